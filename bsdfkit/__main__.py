@@ -1,0 +1,5 @@
+import sys
+
+from bsdfkit.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Readers and writers. No physics here beyond unit bookkeeping."""
