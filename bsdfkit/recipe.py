@@ -1,0 +1,155 @@
+"""Fit/run recipes: ``bsdfkit run fitting/<name>.toml -o OUT/`` — the main job.
+
+A recipe names a measurement folder and the stages to run on it. Each stage is a function of the recipe and
+the products of earlier stages; it returns its part of the run summary and the files it wants written. All
+outputs are collected first and written atomically at the end, after checking that none exists (unless
+``force``), so a failed or interrupted run never leaves a half-written output set behind.
+"""
+from __future__ import annotations
+
+import json
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import xarray as xr
+
+from bsdfkit.errors import FormatError, InputError
+from bsdfkit.io import atomic, netcdf
+
+KNOWN_SECTIONS = {
+    "recipe": {"name", "measurement", "description"},
+    "report": {"figure_config", "figure_wavelength_nm"},
+}
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    figure_config: str = "blue"
+    figure_wavelength_nm: float = 460.0
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A parsed recipe file. Paths are resolved relative to the recipe file."""
+
+    path: Path
+    name: str
+    measurement: Path
+    description: str = ""
+    report: ReportOptions = ReportOptions()
+    raw: dict = field(default_factory=dict, compare=False, hash=False)
+
+
+def _check_keys(data: dict, path: Path) -> None:
+    for section, value in data.items():
+        if section not in KNOWN_SECTIONS:
+            raise FormatError("unknown recipe section", file=path, field=section,
+                              expected="one of " + ", ".join(sorted(KNOWN_SECTIONS)))
+        if not isinstance(value, dict):
+            raise FormatError("recipe section must be a table", file=path, field=section, got=value)
+        for key in value:
+            if key not in KNOWN_SECTIONS[section]:
+                raise FormatError("unknown recipe key", file=path, field=f"{section}.{key}",
+                                  expected="one of " + ", ".join(sorted(KNOWN_SECTIONS[section])))
+
+
+def _typed(table: dict, key: str, kind: type | tuple, path: Path, dotted: str, default: Any = None) -> Any:
+    if key not in table:
+        if default is None:
+            raise InputError("recipe key missing", file=path, field=dotted)
+        return default
+    value = table[key]
+    ok = isinstance(value, kind) and not (isinstance(value, bool) and kind is not bool)
+    if not ok:
+        raise InputError("recipe value of the wrong type", file=path, field=dotted, expected=getattr(kind, "__name__", str(kind)), got=value)
+    return value
+
+
+def load_recipe(path: str | Path) -> Recipe:
+    """Parse and validate a recipe TOML file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("recipe not found", file=path, expected="a TOML recipe file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+    _check_keys(data, path)
+    head = data.get("recipe")
+    if head is None:
+        raise InputError("recipe section missing", file=path, field="recipe")
+    measurement = (path.parent / _typed(head, "measurement", str, path, "recipe.measurement")).resolve()
+    rep = data.get("report", {})
+    report = ReportOptions(
+        figure_config=_typed(rep, "figure_config", str, path, "report.figure_config", "blue"),
+        figure_wavelength_nm=float(_typed(rep, "figure_wavelength_nm", (int, float), path, "report.figure_wavelength_nm", 460.0)),
+    )
+    return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
+                  description=_typed(head, "description", str, path, "recipe.description", ""), report=report, raw=data)
+
+
+@dataclass
+class RunState:
+    """What stages hand on: the calibrated scan, summary parts and pending outputs (name → writer)."""
+
+    recipe: Recipe
+    scan: xr.Dataset | None = None
+    summary: dict = field(default_factory=dict)
+    outputs: dict[str, Callable[[Path, bool], object]] = field(default_factory=dict)
+    log: Callable[[str], None] = lambda message: None
+
+
+def stage_ingest(state: RunState) -> None:
+    """Read the raw export, calibrate it, and queue ``scan.nc``."""
+    from bsdfkit.calibrate import calibrate
+    from bsdfkit.io.goniometer import read_scan
+    from bsdfkit.summary import describe
+
+    state.scan = calibrate(read_scan(state.recipe.measurement))
+    scan = state.scan
+    state.summary["scan"] = describe(scan)
+    state.outputs["scan.nc"] = lambda p, force: netcdf.save(scan, p, force)
+
+
+def stage_report(state: RunState) -> None:
+    """Queue the in-plane BSDF figure (Fig. 6 analogue)."""
+    from bsdfkit.report import in_plane_bsdf_figure, save_figure
+
+    opts = state.recipe.report
+    fig = in_plane_bsdf_figure(state.scan, opts.figure_config, opts.figure_wavelength_nm)
+    state.outputs["inplane_bsdf.png"] = lambda p, force: save_figure(fig, p, force)
+
+
+STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
+    ("ingest", stage_ingest),
+    ("report", stage_report),
+)
+
+
+def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
+        log: Callable[[str], None] = lambda message: None) -> dict:
+    """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary."""
+    recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
+    out_dir = Path(out_dir)
+    state = RunState(recipe=recipe, log=log)
+    timings = {}
+    for name, stage in STAGES:
+        start = time.perf_counter()
+        log(f"stage {name} ...")
+        stage(state)
+        timings[name] = round(time.perf_counter() - start, 3)
+    names = list(state.outputs) + ["summary.json"]
+    for name in names:
+        atomic.check_writable(out_dir / name, force)
+    for name, writer in state.outputs.items():
+        writer(out_dir / name, force)
+    summary = {"recipe": recipe.name, "recipe_file": str(recipe.path), "measurement": str(recipe.measurement),
+               "outputs": names, "stage_seconds": timings, **state.summary}
+    from bsdfkit.commands._common import dumps
+
+    atomic.write_text(out_dir / "summary.json", dumps(summary), force)
+    return summary

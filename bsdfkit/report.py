@@ -1,0 +1,46 @@
+"""Figures for run reports. Uses matplotlib's object API (no pyplot, so no global backend state)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from bsdfkit.io.atomic import write_with
+from bsdfkit.records import incidences, select, signed_in_plane_theta
+
+
+def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
+    """Render ``fig`` to PNG atomically."""
+    FigureCanvasAgg(fig)
+    return write_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120), force)
+
+
+def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: float = 460.0) -> Figure:
+    """BSDF at one wavelength in the plane of incidence, reflection (R) and transmission (T), per incidence.
+
+    The analogue of Fig. 6 of the power-budget paper (log scale; + angles on the specular side).
+    """
+    fig = Figure(figsize=(9, 4))
+    axes = fig.subplots(1, 2, sharey=True)
+    for ax, side, tag in ((axes[0], "reflection", "R"), (axes[1], "transmission", "T")):
+        for th in incidences(ds):
+            sub = select(ds, config=config, theta_i=th, side=side, arc="in_plane")
+            x = signed_in_plane_theta(sub)
+            order = np.argsort(x)
+            y = sub["bsdf"].sel(wavelength=wavelength_nm, method="nearest").values[order]
+            e = sub["bsdf_std"].sel(wavelength=wavelength_nm, method="nearest").values[order]
+            keep = np.isfinite(y) & (y > 0)
+            ax.errorbar(x[order][keep], y[keep], yerr=e[keep], marker=".", ms=3, lw=1, capsize=0,
+                        label=f"{tag}, θi = {th:g}°")
+        ax.set_yscale("log")
+        ax.set_xlabel("in-plane θs (deg, + = specular side)")
+        ax.set_title(f"{side} at {wavelength_nm:g} nm ({config})")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("BSDF (1/sr)")
+    fig.suptitle(ds.attrs.get("sample_name", ""), fontsize=10)
+    fig.tight_layout()
+    return fig
