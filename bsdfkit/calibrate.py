@@ -109,10 +109,11 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         p_i[c] = rate / att
         var_p_i[c] = var_rate / att**2
         peak = p_i[c].max()
-        if not peak > 0:
-            raise NumericalError("zero incident power in the reference beam", file=source, field=f"configuration '{name}'",
-                                 expected="a positive reference spectrum", got=float(peak))
         valid[c] = (p_i[c] > INCIDENT_THRESHOLD * peak) & (p_i[c] > 10.0 * np.sqrt(var_p_i[c]))
+        if not valid[c].any():
+            raise NumericalError("zero incident power in the reference beam", file=source, field=f"configuration '{name}'",
+                                 expected="a reference spectrum above 10 standard uncertainties somewhere",
+                                 got=f"peak {peak:.3g} counts/s")
         power = np.where(valid[c], p_i[c] / resp, 0.0)
         phi[c] = np.sum(power * weights)
         var_phi[c] = np.sum(np.where(valid[c], var_p_i[c] / resp**2, 0.0) * weights**2)

@@ -39,7 +39,9 @@ class BsdfkitError(Exception):
         if expected is not None:
             text += f"; expected {expected}"
         if got is not None:
-            got_text = repr(got) if not isinstance(got, str) else repr(got)
+            if hasattr(got, "item") and getattr(got, "ndim", 1) == 0:
+                got = got.item()  # numpy scalar: show 385.0, not np.float64(385.0)
+            got_text = repr(got)
             if len(got_text) > 80:
                 got_text = got_text[:77] + "..."
             text += f", got {got_text}"

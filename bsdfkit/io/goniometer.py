@@ -145,11 +145,18 @@ def _line_of(table: SpectraTable, row: int) -> int:
 
 
 def _check_grid(table: SpectraTable, grid: NDArray[np.float64], manifest: Manifest) -> None:
-    if table.wavelength.size != grid.size or not np.allclose(table.wavelength, grid, atol=1e-6, rtol=0):
+    if table.wavelength.size != grid.size:
         raise ValidationError("wavelength grid does not match the manifest", file=table.path, field="wavelength header",
                               expected=f"{grid.size} values {grid[0]:g}..{grid[-1]:g} nm step "
                                        f"{manifest.wavelength_step_nm:g} (from {manifest.path.name})",
                               got=f"{table.wavelength.size} values {table.wavelength[0]:g}..{table.wavelength[-1]:g} nm")
+    off = np.flatnonzero(~np.isclose(table.wavelength, grid, atol=1e-6, rtol=0))
+    if off.size:
+        k = int(off[0])
+        raise ValidationError("wavelength grid does not match the manifest", file=table.path, field="wavelength header",
+                              expected=f"{grid[k]:g} nm in wavelength column {k + 1} (grid {grid[0]:g}..{grid[-1]:g} nm "
+                                       f"step {manifest.wavelength_step_nm:g} from {manifest.path.name})",
+                              got=f"{table.wavelength[k]:g} nm")
 
 
 def _read_responsivity(path: Path, grid: NDArray[np.float64]) -> NDArray[np.float64]:

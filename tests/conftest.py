@@ -1,0 +1,53 @@
+"""Shared fixtures: the bundled measurement (calibrated once per session) and a tiny raw export to mutate."""
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+import pytest
+
+from bsdfkit import virtual
+from bsdfkit.calibrate import calibrate
+from bsdfkit.io.goniometer import read_scan
+
+ROOT = Path(__file__).resolve().parents[1]
+BUNDLED = ROOT / "measurements" / "cl830-synthetic"
+
+
+@pytest.fixture(scope="session")
+def bundled_raw():
+    return read_scan(BUNDLED)
+
+
+@pytest.fixture(scope="session")
+def bundled_scan(bundled_raw):
+    return calibrate(bundled_raw)
+
+
+def tiny_gonio() -> virtual.VirtualGoniometer:
+    return virtual.VirtualGoniometer(spectrometer=virtual.Spectrometer(wavelength_step_nm=5.0), dark_frames=3,
+                                     reference_frames=3)
+
+
+def tiny_plan() -> virtual.ScanPlan:
+    return virtual.ScanPlan(theta_i_deg=(45.0,), in_plane_deg=(-60.0, -30.0, 0.0, 30.0, 60.0),
+                            perpendicular_deg=(-20.0, 20.0), fine_halfwidth_deg=2.0, fine_step_deg=2.0)
+
+
+@pytest.fixture
+def tiny_export(tmp_path) -> Path:
+    """A small valid raw export (one incidence, few positions, 5 nm grid) written to a temp folder."""
+    gonio = tiny_gonio()
+    truth = virtual.cl830_truth(gonio)
+    export = virtual.simulate_scan(truth, tiny_plan(), gonio, seed=1)
+    folder = tmp_path / "tiny"
+    virtual.write_raw_export(export, folder)
+    return folder
+
+
+def read_gz_lines(path: Path) -> list[str]:
+    return gzip.decompress(path.read_bytes()).decode().splitlines()
+
+
+def write_gz_lines(path: Path, lines: list[str]) -> None:
+    path.write_bytes(gzip.compress(("\n".join(lines) + "\n").encode()))

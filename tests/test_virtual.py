@@ -1,0 +1,103 @@
+"""The virtual goniometer and the cl830-synthetic truth."""
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from bsdfkit import synthetic, virtual
+from conftest import BUNDLED, tiny_gonio, tiny_plan
+
+TABLE2_45 = {"B_bibs": 10.9, "F_bibs": 5.4, "B_biys": 26.3, "F_biys": 25.7, "B_yiys": 45.7, "F_yiys": 47.1}
+
+
+def test_truth_tis_at_45_equals_table2():
+    truth = virtual.cl830_truth()
+    tis = virtual.truth_manifest_section(truth)["truth"]["tis_percent"]["45"]
+    for key, value in TABLE2_45.items():
+        assert tis[key] == pytest.approx(value, abs=1e-9)
+
+
+@pytest.mark.parametrize("theta_i", [0.0, 5.0, 30.0, 45.0, 56.0, 70.0, 85.0, 89.0])
+def test_truth_conserves_energy_at_every_incidence(theta_i):
+    truth = virtual.cl830_truth()
+    g = virtual.VirtualGoniometer()
+    lam = g.spectrometer.wavelength
+    tis = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1), virtual.YELLOW.incident_power(lam, 1))
+    assert tis["blue_losses"] >= 0 and tis["yellow_losses"] >= 0
+    assert all(np.isfinite(v) for v in tis.values())
+
+
+def test_specular_share_grows_with_incidence():
+    truth = virtual.cl830_truth()
+    shares = [truth.lobe_tis("bibs", "reflection", np.radians(t)) / truth.elastic_tis("bibs", "reflection", np.radians(t))
+              for t in (5.0, 45.0, 56.0)]
+    assert shares[0] < shares[1] < shares[2]
+
+
+def test_lobe_tis_matches_closed_form_inside_disk_and_brute_force_when_clipped():
+    truth = virtual.cl830_truth()
+    p = truth.lobe("bibs", "reflection", np.radians(5.0))
+    # small lobe well inside the unit disk: 2πσ²A
+    assert truth.lobe_tis("bibs", "reflection", np.radians(5.0)) == pytest.approx(2 * np.pi * p.sigma**2 * p.A, rel=1e-9)
+    # broad transmission lobe at 56°: compare with a dense Cartesian (βx, βy) quadrature
+    th = np.radians(56.0)
+    q = truth.lobe("bibs", "transmission", th)
+    n = 2001
+    x = np.linspace(-1, 1, n)
+    bx, by = np.meshgrid(x, x, indexing="ij")
+    inside = bx**2 + by**2 <= 1
+    f = q.A * np.exp(-((bx - np.sin(th)) ** 2 + by**2) / (2 * q.sigma**2)) * inside
+    brute = f.sum() * (x[1] - x[0]) ** 2
+    assert truth.lobe_tis("bibs", "transmission", th) == pytest.approx(brute, rel=2e-3)
+
+
+def test_conversion_shape_does_not_change_tis():
+    """∫(cos θ − 2/3) cos θ dΩ = 0: the ε shape term moves no energy."""
+    mu = np.linspace(0, 1, 200001)
+    assert np.trapezoid((mu - 2 / 3) * mu, mu) == pytest.approx(0.0, abs=1e-10)
+
+
+def test_same_seed_same_export_different_seed_differs(tmp_path):
+    g, plan = tiny_gonio(), tiny_plan()
+    truth = virtual.cl830_truth(g)
+    a = virtual.simulate_scan(truth, plan, g, seed=7)
+    b = virtual.simulate_scan(truth, plan, g, seed=7)
+    c = virtual.simulate_scan(truth, plan, g, seed=8)
+    assert np.array_equal(a.scans["blue"]["counts"], b.scans["blue"]["counts"])
+    assert not np.array_equal(a.scans["blue"]["counts"], c.scans["blue"]["counts"])
+    virtual.write_raw_export(a, tmp_path / "a")
+    virtual.write_raw_export(b, tmp_path / "b")
+    assert (tmp_path / "a/scans/blue.csv.gz").read_bytes() == (tmp_path / "b/scans/blue.csv.gz").read_bytes()
+
+
+def test_bundled_measurement_is_labelled_small_and_reproducible():
+    manifest = tomllib.loads((BUNDLED / "manifest.toml").read_text())
+    assert manifest["sample"]["synthetic"] is True and "SYNTHETIC" in manifest["sample"]["description"]
+    assert manifest["provenance_command"].startswith("bsdfkit simulate --preset cl830-synthetic")
+    assert set(manifest["truth"]["tis_percent"]) == {"5", "45", "56"}
+    size = sum(p.stat().st_size for p in BUNDLED.rglob("*") if p.is_file())
+    assert size < 5 * 1024**2
+    # the truth in the manifest is the truth the generator uses
+    recorded = synthetic.PhosphorPlateTruth.from_dict(json.loads(manifest["truth"]["parameters_json"]))
+    assert recorded == virtual.cl830_truth()
+
+
+def test_bundled_measurement_regenerates_bit_for_bit(tmp_path):
+    seed = tomllib.loads((BUNDLED / "manifest.toml").read_text())["provenance"]["seed"]
+    virtual.write_raw_export(virtual.cl830_synthetic(seed=seed), tmp_path / "regen")
+    for name in ("scans/blue.csv.gz", "scans/yellow.csv.gz", "reference/blue.csv.gz", "dark.csv.gz", "manifest.toml"):
+        assert (tmp_path / "regen" / name).read_bytes() == (BUNDLED / name).read_bytes(), name
+
+
+def test_scan_plan_covers_both_arcs_and_skips_the_source():
+    plan = virtual.default_plan()
+    pos = plan.positions(45.0, "reflection")
+    arcs = {a for _, _, a in pos}
+    assert arcs == {"in_plane", "perpendicular"}
+    # no detector position within the retro-block of the source direction (signed θs = −θi)
+    signed = [t if p == 0 else -t for t, p, a in pos if a == "in_plane"]
+    assert min(abs(s + 45.0) for s in signed) >= plan.retro_block_deg
+    # perpendicular arc goes through the specular direction: θs(ε) = acos(cos ε cos θi)
+    perp = [(t, p) for t, p, a in pos if a == "perpendicular"]
+    assert all(t >= 45.0 - 1e-9 for t, _ in perp)
