@@ -23,6 +23,7 @@ from bsdfkit.io import atomic, netcdf
 KNOWN_SECTIONS = {
     "recipe": {"name", "measurement", "description"},
     "report": {"figure_config", "figure_wavelength_nm"},
+    "reductions": {"budget_incidence_deg", "eta_mc", "iterations"},
 }
 
 
@@ -30,6 +31,15 @@ KNOWN_SECTIONS = {
 class ReportOptions:
     figure_config: str = "blue"
     figure_wavelength_nm: float = 460.0
+
+
+@dataclass(frozen=True)
+class ReductionOptions:
+    """Stage options of the reductions (power-budget paper: 45° incidence, η_MC = 0.94, 7 iterations)."""
+
+    budget_incidence_deg: float = 45.0
+    eta_mc: float = 0.94
+    iterations: int = 7
 
 
 @dataclass(frozen=True)
@@ -41,6 +51,7 @@ class Recipe:
     measurement: Path
     description: str = ""
     report: ReportOptions = ReportOptions()
+    reductions: ReductionOptions = ReductionOptions()
     raw: dict = field(default_factory=dict, compare=False, hash=False)
 
 
@@ -88,8 +99,15 @@ def load_recipe(path: str | Path) -> Recipe:
         figure_config=_typed(rep, "figure_config", str, path, "report.figure_config", "blue"),
         figure_wavelength_nm=float(_typed(rep, "figure_wavelength_nm", (int, float), path, "report.figure_wavelength_nm", 460.0)),
     )
+    red = data.get("reductions", {})
+    reductions = ReductionOptions(
+        budget_incidence_deg=float(_typed(red, "budget_incidence_deg", (int, float), path, "reductions.budget_incidence_deg", 45.0)),
+        eta_mc=float(_typed(red, "eta_mc", (int, float), path, "reductions.eta_mc", 0.94)),
+        iterations=int(_typed(red, "iterations", int, path, "reductions.iterations", 7)),
+    )
     return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
-                  description=_typed(head, "description", str, path, "recipe.description", ""), report=report, raw=data)
+                  description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
+                  reductions=reductions, raw=data)
 
 
 @dataclass
@@ -98,6 +116,8 @@ class RunState:
 
     recipe: Recipe
     scan: xr.Dataset | None = None
+    tis: xr.Dataset | None = None
+    tables: dict = field(default_factory=dict)
     summary: dict = field(default_factory=dict)
     outputs: dict[str, Callable[[Path, bool], object]] = field(default_factory=dict)
     log: Callable[[str], None] = lambda message: None
@@ -124,9 +144,55 @@ def stage_report(state: RunState) -> None:
     state.outputs["inplane_bsdf.png"] = lambda p, force: save_figure(fig, p, force)
 
 
+def stage_reductions(state: RunState) -> None:
+    """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget."""
+    from bsdfkit import angular, budget
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.records import incidences
+    from bsdfkit.report import budget_figure, save_figure
+    from bsdfkit.commands._common import dumps
+
+    opts = state.recipe.reductions
+    scan = state.scan
+    state.tis = angular.tis_table(scan)
+    tables = {f"{th:g}": budget.interaction_table(scan, th, state.tis) for th in incidences(scan)}
+    state.tables = tables
+    key = f"{opts.budget_incidence_deg:g}"
+    if key not in tables:
+        raise InputError("budget incidence not measured", file=state.recipe.path, field="reductions.budget_incidence_deg",
+                         expected="one of " + ", ".join(tables), got=opts.budget_incidence_deg)
+    t = tables[key]
+    power = budget.module_budget(t.power, opts.eta_mc, opts.iterations)
+    photons = budget.module_budget(t.photons, opts.eta_mc, opts.iterations)
+    from bsdfkit.calibrate import truth_tis
+
+    truth = truth_tis(scan)
+    table_json = {k: v.as_dict() for k, v in tables.items()}
+    if truth:
+        table_json["truth_power_percent"] = truth
+    state.summary["interaction_tables"] = table_json
+    state.summary["module_budget"] = {"incidence_deg": opts.budget_incidence_deg, "power": power.as_dict(),
+                                      "photons": photons.as_dict()}
+    tis = state.tis
+    state.outputs["tis.nc"] = lambda p, force: netcdf.save(tis, p, force)
+    state.outputs["interaction_tables.json"] = lambda p, force: write_text(p, dumps(table_json), force)
+    fig = budget_figure(power, photons)
+    state.outputs["module_budget.png"] = lambda p, force: save_figure(fig, p, force)
+    lines = [f"interaction table at {key} deg (percent of incident power / photons):"]
+    for k in budget.KEYS:
+        extra = f"   truth {truth[key][k]:6.2f}" if truth and key in truth else ""
+        lines.append(f"  {k:14s} {t.power[k]:6.2f} ± {t.power_std[k]:.2f}   {t.photons[k]:6.2f}{extra}")
+    lines.append(f"  EQE {t.eqe:.3f} ± {t.eqe_std:.3f}")
+    last = power.iterations[-1]
+    lines.append(f"module budget (η_MC = {opts.eta_mc:g}, {opts.iterations} plate interactions): blue {last['blue']:.2f}, "
+                 f"yellow {last['yellow']:.2f}, total {last['total']:.2f} %; converged total {power.converged['total']:.2f} %")
+    state.summary.setdefault("report_lines", []).extend(lines)
+
+
 STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
     ("ingest", stage_ingest),
     ("report", stage_report),
+    ("reductions", stage_reductions),
 )
 
 

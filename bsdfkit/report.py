@@ -44,3 +44,22 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
     fig.suptitle(ds.attrs.get("sample_name", ""), fontsize=10)
     fig.tight_layout()
     return fig
+
+
+def budget_figure(power, photons=None) -> Figure:
+    """Cumulative extracted power and losses per plate interaction (Fig. 10 of the power-budget paper)."""
+    fig = Figure(figsize=(6.5, 4))
+    ax = fig.subplots()
+    k = np.arange(1, len(power.iterations) + 1)
+    for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^"), ("losses", "--x")):
+        ax.plot(k, [row[key] for row in power.iterations], style, label=f"{key} (power)")
+    if photons is not None:
+        ax.plot(k, [row["total"] for row in photons.iterations], ":o", label="total (photons)")
+    ax.axhline(power.converged["total"], color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("plate interaction (1 = direct pass from the LEDs)")
+    ax.set_ylabel("cumulative % of LED output")
+    ax.set_title(f"iterative module budget, η_MC = {power.eta_mc:g}")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig

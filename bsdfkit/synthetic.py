@@ -179,6 +179,26 @@ class PhosphorPlateTruth:
         p = self.conversion(side, theta_i)
         return p.T / np.pi * (1.0 + p.epsilon * (directions[..., 2] - 2.0 / 3.0))
 
+    def donaldson(self, side: str, theta_i: float, directions: NDArray[np.float64], wavelength_i: NDArray[np.float64],
+                  wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Bi-spectral BSDF matrix q_λ(λi → λs) in 1/(sr·nm), shape (..., n_λi, n_λs), on matching grids.
+
+        Converted part g(λi)·f_conv·e(λs); the elastic part sits on the diagonal as f(λ)/Δλ, the discrete form
+        of f(λ)·δ(λi − λs), so that Σ_λi q_λ E Δλi reproduces f(λs) E(λs) (eq. (2) of the power-budget paper).
+        """
+        lam_i = np.asarray(wavelength_i, dtype=np.float64)
+        lam = np.asarray(wavelength, dtype=np.float64)
+        conv = self.conversion_angular(side, theta_i, directions)[..., None, None]
+        out = conv * self.excitation(lam_i)[:, None] * self.emission_density(lam)[None, :]
+        if lam_i.shape == lam.shape and np.allclose(lam_i, lam):
+            blue = lam < self.elastic_split_nm
+            f_b = self.elastic_angular("bibs", side, theta_i, directions)[..., None] * self.elastic_spectral("bibs", side, theta_i, lam)
+            f_y = self.elastic_angular("yiys", side, theta_i, directions)[..., None] * self.elastic_spectral("yiys", side, theta_i, lam)
+            diag = np.where(blue, f_b, f_y) / np.gradient(lam)
+            idx = np.arange(lam.size)
+            out[..., idx, idx] += diag
+        return out
+
     def elastic_interaction(self, wavelength: ArrayLike) -> NDArray[np.str_]:
         """Which elastic parameter set applies at each wavelength: "bibs" below the split, "yiys" above."""
         lam = np.asarray(wavelength, dtype=np.float64)
