@@ -26,7 +26,7 @@ Half-profiles are interpolated in r (in ln f between positive samples for the TI
 weights) and held constant beyond the last measured radius. Missing arcs
 are filled from the others (documented in :meth:`Hemisphere.from_profile`). The integral uses polar
 coordinates centred on β0, clipped to the unit disk at t_max(ψ) = −b cos ψ + √(b² cos² ψ + 1 − b²): a midpoint
-rule in ψ (periodic, exponentially convergent) and a trapezoid rule in r.
+rule in ψ (periodic, exponentially convergent) and Gauss–Legendre in r.
 
 Outside the radii a half-axis actually sampled (the perpendicular arc stops at ε = ±60°; about the normal it
 starts at |β| = sin θi), its weight is handed to the half-axes sampled at that radius; only where none is,
@@ -84,9 +84,9 @@ def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> 
     psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
     bu = bx * np.cos(psi) + by * np.sin(psi)
     t_max = -bu + np.sqrt(bu * bu + 1.0 - b2)
-    x = np.linspace(0.0, 1.0, n_r)
-    tw = np.full(n_r, 1.0 / (n_r - 1))
-    tw[[0, -1]] *= 0.5
+    # Gauss–Legendre in r: spectral convergence for smooth f (the trapezoid rule was only O(h²) here).
+    x, tw = np.polynomial.legendre.leggauss(n_r)
+    x, tw = 0.5 * (x + 1.0), 0.5 * tw
     r = t_max[:, None] * x[None, :]
     w = (t_max[:, None] ** 2) * x[None, :] * tw[None, :] * (2 * np.pi / n_psi)
     return QuadratureGrid(r=r.ravel(), psi=np.repeat(psi, n_r), w=w.ravel())

@@ -64,8 +64,7 @@ def aperture_solid_angle_small(distance: ArrayLike, radius: ArrayLike) -> NDArra
 
 def sample_direction(theta: ArrayLike, phi: ArrayLike) -> NDArray[np.float64]:
     """Unit vector (sinθ cosφ, sinθ sinφ, cosθ) for angles in radians; shape (..., 3)."""
-    theta = np.asarray(theta, dtype=np.float64)
-    phi = np.asarray(phi, dtype=np.float64)
+    theta, phi = np.broadcast_arrays(np.asarray(theta, dtype=np.float64), np.asarray(phi, dtype=np.float64))
     s = np.sin(theta)
     return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
 
