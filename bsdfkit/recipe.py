@@ -17,13 +17,14 @@ from typing import Any
 
 import xarray as xr
 
-from bsdfkit.errors import FormatError, InputError
+from bsdfkit.errors import FormatError, InputError, NumericalError
 from bsdfkit.io import atomic, netcdf
 
 KNOWN_SECTIONS = {
     "recipe": {"name", "measurement", "description"},
     "report": {"figure_config", "figure_wavelength_nm"},
     "reductions": {"budget_incidence_deg", "eta_mc", "iterations"},
+    "exports": {"interactions", "sides", "formats", "tolerance"},
 }
 
 
@@ -43,6 +44,16 @@ class ReductionOptions:
 
 
 @dataclass(frozen=True)
+class ExportOptions:
+    """Which tables the run writes (into OUT/exports/) and the TIS agreement each re-read must show."""
+
+    interactions: tuple[str, ...] = ("bibs", "biys", "yiys")
+    sides: tuple[str, ...] = ("reflection", "transmission")
+    formats: tuple[str, ...] = ("tracepro", "zemax")
+    tolerance: float = 0.005  # relative: re-read table TIS vs the source's TIS
+
+
+@dataclass(frozen=True)
 class Recipe:
     """A parsed recipe file. Paths are resolved relative to the recipe file."""
 
@@ -52,6 +63,7 @@ class Recipe:
     description: str = ""
     report: ReportOptions = ReportOptions()
     reductions: ReductionOptions = ReductionOptions()
+    exports: ExportOptions = ExportOptions()
     raw: dict = field(default_factory=dict, compare=False, hash=False)
 
 
@@ -105,9 +117,24 @@ def load_recipe(path: str | Path) -> Recipe:
         eta_mc=float(_typed(red, "eta_mc", (int, float), path, "reductions.eta_mc", 0.94)),
         iterations=int(_typed(red, "iterations", int, path, "reductions.iterations", 7)),
     )
+    exp = data.get("exports", {})
+    exports = ExportOptions(
+        interactions=tuple(_choices(exp, "interactions", ("bibs", "biys", "yiys"), path)),
+        sides=tuple(_choices(exp, "sides", ("reflection", "transmission"), path)),
+        formats=tuple(_choices(exp, "formats", ("tracepro", "zemax", "asap"), path, default=("tracepro", "zemax"))),
+        tolerance=float(_typed(exp, "tolerance", (int, float), path, "exports.tolerance", 0.005)),
+    )
     return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
                   description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
-                  reductions=reductions, raw=data)
+                  reductions=reductions, exports=exports, raw=data)
+
+
+def _choices(table: dict, key: str, allowed: tuple[str, ...], path: Path, default: tuple[str, ...] | None = None) -> list[str]:
+    value = table.get(key, list(default or allowed))
+    if not isinstance(value, list) or not all(isinstance(v, str) and v in allowed for v in value):
+        raise InputError("recipe value must be a list of names", file=path, field=f"exports.{key}",
+                         expected="a subset of " + ", ".join(allowed), got=value)
+    return value
 
 
 @dataclass
@@ -189,10 +216,49 @@ def stage_reductions(state: RunState) -> None:
     state.summary.setdefault("report_lines", []).extend(lines)
 
 
+def stage_exports(state: RunState) -> None:
+    """Queue TracePro/Zemax tables of each interaction and side; each is re-read and its TIS checked.
+
+    The tables go into OUT/exports/. Their writer runs with the other outputs (atomic, no clobbering); it
+    records, per file, the source TIS (direct integral of the reconstructed hemisphere) and the TIS recomputed
+    from the file as read back, and fails the run if they differ by more than the recipe's tolerance.
+    """
+    from bsdfkit import export as exporter
+
+    opts = state.recipe.exports
+    scan = state.scan
+    checks: list[dict] = []
+    state.summary["export_checks"] = checks
+    suffix = {"tracepro": "tracepro.txt", "zemax": "zemax.bsdf", "asap": "asap.txt"}
+
+    def writer(inter: str, side: str, fmt: str):
+        def write(path: Path, force: bool) -> None:
+            result = exporter.export(scan, fmt, inter, side, path, force)
+            summary = exporter.read_any(path)
+            for k, th in enumerate(summary.incidences_deg):
+                src = result.tis_source[side][k]
+                got = summary.tis_computed[side][k]
+                rel = abs(got - src) / src if src else abs(got)
+                checks.append({"file": f"exports/{path.name}", "interaction": inter, "side": side, "format": fmt,
+                               "theta_i_deg": th, "tis_source": src, "tis_reread": got, "relative_difference": rel,
+                               "ok": rel <= opts.tolerance})
+                if rel > opts.tolerance:
+                    raise NumericalError("exported table does not carry the source's TIS", file=path,
+                                         field=f"theta_i {th:g}", expected=f"relative difference ≤ {opts.tolerance:g}",
+                                         got=f"{rel:.3g}")
+        return write
+
+    for inter in opts.interactions:
+        for side in opts.sides:
+            for fmt in opts.formats:
+                state.outputs[f"exports/{inter}_{side}.{suffix[fmt]}"] = writer(inter, side, fmt)
+
+
 STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
     ("ingest", stage_ingest),
     ("report", stage_report),
     ("reductions", stage_reductions),
+    ("exports", stage_exports),
 )
 
 
@@ -213,6 +279,12 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         atomic.check_writable(out_dir / name, force)
     for name, writer in state.outputs.items():
         writer(out_dir / name, force)
+    checks = state.summary.get("export_checks")
+    if checks:
+        worst = max(checks, key=lambda c: c["relative_difference"])
+        state.summary.setdefault("report_lines", []).append(
+            f"exports: {len({c['file'] for c in checks})} tables re-read; TIS of every table within "
+            f"{100 * worst['relative_difference']:.3f} % of its source (worst: {worst['file']} at {worst['theta_i_deg']:g} deg)")
     summary = {"recipe": recipe.name, "recipe_file": str(recipe.path), "measurement": str(recipe.measurement),
                "outputs": names, "stage_seconds": timings, **state.summary}
     from bsdfkit.commands._common import dumps
