@@ -1,0 +1,64 @@
+"""An export or run killed mid-write leaves the old file or none — never a partial file."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import BUNDLED
+
+SLOW_WRITER = r"""
+import sys, time
+from bsdfkit.io.atomic import write_with
+def slow(tmp):
+    with open(tmp, "wb") as fh:
+        for _ in range(10_000):
+            fh.write(b"new data " * 1000)
+            fh.flush()
+            time.sleep(0.001)
+write_with(sys.argv[1], slow, force=True)
+"""
+
+
+def _wait_for_part(folder: Path, timeout: float = 60.0) -> None:
+    start = time.time()
+    while time.time() - start < timeout:
+        if any(p.name.endswith(".part") for p in folder.iterdir()):
+            return
+        time.sleep(0.01)
+    raise AssertionError("writer never started")
+
+
+@pytest.mark.parametrize("existing", [True, False])
+def test_killed_writer_leaves_old_file_or_none(tmp_path, existing):
+    target = tmp_path / "table.txt"
+    if existing:
+        target.write_bytes(b"OLD COMPLETE FILE")
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITER, str(target)])
+    _wait_for_part(tmp_path)
+    time.sleep(0.2)  # well inside the write
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    if existing:
+        assert target.read_bytes() == b"OLD COMPLETE FILE"
+    else:
+        assert not target.exists()
+
+
+def test_killed_cli_export_leaves_nothing_behind(tmp_path):
+    """A real verb: `bsdfkit ingest` killed while writing its netCDF."""
+    out = tmp_path / "scan.nc"
+    proc = subprocess.Popen([sys.executable, "-m", "bsdfkit", "ingest", str(BUNDLED), "-o", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _wait_for_part(tmp_path, timeout=120)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert not out.exists(), "partial output left at the target path"
+    # the killed run's temporary file does not block the next run
+    done = subprocess.run([sys.executable, "-m", "bsdfkit", "ingest", str(BUNDLED), "-o", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert out.stat().st_size > 0
