@@ -30,7 +30,7 @@ rule in ψ (periodic, exponentially convergent) and Gauss–Legendre in r.
 
 Outside the radii a half-axis actually sampled (the perpendicular arc stops at ε = ±60°; about the normal it
 starts at |β| = sin θi), its weight is handed to the half-axes sampled at that radius; only where none is,
-the nearest value is held.
+the half-axis sampled farthest out holds its last value.
 
 Error bars: the measurement part propagates the per-record standard uncertainties through the (linear)
 quadrature weights; the TIS value itself interpolates half-profiles in ln f where neighbouring samples are
@@ -199,7 +199,8 @@ class Hemisphere:
         Base weights |cos ψ|^p, |sin ψ|^p (normalised; p = 2 is the cos²/sin² blend) on the half-axes the
         node's quadrant faces. With ``borrow``, a half-axis asked for outside the radii it actually sampled
         hands its weight to the half-axes sampled at that radius (an isotropy assumption used only where data
-        are missing); where none is, it keeps its weight and its nearest value is held.
+        are missing); where none is, the half-axis sampled farthest out takes all the weight and its last value
+        is held.
         """
         r = np.asarray(r, dtype=np.float64).ravel()
         psi = np.asarray(psi, dtype=np.float64).ravel()
@@ -217,7 +218,10 @@ class Hemisphere:
             n_measured = measured.sum(axis=1)
             lost = np.where(measured, 0.0, coef).sum(axis=1)
             share = np.where(n_measured > 0, lost / np.maximum(n_measured, 1), 0.0)
-            coef = np.where(n_measured[:, None] > 0, np.where(measured, coef + share[:, None], 0.0), coef)
+            # Beyond every sampled radius: the half-axis sampled farthest out holds its last value.
+            farthest = np.zeros(len(HALVES))
+            farthest[int(np.argmax(np.where(np.isfinite(lo), hi, -np.inf)))] = 1.0
+            coef = np.where(n_measured[:, None] > 0, np.where(measured, coef + share[:, None], 0.0), farthest[None, :])
         return coef
 
     def evaluate_polar(self, r: NDArray, psi: NDArray, mode: str = "linear", p: float = 2.0,
