@@ -6,7 +6,6 @@ checked by reading it back with ``tomllib`` so a writer bug cannot produce a fil
 """
 from __future__ import annotations
 
-import json
 import math
 import tomllib
 from collections.abc import Mapping
@@ -17,8 +16,27 @@ import numpy as np
 from bsdfkit.errors import BsdfkitError
 
 
+_BARE = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _string(text: str) -> str:
+    """A TOML basic string: quotes, backslashes and control characters escaped (TOML 1.0 §String)."""
+    out = []
+    for ch in text:
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        elif 0xD800 <= ord(ch) <= 0xDFFF:
+            raise BsdfkitError("cannot write a lone surrogate to TOML", expected="valid Unicode text", got=text)
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
 def _key(k: str) -> str:
-    return k if k and all(c.isalnum() or c in "-_" for c in k) else json.dumps(k)
+    return k if k and set(k) <= _BARE else _string(k)
 
 
 def _value(v: Any) -> str:
@@ -34,7 +52,7 @@ def _value(v: Any) -> str:
             return "inf" if f > 0 else "-inf"
         return repr(f)
     if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)
+        return _string(v)
     if isinstance(v, (list, tuple, np.ndarray)):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     raise BsdfkitError(f"cannot write a {type(v).__name__} to TOML", expected="str, number, bool, list or table")

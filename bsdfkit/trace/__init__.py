@@ -1,0 +1,24 @@
+"""JAX Monte Carlo tracer for cylindrical remote-phosphor LED modules (docs/tracer.md).
+
+Data flow: scene TOML → :class:`Scene` (frozen dataclasses) → :class:`Effects` (static kernel
+configuration) + kernel parameters → chunked, compiled kernel → exact tallies → :class:`TraceResult`.
+
+>>> from bsdfkit.trace import load_scene, trace
+>>> result = trace(load_scene("scene.toml"), rays=100_000, seed=1)   # doctest: +SKIP
+>>> result.LER, result.std_err["LER"], result.ledger_error            # doctest: +SKIP
+"""
+from bsdfkit.trace.effects import Effects, scene_effects
+from bsdfkit.trace.plate import (LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated,
+                                 load_plate)
+from bsdfkit.trace.rayfile import RaySet, read_ray_file
+from bsdfkit.trace.scene import (Cavity, Leds, Scene, Surface, Tallies, Top, TraceOptions, dumps_scene,
+                                 load_scene, loads_scene, save_scene, with_values)
+from bsdfkit.trace.tallies import TraceResult
+from bsdfkit.trace.tracer import threshold_bias, trace
+
+__all__ = [
+    "Cavity", "Effects", "LambertGaussian", "Lambertian", "Leds", "PhosphorPlate", "PlateChannel", "RaySet",
+    "Scene", "Surface", "Tabulated", "Tallies", "Top", "TraceOptions", "TraceResult", "dumps_scene",
+    "load_plate", "load_scene", "loads_scene", "read_ray_file", "save_scene", "scene_effects",
+    "threshold_bias", "trace", "with_values",
+]

@@ -1,0 +1,151 @@
+"""Counter-based random numbers and direction sampling (pure JAX functions on arrays of rays).
+
+Random numbers. Every random word is Threefry-2x32 (Salmon et al., SC'11; ``jax.extend.random``) of the
+key derived from the seed and the counter pair ``(ray, event·4 + h)``: ``ray`` is the global ray index
+(< 2³¹), ``event`` the ray's interaction number (0 = emission), ``h`` ∈ {0, 1, 2} gives 6 words per event.
+Lobe-rejection attempts use ``(ray + 2³¹, event·1024 + attempt)``. A ray's random numbers therefore depend
+only on (seed, ray, event), never on the chunk or lane it is traced in.
+
+Directions (θ from the surface normal n, φ azimuth, u uniform in [0, 1)):
+
+* Lambertian (cosine-weighted): sin θ = √u₁, cos θ = √(1 − u₁), φ = 2πu₂.
+* cos^m intensity: pdf(cos θ) ∝ cos^m θ ⇒ cos θ = (1 − u)^{1/(m+1)}; m = 1 is Lambertian.
+* Mirror: d' = d − 2(d·n)n.
+* Gaussian lobe in Harvey–Shack direction cosines: β = β0 + σ(g₁, g₂), g Box–Muller normals; samples with
+  |β| ≥ 1 are rejected and redrawn, which renormalises the lobe over the unit disk.
+* Tabulated BSDF linear in s = sin²θ: invert the piecewise-quadratic CDF exactly (see :func:`table_s`).
+
+Local frames use the branchless orthonormal basis of Duff et al., "Building an orthonormal basis,
+revisited", JCGT 6(1), 2017.
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import lax
+from jax.extend.random import threefry_2x32
+
+TWO_PI = 2.0 * 3.141592653589793
+LOBE_STREAM = 2 ** 31
+
+
+def random_words(key_words, ray, counters):
+    """Threefry words for the counter pairs (ray, c) for each c in ``counters``: 2 words per counter.
+
+    ``key_words`` (2,) uint32, ``ray`` (n,) uint32, ``counters`` list of (n,) uint32. Returns a list of
+    2·len(counters) arrays (n,) uint32, the two words of counter h at positions 2h and 2h + 1.
+    """
+    n = ray.shape[0]
+    m = len(counters)
+    x0 = jnp.concatenate([ray] * m)
+    x1 = jnp.concatenate(counters)
+    out = threefry_2x32((key_words[0], key_words[1]), jnp.concatenate([x0, x1]))
+    a, b = out[: n * m], out[n * m:]
+    words = []
+    for i in range(m):
+        words += [a[i * n:(i + 1) * n], b[i * n:(i + 1) * n]]
+    return words
+
+
+def event_uniforms(key_words, ray, event, dtype, count: int = 6):
+    """``count`` (≤ 6) uniforms in [0, 1) for (ray, event): counters event·4 + h, h = 0, 1, 2.
+
+    Word i comes from counter h = i // 2, so the first words do not change when fewer are drawn.
+    """
+    base = event.astype(jnp.uint32) * jnp.uint32(4)
+    blocks = [base + jnp.uint32(h) for h in range((count + 1) // 2)]
+    words = random_words(key_words, ray, blocks)[:count]
+    return [to_unit(w, dtype) for w in words]
+
+
+def to_unit(bits, dtype):
+    """uint32 → uniform in [0, 1): top 24 bits for float32, all 32 bits for float64 (both exact)."""
+    if jnp.dtype(dtype) == jnp.float32:
+        return (bits >> jnp.uint32(8)).astype(jnp.float32) * jnp.float32(2.0 ** -24)
+    return bits.astype(jnp.float64) * (2.0 ** -32)
+
+
+def orthonormal_basis(nx, ny, nz):
+    """Tangents t1, t2 with (t1, t2, n) right-handed and orthonormal (Duff et al. 2017, Listing 3)."""
+    sign = jnp.where(nz >= 0, 1.0, -1.0).astype(nx.dtype)
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
+    t1 = (1.0 + sign * nx * nx * a, sign * b, -sign * nx)
+    t2 = (b, sign + ny * ny * a, -ny)
+    return t1, t2
+
+
+def local_to_world(sin_t, cos_t, phi, nx, ny, nz):
+    """Direction with polar angle θ (from n) and azimuth φ in the frame of n."""
+    (ax, ay, az), (bx, by, bz) = orthonormal_basis(nx, ny, nz)
+    c, s = jnp.cos(phi), jnp.sin(phi)
+    lx, ly = sin_t * c, sin_t * s
+    return (lx * ax + ly * bx + cos_t * nx, lx * ay + ly * by + cos_t * ny, lx * az + ly * bz + cos_t * nz)
+
+
+def lambertian_angles(u1, u2):
+    """(sin θ, cos θ, φ) of a cosine-weighted direction."""
+    return jnp.sqrt(u1), jnp.sqrt(1.0 - u1), TWO_PI * u2
+
+
+def cos_power_angles(u1, u2, m):
+    """(sin θ, cos θ, φ) for intensity ∝ cos^m θ: cos θ = (1 − u₁)^{1/(m+1)}."""
+    cos_t = (1.0 - u1) ** (1.0 / (m + 1.0))
+    cos_t = cos_t.astype(u1.dtype)
+    return jnp.sqrt(jnp.maximum(1.0 - cos_t * cos_t, 0.0)), cos_t, TWO_PI * u2
+
+
+def mirror(dx, dy, dz, nx, ny, nz):
+    """Specular reflection d − 2(d·n)n."""
+    k = 2.0 * (dx * nx + dy * ny + dz * nz)
+    return dx - k * nx, dy - k * ny, dz - k * nz
+
+
+def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype, max_attempts: int = 1024):
+    """Harvey–Shack lobe sample β ~ N(β0, σ²I) conditioned on |β| < 1, by rejection.
+
+    Lanes with ``pending`` false are untouched. Attempt ``a`` of a ray uses the counter pair
+    (ray + 2³¹, event·1024 + a). Returns (βx, βy, accepted); a lane not accepted after ``max_attempts``
+    (probability < (1 − p_acc)^1024, p_acc ≳ 0.1 for σ ≤ 2) reports accepted = False and the caller
+    falls back to a Lambertian direction.
+    """
+    ray_lobe = ray + jnp.uint32(LOBE_STREAM)
+    base = event.astype(jnp.uint32) * jnp.uint32(1024)
+    zero = jnp.zeros_like(beta0x)
+
+    def cond(state):
+        attempt, todo, _, _ = state
+        return jnp.any(todo) & (attempt < max_attempts)
+
+    def body(state):
+        attempt, todo, bx, by = state
+        w1, w2 = random_words(key_words, ray_lobe, [base + attempt.astype(jnp.uint32)])
+        u1, u2 = to_unit(w1, dtype), to_unit(w2, dtype)
+        r = jnp.sqrt(-2.0 * jnp.log1p(-u1))
+        gx = beta0x + sigma * r * jnp.cos(TWO_PI * u2)
+        gy = beta0y + sigma * r * jnp.sin(TWO_PI * u2)
+        ok = gx * gx + gy * gy < 1.0
+        take = todo & ok
+        return attempt + 1, todo & ~ok, jnp.where(take, gx, bx), jnp.where(take, gy, by)
+
+    _, todo, bx, by = lax.while_loop(cond, body, (jnp.int32(0), pending, zero, zero))
+    return bx, by, pending & ~todo
+
+
+def table_s(u, s_nodes, f_nodes, cdf):
+    """s = sin²θ sampled from a pdf linear in s between nodes (rows per lane).
+
+    In cell k (s_k ≤ s ≤ s_{k+1}) the pdf is f_k + κ(s − s_k), κ = (f_{k+1} − f_k)/(s_{k+1} − s_k), and the CDF
+    is F_k + f_k x + κx²/2 with x = s − s_k. For a target r = u − F_k the root is
+    x = 2r / (f_k + √(f_k² + 2κr)) (stable for κ → 0).
+    """
+    T = s_nodes.shape[-1]
+    k = jnp.clip(jnp.sum(cdf <= u[:, None], axis=-1) - 1, 0, T - 2)
+    take = lambda a, i: jnp.take_along_axis(a, i[:, None], axis=-1)[:, 0]  # noqa: E731
+    s0, s1 = take(s_nodes, k), take(s_nodes, k + 1)
+    f0, f1 = take(f_nodes, k), take(f_nodes, k + 1)
+    r = jnp.maximum(u - take(cdf, k), 0.0)
+    ds = s1 - s0
+    kappa = jnp.where(ds > 0, (f1 - f0) / jnp.where(ds > 0, ds, 1.0), 0.0)
+    den = f0 + jnp.sqrt(jnp.maximum(f0 * f0 + 2.0 * kappa * r, 0.0))
+    x = jnp.where(den > 0, 2.0 * r / jnp.where(den > 0, den, 1.0), 0.0)
+    return jnp.clip(s0 + jnp.minimum(x, ds), 0.0, 1.0)

@@ -1,0 +1,211 @@
+"""Tallies: the kernel's exact fixed-point sums turned into powers and figures of merit.
+
+The kernel (:mod:`bsdfkit.trace.kernel`) returns, per chunk, int64 limb sums of per-ray tallies rounded to
+2⁻⁴⁰ ray weights (squares to 2⁻³²). :class:`FixedSum` adds chunks as Python ints, so totals are exact and
+independent of chunking and order; values are converted to float once, at the end.
+
+Figures of merit (definitions of §5.1 of the cylindrical-module paper):
+
+* LER = extracted total / emitted;  YBR = extracted yellow / extracted blue.
+* Standard errors from the per-ray sample variance: SE(x̄) = √((Σx² − (Σx)²/N) / (N(N − 1))); for the
+  ratio YBR = ȳ/b̄ the delta method, Var ≈ (Var ȳ − 2 R Cov(ȳ, b̄) + R² Var b̄)/b̄².
+* Irradiance non-uniformity = (E_max − E_min)/(E_max + E_min) over the map bins lying entirely inside the
+  plate (all four corners within the radius), Fig. 10 / Fig. 12 of the cylindrical-module paper.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+
+class FixedSum:
+    """Exact running sum of fixed-point values given as int64 limb sums (hi·2^limb + lo) at a scale."""
+
+    def __init__(self, scale: float, limb: int) -> None:
+        self._scale = int(scale)
+        self._limb = limb
+        self._total = 0
+
+    def add(self, hi: int, lo: int) -> None:
+        self._total += (int(hi) << self._limb) + int(lo)
+
+    @property
+    def fraction(self) -> Fraction:
+        return Fraction(self._total, self._scale)
+
+    def __float__(self) -> float:
+        return float(self.fraction)
+
+
+def mean_and_se(s1: Fraction, s2: Fraction, n: int) -> tuple[float, float]:
+    """Mean and its standard error from Σx and Σx² over n samples."""
+    mean = s1 / n
+    if n < 2:
+        return float(mean), float("nan")
+    var = (s2 - s1 * s1 / n) / (n - 1)
+    return float(mean), math.sqrt(max(float(var), 0.0) / n)
+
+
+def ratio_and_se(sy: Fraction, sb: Fraction, syy: Fraction, sbb: Fraction, syb: Fraction,
+                 n: int) -> tuple[float, float]:
+    """R = Σy/Σb and its delta-method standard error."""
+    if sb == 0:
+        return float("nan"), float("nan")
+    r = sy / sb
+    if n < 2:
+        return float(r), float("nan")
+    b = sb / n
+    vy = (syy - sy * sy / n) / (n - 1)
+    vb = (sbb - sb * sb / n) / (n - 1)
+    cyb = (syb - sy * sb / n) / (n - 1)
+    var = (vy - 2 * r * cyb + r * r * vb) / (b * b) / n
+    return float(r), math.sqrt(max(float(var), 0.0))
+
+
+def interior_bins(bins: int) -> np.ndarray:
+    """Boolean (bins, bins) mask of the square bins of [−1, 1]² lying entirely inside the unit disk."""
+    edges = np.linspace(-1.0, 1.0, bins + 1)
+    far = np.maximum(np.abs(edges[:-1]), np.abs(edges[1:]))  # farthest |coordinate| within each bin row/col
+    return far[:, None] ** 2 + far[None, :] ** 2 <= 1.0 + 1e-12
+
+
+def non_uniformity(irradiance: np.ndarray) -> float:
+    """(E_max − E_min)/(E_max + E_min) over bins entirely inside the plate (see module docstring)."""
+    inside = irradiance[interior_bins(irradiance.shape[0])]
+    hi, lo = float(np.max(inside)), float(np.min(inside))
+    return (hi - lo) / (hi + lo) if hi + lo > 0 else float("nan")
+
+
+@dataclass(frozen=True)
+class TraceResult:
+    """Everything one trace produced. Powers in W; arrays as NumPy.
+
+    ``ledger`` holds emitted, extracted, absorbed (per surface), roulette balance, discarded (threshold)
+    and truncated power; ``ledger_error`` = |emitted − Σ others| / emitted computed from the exact sums.
+    ``budget`` (bins, 5) holds, per plate interaction k = 1 … bins (last bin: k ≥ bins), the power
+    extracted blue / yellow, absorbed in the cavity before interaction k, absorbed by the plate at k, and
+    roulette/threshold/truncation balance (Fig. 10 of the power-budget paper).
+    """
+
+    rays: int
+    seed: int
+    chunk: int
+    lanes: int
+    emitted: float
+    extracted: dict[str, float]
+    absorbed: dict[str, float]
+    roulette: float
+    discarded: float
+    truncated: float
+    ledger_error: float
+    LER: float
+    YBR: float
+    std_err: dict[str, float]
+    interactions: int
+    plate_interactions: int
+    clamped_interactions: int
+    irradiance: np.ndarray | None = field(default=None, repr=False)
+    non_uniformity: float | None = None
+    incidence_histogram: np.ndarray | None = field(default=None, repr=False)
+    budget: np.ndarray | None = field(default=None, repr=False)
+    radius_mm: float = 0.0
+    elapsed_s: float = 0.0
+    compile_s: float = 0.0
+    effects: Any = None
+
+    @property
+    def rays_per_s(self) -> float:
+        t = self.elapsed_s - self.compile_s
+        return self.rays / t if t > 0 else float("nan")
+
+    @property
+    def interactions_per_s(self) -> float:
+        t = self.elapsed_s - self.compile_s
+        return self.interactions / t if t > 0 else float("nan")
+
+    def cumulative_budget(self) -> dict[str, np.ndarray] | None:
+        """Cumulative extracted power and losses after each plate interaction (Fig. 10, power-budget paper)."""
+        if self.budget is None:
+            return None
+        b = self.budget
+        ext = np.cumsum(b[:, 0] + b[:, 1])
+        loss = np.cumsum(b[:, 2] + b[:, 3])
+        return {"extracted_blue": np.cumsum(b[:, 0]), "extracted_yellow": np.cumsum(b[:, 1]), "extracted": ext,
+                "losses": loss, "in_flight": self.emitted - ext - loss - np.cumsum(b[:, 4])}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON report of ``bsdfkit trace --json``."""
+        out: dict[str, Any] = {
+            "extracted": dict(self.extracted),
+            "LER": self.LER,
+            "YBR": self.YBR,
+            "absorbed": dict(self.absorbed),
+            "ledger_error": self.ledger_error,
+            "std_err": dict(self.std_err),
+            "non_uniformity": self.non_uniformity,
+            "rays": self.rays,
+            "elapsed_s": self.elapsed_s,
+            "rays_per_s": self.rays_per_s,
+            "interactions_per_s": self.interactions_per_s,
+            "emitted": self.emitted,
+            "ledger": {"emitted": self.emitted, "extracted": self.extracted["total"],
+                       "absorbed": sum(self.absorbed.values()), "roulette_balance": self.roulette,
+                       "threshold_discarded": self.discarded, "truncated": self.truncated},
+            "interactions": self.interactions,
+            "plate_interactions": self.plate_interactions,
+            "clamped_incidences": {"count": self.clamped_interactions,
+                                   "fraction_of_plate_interactions":
+                                       (self.clamped_interactions / self.plate_interactions
+                                        if self.plate_interactions else 0.0)},
+            "seed": self.seed,
+            "chunk": self.chunk,
+            "compile_s": self.compile_s,
+        }
+        cb = self.cumulative_budget()
+        if cb is not None:
+            out["cumulative_budget"] = {k: v.tolist() for k, v in cb.items()}
+        return out
+
+    def to_dataset(self):
+        """The result as an ``xarray.Dataset`` (scalars, irradiance map, incidence histogram, budget)."""
+        import xarray as xr
+
+        data: dict[str, Any] = {
+            "LER": ((), self.LER, {"units": "1", "long_name": "light extraction ratio"}),
+            "YBR": ((), self.YBR, {"units": "1", "long_name": "yellow-to-blue ratio"}),
+            "ledger_error": ((), self.ledger_error, {"units": "1"}),
+        }
+        for k, v in self.extracted.items():
+            data[f"extracted_{k}"] = ((), v, {"units": "W"})
+        for k, v in self.absorbed.items():
+            data[f"absorbed_{k}"] = ((), v, {"units": "W"})
+        for k, v in self.std_err.items():
+            data[f"std_err_{k}"] = ((), v, {"units": "1" if k in ("LER", "YBR") else "W"})
+        coords: dict[str, Any] = {}
+        if self.irradiance is not None:
+            n = self.irradiance.shape[0]
+            centres = (np.arange(n) + 0.5) / n * 2 * self.radius_mm - self.radius_mm
+            coords["y_mm"] = ("y_mm", centres, {"units": "mm"})
+            coords["x_mm"] = ("x_mm", centres, {"units": "mm"})
+            data["irradiance"] = (("y_mm", "x_mm"), self.irradiance,
+                                  {"units": "W/mm^2", "long_name": "irradiance on the cavity side of the top"})
+            data["non_uniformity"] = ((), self.non_uniformity, {"units": "1"})
+        if self.incidence_histogram is not None:
+            hb = self.incidence_histogram.shape[1]
+            coords["theta_i"] = ("theta_i", (np.arange(hb) + 0.5) * 90.0 / hb, {"units": "deg"})
+            coords["colour"] = ("colour", ["blue", "yellow"])
+            data["incident_power"] = (("colour", "theta_i"), self.incidence_histogram,
+                                      {"units": "W", "long_name": "power reaching the top per incidence bin"})
+        if self.budget is not None:
+            coords["interaction"] = ("interaction", np.arange(1, self.budget.shape[0] + 1))
+            coords["budget_term"] = ("budget_term", ["extracted_blue", "extracted_yellow", "absorbed_cavity",
+                                                     "absorbed_plate", "other"])
+            data["budget"] = (("interaction", "budget_term"), self.budget, {"units": "W"})
+        ds = xr.Dataset({k: xr.Variable(*v) for k, v in data.items()},
+                        coords={k: xr.Variable(*v) if len(v) == 3 else xr.Variable(*v) for k, v in coords.items()})
+        ds.attrs.update(rays=self.rays, seed=self.seed, emitted_W=self.emitted)
+        return ds
