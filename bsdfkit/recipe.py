@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import xarray as xr
 
 from bsdfkit.errors import FormatError, InputError, NumericalError
@@ -291,3 +292,44 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
 
     atomic.write_text(out_dir / "summary.json", dumps(summary), force)
     return summary
+
+
+# ------------------------------------------------------------------------------------- the plate
+def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str = ""):
+    """A :class:`bsdfkit.trace.PhosphorPlate` from a calibrated scan: the toolkit's own TIS per interaction,
+    side and measured incidence, with angular shapes from lambert+gaussian fits for the elastic
+    interactions (bibs, yiys) and Lambertian for the converted light (biys, §4.2 of the power-budget paper)."""
+    from bsdfkit import angular, spectral
+    from bsdfkit.fit import fit_bsdf
+    from bsdfkit.trace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel
+
+    tis = tis if tis is not None else angular.tis_table(scan)
+    grid = tuple(float(t) for t in tis["theta_i"].values)
+    channels = {}
+    for inter in ("bibs", "biys", "yiys"):
+        for side in ("reflection", "transmission"):
+            values = tuple(float(np.clip(tis["tis"].sel(interaction=inter, side=side, theta_i=t), 0.0, 1.0)) for t in grid)
+            if inter == "biys":
+                dists = (Lambertian(),) * len(grid)
+            else:
+                prof = spectral.interaction_profile(scan, inter, side)
+                prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
+                fit = fit_bsdf(prof, "lambert+gaussian")
+                dists = tuple(LambertGaussian(rho_per_sr=float(fit["rho"].sel(theta_i=t)) / np.pi,
+                                              a_per_sr=float(fit["A"].sel(theta_i=t)),
+                                              sigma=float(fit["sigma"].sel(theta_i=t))) for t in grid)
+            channels[f"{inter}_{side}"] = PlateChannel(values, dists)
+    plate = PhosphorPlate(theta_i_deg=grid, name=name or scan.attrs.get("sample_name", ""),
+                          notes=f"from {scan.attrs.get('source', '')}: bsdfkit TIS (two-arc reconstruction) and "
+                                "lambert+gaussian fits", **channels)
+    plate.validate()
+    return plate
+
+
+def phosphor_plate(recipe_path: str | Path):
+    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``)."""
+    from bsdfkit.calibrate import calibrate
+    from bsdfkit.io.goniometer import read_scan
+
+    recipe = load_recipe(recipe_path)
+    return plate_from_scan(calibrate(read_scan(recipe.measurement)), name=recipe.name)
