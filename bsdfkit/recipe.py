@@ -26,6 +26,7 @@ KNOWN_SECTIONS = {
     "report": {"figure_config", "figure_wavelength_nm"},
     "reductions": {"budget_incidence_deg", "eta_mc", "iterations"},
     "exports": {"interactions", "sides", "formats", "tolerance"},
+    "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
 }
 
 
@@ -55,6 +56,19 @@ class ExportOptions:
 
 
 @dataclass(frozen=True)
+class TraceStudyOptions:
+    """The module trace of the run: a scene whose plate comes from this recipe, and §5 studies around it."""
+
+    scene: Path | None = None
+    rays: int = 400_000
+    seed: int = 1
+    reflectance: tuple[float, ...] = ()
+    height_mm: tuple[float, ...] = ()
+    led_fwhm_deg: tuple[float, ...] = ()
+    specular_fraction: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
 class Recipe:
     """A parsed recipe file. Paths are resolved relative to the recipe file."""
 
@@ -65,6 +79,7 @@ class Recipe:
     report: ReportOptions = ReportOptions()
     reductions: ReductionOptions = ReductionOptions()
     exports: ExportOptions = ExportOptions()
+    trace: TraceStudyOptions = TraceStudyOptions()
     raw: dict = field(default_factory=dict, compare=False, hash=False)
 
 
@@ -125,9 +140,28 @@ def load_recipe(path: str | Path) -> Recipe:
         formats=tuple(_choices(exp, "formats", ("tracepro", "zemax", "asap"), path, default=("tracepro", "zemax"))),
         tolerance=float(_typed(exp, "tolerance", (int, float), path, "exports.tolerance", 0.005)),
     )
+    tr = data.get("trace")
+    trace = TraceStudyOptions()
+    if tr is not None:
+        scene = path.parent / _typed(tr, "scene", str, path, "trace.scene")
+        if not scene.is_file():
+            raise InputError("trace scene not found", file=path, field="trace.scene", expected="an existing scene TOML",
+                             got=str(scene))
+        trace = TraceStudyOptions(
+            scene=scene, rays=int(_typed(tr, "rays", int, path, "trace.rays", 400_000)),
+            seed=int(_typed(tr, "seed", int, path, "trace.seed", 1)),
+            **{k: tuple(float(v) for v in _numbers(tr, k, path)) for k in
+               ("reflectance", "height_mm", "led_fwhm_deg", "specular_fraction")})
     return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
                   description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
-                  reductions=reductions, exports=exports, raw=data)
+                  reductions=reductions, exports=exports, trace=trace, raw=data)
+
+
+def _numbers(table: dict, key: str, path: Path) -> list[float]:
+    value = table.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise InputError("recipe value must be a list of numbers", file=path, field=f"trace.{key}", got=value)
+    return value
 
 
 def _choices(table: dict, key: str, allowed: tuple[str, ...], path: Path, default: tuple[str, ...] | None = None) -> list[str]:
@@ -255,11 +289,119 @@ def stage_exports(state: RunState) -> None:
                 state.outputs[f"exports/{inter}_{side}.{suffix[fmt]}"] = writer(inter, side, fmt)
 
 
+def stage_trace(state: RunState) -> None:
+    """Trace the module with the plate built from this run's own results, and the §5 studies around it.
+
+    Trends of the cylindrical-module paper are checked and reported (not assumed): LER falls with lower wall
+    reflectance (Fig. 8) and with height (Fig. 11), barely moves with LED FWHM (Fig. 13); non-uniformity is
+    larger for mirror walls than diffuse ones (Fig. 10) and for short cavities (Fig. 12).
+    """
+    from dataclasses import replace as dc_replace
+
+    from bsdfkit.commands._common import dumps
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.report import trace_studies_figure, save_figure
+    from bsdfkit.trace import load_scene, trace, with_values
+
+    opts = state.recipe.trace
+    if opts.scene is None:
+        return
+    plate = plate_from_scan(state.scan, state.tis, name=state.recipe.name)
+    scene = _scene_with_plate(opts.scene, plate)
+    device = trace(scene, opts.rays, opts.seed)
+    results = {"device": device.to_dict()}
+    studies: dict[str, list[dict]] = {}
+
+    def run(label: str, values: dict) -> dict:
+        r = trace(with_values(scene, values), opts.rays, opts.seed)
+        row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR, "YBR_std": r.std_err["YBR"],
+               "non_uniformity": r.non_uniformity, "ledger_error": r.ledger_error}
+        studies.setdefault(label, []).append(row)
+        return row
+
+    for rho in opts.reflectance:
+        run("reflectance", {"wall.reflectance": rho, "base.reflectance": rho})
+    for h in opts.height_mm:
+        run("height_mm", {"cavity.height_mm": h})
+    for fwhm in opts.led_fwhm_deg:
+        run("led_fwhm_deg", {"leds.fwhm_deg": fwhm})
+    for spec in opts.specular_fraction:
+        run("specular_fraction", {"wall.specular_fraction": spec, "base.specular_fraction": spec})
+    results["studies"] = studies
+    results["trends"] = _trends(device, studies)
+    state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity", "ledger_error",
+                                                                         "rays", "elapsed_s", "interactions_per_s")},
+                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
+                              "trends": results["trends"]}
+    state.outputs["trace.json"] = lambda p, force: write_text(p, dumps(results), force)
+    device_ds = device.to_dataset()
+    state.outputs["trace_device.nc"] = lambda p, force: netcdf.save(device_ds, p, force)
+    fig = trace_studies_figure(device, studies)
+    state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
+    lines = [f"module trace ({opts.rays} rays, plate from this run): LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
+             f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f}, non-uniformity {device.non_uniformity:.3f}, "
+             f"ledger error {device.ledger_error:.1e}"]
+    lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({t['detail']})"
+              for name, t in results["trends"].items()]
+    state.summary.setdefault("report_lines", []).extend(lines)
+
+
+def _scene_with_plate(path: Path, plate):
+    """The scene at ``path`` with its phosphor plate given (instead of recomputing it from ``from = ...``)."""
+    import tomllib as _toml
+
+    from bsdfkit.trace.scene import parse_scene
+
+    data = _toml.loads(path.read_text(encoding="utf-8"))
+    top = data.get("top", {})
+    key = "from" if "from" in top else "plate" if "plate" in top else None
+    if top.get("kind") != "phosphor" or key is None:
+        raise InputError("trace scene must have a phosphor top taken from a recipe or plate file", file=path,
+                         field="top", expected='kind = "phosphor" and from = "..."')
+    return parse_scene(data, path, preloaded={"plate": ((key, top[key]), plate)})
+
+
+def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
+    out = {}
+    if len(studies.get("reflectance", [])) >= 2:
+        rows = sorted(studies["reflectance"], key=lambda r: r["values"]["wall.reflectance"])
+        ler = [r["LER"] for r in rows]
+        out["LER falls with reflectance (Fig. 8)"] = {
+            "holds": bool(np.all(np.diff(ler) > 0)),
+            "detail": ", ".join(f"ρ {r['values']['wall.reflectance']:g}: {r['LER']:.3f}" for r in rows)}
+    if len(studies.get("height_mm", [])) >= 2:
+        rows = sorted(studies["height_mm"], key=lambda r: r["values"]["cavity.height_mm"])
+        ler = [r["LER"] for r in rows]
+        out["LER falls with height (Fig. 11)"] = {
+            "holds": bool(np.all(np.diff(ler) < 0)),
+            "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['LER']:.3f}" for r in rows)}
+        nu = [r["non_uniformity"] for r in rows]
+        out["non-uniformity larger for short cavities (Fig. 12)"] = {
+            "holds": bool(nu[0] > nu[-1]),
+            "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['non_uniformity']:.3f}" for r in rows)}
+    if studies.get("led_fwhm_deg") and studies.get("reflectance") and studies.get("height_mm"):
+        # "Barely moves" as the paper ranks it: the FWHM effect is the smallest of the studied LER effects.
+        spans = {k: max(r["LER"] for r in studies[k]) - min(r["LER"] for r in studies[k]) for k in ("reflectance", "height_mm")}
+        moves = max(abs(r["LER"] - device.LER) for r in studies["led_fwhm_deg"])
+        out["LER barely moves with LED FWHM (Fig. 13)"] = {
+            "holds": bool(moves < min(spans.values())),
+            "detail": f"largest change {moves:.3f} vs the Lambertian device; LER spans {spans['reflectance']:.3f} over "
+                      f"reflectance and {spans['height_mm']:.3f} over height (criterion: smallest effect); " + ", ".join(
+                          f"FWHM {r['values']['leds.fwhm_deg']:g}°: {r['LER']:.3f}" for r in studies["led_fwhm_deg"])}
+    if studies.get("specular_fraction"):
+        rows = sorted(studies["specular_fraction"], key=lambda r: r["values"]["wall.specular_fraction"])
+        out["non-uniformity larger for mirror walls (Fig. 10)"] = {
+            "holds": bool(rows[-1]["non_uniformity"] > rows[0]["non_uniformity"]),
+            "detail": ", ".join(f"specular {r['values']['wall.specular_fraction']:g}: {r['non_uniformity']:.3f}" for r in rows)}
+    return out
+
+
 STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
     ("ingest", stage_ingest),
     ("report", stage_report),
     ("reductions", stage_reductions),
     ("exports", stage_exports),
+    ("trace", stage_trace),
 )
 
 

@@ -63,3 +63,29 @@ def budget_figure(power, photons=None) -> Figure:
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def trace_studies_figure(device, studies: dict[str, list[dict]]) -> Figure:
+    """LER, YBR and non-uniformity of the module studies (cf. Figs. 8, 11, 13 of the cylindrical-module paper)."""
+    panels = [k for k in ("reflectance", "height_mm", "led_fwhm_deg", "specular_fraction") if studies.get(k)]
+    fig = Figure(figsize=(3.2 * max(len(panels), 1), 6))
+    axes = fig.subplots(2, max(len(panels), 1), squeeze=False)
+    keys = {"reflectance": "wall.reflectance", "height_mm": "cavity.height_mm", "led_fwhm_deg": "leds.fwhm_deg",
+            "specular_fraction": "wall.specular_fraction"}
+    for c, name in enumerate(panels):
+        rows = sorted(studies[name], key=lambda r: r["values"][keys[name]])
+        x = [r["values"][keys[name]] for r in rows]
+        ax = axes[0][c]
+        ax.errorbar(x, [r["LER"] for r in rows], yerr=[r["LER_std"] for r in rows], marker="o", label="LER")
+        ax.axhline(device.LER, color="grey", ls=":", lw=0.8, label="test device")
+        ax.set_title(name, fontsize=9)
+        ax.set_ylabel("LER")
+        ax.grid(True, alpha=0.3)
+        ax2 = axes[1][c]
+        ax2.plot(x, [r["YBR"] for r in rows], "s-", label="YBR")
+        ax2.plot(x, [10 * r["non_uniformity"] for r in rows], "^--", label="10 × non-uniformity")
+        ax2.set_xlabel(keys[name])
+        ax2.grid(True, alpha=0.3)
+        ax2.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
