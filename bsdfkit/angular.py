@@ -33,7 +33,8 @@ starts at |β| = sin θi), its weight is handed to the half-axes sampled at that
 the half-axis sampled farthest out holds its last value.
 
 Error bars: the measurement part propagates the per-record standard uncertainties through the (linear)
-quadrature weights; the TIS value itself interpolates half-profiles in ln f where neighbouring samples are
+quadrature weights and adds the scale uncertainty common to all records (the reference beam,
+``attrs['common_relative_std']`` of the profile); the TIS value itself interpolates half-profiles in ln f where neighbouring samples are
 positive (linear in f elsewhere), which follows the convex tails of lobes between sparse samples
 (metrology.md §4.4). The reconstruction part adds in quadrature (i) the change when the quadrature grid is
 halved, (ii) the change when half-profiles are interpolated in f instead of ln f, (iii) the largest change
@@ -328,7 +329,8 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
     # ln-f interpolation follows convex lobe tails between sparse samples (metrology.md §4.4); the linear
     # form (exactly w·f) gives the first-order propagation of the measurement uncertainty.
     value = hemi.tis("log", n_psi, n_r)
-    std_meas = float(np.sqrt(np.sum((w * s) ** 2)))
+    # per-record noise through the linear weights, plus the scale common to all records (reference beam)
+    std_meas = float(np.hypot(np.sqrt(np.sum((w * s) ** 2)), profile.attrs.get("common_relative_std", 0.0) * value))
     coarse = hemi.tis("log", n_psi // 2, n_r // 2)
     blends = [hemi.tis("log", n_psi, n_r, p=p) for p in (1.0, 4.0)]
     hold = hemi.tis("log", n_psi, n_r, borrow=False)

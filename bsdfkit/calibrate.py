@@ -155,7 +155,10 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
             "saturated": (("record", "wavelength"), saturated),
             "grazing": ("record", grazing),
             "incident_spectrum": (("configuration", "wavelength"), spectrum),
+            "incident_relative_std": (("configuration", "wavelength"),
+                                      np.where(valid, np.sqrt(var_p_i) / np.where(valid, p_i, 1.0), np.nan)),
             "incident_valid": (("configuration", "wavelength"), valid),
+            "incident_power_relative_std": ("configuration", np.sqrt(var_phi) / phi),
             "incident_band": raw["incident_band"],
             "configuration_description": raw["configuration_description"],
         },
@@ -169,6 +172,12 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
     ds["bsdf_bispectral_std"].attrs.update(units="1/(sr nm)")
     ds["noise_floor_bispectral"].attrs.update(units="1/(sr nm)")
     ds["incident_spectrum"].attrs.update(units="1/nm", long_name="incident spectral power, normalised to unit integral")
+    ds["incident_relative_std"].attrs.update(
+        units="1", long_name="relative standard uncertainty of the reference-beam power per pixel",
+        note="common to every record of the configuration: a fully correlated scale uncertainty")
+    ds["incident_power_relative_std"].attrs.update(
+        units="1", long_name="relative standard uncertainty of the band-integrated incident power Φ_i",
+        note="common to every bi-spectral value of the configuration")
     ds["saturated"].attrs["long_name"] = "raw counts at full scale"
     ds["grazing"].attrs["long_name"] = "aperture within one diameter of the horizon; BSDF masked"
     geometry = {k: raw.attrs[k] for k in ("detector_distance_mm", "aperture_diameter_mm", "beam_diameter_mm")}

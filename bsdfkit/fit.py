@@ -31,6 +31,8 @@ solution) raise :class:`bsdfkit.errors.FitError`; a fit that stops at ``maxiter`
 """
 from __future__ import annotations
 
+import functools
+
 import dataclasses
 import math
 import warnings
@@ -318,8 +320,11 @@ def _bucket(k: int) -> int:
 
 
 def _as_batch(name: str, a: Any, shape: tuple[int, int]) -> np.ndarray:
+    arr = np.asarray(a, dtype=float)
+    if arr.ndim > 2 and arr.shape[:2] == shape:
+        return arr  # per-point sub-arrays (e.g. detector-aperture nodes) ride along unchanged
     try:
-        return np.broadcast_to(np.asarray(a, dtype=float), shape)
+        return np.broadcast_to(arr, shape)
     except ValueError:
         raise InputError("array does not match the data shape", field=name,
                          expected=f"broadcastable to {shape}", got=np.shape(a)) from None
@@ -467,7 +472,7 @@ def least_squares(
 
     def pad(a: np.ndarray, value: float | None) -> np.ndarray:
         a = np.concatenate([a, np.repeat(a[:1], b_pad - n_batch, axis=0)], axis=0)
-        width = ((0, 0), (0, n_pad - n))
+        width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
         return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
 
     u0_pad = np.concatenate([u0, np.repeat(u0[:1], b_pad - n_batch, axis=0)], axis=0)
@@ -604,10 +609,26 @@ def _lambert_abg_model(theta, x):
     return models.lambert_abg(x["theta_i"], x["theta_s"], x["phi_s"], theta[0], theta[1], theta[2], theta[3])
 
 
+def _aperture_average(function: Callable, theta, x):
+    """The model as the goniometer reports it: averaged over the detector aperture.
+
+    A detector of solid angle Ω centred at θs reports Σ_n w_n f(ω_n) cos θ_n / (Ω cos θs) over aperture nodes
+    ω_n (:func:`bsdfkit.instrument.aperture_quadrature`); ``x["weight"]`` holds w_n cos θ_n / (Ω cos θs).
+    Fitting the point model to such data would bias sharp lobes (metrology.md §4.6: convolve the model rather
+    than deconvolve the data).
+    """
+    nodes = {"theta_i": x["theta_i"][..., None], "theta_s": x["theta_s_nodes"], "phi_s": x["phi_s_nodes"]}
+    return jnp.sum(function(theta, nodes) * x["weight"], axis=-1)
+
+
 @dataclass(frozen=True)
 class _BsdfModel:
     function: Callable
     parameters: tuple[Parameter, ...]
+
+    @property
+    def aperture_function(self) -> Callable:
+        return _APERTURE_FUNCTIONS[self.function]
 
 
 #: BSDF models known to :func:`fit_bsdf`: name → (JAX model, parameters with bounds and units).
@@ -631,6 +652,11 @@ BSDF_MODELS: dict[str, _BsdfModel] = {
 }
 
 
+#: Aperture-averaged versions of the model functions (module-level objects: hashable, compiled once).
+_APERTURE_FUNCTIONS: dict[Callable, Callable] = {
+    m.function: functools.partial(_aperture_average, m.function) for m in BSDF_MODELS.values()}
+
+
 @dataclass(frozen=True)
 class BsdfFitOptions:
     """Masks and residual settings of :func:`fit_bsdf`.
@@ -644,6 +670,9 @@ class BsdfFitOptions:
     specular_core_deg
         Points within this angle of the specular direction are masked (detector half-angle); default 0
         (no mask).
+    aperture
+        Average the model over the detector aperture when the profile states the instrument geometry
+        (attributes ``detector_distance_mm`` and ``aperture_diameter_mm``); default True.
     fit
         :class:`FitOptions`; default log residuals (BSDFs span decades), linear loss.
     """
@@ -651,6 +680,7 @@ class BsdfFitOptions:
     max_theta_s_deg: float = 85.0
     noise_floor_k: float = 3.0
     specular_core_deg: float = 0.0
+    aperture: bool = True
     fit: FitOptions = field(default_factory=lambda: FitOptions(residual="log"))
 
 
@@ -830,7 +860,22 @@ def fit_bsdf(
         p0[b] = _initial_bsdf_parameters(model, dbeta[use], f[b, :k][use])
 
     x = {"theta_i": ti, "theta_s": ts, "phi_s": ps}
-    ds = least_squares(spec.function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
+    function = spec.function
+    geometry = ("detector_distance_mm", "aperture_diameter_mm")
+    with_aperture = options.aperture and all(k in profile.attrs for k in geometry)
+    if with_aperture:
+        from bsdfkit.instrument import Instrument, aperture_quadrature
+
+        inst = Instrument(float(profile.attrs["detector_distance_mm"]), float(profile.attrs["aperture_diameter_mm"]),
+                          float(profile.attrs.get("beam_diameter_mm", 1.0)))
+        quad = aperture_quadrature(ts, ps, inst)
+        d = quad.directions
+        cos_nodes = np.clip(d[..., 2], 0.0, None)
+        x["theta_s_nodes"] = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
+        x["phi_s_nodes"] = np.arctan2(d[..., 1], d[..., 0])
+        x["weight"] = quad.weights * cos_nodes / (inst.solid_angle_sr * np.cos(ts)[..., None])
+        function = spec.aperture_function
+    ds = least_squares(function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
                        batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
                        model_name=model)
     ds = ds.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
@@ -842,4 +887,13 @@ def fit_bsdf(
     ds.attrs["max_theta_s_deg"] = options.max_theta_s_deg
     ds.attrs["noise_floor_k"] = options.noise_floor_k
     ds.attrs["specular_core_deg"] = options.specular_core_deg
+    ds.attrs["aperture_averaged"] = int(with_aperture)
+    common = float(profile.attrs.get("common_relative_std", 0.0))
+    if common > 0:
+        # A common scale error of the data (the reference beam) moves every amplitude-like parameter by the
+        # same fraction; shape parameters (σ, B, g) are scale-free. Add it to their standard errors.
+        for name in ("rho", "A"):
+            if name in ds and f"{name}_std" in ds:
+                ds[f"{name}_std"] = np.hypot(ds[f"{name}_std"], common * np.abs(ds[name]))
+        ds.attrs["common_relative_std"] = common
     return ds

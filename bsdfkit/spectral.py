@@ -103,7 +103,13 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: Spectr
     with np.errstate(invalid="ignore"):
         mean = np.where(defined, np.nansum(q * w, axis=1) / norm, np.nan)
         std = np.where(defined, np.sqrt(np.nansum((s * w) ** 2, axis=1)) / norm, np.nan)
-    return _profile(sub, mean, std, "1/sr", f"weighted mean BSDF over {band[0]:g}-{band[1]:g} nm (eq. 5)")
+    out = _profile(sub, mean, std, "1/sr", f"weighted mean BSDF over {band[0]:g}-{band[1]:g} nm (eq. 5)")
+    if "incident_relative_std" in sub:
+        # The reference beam divides every record alike: its noise is a common scale factor, which per-record
+        # standard uncertainties (and fits that treat records as independent) cannot carry.
+        rel = np.nan_to_num(sub["incident_relative_std"].sel(configuration=config).values)
+        out.attrs["common_relative_std"] = float(np.sqrt(np.sum((w * rel) ** 2)) / norm)
+    return out
 
 
 def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = YELLOW_BAND_NM) -> xr.Dataset:
@@ -119,7 +125,10 @@ def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = YELLOW_BA
     total = np.sum(np.where(inside, q, 0.0) * w, axis=1)
     total = np.where(np.isfinite(q[:, inside]).all(axis=1), total, np.nan)
     std = np.sqrt(np.sum(np.where(inside, s, 0.0) ** 2 * w**2, axis=1))
-    return _profile(sub, total, std, "1/sr", f"bi-spectral BSDF integrated over {band[0]:g}-{band[1]:g} nm (eq. 13)")
+    out = _profile(sub, total, std, "1/sr", f"bi-spectral BSDF integrated over {band[0]:g}-{band[1]:g} nm (eq. 13)")
+    if "incident_power_relative_std" in sub:
+        out.attrs["common_relative_std"] = float(sub["incident_power_relative_std"].sel(configuration=config))
+    return out
 
 
 def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = YELLOW_BAND_NM) -> xr.Dataset:
@@ -180,6 +189,7 @@ def _profile(sub: xr.Dataset, value: NDArray, std: NDArray, units: str, name: st
     out.attrs.update({k: v for k, v in sub.attrs.items() if k in (
         "source", "sample_name", "aperture_half_angle_deg", "solid_angle_sr", "detector_distance_mm",
         "aperture_diameter_mm", "beam_diameter_mm")})
+    out["bsdf_std"].attrs["note"] = "per-record (independent) part; see attrs['common_relative_std'] for the shared scale"
     out.attrs["quantity"] = "bsdf_profile"
     return out
 

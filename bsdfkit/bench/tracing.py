@@ -1,0 +1,88 @@
+"""Tracer studies: LER error vs rays, roulette vs the flux threshold Th, float32 vs float64.
+
+The truth is the two-wavelength radiosity oracle with exact view factors (:mod:`bsdfkit.trace.radiosity`) of
+the same scene: a fully diffuse cavity with Lambertian LEDs, exit top or the Table-2 plate taken as
+angle-independent and Lambertian. Errors are relative; for a Monte Carlo run the reported error is
+max(|LER − oracle|, 2σ)/oracle, so a lucky run cannot claim an accuracy its statistics do not support.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from bsdfkit.bench.core import Row, Study
+from bsdfkit.trace import load_scene, trace, with_values
+from bsdfkit.trace.radiosity import module_radiosity
+
+SCENES = Path(__file__).resolve().parents[2] / "fitting" / "scenes"
+TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
+          "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
+
+
+def _example(plate: bool):
+    scene = load_scene(SCENES / "example.toml")
+    if plate:
+        from bsdfkit.trace import PhosphorPlate, Top
+
+        scene = replace(scene, top=Top(kind="phosphor", plate=PhosphorPlate.constant(TABLE2, name="Table 2, 45°")))
+    return scene
+
+
+def _error(result, oracle: float) -> float:
+    return max(abs(result.LER - oracle), 2 * result.std_err["LER"]) / oracle
+
+
+def rays(quick: bool) -> Study:
+    scene = _example(plate=True)
+    oracle = module_radiosity(scene).LER
+    trace(scene, 2000, 0)  # compile outside the timings
+    rows = []
+    for n in ((10_000, 100_000, 400_000) if quick else (10_000, 100_000, 1_000_000, 4_000_000)):
+        start = time.perf_counter()
+        r = trace(scene, n, 7)
+        wall = time.perf_counter() - start
+        rows.append(Row(f"{n:.0e} rays", _error(r, oracle), wall, n,
+                        {"LER": r.LER, "sigma_rel": r.std_err["LER"] / oracle, "oracle": oracle}))
+    return Study("trace_rays", "Tracer: LER error vs rays (example cavity h = 43 mm, ρ = 0.9, Table-2 plate)",
+                 "max(|LER − radiosity oracle|, 2σ) / oracle", "rays", tuple(rows),
+                 notes="Wall time excludes compilation (done once per scene configuration, 2-6 s here).")
+
+
+def termination(quick: bool) -> Study:
+    scene = with_values(_example(plate=True), {"wall.reflectance": 0.985, "base.reflectance": 0.985})
+    oracle = module_radiosity(scene).LER
+    n = 100_000 if quick else 1_000_000
+    rows = []
+    trace(scene, 2000, 0)
+    start = time.perf_counter()
+    ref = trace(scene, n, 3)
+    rows.append(Row("Russian roulette (unbiased)", _error(ref, oracle), time.perf_counter() - start, n,
+                    {"group": "roulette", "bias": ref.LER - oracle}))
+    for th in ((0.01, 0.1) if quick else (0.001, 0.01, 0.05, 0.1, 0.2)):
+        sc = replace(scene, trace=replace(scene.trace, termination="threshold", threshold=th))
+        trace(sc, 2000, 0)
+        start = time.perf_counter()
+        r = trace(sc, n, 3)
+        rows.append(Row(f"flux threshold Th = {th:g}", _error(r, oracle), time.perf_counter() - start, n,
+                        {"group": "threshold", "bias": r.LER - oracle, "discarded": r.discarded / r.emitted}))
+    return Study("trace_termination", "Tracer: Russian roulette vs the per-ray flux threshold Th (ρ = 0.985, plate)",
+                 "max(|LER − radiosity oracle|, 2σ) / oracle", "rays", tuple(rows), groups=("roulette", "threshold"),
+                 notes="The threshold drops light (biased low); roulette keeps the expectation exact. Per-iteration "
+                       "thresholds as in Fig. 6 of the cylindrical-module paper are discussed in docs/tracer.md.")
+
+
+def precision(quick: bool) -> Study:
+    scene = _example(plate=True)
+    oracle = module_radiosity(scene).LER
+    n = 100_000 if quick else 1_000_000
+    rows = []
+    for prec in ("float32", "float64"):
+        sc = replace(scene, trace=replace(scene.trace, precision=prec))
+        trace(sc, 2000, 0)
+        start = time.perf_counter()
+        r = trace(sc, n, 5)
+        rows.append(Row(prec, _error(r, oracle), time.perf_counter() - start, n,
+                        {"group": prec, "LER": r.LER, "ledger_error": r.ledger_error}))
+    return Study("trace_precision", "Tracer: float32 vs float64 ray geometry (same seed; tallies always float64)",
+                 "max(|LER − radiosity oracle|, 2σ) / oracle", "rays", tuple(rows), groups=("float32", "float64"))
