@@ -378,6 +378,26 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
     return out
 
 
+def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: str,
+                           interaction: str = "biys", band: tuple[float, float] = (470.0, 740.0)) -> xr.DataArray:
+    """Spectral TIS density (1/nm): the bi-spectral BSDF integrated over the hemisphere at each λs.
+
+    The hemisphere weights of the band-integrated profile are linear in the data, so one reconstruction
+    integrates every wavelength: Φ_λ,s/Φ_i = Σ_k w_k ⟨q_λ⟩_k(λs). Its integral over ``band`` is the TIS.
+    """
+    from bsdfkit.records import select
+    from bsdfkit.spectral import bispectral_band_integral
+
+    sub = select(ds, config=config, theta_i=theta_i, side=side)
+    prof = bispectral_band_integral(sub, config, band)
+    hemi = Hemisphere.from_profile(prof, center=CENTER.get(interaction, "specular"))
+    w = hemi.weights()
+    density = np.nan_to_num(sub["bsdf_bispectral"].values, nan=0.0).T @ w
+    out = xr.DataArray(density, dims=["wavelength"], coords={"wavelength": ds["wavelength"].values})
+    out.attrs.update(units="1/nm", long_name=f"hemispherical spectral TIS density, {side}, θi = {theta_i:g}°")
+    return out
+
+
 def hemisphere_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> Callable[[float, str, NDArray], NDArray]:
     """A callable ``f(theta_i_deg, side, directions) -> bsdf`` over measured incidences (for grids/exports).
 

@@ -66,7 +66,6 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
                       yellow_band: tuple[float, float] = (470.0, 740.0)) -> InteractionTable:
     """Table 2 of the power-budget paper at incidence ``theta_i`` (deg) from a calibrated scan."""
     from bsdfkit import angular, spectral
-    from bsdfkit.records import select
 
     tis = tis if tis is not None else angular.tis_table(ds, theta_i=[theta_i])
     sel = tis.sel(theta_i=theta_i, method="nearest")
@@ -79,17 +78,10 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
             power_std[f"{tag}_{inter}"] = 100 * float(sel["tis_std"].sel(interaction=inter, side=side))
     # eq. (15): incident blue spectrum; eq. (14): hemispherically scattered yellow spectrum per side
     incident = spectral.incident_spectrum(ds, "blue")
-    lam = ds["wavelength"].values
     ratio = {}
     for tag, side in (("B", "reflection"), ("F", "transmission")):
-        sub = select(ds, config="blue", theta_i=theta_i, side=side)
-        prof = spectral.bispectral_band_integral(sub, "blue", yellow_band)
-        prof.attrs["interaction"] = "biys"
-        hemi = angular.Hemisphere.from_profile(prof, center=angular.CENTER["biys"])
-        w = hemi.weights()
-        scattered = np.nan_to_num(sub["bsdf_bispectral"].values, nan=0.0).T @ w  # spectral TIS density, 1/nm
-        sd = xr.DataArray(scattered, dims=["wavelength"], coords={"wavelength": lam})
-        ratio[tag] = spectral.photon_ratio(incident, blue_band, sd, yellow_band)
+        scattered = angular.hemispherical_spectrum(ds, "blue", theta_i, side, "biys", yellow_band)
+        ratio[tag] = spectral.photon_ratio(incident, blue_band, scattered, yellow_band)
     photons = dict(power)
     photons_std = dict(power_std)
     for tag in ("B", "F"):

@@ -27,6 +27,8 @@ KNOWN_SECTIONS = {
     "reductions": {"budget_incidence_deg", "eta_mc", "iterations"},
     "exports": {"interactions", "sides", "formats", "tolerance"},
     "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
+    "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
+             "fallback_flux_W"},
 }
 
 
@@ -56,6 +58,23 @@ class ExportOptions:
 
 
 @dataclass(frozen=True)
+class FitStageOptions:
+    """Model fits of the run and the module-spectrum reconstruction (§4.2 of the cylindrical-module paper).
+
+    The blue LED spectrum defaults to Table 2 of that paper (450.1 nm, FWHM 22.9 nm); the phosphor emission is
+    fitted to this run's measured converted light. The two-wavelength fluxes come from the run's module trace,
+    or, without a trace stage, from ``fallback_flux_W`` (Table 1 of that paper: 0.058 W blue, 0.472 W yellow).
+    """
+
+    bsdf_model: str = "lambert+gaussian"
+    emission_model: str = "split-gaussian"
+    emission_incidence_deg: float = 45.0
+    led_peak_nm: float = 450.1
+    led_fwhm_nm: float = 22.9
+    fallback_flux_W: tuple[float, float] = (0.058, 0.472)
+
+
+@dataclass(frozen=True)
 class TraceStudyOptions:
     """The module trace of the run: a scene whose plate comes from this recipe, and §5 studies around it."""
 
@@ -80,6 +99,7 @@ class Recipe:
     reductions: ReductionOptions = ReductionOptions()
     exports: ExportOptions = ExportOptions()
     trace: TraceStudyOptions = TraceStudyOptions()
+    fits: FitStageOptions = FitStageOptions()
     raw: dict = field(default_factory=dict, compare=False, hash=False)
 
 
@@ -152,15 +172,28 @@ def load_recipe(path: str | Path) -> Recipe:
             seed=int(_typed(tr, "seed", int, path, "trace.seed", 1)),
             **{k: tuple(float(v) for v in _numbers(tr, k, path)) for k in
                ("reflectance", "height_mm", "led_fwhm_deg", "specular_fraction")})
+    ft = data.get("fits", {})
+    fallback = _numbers(ft, "fallback_flux_W", path, section="fits") or [0.058, 0.472]
+    if len(fallback) != 2:
+        raise InputError("two fluxes expected", file=path, field="fits.fallback_flux_W", expected="[blue_W, yellow_W]",
+                         got=fallback)
+    fits = FitStageOptions(
+        bsdf_model=_typed(ft, "bsdf_model", str, path, "fits.bsdf_model", "lambert+gaussian"),
+        emission_model=_typed(ft, "emission_model", str, path, "fits.emission_model", "split-gaussian"),
+        emission_incidence_deg=float(_typed(ft, "emission_incidence_deg", (int, float), path, "fits.emission_incidence_deg", 45.0)),
+        led_peak_nm=float(_typed(ft, "led_peak_nm", (int, float), path, "fits.led_peak_nm", 450.1)),
+        led_fwhm_nm=float(_typed(ft, "led_fwhm_nm", (int, float), path, "fits.led_fwhm_nm", 22.9)),
+        fallback_flux_W=(float(fallback[0]), float(fallback[1])),
+    )
     return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
                   description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
-                  reductions=reductions, exports=exports, trace=trace, raw=data)
+                  reductions=reductions, exports=exports, trace=trace, fits=fits, raw=data)
 
 
-def _numbers(table: dict, key: str, path: Path) -> list[float]:
+def _numbers(table: dict, key: str, path: Path, section: str = "trace") -> list[float]:
     value = table.get(key, [])
     if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-        raise InputError("recipe value must be a list of numbers", file=path, field=f"trace.{key}", got=value)
+        raise InputError("recipe value must be a list of numbers", file=path, field=f"{section}.{key}", got=value)
     return value
 
 
@@ -179,6 +212,9 @@ class RunState:
     recipe: Recipe
     scan: xr.Dataset | None = None
     tis: xr.Dataset | None = None
+    fits: dict = field(default_factory=dict)
+    emission: dict = field(default_factory=dict)
+    device: object = None
     tables: dict = field(default_factory=dict)
     summary: dict = field(default_factory=dict)
     outputs: dict[str, Callable[[Path, bool], object]] = field(default_factory=dict)
@@ -306,9 +342,11 @@ def stage_trace(state: RunState) -> None:
     opts = state.recipe.trace
     if opts.scene is None:
         return
-    plate = plate_from_scan(state.scan, state.tis, name=state.recipe.name)
+    plate = plate_from_scan(state.scan, state.tis, name=state.recipe.name,
+                            fits={k: v[0] for k, v in state.fits.items()})
     scene = _scene_with_plate(opts.scene, plate)
     device = trace(scene, opts.rays, opts.seed)
+    state.device = device
     results = {"device": device.to_dict()}
     studies: dict[str, list[dict]] = {}
 
@@ -396,12 +434,109 @@ def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
     return out
 
 
+def stage_fits(state: RunState) -> None:
+    """Lobe fits of every elastic interaction and side (aperture-averaged), a Lambert fit of the converted light,
+    and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper)."""
+    from bsdfkit import angular, spectral
+    from bsdfkit.commands._common import dumps
+    from bsdfkit.fit import fit_bsdf
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.report import bsdf_fits_figure, save_figure
+    from bsdfkit.spectra import fit_spectrum
+
+    opts = state.recipe.fits
+    scan, tis = state.scan, state.tis
+    rows = []
+    for inter in ("bibs", "biys", "yiys"):
+        model = "lambert" if inter == "biys" else opts.bsdf_model
+        for side in ("reflection", "transmission"):
+            prof = spectral.interaction_profile(scan, inter, side)
+            prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
+            fit = fit_bsdf(prof, model)
+            state.fits[(inter, side)] = (fit, prof)
+            for th in fit["theta_i"].values:
+                row = fit.sel(theta_i=th)
+                params = {p: float(row[p]) for p in ("rho", "A", "sigma", "B", "g") if p in row}
+                stds = {p: float(row[f"{p}_std"]) for p in params}
+                measured = float(tis["tis"].sel(interaction=inter, side=side, theta_i=th))
+                rows.append({"interaction": inter, "side": side, "theta_i_deg": float(th), "model": model,
+                             "params": params, "std": stds, "r2": float(row["r2"]), "converged": bool(row["converged"]),
+                             "model_tis": float(row["tis"]), "measured_tis": measured,
+                             "tis_difference_pp": 100 * (float(row["tis"]) - measured)})
+    # the converted light's spectrum, both hemispheres, at the chosen incidence
+    th = opts.emission_incidence_deg
+    density = sum(angular.hemispherical_spectrum(scan, "blue", th, side) for side in ("reflection", "transmission"))
+    lam = density["wavelength"].values
+    region = (lam >= 470.0) & (lam <= 780.0)
+    peak = float(density.values[region].max())
+    fit = fit_spectrum(lam[region], density.values[region] / peak, opts.emission_model)
+    emission = {k: float(fit[k]) for k in ("peak_nm", "fwhm_nm", "alpha") if k in fit}
+    emission.update({f"{k}_std": float(fit[f"{k}_std"]) for k in ("peak_nm", "fwhm_nm", "alpha") if f"{k}_std" in fit})
+    emission.update(r2=float(fit["r2"]), converged=bool(fit["converged"]), incidence_deg=th, model=opts.emission_model)
+    state.emission = {"fit": emission, "wavelength": lam, "measured": density.values / peak}
+    state.summary["bsdf_fits"] = rows
+    state.summary["emission_fit"] = emission
+    state.outputs["bsdf_fits.json"] = lambda p, force: write_text(p, dumps(rows), force)
+    fig = bsdf_fits_figure(state.fits)
+    state.outputs["bsdf_fits.png"] = lambda p, force: save_figure(fig, p, force)
+    worst = max(rows, key=lambda r: abs(r["tis_difference_pp"]))
+    state.summary.setdefault("report_lines", []).extend([
+        f"BSDF fits: {sum(r['converged'] for r in rows)}/{len(rows)} converged; fitted-model TIS within "
+        f"{abs(worst['tis_difference_pp']):.3f} pp of the measured TIS (worst {worst['interaction']} {worst['side']} "
+        f"{worst['theta_i_deg']:g} deg)",
+        f"emission fit ({opts.emission_model}, θi = {th:g}°): peak {emission['peak_nm']:.1f} nm, FWHM {emission['fwhm_nm']:.1f} nm, "
+        f"α {emission.get('alpha', 0.0):.3f}, R² {emission['r2']:.4f}"])
+
+
+def stage_spectrum(state: RunState) -> None:
+    """The module's absolute spectrum from the two-wavelength result (§4.2, Fig. 7 of the cylindrical-module
+    paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR."""
+    from bsdfkit.colorimetry import colorimetric_summary
+    from bsdfkit.commands._common import dumps
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.report import module_spectrum_figure, save_figure
+    from bsdfkit.spectra import reconstruct_two_band_spectrum, spectrum_model_values
+
+    opts = state.recipe.fits
+    if not state.emission:
+        return
+    lam = np.arange(380.0, 780.0 + 1e-9, 1.0)
+    s_blue = spectrum_model_values("gaussian", {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm, "amplitude": 1.0}, lam)
+    e = state.emission["fit"]
+    s_yellow = spectrum_model_values(opts.emission_model, {"peak_nm": e["peak_nm"], "fwhm_nm": e["fwhm_nm"],
+                                                           "alpha": e.get("alpha", 0.0), "amplitude": 1.0}, lam)
+    if state.device is not None:
+        flux = (float(state.device.extracted["blue"]), float(state.device.extracted["yellow"]))
+        source = f"module trace ({state.recipe.trace.rays} rays, LED power {state.device.emitted:g} W)"
+    else:
+        flux = opts.fallback_flux_W
+        source = "fits.fallback_flux_W (Table 1 of the cylindrical-module paper)"
+    sd = reconstruct_two_band_spectrum(lam, s_blue, s_yellow, flux[0], flux[1], name=f"{state.recipe.name} module")
+    colour_ = colorimetric_summary(sd)
+    result = {"flux_W": {"blue": flux[0], "yellow": flux[1]}, "flux_source": source,
+              "led_spectrum": {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm},
+              "colour": {"x": colour_.x, "y": colour_.y, "cct_K": colour_.cct_K, "duv": colour_.duv,
+                         "luminous_efficacy_lm_per_W": colour_.luminous_efficacy_lm_per_W, "ybr": colour_.ybr}}
+    state.summary["module_spectrum"] = result
+    csv = "wavelength_nm,spectral_flux_W_per_nm\n" + "".join(f"{w:.1f},{v:.8e}\n" for w, v in zip(sd.wavelengths, sd.values))
+    state.outputs["module_spectrum.csv"] = lambda p, force: write_text(p, csv, force)
+    fig = module_spectrum_figure(lam, s_blue, s_yellow, state.emission, sd)
+    state.outputs["module_spectrum.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["module_spectrum.json"] = lambda p, force: write_text(p, dumps(result), force)
+    c = result["colour"]
+    state.summary.setdefault("report_lines", []).append(
+        f"module spectrum from {source}: x {c['x']:.4f}, y {c['y']:.4f}, CCT {c['cct_K']:.0f} K, Duv {c['duv']:.4f}, "
+        f"{c['luminous_efficacy_lm_per_W']:.0f} lm/W, YBR {c['ybr']:.2f}")
+
+
 STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
     ("ingest", stage_ingest),
     ("report", stage_report),
     ("reductions", stage_reductions),
     ("exports", stage_exports),
+    ("fits", stage_fits),
     ("trace", stage_trace),
+    ("spectrum", stage_spectrum),
 )
 
 
@@ -437,10 +572,11 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
 
 
 # ------------------------------------------------------------------------------------- the plate
-def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str = ""):
+def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str = "", fits: dict | None = None):
     """A :class:`bsdfkit.trace.PhosphorPlate` from a calibrated scan: the toolkit's own TIS per interaction,
     side and measured incidence, with angular shapes from lambert+gaussian fits for the elastic
-    interactions (bibs, yiys) and Lambertian for the converted light (biys, §4.2 of the power-budget paper)."""
+    interactions (bibs, yiys) and Lambertian for the converted light (biys, §4.2 of the power-budget paper).
+    ``fits`` may hold lambert+gaussian fits already made, keyed by (interaction, side)."""
     from bsdfkit import angular, spectral
     from bsdfkit.fit import fit_bsdf
     from bsdfkit.trace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel
@@ -454,9 +590,11 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
             if inter == "biys":
                 dists = (Lambertian(),) * len(grid)
             else:
-                prof = spectral.interaction_profile(scan, inter, side)
-                prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
-                fit = fit_bsdf(prof, "lambert+gaussian")
+                fit = (fits or {}).get((inter, side))
+                if fit is None or fit.attrs.get("model") not in (None, "lambert+gaussian") or "sigma" not in fit:
+                    prof = spectral.interaction_profile(scan, inter, side)
+                    prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
+                    fit = fit_bsdf(prof, "lambert+gaussian")
                 dists = tuple(LambertGaussian(rho_per_sr=float(fit["rho"].sel(theta_i=t)) / np.pi,
                                               a_per_sr=float(fit["A"].sel(theta_i=t)),
                                               sigma=float(fit["sigma"].sel(theta_i=t))) for t in grid)

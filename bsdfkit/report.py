@@ -89,3 +89,59 @@ def trace_studies_figure(device, studies: dict[str, list[dict]]) -> Figure:
         ax2.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def bsdf_fits_figure(fits: dict) -> Figure:
+    """In-plane data vs fitted model for each interaction and side (one curve per incidence)."""
+    from bsdfkit.fit import bsdf_model_values
+
+    keys = [k for k in (("bibs", "reflection"), ("bibs", "transmission"), ("yiys", "reflection"),
+                        ("yiys", "transmission"), ("biys", "reflection"), ("biys", "transmission")) if k in fits]
+    fig = Figure(figsize=(10, 3.2 * ((len(keys) + 1) // 2)))
+    axes = fig.subplots((len(keys) + 1) // 2, 2, squeeze=False).ravel()
+    for ax, key in zip(axes, keys):
+        fit, prof = fits[key]
+        model = fit.attrs.get("model", "lambert+gaussian")
+        for th in fit["theta_i"].values:
+            sel = (np.isclose(prof["theta_i"].values, th)) & (prof["arc"].values == "in_plane")
+            sub = prof.isel(record=np.flatnonzero(sel))
+            x = signed_in_plane_theta(sub)
+            order = np.argsort(x)
+            line = ax.plot(x[order], sub["bsdf"].values[order], ".", ms=4, label=f"θi = {th:g}° data")[0]
+            grid = np.linspace(-88, 88, 353)
+            params = {p: float(fit[p].sel(theta_i=th)) for p in ("rho", "A", "sigma", "B", "g") if p in fit}
+            y = bsdf_model_values(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
+            ax.plot(grid, y, "-", color=line.get_color(), lw=1)
+        ax.set_yscale("log")
+        ax.set_title(f"{key[0]} {key[1]} ({model}, aperture-averaged fit)", fontsize=9)
+        ax.set_xlabel("in-plane θs (deg)")
+        ax.set_ylabel("BSDF (1/sr)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes[len(keys):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    return fig
+
+
+def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> Figure:
+    """Fig. 7 of the cylindrical-module paper: normalised blue and yellow spectra (left) and the
+    reconstructed absolute spectral flux of the module (right)."""
+    fig = Figure(figsize=(10, 3.8))
+    left, right = fig.subplots(1, 2)
+    left.plot(wavelength, s_blue, label="S_blue (LED, Gaussian)")
+    left.plot(wavelength, s_yellow, label="S_yellow (fitted split Gaussian)")
+    conv = np.asarray(emission["wavelength"]) >= 470.0  # below: the elastic blue band of the same spectrum
+    left.plot(np.asarray(emission["wavelength"])[conv], np.asarray(emission["measured"])[conv], ":", lw=1.5,
+              label="measured converted light (hemisphere)")
+    left.set_xlabel("wavelength (nm)")
+    left.set_ylabel("normalised")
+    left.legend(fontsize=8)
+    left.grid(True, alpha=0.3)
+    right.plot(sd.wavelengths, 1e3 * sd.values)
+    right.set_xlabel("wavelength (nm)")
+    right.set_ylabel("spectral flux (mW/nm)")
+    right.set_title(sd.name, fontsize=9)
+    right.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
