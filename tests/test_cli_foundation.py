@@ -36,12 +36,40 @@ def test_info_on_raw_folder():
     assert proc.returncode == 0 and "SYNTHETIC" in proc.stdout
 
 
+def _small_recipe(tmp_path):
+    """The bundled recipe with fewer rays and one value per study: every stage runs, in a fraction of the time."""
+    import tomllib
+
+    from bsdfkit.io.toml_write import dumps
+
+    recipe = ROOT / "fitting" / "cl830.toml"
+    data = tomllib.loads(recipe.read_text())
+    data["recipe"]["measurement"] = str(ROOT / "measurements" / "cl830-synthetic")
+    data["exports"].update(interactions=["bibs"], sides=["reflection"])
+    data["trace"].update(scene=str(ROOT / "fitting" / "scenes" / "cl830_device.toml"), rays=20000,
+                         reflectance=[0.8, 0.98], height_mm=[10.0, 80.0], led_fwhm_deg=[30.0], specular_fraction=[1.0])
+    path = tmp_path / "small.toml"
+    path.write_text(dumps(data))
+    return path
+
+
 def test_run_writes_outputs_and_refuses_to_clobber(tmp_path):
     out = tmp_path / "out"
-    proc = _bsdfkit("run", ROOT / "fitting" / "cl830.toml", "-o", out)
+    recipe = _small_recipe(tmp_path)
+    proc = _bsdfkit("run", recipe, "-o", out)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
-    assert {"scan.nc", "inplane_bsdf.png", "summary.json"} <= set(summary["outputs"])
+    expected = {"scan.nc", "inplane_bsdf.png", "tis.nc", "interaction_tables.json", "module_budget.png",
+                "exports/bibs_reflection.tracepro.txt", "exports/bibs_reflection.zemax.bsdf", "bsdf_fits.json",
+                "bsdf_fits.png", "trace.json", "trace_device.nc", "trace_studies.png", "module_spectrum.csv",
+                "module_spectrum.png", "module_spectrum.json", "summary.json"}
+    assert expected <= set(summary["outputs"])
+    for name in expected:
+        assert (out / name).stat().st_size > 0, name
     assert (out / "inplane_bsdf.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    proc = _bsdfkit("run", ROOT / "fitting" / "cl830.toml", "-o", out)
+    assert all(c["ok"] for c in summary["export_checks"])
+    assert summary["trace"]["device"]["ledger_error"] < 1e-9
+    assert 0.3 < summary["trace"]["device"]["LER"] < 0.8
+    assert set(summary["module_spectrum"]["colour"]) >= {"x", "y", "cct_K", "duv", "luminous_efficacy_lm_per_W"}
+    proc = _bsdfkit("run", recipe, "-o", out)
     assert proc.returncode != 0 and "--force" in proc.stderr
