@@ -90,3 +90,40 @@ def test_readers_on_arbitrary_bytes(blob, tmp_path_factory):
         path = folder / name
         path.write_bytes(blob)
         _parses_or_bsdfkit_error(reader, path)
+
+
+SCENES = ROOT / "fitting" / "scenes"
+
+
+@pytest.mark.parametrize("name", ["example.toml", "study_height.toml"])
+def test_scene_toml(name):
+    from bsdfkit.trace import loads_scene
+
+    source = (SCENES / name).read_text()
+
+    @FUZZ
+    @given(data=st.data())
+    def run(data):
+        try:
+            loads_scene(data.draw(damaged(source)), SCENES / name)
+        except BsdfkitError as exc:
+            assert "\n" not in str(exc)
+
+    run()
+
+
+def test_plate_json(tmp_path_factory):
+    from bsdfkit.trace import PhosphorPlate, load_plate
+
+    table2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
+              "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
+    source = PhosphorPlate.constant(table2, name="fuzz").to_json()
+
+    @FUZZ
+    @given(data=st.data())
+    def run(data):
+        path = tmp_path_factory.mktemp("plate") / "plate.json"
+        path.write_bytes(data.draw(damaged(source)).encode("utf-8", "surrogatepass"))
+        _parses_or_bsdfkit_error(load_plate, path)
+
+    run()

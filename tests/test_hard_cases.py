@@ -1,8 +1,9 @@
 """Hard cases that must stay numerically stable: each asserts a finite, correct value or a clear bsdfkit error.
 
-Model/fit and tracer hard cases (α → ±1, FWHM → 0, near-singular two-band systems, ABg with g, B → 0, NaN-free
-gradients, rays grazing the wall or hitting the rim/seam, float32 vs float64 tracing) are collected at the end
-of this file from the fitting and tracer modules.
+Tracer hard cases (rays grazing the wall, aimed at the rim or seam, float32 vs float64) are at the end of this
+file. Model and fit hard cases live beside their models: α → ±1 and FWHM → 0 in spectrum fits and the
+near-singular two-band system in tests/test_spectra.py; ABg with g, B → 0 and NaN-free gradients through every
+model (hypothesis) in tests/test_models.py.
 """
 import numpy as np
 import pytest
@@ -130,3 +131,81 @@ def test_profile_without_usable_values_is_a_clear_error():
                               "side": ("record", ["reflection"] * 2), "arc": ("record", ["in_plane"] * 2)})
     with pytest.raises(InputError, match="no usable records"):
         angular.tis_from_profile(prof)
+
+
+# ---------------------------------------------------------------------------------------------- tracer
+# Rays grazing the cylinder wall, aimed at the rim (wall ∩ top) or the seam (wall ∩ base), or running up the
+# axis: the next hit must be finite, on a real surface and inside the cavity, in float32 and float64.
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+def _next_hit(p, d, dtype, radius=35.0, height=43.0):
+    import jax.numpy as jnp
+
+    from bsdfkit._jax import x64
+    from bsdfkit.trace.geometry import next_hit
+
+    with x64(dtype == "float64"):
+        arrays = [jnp.asarray(np.asarray(v), dtype=dtype) for v in (*p, *d)]
+        surface, x, y, z = next_hit(*arrays, jnp.asarray(radius, dtype), jnp.asarray(height, dtype))
+        return np.asarray(surface), np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)
+
+
+def _check_hits(surface, x, y, z, radius=35.0, height=43.0, rtol=2e-6):
+    assert np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(z))
+    assert set(np.unique(surface)) <= {0, 1, 2}
+    assert np.all(np.hypot(x, y) <= radius * (1 + rtol))
+    assert np.all((z >= -height * rtol) & (z <= height * (1 + rtol)))
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(phi=st.floats(0, 2 * np.pi), z=st.floats(0.0, 43.0), tilt=st.floats(-1e-6, 1e-6),
+       up=st.floats(-1.0, 1.0), inset=st.sampled_from([0.0, 1e-9, 1e-4]))
+def test_rays_grazing_the_wall(dtype, phi, z, tilt, up, inset):
+    r = 35.0 * (1 - inset)
+    p = (np.array([r * np.cos(phi)]), np.array([r * np.sin(phi)]), np.array([z]))
+    # tangent to the wall (plus a tiny inward/outward tilt), any elevation
+    t = np.array([-np.sin(phi), np.cos(phi), 0.0]) + tilt * np.array([-np.cos(phi), -np.sin(phi), 0.0])
+    d = np.array([t[0] * np.sqrt(1 - up**2), t[1] * np.sqrt(1 - up**2), up])
+    d /= np.linalg.norm(d)
+    _check_hits(*_next_hit(p, ([d[0]], [d[1]], [d[2]]), dtype))
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@pytest.mark.parametrize("target_z", [43.0, 0.0], ids=["rim", "seam"])
+def test_rays_aimed_at_the_rim_and_the_seam(dtype, target_z):
+    rng = np.random.default_rng(0)
+    n = 500
+    phi = rng.uniform(0, 2 * np.pi, n)
+    start = np.stack([rng.uniform(-20, 20, n), rng.uniform(-20, 20, n), np.full(n, 21.5)])
+    target = np.stack([35.0 * np.cos(phi), 35.0 * np.sin(phi), np.full(n, target_z)])
+    d = (target - start) / np.linalg.norm(target - start, axis=0)
+    surface, x, y, z = _next_hit(tuple(start), tuple(d), dtype)
+    _check_hits(surface, x, y, z)
+    # the hit is the aimed corner (to rounding), whichever of the two surfaces claims it
+    assert np.allclose(np.hypot(x, y), 35.0, rtol=1e-5) and np.allclose(z, target_z, atol=1e-4)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_rays_up_the_axis_and_parallel_to_the_wall(dtype):
+    p = (np.array([0.0, 34.999999]), np.array([0.0, 0.0]), np.array([0.0, 10.0]))
+    d = (np.array([0.0, 0.0]), np.array([0.0, 0.0]), np.array([1.0, -1.0]))
+    surface, x, y, z = _next_hit(p, d, dtype)
+    _check_hits(surface, x, y, z)
+    assert surface.tolist() == [2, 1]  # top, base
+
+
+def test_float32_tracing_agrees_with_float64():
+    """End to end: the same scene and seed traced with float32 and float64 ray geometry agree within 3σ."""
+    from dataclasses import replace
+
+    from bsdfkit.trace import load_scene, trace
+    from conftest import ROOT
+
+    scene = load_scene(ROOT / "fitting" / "scenes" / "example.toml")
+    r32 = trace(replace(scene, trace=replace(scene.trace, precision="float32")), 20000, 4)
+    r64 = trace(replace(scene, trace=replace(scene.trace, precision="float64")), 20000, 4)
+    assert abs(r32.LER - r64.LER) <= 3 * np.hypot(r32.std_err["LER"], r64.std_err["LER"]) + 1e-12
+    assert r32.ledger_error < 1e-9 and r64.ledger_error < 1e-9
