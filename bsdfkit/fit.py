@@ -1,8 +1,11 @@
-"""Batched nonlinear least squares on jaxopt, and the BSDF-model fitting entry point.
+"""Batched nonlinear least squares in JAX, and the BSDF-model fitting entry point.
 
-:func:`least_squares` fits one model to a batch of data sets at once: one ``jax.jit(jax.vmap(...))``
-call (one compilation per model, options and array shape) runs :class:`jaxopt.LevenbergMarquardt` on
-every member of the batch. :func:`fit_bsdf` builds on it for goniometer profiles.
+:func:`least_squares` fits one model to a batch of data sets at once. The default solver (``FitOptions.solver
+= "lm"``, :mod:`bsdfkit.lm`) evaluates residuals and Jacobians of the whole batch in one compiled
+``jax.vmap``/``jax.jacfwd`` kernel and runs the Levenberg–Marquardt iteration on the host; ``solver =
+"jaxopt"`` runs :class:`jaxopt.LevenbergMarquardt` under ``jax.jit(jax.vmap(...))``. Both give the same
+solutions (tests/test_lm.py); the measured costs are in docs/fitting.md §8. :func:`fit_bsdf` builds on it
+for goniometer profiles.
 
 How a fit is set up (docs/fitting.md has the derivations):
 
@@ -46,7 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from bsdfkit import models
+from bsdfkit import lm, models
 from bsdfkit._jax import x64
 from bsdfkit.errors import FitError, InputError, ValidationError
 
@@ -117,12 +120,18 @@ class FitOptions:
     absolute_sigma
         If true the covariance is (JᵀJ)⁻¹ (uncertainties trusted as absolute); otherwise s²(JᵀJ)⁻¹.
     maxiter
-        Maximum Levenberg–Marquardt iterations; reaching it marks the fit ``converged = False``.
+        Maximum Levenberg–Marquardt iterations (steps tried); reaching it without meeting a stopping rule
+        marks the fit ``converged = False``.
     xtol, gtol
-        Madsen–Nielsen stopping rule of jaxopt: stop when ‖Δu‖ ≤ xtol·‖u‖ or ‖∇‖∞ ≤ gtol, where the
+        Madsen–Nielsen stopping rule: stop when ‖Δu‖ ≤ xtol·(‖u‖ + xtol) or ‖∇‖∞ ≤ gtol, where the
         residuals are divided by their norm at the start point, so gtol is relative to the initial cost.
     max_condition
         JᵀJ (column-equilibrated) with a larger condition number is treated as singular → FitError.
+    solver
+        'lm' (default): :func:`bsdfkit.lm.levenberg_marquardt`, one compiled Jacobian kernel and a
+        host-driven iteration over the fits still running — fast to compile (docs/fitting.md §8).
+        'jaxopt': :class:`jaxopt.LevenbergMarquardt` under ``jax.jit(jax.vmap(...))``, the whole iteration
+        compiled. Both use the same residuals, transforms, tolerances and result semantics.
     """
 
     residual: ResidualKind = "absolute"
@@ -134,6 +143,7 @@ class FitOptions:
     xtol: float = 1e-10
     gtol: float = 1e-10
     max_condition: float = 1e12
+    solver: Literal["lm", "jaxopt"] = "lm"
 
     def __post_init__(self) -> None:
         if self.residual not in ("absolute", "relative", "log"):
@@ -148,6 +158,12 @@ class FitOptions:
             raise ValidationError("log_epsilon must be ≥ 0", field="log_epsilon", got=self.log_epsilon)
         if not (isinstance(self.maxiter, int) and self.maxiter >= 1):
             raise ValidationError("maxiter must be a positive integer", field="maxiter", got=self.maxiter)
+        for name in ("xtol", "gtol"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value >= 0):
+                raise ValidationError(f"{name} must be a finite number ≥ 0", field=name, got=value)
+        if self.solver not in ("lm", "jaxopt"):
+            raise ValidationError("unknown solver", field="solver", expected="lm or jaxopt", got=self.solver)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -330,6 +346,96 @@ def _as_batch(name: str, a: Any, shape: tuple[int, int]) -> np.ndarray:
                          expected=f"broadcastable to {shape}", got=np.shape(a)) from None
 
 
+def _natural_and_slope(u: np.ndarray, parameters: Sequence[Parameter]) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy twin of :func:`_to_natural` for the ``solver='lm'`` path: θ = T(u) and dθ/du (elementwise;
+    zero where the clip of u is active, as for the JAX transform), for u of shape (..., p)."""
+    theta = np.empty_like(u)
+    slope = np.empty_like(u)
+    for k, p in enumerate(parameters):
+        uk = u[..., k]
+        kind = p.transform
+        if kind == "logit":
+            inside = np.abs(uk) < _U_CLIP_SIGMOID
+            sig = 1.0 / (1.0 + np.exp(-np.clip(uk, -_U_CLIP_SIGMOID, _U_CLIP_SIGMOID)))
+            theta[..., k] = p.lower + (p.upper - p.lower) * sig
+            slope[..., k] = np.where(inside, (p.upper - p.lower) * sig * (1.0 - sig), 0.0)
+        elif kind in ("log", "neglog"):
+            inside = np.abs(uk) < _U_CLIP_EXP
+            e = np.exp(np.clip(uk, -_U_CLIP_EXP, _U_CLIP_EXP))
+            theta[..., k] = p.lower + e if kind == "log" else p.upper - e
+            slope[..., k] = np.where(inside, e if kind == "log" else -e, 0.0)
+        else:
+            theta[..., k] = uk
+            slope[..., k] = 1.0
+    return theta, slope
+
+
+def _lm_kernel_impl(theta, slope, x, y_t, w, m, *, model, options: FitOptions):
+    """Linearisation kernel of the ``solver='lm'`` path, for a chunk of fits at natural parameters θ with
+    transform slopes dθ/du: ½Σr̃², J_uᵀr̃, J_uᵀJ_u, J_θᵀJ_θ and the plain residuals, where J_θ = ∂r̃/∂θ by
+    forward mode and J_u = J_θ·diag(dθ/du) (chain rule). The residuals are those of
+    :func:`_residuals_natural`. The transform and the row gather stay on the host, so the kernel depends
+    only on the model, the residual settings, the chunk size and the padded length."""
+
+    def one(theta, slope, x, y_t, w, m):
+        def residuals(t):
+            plain = jnp.where(m, _model_space(model(t, x), options) - y_t, 0.0)
+            r = _robust_scale(plain * w, options)
+            return jnp.where(jnp.isfinite(r), r, _BAD_RESIDUAL), plain
+
+        cost, g_theta, jtj_theta, plain = lm.jacobian_products(residuals, theta)
+        return cost, slope * g_theta, slope[:, None] * jtj_theta * slope[None, :], jtj_theta, plain
+
+    return jax.vmap(one)(theta, slope, x, y_t, w, m)
+
+
+# One compilation per (model, residual settings, chunk, padded length); tolerances, maxiter, bounds and the
+# batch size are not part of the kernel. XLA options: bsdfkit.lm.COMPILER_OPTIONS; kernels of at most
+# lm.SMALL_KERNEL_POINTS points per call are built without LLVM optimisation (lm.SMALL_KERNEL_OPTIONS).
+_lm_kernel = jax.jit(_lm_kernel_impl, static_argnames=("model", "options"), compiler_options=lm.COMPILER_OPTIONS)
+_lm_kernel_small = jax.jit(_lm_kernel_impl, static_argnames=("model", "options"),
+                           compiler_options=lm.SMALL_KERNEL_OPTIONS)
+_LM_CHUNK = 128  # fits per kernel call (bsdfkit.lm evaluates only the fits still running, in such chunks)
+
+
+def _solve_lm(u0: np.ndarray, x: Any, y_t: np.ndarray, w: np.ndarray, m: np.ndarray,
+              parameters: Sequence[Parameter], *, model, options: FitOptions) -> dict[str, np.ndarray]:
+    """The ``solver='lm'`` path of :func:`least_squares`: inputs have the fits on axis 0 and the points
+    padded to a bucket; the result dict has the layout of the jaxopt path, plus ``converged``."""
+    n_fit, n_par = u0.shape
+    if n_fit == 0:  # an empty batch gives an empty result, as on the jaxopt path
+        return {"theta": np.zeros((0, n_par)), "r0_finite": np.zeros(0, bool), "sum_sq": np.zeros(0),
+                "jtj": np.zeros((0, n_par, n_par)), "plain": np.zeros((0, y_t.shape[1])),
+                "iterations": np.zeros(0, int), "converged": np.zeros(0, bool)}
+    kernel_options = dataclasses.replace(FitOptions(), residual=options.residual, loss=options.loss,
+                                         f_scale=options.f_scale, log_epsilon=options.log_epsilon)
+    chunk = min(_bucket(u0.shape[0]), _LM_CHUNK)
+    kernel = _lm_kernel_small if chunk * y_t.shape[1] <= lm.SMALL_KERNEL_POINTS else _lm_kernel
+
+    def linearize(u: np.ndarray, rows: np.ndarray) -> lm.Linearization:
+        theta, slope = _natural_and_slope(u, parameters)
+        contiguous = np.array_equal(rows, np.arange(rows[0], rows[0] + rows.size))
+        pick = slice(rows[0], rows[0] + rows.size) if contiguous else rows
+        data = jax.tree_util.tree_map(lambda a: a[pick], (x, y_t, w, m))
+        # Device arrays are returned unread: the kernel runs asynchronously while lm prepares the next chunk.
+        cost, grad, jtj, jtj_theta, plain = kernel(theta, slope, *data, model=model, options=kernel_options)
+        return lm.Linearization(cost, grad, jtj, (theta, jtj_theta, plain))
+
+    res = lm.levenberg_marquardt(linearize, u0, xtol=options.xtol, gtol=options.gtol, maxiter=options.maxiter,
+                                 chunk=chunk)
+    theta, jtj_theta, plain = res.extra
+    return {
+        "theta": theta,
+        # A residual replaced by the stand-in for a non-finite value makes Σr̃² ≥ (1e100)².
+        "r0_finite": np.isfinite(res.initial_cost) & (2.0 * res.initial_cost < _BAD_RESIDUAL**2),
+        "sum_sq": 2.0 * res.cost,
+        "jtj": jtj_theta,
+        "plain": plain,
+        "iterations": res.iterations,
+        "converged": res.converged,
+    }
+
+
 def least_squares(
     model: Callable[[jnp.ndarray, Any], jnp.ndarray],
     x: Any,
@@ -344,7 +450,10 @@ def least_squares(
     batch_labels: Sequence[str] | None = None,
     model_name: str | None = None,
 ) -> xr.Dataset:
-    """Fit ``model`` to one data set or a batch of them (Levenberg–Marquardt, jaxopt, float64).
+    """Fit ``model`` to one data set or a batch of them (Levenberg–Marquardt, float64).
+
+    The solver is chosen by ``options.solver``: 'lm' (:mod:`bsdfkit.lm`, the default) or 'jaxopt'; both
+    solve the same problem with the same stopping rule and return the same result layout.
 
     Parameters
     ----------
@@ -453,12 +562,14 @@ def least_squares(
         return f"fit {b}: "
 
     n_used = m.sum(axis=1)
-    for b in range(n_batch):
-        if n_used[b] <= n_par:
+    too_few = n_used <= n_par
+    bad = too_few | ~np.any(m & (y2 != 0), axis=1)
+    if bad.any():  # the first offending fit, as a loop over the batch would find it
+        b = int(np.argmax(bad))
+        if too_few[b]:
             raise FitError(f"{where(b)}{int(n_used[b])} unmasked points for {n_par} parameters; "
                            f"need at least {n_par + 1}")
-        if np.all(y2[b][m[b]] == 0):
-            raise FitError(f"{where(b)}all unmasked data are zero; nothing to fit")
+        raise FitError(f"{where(b)}all unmasked data are zero; nothing to fit")
 
     u0 = _to_unconstrained(p0, parameters)
     spec = _Spec(
@@ -475,20 +586,33 @@ def least_squares(
         width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
         return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
 
-    u0_pad = np.concatenate([u0, np.repeat(u0[:1], b_pad - n_batch, axis=0)], axis=0)
-    with x64():
-        solve = _solve_batch_small if b_pad * n_pad <= _SMALL_PROBLEM else _solve_batch
-        out = solve(
-            jnp.asarray(u0_pad),
-            jax.tree_util.tree_map(lambda leaf: jnp.asarray(pad(leaf, None)), x2),
-            jnp.asarray(pad(np.asarray(y_t, float), 0.0)),
-            jnp.asarray(pad(np.asarray(w, float), 0.0)),
-            jnp.asarray(pad(m, False)),
-            jnp.asarray([[p.lower, p.upper] for p in parameters], dtype=jnp.float64),
-            model=model,
-            spec=spec,
-        )
-        out = {k: np.asarray(v)[:n_batch] for k, v in out.items()}
+    if options.solver == "lm":
+        # Only the points are padded: bsdfkit.lm gathers the fits it evaluates into fixed-size chunks.
+        def pad_points(a: np.ndarray, value: float | None) -> np.ndarray:
+            width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
+            return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
+
+        with x64():
+            out = _solve_lm(u0, jax.tree_util.tree_map(lambda leaf: pad_points(leaf, None), x2),
+                            pad_points(np.asarray(y_t, float), 0.0), pad_points(np.asarray(w, float), 0.0),
+                            pad_points(m, False), parameters, model=model, options=options)
+    else:
+        u0_pad = np.concatenate([u0, np.repeat(u0[:1], b_pad - n_batch, axis=0)], axis=0)
+        with x64():
+            solve = _solve_batch_small if b_pad * n_pad <= _SMALL_PROBLEM else _solve_batch
+            out = solve(
+                jnp.asarray(u0_pad),
+                jax.tree_util.tree_map(lambda leaf: jnp.asarray(pad(leaf, None)), x2),
+                jnp.asarray(pad(np.asarray(y_t, float), 0.0)),
+                jnp.asarray(pad(np.asarray(w, float), 0.0)),
+                jnp.asarray(pad(m, False)),
+                jnp.asarray([[p.lower, p.upper] for p in parameters], dtype=jnp.float64),
+                model=model,
+                spec=spec,
+            )
+            out = {k: np.asarray(v)[:n_batch] for k, v in out.items()}
+        # jaxopt reports no stopping reason: a fit that used all maxiter steps counts as not converged.
+        out["converged"] = out["iterations"] < options.maxiter
     out["plain"] = out["plain"][:, :n]
 
     theta = out["theta"]
@@ -548,7 +672,7 @@ def least_squares(
         r2 = np.where(ss_tot > 0, 1.0 - ss_for_r2 / ss_tot, np.nan)
 
     iterations = out["iterations"].astype(int)
-    converged = (iterations < options.maxiter) & np.all(np.isfinite(theta), axis=1) & np.isfinite(out["sum_sq"])
+    converged = out["converged"] & np.all(np.isfinite(theta), axis=1) & np.isfinite(out["sum_sq"])
 
     std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     lowers = np.array([p.lower for p in parameters])
@@ -578,7 +702,9 @@ def least_squares(
         coords={"parameter": names, "parameter_2": names},
         attrs={
             "model": model_name or getattr(model, "__name__", repr(model)),
-            "solver": "jaxopt.LevenbergMarquardt (madsen-nielsen stop), float64",
+            "solver": ("bsdfkit.lm Levenberg–Marquardt (Marquardt scaling, Nielsen damping, madsen-nielsen "
+                       "stop), float64" if options.solver == "lm" else
+                       "jaxopt.LevenbergMarquardt (madsen-nielsen stop), float64"),
             "residual": options.residual,
             "loss": options.loss,
             "f_scale": options.f_scale,
