@@ -34,6 +34,7 @@ from bsdfkit import models
 from bsdfkit._jax import x64
 from bsdfkit.errors import FitError, InputError, NumericalError, ValidationError
 from bsdfkit.fit import FitOptions, Parameter, least_squares
+from bsdfkit.spectral import band_sum
 
 if TYPE_CHECKING:
     from colour import SpectralDistribution
@@ -338,23 +339,17 @@ def fit_spectrum(
 # ------------------------------------------------------------------------------------------------
 # Two-band reconstruction (§4.2 of the cylindrical-module paper)
 # ------------------------------------------------------------------------------------------------
-def _cell_widths(wl: np.ndarray) -> np.ndarray:
-    """Δλi of each sample: central differences (one-sided at the ends); 1 nm everywhere on a 1 nm grid."""
-    return np.gradient(wl)
-
-
 def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[float, float]) -> float:
     """Σ values(λi)·Δλi over lo ≤ λi ≤ hi (inclusive), the band sum of §4.2 of the cylindrical-module paper.
 
-    λ in nm; Δλi are the sample spacings (central differences). Result in value-unit·nm (W for W/nm).
+    λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.spectral.band_sum` on a validated
+    grid. Result in value-unit·nm (W for W/nm).
     """
     wl = _validated_grid(wavelength)
-    v = np.asarray(values, dtype=float)
     lo, hi = band_nm
     if not lo < hi:
         raise ValidationError("empty band", field="band_nm", expected="lower < upper", got=band_nm)
-    sel = (wl >= lo) & (wl <= hi)
-    return float(np.sum(v[sel] * _cell_widths(wl)[sel]))
+    return band_sum(wl, values, band_nm)
 
 
 @dataclass(frozen=True)

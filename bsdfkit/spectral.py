@@ -68,14 +68,23 @@ def incident_spectrum(ds: xr.Dataset, config: str) -> colour.SpectralDistributio
     return to_spectral_distribution(ds["incident_spectrum"].sel(configuration=config), name=f"incident {config}")
 
 
-def band_integral(spectrum: SpectrumLike, band: Band) -> float:
-    """Σ_band S(λ) Δλ on the spectrum's own grid (the sums of eqs. (4)-(16))."""
+def _arrays(spectrum: SpectrumLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     if isinstance(spectrum, colour.SpectralDistribution):
-        wl, values = spectrum.wavelengths, spectrum.values
-    else:
-        wl, values = spectrum["wavelength"].values, spectrum.values
+        return spectrum.wavelengths, spectrum.values
+    return spectrum["wavelength"].values, spectrum.values
+
+
+def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band) -> float:
+    """Σ_band values(λ)·Δλ with Δλ the central-difference sample spacing, band closed: the sums of eqs. (4)-(16)
+    of the power-budget paper and §4.2 of the cylindrical-module paper."""
+    wl = np.asarray(wavelength, dtype=np.float64)
     inside = _band_mask(wl, band)
-    return float(np.sum(values[inside] * np.gradient(wl)[inside]))
+    return float(np.sum(np.asarray(values, dtype=np.float64)[inside] * np.gradient(wl)[inside]))
+
+
+def band_integral(spectrum: SpectrumLike, band: Band) -> float:
+    """Σ_band S(λ) Δλ on the spectrum's own grid (:func:`band_sum`)."""
+    return band_sum(*_arrays(spectrum), band)
 
 
 def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: SpectrumLike | None = None) -> xr.Dataset:
@@ -158,16 +167,11 @@ def bispectral_weighted_mean(donaldson: xr.DataArray, excitation: SpectrumLike) 
 
 def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
     """Power-weighted mean wavelength λ̄ = Σ Φ_λ λ Δλ / Σ Φ_λ Δλ over ``band`` (nm)."""
-    if isinstance(spectrum, colour.SpectralDistribution):
-        wl, values = spectrum.wavelengths, spectrum.values
-    else:
-        wl, values = spectrum["wavelength"].values, spectrum.values
-    inside = _band_mask(wl, band)
-    w = values[inside] * np.gradient(wl)[inside]
-    total = w.sum()
+    wl, values = _arrays(spectrum)
+    total = band_sum(wl, values, band)
     if not total > 0:
         raise NumericalError("spectrum carries no power in the band", field="band", got=band)
-    return float(np.sum(w * wl[inside]) / total)
+    return band_sum(wl, values * wl, band) / total
 
 
 def mean_photon_energy(spectrum: SpectrumLike, band: Band) -> float:
