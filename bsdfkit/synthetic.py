@@ -213,11 +213,7 @@ class PhosphorPlateTruth:
         The remaining ψ integral is periodic and smooth, so the midpoint rule converges exponentially.
         """
         p = self.lobe(interaction, side, theta_i)
-        b = np.sin(theta_i)
-        psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
-        bu = b * np.cos(psi)
-        t_max = -bu + np.sqrt(bu * bu + 1.0 - b * b)
-        return float(p.A * p.sigma**2 * np.sum(-np.expm1(-t_max**2 / (2 * p.sigma**2))) * (2 * np.pi / n_psi))
+        return clipped_gaussian_lobe_tis(p.A, p.sigma, theta_i, n_psi)
 
     def elastic_tis(self, interaction: str, side: str, theta_i: float) -> float:
         """TIS of the wavelength-independent elastic part: ρ + lobe (fraction of incident power)."""
@@ -245,6 +241,19 @@ class PhosphorPlateTruth:
         except (KeyError, TypeError) as exc:
             raise ValidationError("truth description incomplete", field="truth", expected="a PhosphorPlateTruth",
                                   got=str(exc)) from None
+
+
+def clipped_gaussian_lobe_tis(A: float, sigma: float, theta_i: float, n_psi: int = 4096) -> float:
+    """∬_{|β|≤1} A exp(−|β−β0|²/2σ²) dβ with |β0| = sin θi (radians): the lobe TIS clipped by the unit disk.
+
+    In polar coordinates (t, ψ) centred on β0 the radial integral is analytic, Aσ²(1 − e^{−t_max²/2σ²}) with
+    t_max(ψ) = −b cos ψ + √(b² cos² ψ + 1 − b²); the periodic ψ integral uses the midpoint rule.
+    """
+    b = np.sin(theta_i)
+    psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
+    bu = b * np.cos(psi)
+    t_max = -bu + np.sqrt(bu * bu + 1.0 - b * b)
+    return float(A * sigma**2 * np.sum(-np.expm1(-t_max**2 / (2 * sigma**2))) * (2 * np.pi / n_psi))
 
 
 def weighted_mean(wavelength: NDArray[np.float64], values: NDArray[np.float64], weight: NDArray[np.float64],

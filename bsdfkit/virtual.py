@@ -373,13 +373,9 @@ def cl830_truth(goniometer: VirtualGoniometer | None = None) -> synthetic.Phosph
             rows = []
             for th in angles:
                 a, sigma = _CL830_LOBES[(inter, side)][th]
-                lobe_only = synthetic.LobeParams(rho=0.0, A=a, sigma=sigma, kappa=kappa / 100.0, lambda_ref=lref)
-                probe = synthetic.PhosphorPlateTruth(
-                    name="probe", theta_i_deg=(th,), bibs={s: (lobe_only,) for s in synthetic.SIDES},
-                    yiys={s: (lobe_only,) for s in synthetic.SIDES},
-                    biys={s: (synthetic.ConversionParams(T=0.0),) for s in synthetic.SIDES})
-                m = synthetic.weighted_mean(lam, probe.elastic_spectral(inter, side, np.radians(th), lam), spec, band)
-                rho = CL830_TIS_TARGETS[th][f"{tag}_{inter}"] / 100.0 / m - probe.lobe_tis(inter, side, np.radians(th))
+                m = synthetic.weighted_mean(lam, 1.0 + kappa / 100.0 * (lam - lref) / 100.0, spec, band)
+                rho = (CL830_TIS_TARGETS[th][f"{tag}_{inter}"] / 100.0 / m
+                       - synthetic.clipped_gaussian_lobe_tis(a, sigma, np.radians(th)))
                 if rho <= 0:
                     raise ValidationError("lobe carries more than the target TIS", field=f"{inter}.{side}.{th}")
                 rows.append(synthetic.LobeParams(rho=rho, A=a, sigma=sigma, kappa=kappa / 100.0, lambda_ref=lref))
