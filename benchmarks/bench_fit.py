@@ -7,7 +7,7 @@ amplitude) on a 380-780 nm, 1 nm grid, 1 % noise, in the same unconstrained vari
 log FWHM and amplitude), from the same data-derived start (argmax, half-maximum crossings), with relative
 step tolerance 1e-10 and gradient tolerance 1e-10. Timed, all in this one process:
 
-* ``lm``: :func:`bsdfkit.fit.least_squares` with ``solver='lm'`` (:mod:`bsdfkit.lm`: one compiled
+* ``lm``: :func:`bsdfkit.fit.least_squares.least_squares` with ``solver='lm'`` (:mod:`bsdfkit.fit.lm`: one compiled
   ``jit(vmap(jacfwd))`` kernel, host-driven Levenberg–Marquardt), float64, *including compilation*: the JAX
   caches are cleared before every repeat. Then the same call again with the kernel compiled (steady state),
   and, separately, the kernel's tracing + lowering and XLA compile alone (caches cleared first).
@@ -30,8 +30,9 @@ import jax
 import numpy as np
 import scipy.optimize
 
-from bsdfkit import fit, spectra
-from bsdfkit._jax import x64
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.fit import least_squares as fit
+from bsdfkit.fit import spectrum as spectra
 
 C = 4.0 * math.log(2.0)
 NAMES = ["peak_nm", "fwhm_nm", "alpha", "amplitude"]

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from bsdfkit.trace import PhosphorPlate, load_scene, trace, with_values
-from bsdfkit.trace.numpy_reference import trace_numpy
-from bsdfkit.trace.radiosity import module_radiosity
+from bsdfkit.trace.oracles.numpy_reference import trace_numpy
+from bsdfkit.trace.oracles.radiosity import module_radiosity
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "fitting" / "scenes" / "example.toml"

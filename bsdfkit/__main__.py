@@ -1,5 +1,5 @@
 import sys
 
-from bsdfkit.cli import main
+from bsdfkit.cli.main import main
 
 sys.exit(main())

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from bsdfkit import virtual
-from bsdfkit.calibrate import calibrate
-from bsdfkit.io.goniometer import read_scan
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "measurements" / "cl830-synthetic"

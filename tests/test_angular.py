@@ -6,10 +6,11 @@ import pytest
 import xarray as xr
 from scipy import integrate
 
-from bsdfkit import angular, virtual
-from bsdfkit.calibrate import calibrate
-from bsdfkit.instrument import sample_direction
-from bsdfkit.io.goniometer import read_scan
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.instrument import sample_direction
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.reduction import tis as angular
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 
 def _profile(theta_i, theta_s, phi_s, arc, values, side="reflection", interaction="bibs"):
@@ -135,7 +136,7 @@ def test_error_bars_are_honest_over_20_realisations(tmp_path):
     plan = virtual.ScanPlan(theta_i_deg=(45.0,), in_plane_deg=virtual.default_plan().in_plane_deg,
                             perpendicular_deg=virtual.default_plan().perpendicular_deg)
     lam = g.spectrometer.wavelength
-    from bsdfkit import synthetic
+    from bsdfkit.simulation import truth as synthetic
     exact = synthetic.exact_tis_table(truth, 45.0, lam, virtual.BLUE.incident_power(lam, 1), virtual.YELLOW.incident_power(lam, 1))
     inside = []
     for seed in range(20):

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bsdfkit import frames, grids
-from bsdfkit.errors import FormatError, OutputExistsError
-from bsdfkit.export import ExportSettings, export, read_any
-from bsdfkit.io import asap
+from bsdfkit.core import frames
+from bsdfkit.core.errors import FormatError, OutputExistsError
+from bsdfkit.tables import grids
+from bsdfkit.tables.export import ExportSettings, export, read_any
+from bsdfkit.tables.formats import asap
 
 GOLDEN = Path(__file__).parent / "data" / "golden"
 WHEN = datetime(2020, 1, 23, 15, 24, 9)

@@ -5,10 +5,11 @@ import sys
 
 import numpy as np
 import pytest
-
-from bsdfkit import budget, synthetic, virtual
-from bsdfkit.errors import InputError
 from conftest import BUNDLED
+
+from bsdfkit.core.errors import InputError
+from bsdfkit.reduction import budget
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 TABLE2_POWER = {"B_bibs": 10.9, "F_bibs": 5.4, "B_biys": 26.3, "F_biys": 25.7, "B_yiys": 45.7, "F_yiys": 47.1}
 TABLE2_PHOTONS = {"B_bibs": 10.9, "F_bibs": 5.4, "B_biys": 33.9, "F_biys": 33.1, "B_yiys": 45.7, "F_yiys": 47.1}

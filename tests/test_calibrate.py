@@ -3,12 +3,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bsdfkit import virtual
-from bsdfkit.calibrate import calibrate
-from bsdfkit.errors import NumericalError
+from bsdfkit.core.errors import NumericalError
 from bsdfkit.io import netcdf
-from bsdfkit.io.goniometer import read_scan
-from bsdfkit.records import incidences
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 CONFIGS = {"blue": virtual.BLUE, "yellow": virtual.YELLOW}
 

@@ -1,4 +1,4 @@
-"""bsdfkit.colorimetry and ``bsdfkit color``: CIE LED reference chromaticities/CCTs, photometry, YBR."""
+"""bsdfkit.reduction.colorimetry and ``bsdfkit color``: CIE LED reference chromaticities/CCTs, photometry, YBR."""
 import json
 import subprocess
 import sys
@@ -8,9 +8,9 @@ import colour
 import numpy as np
 import pytest
 
-from bsdfkit import colorimetry
-from bsdfkit.cli import main
-from bsdfkit.errors import InputError, NumericalError
+from bsdfkit.cli.main import main
+from bsdfkit.core.errors import InputError, NumericalError
+from bsdfkit.reduction import colorimetry
 
 DATA = Path(__file__).resolve().parent / "data"
 CIE_CSV = DATA / "colour-cie-nist-led-spd" / "cie_led_illuminants_and_nist_cqs_led_spd_5nm.csv"

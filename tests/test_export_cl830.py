@@ -1,7 +1,7 @@
 """Acceptance: the measured (reconstructed) cl830 bibs table survives export → read with its TIS intact."""
 import pytest
 
-from bsdfkit import export
+from bsdfkit.tables import export
 
 
 @pytest.mark.parametrize("fmt,suffix", [("tracepro", "txt"), ("zemax", "bsdf")])

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bsdfkit import grids
-from bsdfkit.cli import main
-from bsdfkit.export import fit_bsdf_fn
+from bsdfkit.cli.main import main
+from bsdfkit.tables import grids
+from bsdfkit.tables.export import fit_bsdf_fn
 
 REAL = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
 THETA = [0.0, 30.0, 60.0]
@@ -134,11 +134,11 @@ def test_scan_source_uses_angular_hemisphere_bsdf_fn(tmp_path, monkeypatch):
         calls.append((interaction, side, float(ds["bsdf"].sum())))
         return lambda theta_i_deg, side_, d: np.full(d.shape[:-1], 0.25 / np.pi)
 
-    fake = types.ModuleType("bsdfkit.angular")
-    fake.__spec__ = importlib.machinery.ModuleSpec("bsdfkit.angular", None)
+    fake = types.ModuleType("bsdfkit.reduction.tis")
+    fake.__spec__ = importlib.machinery.ModuleSpec("bsdfkit.reduction.tis", None)
     fake.hemisphere_bsdf_fn = hemisphere_bsdf_fn
-    monkeypatch.setitem(sys.modules, "bsdfkit.angular", fake)
-    from bsdfkit.export import export, read_any
+    monkeypatch.setitem(sys.modules, "bsdfkit.reduction.tis", fake)
+    from bsdfkit.tables.export import export, read_any
 
     result = export(scan_dataset(), "tracepro", "yiys", "both", tmp_path / "scan.txt")
     assert calls == [("yiys", "reflection", 6.0), ("yiys", "transmission", 6.0)]
@@ -148,18 +148,18 @@ def test_scan_source_uses_angular_hemisphere_bsdf_fn(tmp_path, monkeypatch):
 
 
 def test_scan_source_without_angular_support(tmp_path, monkeypatch):
-    from bsdfkit.errors import InputError
-    from bsdfkit.export import export
+    from bsdfkit.core.errors import InputError
+    from bsdfkit.tables.export import export
 
-    fake = types.ModuleType("bsdfkit.angular")
-    fake.__spec__ = importlib.machinery.ModuleSpec("bsdfkit.angular", None)
-    monkeypatch.setitem(sys.modules, "bsdfkit.angular", fake)
+    fake = types.ModuleType("bsdfkit.reduction.tis")
+    fake.__spec__ = importlib.machinery.ModuleSpec("bsdfkit.reduction.tis", None)
+    monkeypatch.setitem(sys.modules, "bsdfkit.reduction.tis", fake)
     with pytest.raises(InputError, match="has no hemisphere_bsdf_fn"):
         export(scan_dataset(), "zemax", "bibs", "reflection", tmp_path / "x.bsdf")
     real_find_spec = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "bsdfkit.angular" else real_find_spec(name, *a))
-    with pytest.raises(InputError, match="needs bsdfkit.angular.hemisphere_bsdf_fn"):
+                        lambda name, *a: None if name == "bsdfkit.reduction.tis" else real_find_spec(name, *a))
+    with pytest.raises(InputError, match="needs bsdfkit.reduction.tis.hemisphere_bsdf_fn"):
         export(scan_dataset(), "zemax", "bibs", "reflection", tmp_path / "x.bsdf")
     assert not (tmp_path / "x.bsdf").exists()
 

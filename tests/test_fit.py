@@ -1,4 +1,4 @@
-"""bsdfkit.fit: the least-squares core (uncertainties, losses, degeneracies) and BSDF model fits."""
+"""bsdfkit.fit.least_squares: the least-squares core (uncertainties, losses, degeneracies) and BSDF model fits."""
 import math
 
 import jax.numpy as jnp
@@ -7,9 +7,10 @@ import pytest
 import scipy.optimize
 import xarray as xr
 
-from bsdfkit import fit, models
-from bsdfkit._jax import x64
-from bsdfkit.errors import FitError, InputError, ValidationError
+from bsdfkit.core.errors import FitError, InputError, ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.fit import least_squares as fit
+from bsdfkit.models import functions as models
 
 TRUTH = {  # θi (deg) → lambert+gaussian parameters (ρ, A sr⁻¹, σ)
     5.0: dict(rho=0.10, A=5.0, sigma=0.03),
@@ -275,7 +276,7 @@ def test_fit_bsdf_cli_on_bundled_measurement(capsys):
     import json
     from pathlib import Path
 
-    from bsdfkit.cli import main
+    from bsdfkit.cli.main import main
 
     scan = Path(__file__).resolve().parents[1] / "measurements" / "cl830-synthetic"
     assert main(["fit", "bsdf", str(scan), "--interaction", "bibs", "--side", "reflection",

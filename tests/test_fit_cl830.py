@@ -2,8 +2,11 @@
 import numpy as np
 import pytest
 
-from bsdfkit import angular, spectral, synthetic, virtual
-from bsdfkit.fit import fit_bsdf
+from bsdfkit.fit.least_squares import fit_bsdf
+from bsdfkit.reduction import spectral
+from bsdfkit.reduction import tis as angular
+from bsdfkit.simulation import truth as synthetic
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 BANDS = {"bibs": (virtual.BLUE, (450.0, 470.0)), "yiys": (virtual.YELLOW, (470.0, 740.0))}
 

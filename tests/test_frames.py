@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bsdfkit import frames
-from bsdfkit.errors import ValidationError
+from bsdfkit.core import frames
+from bsdfkit.core.errors import ValidationError
 
 TOL = 1e-12
 DEG = np.pi / 180.0

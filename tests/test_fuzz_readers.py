@@ -4,19 +4,18 @@ Examples are bounded (hypothesis max_examples) and each example has a deadline, 
 """
 import gzip
 import shutil
-from pathlib import Path
 
 import pytest
+from conftest import ROOT, tiny_gonio, tiny_plan
+from fuzzing import damaged
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bsdfkit.errors import BsdfkitError
-from bsdfkit.io.asap import read_asap
-from bsdfkit.io.goniometer import read_scan
-from bsdfkit.io.tracepro import read_tracepro
-from bsdfkit.io.zemax import read_zemax
-from conftest import ROOT, tiny_gonio, tiny_plan
-from fuzzing import damaged
+from bsdfkit.core.errors import BsdfkitError
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.tables.formats.asap import read_asap
+from bsdfkit.tables.formats.tracepro import read_tracepro
+from bsdfkit.tables.formats.zemax import read_zemax
 
 GOLDEN = ROOT / "tests" / "data" / "golden"
 FUZZ = settings(max_examples=60, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture,
@@ -25,7 +24,7 @@ FUZZ = settings(max_examples=60, deadline=5000, suppress_health_check=[HealthChe
 
 @pytest.fixture(scope="module")
 def tiny_folder(tmp_path_factory):
-    from bsdfkit import virtual
+    from bsdfkit.simulation import virtual_goniometer as virtual
 
     gonio = tiny_gonio()
     folder = tmp_path_factory.mktemp("fuzz") / "tiny"

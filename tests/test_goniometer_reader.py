@@ -5,10 +5,10 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from bsdfkit.errors import BsdfkitError, FormatError, InputError, ValidationError
-from bsdfkit.io.goniometer import read_scan
 from conftest import read_gz_lines, write_gz_lines
+
+from bsdfkit.core.errors import BsdfkitError, FormatError, InputError, ValidationError
+from bsdfkit.measurement.raw_scan import read_scan
 
 
 def _edit_scan(folder: Path, edit) -> Path:

@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bsdfkit import frames, grids
-from bsdfkit.errors import ValidationError
+from bsdfkit.core import frames
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.tables import grids
 
 
 def lambert(rho):

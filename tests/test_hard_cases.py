@@ -8,11 +8,13 @@ model (hypothesis) in tests/test_models.py.
 import numpy as np
 import pytest
 
-from bsdfkit import angular, synthetic, virtual
-from bsdfkit.calibrate import calibrate
-from bsdfkit.errors import BsdfkitError, InputError
-from bsdfkit.instrument import Instrument
-from bsdfkit.io.goniometer import read_scan
+from bsdfkit.core.errors import BsdfkitError, InputError
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.instrument import Instrument
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.reduction import tis as angular
+from bsdfkit.simulation import truth as synthetic
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 
 def _mirror_like_truth(A: float, sigma: float) -> synthetic.PhosphorPlateTruth:
@@ -54,7 +56,8 @@ def test_specular_peak_six_decades_above_diffuse(tmp_path):
 def test_tis_of_a_narrow_lobe_on_dense_arcs():
     """TIS of a lobe 1e6 above the diffuse level is integrated correctly (log-interpolation, polar quadrature)."""
     import xarray as xr
-    from bsdfkit.instrument import sample_direction
+
+    from bsdfkit.measurement.instrument import sample_direction
 
     A, sigma, rho, th = 4e4, 1.3e-3, 0.1, 30.0  # lobe TIS 0.42, peak 6.1 decades above ρ/π
     s0 = np.sin(np.radians(th))
@@ -143,7 +146,7 @@ from hypothesis import strategies as st  # noqa: E402
 def _next_hit(p, d, dtype, radius=35.0, height=43.0):
     import jax.numpy as jnp
 
-    from bsdfkit._jax import x64
+    from bsdfkit.core.jaxconfig import x64
     from bsdfkit.trace.geometry import next_hit
 
     with x64(dtype == "float64"):
@@ -201,8 +204,9 @@ def test_float32_tracing_agrees_with_float64():
     """End to end: the same scene and seed traced with float32 and float64 ray geometry agree within 3σ."""
     from dataclasses import replace
 
-    from bsdfkit.trace import load_scene, trace
     from conftest import ROOT
+
+    from bsdfkit.trace import load_scene, trace
 
     scene = load_scene(ROOT / "fitting" / "scenes" / "example.toml")
     r32 = trace(replace(scene, trace=replace(scene.trace, precision="float32")), 20000, 4)

@@ -4,9 +4,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bsdfkit.calibrate import aperture_solid_angle, aperture_solid_angle_small
-from bsdfkit.instrument import Instrument, aperture_quadrature
-from bsdfkit.errors import ValidationError
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.measurement.calibrate import aperture_solid_angle, aperture_solid_angle_small
+from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
 
 
 @given(d=st.floats(1.0, 5000.0), a=st.floats(1e-3, 1000.0))

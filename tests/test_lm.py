@@ -1,4 +1,4 @@
-"""bsdfkit.lm: the batched Levenberg–Marquardt solver, directly and as bsdfkit.fit's default solver."""
+"""bsdfkit.fit.lm: the batched Levenberg–Marquardt solver, directly and as bsdfkit.fit.least_squares's default solver."""
 import math
 
 import jax
@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from bsdfkit import fit, lm, spectra
-from bsdfkit._jax import x64
-from bsdfkit.errors import FitError, ValidationError
+from bsdfkit.core.errors import FitError, ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.fit import least_squares as fit
+from bsdfkit.fit import lm
+from bsdfkit.fit import spectrum as spectra
 
 
 # ------------------------------------------------------------------------------------ the driver, NumPy-only
@@ -125,7 +127,7 @@ def test_jacobian_products_match_the_analytic_jacobian():
     assert float(aux) == 1.5
 
 
-# ------------------------------------------------------------------------------- through bsdfkit.fit (JAX)
+# ------------------------------------------------------------------------------- through bsdfkit.fit.least_squares (JAX)
 C = 4.0 * math.log(2.0)
 
 
@@ -157,7 +159,7 @@ def test_split_gaussian_fits_agree_with_scipy_and_with_jaxopt():
     wl, y = split_gaussian_data(6, seed=11)
     p0 = start(wl, y)
     ds = split_fit(wl, y, p0)
-    assert ds.attrs["solver"].startswith("bsdfkit.lm") and bool(ds.converged.all())
+    assert ds.attrs["solver"].startswith("bsdfkit.fit.lm") and bool(ds.converged.all())
     params = spectra._parameters("split-gaussian", float(wl[0]), float(wl[-1]))
     lo, hi = params[0].lower, params[0].upper
 

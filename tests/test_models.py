@@ -1,4 +1,4 @@
-"""bsdfkit.models: spectrum shapes, direction cosines, BSDF models, TIS, and gradient safety at the edges."""
+"""bsdfkit.models.functions: spectrum shapes, direction cosines, BSDF models, TIS, and gradient safety at the edges."""
 import math
 
 import jax
@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bsdfkit import models
-from bsdfkit._jax import x64
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.models import functions as models
 
 
 def _np(f, *args):

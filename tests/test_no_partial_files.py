@@ -1,5 +1,4 @@
 """An export or run killed mid-write leaves the old file or none — never a partial file."""
-import os
 import signal
 import subprocess
 import sys
@@ -7,7 +6,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import BUNDLED
 
 SLOW_WRITER = r"""

@@ -1,14 +1,15 @@
-"""bsdfkit.spectra: spectrum fits (synthetic Table 2, measured Benkner LEDs, hard cases) and the §4.2
+"""bsdfkit.fit.spectrum: spectrum fits (synthetic Table 2, measured Benkner LEDs, hard cases) and the §4.2
 two-band reconstruction of the cylindrical-module paper."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bsdfkit import models, spectra
-from bsdfkit._jax import x64
-from bsdfkit.errors import FitError, InputError, NumericalError, ValidationError
+from bsdfkit.core.errors import FitError, InputError, NumericalError, ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.fit import spectrum as spectra
 from bsdfkit.io.spectrum_file import read_spectrum_arrays
+from bsdfkit.models import functions as models
 
 DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
 WL = np.arange(380.0, 781.0)  # 1 nm grid, 380-780 nm
@@ -189,7 +190,7 @@ def test_near_singular_two_band_system_raises_numerical_error():
 def test_fit_spectrum_cli_json_and_non_convergence_warning(tmp_path, capsys):
     import json
 
-    from bsdfkit.cli import main
+    from bsdfkit.cli.main import main
 
     _, s_yellow = table2_spectra()
     path = tmp_path / "phosphor.txt"

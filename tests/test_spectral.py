@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bsdfkit import spectral, synthetic, virtual
-from bsdfkit.errors import InputError
-from bsdfkit.instrument import sample_direction
+from bsdfkit.core.errors import InputError
+from bsdfkit.measurement.instrument import sample_direction
+from bsdfkit.reduction import spectral
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 
 def test_weighted_mean_uses_only_the_relative_spectrum(bundled_scan):

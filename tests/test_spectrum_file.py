@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bsdfkit.cli import main
-from bsdfkit.errors import FormatError, InputError, ValidationError
+from bsdfkit.cli.main import main
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io.spectrum_file import read_spectrum, read_spectrum_arrays
 
 BENKNER = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"

@@ -6,7 +6,7 @@ import json
 import pytest
 import xarray as xr
 
-from bsdfkit.cli import main
+from bsdfkit.cli.main import main
 
 SCENE = """
 [cavity]

@@ -9,13 +9,23 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from bsdfkit._jax import x64
-from bsdfkit.errors import ValidationError
-from bsdfkit.trace import (LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated, loads_scene,
-                           scene_effects, threshold_bias, trace)
-from bsdfkit.trace import kernel, sampling
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.trace import (
+    LambertGaussian,
+    Lambertian,
+    PhosphorPlate,
+    PlateChannel,
+    Tabulated,
+    kernel,
+    loads_scene,
+    sampling,
+    scene_effects,
+    threshold_bias,
+    trace,
+)
 from bsdfkit.trace.effects import kernel_params
-from bsdfkit.trace.radiosity import module_radiosity
+from bsdfkit.trace.oracles.radiosity import module_radiosity
 from bsdfkit.trace.rayfile import RaySet, format_rays
 
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,

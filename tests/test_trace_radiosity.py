@@ -7,8 +7,17 @@ import numpy as np
 import pytest
 
 from bsdfkit.trace import loads_scene
-from bsdfkit.trace.radiosity import (BASE, TOP, WALL, cylinder_patches, disk_to_disk, element_to_disk, led_direct,
-                                     module_radiosity, view_factors)
+from bsdfkit.trace.oracles.radiosity import (
+    BASE,
+    TOP,
+    WALL,
+    cylinder_patches,
+    disk_to_disk,
+    element_to_disk,
+    led_direct,
+    module_radiosity,
+    view_factors,
+)
 
 SCENE = """
 [cavity]

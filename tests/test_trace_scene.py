@@ -10,11 +10,23 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bsdfkit.errors import BsdfkitError, InputError, OutputExistsError, ValidationError
-from bsdfkit.trace import (LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated, dumps_scene,
-                           load_plate, load_scene, loads_scene, read_ray_file, save_scene, with_values)
-from bsdfkit.trace.rayfile import RaySet, format_rays
+from bsdfkit.core.errors import BsdfkitError, InputError, OutputExistsError, ValidationError
 from bsdfkit.io.toml_write import dumps
+from bsdfkit.trace import (
+    LambertGaussian,
+    Lambertian,
+    PhosphorPlate,
+    PlateChannel,
+    Tabulated,
+    dumps_scene,
+    load_plate,
+    load_scene,
+    loads_scene,
+    read_ray_file,
+    save_scene,
+    with_values,
+)
+from bsdfkit.trace.rayfile import RaySet, format_rays
 
 EXAMPLE = """
 [cavity]
@@ -122,23 +134,23 @@ def test_phosphor_from_recipe_is_resolved_lazily_by_the_recipe_module(tmp_path, 
     text = EXAMPLE.replace('kind = "exit"                # all light reaching the top leaves the module',
                            'kind = "phosphor"\nfrom = "fitting/cl830.toml"')
     calls = []
-    fake = types.ModuleType("bsdfkit.recipe")
+    fake = types.ModuleType("bsdfkit.pipeline.recipe")
 
     def phosphor_plate(path):
         calls.append(path)
         return PhosphorPlate.constant(TABLE2, name="from recipe")
 
     fake.phosphor_plate = phosphor_plate
-    monkeypatch.setitem(sys.modules, "bsdfkit.recipe", fake)
+    monkeypatch.setitem(sys.modules, "bsdfkit.pipeline.recipe", fake)
     s = loads_scene(text, tmp_path / "s.toml")
     assert s.top.plate.name == "from recipe" and s.top.plate_recipe == "fitting/cl830.toml"
     assert str(calls[0]).endswith("cl830.toml")
     assert tomllib.loads(dumps_scene(s))["top"]["from"] == "fitting/cl830.toml"
     # without the function: one clear bsdfkit error naming the key
-    monkeypatch.setitem(sys.modules, "bsdfkit.recipe", types.ModuleType("bsdfkit.recipe"))
+    monkeypatch.setitem(sys.modules, "bsdfkit.pipeline.recipe", types.ModuleType("bsdfkit.pipeline.recipe"))
     with pytest.raises(InputError) as info:
         loads_scene(text, tmp_path / "s.toml")
-    assert "bsdfkit.recipe.phosphor_plate" in str(info.value) and "top.from" in str(info.value)
+    assert "bsdfkit.pipeline.recipe.phosphor_plate" in str(info.value) and "top.from" in str(info.value)
 
 
 def test_plate_json_round_trip_with_every_distribution_kind(tmp_path):

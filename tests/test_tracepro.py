@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bsdfkit import frames, grids
-from bsdfkit.errors import FormatError, OutputExistsError, ValidationError
-from bsdfkit.export import ExportSettings, export, read_any
-from bsdfkit.io import tracepro
+from bsdfkit.core import frames
+from bsdfkit.core.errors import FormatError, OutputExistsError, ValidationError
+from bsdfkit.tables import grids
+from bsdfkit.tables.export import ExportSettings, export, read_any
+from bsdfkit.tables.formats import tracepro
 
 GOLDEN = Path(__file__).parent / "data" / "golden"
 WHEN = datetime(2020, 1, 23, 15, 24, 9)

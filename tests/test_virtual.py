@@ -4,9 +4,10 @@ import tomllib
 
 import numpy as np
 import pytest
-
-from bsdfkit import synthetic, virtual
 from conftest import BUNDLED, tiny_gonio, tiny_plan
+
+from bsdfkit.simulation import truth as synthetic
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 TABLE2_45 = {"B_bibs": 10.9, "F_bibs": 5.4, "B_biys": 26.3, "F_biys": 25.7, "B_yiys": 45.7, "F_yiys": 47.1}
 

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bsdfkit import frames, grids
-from bsdfkit.errors import FormatError, OutputExistsError, ValidationError
-from bsdfkit.export import ExportSettings, export, read_any
-from bsdfkit.io import zemax
+from bsdfkit.core import frames
+from bsdfkit.core.errors import FormatError, OutputExistsError, ValidationError
+from bsdfkit.tables import grids
+from bsdfkit.tables.export import ExportSettings, export, read_any
+from bsdfkit.tables.formats import zemax
 
 HERE = Path(__file__).parent
 GOLDEN = HERE / "data" / "golden"
@@ -187,7 +188,7 @@ def test_real_file_parses():
 def test_real_file_tis_comparison_is_reported(capsys):
     rows = real_file_table()
     with capsys.disabled():
-        print("\nReal Zemax file: AOI, TIS stated, TIS recomputed (bsdfkit.grids.tis_specular_table), diff %")
+        print("\nReal Zemax file: AOI, TIS stated, TIS recomputed (bsdfkit.tables.grids.tis_specular_table), diff %")
         for row in rows:
             print("  " + docs_row(row))
     for aoi, _, _, diff in rows:

@@ -114,7 +114,7 @@ def report_header(command: str, quick: bool, elapsed_s: float) -> str:
 
 def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float, force: bool = True) -> Path:
     from bsdfkit.io.atomic import write_text
-    from bsdfkit.report import save_figure
+    from bsdfkit.plotting.figures import save_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     parts = [report_header(command, quick, elapsed_s)]

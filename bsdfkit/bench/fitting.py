@@ -6,8 +6,8 @@ import time
 import numpy as np
 
 from bsdfkit.bench.core import Row, Study
-from bsdfkit.fit import FitOptions
-from bsdfkit.spectra import fit_spectra, fit_spectrum, spectrum_model_values
+from bsdfkit.fit.least_squares import FitOptions
+from bsdfkit.fit.spectrum import fit_spectra, fit_spectrum, spectrum_model_values
 
 TRUTH = {"peak_nm": 596.7, "fwhm_nm": 154.3, "alpha": -0.12, "amplitude": 1.0}  # Table 2, cylindrical-module paper
 

@@ -7,11 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bsdfkit import angular, synthetic, virtual
 from bsdfkit.bench.core import Row, Study
-from bsdfkit.calibrate import calibrate
-from bsdfkit.io.goniometer import read_scan
-from bsdfkit.instrument import sample_direction
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.instrument import sample_direction
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.reduction import tis as angular
+from bsdfkit.simulation import truth as synthetic
+from bsdfkit.simulation import virtual_goniometer as virtual
 
 ENTRIES = [(i, tag, side) for i in ("bibs", "biys", "yiys") for tag, side in (("B", "reflection"), ("F", "transmission"))]
 

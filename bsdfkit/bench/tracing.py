@@ -1,6 +1,6 @@
 """Tracer studies: LER error vs rays, roulette vs the flux threshold Th, float32 vs float64.
 
-The truth is the two-wavelength radiosity oracle with exact view factors (:mod:`bsdfkit.trace.radiosity`) of
+The truth is the two-wavelength radiosity oracle with exact view factors (:mod:`bsdfkit.trace.oracles.radiosity`) of
 the same scene: a fully diffuse cavity with Lambertian LEDs, exit top or the Table-2 plate taken as
 angle-independent and Lambertian. Errors are relative; for a Monte Carlo run the reported error is
 max(|LER − oracle|, 2σ)/oracle, so a lucky run cannot claim an accuracy its statistics do not support.
@@ -13,7 +13,7 @@ from pathlib import Path
 
 from bsdfkit.bench.core import Row, Study
 from bsdfkit.trace import load_scene, trace, with_values
-from bsdfkit.trace.radiosity import module_radiosity
+from bsdfkit.trace.oracles.radiosity import module_radiosity
 
 SCENES = Path(__file__).resolve().parents[2] / "fitting" / "scenes"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,

@@ -13,7 +13,7 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from bsdfkit.errors import OutputExistsError
+from bsdfkit.core.errors import OutputExistsError
 
 
 def check_writable(path: str | Path, force: bool) -> Path:

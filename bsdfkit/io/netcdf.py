@@ -8,10 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import xarray as xr
 
-from bsdfkit.errors import FormatError, InputError
+from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.io.atomic import write_with
 
 ENGINE = "netcdf4"

@@ -6,7 +6,7 @@ a byte-order mark, LF or CRLF line ends, ``#`` comment lines and blank lines any
 semicolon or blank separator a decimal comma (``450,5``) is accepted, as spreadsheet exports in many
 locales write it. Instrument Systems ``.ISD`` exports (header ``wl<TAB>pwr``) are read as is.
 
-Rejected with a one-line :class:`bsdfkit.errors.InputError` / :class:`~bsdfkit.errors.FormatError`
+Rejected with a one-line :class:`bsdfkit.core.errors.InputError` / :class:`~bsdfkit.core.errors.FormatError`
 naming the file, line and field: missing or unreadable file, not UTF-8, empty file, a line with other
 than two fields, a non-numeric cell, NaN or infinity, wavelengths not strictly increasing or not
 positive, fewer than three data rows.
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bsdfkit.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 
 if TYPE_CHECKING:
     from colour import SpectralDistribution
@@ -125,7 +125,7 @@ def read_spectrum(path: str | Path) -> SpectralDistribution:
     """Read a two-column spectrum file as a :class:`colour.SpectralDistribution` (wavelength in nm).
 
     The distribution is named after the file stem; values keep the file's unit. Irregular grids are kept
-    as they are (colorimetry resamples when it must, see :mod:`bsdfkit.colorimetry`).
+    as they are (colorimetry resamples when it must, see :mod:`bsdfkit.reduction.colorimetry`).
     """
     import colour
 

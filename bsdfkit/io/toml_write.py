@@ -13,8 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from bsdfkit.errors import BsdfkitError
-
+from bsdfkit.core.errors import BsdfkitError
 
 _BARE = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
 _ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}

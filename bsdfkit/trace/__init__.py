@@ -8,11 +8,22 @@ configuration) + kernel parameters → chunked, compiled kernel → exact tallie
 >>> result.LER, result.std_err["LER"], result.ledger_error            # doctest: +SKIP
 """
 from bsdfkit.trace.effects import Effects, scene_effects
-from bsdfkit.trace.plate import (LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated,
-                                 load_plate)
+from bsdfkit.trace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated, load_plate
 from bsdfkit.trace.rayfile import RaySet, read_ray_file
-from bsdfkit.trace.scene import (Cavity, Leds, Scene, Surface, Tallies, Top, TraceOptions, dumps_scene,
-                                 load_scene, loads_scene, save_scene, with_values)
+from bsdfkit.trace.scene import (
+                                 Cavity,
+                                 Leds,
+                                 Scene,
+                                 Surface,
+                                 Tallies,
+                                 Top,
+                                 TraceOptions,
+                                 dumps_scene,
+                                 load_scene,
+                                 loads_scene,
+                                 save_scene,
+                                 with_values,
+)
 from bsdfkit.trace.tallies import TraceResult
 from bsdfkit.trace.tracer import threshold_bias, trace
 

@@ -39,7 +39,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from bsdfkit.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io.atomic import write_text
 
 FORMAT = "bsdfkit-phosphor-plate"

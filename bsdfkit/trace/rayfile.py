@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bsdfkit.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 
 
 @dataclass(frozen=True, eq=False)

@@ -37,9 +37,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from bsdfkit.errors import FormatError, InputError, ValidationError
-from bsdfkit.io.atomic import write_text
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import toml_write
+from bsdfkit.io.atomic import write_text
 from bsdfkit.trace.plate import PhosphorPlate, load_plate
 from bsdfkit.trace.rayfile import RaySet, read_ray_file
 
@@ -110,7 +110,7 @@ class Top:
     ``exit``: all light reaching it leaves the module. ``lambertian``: a non-converting diffuser with
     ``reflectance`` and ``transmittance`` (both Lambertian). ``phosphor``: the plate of
     :mod:`bsdfkit.trace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe resolved
-    by ``bsdfkit.recipe.phosphor_plate``) or given inline.
+    by ``bsdfkit.pipeline.recipe.phosphor_plate``) or given inline.
     """
 
     kind: str = "exit"
@@ -449,11 +449,11 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
 
 
 def plate_from_recipe(recipe: Path, scene_file: str | Path | None) -> PhosphorPlate:
-    """The plate of a fitting recipe, via the lead's ``bsdfkit.recipe.phosphor_plate`` (imported lazily)."""
+    """The plate of a fitting recipe, via the lead's ``bsdfkit.pipeline.recipe.phosphor_plate`` (imported lazily)."""
     try:
-        from bsdfkit.recipe import phosphor_plate  # type: ignore[attr-defined]
+        from bsdfkit.pipeline.recipe import phosphor_plate  # type: ignore[attr-defined]
     except ImportError:
-        raise InputError("plate from a fitting recipe needs bsdfkit.recipe.phosphor_plate, which this bsdfkit "
+        raise InputError("plate from a fitting recipe needs bsdfkit.pipeline.recipe.phosphor_plate, which this bsdfkit "
                          "does not provide", file=scene_file, field="top.from",
                          expected="plate = 'file.json' or an inline [top.plate] instead", got=str(recipe)) from None
     plate = phosphor_plate(recipe)

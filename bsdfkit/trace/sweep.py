@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bsdfkit.errors import InputError, ValidationError
+from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.io.atomic import check_writable, write_with
 from bsdfkit.trace.scene import Scene, dumps_scene, with_values
 from bsdfkit.trace.tracer import trace

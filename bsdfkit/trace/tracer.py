@@ -9,8 +9,8 @@ from dataclasses import replace
 import jax
 import numpy as np
 
-from bsdfkit._jax import x64
-from bsdfkit.errors import ValidationError
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.core.jaxconfig import x64
 from bsdfkit.trace import kernel
 from bsdfkit.trace.effects import Effects, kernel_params, scene_effects
 from bsdfkit.trace.scene import Scene
@@ -100,7 +100,7 @@ def _signature(params) -> tuple:
 def compiled_kernel(effects: Effects, lanes: int, signature: tuple):
     """The kernel compiled for ``effects``, the lane count and a parameter signature (cached).
 
-    Must be called inside :func:`bsdfkit._jax.x64`. Sweeping numbers (reflectance, height, plate TIS)
+    Must be called inside :func:`bsdfkit.core.jaxconfig.x64`. Sweeping numbers (reflectance, height, plate TIS)
     keeps the signature, so a sweep compiles once per distinct :class:`Effects`.
     """
     treedef, shapes = signature

@@ -1,0 +1,1 @@
+"""``bsdfkit <verb>``: the command line, one module per verb, each a thin wrapper over the library."""

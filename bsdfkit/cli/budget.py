@@ -1,0 +1,57 @@
+"""``bsdfkit budget (SCAN --incidence 45 | --table T.json) --eta-mc 0.94 --iterations 7 [--json]``."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import FormatError, InputError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("budget", help="iterative module power budget (Figs. 9-10, Table 3 of the power-budget paper)")
+    p.add_argument("scan", nargs="?", help="calibrated scan or raw measurement folder (with --incidence)")
+    p.add_argument("--incidence", type=float, help="incidence angle of the scan's interaction table, deg")
+    p.add_argument("--table", help='JSON {"power": {"B_bibs": 10.9, ...}} in percent (instead of a scan)')
+    p.add_argument("--eta-mc", type=float, required=True, help="mixing-chamber efficiency η_MC")
+    p.add_argument("--iterations", type=int, default=7, help="plate interactions (the first is the LEDs' direct pass)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from bsdfkit.cli.tis import load_scan
+    from bsdfkit.reduction.budget import interaction_table, module_budget, table_from_json
+
+    if (args.scan is None) == (args.table is None):
+        raise InputError("give either a scan (with --incidence) or --table", field="scan/--table")
+    if args.table is not None:
+        path = Path(args.table)
+        if not path.is_file():
+            raise InputError("file not found", file=path)
+        try:
+            data = json.loads(path.read_text(encoding="utf-8-sig"))
+        except json.JSONDecodeError as exc:
+            raise FormatError(f"not valid JSON ({exc.msg})", file=path, line=exc.lineno) from None
+        tables = table_from_json(data, str(path))
+    else:
+        if args.incidence is None:
+            raise InputError("a scan needs --incidence", field="--incidence")
+        t = interaction_table(load_scan(args.scan), args.incidence)
+        tables = {"power": t.power, "photons": t.photons}
+    result = module_budget(tables["power"], args.eta_mc, args.iterations).as_dict()
+    if "photons" in tables:
+        result["photons"] = module_budget(tables["photons"], args.eta_mc, args.iterations).as_dict()
+    if args.json:
+        emit_json(result)
+        return 0
+    print(f"η_MC = {args.eta_mc:g}; cumulative extracted (% of LED power) per plate interaction")
+    print("  k   blue  yellow   total  losses  in flight")
+    for k, row in enumerate(result["iterations"], start=1):
+        print(f"  {k:<2d} {row['blue']:6.2f} {row['yellow']:7.2f} {row['total']:7.2f} {row['losses']:7.2f} {row['backscattered']:9.2f}")
+    c = result["converged"]
+    print(f"  ∞  {c['blue']:6.2f} {c['yellow']:7.2f} {c['total']:7.2f} {c['losses']:7.2f}")
+    f = result["first_iteration"]
+    print(f"  first interaction: forward {f['forward']:.1f}, lost {f['lost']:.1f}, backscattered {f['backscattered']:.1f}")
+    return 0

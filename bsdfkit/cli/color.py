@@ -1,0 +1,37 @@
+"""``bsdfkit color FILE [--json]``: chromaticity, CCT/Duv, luminous efficacy and YBR of a spectrum file."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from bsdfkit.cli._common import emit_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("color", help="CIE 1931 x, y, CCT and Duv (Ohno 2013), luminous efficacy and YBR of a spectrum")
+    p.add_argument("file", help="two-column text spectrum: wavelength (nm), value")
+    p.add_argument("--json", action="store_true",
+                   help="print x, y, cct_K, duv, luminous_efficacy_lm_per_W, ybr as JSON")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from bsdfkit.io.spectrum_file import read_spectrum
+    from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
+
+    sd = read_spectrum(args.file)
+    c = colorimetric_summary(sd)
+    if not c.cct_meaningful:
+        print(f"bsdfkit color: warning: |Duv| = {abs(c.duv):.3f} > {DUV_LIMIT} — the CCT of {args.file} "
+              "is not meaningful (CIE 015)", file=sys.stderr)
+    if args.json:
+        emit_json({"file": str(args.file), "x": c.x, "y": c.y, "cct_K": c.cct_K, "duv": c.duv,
+                   "luminous_efficacy_lm_per_W": c.luminous_efficacy_lm_per_W, "ybr": c.ybr,
+                   "cct_meaningful": c.cct_meaningful})
+        return 0
+    print(f"{args.file}:")
+    print(f"  CIE 1931 2°: x = {c.x:.4f}, y = {c.y:.4f}")
+    print(f"  CCT = {c.cct_K:.0f} K, Duv = {c.duv:+.4f} (Ohno 2013){'' if c.cct_meaningful else ' — not meaningful'}")
+    print(f"  luminous efficacy of radiation = {c.luminous_efficacy_lm_per_W:.1f} lm/W")
+    print("  YBR (471-780 nm / 380-470 nm) = " + ("undefined (no blue flux)" if c.ybr is None else f"{c.ybr:.3f}"))
+    return 0

@@ -1,0 +1,83 @@
+"""``bsdfkit export SOURCE --to tracepro|zemax|asap --interaction I --side S -o PATH [--force]``.
+
+SOURCE is a fit result netCDF (attribute ``model``) or a calibrated scan netCDF (reconstructed by
+``bsdfkit.reduction.tis.hemisphere_bsdf_fn``); see :func:`bsdfkit.tables.export.export`.
+"""
+from __future__ import annotations
+
+import argparse
+
+from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import ValidationError
+
+
+def _incidences(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.replace(" ", "").split(",") if v)
+    except ValueError:
+        raise ValidationError("incidences must be comma-separated numbers (deg)", field="--incidences",
+                              got=text) from None
+    if not values:
+        raise ValidationError("no incidence given", field="--incidences", got=text)
+    return values
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("export", help="write a TracePro, Zemax or ASAP-style BSDF table",
+                       description="Write a TracePro, Zemax or ASAP-style BSDF table from a fit result or a "
+                                   "calibrated scan, and report the TIS of source and table (docs/exports.md).")
+    p.add_argument("source", metavar="SOURCE", help="fit result or calibrated scan (netCDF)")
+    p.add_argument("--to", required=True, choices=("tracepro", "zemax", "asap"), help="target format")
+    p.add_argument("--interaction", required=True, help="interaction to export (e.g. bibs, biys, yiys)")
+    p.add_argument("--side", default="reflection", choices=("reflection", "transmission", "both"),
+                   help="scattering side (TracePro and ASAP accept both; default reflection)")
+    p.add_argument("-o", "--output", required=True, metavar="PATH", help="output file")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--incidences", metavar="DEG,DEG,...", help="incidence angles to export (default: the source's)")
+    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
+                   help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
+                   help="PlaneSymmetrical: largest accepted mirror deviation of the source, as a fraction "
+                        "of the block maximum (default 0.01); the mirror average is written")
+    p.add_argument("--tracepro-scatter", default="table", choices=("table", "abg"),
+                   help="TracePro Scatter 5 asymmetric table, or Scatter 1 ABg (ABg fits only)")
+    p.add_argument("--zero-azimuth", type=float, default=None, metavar="DEG",
+                   help="sample-frame azimuth of TracePro's ScatterAzimuth 0 (default 270; see docs/exports.md)")
+    p.add_argument("--name", default=None, help="TracePro property name")
+    p.add_argument("--wavelength-um", type=float, default=None, help="TracePro wavelength column (um)")
+    p.add_argument("--temperature-k", type=float, default=None, help="TracePro temperature column (K)")
+    p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from bsdfkit.tables.export import ExportSettings, export
+    from bsdfkit.tables.formats.tracepro import TraceProOptions
+
+    tp = TraceProOptions()
+    changes = {k: v for k, v in (("name", args.name), ("wavelength_um", args.wavelength_um),
+                                 ("temperature_K", args.temperature_k), ("zero_azimuth_deg", args.zero_azimuth))
+               if v is not None}
+    settings = ExportSettings(
+        theta_i_deg=_incidences(args.incidences) if args.incidences else None,
+        zemax_symmetry=args.symmetry,
+        symmetry_tolerance=args.symmetry_tolerance,
+        tracepro=replace(tp, **changes),
+        tracepro_scatter=args.tracepro_scatter,
+    )
+    result = export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings)
+    if args.json:
+        emit_json(result.to_dict())
+        return 0
+    print(f"wrote {result.format} table {result.path}")
+    if result.plane_symmetry_deviation is not None:
+        print(f"plane-symmetry deviation of the source: {result.plane_symmetry_deviation:.3g} of the block maximum "
+              "(mirror average written)")
+    print(f"{'side':<13}{'theta_i':>8}{'TIS source':>13}{'TIS table':>12}{'diff %':>9}")
+    for side in result.sides:
+        for t, src, tab in zip(result.incidences_deg, result.tis_source[side], result.tis_table[side]):
+            diff = 100.0 * (tab / src - 1.0) if src else 0.0
+            print(f"{side:<13}{t:>8g}{src:>13.6g}{tab:>12.6g}{diff:>+9.3f}")
+    return 0

@@ -1,0 +1,38 @@
+"""``bsdfkit info SCAN [--json]``: what a scan (netCDF or raw folder) contains."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from bsdfkit.cli._common import emit_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="summarise a scan: incidences, sides, positions per arc, wavelengths, configurations")
+    p.add_argument("scan", help="netCDF written by bsdfkit, or a raw measurement folder")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from bsdfkit.io import netcdf
+    from bsdfkit.measurement.describe import describe
+    from bsdfkit.measurement.raw_scan import read_scan
+
+    path = Path(args.scan)
+    ds = read_scan(path) if path.is_dir() else netcdf.load(path, quantity=("bsdf", "raw_counts"))
+    info = describe(ds)
+    info["file"] = str(path)
+    if args.json:
+        emit_json(info)
+        return 0
+    print(f"{path}: {info['quantity']} of '{info['sample']}'{' (SYNTHETIC)' if info['synthetic'] else ''}")
+    print(f"  records: {info['records']}; incidences (deg): {', '.join(f'{t:g}' for t in info['incidences_deg'])}")
+    w = info["wavelength_nm"]
+    print(f"  wavelength: {w['min']:g}-{w['max']:g} nm, step {w['step']:g} nm ({w['count']} values)")
+    for c in info["configurations"]:
+        print(f"  configuration {c['name']}: {c['description']} (band {c['incident_band_nm'][0]:g}-{c['incident_band_nm'][1]:g} nm)")
+    for th, sides in info["positions"].items():
+        parts = [f"{side}: " + ", ".join(f"{n} {arc}" for arc, n in arcs.items()) for side, arcs in sides.items()]
+        print(f"  θi = {th}°: " + "; ".join(parts))
+    return 0

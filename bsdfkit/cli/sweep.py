@@ -1,0 +1,59 @@
+"""``bsdfkit sweep SCENE.toml --param KEYS=VALUES … -o OUT.nc``: parameter studies of a scene."""
+from __future__ import annotations
+
+import argparse
+
+from bsdfkit.cli._common import Progress, emit_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sweep", help="trace a scene over a grid of parameters (netCDF + PNG)",
+                       description="Sweep scene keys, e.g. --param wall.reflectance,base.reflectance=0.80:0.98:5 "
+                                   "or --param cavity.height_mm=10,43,80; without --param the scene's [sweep] "
+                                   "table is used (fitting/scenes/study_*.toml).")
+    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("--param", action="append", default=None, metavar="KEYS=VALUES",
+                   help="swept keys and values: start:stop:count or a comma list (repeatable)")
+    p.add_argument("-o", "--output", required=True, help="output netCDF file (PNG plots are written beside it)")
+    p.add_argument("--rays", type=int, default=None, help="rays per point (default: [sweep] rays or 200000)")
+    p.add_argument("--seed", type=int, default=None, help="seed (default: [sweep] seed or 0)")
+    p.add_argument("--chunk", type=int, default=None, help="rays per compiled call")
+    p.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from bsdfkit.core.errors import InputError
+    from bsdfkit.trace import load_scene
+    from bsdfkit.trace.sweep import run_sweep
+
+    scene = load_scene(args.scene)
+    defaults = scene.sweep
+    params = args.param or (list(defaults.params) if defaults else [])
+    if not params:
+        raise InputError("nothing to sweep", file=args.scene, field="sweep.params",
+                         expected="--param KEYS=VALUES or a [sweep] params list in the scene")
+    rays = args.rays or (defaults.rays if defaults and defaults.rays else 200_000)
+    seed = args.seed if args.seed is not None else (defaults.seed if defaults and defaults.seed is not None else 0)
+    bar = Progress(1, label="sweep")
+
+    def progress(done: int, total: int) -> None:
+        bar.total = float(total)
+        bar.update(done)
+
+    try:
+        ds = run_sweep(scene, params, args.output, rays=rays, seed=seed, chunk=args.chunk, force=args.force,
+                       plots=not args.no_plots, progress=progress)
+    finally:
+        bar.close()
+    summary = {"output": args.output, "dims": {d: int(n) for d, n in ds["LER"].sizes.items()},
+               "LER": ds["LER"].values, "YBR": ds["YBR"].values, "non_uniformity": ds["non_uniformity"].values,
+               "max_ledger_error": float(ds["ledger_error"].max()), "rays_per_point": rays, "seed": seed}
+    if args.json:
+        emit_json(summary)
+    else:
+        print(ds[["LER", "std_err_LER", "YBR", "non_uniformity", "ledger_error"]].to_dataframe().to_string())
+        print(f"wrote {args.output}")
+    return 0

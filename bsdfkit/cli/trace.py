@@ -1,0 +1,61 @@
+"""``bsdfkit trace SCENE.toml``: Monte Carlo trace of a remote-phosphor module scene."""
+from __future__ import annotations
+
+import argparse
+
+from bsdfkit.cli._common import Progress, emit_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("trace", help="trace a scene (LER, YBR, absorption, non-uniformity, energy ledger)",
+                       description="Trace SCENE.toml with the JAX Monte Carlo tracer (docs/tracer.md).")
+    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("--rays", type=int, default=1_000_000, help="number of rays (default 1e6)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--chunk", type=int, default=None, help="rays per compiled call (default: the scene's)")
+    p.add_argument("--lanes", type=int, default=None, help="rays in flight at once (default: the scene's)")
+    p.add_argument("--full-kernel", action="store_true", help="compile every optional branch (benchmarking)")
+    p.add_argument("-o", "--output", default=None, help="also write the result as netCDF (map, histogram, budget)")
+    p.add_argument("--force", action="store_true", help="overwrite --output if it exists")
+    p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from bsdfkit.io.atomic import check_writable, write_with
+    from bsdfkit.trace import load_scene, trace
+
+    scene = load_scene(args.scene)
+    if args.output:
+        check_writable(args.output, args.force)
+    bar = Progress(args.rays, label="trace")
+    try:
+        result = trace(scene, args.rays, args.seed, chunk=args.chunk, lanes=args.lanes,
+                       full_kernel=args.full_kernel, progress=bar.update)
+    finally:
+        bar.close()
+    if args.output:
+        ds = result.to_dataset()
+        write_with(args.output, lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), args.force)
+    report = result.to_dict()
+    if args.json:
+        emit_json(report)
+        return 0
+    e, a, se = result.extracted, result.absorbed, result.std_err
+    lines = [
+        f"scene        {args.scene}  ({result.rays} rays, seed {result.seed})",
+        f"LER          {result.LER:.5f} ± {se['LER']:.5f}",
+        f"YBR          {result.YBR:.4f} ± {se['YBR']:.4f}" if e["blue"] > 0 else "YBR          n/a (no blue extracted)",
+        f"extracted W  blue {e['blue']:.6g}  yellow {e['yellow']:.6g}  total {e['total']:.6g}",
+        "absorbed W   " + "  ".join(f"{k} {v:.6g}" for k, v in a.items()),
+        f"ledger       roulette {result.roulette:.3g} W, threshold {result.discarded:.3g} W, truncated "
+        f"{result.truncated:.3g} W; relative error {result.ledger_error:.2e}",
+    ]
+    if result.non_uniformity is not None:
+        lines.append(f"non-uniform. {result.non_uniformity:.4f}")
+    if result.clamped_interactions:
+        lines.append(f"clamped      {result.clamped_interactions} plate incidences outside the measured grid")
+    lines.append(f"speed        {result.rays_per_s:.3g} rays/s, {result.interactions_per_s:.3g} interactions/s "
+                 f"(compile {result.compile_s:.2f} s, total {result.elapsed_s:.2f} s)")
+    print("\n".join(lines))
+    return 0

@@ -1,0 +1,1025 @@
+"""Batched nonlinear least squares in JAX, and the BSDF-model fitting entry point.
+
+:func:`least_squares` fits one model to a batch of data sets at once. The default solver (``FitOptions.solver
+= "lm"``, :mod:`bsdfkit.fit.lm`) evaluates residuals and Jacobians of the whole batch in one compiled
+``jax.vmap``/``jax.jacfwd`` kernel and runs the Levenberg–Marquardt iteration on the host; ``solver =
+"jaxopt"`` runs :class:`jaxopt.LevenbergMarquardt` under ``jax.jit(jax.vmap(...))``. Both give the same
+solutions (tests/test_lm.py); the measured costs are in docs/fitting.md §8. :func:`fit_bsdf` builds on it
+for goniometer profiles.
+
+How a fit is set up (docs/fitting.md has the derivations):
+
+* **Bounds** by parameter transforms θ = T(u) on an unconstrained u: lower and upper bound →
+  θ = lo + (hi − lo)·sigmoid(u) (logit); lower only → θ = lo + eᵘ (log); upper only → θ = hi − eᵘ;
+  none → θ = u. The solver works in u; the results are reported in θ.
+* **Residual kinds** (docs/metrology.md §5.2): ``absolute`` r = f − y; ``relative`` r = (f − y)/|y|;
+  ``log`` r = ln(f + ε) − ln(y + ε), for BSDFs spanning decades. With standard uncertainties u(y) each
+  residual is divided by its propagated uncertainty: u(y), u(y)/|y| and u(y)/(y + ε) respectively.
+* **Robust losses** as in :func:`scipy.optimize.least_squares` (cost ½Σ c²ρ(r²/c²), c = ``f_scale``):
+  soft_l1 ρ(z) = 2(√(1+z) − 1), huber ρ(z) = z (z ≤ 1) else 2√z − 1, cauchy ρ(z) = ln(1+z). They are
+  realised by rescaling each residual, r̃ = r·√(ρ(z)/z), so that ½Σr̃² is exactly that cost and the
+  Levenberg–Marquardt machinery applies unchanged.
+* **Uncertainties**: covariance C = s²(JᵀJ)⁻¹ with J the Jacobian of the (weighted, robust-rescaled)
+  residuals with respect to the *natural* parameters θ at the solution, and s² = Σr̃²/(n − p) (set
+  s² = 1 with ``absolute_sigma=True`` when the supplied uncertainties are trusted in absolute terms).
+  By the chain rule J_u = J_θ·diag(dθ/du), so this equals diag(dθ/du)·s²(J_uᵀJ_u)⁻¹·diag(dθ/du), the
+  covariance of u mapped through the transform's Jacobian; J_θ is used directly because it stays
+  regular when a parameter approaches a bound (dθ/du → 0).
+* **R² and RMS** are computed unweighted in the residual space: on y for ``absolute``, on
+  (f − y)/|y| for ``relative`` (R² there uses the absolute form) and on ln(y + ε) for ``log``.
+
+Degenerate problems (fewer unmasked points than parameters + 1, all-zero data, a singular JᵀJ at the
+solution) raise :class:`bsdfkit.core.errors.FitError`; a fit that stops at ``maxiter`` is returned with
+``converged = False``. All work runs in float64 inside :func:`bsdfkit.core.jaxconfig.x64`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any, Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+
+from bsdfkit.core.errors import FitError, InputError, ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.fit import lm
+from bsdfkit.models import functions as models
+
+__all__ = [
+    "Parameter",
+    "FitOptions",
+    "least_squares",
+    "BSDF_MODELS",
+    "BsdfFitOptions",
+    "fit_bsdf",
+    "bsdf_model_values",
+]
+
+ResidualKind = Literal["absolute", "relative", "log"]
+LossKind = Literal["linear", "soft_l1", "huber", "cauchy"]
+
+# Clip of the unconstrained variables: keeps eᵘ and sigmoid(u) away from overflow/underflow so that a
+# wild trial step yields a rejected step instead of inf/NaN (which would poison the solver state).
+_U_CLIP_EXP = 60.0
+_U_CLIP_SIGMOID = 40.0
+# Stand-in for a non-finite residual at a trial point: large, so the step is rejected, and finite.
+_BAD_RESIDUAL = 1e100
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A fitted parameter: name, bounds (inclusive limits never reached; ±inf for none) and unit."""
+
+    name: str
+    lower: float = -math.inf
+    upper: float = math.inf
+    unit: str = ""
+
+    def __post_init__(self) -> None:
+        if not (self.lower < self.upper):
+            raise ValidationError(
+                "parameter bounds are empty", field=self.name, expected="lower < upper",
+                got=(self.lower, self.upper),
+            )
+
+    @property
+    def transform(self) -> str:
+        """'logit', 'log', 'neglog' or 'identity' (see the module docstring)."""
+        lo, hi = math.isfinite(self.lower), math.isfinite(self.upper)
+        if lo and hi:
+            return "logit"
+        if lo:
+            return "log"
+        if hi:
+            return "neglog"
+        return "identity"
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Configuration of :func:`least_squares`.
+
+    Attributes
+    ----------
+    residual
+        'absolute', 'relative' or 'log' (see the module docstring).
+    loss
+        'linear' (plain least squares), 'soft_l1', 'huber' or 'cauchy' (scipy definitions).
+    f_scale
+        Soft margin c of the robust losses, in residual units (after weighting by uncertainties).
+    log_epsilon
+        ε of the log residual, in data units (e.g. the noise-equivalent BSDF).
+    absolute_sigma
+        If true the covariance is (JᵀJ)⁻¹ (uncertainties trusted as absolute); otherwise s²(JᵀJ)⁻¹.
+    maxiter
+        Maximum Levenberg–Marquardt iterations (steps tried); reaching it without meeting a stopping rule
+        marks the fit ``converged = False``.
+    xtol, gtol
+        Madsen–Nielsen stopping rule: stop when ‖Δu‖ ≤ xtol·(‖u‖ + xtol) or ‖∇‖∞ ≤ gtol, where the
+        residuals are divided by their norm at the start point, so gtol is relative to the initial cost.
+    max_condition
+        JᵀJ (column-equilibrated) with a larger condition number is treated as singular → FitError.
+    solver
+        'lm' (default): :func:`bsdfkit.fit.lm.levenberg_marquardt`, one compiled Jacobian kernel and a
+        host-driven iteration over the fits still running — fast to compile (docs/fitting.md §8).
+        'jaxopt': :class:`jaxopt.LevenbergMarquardt` under ``jax.jit(jax.vmap(...))``, the whole iteration
+        compiled. Both use the same residuals, transforms, tolerances and result semantics.
+    """
+
+    residual: ResidualKind = "absolute"
+    loss: LossKind = "linear"
+    f_scale: float = 1.0
+    log_epsilon: float = 0.0
+    absolute_sigma: bool = False
+    maxiter: int = 200
+    xtol: float = 1e-10
+    gtol: float = 1e-10
+    max_condition: float = 1e12
+    solver: Literal["lm", "jaxopt"] = "lm"
+
+    def __post_init__(self) -> None:
+        if self.residual not in ("absolute", "relative", "log"):
+            raise ValidationError("unknown residual kind", field="residual",
+                                  expected="absolute, relative or log", got=self.residual)
+        if self.loss not in ("linear", "soft_l1", "huber", "cauchy"):
+            raise ValidationError("unknown loss", field="loss",
+                                  expected="linear, soft_l1, huber or cauchy", got=self.loss)
+        if not (self.f_scale > 0 and math.isfinite(self.f_scale)):
+            raise ValidationError("f_scale must be positive", field="f_scale", got=self.f_scale)
+        if not (self.log_epsilon >= 0 and math.isfinite(self.log_epsilon)):
+            raise ValidationError("log_epsilon must be ≥ 0", field="log_epsilon", got=self.log_epsilon)
+        if not (isinstance(self.maxiter, int) and self.maxiter >= 1):
+            raise ValidationError("maxiter must be a positive integer", field="maxiter", got=self.maxiter)
+        for name in ("xtol", "gtol"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value >= 0):
+                raise ValidationError(f"{name} must be a finite number ≥ 0", field=name, got=value)
+        if self.solver not in ("lm", "jaxopt"):
+            raise ValidationError("unknown solver", field="solver", expected="lm or jaxopt", got=self.solver)
+
+
+# ------------------------------------------------------------------------------------------------
+# Parameter transforms
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Spec:
+    """Hashable, static description of a problem for the jitted solver (the bound *values* are traced
+    arguments, so fits that differ only in bounds share one compilation)."""
+
+    transforms: tuple[str, ...]
+    options: FitOptions
+
+
+def _to_natural(u: jnp.ndarray, spec: _Spec, bounds: jnp.ndarray) -> jnp.ndarray:
+    """θ = T(u); ``bounds`` is the (p, 2) array of (lower, upper)."""
+    out = []
+    for k, kind in enumerate(spec.transforms):
+        lo, hi, uk = bounds[k, 0], bounds[k, 1], u[k]
+        if kind == "logit":
+            out.append(lo + (hi - lo) * jax.nn.sigmoid(jnp.clip(uk, -_U_CLIP_SIGMOID, _U_CLIP_SIGMOID)))
+        elif kind == "log":
+            out.append(lo + jnp.exp(jnp.clip(uk, -_U_CLIP_EXP, _U_CLIP_EXP)))
+        elif kind == "neglog":
+            out.append(hi - jnp.exp(jnp.clip(uk, -_U_CLIP_EXP, _U_CLIP_EXP)))
+        else:
+            out.append(uk)
+    return jnp.stack(out)
+
+
+def _to_unconstrained(theta: np.ndarray, parameters: Sequence[Parameter]) -> np.ndarray:
+    """Inverse transform (NumPy) of initial values, which must lie strictly inside their bounds."""
+    u = np.empty_like(theta, dtype=float)
+    for k, p in enumerate(parameters):
+        t = theta[..., k]
+        if not np.all(np.isfinite(t)):
+            raise ValidationError("initial value is not finite", field=p.name, got=float(t[~np.isfinite(t)][0]))
+        inside = (t > p.lower) & (t < p.upper)
+        if not np.all(inside):
+            bad = float(t[~inside].ravel()[0])
+            raise ValidationError("initial value must lie strictly inside the bounds", field=p.name,
+                                  expected=f"{p.lower} < value < {p.upper}", got=bad)
+        kind = p.transform
+        if kind == "logit":
+            q = (t - p.lower) / (p.upper - p.lower)
+            u[..., k] = np.log(q) - np.log1p(-q)
+        elif kind == "log":
+            u[..., k] = np.log(t - p.lower)
+        elif kind == "neglog":
+            u[..., k] = np.log(p.upper - t)
+        else:
+            u[..., k] = t
+    return u
+
+
+# ------------------------------------------------------------------------------------------------
+# Residuals and robust loss
+# ------------------------------------------------------------------------------------------------
+def _model_space(f: jnp.ndarray, options: FitOptions) -> jnp.ndarray:
+    """Map model values to the residual space (ln(f + ε) for log residuals)."""
+    if options.residual == "log":
+        # The floor keeps ln finite (and its gradient zero) if a trial model value goes non-positive.
+        return jnp.log(jnp.maximum(f + options.log_epsilon, 1e-300))
+    return f
+
+
+def _robust_scale(r: jnp.ndarray, options: FitOptions) -> jnp.ndarray:
+    """r̃ = r·√(ρ(z)/z), z = (r/c)², so ½Σr̃² = ½Σc²ρ(z) (scipy's robust cost)."""
+    if options.loss == "linear":
+        return r
+    z = (r / options.f_scale) ** 2
+    if options.loss == "soft_l1":
+        phi = 2.0 / (1.0 + jnp.sqrt(1.0 + z))
+    elif options.loss == "huber":
+        big = z > 1.0
+        z_safe = jnp.where(big, z, 1.0)
+        phi = jnp.where(big, (2.0 * jnp.sqrt(z_safe) - 1.0) / z_safe, 1.0)
+    else:  # cauchy
+        small = z < 1e-8
+        z_safe = jnp.where(small, 1.0, z)
+        phi = jnp.where(small, 1.0 - 0.5 * z, jnp.log1p(z_safe) / z_safe)
+    return r * jnp.sqrt(phi)
+
+
+def _residuals_natural(theta, x, y_t, w, m, model, options):
+    """Weighted, robust-rescaled residuals at natural parameters θ; masked points give exactly 0."""
+    f = model(theta, x)
+    r = (_model_space(f, options) - y_t) * w
+    r = jnp.where(m, r, 0.0)
+    r = _robust_scale(r, options)
+    return jnp.where(jnp.isfinite(r), r, _BAD_RESIDUAL)
+
+
+def _jaxopt():
+    # jaxopt announces on import that it is no longer maintained (DeprecationWarning); bsdfkit pins and
+    # tests the version it uses, so that notice is noise for users of bsdfkit.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import jaxopt
+    return jaxopt
+
+
+def _solve_one(u0, x, y_t, w, m, bounds, *, model, spec: _Spec):
+    jaxopt = _jaxopt()
+
+    options = spec.options
+
+    def natural(theta):
+        return _residuals_natural(theta, x, y_t, w, m, model, options)
+
+    r0 = natural(_to_natural(u0, spec, bounds))
+    # Scale residuals to unit norm at the start so gtol is relative. A start that is already exact
+    # (‖r0‖ = 0, or below 1e-100) keeps scale 1: a huge scale would overflow JᵀJ.
+    norm0 = jnp.sqrt(jnp.sum(r0**2))
+    scale = jnp.where(norm0 > 1e-100, 1.0 / jnp.where(norm0 > 1e-100, norm0, 1.0), 1.0)
+
+    def scaled(u):
+        return natural(_to_natural(u, spec, bounds)) * scale
+
+    solver = jaxopt.LevenbergMarquardt(
+        residual_fun=scaled,
+        maxiter=options.maxiter,
+        stop_criterion="madsen-nielsen",
+        xtol=options.xtol,
+        gtol=options.gtol,
+        # Cholesky of JᵀJ + μI: twice as fast as jaxopt's QR of [J; √μ I] on large batches. On an
+        # exactly singular problem it can return NaN; that fit is then reported as a FitError below.
+        solver="cholesky",
+        materialize_jac=True,
+        implicit_diff=False,
+        jit=True,
+    )
+    u, state = solver.run(u0)
+    theta = _to_natural(u, spec, bounds)
+    r = natural(theta)
+    jac = jax.jacfwd(natural)(theta)
+    f = model(theta, x)
+    plain = jnp.where(m, _model_space(f, options) - y_t, 0.0)
+    return {
+        "theta": theta,
+        "r0_finite": jnp.all(jnp.isfinite(r0)) & jnp.all(jnp.abs(r0) < _BAD_RESIDUAL),
+        "sum_sq": jnp.sum(r**2),
+        "jtj": jac.T @ jac,
+        "plain": plain,
+        "iterations": state.iter_num,
+    }
+
+
+def _solve_batch_impl(u0, x, y_t, w, m, bounds, *, model, spec):
+    one = partial(_solve_one, model=model, spec=spec)
+    return jax.vmap(one, in_axes=(0, 0, 0, 0, 0, None))(u0, x, y_t, w, m, bounds)
+
+
+# One compiled solver per (model, spec, shape). Small problems are compiled with XLA's backend
+# optimisation off: that halves the compile time, which dominates their cost, while large batches
+# (where run time dominates) get the fully optimised build. Per-function compiler options: no global flag.
+_SMALL_PROBLEM = 1 << 16  # padded batch × points
+_solve_batch = jax.jit(_solve_batch_impl, static_argnames=("model", "spec"))
+_solve_batch_small = jax.jit(_solve_batch_impl, static_argnames=("model", "spec"),
+                             compiler_options={"xla_backend_optimization_level": 0})
+
+
+# ------------------------------------------------------------------------------------------------
+# Public entry point
+# ------------------------------------------------------------------------------------------------
+def _bucket(k: int) -> int:
+    """Padded size: the next power of two up to 64, then the next multiple of 64."""
+    k = max(int(k), 1)
+    return 1 << (k - 1).bit_length() if k <= 64 else -(-k // 64) * 64
+
+
+def _as_batch(name: str, a: Any, shape: tuple[int, int]) -> np.ndarray:
+    arr = np.asarray(a, dtype=float)
+    if arr.ndim > 2 and arr.shape[:2] == shape:
+        return arr  # per-point sub-arrays (e.g. detector-aperture nodes) ride along unchanged
+    try:
+        return np.broadcast_to(arr, shape)
+    except ValueError:
+        raise InputError("array does not match the data shape", field=name,
+                         expected=f"broadcastable to {shape}", got=np.shape(a)) from None
+
+
+def _natural_and_slope(u: np.ndarray, parameters: Sequence[Parameter]) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy twin of :func:`_to_natural` for the ``solver='lm'`` path: θ = T(u) and dθ/du (elementwise;
+    zero where the clip of u is active, as for the JAX transform), for u of shape (..., p)."""
+    theta = np.empty_like(u)
+    slope = np.empty_like(u)
+    for k, p in enumerate(parameters):
+        uk = u[..., k]
+        kind = p.transform
+        if kind == "logit":
+            inside = np.abs(uk) < _U_CLIP_SIGMOID
+            sig = 1.0 / (1.0 + np.exp(-np.clip(uk, -_U_CLIP_SIGMOID, _U_CLIP_SIGMOID)))
+            theta[..., k] = p.lower + (p.upper - p.lower) * sig
+            slope[..., k] = np.where(inside, (p.upper - p.lower) * sig * (1.0 - sig), 0.0)
+        elif kind in ("log", "neglog"):
+            inside = np.abs(uk) < _U_CLIP_EXP
+            e = np.exp(np.clip(uk, -_U_CLIP_EXP, _U_CLIP_EXP))
+            theta[..., k] = p.lower + e if kind == "log" else p.upper - e
+            slope[..., k] = np.where(inside, e if kind == "log" else -e, 0.0)
+        else:
+            theta[..., k] = uk
+            slope[..., k] = 1.0
+    return theta, slope
+
+
+def _lm_kernel_impl(theta, slope, x, y_t, w, m, *, model, options: FitOptions):
+    """Linearisation kernel of the ``solver='lm'`` path, for a chunk of fits at natural parameters θ with
+    transform slopes dθ/du: ½Σr̃², J_uᵀr̃, J_uᵀJ_u, J_θᵀJ_θ and the plain residuals, where J_θ = ∂r̃/∂θ by
+    forward mode and J_u = J_θ·diag(dθ/du) (chain rule). The residuals are those of
+    :func:`_residuals_natural`. The transform and the row gather stay on the host, so the kernel depends
+    only on the model, the residual settings, the chunk size and the padded length."""
+
+    def one(theta, slope, x, y_t, w, m):
+        def residuals(t):
+            plain = jnp.where(m, _model_space(model(t, x), options) - y_t, 0.0)
+            r = _robust_scale(plain * w, options)
+            return jnp.where(jnp.isfinite(r), r, _BAD_RESIDUAL), plain
+
+        cost, g_theta, jtj_theta, plain = lm.jacobian_products(residuals, theta)
+        return cost, slope * g_theta, slope[:, None] * jtj_theta * slope[None, :], jtj_theta, plain
+
+    return jax.vmap(one)(theta, slope, x, y_t, w, m)
+
+
+# One compilation per (model, residual settings, chunk, padded length); tolerances, maxiter, bounds and the
+# batch size are not part of the kernel. XLA options: bsdfkit.fit.lm.COMPILER_OPTIONS; kernels of at most
+# lm.SMALL_KERNEL_POINTS points per call are built without LLVM optimisation (lm.SMALL_KERNEL_OPTIONS).
+_lm_kernel = jax.jit(_lm_kernel_impl, static_argnames=("model", "options"), compiler_options=lm.COMPILER_OPTIONS)
+_lm_kernel_small = jax.jit(_lm_kernel_impl, static_argnames=("model", "options"),
+                           compiler_options=lm.SMALL_KERNEL_OPTIONS)
+_LM_CHUNK = 128  # fits per kernel call (bsdfkit.fit.lm evaluates only the fits still running, in such chunks)
+
+
+def _solve_lm(u0: np.ndarray, x: Any, y_t: np.ndarray, w: np.ndarray, m: np.ndarray,
+              parameters: Sequence[Parameter], *, model, options: FitOptions) -> dict[str, np.ndarray]:
+    """The ``solver='lm'`` path of :func:`least_squares`: inputs have the fits on axis 0 and the points
+    padded to a bucket; the result dict has the layout of the jaxopt path, plus ``converged``."""
+    n_fit, n_par = u0.shape
+    if n_fit == 0:  # an empty batch gives an empty result, as on the jaxopt path
+        return {"theta": np.zeros((0, n_par)), "r0_finite": np.zeros(0, bool), "sum_sq": np.zeros(0),
+                "jtj": np.zeros((0, n_par, n_par)), "plain": np.zeros((0, y_t.shape[1])),
+                "iterations": np.zeros(0, int), "converged": np.zeros(0, bool)}
+    kernel_options = dataclasses.replace(FitOptions(), residual=options.residual, loss=options.loss,
+                                         f_scale=options.f_scale, log_epsilon=options.log_epsilon)
+    chunk = min(_bucket(u0.shape[0]), _LM_CHUNK)
+    kernel = _lm_kernel_small if chunk * y_t.shape[1] <= lm.SMALL_KERNEL_POINTS else _lm_kernel
+
+    def linearize(u: np.ndarray, rows: np.ndarray) -> lm.Linearization:
+        theta, slope = _natural_and_slope(u, parameters)
+        contiguous = np.array_equal(rows, np.arange(rows[0], rows[0] + rows.size))
+        pick = slice(rows[0], rows[0] + rows.size) if contiguous else rows
+        data = jax.tree_util.tree_map(lambda a: a[pick], (x, y_t, w, m))
+        # Device arrays are returned unread: the kernel runs asynchronously while lm prepares the next chunk.
+        cost, grad, jtj, jtj_theta, plain = kernel(theta, slope, *data, model=model, options=kernel_options)
+        return lm.Linearization(cost, grad, jtj, (theta, jtj_theta, plain))
+
+    res = lm.levenberg_marquardt(linearize, u0, xtol=options.xtol, gtol=options.gtol, maxiter=options.maxiter,
+                                 chunk=chunk)
+    theta, jtj_theta, plain = res.extra
+    return {
+        "theta": theta,
+        # A residual replaced by the stand-in for a non-finite value makes Σr̃² ≥ (1e100)².
+        "r0_finite": np.isfinite(res.initial_cost) & (2.0 * res.initial_cost < _BAD_RESIDUAL**2),
+        "sum_sq": 2.0 * res.cost,
+        "jtj": jtj_theta,
+        "plain": plain,
+        "iterations": res.iterations,
+        "converged": res.converged,
+    }
+
+
+def least_squares(
+    model: Callable[[jnp.ndarray, Any], jnp.ndarray],
+    x: Any,
+    y: np.ndarray,
+    p0: np.ndarray,
+    parameters: Sequence[Parameter],
+    *,
+    sigma: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    options: FitOptions | None = None,
+    batch_dim: str = "fit",
+    batch_labels: Sequence[str] | None = None,
+    model_name: str | None = None,
+) -> xr.Dataset:
+    """Fit ``model`` to one data set or a batch of them (Levenberg–Marquardt, float64).
+
+    The solver is chosen by ``options.solver``: 'lm' (:mod:`bsdfkit.fit.lm`, the default) or 'jaxopt'; both
+    solve the same problem with the same stopping rule and return the same result layout.
+
+    Parameters
+    ----------
+    model
+        Pure JAX function ``model(theta, x) -> f`` for *one* data set: θ is the 1-D array of natural
+        parameters (ordered as ``parameters``), ``x`` a pytree of arrays of shape (n,). It must be
+        hashable (a module-level function or a ``functools.partial`` kept alive by the caller) because it
+        is a static argument of the compiled solver.
+    x
+        Independent variable(s): a pytree whose leaves broadcast to the shape of ``y``.
+    y
+        Data, shape (n,) for one fit or (batch, n). Pad unequal lengths and mask the padding.
+    p0
+        Initial natural parameters, shape (p,) or (batch, p), strictly inside the bounds.
+    parameters
+        One :class:`Parameter` per model parameter (names, bounds, units).
+    sigma
+        Standard uncertainties of ``y`` (same units), broadcast to ``y``; None = unweighted.
+    mask
+        Boolean, True = use the point; broadcast to ``y``. None = use all points.
+    options
+        :class:`FitOptions`.
+    batch_dim
+        Name of the batch dimension of the result.
+    batch_labels
+        How error messages name each member of a batch (default "fit 0", "fit 1", ...; "" = no prefix).
+    model_name
+        Recorded in the result's attributes.
+
+    Returns
+    -------
+    xarray.Dataset over ``batch_dim`` (and ``parameter``/``parameter_2`` for the covariance) with, for
+    each parameter ``name``: ``name`` and ``name_std``; plus ``covariance``, ``at_bound`` (per parameter),
+    ``r2``, ``rms``, ``cost`` (½Σr̃²), ``n_points``, ``dof``, ``iterations`` and ``converged``. A 1-D ``y``
+    gives a result without the batch dimension.
+
+    Raises
+    ------
+    FitError
+        Too few unmasked points, all-zero data, model not finite at ``p0``, singular JᵀJ.
+    InputError
+        Non-finite data or uncertainty on an unmasked point, non-positive uncertainty, shape mismatch.
+    """
+    options = options or FitOptions()
+    parameters = tuple(parameters)
+    n_par = len(parameters)
+    names = [p.name for p in parameters]
+    if len(set(names)) != n_par:
+        raise ValidationError("parameter names must be unique", field="parameters", got=names)
+
+    y = np.asarray(y, dtype=float)
+    single = y.ndim == 1
+    if y.ndim not in (1, 2):
+        raise InputError("data must be 1-D (one fit) or 2-D (batch, n)", field="y", got=y.shape)
+    y2 = y[None, :] if single else y
+    shape = y2.shape
+    n_batch, n = shape
+    p0 = np.asarray(p0, dtype=float)
+    if p0.shape[-1:] != (n_par,):
+        raise InputError("initial values do not match the parameters", field="p0",
+                         expected=f"last dimension {n_par}", got=p0.shape)
+    p0 = np.broadcast_to(p0, (n_batch, n_par))
+    m = np.ones(shape, bool) if mask is None else np.broadcast_to(np.asarray(mask, bool), shape)
+    x2 = jax.tree_util.tree_map(lambda leaf: _as_batch("x", leaf, shape), x)
+
+    # Data-side transform and weights.
+    used_y = np.where(m, y2, 1.0)
+    if not np.all(np.isfinite(used_y)):
+        i, j = np.argwhere(~np.isfinite(used_y))[0]
+        raise InputError("data value is not finite", field=f"y[{i}, {j}]" if not single else f"y[{j}]",
+                         got=float(y2[i, j]))
+    if sigma is None:
+        s = np.ones(shape)
+    else:
+        s = _as_batch("sigma", sigma, shape)
+        used_s = np.where(m, s, 1.0)
+        bad = ~(np.isfinite(used_s) & (used_s > 0))
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise InputError("standard uncertainty must be finite and > 0", field=f"sigma[{i}, {j}]",
+                             got=float(s[i, j]))
+    eps = options.log_epsilon
+    if options.residual == "absolute":
+        y_t, w = y2, 1.0 / np.where(m, s, 1.0)
+        if sigma is None:
+            w = np.ones(shape)
+    elif options.residual == "relative":
+        if np.any(m & (y2 == 0)):
+            raise FitError("relative residuals need non-zero data on every unmasked point; mask the zeros")
+        # r = (f − y)/|y| with uncertainty u/|y|  ⇒  weight |y|/u (or 1/|y| unweighted).
+        y_t = y2
+        w = 1.0 / np.where(m, np.abs(y2), 1.0) if sigma is None else 1.0 / np.where(m, s, 1.0)
+    else:
+        shifted = y2 + eps
+        if np.any(m & ~(shifted > 0)):
+            raise FitError("log residuals need data + log_epsilon > 0 on every unmasked point; "
+                           "mask non-positive points or raise log_epsilon")
+        y_t = np.log(np.where(m, shifted, 1.0))
+        w = np.ones(shape) if sigma is None else np.where(m, shifted, 1.0) / np.where(m, s, 1.0)
+
+    def where(b: int) -> str:
+        if single:
+            return ""
+        if batch_labels is not None:
+            return f"{batch_labels[b]}: " if batch_labels[b] else ""
+        return f"fit {b}: "
+
+    n_used = m.sum(axis=1)
+    too_few = n_used <= n_par
+    bad = too_few | ~np.any(m & (y2 != 0), axis=1)
+    if bad.any():  # the first offending fit, as a loop over the batch would find it
+        b = int(np.argmax(bad))
+        if too_few[b]:
+            raise FitError(f"{where(b)}{int(n_used[b])} unmasked points for {n_par} parameters; "
+                           f"need at least {n_par + 1}")
+        raise FitError(f"{where(b)}all unmasked data are zero; nothing to fit")
+
+    u0 = _to_unconstrained(p0, parameters)
+    spec = _Spec(
+        transforms=tuple(p.transform for p in parameters),
+        # Only what the solver loop uses: post-processing options must not force a recompilation.
+        options=dataclasses.replace(options, absolute_sigma=False, max_condition=1e12),
+    )
+    # Pad the point and batch axes to buckets (masked points; copies of fit 0) so that problems of
+    # similar size share one compiled solver instead of compiling once per exact shape.
+    n_pad, b_pad = _bucket(n), _bucket(n_batch)
+
+    def pad(a: np.ndarray, value: float | None) -> np.ndarray:
+        a = np.concatenate([a, np.repeat(a[:1], b_pad - n_batch, axis=0)], axis=0)
+        width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
+        return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
+
+    if options.solver == "lm":
+        # Only the points are padded: bsdfkit.fit.lm gathers the fits it evaluates into fixed-size chunks.
+        def pad_points(a: np.ndarray, value: float | None) -> np.ndarray:
+            width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
+            return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
+
+        with x64():
+            out = _solve_lm(u0, jax.tree_util.tree_map(lambda leaf: pad_points(leaf, None), x2),
+                            pad_points(np.asarray(y_t, float), 0.0), pad_points(np.asarray(w, float), 0.0),
+                            pad_points(m, False), parameters, model=model, options=options)
+    else:
+        u0_pad = np.concatenate([u0, np.repeat(u0[:1], b_pad - n_batch, axis=0)], axis=0)
+        with x64():
+            solve = _solve_batch_small if b_pad * n_pad <= _SMALL_PROBLEM else _solve_batch
+            out = solve(
+                jnp.asarray(u0_pad),
+                jax.tree_util.tree_map(lambda leaf: jnp.asarray(pad(leaf, None)), x2),
+                jnp.asarray(pad(np.asarray(y_t, float), 0.0)),
+                jnp.asarray(pad(np.asarray(w, float), 0.0)),
+                jnp.asarray(pad(m, False)),
+                jnp.asarray([[p.lower, p.upper] for p in parameters], dtype=jnp.float64),
+                model=model,
+                spec=spec,
+            )
+            out = {k: np.asarray(v)[:n_batch] for k, v in out.items()}
+        # jaxopt reports no stopping reason: a fit that used all maxiter steps counts as not converged.
+        out["converged"] = out["iterations"] < options.maxiter
+    out["plain"] = out["plain"][:, :n]
+
+    theta = out["theta"]
+    jtj = out["jtj"]
+    dof = n_used - n_par
+    bad_start = ~out["r0_finite"]
+    if bad_start.any():
+        b = int(np.argmax(bad_start))
+        raise FitError(f"{where(b)}model is not finite at the initial parameters "
+                       f"{dict(zip(names, p0[b].tolist()))}")
+    diverged = ~np.isfinite(theta).all(axis=1)
+    if diverged.any():
+        b = int(np.argmax(diverged))
+        raise FitError(f"{where(b)}the solver produced non-finite parameters "
+                       "(singular normal equations during the iterations); the data do not determine "
+                       f"{', '.join(names)}")
+    # Covariance C = s²(JᵀJ)⁻¹, computed on the column-equilibrated matrix (all fits at once).
+    d = np.sqrt(np.abs(np.diagonal(jtj, axis1=1, axis2=2)))
+    unconstrained = ~np.isfinite(jtj).all(axis=(1, 2)) | ~(d > 0).all(axis=1)
+    if unconstrained.any():
+        b = int(np.argmax(unconstrained))
+        zero = [names[k] for k in range(n_par) if not (np.isfinite(d[b, k]) and d[b, k] > 0)]
+        raise FitError(f"{where(b)}singular JᵀJ: the data do not constrain "
+                       f"{', '.join(zero) or 'the parameters (non-finite Jacobian)'}")
+    outer = d[:, :, None] * d[:, None, :]
+    corr = jtj / outer
+    ev, evec = np.linalg.eigh(corr)
+    with np.errstate(divide="ignore"):
+        cond = np.where(ev[:, 0] > 0, ev[:, -1] / np.where(ev[:, 0] > 0, ev[:, 0], 1.0), np.inf)
+    singular = ~(cond <= options.max_condition)
+    if singular.any():
+        b = int(np.argmax(singular))
+        # The eigenvector of the smallest eigenvalue names the parameter combination left undetermined.
+        weak = [names[k] for k in np.argsort(-np.abs(evec[b, :, 0])) if abs(evec[b, k, 0]) > 0.3]
+        raise FitError(f"{where(b)}singular JᵀJ (condition number {cond[b]:.3g} > "
+                       f"{options.max_condition:.3g}): {', '.join(weak)} not separately determined by these "
+                       "data; fix the model (fewer parameters) or the data (masks, range)")
+    s2 = np.ones(n_batch) if options.absolute_sigma else out["sum_sq"] / dof
+    cov = s2[:, None, None] * np.linalg.inv(corr) / outer
+
+    plain = out["plain"]
+    ss_res = np.sum(plain**2, axis=1)
+    if options.residual == "relative":
+        # R² on the data themselves; the RMS is the relative one.
+        fitted = y2 + plain
+        ss_res_abs = np.sum(np.where(m, (fitted - y2) ** 2, 0.0), axis=1)
+        mean = np.sum(np.where(m, y2, 0.0), axis=1) / n_used
+        ss_tot = np.sum(np.where(m, (y2 - mean[:, None]) ** 2, 0.0), axis=1)
+        rms = np.sqrt(np.sum(np.where(m, (plain / np.where(m, np.abs(y2), 1.0)) ** 2, 0.0), axis=1) / n_used)
+        ss_for_r2 = ss_res_abs
+    else:
+        mean = np.sum(np.where(m, y_t, 0.0), axis=1) / n_used
+        ss_tot = np.sum(np.where(m, (y_t - mean[:, None]) ** 2, 0.0), axis=1)
+        rms = np.sqrt(ss_res / n_used)
+        ss_for_r2 = ss_res
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r2 = np.where(ss_tot > 0, 1.0 - ss_for_r2 / ss_tot, np.nan)
+
+    iterations = out["iterations"].astype(int)
+    converged = out["converged"] & np.all(np.isfinite(theta), axis=1) & np.isfinite(out["sum_sq"])
+
+    std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    lowers = np.array([p.lower for p in parameters])
+    uppers = np.array([p.upper for p in parameters])
+    finite_range = np.isfinite(lowers) & np.isfinite(uppers)
+    tol = np.where(finite_range, 1e-6 * np.where(finite_range, uppers - lowers, 0.0),
+                   1e-9 * np.maximum(1.0, np.abs(theta)))
+    at_bound = (np.isfinite(lowers) & (theta - lowers <= tol)) | (np.isfinite(uppers) & (uppers - theta <= tol))
+    data_vars: dict[str, Any] = {}
+    for k, p in enumerate(parameters):
+        data_vars[p.name] = ((batch_dim,), theta[:, k], {"units": p.unit, "lower": p.lower, "upper": p.upper})
+        data_vars[f"{p.name}_std"] = ((batch_dim,), std[:, k], {"units": p.unit,
+                                                                "long_name": f"standard error of {p.name}"})
+    data_vars["covariance"] = ((batch_dim, "parameter", "parameter_2"), cov)
+    data_vars["at_bound"] = ((batch_dim, "parameter"), at_bound,
+                             {"long_name": "parameter ended on (within 1e-6 of) a bound"})
+    data_vars["r2"] = ((batch_dim,), r2, {"long_name": "coefficient of determination",
+                                          "note": "NaN only if the unmasked data are constant"})
+    data_vars["rms"] = ((batch_dim,), rms, {"long_name": f"RMS of the unweighted {options.residual} residuals"})
+    data_vars["cost"] = ((batch_dim,), 0.5 * out["sum_sq"], {"long_name": "final cost ½Σr̃²"})
+    data_vars["n_points"] = ((batch_dim,), n_used.astype(int))
+    data_vars["dof"] = ((batch_dim,), dof.astype(int))
+    data_vars["iterations"] = ((batch_dim,), iterations)
+    data_vars["converged"] = ((batch_dim,), converged)
+    ds = xr.Dataset(
+        data_vars,
+        coords={"parameter": names, "parameter_2": names},
+        attrs={
+            "model": model_name or getattr(model, "__name__", repr(model)),
+            "solver": ("bsdfkit.fit.lm Levenberg–Marquardt (Marquardt scaling, Nielsen damping, madsen-nielsen "
+                       "stop), float64" if options.solver == "lm" else
+                       "jaxopt.LevenbergMarquardt (madsen-nielsen stop), float64"),
+            "residual": options.residual,
+            "loss": options.loss,
+            "f_scale": options.f_scale,
+            "log_epsilon": options.log_epsilon,
+            "absolute_sigma": int(options.absolute_sigma),
+            "maxiter": options.maxiter,
+        },
+    )
+    return ds.isel({batch_dim: 0}) if single else ds
+
+
+# ------------------------------------------------------------------------------------------------
+# BSDF model fitting
+# ------------------------------------------------------------------------------------------------
+def _lambert_model(theta, x):
+    return jnp.broadcast_to(models.lambert(theta[0]), x["theta_s"].shape)
+
+
+def _lambert_gaussian_model(theta, x):
+    return models.lambert_gaussian(x["theta_i"], x["theta_s"], x["phi_s"], theta[0], theta[1], theta[2])
+
+
+def _abg_model(theta, x):
+    return models.abg(models.delta_beta(x["theta_i"], x["theta_s"], x["phi_s"]), theta[0], theta[1], theta[2])
+
+
+def _lambert_abg_model(theta, x):
+    return models.lambert_abg(x["theta_i"], x["theta_s"], x["phi_s"], theta[0], theta[1], theta[2], theta[3])
+
+
+def _aperture_average(function: Callable, theta, x):
+    """The model as the goniometer reports it: averaged over the detector aperture.
+
+    A detector of solid angle Ω centred at θs reports Σ_n w_n f(ω_n) cos θ_n / (Ω cos θs) over aperture nodes
+    ω_n (:func:`bsdfkit.measurement.instrument.aperture_quadrature`); ``x["weight"]`` holds w_n cos θ_n / (Ω cos θs).
+    Fitting the point model to such data would bias sharp lobes (metrology.md §4.6: convolve the model rather
+    than deconvolve the data).
+    """
+    nodes = {"theta_i": x["theta_i"][..., None], "theta_s": x["theta_s_nodes"], "phi_s": x["phi_s_nodes"]}
+    return jnp.sum(function(theta, nodes) * x["weight"], axis=-1)
+
+
+@dataclass(frozen=True)
+class _BsdfModel:
+    function: Callable
+    parameters: tuple[Parameter, ...]
+
+    @property
+    def aperture_function(self) -> Callable:
+        return _APERTURE_FUNCTIONS[self.function]
+
+
+#: BSDF models known to :func:`fit_bsdf`: name → (JAX model, parameters with bounds and units).
+BSDF_MODELS: dict[str, _BsdfModel] = {
+    "lambert": _BsdfModel(_lambert_model, (Parameter("rho", 0.0, 1.0, "1"),)),
+    "lambert+gaussian": _BsdfModel(
+        _lambert_gaussian_model,
+        (Parameter("rho", 0.0, 1.0, "1"), Parameter("A", 0.0, math.inf, "1/sr"),
+         Parameter("sigma", 0.0, math.inf, "1")),
+    ),
+    "abg": _BsdfModel(
+        _abg_model,
+        (Parameter("A", 0.0, math.inf, "1/sr"), Parameter("B", 0.0, math.inf, "1"),
+         Parameter("g", 0.0, 3.0, "1")),
+    ),
+    "lambert+abg": _BsdfModel(
+        _lambert_abg_model,
+        (Parameter("rho", 0.0, 1.0, "1"), Parameter("A", 0.0, math.inf, "1/sr"),
+         Parameter("B", 0.0, math.inf, "1"), Parameter("g", 0.0, 3.0, "1")),
+    ),
+}
+
+
+#: Aperture-averaged versions of the model functions (module-level objects: hashable, compiled once).
+_APERTURE_FUNCTIONS: dict[Callable, Callable] = {
+    m.function: functools.partial(_aperture_average, m.function) for m in BSDF_MODELS.values()}
+
+
+@dataclass(frozen=True)
+class BsdfFitOptions:
+    """Masks and residual settings of :func:`fit_bsdf`.
+
+    Attributes
+    ----------
+    max_theta_s_deg
+        Points with θs above this (grazing) are masked; default 85°.
+    noise_floor_k
+        Points with bsdf < k·bsdf_std are masked (below the noise floor); default 3.
+    specular_core_deg
+        Points within this angle of the specular direction are masked (detector half-angle); default 0
+        (no mask).
+    aperture
+        Average the model over the detector aperture when the profile states the instrument geometry
+        (attributes ``detector_distance_mm`` and ``aperture_diameter_mm``); default True.
+    fit
+        :class:`FitOptions`; default log residuals (BSDFs span decades), linear loss.
+    """
+
+    max_theta_s_deg: float = 85.0
+    noise_floor_k: float = 3.0
+    specular_core_deg: float = 0.0
+    aperture: bool = True
+    fit: FitOptions = field(default_factory=lambda: FitOptions(residual="log"))
+
+
+def bsdf_model_values(model: str, params: dict[str, float], theta_i_deg, theta_s_deg, phi_s_deg) -> np.ndarray:
+    """Evaluate a named BSDF model (sr⁻¹) at angles in **degrees** (source at φi = 180°)."""
+    spec = _bsdf_model(model)
+    theta = jnp.asarray([params[p.name] for p in spec.parameters], dtype=float)
+    with x64():
+        x = {k: jnp.asarray(np.radians(np.asarray(v, dtype=float)))
+             for k, v in (("theta_i", theta_i_deg), ("theta_s", theta_s_deg), ("phi_s", phi_s_deg))}
+        shape = np.broadcast_shapes(*(np.shape(v) for v in x.values()))
+        x = {k: jnp.broadcast_to(v, shape) for k, v in x.items()}
+        return np.asarray(jax.jit(spec.function)(jnp.asarray(theta, dtype=jnp.float64), x))
+
+
+def _bsdf_model(model: str) -> _BsdfModel:
+    try:
+        return BSDF_MODELS[model]
+    except KeyError:
+        raise ValidationError("unknown BSDF model", field="model", expected=" | ".join(BSDF_MODELS),
+                              got=model) from None
+
+
+def _model_tis(model: str, theta_i_rad: np.ndarray, p: dict[str, np.ndarray]) -> np.ndarray:
+    """TIS of the fitted models, all incidences in one compiled call (θi in radians)."""
+    if model == "lambert":
+        return np.asarray(p["rho"], dtype=float)
+    functions = {
+        "lambert+gaussian": (models.tis_lambert_gaussian, ("rho", "A", "sigma")),
+        "abg": (models.tis_abg, ("A", "B", "g")),
+        "lambert+abg": (models.tis_lambert_abg, ("rho", "A", "B", "g")),
+    }
+    function, names = functions[model]
+    with x64():
+        args = [jnp.asarray(theta_i_rad, dtype=jnp.float64)] + [jnp.asarray(p[k], dtype=jnp.float64) for k in names]
+        return np.asarray(jax.jit(function)(*args))
+
+
+def _initial_bsdf_parameters(model: str, d: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Start values from the data of one incidence: d = |β − β0| and f = BSDF on the usable points."""
+    far = d > max(0.3, np.quantile(d, 0.5))
+    base = float(np.median(f[far])) if far.any() else float(np.min(f))
+    rho = float(np.clip(np.pi * base, 1e-4, 0.999))
+    peak_idx = int(np.argmin(d))
+    peak = float(np.max(f[d <= d[peak_idx] + 1e-9]))
+    excess = f - rho / np.pi
+    amp = max(peak - rho / np.pi, 1e-3 * max(peak, 1e-12))
+    # Half-width of the peak above the diffuse base → σ of a Gaussian (HWHM = 1.1774σ).
+    above = excess >= 0.5 * amp
+    hw = float(np.max(d[above])) if above.any() else 0.05
+    sigma = float(np.clip(hw / 1.1774 if hw > 0 else 0.05, 5e-3, 0.5))
+    if model == "lambert":
+        return np.array([rho])
+    if model == "lambert+gaussian":
+        return np.array([rho, amp, sigma])
+    g = 1.5
+    B = max((1.1774 * sigma) ** g, 1e-8)
+    if model == "abg":
+        pk = max(peak, 1e-12)
+        return np.array([pk * B, B, g])
+    return np.array([rho, amp * B, B, g])
+
+
+def _profile_field(profile: xr.Dataset, name: str) -> np.ndarray:
+    if name not in profile.variables:
+        raise InputError("BSDF profile lacks a required variable", field=name,
+                         expected="bsdf, bsdf_std, theta_i, phi_i, theta_s, phi_s, side on dim 'record'")
+    var = profile[name]
+    if var.dims != ("record",):
+        raise InputError("variable must be 1-D on dimension 'record'", field=name, got=var.dims)
+    return np.asarray(var.values)
+
+
+def fit_bsdf(
+    profile: xr.Dataset,
+    model: str = "lambert+gaussian",
+    *,
+    options: BsdfFitOptions | None = None,
+    incidence_deg: float | None = None,
+) -> xr.Dataset:
+    """Fit a BSDF model to a goniometer profile, one fit per incidence angle (batched with vmap).
+
+    Parameters
+    ----------
+    profile
+        xarray.Dataset on dimension ``record`` with data variables ``bsdf`` and ``bsdf_std`` (sr⁻¹) and
+        coordinates ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s`` (degrees; source at φi = 180°, so the
+        specular direction is at φs = 0) and ``side`` ('reflection' or 'transmission', one value only).
+        For transmission the angles are measured from the back normal and the lobe sits on the direct
+        (straight-through) direction, which has the same β0 = (sin θi, 0). A source at another φi is
+        handled by rotating φs by φi − 180°.
+    model
+        'lambert+gaussian' (ρ, A, σ), 'abg' (A, B, g), 'lambert+abg' (ρ, A, B, g) or 'lambert' (ρ),
+        see :mod:`bsdfkit.models.functions`.
+    options
+        :class:`BsdfFitOptions`: default masks θs > 85° and bsdf < 3·bsdf_std; log residuals weighted by
+        bsdf_std/bsdf.
+    incidence_deg
+        Fit only the records at this incidence angle (degrees).
+
+    Returns
+    -------
+    xarray.Dataset over ``theta_i`` (degrees) with each parameter and its ``_std``, ``r2``, ``rms``,
+    ``converged``, ``iterations``, ``n_points`` and ``tis``: the model's total integrated scatter over
+    the hemisphere (exact numerical integral of the lobe clipped by the unit disk).
+    """
+    options = options or BsdfFitOptions()
+    spec = _bsdf_model(model)
+    names = ("bsdf", "bsdf_std", "theta_i", "phi_i", "theta_s", "phi_s", "side")
+    fields = {n: _profile_field(profile, n) for n in names}
+    sides = np.unique(fields["side"].astype(str))
+    if sides.size != 1 or sides[0] not in ("reflection", "transmission"):
+        raise InputError("fit one side at a time", field="side", expected="a single 'reflection' or "
+                         "'transmission'", got=sides.tolist())
+    for n in names[:6]:
+        arr = fields[n].astype(float)
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            raise InputError("value is not finite", field=f"{n}[record={int(np.argmax(bad))}]",
+                             got=float(arr[bad][0]))
+        fields[n] = arr
+    if np.any(fields["bsdf_std"] <= 0):
+        k = int(np.argmax(fields["bsdf_std"] <= 0))
+        raise InputError("standard uncertainty must be > 0", field=f"bsdf_std[record={k}]",
+                         got=float(fields["bsdf_std"][k]))
+    if np.any((fields["theta_s"] < 0) | (fields["theta_s"] > 90)):
+        k = int(np.argmax((fields["theta_s"] < 0) | (fields["theta_s"] > 90)))
+        raise InputError("scatter polar angle out of range", field=f"theta_s[record={k}]",
+                         expected="0..90 degrees", got=float(fields["theta_s"][k]))
+    if np.any((fields["theta_i"] < 0) | (fields["theta_i"] >= 90)):
+        k = int(np.argmax((fields["theta_i"] < 0) | (fields["theta_i"] >= 90)))
+        raise InputError("incidence angle out of range", field=f"theta_i[record={k}]",
+                         expected="0..<90 degrees", got=float(fields["theta_i"][k]))
+
+    ti_all = np.round(fields["theta_i"], 6)
+    incidences = np.unique(ti_all)
+    if incidence_deg is not None:
+        sel = np.isclose(incidences, incidence_deg, atol=1e-6)
+        if not sel.any():
+            raise InputError("no records at the requested incidence", field="incidence",
+                             expected=f"one of {incidences.tolist()}", got=incidence_deg)
+        incidences = incidences[sel]
+
+    groups = [np.flatnonzero(ti_all == t) for t in incidences]
+    n_max = max(g.size for g in groups)
+    shape = (len(groups), n_max)
+    f = np.ones(shape)
+    s = np.ones(shape)
+    ti = np.zeros(shape)
+    ts = np.zeros(shape)
+    ps = np.zeros(shape)
+    m = np.zeros(shape, bool)
+    p0 = np.zeros((len(groups), len(spec.parameters)))
+    for b, idx in enumerate(groups):
+        k = idx.size
+        f[b, :k] = fields["bsdf"][idx]
+        s[b, :k] = fields["bsdf_std"][idx]
+        ti[b, :k] = np.radians(fields["theta_i"][idx])
+        ts[b, :k] = np.radians(fields["theta_s"][idx])
+        # Rotate so that the source is at φi = 180° (specular at φs = 0).
+        ps[b, :k] = np.radians(fields["phi_s"][idx] - (fields["phi_i"][idx] - 180.0))
+        use = (fields["theta_s"][idx] <= options.max_theta_s_deg)
+        use &= f[b, :k] >= options.noise_floor_k * s[b, :k]
+        # |β − β0| for the start values (NumPy: same formula as models.delta_beta, no JAX dispatch).
+        dbeta = np.hypot(np.sin(ts[b, :k]) * np.cos(ps[b, :k]) - np.sin(ti[b, :k]),
+                         np.sin(ts[b, :k]) * np.sin(ps[b, :k]))
+        if options.specular_core_deg > 0:
+            # Angle between the scatter and the specular direction, from the 3-D unit vectors.
+            sx, sy, sz = np.sin(ts[b, :k]) * np.cos(ps[b, :k]), np.sin(ts[b, :k]) * np.sin(ps[b, :k]), np.cos(ts[b, :k])
+            cos_dev = sx * np.sin(ti[b, :k]) + sz * np.cos(ti[b, :k])
+            use &= np.degrees(np.arccos(np.clip(cos_dev, -1, 1))) > options.specular_core_deg
+        m[b, :k] = use
+        if use.sum() <= len(spec.parameters):
+            raise FitError(f"incidence {incidences[b]:g}°: {int(use.sum())} usable points after masking "
+                           f"(θs ≤ {options.max_theta_s_deg:g}°, bsdf ≥ {options.noise_floor_k:g}·bsdf_std) "
+                           f"for {len(spec.parameters)} parameters")
+        p0[b] = _initial_bsdf_parameters(model, dbeta[use], f[b, :k][use])
+
+    x = {"theta_i": ti, "theta_s": ts, "phi_s": ps}
+    function = spec.function
+    geometry = ("detector_distance_mm", "aperture_diameter_mm")
+    with_aperture = options.aperture and all(k in profile.attrs for k in geometry)
+    if with_aperture:
+        from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
+
+        inst = Instrument(float(profile.attrs["detector_distance_mm"]), float(profile.attrs["aperture_diameter_mm"]),
+                          float(profile.attrs.get("beam_diameter_mm", 1.0)))
+        quad = aperture_quadrature(ts, ps, inst)
+        d = quad.directions
+        cos_nodes = np.clip(d[..., 2], 0.0, None)
+        x["theta_s_nodes"] = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
+        x["phi_s_nodes"] = np.arctan2(d[..., 1], d[..., 0])
+        x["weight"] = quad.weights * cos_nodes / (inst.solid_angle_sr * np.cos(ts)[..., None])
+        function = spec.aperture_function
+    ds = least_squares(function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
+                       batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
+                       model_name=model)
+    ds = ds.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
+    tis = _model_tis(model, np.radians(incidences.astype(float)),
+                     {p.name: np.atleast_1d(ds[p.name].values) for p in spec.parameters})
+    ds["tis"] = ("theta_i", tis, {"long_name": "total integrated scatter of the fitted model "
+                                                            "(hemisphere, lobe clipped by the unit disk)"})
+    ds.attrs["side"] = str(sides[0])
+    ds.attrs["max_theta_s_deg"] = options.max_theta_s_deg
+    ds.attrs["noise_floor_k"] = options.noise_floor_k
+    ds.attrs["specular_core_deg"] = options.specular_core_deg
+    ds.attrs["aperture_averaged"] = int(with_aperture)
+    common = float(profile.attrs.get("common_relative_std", 0.0))
+    if common > 0:
+        # A common scale error of the data (the reference beam) moves every amplitude-like parameter by the
+        # same fraction; shape parameters (σ, B, g) are scale-free. Add it to their standard errors.
+        for name in ("rho", "A"):
+            if name in ds and f"{name}_std" in ds:
+                ds[f"{name}_std"] = np.hypot(ds[f"{name}_std"], common * np.abs(ds[name]))
+        ds.attrs["common_relative_std"] = common
+    return ds

@@ -1,0 +1,167 @@
+"""``manifest.toml`` of a raw goniometer export: parse and validate (docs/raw-format.md).
+
+Each problem raises :class:`bsdfkit.core.errors.InputError` naming the manifest file and the dotted key.
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.measurement.instrument import Instrument
+
+FORMAT_NAME = "bsdfkit-raw-scan"
+SUPPORTED_VERSIONS = (1,)
+
+
+@dataclass(frozen=True)
+class ConfigurationEntry:
+    name: str
+    description: str
+    incident_band_nm: tuple[float, float]
+    scan_file: Path
+    reference_file: Path
+    reference_attenuation: float
+
+
+@dataclass(frozen=True)
+class Manifest:
+    path: Path
+    sample_name: str
+    synthetic: bool
+    instrument: Instrument
+    wavelength_min_nm: float
+    wavelength_max_nm: float
+    wavelength_step_nm: float
+    gain_e_per_count: float
+    full_scale_counts: int
+    responsivity_file: Path | None
+    dark_file: Path
+    configurations: tuple[ConfigurationEntry, ...]
+    raw: dict
+
+    @property
+    def folder(self) -> Path:
+        return self.path.parent
+
+
+_NUMBER = (int, float)
+
+
+def _get(table: Any, key: str, kind: type | tuple, path: Path, dotted: str, required: bool = True) -> Any:
+    if not isinstance(table, dict):
+        raise InputError("expected a table", file=path, field=dotted.rsplit(".", 1)[0], expected="a TOML table",
+                         got=type(table).__name__)
+    if key not in table:
+        if required:
+            raise InputError("manifest key missing", file=path, field=dotted, expected=_kind_name(kind))
+        return None
+    value = table[key]
+    if kind is float:
+        kind = _NUMBER
+    if isinstance(value, bool) and kind is not bool:
+        raise InputError("manifest value of the wrong type", file=path, field=dotted, expected=_kind_name(kind), got=value)
+    if not isinstance(value, kind):
+        raise InputError("manifest value of the wrong type", file=path, field=dotted, expected=_kind_name(kind), got=value)
+    return value
+
+
+def _kind_name(kind: type | tuple) -> str:
+    names = {str: "a string", bool: "true/false", int: "an integer", float: "a number", list: "an array",
+             dict: "a table", _NUMBER: "a number"}
+    return names.get(kind, str(kind))
+
+
+def _positive(value: float, path: Path, dotted: str) -> float:
+    if not value > 0:
+        raise ValidationError("must be positive", file=path, field=dotted, expected="a number > 0", got=value)
+    return float(value)
+
+
+def _file(folder: Path, name: str, path: Path, dotted: str) -> Path:
+    target = folder / name
+    if not target.is_file():
+        raise InputError("file named in the manifest is missing", file=path, field=dotted,
+                         expected=f"an existing file {target}", got=name)
+    return target
+
+
+def read_manifest(folder_or_file: str | Path) -> Manifest:
+    """Read and validate the manifest of a raw export folder (or the manifest file itself)."""
+    path = Path(folder_or_file)
+    if path.is_dir():
+        path = path / "manifest.toml"
+    if not path.is_file():
+        raise InputError("no manifest", file=path, expected="a manifest.toml in the measurement folder")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+    except UnicodeDecodeError:
+        raise FormatError("not UTF-8 text", file=path) from None
+    fmt = _get(data, "format", str, path, "format")
+    if fmt != FORMAT_NAME:
+        raise FormatError("unknown format", file=path, field="format", expected=repr(FORMAT_NAME), got=fmt)
+    version = _get(data, "format_version", int, path, "format_version")
+    if version not in SUPPORTED_VERSIONS:
+        raise FormatError("unsupported format version", file=path, field="format_version",
+                          expected=f"one of {SUPPORTED_VERSIONS}", got=version)
+    sample = _get(data, "sample", dict, path, "sample")
+    name = _get(sample, "name", str, path, "sample.name")
+    synthetic = bool(_get(sample, "synthetic", bool, path, "sample.synthetic", required=False) or False)
+    inst = _get(data, "instrument", dict, path, "instrument")
+    try:
+        instrument = Instrument(
+            detector_distance_mm=float(_get(inst, "detector_distance_mm", float, path, "instrument.detector_distance_mm")),
+            aperture_diameter_mm=float(_get(inst, "aperture_diameter_mm", float, path, "instrument.aperture_diameter_mm")),
+            beam_diameter_mm=float(_get(inst, "beam_diameter_mm", float, path, "instrument.beam_diameter_mm")),
+        )
+    except ValidationError as exc:
+        raise ValidationError(str(exc), file=path) from None
+    spec = _get(data, "spectrometer", dict, path, "spectrometer")
+    wmin = float(_get(spec, "wavelength_min_nm", float, path, "spectrometer.wavelength_min_nm"))
+    wmax = float(_get(spec, "wavelength_max_nm", float, path, "spectrometer.wavelength_max_nm"))
+    step = _positive(_get(spec, "wavelength_step_nm", float, path, "spectrometer.wavelength_step_nm"), path,
+                     "spectrometer.wavelength_step_nm")
+    if not wmax > wmin:
+        raise ValidationError("empty wavelength range", file=path, field="spectrometer.wavelength_max_nm",
+                              expected=f"> wavelength_min_nm = {wmin}", got=wmax)
+    gain = _positive(_get(spec, "gain_e_per_count", float, path, "spectrometer.gain_e_per_count"), path,
+                     "spectrometer.gain_e_per_count")
+    full_scale = _get(spec, "full_scale_counts", int, path, "spectrometer.full_scale_counts")
+    resp_name = _get(spec, "responsivity_file", str, path, "spectrometer.responsivity_file", required=False)
+    folder = path.parent
+    resp = _file(folder, resp_name, path, "spectrometer.responsivity_file") if resp_name else None
+    dark = _get(data, "dark", dict, path, "dark")
+    dark_file = _file(folder, _get(dark, "file", str, path, "dark.file"), path, "dark.file")
+    configs_raw = _get(data, "configuration", list, path, "configuration")
+    if not configs_raw:
+        raise InputError("no incident configuration", file=path, field="configuration", expected="at least one [[configuration]]")
+    configs = []
+    seen = set()
+    for k, c in enumerate(configs_raw):
+        pre = f"configuration[{k}]"
+        cname = _get(c, "name", str, path, f"{pre}.name")
+        if cname in seen:
+            raise ValidationError("duplicate configuration name", file=path, field=f"{pre}.name", got=cname)
+        seen.add(cname)
+        band = _get(c, "incident_band_nm", list, path, f"{pre}.incident_band_nm")
+        if len(band) != 2 or not all(isinstance(b, _NUMBER) and not isinstance(b, bool) for b in band) or not band[1] > band[0]:
+            raise ValidationError("bad incident band", file=path, field=f"{pre}.incident_band_nm",
+                                  expected="[low_nm, high_nm] with low < high", got=band)
+        configs.append(ConfigurationEntry(
+            name=cname,
+            description=_get(c, "description", str, path, f"{pre}.description", required=False) or "",
+            incident_band_nm=(float(band[0]), float(band[1])),
+            scan_file=_file(folder, _get(c, "scan_file", str, path, f"{pre}.scan_file"), path, f"{pre}.scan_file"),
+            reference_file=_file(folder, _get(c, "reference_file", str, path, f"{pre}.reference_file"), path,
+                                 f"{pre}.reference_file"),
+            reference_attenuation=_positive(_get(c, "reference_attenuation", float, path, f"{pre}.reference_attenuation"),
+                                            path, f"{pre}.reference_attenuation"),
+        ))
+    return Manifest(path=path, sample_name=name, synthetic=synthetic, instrument=instrument, wavelength_min_nm=wmin,
+                    wavelength_max_nm=wmax, wavelength_step_nm=step, gain_e_per_count=gain,
+                    full_scale_counts=int(full_scale), responsivity_file=resp, dark_file=dark_file,
+                    configurations=tuple(configs), raw=data)

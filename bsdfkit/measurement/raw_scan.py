@@ -1,0 +1,291 @@
+"""Read a raw goniometer export (manifest + spectra files) into an xarray Dataset, with validation.
+
+No physics happens here: counts stay counts. Calibration is :mod:`bsdfkit.measurement.calibrate`. Every malformed input
+raises a :class:`bsdfkit.core.errors.InputError` subclass whose one-line message names the file, the line or
+field, what was expected and what was found. The format is documented in docs/raw-format.md.
+"""
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.measurement.manifest import Manifest, read_manifest
+
+SCAN_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "exposure_s")
+SCAN_OPTIONAL = ("arc",)
+FRAME_COLUMNS = ("frame", "exposure_s")
+SIDES = ("reflection", "transmission")
+ARCS = ("in_plane", "perpendicular", "other")
+
+
+@dataclass(frozen=True)
+class SpectraTable:
+    """A parsed spectra file: named text/number columns and a counts matrix over its wavelength header."""
+
+    path: Path
+    columns: dict[str, list[str]]
+    wavelength: NDArray[np.float64]
+    counts: NDArray[np.float64]
+    first_data_line: int
+
+
+def _open_text(path: Path) -> str:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError("file not found", file=path) from None
+    if path.suffix == ".gz":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as exc:
+            raise FormatError(f"not a readable gzip file ({exc})", file=path) from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise FormatError("not UTF-8 text", file=path) from None
+
+
+def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
+    """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
+    text = _open_text(path)
+    rows = [r for r in csv.reader(io.StringIO(text))]
+    # Skip blank and '#' comment lines but keep 1-based line numbers for messages.
+    numbered = [(k + 1, r) for k, r in enumerate(rows) if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+    if not numbered:
+        raise InputError("empty file", file=path, expected="a header line and at least one data row")
+    header_line, header = numbered[0]
+    header = [h.strip() for h in header]
+    data = numbered[1:]
+    if not data:
+        raise InputError("no data rows", file=path, line=header_line, expected="at least one data row after the header")
+    names: list[str] = []
+    wl: list[float] = []
+    for k, h in enumerate(header):
+        try:
+            value = float(h)
+        except ValueError:
+            if wl:
+                raise FormatError("text column after the wavelength columns", file=path, line=header_line, field=h,
+                                  expected="wavelength (nm) headers only after the named columns")
+            if h not in required and h not in optional:
+                raise FormatError("unknown column", file=path, line=header_line, field=h,
+                                  expected="one of " + ", ".join(required + optional) + " or a wavelength in nm")
+            if h in names:
+                raise FormatError("column appears twice", file=path, line=header_line, field=h)
+            names.append(h)
+        else:
+            if not np.isfinite(value):
+                raise FormatError("wavelength header not finite", file=path, line=header_line, field=h)
+            wl.append(value)
+    missing = [c for c in required if c not in names]
+    if missing:
+        raise FormatError("required column missing", file=path, line=header_line, field=missing[0],
+                          expected="columns " + ", ".join(required))
+    if not wl:
+        raise FormatError("no wavelength columns", file=path, line=header_line, expected="count columns headed by wavelength in nm")
+    wavelength = np.asarray(wl)
+    steps = np.diff(wavelength)
+    if np.any(steps <= 0):
+        bad = int(np.argmax(steps <= 0)) + 1
+        raise ValidationError("wavelength grid not strictly increasing", file=path, line=header_line,
+                              field=header[len(names) + bad], expected=f"> {wavelength[bad - 1]:g} nm", got=wavelength[bad])
+    n_named = len(names)
+    width = n_named + wavelength.size
+    columns: dict[str, list[str]] = {n: [] for n in names}
+    counts = np.empty((len(data), wavelength.size))
+    for r, (line, row) in enumerate(data):
+        if len(row) != width:
+            raise FormatError("wrong number of fields", file=path, line=line, expected=f"{width} fields", got=len(row))
+        for n, cell in zip(names, row[:n_named]):
+            columns[n].append(cell.strip())
+        try:
+            counts[r] = np.asarray(row[n_named:], dtype=np.float64)
+        except ValueError:
+            for k, cell in enumerate(row[n_named:]):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise FormatError("count is not a number", file=path, line=line, field=header[n_named + k],
+                                      expected="a number", got=cell) from None
+        if not np.all(np.isfinite(counts[r])):
+            k = int(np.argmax(~np.isfinite(counts[r])))
+            raise ValidationError("count is not finite", file=path, line=line, field=header[n_named + k],
+                                  expected="a finite number", got=row[n_named + k])
+    return SpectraTable(path=path, columns=columns, wavelength=wavelength, counts=counts, first_data_line=data[0][0])
+
+
+def _floats(table: SpectraTable, name: str, lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> NDArray[np.float64]:
+    out = np.empty(len(table.columns[name]))
+    for k, cell in enumerate(table.columns[name]):
+        try:
+            value = float(cell)
+        except ValueError:
+            value = np.nan
+        ok = np.isfinite(value) and (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+        if not ok:
+            rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+            raise ValidationError("value out of range", file=table.path, line=_line_of(table, k), field=name,
+                                  expected=f"a number in {rng}", got=cell)
+        out[k] = value
+    return out
+
+
+def _line_of(table: SpectraTable, row: int) -> int:
+    # Data rows are contiguous after the header in files bsdfkit reads (comments only precede the header).
+    return table.first_data_line + row
+
+
+def _check_grid(table: SpectraTable, grid: NDArray[np.float64], manifest: Manifest) -> None:
+    if table.wavelength.size != grid.size:
+        raise ValidationError("wavelength grid does not match the manifest", file=table.path, field="wavelength header",
+                              expected=f"{grid.size} values {grid[0]:g}..{grid[-1]:g} nm step "
+                                       f"{manifest.wavelength_step_nm:g} (from {manifest.path.name})",
+                              got=f"{table.wavelength.size} values {table.wavelength[0]:g}..{table.wavelength[-1]:g} nm")
+    off = np.flatnonzero(~np.isclose(table.wavelength, grid, atol=1e-6, rtol=0))
+    if off.size:
+        k = int(off[0])
+        raise ValidationError("wavelength grid does not match the manifest", file=table.path, field="wavelength header",
+                              expected=f"{grid[k]:g} nm in wavelength column {k + 1} (grid {grid[0]:g}..{grid[-1]:g} nm "
+                                       f"step {manifest.wavelength_step_nm:g} from {manifest.path.name})",
+                              got=f"{table.wavelength[k]:g} nm")
+
+
+def _read_responsivity(path: Path, grid: NDArray[np.float64]) -> NDArray[np.float64]:
+    text = _open_text(path)
+    rows = [r for r in csv.reader(io.StringIO(text)) if r and r[0].strip() and not r[0].lstrip().startswith("#")]
+    if len(rows) < 2:
+        raise InputError("empty responsivity file", file=path, expected="header + one row per wavelength")
+    values = []
+    for k, r in enumerate(rows[1:], start=2):
+        try:
+            lam, val = float(r[0]), float(r[1])
+        except (ValueError, IndexError):
+            raise FormatError("bad responsivity row", file=path, line=k, expected="wavelength_nm,relative_responsivity", got=",".join(r)) from None
+        if not (np.isfinite(val) and val > 0):
+            raise ValidationError("responsivity must be positive", file=path, line=k, field="relative_responsivity", got=r[1])
+        values.append((lam, val))
+    arr = np.asarray(values)
+    if arr.shape[0] != grid.size or not np.allclose(arr[:, 0], grid, atol=1e-6):
+        raise ValidationError("responsivity wavelengths do not match the manifest grid", file=path, field="wavelength_nm",
+                              expected=f"{grid.size} values {grid[0]:g}..{grid[-1]:g} nm", got=f"{arr.shape[0]} rows")
+    return arr[:, 1]
+
+
+def read_scan(folder: str | Path) -> xr.Dataset:
+    """Read a raw export folder into a raw xarray Dataset (counts, darks, references; no physics).
+
+    Dims: ``record`` (one detector position and configuration), ``wavelength`` (nm), ``reference_record``,
+    ``dark_record``, ``configuration``. Record coordinates: ``config``, ``theta_i``, ``phi_i``, ``theta_s``,
+    ``phi_s`` (degrees), ``side``, ``arc``, ``exposure`` (s), ``source_line``.
+    """
+    manifest = read_manifest(folder)
+    n = int(round((manifest.wavelength_max_nm - manifest.wavelength_min_nm) / manifest.wavelength_step_nm)) + 1
+    grid = manifest.wavelength_min_nm + manifest.wavelength_step_nm * np.arange(n)
+    if abs(grid[-1] - manifest.wavelength_max_nm) > 1e-6:
+        raise ValidationError("wavelength range is not a whole number of steps", file=manifest.path,
+                              field="spectrometer.wavelength_step_nm",
+                              expected="(max − min)/step integral", got=manifest.wavelength_step_nm)
+    parts = []
+    refs = []
+    for cfg in manifest.configurations:
+        table = read_spectra_table(cfg.scan_file, SCAN_COLUMNS, SCAN_OPTIONAL)
+        _check_grid(table, grid, manifest)
+        theta_i = _floats(table, "theta_i_deg", 0.0, 90.0, hi_open=True)
+        phi_i = _floats(table, "phi_i_deg", -360.0, 360.0)
+        theta_s = _floats(table, "theta_s_deg", 0.0, 90.0)
+        phi_s = _floats(table, "phi_s_deg", -360.0, 360.0)
+        exposure = _floats(table, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
+        side = []
+        for k, s in enumerate(table.columns["side"]):
+            if s.lower() not in SIDES:
+                raise ValidationError("unknown side", file=table.path, line=_line_of(table, k), field="side",
+                                      expected="reflection or transmission", got=s)
+            side.append(s.lower())
+        arcs = table.columns.get("arc") or ["other"] * len(side)
+        for k, a in enumerate(arcs):
+            if a not in ARCS:
+                raise ValidationError("unknown arc", file=table.path, line=_line_of(table, k), field="arc",
+                                      expected=" or ".join(ARCS), got=a)
+        # Duplicate positions: identical directions (to 1e-6°, φ modulo 360, and φ irrelevant at θ = 0).
+        seen: dict[tuple, int] = {}
+        for k in range(len(side)):
+            ps = 0.0 if theta_s[k] < 1e-9 else round(phi_s[k] % 360.0, 6) % 360.0
+            key = (round(theta_i[k], 6), round(phi_i[k] % 360.0, 6) % 360.0, round(theta_s[k], 6), ps, side[k])
+            if key in seen:
+                raise ValidationError("duplicate detector position", file=table.path, line=_line_of(table, k),
+                                      field="theta_s_deg/phi_s_deg",
+                                      expected=f"each position once (same as line {_line_of(table, seen[key])})",
+                                      got=f"θi={theta_i[k]:g} θs={theta_s[k]:g} φs={phi_s[k]:g} {side[k]}")
+            seen[key] = k
+        parts.append(xr.Dataset(
+            {"counts": (("record", "wavelength"), table.counts)},
+            coords={
+                "config": ("record", np.array([cfg.name] * len(side), dtype=object)),
+                "theta_i": ("record", theta_i), "phi_i": ("record", phi_i),
+                "theta_s": ("record", theta_s), "phi_s": ("record", phi_s),
+                "side": ("record", np.array(side, dtype=object)),
+                "arc": ("record", np.array(arcs, dtype=object)),
+                "exposure": ("record", exposure),
+                "source_line": ("record", np.arange(len(side)) + table.first_data_line),
+            },
+        ))
+        ref = read_spectra_table(cfg.reference_file, FRAME_COLUMNS)
+        _check_grid(ref, grid, manifest)
+        refs.append(xr.Dataset(
+            {"reference_counts": (("reference_record", "wavelength"), ref.counts)},
+            coords={"reference_config": ("reference_record", np.array([cfg.name] * ref.counts.shape[0], dtype=object)),
+                    "reference_exposure": ("reference_record", _floats(ref, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True))},
+        ))
+    dark = read_spectra_table(manifest.dark_file, FRAME_COLUMNS)
+    _check_grid(dark, grid, manifest)
+    dark_exposure = _floats(dark, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
+    needed = set(np.concatenate([p["exposure"].values for p in parts] + [r["reference_exposure"].values for r in refs]).tolist())
+    have = {}
+    for t in dark_exposure:
+        have[round(t, 12)] = have.get(round(t, 12), 0) + 1
+    for t in sorted(needed):
+        if have.get(round(t, 12), 0) < 2:
+            raise ValidationError("not enough dark frames for an exposure time", file=manifest.dark_file, field="exposure_s",
+                                  expected=f"≥ 2 dark frames at {t:g} s (used by a scan or reference)",
+                                  got=have.get(round(t, 12), 0))
+    responsivity = (_read_responsivity(manifest.responsivity_file, grid) if manifest.responsivity_file
+                    else np.ones_like(grid))
+
+    ds = xr.concat(parts, dim="record")
+    ds = xr.merge([ds, xr.concat(refs, dim="reference_record")])
+    ds["dark_counts"] = (("dark_record", "wavelength"), dark.counts)
+    ds = ds.assign_coords(dark_exposure=("dark_record", dark_exposure), wavelength=grid,
+                          configuration=[c.name for c in manifest.configurations])
+    ds["responsivity"] = ("wavelength", responsivity)
+    ds["reference_attenuation"] = ("configuration", [c.reference_attenuation for c in manifest.configurations])
+    ds["incident_band"] = (("configuration", "band_edge"), [list(c.incident_band_nm) for c in manifest.configurations])
+    ds = ds.assign_coords(band_edge=["low", "high"])
+    ds["configuration_description"] = ("configuration", np.array([c.description for c in manifest.configurations], dtype=object))
+    for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
+        ds[name].attrs["units"] = "deg"
+    ds["wavelength"].attrs.update(units="nm", long_name="scattered (detected) wavelength")
+    ds["exposure"].attrs["units"] = "s"
+    ds["counts"].attrs.update(units="counts", long_name="raw spectrometer counts (dark not subtracted)")
+    ds["responsivity"].attrs.update(units="1", long_name="relative spectral responsivity of the detector")
+    ds.attrs.update(
+        quantity="raw_counts",
+        sample_name=manifest.sample_name,
+        synthetic=int(manifest.synthetic),
+        source=str(manifest.folder),
+        detector_distance_mm=manifest.instrument.detector_distance_mm,
+        aperture_diameter_mm=manifest.instrument.aperture_diameter_mm,
+        beam_diameter_mm=manifest.instrument.beam_diameter_mm,
+        gain_e_per_count=manifest.gain_e_per_count,
+        full_scale_counts=manifest.full_scale_counts,
+        manifest_json=json.dumps(manifest.raw, sort_keys=True),
+    )
+    return ds

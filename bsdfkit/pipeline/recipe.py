@@ -1,0 +1,616 @@
+"""Fit/run recipes: ``bsdfkit run fitting/<name>.toml -o OUT/`` — the main job.
+
+A recipe names a measurement folder and the stages to run on it. Each stage is a function of the recipe and
+the products of earlier stages; it returns its part of the run summary and the files it wants written. All
+outputs are collected first and written atomically at the end, after checking that none exists (unless
+``force``), so a failed or interrupted run never leaves a half-written output set behind.
+"""
+from __future__ import annotations
+
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from bsdfkit.core.errors import FormatError, InputError, NumericalError
+from bsdfkit.io import atomic, netcdf
+
+KNOWN_SECTIONS = {
+    "recipe": {"name", "measurement", "description"},
+    "report": {"figure_config", "figure_wavelength_nm"},
+    "reductions": {"budget_incidence_deg", "eta_mc", "iterations"},
+    "exports": {"interactions", "sides", "formats", "tolerance"},
+    "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
+    "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
+             "fallback_flux_W"},
+}
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    figure_config: str = "blue"
+    figure_wavelength_nm: float = 460.0
+
+
+@dataclass(frozen=True)
+class ReductionOptions:
+    """Stage options of the reductions (power-budget paper: 45° incidence, η_MC = 0.94, 7 iterations)."""
+
+    budget_incidence_deg: float = 45.0
+    eta_mc: float = 0.94
+    iterations: int = 7
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """Which tables the run writes (into OUT/exports/) and the TIS agreement each re-read must show."""
+
+    interactions: tuple[str, ...] = ("bibs", "biys", "yiys")
+    sides: tuple[str, ...] = ("reflection", "transmission")
+    formats: tuple[str, ...] = ("tracepro", "zemax")
+    tolerance: float = 0.005  # relative: re-read table TIS vs the source's TIS
+
+
+@dataclass(frozen=True)
+class FitStageOptions:
+    """Model fits of the run and the module-spectrum reconstruction (§4.2 of the cylindrical-module paper).
+
+    The blue LED spectrum defaults to Table 2 of that paper (450.1 nm, FWHM 22.9 nm); the phosphor emission is
+    fitted to this run's measured converted light. The two-wavelength fluxes come from the run's module trace,
+    or, without a trace stage, from ``fallback_flux_W`` (Table 1 of that paper: 0.058 W blue, 0.472 W yellow).
+    """
+
+    bsdf_model: str = "lambert+gaussian"
+    emission_model: str = "split-gaussian"
+    emission_incidence_deg: float = 45.0
+    led_peak_nm: float = 450.1
+    led_fwhm_nm: float = 22.9
+    fallback_flux_W: tuple[float, float] = (0.058, 0.472)
+
+
+@dataclass(frozen=True)
+class TraceStudyOptions:
+    """The module trace of the run: a scene whose plate comes from this recipe, and §5 studies around it."""
+
+    scene: Path | None = None
+    rays: int = 400_000
+    seed: int = 1
+    reflectance: tuple[float, ...] = ()
+    height_mm: tuple[float, ...] = ()
+    led_fwhm_deg: tuple[float, ...] = ()
+    specular_fraction: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A parsed recipe file. Paths are resolved relative to the recipe file."""
+
+    path: Path
+    name: str
+    measurement: Path
+    description: str = ""
+    report: ReportOptions = ReportOptions()
+    reductions: ReductionOptions = ReductionOptions()
+    exports: ExportOptions = ExportOptions()
+    trace: TraceStudyOptions = TraceStudyOptions()
+    fits: FitStageOptions = FitStageOptions()
+    raw: dict = field(default_factory=dict, compare=False, hash=False)
+
+
+def _check_keys(data: dict, path: Path) -> None:
+    for section, value in data.items():
+        if section not in KNOWN_SECTIONS:
+            raise FormatError("unknown recipe section", file=path, field=section,
+                              expected="one of " + ", ".join(sorted(KNOWN_SECTIONS)))
+        if not isinstance(value, dict):
+            raise FormatError("recipe section must be a table", file=path, field=section, got=value)
+        for key in value:
+            if key not in KNOWN_SECTIONS[section]:
+                raise FormatError("unknown recipe key", file=path, field=f"{section}.{key}",
+                                  expected="one of " + ", ".join(sorted(KNOWN_SECTIONS[section])))
+
+
+def _typed(table: dict, key: str, kind: type | tuple, path: Path, dotted: str, default: Any = None) -> Any:
+    if key not in table:
+        if default is None:
+            raise InputError("recipe key missing", file=path, field=dotted)
+        return default
+    value = table[key]
+    ok = isinstance(value, kind) and not (isinstance(value, bool) and kind is not bool)
+    if not ok:
+        raise InputError("recipe value of the wrong type", file=path, field=dotted, expected=getattr(kind, "__name__", str(kind)), got=value)
+    return value
+
+
+def load_recipe(path: str | Path) -> Recipe:
+    """Parse and validate a recipe TOML file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("recipe not found", file=path, expected="a TOML recipe file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+    _check_keys(data, path)
+    head = data.get("recipe")
+    if head is None:
+        raise InputError("recipe section missing", file=path, field="recipe")
+    measurement = (path.parent / _typed(head, "measurement", str, path, "recipe.measurement")).resolve()
+    rep = data.get("report", {})
+    report = ReportOptions(
+        figure_config=_typed(rep, "figure_config", str, path, "report.figure_config", "blue"),
+        figure_wavelength_nm=float(_typed(rep, "figure_wavelength_nm", (int, float), path, "report.figure_wavelength_nm", 460.0)),
+    )
+    red = data.get("reductions", {})
+    reductions = ReductionOptions(
+        budget_incidence_deg=float(_typed(red, "budget_incidence_deg", (int, float), path, "reductions.budget_incidence_deg", 45.0)),
+        eta_mc=float(_typed(red, "eta_mc", (int, float), path, "reductions.eta_mc", 0.94)),
+        iterations=int(_typed(red, "iterations", int, path, "reductions.iterations", 7)),
+    )
+    exp = data.get("exports", {})
+    exports = ExportOptions(
+        interactions=tuple(_choices(exp, "interactions", ("bibs", "biys", "yiys"), path)),
+        sides=tuple(_choices(exp, "sides", ("reflection", "transmission"), path)),
+        formats=tuple(_choices(exp, "formats", ("tracepro", "zemax", "asap"), path, default=("tracepro", "zemax"))),
+        tolerance=float(_typed(exp, "tolerance", (int, float), path, "exports.tolerance", 0.005)),
+    )
+    tr = data.get("trace")
+    trace = TraceStudyOptions()
+    if tr is not None:
+        scene = path.parent / _typed(tr, "scene", str, path, "trace.scene")
+        if not scene.is_file():
+            raise InputError("trace scene not found", file=path, field="trace.scene", expected="an existing scene TOML",
+                             got=str(scene))
+        trace = TraceStudyOptions(
+            scene=scene, rays=int(_typed(tr, "rays", int, path, "trace.rays", 400_000)),
+            seed=int(_typed(tr, "seed", int, path, "trace.seed", 1)),
+            **{k: tuple(float(v) for v in _numbers(tr, k, path)) for k in
+               ("reflectance", "height_mm", "led_fwhm_deg", "specular_fraction")})
+    ft = data.get("fits", {})
+    fallback = _numbers(ft, "fallback_flux_W", path, section="fits") or [0.058, 0.472]
+    if len(fallback) != 2:
+        raise InputError("two fluxes expected", file=path, field="fits.fallback_flux_W", expected="[blue_W, yellow_W]",
+                         got=fallback)
+    fits = FitStageOptions(
+        bsdf_model=_typed(ft, "bsdf_model", str, path, "fits.bsdf_model", "lambert+gaussian"),
+        emission_model=_typed(ft, "emission_model", str, path, "fits.emission_model", "split-gaussian"),
+        emission_incidence_deg=float(_typed(ft, "emission_incidence_deg", (int, float), path, "fits.emission_incidence_deg", 45.0)),
+        led_peak_nm=float(_typed(ft, "led_peak_nm", (int, float), path, "fits.led_peak_nm", 450.1)),
+        led_fwhm_nm=float(_typed(ft, "led_fwhm_nm", (int, float), path, "fits.led_fwhm_nm", 22.9)),
+        fallback_flux_W=(float(fallback[0]), float(fallback[1])),
+    )
+    return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
+                  description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
+                  reductions=reductions, exports=exports, trace=trace, fits=fits, raw=data)
+
+
+def _numbers(table: dict, key: str, path: Path, section: str = "trace") -> list[float]:
+    value = table.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise InputError("recipe value must be a list of numbers", file=path, field=f"{section}.{key}", got=value)
+    return value
+
+
+def _choices(table: dict, key: str, allowed: tuple[str, ...], path: Path, default: tuple[str, ...] | None = None) -> list[str]:
+    value = table.get(key, list(default or allowed))
+    if not isinstance(value, list) or not all(isinstance(v, str) and v in allowed for v in value):
+        raise InputError("recipe value must be a list of names", file=path, field=f"exports.{key}",
+                         expected="a subset of " + ", ".join(allowed), got=value)
+    return value
+
+
+@dataclass
+class RunState:
+    """What stages hand on: the calibrated scan, summary parts and pending outputs (name → writer)."""
+
+    recipe: Recipe
+    scan: xr.Dataset | None = None
+    tis: xr.Dataset | None = None
+    fits: dict = field(default_factory=dict)
+    emission: dict = field(default_factory=dict)
+    device: object = None
+    tables: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+    outputs: dict[str, Callable[[Path, bool], object]] = field(default_factory=dict)
+    log: Callable[[str], None] = lambda message: None
+
+
+def stage_ingest(state: RunState) -> None:
+    """Read the raw export, calibrate it, and queue ``scan.nc``."""
+    from bsdfkit.measurement.calibrate import calibrate
+    from bsdfkit.measurement.describe import describe
+    from bsdfkit.measurement.raw_scan import read_scan
+
+    state.scan = calibrate(read_scan(state.recipe.measurement))
+    scan = state.scan
+    state.summary["scan"] = describe(scan)
+    state.outputs["scan.nc"] = lambda p, force: netcdf.save(scan, p, force)
+
+
+def stage_report(state: RunState) -> None:
+    """Queue the in-plane BSDF figure (Fig. 6 analogue)."""
+    from bsdfkit.plotting.figures import in_plane_bsdf_figure, save_figure
+
+    opts = state.recipe.report
+    fig = in_plane_bsdf_figure(state.scan, opts.figure_config, opts.figure_wavelength_nm)
+    state.outputs["inplane_bsdf.png"] = lambda p, force: save_figure(fig, p, force)
+
+
+def stage_reductions(state: RunState) -> None:
+    """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget."""
+    from bsdfkit.core.records import incidences
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.io.jsonout import dumps
+    from bsdfkit.plotting.figures import budget_figure, save_figure
+    from bsdfkit.reduction import budget
+    from bsdfkit.reduction import tis as angular
+
+    opts = state.recipe.reductions
+    scan = state.scan
+    state.tis = angular.tis_table(scan)
+    tables = {f"{th:g}": budget.interaction_table(scan, th, state.tis) for th in incidences(scan)}
+    state.tables = tables
+    key = f"{opts.budget_incidence_deg:g}"
+    if key not in tables:
+        raise InputError("budget incidence not measured", file=state.recipe.path, field="reductions.budget_incidence_deg",
+                         expected="one of " + ", ".join(tables), got=opts.budget_incidence_deg)
+    t = tables[key]
+    power = budget.module_budget(t.power, opts.eta_mc, opts.iterations)
+    photons = budget.module_budget(t.photons, opts.eta_mc, opts.iterations)
+    from bsdfkit.measurement.calibrate import truth_tis
+
+    truth = truth_tis(scan)
+    table_json = {k: v.as_dict() for k, v in tables.items()}
+    if truth:
+        table_json["truth_power_percent"] = truth
+    state.summary["interaction_tables"] = table_json
+    state.summary["module_budget"] = {"incidence_deg": opts.budget_incidence_deg, "power": power.as_dict(),
+                                      "photons": photons.as_dict()}
+    tis = state.tis
+    state.outputs["tis.nc"] = lambda p, force: netcdf.save(tis, p, force)
+    state.outputs["interaction_tables.json"] = lambda p, force: write_text(p, dumps(table_json), force)
+    fig = budget_figure(power, photons)
+    state.outputs["module_budget.png"] = lambda p, force: save_figure(fig, p, force)
+    lines = [f"interaction table at {key} deg (percent of incident power / photons):"]
+    for k in budget.KEYS:
+        extra = f"   truth {truth[key][k]:6.2f}" if truth and key in truth else ""
+        lines.append(f"  {k:14s} {t.power[k]:6.2f} ± {t.power_std[k]:.2f}   {t.photons[k]:6.2f}{extra}")
+    lines.append(f"  EQE {t.eqe:.3f} ± {t.eqe_std:.3f}")
+    last = power.iterations[-1]
+    lines.append(f"module budget (η_MC = {opts.eta_mc:g}, {opts.iterations} plate interactions): blue {last['blue']:.2f}, "
+                 f"yellow {last['yellow']:.2f}, total {last['total']:.2f} %; converged total {power.converged['total']:.2f} %")
+    state.summary.setdefault("report_lines", []).extend(lines)
+
+
+def stage_exports(state: RunState) -> None:
+    """Queue TracePro/Zemax tables of each interaction and side; each is re-read and its TIS checked.
+
+    The tables go into OUT/exports/. Their writer runs with the other outputs (atomic, no clobbering); it
+    records, per file, the source TIS (direct integral of the reconstructed hemisphere) and the TIS recomputed
+    from the file as read back, and fails the run if they differ by more than the recipe's tolerance.
+    """
+    from bsdfkit.tables import export as exporter
+
+    opts = state.recipe.exports
+    scan = state.scan
+    checks: list[dict] = []
+    state.summary["export_checks"] = checks
+    suffix = {"tracepro": "tracepro.txt", "zemax": "zemax.bsdf", "asap": "asap.txt"}
+
+    def writer(inter: str, side: str, fmt: str):
+        def write(path: Path, force: bool) -> None:
+            result = exporter.export(scan, fmt, inter, side, path, force)
+            summary = exporter.read_any(path)
+            for k, th in enumerate(summary.incidences_deg):
+                src = result.tis_source[side][k]
+                got = summary.tis_computed[side][k]
+                rel = abs(got - src) / src if src else abs(got)
+                checks.append({"file": f"exports/{path.name}", "interaction": inter, "side": side, "format": fmt,
+                               "theta_i_deg": th, "tis_source": src, "tis_reread": got, "relative_difference": rel,
+                               "ok": rel <= opts.tolerance})
+                if rel > opts.tolerance:
+                    raise NumericalError("exported table does not carry the source's TIS", file=path,
+                                         field=f"theta_i {th:g}", expected=f"relative difference ≤ {opts.tolerance:g}",
+                                         got=f"{rel:.3g}")
+        return write
+
+    for inter in opts.interactions:
+        for side in opts.sides:
+            for fmt in opts.formats:
+                state.outputs[f"exports/{inter}_{side}.{suffix[fmt]}"] = writer(inter, side, fmt)
+
+
+def stage_trace(state: RunState) -> None:
+    """Trace the module with the plate built from this run's own results, and the §5 studies around it.
+
+    Trends of the cylindrical-module paper are checked and reported (not assumed): LER falls with lower wall
+    reflectance (Fig. 8) and with height (Fig. 11), barely moves with LED FWHM (Fig. 13); non-uniformity is
+    larger for mirror walls than diffuse ones (Fig. 10) and for short cavities (Fig. 12).
+    """
+
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.io.jsonout import dumps
+    from bsdfkit.plotting.figures import save_figure, trace_studies_figure
+    from bsdfkit.trace import trace, with_values
+
+    opts = state.recipe.trace
+    if opts.scene is None:
+        return
+    plate = plate_from_scan(state.scan, state.tis, name=state.recipe.name,
+                            fits={k: v[0] for k, v in state.fits.items()})
+    scene = _scene_with_plate(opts.scene, plate)
+    device = trace(scene, opts.rays, opts.seed)
+    state.device = device
+    results = {"device": device.to_dict()}
+    studies: dict[str, list[dict]] = {}
+
+    def run(label: str, values: dict) -> dict:
+        r = trace(with_values(scene, values), opts.rays, opts.seed)
+        row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR, "YBR_std": r.std_err["YBR"],
+               "non_uniformity": r.non_uniformity, "ledger_error": r.ledger_error}
+        studies.setdefault(label, []).append(row)
+        return row
+
+    for rho in opts.reflectance:
+        run("reflectance", {"wall.reflectance": rho, "base.reflectance": rho})
+    for h in opts.height_mm:
+        run("height_mm", {"cavity.height_mm": h})
+    for fwhm in opts.led_fwhm_deg:
+        run("led_fwhm_deg", {"leds.fwhm_deg": fwhm})
+    for spec in opts.specular_fraction:
+        run("specular_fraction", {"wall.specular_fraction": spec, "base.specular_fraction": spec})
+    results["studies"] = studies
+    results["trends"] = _trends(device, studies)
+    state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity", "ledger_error",
+                                                                         "rays", "elapsed_s", "interactions_per_s")},
+                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
+                              "trends": results["trends"]}
+    state.outputs["trace.json"] = lambda p, force: write_text(p, dumps(results), force)
+    device_ds = device.to_dataset()
+    state.outputs["trace_device.nc"] = lambda p, force: netcdf.save(device_ds, p, force)
+    fig = trace_studies_figure(device, studies)
+    state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
+    lines = [f"module trace ({opts.rays} rays, plate from this run): LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
+             f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f}, non-uniformity {device.non_uniformity:.3f}, "
+             f"ledger error {device.ledger_error:.1e}"]
+    lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({t['detail']})"
+              for name, t in results["trends"].items()]
+    state.summary.setdefault("report_lines", []).extend(lines)
+
+
+def _scene_with_plate(path: Path, plate):
+    """The scene at ``path`` with its phosphor plate given (instead of recomputing it from ``from = ...``)."""
+    import tomllib as _toml
+
+    from bsdfkit.trace.scene import parse_scene
+
+    data = _toml.loads(path.read_text(encoding="utf-8"))
+    top = data.get("top", {})
+    key = "from" if "from" in top else "plate" if "plate" in top else None
+    if top.get("kind") != "phosphor" or key is None:
+        raise InputError("trace scene must have a phosphor top taken from a recipe or plate file", file=path,
+                         field="top", expected='kind = "phosphor" and from = "..."')
+    return parse_scene(data, path, preloaded={"plate": ((key, top[key]), plate)})
+
+
+def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
+    out = {}
+    if len(studies.get("reflectance", [])) >= 2:
+        rows = sorted(studies["reflectance"], key=lambda r: r["values"]["wall.reflectance"])
+        ler = [r["LER"] for r in rows]
+        out["LER falls with reflectance (Fig. 8)"] = {
+            "holds": bool(np.all(np.diff(ler) > 0)),
+            "detail": ", ".join(f"ρ {r['values']['wall.reflectance']:g}: {r['LER']:.3f}" for r in rows)}
+    if len(studies.get("height_mm", [])) >= 2:
+        rows = sorted(studies["height_mm"], key=lambda r: r["values"]["cavity.height_mm"])
+        ler = [r["LER"] for r in rows]
+        out["LER falls with height (Fig. 11)"] = {
+            "holds": bool(np.all(np.diff(ler) < 0)),
+            "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['LER']:.3f}" for r in rows)}
+        nu = [r["non_uniformity"] for r in rows]
+        out["non-uniformity larger for short cavities (Fig. 12)"] = {
+            "holds": bool(nu[0] > nu[-1]),
+            "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['non_uniformity']:.3f}" for r in rows)}
+    if studies.get("led_fwhm_deg") and studies.get("reflectance") and studies.get("height_mm"):
+        # "Barely moves" as the paper ranks it: the FWHM effect is the smallest of the studied LER effects.
+        spans = {k: max(r["LER"] for r in studies[k]) - min(r["LER"] for r in studies[k]) for k in ("reflectance", "height_mm")}
+        moves = max(abs(r["LER"] - device.LER) for r in studies["led_fwhm_deg"])
+        out["LER barely moves with LED FWHM (Fig. 13)"] = {
+            "holds": bool(moves < min(spans.values())),
+            "detail": f"largest change {moves:.3f} vs the Lambertian device; LER spans {spans['reflectance']:.3f} over "
+                      f"reflectance and {spans['height_mm']:.3f} over height (criterion: smallest effect); " + ", ".join(
+                          f"FWHM {r['values']['leds.fwhm_deg']:g}°: {r['LER']:.3f}" for r in studies["led_fwhm_deg"])}
+    if studies.get("specular_fraction"):
+        rows = sorted(studies["specular_fraction"], key=lambda r: r["values"]["wall.specular_fraction"])
+        out["non-uniformity larger for mirror walls (Fig. 10)"] = {
+            "holds": bool(rows[-1]["non_uniformity"] > rows[0]["non_uniformity"]),
+            "detail": ", ".join(f"specular {r['values']['wall.specular_fraction']:g}: {r['non_uniformity']:.3f}" for r in rows)}
+    return out
+
+
+def stage_fits(state: RunState) -> None:
+    """Lobe fits of every elastic interaction and side (aperture-averaged), a Lambert fit of the converted light,
+    and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper)."""
+    from bsdfkit.fit.least_squares import fit_bsdf
+    from bsdfkit.fit.spectrum import fit_spectrum
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.io.jsonout import dumps
+    from bsdfkit.plotting.figures import bsdf_fits_figure, save_figure
+    from bsdfkit.reduction import spectral
+    from bsdfkit.reduction import tis as angular
+
+    opts = state.recipe.fits
+    scan, tis = state.scan, state.tis
+    rows = []
+    for inter in ("bibs", "biys", "yiys"):
+        model = "lambert" if inter == "biys" else opts.bsdf_model
+        for side in ("reflection", "transmission"):
+            prof = spectral.interaction_profile(scan, inter, side)
+            prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
+            fit = fit_bsdf(prof, model)
+            state.fits[(inter, side)] = (fit, prof)
+            for th in fit["theta_i"].values:
+                row = fit.sel(theta_i=th)
+                params = {p: float(row[p]) for p in ("rho", "A", "sigma", "B", "g") if p in row}
+                stds = {p: float(row[f"{p}_std"]) for p in params}
+                measured = float(tis["tis"].sel(interaction=inter, side=side, theta_i=th))
+                rows.append({"interaction": inter, "side": side, "theta_i_deg": float(th), "model": model,
+                             "params": params, "std": stds, "r2": float(row["r2"]), "converged": bool(row["converged"]),
+                             "model_tis": float(row["tis"]), "measured_tis": measured,
+                             "tis_difference_pp": 100 * (float(row["tis"]) - measured)})
+    # the converted light's spectrum, both hemispheres, at the chosen incidence
+    th = opts.emission_incidence_deg
+    density = sum(angular.hemispherical_spectrum(scan, "blue", th, side) for side in ("reflection", "transmission"))
+    lam = density["wavelength"].values
+    region = (lam >= 470.0) & (lam <= 780.0)
+    peak = float(density.values[region].max())
+    fit = fit_spectrum(lam[region], density.values[region] / peak, opts.emission_model)
+    emission = {k: float(fit[k]) for k in ("peak_nm", "fwhm_nm", "alpha") if k in fit}
+    emission.update({f"{k}_std": float(fit[f"{k}_std"]) for k in ("peak_nm", "fwhm_nm", "alpha") if f"{k}_std" in fit})
+    emission.update(r2=float(fit["r2"]), converged=bool(fit["converged"]), incidence_deg=th, model=opts.emission_model)
+    state.emission = {"fit": emission, "wavelength": lam, "measured": density.values / peak}
+    state.summary["bsdf_fits"] = rows
+    state.summary["emission_fit"] = emission
+    state.outputs["bsdf_fits.json"] = lambda p, force: write_text(p, dumps(rows), force)
+    fig = bsdf_fits_figure(state.fits)
+    state.outputs["bsdf_fits.png"] = lambda p, force: save_figure(fig, p, force)
+    worst = max(rows, key=lambda r: abs(r["tis_difference_pp"]))
+    state.summary.setdefault("report_lines", []).extend([
+        f"BSDF fits: {sum(r['converged'] for r in rows)}/{len(rows)} converged; fitted-model TIS within "
+        f"{abs(worst['tis_difference_pp']):.3f} pp of the measured TIS (worst {worst['interaction']} {worst['side']} "
+        f"{worst['theta_i_deg']:g} deg)",
+        f"emission fit ({opts.emission_model}, θi = {th:g}°): peak {emission['peak_nm']:.1f} nm, FWHM {emission['fwhm_nm']:.1f} nm, "
+        f"α {emission.get('alpha', 0.0):.3f}, R² {emission['r2']:.4f}"])
+
+
+def stage_spectrum(state: RunState) -> None:
+    """The module's absolute spectrum from the two-wavelength result (§4.2, Fig. 7 of the cylindrical-module
+    paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR."""
+    from bsdfkit.fit.spectrum import reconstruct_two_band_spectrum, spectrum_model_values
+    from bsdfkit.io.atomic import write_text
+    from bsdfkit.io.jsonout import dumps
+    from bsdfkit.plotting.figures import module_spectrum_figure, save_figure
+    from bsdfkit.reduction.colorimetry import colorimetric_summary
+
+    opts = state.recipe.fits
+    if not state.emission:
+        return
+    lam = np.arange(380.0, 780.0 + 1e-9, 1.0)
+    s_blue = spectrum_model_values("gaussian", {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm, "amplitude": 1.0}, lam)
+    e = state.emission["fit"]
+    s_yellow = spectrum_model_values(opts.emission_model, {"peak_nm": e["peak_nm"], "fwhm_nm": e["fwhm_nm"],
+                                                           "alpha": e.get("alpha", 0.0), "amplitude": 1.0}, lam)
+    if state.device is not None:
+        flux = (float(state.device.extracted["blue"]), float(state.device.extracted["yellow"]))
+        source = f"module trace ({state.recipe.trace.rays} rays, LED power {state.device.emitted:g} W)"
+    else:
+        flux = opts.fallback_flux_W
+        source = "fits.fallback_flux_W (Table 1 of the cylindrical-module paper)"
+    sd = reconstruct_two_band_spectrum(lam, s_blue, s_yellow, flux[0], flux[1], name=f"{state.recipe.name} module")
+    colour_ = colorimetric_summary(sd)
+    result = {"flux_W": {"blue": flux[0], "yellow": flux[1]}, "flux_source": source,
+              "led_spectrum": {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm},
+              "colour": {"x": colour_.x, "y": colour_.y, "cct_K": colour_.cct_K, "duv": colour_.duv,
+                         "luminous_efficacy_lm_per_W": colour_.luminous_efficacy_lm_per_W, "ybr": colour_.ybr}}
+    state.summary["module_spectrum"] = result
+    csv = "wavelength_nm,spectral_flux_W_per_nm\n" + "".join(f"{w:.1f},{v:.8e}\n" for w, v in zip(sd.wavelengths, sd.values))
+    state.outputs["module_spectrum.csv"] = lambda p, force: write_text(p, csv, force)
+    fig = module_spectrum_figure(lam, s_blue, s_yellow, state.emission, sd)
+    state.outputs["module_spectrum.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["module_spectrum.json"] = lambda p, force: write_text(p, dumps(result), force)
+    c = result["colour"]
+    state.summary.setdefault("report_lines", []).append(
+        f"module spectrum from {source}: x {c['x']:.4f}, y {c['y']:.4f}, CCT {c['cct_K']:.0f} K, Duv {c['duv']:.4f}, "
+        f"{c['luminous_efficacy_lm_per_W']:.0f} lm/W, YBR {c['ybr']:.2f}")
+
+
+STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
+    ("ingest", stage_ingest),
+    ("report", stage_report),
+    ("reductions", stage_reductions),
+    ("exports", stage_exports),
+    ("fits", stage_fits),
+    ("trace", stage_trace),
+    ("spectrum", stage_spectrum),
+)
+
+
+def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
+        log: Callable[[str], None] = lambda message: None) -> dict:
+    """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary."""
+    recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
+    out_dir = Path(out_dir)
+    state = RunState(recipe=recipe, log=log)
+    timings = {}
+    for name, stage in STAGES:
+        start = time.perf_counter()
+        log(f"stage {name} ...")
+        stage(state)
+        timings[name] = round(time.perf_counter() - start, 3)
+    names = list(state.outputs) + ["summary.json"]
+    for name in names:
+        atomic.check_writable(out_dir / name, force)
+    for name, writer in state.outputs.items():
+        writer(out_dir / name, force)
+    checks = state.summary.get("export_checks")
+    if checks:
+        worst = max(checks, key=lambda c: c["relative_difference"])
+        state.summary.setdefault("report_lines", []).append(
+            f"exports: {len({c['file'] for c in checks})} tables re-read; TIS of every table within "
+            f"{100 * worst['relative_difference']:.3f} % of its source (worst: {worst['file']} at {worst['theta_i_deg']:g} deg)")
+    summary = {"recipe": recipe.name, "recipe_file": str(recipe.path), "measurement": str(recipe.measurement),
+               "outputs": names, "stage_seconds": timings, **state.summary}
+    from bsdfkit.io.jsonout import dumps
+
+    atomic.write_text(out_dir / "summary.json", dumps(summary), force)
+    return summary
+
+
+# ------------------------------------------------------------------------------------- the plate
+def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str = "", fits: dict | None = None):
+    """A :class:`bsdfkit.trace.PhosphorPlate` from a calibrated scan: the toolkit's own TIS per interaction,
+    side and measured incidence, with angular shapes from lambert+gaussian fits for the elastic
+    interactions (bibs, yiys) and Lambertian for the converted light (biys, §4.2 of the power-budget paper).
+    ``fits`` may hold lambert+gaussian fits already made, keyed by (interaction, side)."""
+    from bsdfkit.fit.least_squares import fit_bsdf
+    from bsdfkit.reduction import spectral
+    from bsdfkit.reduction import tis as angular
+    from bsdfkit.trace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel
+
+    tis = tis if tis is not None else angular.tis_table(scan)
+    grid = tuple(float(t) for t in tis["theta_i"].values)
+    channels = {}
+    for inter in ("bibs", "biys", "yiys"):
+        for side in ("reflection", "transmission"):
+            values = tuple(float(np.clip(tis["tis"].sel(interaction=inter, side=side, theta_i=t), 0.0, 1.0)) for t in grid)
+            if inter == "biys":
+                dists = (Lambertian(),) * len(grid)
+            else:
+                fit = (fits or {}).get((inter, side))
+                if fit is None or fit.attrs.get("model") not in (None, "lambert+gaussian") or "sigma" not in fit:
+                    prof = spectral.interaction_profile(scan, inter, side)
+                    prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
+                    fit = fit_bsdf(prof, "lambert+gaussian")
+                dists = tuple(LambertGaussian(rho_per_sr=float(fit["rho"].sel(theta_i=t)) / np.pi,
+                                              a_per_sr=float(fit["A"].sel(theta_i=t)),
+                                              sigma=float(fit["sigma"].sel(theta_i=t))) for t in grid)
+            channels[f"{inter}_{side}"] = PlateChannel(values, dists)
+    plate = PhosphorPlate(theta_i_deg=grid, name=name or scan.attrs.get("sample_name", ""),
+                          notes=f"from {scan.attrs.get('source', '')}: bsdfkit TIS (two-arc reconstruction) and "
+                                "lambert+gaussian fits", **channels)
+    plate.validate()
+    return plate
+
+
+def phosphor_plate(recipe_path: str | Path):
+    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``)."""
+    from bsdfkit.measurement.calibrate import calibrate
+    from bsdfkit.measurement.raw_scan import read_scan
+
+    recipe = load_recipe(recipe_path)
+    return plate_from_scan(calibrate(read_scan(recipe.measurement)), name=recipe.name)

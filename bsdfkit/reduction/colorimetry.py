@@ -1,0 +1,228 @@
+"""Colorimetry of emission spectra through colour-science (no re-implemented CMFs or CCT).
+
+* Chromaticity: CIE 1931 2° standard observer, ``colour.sd_to_XYZ`` with its default method
+  (ASTM E308-15 practice; illuminant E, i.e. the spectrum itself is the stimulus), then
+  ``colour.XYZ_to_xy``.
+* CCT and Duv: ``colour.uv_to_CCT(uv, method="Ohno 2013")`` on CIE 1960 UCS uv
+  (``colour.xy_to_UCS_uv``): Ohno, "Practical use and calculation of CCT and Duv", LEUKOS 10(1), 2014
+  (combined triangular/parabolic solution over a cascade of Planckian tables). CIE 015 regards a CCT as
+  meaningful only for |Duv| ≤ 0.05 (:data:`DUV_LIMIT`); the value is returned regardless and
+  :func:`cct_is_meaningful` says whether it is.
+* Luminous flux (lm, for a spectrum in W/nm) and luminous efficacy of radiation (lm/W):
+  ``colour.luminous_flux`` and ``colour.luminous_efficacy`` (CIE 1924 photopic V(λ), K_m = 683 lm/W).
+* Yellow-to-blue ratio YBR = ∫_yellow S dλ / ∫_blue S dλ with blue = 380–470 nm and yellow = 471–780 nm
+  by default (definitions of the cylindrical-module paper, docs/reference/seed_figures.json); band
+  sums as :func:`bsdfkit.fit.spectrum.band_integral`.
+
+Grids: uniform 5, 10 or 20 nm grids starting on a whole nanometre are passed to colour unchanged
+(ASTM E308 practice, weighting-factor method). Any other grid (1 nm, or an irregular
+spectroradiometer grid, interpolated by colour onto 1 nm over its own range) is put on exactly
+360-780 nm at 1 nm (the ASTM practice range of the CMFs) with zeros outside the measured range, an
+emission spectrum having no light where it was not measured (colour would otherwise repeat the end
+values). Photometry (V(λ), 360-830 nm) integrates the spectrum over its own range.
+Spectra cross the API as :class:`colour.SpectralDistribution` (wavelength in nm).
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from bsdfkit.core.errors import InputError, NumericalError
+
+if TYPE_CHECKING:
+    from colour import SpectralDistribution
+
+__all__ = [
+    "CMFS_NAME",
+    "DUV_LIMIT",
+    "YBR_BLUE_BAND_NM",
+    "YBR_YELLOW_BAND_NM",
+    "chromaticity_xy",
+    "cct_duv",
+    "cct_is_meaningful",
+    "CCT_RANGE_K",
+    "luminous_flux_lm",
+    "luminous_efficacy_of_radiation",
+    "yellow_blue_ratio",
+    "ColorimetricSummary",
+    "colorimetric_summary",
+]
+
+CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
+#: |Duv| above which a CCT is not meaningful (CIE 015:2018 §9.5).
+DUV_LIMIT = 0.05
+#: Planckian table range of colour's Ohno (2013) solver (its defaults ``start`` and ``end``), in K.
+CCT_RANGE_K: tuple[float, float] = (1000.0, 100000.0)
+YBR_BLUE_BAND_NM: tuple[float, float] = (380.0, 470.0)
+YBR_YELLOW_BAND_NM: tuple[float, float] = (471.0, 780.0)
+
+_ASTM_INTERVALS = (1.0, 5.0, 10.0, 20.0)
+
+
+def _checked(sd):
+    """Validate a SpectralDistribution (finite values, some positive power) and return (λ, values)."""
+    import colour
+
+    if not isinstance(sd, colour.SpectralDistribution):
+        raise InputError("spectrum must be a colour.SpectralDistribution", field="sd",
+                         got=type(sd).__name__)
+    wl = np.asarray(sd.wavelengths, dtype=float)
+    values = np.asarray(sd.values, dtype=float)
+    if wl.size < 3:
+        raise InputError("spectrum needs at least 3 samples", field=sd.name, got=wl.size)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        raise InputError("spectral value is not finite", field=f"{sd.name} at {wl[bad][0]:g} nm",
+                         got=float(values[bad][0]))
+    if not np.any(values > 0):
+        raise NumericalError(f"{sd.name}: spectrum has no positive value; colorimetry is undefined")
+    return wl, values
+
+
+def _uniform_sd(sd):
+    """The spectrum on a uniform grid: unchanged if already uniform, else interpolated by colour onto
+    1 nm over its own (whole-nanometre) range."""
+    import colour
+
+    wl, _ = _checked(sd)
+    steps = np.diff(wl)
+    if np.allclose(steps, steps[0], rtol=0, atol=1e-9):
+        return sd
+    shape = colour.SpectralShape(math.ceil(wl[0]), math.floor(wl[-1]), 1.0)
+    if shape.end - shape.start < 2:
+        raise InputError("spectrum spans less than 2 nm", field=sd.name, got=(wl[0], wl[-1]))
+    return sd.copy().interpolate(shape)
+
+
+def _colorimetric_sd(sd):
+    """The spectrum on a grid colour's ASTM E308 path accepts without re-aligning it (module docstring)."""
+    import colour
+
+    wl, _ = _checked(sd)
+    steps = np.diff(wl)
+    uniform = np.allclose(steps, steps[0], rtol=0, atol=1e-9)
+    on_whole_nm = abs(wl[0] - round(wl[0])) < 1e-9
+    if uniform and on_whole_nm and any(abs(steps[0] - s) < 1e-9 for s in _ASTM_INTERVALS[1:]):
+        return sd
+    # 1 nm path: exactly the practice range 360-780 nm of the CMFs, zero outside the measured range,
+    # so colour neither warns nor extrapolates the end values as constants.
+    out = _uniform_sd(sd).copy()
+    if out.shape.interval != 1.0 or not on_whole_nm:
+        out = out.interpolate(colour.SpectralShape(math.ceil(wl[0]), math.floor(wl[-1]), 1.0))
+    target = colour.SpectralShape(360.0, 780.0, 1.0)
+    values = np.interp(target.wavelengths, out.wavelengths, out.values, left=0.0, right=0.0)
+    return colour.SpectralDistribution(values, target.wavelengths, name=sd.name)
+
+
+def _xyz(sd) -> np.ndarray:
+    import colour
+
+    cmfs = colour.MSDS_CMFS[CMFS_NAME]
+    with warnings.catch_warnings():
+        # colour reports each internal re-alignment of illuminant E / the 5 nm ASTM tables as a runtime
+        # warning; those steps are its documented ASTM E308 practice, not a problem with the input.
+        warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
+        xyz = np.asarray(colour.sd_to_XYZ(_colorimetric_sd(sd), cmfs), dtype=float)
+    if not (np.all(np.isfinite(xyz)) and xyz.sum() > 0):
+        raise NumericalError(f"{sd.name}: tristimulus values are not positive ({xyz.tolist()}); "
+                             "is the spectrum inside 360-830 nm?")
+    return xyz
+
+
+def chromaticity_xy(sd: SpectralDistribution) -> tuple[float, float]:
+    """CIE 1931 2° chromaticity (x, y) of an emission spectrum (wavelength in nm, any radiometric unit)."""
+    import colour
+
+    x, y = np.asarray(colour.XYZ_to_xy(_xyz(sd)), dtype=float)
+    return float(x), float(y)
+
+
+def cct_duv(sd: SpectralDistribution) -> tuple[float, float]:
+    """Correlated colour temperature (K) and Duv by Ohno (2013) via ``colour.uv_to_CCT``.
+
+    Duv is the signed distance from the Planckian locus in CIE 1960 uv (positive above the locus).
+    """
+    import colour
+
+    xy = np.array(chromaticity_xy(sd))
+    uv = colour.xy_to_UCS_uv(xy)
+    with warnings.catch_warnings():
+        # colour warns when the nearest Planckian point is on its table bound (CCT outside
+        # 1000-100000 K); cct_is_meaningful() reports that case, so the warning is redundant.
+        warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
+        cct, duv = np.asarray(colour.uv_to_CCT(uv, method="Ohno 2013"), dtype=float)
+    if not (math.isfinite(cct) and math.isfinite(duv)):
+        raise NumericalError(f"{sd.name}: CCT is undefined for chromaticity x={xy[0]:.4f}, y={xy[1]:.4f}")
+    return float(cct), float(duv)
+
+
+def cct_is_meaningful(duv: float, cct_K: float | None = None) -> bool:
+    """True when |Duv| ≤ :data:`DUV_LIMIT` (CIE 015) and, if given, the CCT lies inside the Planckian
+    table of the Ohno (2013) solver (:data:`CCT_RANGE_K`); otherwise the CCT should not be quoted."""
+    inside = cct_K is None or CCT_RANGE_K[0] <= cct_K <= CCT_RANGE_K[1]
+    return abs(duv) <= DUV_LIMIT and inside
+
+
+def luminous_flux_lm(sd: SpectralDistribution) -> float:
+    """Luminous flux in lm of a spectral radiant flux in W/nm (``colour.luminous_flux``, K_m = 683 lm/W)."""
+    import colour
+
+    return float(colour.luminous_flux(_uniform_sd(sd)))
+
+
+def luminous_efficacy_of_radiation(sd: SpectralDistribution) -> float:
+    """Luminous efficacy of radiation K = Φ_v/Φ_e in lm/W (``colour.luminous_efficacy``); unit-free input."""
+    import colour
+
+    value = float(colour.luminous_efficacy(_uniform_sd(sd)))
+    if not math.isfinite(value):
+        raise NumericalError(f"{sd.name}: luminous efficacy is undefined (zero radiant flux)")
+    return value
+
+
+def yellow_blue_ratio(
+    sd: SpectralDistribution,
+    blue_band_nm: tuple[float, float] = YBR_BLUE_BAND_NM,
+    yellow_band_nm: tuple[float, float] = YBR_YELLOW_BAND_NM,
+) -> float:
+    """YBR = Σ_yellow S Δλ / Σ_blue S Δλ (inclusive band limits in nm; defaults 380–470 and 471–780 nm)."""
+    from bsdfkit.fit.spectrum import band_integral
+
+    wl, values = _checked(sd)
+    blue = band_integral(wl, values, blue_band_nm)
+    yellow = band_integral(wl, values, yellow_band_nm)
+    if not blue > 0:
+        raise NumericalError(f"{sd.name}: no flux in the blue band {blue_band_nm[0]:g}-{blue_band_nm[1]:g} nm; "
+                             "YBR is undefined")
+    return yellow / blue
+
+
+@dataclass(frozen=True)
+class ColorimetricSummary:
+    """Chromaticity, CCT/Duv (Ohno 2013), luminous efficacy of radiation and YBR of one spectrum."""
+
+    x: float
+    y: float
+    cct_K: float
+    duv: float
+    luminous_efficacy_lm_per_W: float
+    ybr: float | None
+
+    @property
+    def cct_meaningful(self) -> bool:
+        return cct_is_meaningful(self.duv, self.cct_K)
+
+
+def colorimetric_summary(sd: SpectralDistribution) -> ColorimetricSummary:
+    """All colour quantities of :class:`ColorimetricSummary`; YBR is None if the blue band is empty."""
+    x, y = chromaticity_xy(sd)
+    cct, duv = cct_duv(sd)
+    try:
+        ybr: float | None = yellow_blue_ratio(sd)
+    except NumericalError:
+        ybr = None
+    return ColorimetricSummary(x, y, cct, duv, luminous_efficacy_of_radiation(sd), ybr)

@@ -1,0 +1,228 @@
+"""Spectral reductions: weighted mean BSDFs, bi-spectral band averages, band integrals, photons.
+
+Equation numbers refer to the power-budget paper ("Power and photon budget of a remote phosphor LED module").
+
+* Weighted mean BSDF over an incident spectrum E (eqs. (3)-(5), (8)); only the relative shape of E matters:
+  ⟨q⟩ = Σ_band q(λ) E(λ) Δλ / Σ_band E(λ) Δλ.
+* Band-averaged bi-spectral BSDF (eqs. (9)-(10)): ⟨q_λ⟩(λs) = Σ_λi q_λ(λi, λs) E(λi) Δλi / Σ E Δλi. A calibrated
+  scan holds it directly (``bsdf_bispectral``, for the measurement's incident spectrum); a dataset with an
+  excitation axis ``wavelength_i`` (a Donaldson-style matrix ``bsdf_donaldson``) is reduced to it by
+  :func:`bispectral_weighted_mean` for any excitation spectrum.
+* Its average over the emission band (eqs. (11)-(12)): ⟨⟨q_λ⟩⟩ = Σ_band ⟨q_λ⟩ Δλs / ΔΛs, so that the TIS of
+  eq. (13) integrates ⟨⟨q_λ⟩⟩·ΔΛs = Σ_band ⟨q_λ⟩ Δλs (:func:`bispectral_band_integral`).
+* Power ↔ photons (eqs. (14)-(16)): Φ_e = Φ_photons · hc·ΣΦ_λΔλ / ΣΦ_λ λ Δλ = Φ_photons · hc/λ̄, with λ̄ the
+  power-weighted mean wavelength of the spectrum (:func:`mean_photon_energy`).
+
+Spectra cross the public API as ``colour.SpectralDistribution`` (or xarray DataArrays over ``wavelength``);
+sums use the data's own wavelength grid with Δλ from :func:`numpy.gradient` (exact on uniform grids).
+"""
+from __future__ import annotations
+
+import colour
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import InputError, NumericalError
+
+PLANCK_H = 6.62607015e-34  # J s (exact, SI 2019)
+LIGHT_C = 299_792_458.0  # m/s (exact)
+
+BLUE_BAND_NM = (450.0, 470.0)
+YELLOW_BAND_NM = (470.0, 740.0)
+
+Band = tuple[float, float]
+SpectrumLike = colour.SpectralDistribution | xr.DataArray
+
+
+def _band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
+    lo, hi = band
+    if not hi > lo:
+        raise InputError("empty wavelength band", field="band", expected="(low, high) with low < high", got=band)
+    return (wavelength >= lo - 1e-9) & (wavelength <= hi + 1e-9)
+
+
+def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Values of ``spectrum`` on ``wavelength`` (nm): linear interpolation, zero outside its domain."""
+    if isinstance(spectrum, colour.SpectralDistribution):
+        wl, values = spectrum.wavelengths, spectrum.values
+    elif isinstance(spectrum, xr.DataArray):
+        wl, values = spectrum["wavelength"].values, spectrum.values
+    else:
+        raise InputError("unsupported spectrum type", field="spectrum",
+                         expected="colour.SpectralDistribution or xarray.DataArray over 'wavelength'",
+                         got=type(spectrum).__name__)
+    values = np.asarray(values, dtype=np.float64)
+    if not np.all(np.isfinite(values)):
+        raise InputError("spectrum has non-finite values", field="spectrum", expected="finite values")
+    return np.interp(wavelength, wl, values, left=0.0, right=0.0)
+
+
+def to_spectral_distribution(da: xr.DataArray, name: str = "") -> colour.SpectralDistribution:
+    """A 1-D DataArray over ``wavelength`` as a colour SpectralDistribution."""
+    return colour.SpectralDistribution(dict(zip(da["wavelength"].values.tolist(), da.values.tolist())), name=name)
+
+
+def incident_spectrum(ds: xr.Dataset, config: str) -> colour.SpectralDistribution:
+    """The measured, normalised incident spectrum of configuration ``config`` (1/nm)."""
+    return to_spectral_distribution(ds["incident_spectrum"].sel(configuration=config), name=f"incident {config}")
+
+
+def _arrays(spectrum: SpectrumLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    if isinstance(spectrum, colour.SpectralDistribution):
+        return spectrum.wavelengths, spectrum.values
+    return spectrum["wavelength"].values, spectrum.values
+
+
+def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band) -> float:
+    """Σ_band values(λ)·Δλ with Δλ the central-difference sample spacing, band closed: the sums of eqs. (4)-(16)
+    of the power-budget paper and §4.2 of the cylindrical-module paper."""
+    wl = np.asarray(wavelength, dtype=np.float64)
+    inside = _band_mask(wl, band)
+    return float(np.sum(np.asarray(values, dtype=np.float64)[inside] * np.gradient(wl)[inside]))
+
+
+def band_integral(spectrum: SpectrumLike, band: Band) -> float:
+    """Σ_band S(λ) Δλ on the spectrum's own grid (:func:`band_sum`)."""
+    return band_sum(*_arrays(spectrum), band)
+
+
+def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: SpectrumLike | None = None) -> xr.Dataset:
+    """Spectrally weighted mean BSDF per record (eq. (5); eq. (8) for yellow), with propagated std.
+
+    ``spectrum`` is the weighting spectrum E(λ) (its relative shape only); by default the measured incident
+    spectrum of ``config``. Only pixels inside ``band`` where the BSDF is defined (incident light present) are
+    used; a band without such pixels raises :class:`InputError` (a band with no signal).
+    """
+    sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
+    if sub.sizes["record"] == 0:
+        raise InputError("no records for configuration", file=ds.attrs.get("source"), field="config", got=config)
+    lam = sub["wavelength"].values
+    weight = (sub["incident_spectrum"].sel(configuration=config).values if spectrum is None
+              else spectrum_on(spectrum, lam))
+    usable = _band_mask(lam, band) & sub["incident_valid"].sel(configuration=config).values & (weight > 0)
+    if not usable.any():
+        raise InputError("band with no signal: no wavelength in the band carries incident light", file=ds.attrs.get("source"),
+                         field="band", expected=f"overlap with the incident light of '{config}'", got=band)
+    w = weight * np.gradient(lam) * usable
+    q = sub["bsdf"].values
+    s = sub["bsdf_std"].values
+    defined = np.isfinite(q[:, usable]).all(axis=1)
+    norm = w.sum()
+    with np.errstate(invalid="ignore"):
+        mean = np.where(defined, np.nansum(q * w, axis=1) / norm, np.nan)
+        std = np.where(defined, np.sqrt(np.nansum((s * w) ** 2, axis=1)) / norm, np.nan)
+    out = _profile(sub, mean, std, "1/sr", f"weighted mean BSDF over {band[0]:g}-{band[1]:g} nm (eq. 5)")
+    if "incident_relative_std" in sub:
+        # The reference beam divides every record alike: its noise is a common scale factor, which per-record
+        # standard uncertainties (and fits that treat records as independent) cannot carry.
+        rel = np.nan_to_num(sub["incident_relative_std"].sel(configuration=config).values)
+        out.attrs["common_relative_std"] = float(np.sqrt(np.sum((w * rel) ** 2)) / norm)
+    return out
+
+
+def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = YELLOW_BAND_NM) -> xr.Dataset:
+    """Σ_band ⟨q_λ⟩(λs) Δλs per record, in 1/sr: ⟨⟨q_λ⟩⟩·ΔΛs of eqs. (11)-(13)."""
+    sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
+    lam = sub["wavelength"].values
+    inside = _band_mask(lam, band)
+    if not inside.any():
+        raise InputError("band outside the wavelength grid", field="band", got=band)
+    w = np.gradient(lam) * inside
+    q = sub["bsdf_bispectral"].values
+    s = sub["bsdf_bispectral_std"].values
+    total = np.sum(np.where(inside, q, 0.0) * w, axis=1)
+    total = np.where(np.isfinite(q[:, inside]).all(axis=1), total, np.nan)
+    std = np.sqrt(np.sum(np.where(inside, s, 0.0) ** 2 * w**2, axis=1))
+    out = _profile(sub, total, std, "1/sr", f"bi-spectral BSDF integrated over {band[0]:g}-{band[1]:g} nm (eq. 13)")
+    if "incident_power_relative_std" in sub:
+        out.attrs["common_relative_std"] = float(sub["incident_power_relative_std"].sel(configuration=config))
+    return out
+
+
+def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = YELLOW_BAND_NM) -> xr.Dataset:
+    """⟨⟨q_λ⟩⟩ per record (eq. (12)), in 1/(sr·nm): the band integral divided by ΔΛs = high − low."""
+    out = bispectral_band_integral(ds, config, band)
+    width = band[1] - band[0]
+    out["bsdf"] = out["bsdf"] / width
+    out["bsdf_std"] = out["bsdf_std"] / width
+    out["bsdf"].attrs.update(units="1/(sr nm)", long_name="<<q_lambda>> (eq. 12)")
+    out["bsdf_std"].attrs["units"] = "1/(sr nm)"
+    return out
+
+
+def bispectral_weighted_mean(donaldson: xr.DataArray, excitation: SpectrumLike) -> xr.DataArray:
+    """Reduce a Donaldson-style bi-spectral BSDF q_λ(λi, λs) (dims include ``wavelength_i``) to ⟨q_λ⟩(λs), eq. (10)."""
+    if "wavelength_i" not in donaldson.dims:
+        raise InputError("no excitation axis", field="wavelength_i", expected="a dimension 'wavelength_i'")
+    lam_i = donaldson["wavelength_i"].values
+    e = spectrum_on(excitation, lam_i) * np.gradient(lam_i)
+    if not e.sum() > 0:
+        raise NumericalError("excitation spectrum has no power on the excitation grid", field="excitation")
+    weights = xr.DataArray(e / e.sum(), dims=["wavelength_i"], coords={"wavelength_i": lam_i})
+    out = (donaldson * weights).sum("wavelength_i")
+    out.attrs.update(units="1/(sr nm)", long_name="<q_lambda>(lambda_s), eq. (10)")
+    return out
+
+
+def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
+    """Power-weighted mean wavelength λ̄ = Σ Φ_λ λ Δλ / Σ Φ_λ Δλ over ``band`` (nm)."""
+    wl, values = _arrays(spectrum)
+    total = band_sum(wl, values, band)
+    if not total > 0:
+        raise NumericalError("spectrum carries no power in the band", field="band", got=band)
+    return band_sum(wl, values * wl, band) / total
+
+
+def mean_photon_energy(spectrum: SpectrumLike, band: Band) -> float:
+    """hc·ΣΦ_λΔλ / ΣΦ_λλΔλ in joules: the factor converting photon flux to power in eqs. (14)-(15)."""
+    return PLANCK_H * LIGHT_C / (mean_wavelength(spectrum, band) * 1e-9)
+
+
+def photon_ratio(incident: SpectrumLike, incident_band: Band, scattered: SpectrumLike, scattered_band: Band) -> float:
+    """TIS_photons / TIS_power for a converting interaction, eq. (16): E_ph,incident / E_ph,scattered = λ̄s/λ̄i."""
+    return mean_photon_energy(incident, incident_band) / mean_photon_energy(scattered, scattered_band)
+
+
+def _profile(sub: xr.Dataset, value: NDArray, std: NDArray, units: str, name: str) -> xr.Dataset:
+    keep = ["config", "theta_i", "phi_i", "theta_s", "phi_s", "side", "arc"]
+    out = xr.Dataset({"bsdf": ("record", value), "bsdf_std": ("record", std)},
+                     coords={k: sub[k] for k in keep if k in sub.coords})
+    out["bsdf"].attrs.update(units=units, long_name=name)
+    out["bsdf_std"].attrs["units"] = units
+    out.attrs.update({k: v for k, v in sub.attrs.items() if k in (
+        "source", "sample_name", "aperture_half_angle_deg", "solid_angle_sr", "detector_distance_mm",
+        "aperture_diameter_mm", "beam_diameter_mm")})
+    out["bsdf_std"].attrs["note"] = "per-record (independent) part; see attrs['common_relative_std'] for the shared scale"
+    out.attrs["quantity"] = "bsdf_profile"
+    return out
+
+
+INTERACTIONS = ("bibs", "biys", "yiys")
+
+
+def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = None,
+                        bands: dict[str, Band] | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
+    """The per-record BSDF profile (1/sr) of one interaction of the two-wavelength approach.
+
+    bibs: eq. (5) weighted mean over the blue band with the blue configuration; yiys: eq. (8) over the yellow
+    band with the yellow configuration; biys: eq. (13) integrand ⟨⟨q_λ⟩⟩·ΔΛs from the blue configuration.
+    Optionally restricted to one ``side``. Band and configuration names can be overridden.
+    """
+    bands = {"blue": BLUE_BAND_NM, "yellow": YELLOW_BAND_NM, **(bands or {})}
+    configs = {"blue": "blue", "yellow": "yellow", **(configs or {})}
+    if interaction == "bibs":
+        out = weighted_mean_bsdf(ds, configs["blue"], bands["blue"])
+    elif interaction == "yiys":
+        out = weighted_mean_bsdf(ds, configs["yellow"], bands["yellow"])
+    elif interaction == "biys":
+        out = bispectral_band_integral(ds, configs["blue"], bands["yellow"])
+    else:
+        raise InputError("unknown interaction", field="interaction", expected=" or ".join(INTERACTIONS), got=interaction)
+    out.attrs["interaction"] = interaction
+    if side is not None:
+        if side not in ("reflection", "transmission"):
+            raise InputError("unknown side", field="side", expected="reflection or transmission", got=side)
+        out = out.isel(record=np.flatnonzero(out["side"].values == side))
+    return out
+

@@ -1,0 +1,438 @@
+"""Angular reductions: hemisphere reconstruction from two measured arcs, and TIS with error bars.
+
+A goniometer scan of the power-budget paper (§2) measures two arcs per incidence and side: the plane of
+incidence, and the plane perpendicular to it through the specular direction. The TIS needs the whole
+hemisphere. We work in Harvey–Shack direction cosines, where the projected solid angle is exactly
+cos θs dΩ = dβx dβy (metrology.md §1.7; formats.md §1), so
+
+    TIS = ∫∫_{|β| ≤ 1} f(β) dβx dβy,
+
+and reconstruct f around the specular point β0 (for the source at φi = 180°, β0 = (sin θi, 0); the same β0 for
+light transmitted through a plate). With Δ = β − β0 = r(cos ψ, sin ψ):
+
+* the in-plane arc gives two half-profiles along ±Δα (Δβ = 0): f_+α(r), f_−α(r);
+* the perpendicular arc gives two half-profiles along ±Δβ; it is **not** a line of constant α — its points
+  are Δα = −sin θi (1 − cos ε), Δβ = sin ε (metrology.md §2.3) — so each point is placed at its true radius
+  r = |Δ|, not at sin ε;
+* the hemisphere is the elliptical blend (metrology.md §4.7, option 3, done in f rather than ln f so that the
+  TIS is linear in the data and negative values after dark subtraction are kept):
+
+      f(r, ψ) = cos²ψ · f_{sgn cos ψ · α}(r) + sin²ψ · f_{sgn sin ψ · β}(r).
+
+  It is exact for any f that depends on |Δ| only (a Lambertian body, Gaussian or ABg lobes about β0) and for
+  an in-plane profile that differs on the two sides of the specular point.
+
+Half-profiles are interpolated in r (in ln f between positive samples for the TIS value, in f for the linear
+weights) and held constant beyond the last measured radius. Missing arcs
+are filled from the others (documented in :meth:`Hemisphere.from_profile`). The integral uses polar
+coordinates centred on β0, clipped to the unit disk at t_max(ψ) = −b cos ψ + √(b² cos² ψ + 1 − b²): a midpoint
+rule in ψ (periodic, exponentially convergent) and Gauss–Legendre in r.
+
+Outside the radii a half-axis actually sampled (the perpendicular arc stops at ε = ±60°; about the normal it
+starts at |β| = sin θi), its weight is handed to the half-axes sampled at that radius; only where none is,
+the half-axis sampled farthest out holds its last value.
+
+Error bars: the measurement part propagates the per-record standard uncertainties through the (linear)
+quadrature weights and adds the scale uncertainty common to all records (the reference beam,
+``attrs['common_relative_std']`` of the profile); the TIS value itself interpolates half-profiles in ln f where neighbouring samples are
+positive (linear in f elsewhere), which follows the convex tails of lobes between sparse samples
+(metrology.md §4.4). The reconstruction part adds in quadrature (i) the change when the quadrature grid is
+halved, (ii) the change when half-profiles are interpolated in f instead of ln f, (iii) the largest change
+when the blend exponent goes from 2 (cos²ψ) to 1 or 4, and (iv) the change when data ends are held instead of
+borrowed. The single-arc (radially symmetric) reconstructions are reported for comparison.
+
+The paper's own rectangle sum, eq. (7) of the power-budget paper, is :func:`tis_rectangle_sum`.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import InputError, NumericalError
+from bsdfkit.core.records import incidences
+
+HALVES = ("+alpha", "-alpha", "+beta", "-beta")
+
+
+@dataclass(frozen=True)
+class HalfProfile:
+    """Samples of f along one half-axis: radii (sorted, unique), values, and the record index of each sample."""
+
+    radius: NDArray[np.float64]
+    value: NDArray[np.float64]
+    record: NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class QuadratureGrid:
+    """Polar nodes about β0 clipped to the unit disk: radius, angle and area weight (r dr dψ) per node."""
+
+    r: NDArray[np.float64]
+    psi: NDArray[np.float64]
+    w: NDArray[np.float64]
+
+
+def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> QuadratureGrid:
+    """Nodes covering the unit disk in polar coordinates centred on β0 (|β0| < 1)."""
+    bx, by = beta0
+    b2 = bx * bx + by * by
+    if not b2 < 1.0:
+        raise NumericalError("specular point on or outside the unit disk", field="theta_i", expected="θi < 90°")
+    psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
+    bu = bx * np.cos(psi) + by * np.sin(psi)
+    t_max = -bu + np.sqrt(bu * bu + 1.0 - b2)
+    # Gauss–Legendre in r: spectral convergence for smooth f (the trapezoid rule was only O(h²) here).
+    x, tw = np.polynomial.legendre.leggauss(n_r)
+    x, tw = 0.5 * (x + 1.0), 0.5 * tw
+    r = t_max[:, None] * x[None, :]
+    w = (t_max[:, None] ** 2) * x[None, :] * tw[None, :] * (2 * np.pi / n_psi)
+    return QuadratureGrid(r=r.ravel(), psi=np.repeat(psi, n_r), w=w.ravel())
+
+
+def _interp_weights(samples: NDArray[np.float64], query: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Indices and weights of linear interpolation with constant extrapolation (same as np.interp)."""
+    m = samples.size
+    if m == 1:
+        z = np.zeros(query.size, dtype=np.int64)
+        return z, z, np.ones(query.size), np.zeros(query.size)
+    q = np.clip(query, samples[0], samples[-1])
+    hi = np.clip(np.searchsorted(samples, q, side="right"), 1, m - 1)
+    lo = hi - 1
+    span = samples[hi] - samples[lo]
+    t = (q - samples[lo]) / span
+    return lo, hi, 1.0 - t, t
+
+
+@dataclass(frozen=True)
+class Hemisphere:
+    """A reconstruction of f over the scattering hemisphere from half-profiles about β0."""
+
+    beta0: tuple[float, float]
+    halves: dict[str, tuple[tuple[HalfProfile, float], ...]]  # half-axis -> Σ coef·interpolant
+    n_records: int
+    measured_range: dict[str, tuple[float, float]]  # radii [first, last] actually sampled per half-axis
+    axis: tuple[float, float] = (1.0, 0.0)  # unit vector of +α: from the source toward the specular side
+
+    # -- construction --------------------------------------------------------------------------------------
+    @classmethod
+    def from_profile(cls, profile: xr.Dataset, use: str = "both", center: str = "specular") -> "Hemisphere":
+        """Build from a profile of one incidence and one side (dim ``record``, var ``bsdf``, angle coords).
+
+        ``center`` = "specular" (β0: Harvey–Shack shift invariance, right for elastic scatter) or "normal"
+        (β = 0: rotational symmetry about the normal, right for light re-emitted by a phosphor, which forgets
+        the incident direction; §4.2 of the power-budget paper finds biys "lambertian").
+
+        ``use`` = "both" (default), "in_plane" or "perpendicular" (the single-arc, radially symmetric variants).
+        Fill rules: a missing perpendicular branch copies the other; no perpendicular arc → f_±β = mean of the
+        in-plane halves; a missing in-plane half copies the other; no in-plane arc → f_±α = mean of f_±β.
+        Records with a non-finite value (grazing, masked) are skipped.
+        """
+        th = np.radians(profile["theta_i"].values)
+        if th.size == 0:
+            raise InputError("empty profile", field="record", expected="records of one incidence and side")
+        if np.ptp(th) > 1e-9 or len(set(profile["side"].values)) != 1:
+            raise InputError("profile mixes incidences or sides", field="theta_i/side", expected="one incidence and one side")
+        phi_i = np.radians(profile["phi_i"].values[0])
+        theta_i = th[0]
+        if center == "specular":
+            b0 = (np.sin(theta_i) * np.cos(phi_i - np.pi), np.sin(theta_i) * np.sin(phi_i - np.pi))
+        elif center == "normal":
+            b0 = (0.0, 0.0)
+        else:
+            raise InputError("unknown reconstruction centre", field="center", expected="specular or normal", got=center)
+        ts = np.radians(profile["theta_s"].values)
+        ps = np.radians(profile["phi_s"].values)
+        # components in the frame aligned with the plane of incidence (u along β0 direction)
+        u_dir = np.array([np.cos(phi_i - np.pi), np.sin(phi_i - np.pi)])
+        a = np.sin(ts) * np.cos(ps)
+        b = np.sin(ts) * np.sin(ps)
+        du = (a - b0[0]) * u_dir[0] + (b - b0[1]) * u_dir[1]
+        dv = -(a - b0[0]) * u_dir[1] + (b - b0[1]) * u_dir[0]
+        value = profile["bsdf"].values
+        ok = np.isfinite(value)
+        arc = profile["arc"].values if "arc" in profile.coords else np.full(value.size, "other")
+        inplane = ok & (arc == "in_plane")
+        perp = ok & (arc == "perpendicular")
+        idx = np.arange(value.size)
+        r_all = np.hypot(du, dv)
+
+        def half(mask: NDArray[np.bool_]) -> HalfProfile | None:
+            if not mask.any():
+                return None
+            order = np.argsort(r_all[mask], kind="stable")
+            r, v, k = r_all[mask][order], value[mask][order], idx[mask][order]
+            keep = np.concatenate([[True], np.diff(r) > 1e-12])  # duplicate radius: keep the first sample
+            return HalfProfile(r[keep], v[keep], k[keep])
+
+        # The sample at the centre anchors the perpendicular half-axes (for the normal centre the perpendicular
+        # arc starts at |β| = sin θi and borrowing fills the inside).
+        anchor = inplane & (np.abs(du) < 1e-9)
+        halves: dict[str, HalfProfile | None] = {
+            "+alpha": half(inplane & (du >= -1e-9)),
+            "-alpha": half(inplane & (du <= 1e-9)),
+            "+beta": half(perp & (dv > 0) | anchor),
+            "-beta": half(perp & (dv < 0) | anchor),
+        }
+        if use == "in_plane":
+            halves["+beta"] = halves["-beta"] = None
+        elif use == "perpendicular":
+            halves["+alpha"] = halves["-alpha"] = None
+        elif use != "both":
+            raise InputError("unknown reconstruction", field="use", expected="both, in_plane or perpendicular", got=use)
+        own = {"+alpha": inplane & (du >= -1e-9), "-alpha": inplane & (du <= 1e-9),
+               "+beta": perp & (dv > 0), "-beta": perp & (dv < 0)}
+        measured = {}
+        for k, h in halves.items():
+            radii = r_all[own[k]]
+            measured[k] = (float(radii.min()), float(radii.max())) if h is not None and radii.size else (np.inf, -np.inf)
+        filled = _fill(halves)
+        return cls(beta0=(float(b0[0]), float(b0[1])), halves=filled, n_records=value.size, measured_range=measured,
+                   axis=(float(u_dir[0]), float(u_dir[1])))
+
+    # -- evaluation ------------------------------------------------------------------------------------------
+    def coefficients(self, r: NDArray, psi: NDArray, p: float = 2.0, borrow: bool = True) -> NDArray[np.float64]:
+        """Blend coefficients (n, 4) of the half-axes at polar nodes (r, ψ); rows sum to 1.
+
+        Base weights |cos ψ|^p, |sin ψ|^p (normalised; p = 2 is the cos²/sin² blend) on the half-axes the
+        node's quadrant faces. With ``borrow``, a half-axis asked for outside the radii it actually sampled
+        hands its weight to the half-axes sampled at that radius (an isotropy assumption used only where data
+        are missing); where none is, the half-axis sampled farthest out takes all the weight and its last value
+        is held.
+        """
+        r = np.asarray(r, dtype=np.float64).ravel()
+        psi = np.asarray(psi, dtype=np.float64).ravel()
+        ca, sb = np.abs(np.cos(psi)) ** p, np.abs(np.sin(psi)) ** p
+        norm = ca + sb
+        ca, sb = ca / norm, sb / norm
+        c = np.cos(psi)
+        sn = np.sin(psi)
+        coef = np.stack([np.where(c > 0, ca, 0.0), np.where(c <= 0, ca, 0.0),
+                         np.where(sn > 0, sb, 0.0), np.where(sn <= 0, sb, 0.0)], axis=1)
+        if borrow:
+            lo = np.array([self.measured_range[h][0] for h in HALVES])
+            hi = np.array([self.measured_range[h][1] for h in HALVES])
+            measured = (r[:, None] >= lo[None, :] - 1e-12) & (r[:, None] <= hi[None, :] + 1e-12)
+            n_measured = measured.sum(axis=1)
+            lost = np.where(measured, 0.0, coef).sum(axis=1)
+            share = np.where(n_measured > 0, lost / np.maximum(n_measured, 1), 0.0)
+            # Beyond every sampled radius: the half-axis sampled farthest out holds its last value.
+            farthest = np.zeros(len(HALVES))
+            farthest[int(np.argmax(np.where(np.isfinite(lo), hi, -np.inf)))] = 1.0
+            coef = np.where(n_measured[:, None] > 0, np.where(measured, coef + share[:, None], 0.0), farthest[None, :])
+        return coef
+
+    def evaluate_polar(self, r: NDArray, psi: NDArray, mode: str = "linear", p: float = 2.0,
+                       borrow: bool = True) -> NDArray[np.float64]:
+        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame)."""
+        if mode not in ("linear", "log"):
+            raise InputError("unknown interpolation mode", field="mode", expected="linear or log", got=mode)
+        shape = np.broadcast(r, psi).shape
+        r_flat = np.broadcast_to(r, shape).ravel()
+        coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow)
+        out = np.zeros(r_flat.size)
+        for k, name in enumerate(HALVES):
+            for h, share in self.halves[name]:
+                out += coef[:, k] * share * _interp(h, r_flat, mode)
+        return out.reshape(shape)
+
+    def bsdf(self, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        """f (1/sr) for unit vectors (..., 3) in the scattering hemisphere's sample frame (source at φi = 180°
+        unless the profile said otherwise)."""
+        d = np.asarray(directions, dtype=np.float64)
+        x = d[..., 0] - self.beta0[0]
+        y = d[..., 1] - self.beta0[1]
+        ux, uy = self.axis
+        du, dv = x * ux + y * uy, -x * uy + y * ux
+        return self.evaluate_polar(np.hypot(du, dv), np.arctan2(dv, du))
+
+    def weights(self, n_psi: int = 256, n_r: int = 400) -> NDArray[np.float64]:
+        """w such that TIS = Σ_records w_k f_k (the reconstruction and quadrature are linear in the data)."""
+        grid = polar_grid((float(np.hypot(*self.beta0)), 0.0), n_psi, n_r)
+        coef = self.coefficients(grid.r, grid.psi)
+        w = np.zeros(self.n_records)
+        for k, name in enumerate(HALVES):
+            for h, share in self.halves[name]:
+                a = coef[:, k] * share * grid.w
+                lo, hi, wl, wh = _interp_weights(h.radius, grid.r)
+                w += np.bincount(h.record[lo], weights=a * wl, minlength=self.n_records)
+                w += np.bincount(h.record[hi], weights=a * wh, minlength=self.n_records)
+        return w
+
+    def tis(self, mode: str = "linear", n_psi: int = 256, n_r: int = 400, p: float = 2.0, borrow: bool = True) -> float:
+        grid = polar_grid((float(np.hypot(*self.beta0)), 0.0), n_psi, n_r)
+        return float(np.sum(self.evaluate_polar(grid.r, grid.psi, mode, p, borrow) * grid.w))
+
+
+def _interp(h: HalfProfile, r: NDArray, mode: str) -> NDArray[np.float64]:
+    """Linear interpolation in f (or in ln f between positive neighbours), constant beyond the ends."""
+    lin = np.interp(r, h.radius, h.value)
+    if mode == "linear":
+        return lin
+    positive = h.value > 0
+    logv = np.interp(r, h.radius, np.log(np.where(positive, h.value, 1.0)))
+    good = np.interp(r, h.radius, positive.astype(float)) > 1 - 1e-12
+    return np.where(good, np.exp(logv), lin)
+
+
+def _fill(halves: dict[str, HalfProfile | None]) -> dict[str, tuple[tuple[HalfProfile, float], ...]]:
+    """Missing half-axes from the measured ones (rules in :meth:`Hemisphere.from_profile`)."""
+    h = dict(halves)
+    for a, b in (("+beta", "-beta"), ("-beta", "+beta"), ("+alpha", "-alpha"), ("-alpha", "+alpha")):
+        if h[a] is None and h[b] is not None:
+            h[a] = h[b]
+    if h["+alpha"] is None and h["+beta"] is None:
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf", expected="finite values on an arc")
+    out: dict[str, tuple[tuple[HalfProfile, float], ...]] = {}
+    for name, other in (("+alpha", ("+beta", "-beta")), ("-alpha", ("+beta", "-beta")),
+                        ("+beta", ("+alpha", "-alpha")), ("-beta", ("+alpha", "-alpha"))):
+        if h[name] is not None:
+            out[name] = ((h[name], 1.0),)
+        else:  # radial symmetry from the other arc: the mean of its two halves
+            out[name] = ((h[other[0]], 0.5), (h[other[1]], 0.5))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- TIS
+@dataclass(frozen=True)
+class TIS:
+    """TIS (fraction of incident power) with its measurement and reconstruction standard uncertainties."""
+
+    value: float
+    std_measurement: float
+    std_reconstruction: float
+    components: dict[str, float]
+
+    @property
+    def std(self) -> float:
+        return float(np.hypot(self.std_measurement, self.std_reconstruction))
+
+
+#: Reconstruction centre per interaction of the two-wavelength approach.
+CENTER = {"bibs": "specular", "yiys": "specular", "biys": "normal"}
+
+
+def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, center: str | None = None) -> TIS:
+    """TIS of one incidence and side of a profile (1/sr per record), with error bars (module docstring).
+
+    ``center`` defaults to the profile's interaction (``attrs['interaction']``) via :data:`CENTER`, else specular.
+    """
+    center = center or CENTER.get(profile.attrs.get("interaction", ""), "specular")
+    hemi = Hemisphere.from_profile(profile, center=center)
+    w = hemi.weights(n_psi, n_r)
+    f = np.nan_to_num(profile["bsdf"].values, nan=0.0)
+    s = np.nan_to_num(profile["bsdf_std"].values, nan=0.0) if "bsdf_std" in profile else np.zeros_like(f)
+    linear = float(w @ f)
+    # ln-f interpolation follows convex lobe tails between sparse samples (metrology.md §4.4); the linear
+    # form (exactly w·f) gives the first-order propagation of the measurement uncertainty.
+    value = hemi.tis("log", n_psi, n_r)
+    # per-record noise through the linear weights, plus the scale common to all records (reference beam)
+    std_meas = float(np.hypot(np.sqrt(np.sum((w * s) ** 2)), profile.attrs.get("common_relative_std", 0.0) * value))
+    coarse = hemi.tis("log", n_psi // 2, n_r // 2)
+    blends = [hemi.tis("log", n_psi, n_r, p=p) for p in (1.0, 4.0)]
+    hold = hemi.tis("log", n_psi, n_r, borrow=False)
+    parts = {"quadrature": abs(value - coarse), "interpolation": abs(value - linear),
+             "blend": max(abs(b - value) for b in blends), "extrapolation": abs(hold - value)}
+    std_rec = float(np.sqrt(sum(v * v for v in parts.values())))
+    singles = {}
+    for use in ("in_plane", "perpendicular"):
+        try:
+            singles[f"{use}_only"] = Hemisphere.from_profile(profile, use=use, center=center).tis("log", n_psi, n_r)
+        except InputError:
+            singles[f"{use}_only"] = float("nan")  # that arc was not measured
+    return TIS(value=value, std_measurement=std_meas, std_reconstruction=std_rec, components={**parts, **singles})
+
+
+def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "yiys"),
+              theta_i: list[float] | None = None) -> xr.Dataset:
+    """TIS per interaction, side and incidence from a calibrated scan: a Dataset with ``tis``, ``tis_std``,
+    ``tis_std_measurement``, ``tis_std_reconstruction`` (fractions) over (interaction, side, theta_i)."""
+    from bsdfkit.reduction.spectral import interaction_profile
+
+    angles = theta_i if theta_i is not None else incidences(ds)
+    sides = ["reflection", "transmission"]
+    shape = (len(interactions), len(sides), len(angles))
+    arrays = {k: np.full(shape, np.nan) for k in ("tis", "tis_std", "tis_std_measurement", "tis_std_reconstruction")}
+    for a, inter in enumerate(interactions):
+        prof = interaction_profile(ds, inter)
+        for b, side in enumerate(sides):
+            for c, th in enumerate(angles):
+                sel = (prof["side"].values == side) & np.isclose(prof["theta_i"].values, th, atol=1e-6)
+                if not sel.any():
+                    raise InputError("no records for this incidence and side", file=ds.attrs.get("source"),
+                                     field="theta_i", expected=f"records at {th:g} deg, {side}")
+                t = tis_from_profile(prof.isel(record=np.flatnonzero(sel)))
+                arrays["tis"][a, b, c] = t.value
+                arrays["tis_std"][a, b, c] = t.std
+                arrays["tis_std_measurement"][a, b, c] = t.std_measurement
+                arrays["tis_std_reconstruction"][a, b, c] = t.std_reconstruction
+    out = xr.Dataset({k: (("interaction", "side", "theta_i"), v) for k, v in arrays.items()},
+                     coords={"interaction": list(interactions), "side": sides, "theta_i": angles})
+    for k in arrays:
+        out[k].attrs["units"] = "1"
+    out["theta_i"].attrs["units"] = "deg"
+    out.attrs.update(quantity="tis", source=ds.attrs.get("source", ""))
+    return out
+
+
+def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: str,
+                           interaction: str = "biys", band: tuple[float, float] = (470.0, 740.0)) -> xr.DataArray:
+    """Spectral TIS density (1/nm): the bi-spectral BSDF integrated over the hemisphere at each λs.
+
+    The hemisphere weights of the band-integrated profile are linear in the data, so one reconstruction
+    integrates every wavelength: Φ_λ,s/Φ_i = Σ_k w_k ⟨q_λ⟩_k(λs). Its integral over ``band`` is the TIS.
+    """
+    from bsdfkit.core.records import select
+    from bsdfkit.reduction.spectral import bispectral_band_integral
+
+    sub = select(ds, config=config, theta_i=theta_i, side=side)
+    prof = bispectral_band_integral(sub, config, band)
+    hemi = Hemisphere.from_profile(prof, center=CENTER.get(interaction, "specular"))
+    w = hemi.weights()
+    density = np.nan_to_num(sub["bsdf_bispectral"].values, nan=0.0).T @ w
+    out = xr.DataArray(density, dims=["wavelength"], coords={"wavelength": ds["wavelength"].values})
+    out.attrs.update(units="1/nm", long_name=f"hemispherical spectral TIS density, {side}, θi = {theta_i:g}°")
+    return out
+
+
+def hemisphere_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> Callable[[float, str, NDArray], NDArray]:
+    """A callable ``f(theta_i_deg, side, directions) -> bsdf`` over measured incidences (for grids/exports).
+
+    Only measured incidences are available (no interpolation across incidence); others raise InputError.
+    """
+    from bsdfkit.reduction.spectral import interaction_profile
+
+    prof = interaction_profile(ds, interaction, side)
+    cache: dict[float, Hemisphere] = {}
+
+    def fn(theta_i_deg: float, side_: str, directions: NDArray) -> NDArray:
+        if side_ != side:
+            raise InputError("this reconstruction is for another side", field="side", expected=side, got=side_)
+        key = round(float(theta_i_deg), 6)
+        if key not in cache:
+            sel = np.isclose(prof["theta_i"].values, theta_i_deg, atol=1e-6)
+            if not sel.any():
+                raise InputError("incidence not measured", field="theta_i", expected="one of "
+                                 + ", ".join(f"{t:g}" for t in incidences(prof)), got=theta_i_deg)
+            cache[key] = Hemisphere.from_profile(prof.isel(record=np.flatnonzero(sel)), center=CENTER[interaction])
+        return cache[key].bsdf(directions)
+
+    fn.incidences_deg = incidences(prof)  # type: ignore[attr-defined]
+    return fn
+
+
+def tis_rectangle_sum(bsdf: Callable[[NDArray, NDArray], NDArray], dtheta_deg: float, dphi_deg: float) -> float:
+    """Eq. (7) of the power-budget paper: Σ_φ Σ_θ f(θ, φ) cos θ sin θ Δθ Δφ on the nodes θ = 0, Δθ, …, 90°
+    and φ = 0, Δφ, …, 360° − Δφ. ``bsdf(theta_rad, phi_rad)`` evaluates f on broadcast arrays."""
+    n_t = int(round(90.0 / dtheta_deg))
+    n_p = int(round(360.0 / dphi_deg))
+    if n_t < 1 or n_p < 1 or abs(n_t * dtheta_deg - 90) > 1e-9 or abs(n_p * dphi_deg - 360) > 1e-9:
+        raise InputError("steps must divide the hemisphere", field="dtheta/dphi", expected="90/Δθ and 360/Δφ integers",
+                         got=(dtheta_deg, dphi_deg))
+    th = np.radians(np.arange(n_t + 1) * dtheta_deg)[:, None]
+    ph = np.radians(np.arange(n_p) * dphi_deg)[None, :]
+    f = bsdf(th, ph)
+    return float(np.sum(f * np.cos(th) * np.sin(th)) * np.radians(dtheta_deg) * np.radians(dphi_deg))

@@ -1,0 +1,411 @@
+"""The virtual goniometer: simulate the raw export of a spectral goniometer scan from a truth BSDF.
+
+Users plan measurements with it (how fine a scan, how long an exposure, what uncertainty to expect); the test
+suite uses it as ground truth. It models the set-up of §2 of the power-budget paper: a collimated Xe beam
+through an interference or cut-on filter, a circular detector aperture at distance d feeding a CCD
+spectrometer, and a reference (direct-beam) spectrum taken by the same detector through an ND filter.
+
+Signal chain per spectral pixel (counts):
+    raw = clip(round(N_e/G + bias + N(0, σ_read)), 0, full scale),  N_e ~ Poisson(G·t·(rate + dark_rate))
+with rate = R(λ)·P(λ) (R: relative responsivity, P: spectral power reaching the detector). The scattered
+power is the aperture integral P_s(λ) = P_i(λ)·∫_ap f(ω, λ) cos θ dΩ (elastic) plus
+Φ_exc·e(λ)·∫_ap f_conv(ω) cos θ dΩ (converted), evaluated with :func:`bsdfkit.measurement.instrument.aperture_quadrature`,
+so finite-aperture averaging of sharp lobes is part of the simulation. Everything is deterministic per seed:
+each file draws from its own ``numpy.random.SeedSequence`` stream.
+"""
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.io import atomic
+from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
+from bsdfkit.simulation import truth as synthetic
+
+EXPOSURE_LADDER_S: tuple[float, ...] = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0)
+
+
+@dataclass(frozen=True)
+class Spectrometer:
+    """CCD spectrometer: wavelength grid (nm), conversion gain, noise and range."""
+
+    wavelength_min_nm: float = 380.0
+    wavelength_max_nm: float = 780.0
+    wavelength_step_nm: float = 0.5
+    gain_e_per_count: float = 2.0
+    read_noise_counts: float = 8.0
+    bias_counts: float = 1000.0
+    dark_rate_counts_per_s: float = 20.0
+    full_scale_counts: int = 65535
+
+    @property
+    def wavelength(self) -> NDArray[np.float64]:
+        n = int(round((self.wavelength_max_nm - self.wavelength_min_nm) / self.wavelength_step_nm)) + 1
+        return self.wavelength_min_nm + self.wavelength_step_nm * np.arange(n)
+
+    def responsivity(self, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Relative spectral responsivity (counts per unit spectral power), peak 1: a smooth CCD-like curve."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        return 0.35 + 0.65 * np.exp(-(((lam - 600.0) / 230.0) ** 2))
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """An incident configuration: the lamp through a filter. ``filter`` is ("bandpass", lo, hi) or ("longpass", cut_on)."""
+
+    name: str
+    description: str
+    filter: tuple
+    incident_band_nm: tuple[float, float]
+    reference_attenuation: float = 1e-3
+
+    def incident_power(self, wavelength: NDArray[np.float64], beam_scale: float) -> NDArray[np.float64]:
+        """Spectral power of the beam at the sample (counts/s at unit responsivity per pixel)."""
+        kind = self.filter[0]
+        if kind == "bandpass":
+            filt = synthetic.bandpass_filter(wavelength, self.filter[1], self.filter[2])
+        elif kind == "longpass":
+            filt = synthetic.longpass_filter(wavelength, self.filter[1])
+        else:
+            raise ValidationError("unknown filter kind", field="filter", expected="bandpass or longpass", got=kind)
+        return beam_scale * synthetic.xenon_lamp(wavelength) * filt
+
+
+BLUE = Configuration("blue", "blue interference filter 450-470 nm", ("bandpass", 450.0, 470.0), (450.0, 470.0))
+YELLOW = Configuration("yellow", "yellow cut-on filter 475 nm", ("longpass", 475.0), (475.0, 780.0))
+
+
+@dataclass(frozen=True)
+class ScanPlan:
+    """Detector positions per incidence: the in-plane arc (signed θs; + = specular side) in each listed side,
+    and the perpendicular arc through the specular direction (elevation ε), degrees."""
+
+    theta_i_deg: tuple[float, ...] = (5.0, 45.0, 56.0)
+    in_plane_deg: tuple[float, ...] = ()
+    perpendicular_deg: tuple[float, ...] = ()
+    sides: tuple[str, ...] = synthetic.SIDES
+    retro_block_deg: float = 3.0
+    fine_step_deg: float = 1.0
+    fine_halfwidth_deg: float = 10.0
+
+    def positions(self, theta_i_deg: float, side: str) -> list[tuple[float, float, str]]:
+        """(θs, φs, arc) in degrees in the sample frame for one incidence and side."""
+        th = theta_i_deg
+        signed = set(np.round(self.in_plane_deg, 6))
+        if self.fine_halfwidth_deg > 0:
+            fine = np.arange(-self.fine_halfwidth_deg, self.fine_halfwidth_deg + 1e-9, self.fine_step_deg)
+            signed |= set(np.round(th + fine, 6))
+        out = []
+        for s in sorted(signed):
+            if abs(s) > 90.0 or (side == "reflection" and abs(s + th) < self.retro_block_deg):
+                continue
+            out.append((abs(s), 0.0 if s >= 0 else 180.0, "in_plane"))
+        for eps in self.perpendicular_deg:
+            if abs(eps) < 1e-9:
+                continue  # the specular point is on the in-plane arc already
+            e, t = np.radians(eps), np.radians(th)
+            ts = np.degrees(np.arccos(np.clip(np.cos(e) * np.cos(t), -1, 1)))
+            ps = np.degrees(np.arctan2(np.sin(e), np.cos(e) * np.sin(t)))
+            out.append((float(ts), float(ps), "perpendicular"))
+        return out
+
+
+def default_plan() -> ScanPlan:
+    """The cl830-synthetic plan: in-plane −88…88° every 4° plus 1° steps within ±10° of specular; the
+    perpendicular arc −60…60° every 5° plus 1° steps within ±8°."""
+    coarse = tuple(float(x) for x in np.arange(-88.0, 88.0 + 1e-9, 4.0))
+    perp = sorted(set(np.round(np.arange(-60.0, 60.0 + 1e-9, 5.0), 6)) | set(np.round(np.arange(-8.0, 8.0 + 1e-9, 1.0), 6)))
+    return ScanPlan(in_plane_deg=coarse, perpendicular_deg=tuple(float(x) for x in perp))
+
+
+@dataclass(frozen=True)
+class VirtualGoniometer:
+    """Instrument + spectrometer + lamp of the power-budget paper's set-up (§2)."""
+
+    instrument: Instrument = Instrument(886.0, 25.4, 14.0)
+    spectrometer: Spectrometer = Spectrometer()
+    beam_peak_counts_per_s: float = 2.0e8
+    target_fill: float = 0.6
+    max_exposure_s: float = 20.0
+    dark_frames: int = 8
+    reference_frames: int = 8
+    exposure_ladder_s: tuple[float, ...] = EXPOSURE_LADDER_S
+
+    # -- signal model ------------------------------------------------------------------------------
+    def scattered_rate(self, truth: synthetic.PhosphorPlateTruth, config: Configuration, theta_i_deg: float,
+                       side: str, theta_s_deg: NDArray, phi_s_deg: NDArray) -> NDArray[np.float64]:
+        """Mean signal (counts/s per pixel, no dark) for detector centres (θs, φs); shape (n_pos, n_wavelength)."""
+        lam = self.spectrometer.wavelength
+        resp = self.spectrometer.responsivity(lam)
+        p_i = config.incident_power(lam, self.beam_peak_counts_per_s)
+        th = np.radians(theta_i_deg)
+        quad = aperture_quadrature(np.radians(theta_s_deg), np.radians(phi_s_deg), self.instrument)
+        cos = np.clip(quad.directions[..., 2], 0.0, None)  # nodes past the horizon see nothing
+        w = quad.weights * cos
+        s_b = (truth.elastic_angular("bibs", side, th, quad.directions) * w).sum(-1)
+        s_y = (truth.elastic_angular("yiys", side, th, quad.directions) * w).sum(-1)
+        s_c = (truth.conversion_angular(side, th, quad.directions) * w).sum(-1)
+        elastic_b = truth.elastic_spectral("bibs", side, th, lam)
+        elastic_y = truth.elastic_spectral("yiys", side, th, lam)
+        blue = lam < truth.elastic_split_nm
+        elastic = p_i * np.where(blue, elastic_b * s_b[:, None], elastic_y * s_y[:, None])
+        phi_exc = np.trapezoid(p_i * truth.excitation(lam), lam)
+        converted = phi_exc * truth.emission_density(lam) * s_c[:, None]
+        return resp * (elastic + converted)
+
+    def expected_bsdf(self, truth: synthetic.PhosphorPlateTruth, config: Configuration, theta_i_deg: float,
+                      side: str, theta_s_deg: NDArray, phi_s_deg: NDArray) -> dict[str, NDArray[np.float64]]:
+        """What an ideal (noise-free) instrument reports: aperture-averaged BSDF and bi-spectral BSDF.
+
+        ``bsdf`` = P_s(λ)/(P_i(λ) Ω cos θs) where P_i(λ) > 0; ``bsdf_bispectral`` = P_s(λ)/(Φ_i Ω cos θs).
+        """
+        lam = self.spectrometer.wavelength
+        resp = self.spectrometer.responsivity(lam)
+        p_i = config.incident_power(lam, self.beam_peak_counts_per_s)
+        rate = self.scattered_rate(truth, config, theta_i_deg, side, theta_s_deg, phi_s_deg)
+        geom = self.instrument.solid_angle_sr * np.cos(np.radians(np.asarray(theta_s_deg)))[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bsdf = np.where(p_i > 0, rate / (resp * np.where(p_i > 0, p_i, 1.0)) / geom, np.nan)
+        phi_i = np.trapezoid(p_i, lam)
+        return {"bsdf": bsdf, "bsdf_bispectral": rate / resp / phi_i / geom}
+
+    # -- noise -------------------------------------------------------------------------------------
+    def choose_exposure(self, peak_rate: float) -> float:
+        sp = self.spectrometer
+        budget = self.target_fill * sp.full_scale_counts - sp.bias_counts
+        best = self.exposure_ladder_s[0]
+        for t in self.exposure_ladder_s:
+            if t <= self.max_exposure_s and (peak_rate + sp.dark_rate_counts_per_s) * t <= budget:
+                best = t
+        return best
+
+    def read_counts(self, rate: NDArray[np.float64], exposure_s: NDArray[np.float64] | float,
+                    rng: np.random.Generator) -> NDArray[np.int64]:
+        """Raw counts for mean signal ``rate`` (counts/s) integrated for ``exposure_s``, with dark, shot and read noise."""
+        sp = self.spectrometer
+        t = np.asarray(exposure_s, dtype=np.float64)
+        if t.ndim == 1:
+            t = t[:, None]
+        electrons = rng.poisson(sp.gain_e_per_count * t * (np.clip(rate, 0, None) + sp.dark_rate_counts_per_s))
+        counts = electrons / sp.gain_e_per_count + sp.bias_counts + rng.normal(0.0, sp.read_noise_counts, electrons.shape)
+        return np.clip(np.rint(counts), 0, sp.full_scale_counts).astype(np.int64)
+
+
+# ------------------------------------------------------------------------------------------- export
+@dataclass
+class RawExport:
+    """An in-memory raw export; :func:`write_raw_export` writes it in the documented format (docs/raw-format.md)."""
+
+    manifest: dict
+    scans: dict[str, dict]            # config name -> {"columns": {...}, "counts": (n, n_wl)}
+    references: dict[str, dict]       # config name -> {"exposure_s": t, "counts": (frames, n_wl)}
+    dark: dict                        # {"exposure_s": (n,), "frame": (n,), "counts": (n, n_wl)}
+    responsivity: NDArray[np.float64]
+    wavelength: NDArray[np.float64]
+
+
+def _stream(seed: int, *words: str) -> np.random.Generator:
+    key = [int(seed)] + [int.from_bytes(w.encode()[:8].ljust(8, b"\0"), "little") for w in words]
+    return np.random.default_rng(np.random.SeedSequence(key))
+
+
+def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = None,
+                  goniometer: VirtualGoniometer | None = None,
+                  configurations: tuple[Configuration, ...] = (BLUE, YELLOW), seed: int = 0,
+                  sample_name: str | None = None, extra_manifest: dict | None = None) -> RawExport:
+    """Simulate a complete raw export (scans, reference beams, darks) of ``truth`` measured with ``plan``."""
+    plan = plan or default_plan()
+    gonio = goniometer or VirtualGoniometer()
+    sp = gonio.spectrometer
+    lam = sp.wavelength
+    used_exposures: set[float] = set()
+    scans: dict[str, dict] = {}
+    references: dict[str, dict] = {}
+    for config in configurations:
+        cols: dict[str, list] = {k: [] for k in ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc", "exposure_s")}
+        blocks = []
+        for th in plan.theta_i_deg:
+            for side in plan.sides:
+                pos = plan.positions(th, side)
+                ts = np.array([p[0] for p in pos])
+                ps = np.array([p[1] for p in pos])
+                rate = gonio.scattered_rate(truth, config, th, side, ts, ps)
+                exposure = np.array([gonio.choose_exposure(r.max()) for r in rate])
+                used_exposures.update(exposure.tolist())
+                rng = _stream(seed, "scan", config.name, f"{th:g}", side)
+                blocks.append(gonio.read_counts(rate, exposure, rng))
+                cols["theta_i_deg"] += [th] * len(pos)
+                cols["phi_i_deg"] += [180.0] * len(pos)
+                cols["theta_s_deg"] += ts.tolist()
+                cols["phi_s_deg"] += ps.tolist()
+                cols["side"] += [side] * len(pos)
+                cols["arc"] += [p[2] for p in pos]
+                cols["exposure_s"] += exposure.tolist()
+        scans[config.name] = {"columns": cols, "counts": np.concatenate(blocks, axis=0)}
+        ref_rate = sp.responsivity(lam) * config.incident_power(lam, gonio.beam_peak_counts_per_s) * config.reference_attenuation
+        t_ref = gonio.choose_exposure(ref_rate.max())
+        used_exposures.add(t_ref)
+        rng = _stream(seed, "reference", config.name)
+        references[config.name] = {
+            "exposure_s": t_ref,
+            "counts": gonio.read_counts(np.broadcast_to(ref_rate, (gonio.reference_frames, lam.size)),
+                                        np.full(gonio.reference_frames, t_ref), rng),
+        }
+    exposures = sorted(used_exposures)
+    dark_t = np.repeat(exposures, gonio.dark_frames)
+    rng = _stream(seed, "dark")
+    dark_counts = gonio.read_counts(np.zeros((dark_t.size, lam.size)), dark_t, rng)
+    dark = {"exposure_s": dark_t, "frame": np.tile(np.arange(gonio.dark_frames), len(exposures)), "counts": dark_counts}
+
+    manifest = {
+        "format": "bsdfkit-raw-scan",
+        "format_version": 1,
+        "sample": {"name": sample_name or truth.name, "synthetic": True,
+                   "description": f"SYNTHETIC data made by bsdfkit's virtual goniometer from the truth '{truth.name}'"},
+        "instrument": asdict(gonio.instrument),
+        "spectrometer": {
+            "wavelength_min_nm": sp.wavelength_min_nm, "wavelength_max_nm": sp.wavelength_max_nm,
+            "wavelength_step_nm": sp.wavelength_step_nm, "gain_e_per_count": sp.gain_e_per_count,
+            "full_scale_counts": sp.full_scale_counts, "responsivity_file": "responsivity.csv",
+        },
+        "dark": {"file": "dark.csv.gz"},
+        "configuration": [
+            {"name": c.name, "description": c.description, "incident_band_nm": list(c.incident_band_nm),
+             "scan_file": f"scans/{c.name}.csv.gz", "reference_file": f"reference/{c.name}.csv.gz",
+             "reference_attenuation": c.reference_attenuation}
+            for c in configurations
+        ],
+        "provenance": {"generator": "bsdfkit.simulation.virtual_goniometer.simulate_scan", "seed": int(seed),
+                       "plan": asdict(plan), "goniometer": json.loads(json.dumps(asdict(gonio)))},
+    }
+    if extra_manifest:
+        manifest.update(extra_manifest)
+    return RawExport(manifest=manifest, scans=scans, references=references, dark=dark,
+                     responsivity=sp.responsivity(lam), wavelength=lam)
+
+
+# --------------------------------------------------------------------------------------------- writing
+def _csv_gz(header: list[str], rows: list[list]) -> bytes:
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    # mtime=0 keeps the bytes identical for identical content.
+    return gzip.compress(text.getvalue().encode("utf-8"), compresslevel=9, mtime=0)
+
+
+def _wl_header(lam: NDArray[np.float64]) -> list[str]:
+    return [f"{x:.1f}" if abs(x * 10 - round(x * 10)) < 1e-9 else repr(float(x)) for x in lam]
+
+
+def write_raw_export(export: RawExport, folder: str | Path, force: bool = False) -> Path:
+    """Write ``export`` as manifest.toml + gzip CSV files (docs/raw-format.md); atomic per file."""
+    from bsdfkit.io.toml_write import dumps as toml_dumps
+
+    folder = Path(folder)
+    atomic.check_writable(folder / "manifest.toml", force)
+    wl = _wl_header(export.wavelength)
+    for name, scan in export.scans.items():
+        c = scan["columns"]
+        rows = [[f"{c['theta_i_deg'][k]:.6g}", f"{c['phi_i_deg'][k]:.6g}", f"{c['theta_s_deg'][k]:.6f}",
+                 f"{c['phi_s_deg'][k]:.6f}", c["side"][k], c["arc"][k], f"{c['exposure_s'][k]:g}"]
+                + scan["counts"][k].tolist() for k in range(len(c["side"]))]
+        atomic.write_bytes(folder / "scans" / f"{name}.csv.gz",
+                           _csv_gz(["theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc", "exposure_s"] + wl, rows),
+                           force)
+    for name, ref in export.references.items():
+        rows = [[k, f"{ref['exposure_s']:g}"] + ref["counts"][k].tolist() for k in range(ref["counts"].shape[0])]
+        atomic.write_bytes(folder / "reference" / f"{name}.csv.gz", _csv_gz(["frame", "exposure_s"] + wl, rows), force)
+    d = export.dark
+    rows = [[int(d["frame"][k]), f"{d['exposure_s'][k]:g}"] + d["counts"][k].tolist() for k in range(d["counts"].shape[0])]
+    atomic.write_bytes(folder / "dark.csv.gz", _csv_gz(["frame", "exposure_s"] + wl, rows), force)
+    resp_rows = "wavelength_nm,relative_responsivity\n" + "".join(
+        f"{x:.1f},{r:.8f}\n" for x, r in zip(export.wavelength, export.responsivity))
+    atomic.write_text(folder / "responsivity.csv", resp_rows, force)
+    atomic.write_text(folder / "manifest.toml", toml_dumps(export.manifest), force)
+    return folder
+
+
+# ------------------------------------------------------------------------------ the cl830 stand-in
+#: TIS targets (percent of incident power) of the synthetic CL830 stand-in. 45° is Table 2 of the
+#: power-budget paper; 5° and 56° are plausible values with the specular share growing with incidence.
+CL830_TIS_TARGETS: dict[float, dict[str, float]] = {
+    5.0: {"B_bibs": 10.2, "F_bibs": 6.4, "B_biys": 26.0, "F_biys": 26.6, "B_yiys": 45.0, "F_yiys": 48.3},
+    45.0: {"B_bibs": 10.9, "F_bibs": 5.4, "B_biys": 26.3, "F_biys": 25.7, "B_yiys": 45.7, "F_yiys": 47.1},
+    56.0: {"B_bibs": 11.8, "F_bibs": 4.7, "B_biys": 26.6, "F_biys": 25.0, "B_yiys": 46.6, "F_yiys": 45.9},
+}
+#: Lobe shapes: (A, σ) per interaction, side and incidence. Reflection lobes are specular peaks whose TIS
+#: share grows with incidence (Figs. 6-8); transmission lobes are broad forward bodies centred on the direct
+#: transmission direction ("decreasing with scattering angle", Fig. 4 of the cylindrical-module paper).
+_CL830_LOBES = {
+    ("bibs", "reflection"): {5.0: (0.6, 0.045), 45.0: (2.0, 0.05), 56.0: (3.2, 0.055)},
+    ("yiys", "reflection"): {5.0: (1.0, 0.045), 45.0: (3.0, 0.05), 56.0: (4.5, 0.055)},
+    ("bibs", "transmission"): {5.0: (0.016, 0.42), 45.0: (0.014, 0.40), 56.0: (0.012, 0.40)},
+    ("yiys", "transmission"): {5.0: (0.09, 0.45), 45.0: (0.085, 0.43), 56.0: (0.08, 0.42)},
+}
+_CL830_KAPPA = {"bibs": (-5.0, 460.0), "yiys": (3.0, 600.0)}
+_CL830_EPSILON = {"reflection": 0.10, "transmission": 0.05}
+
+
+def cl830_truth(goniometer: VirtualGoniometer | None = None) -> synthetic.PhosphorPlateTruth:
+    """Truth of the cl830-synthetic plate, with ρ and T solved so that the exact TIS equals the targets.
+
+    The exact TIS depends on the measurement's incident spectra (the weighted means of eqs. 5 and 8), so the
+    lamp and filters of ``goniometer`` enter: ρ = TIS/⟨m⟩ − TIS_lobe.
+    """
+    gonio = goniometer or VirtualGoniometer()
+    lam = gonio.spectrometer.wavelength
+    blue = BLUE.incident_power(lam, 1.0)
+    yellow = YELLOW.incident_power(lam, 1.0)
+    angles = tuple(sorted(CL830_TIS_TARGETS))
+    tables: dict[str, dict[str, list]] = {"bibs": {}, "yiys": {}, "biys": {}}
+    for side, tag in (("reflection", "B"), ("transmission", "F")):
+        for inter, band, spec in (("bibs", synthetic.BLUE_BAND_NM, blue), ("yiys", synthetic.YELLOW_BAND_NM, yellow)):
+            kappa, lref = _CL830_KAPPA[inter]
+            rows = []
+            for th in angles:
+                a, sigma = _CL830_LOBES[(inter, side)][th]
+                m = synthetic.weighted_mean(lam, 1.0 + kappa / 100.0 * (lam - lref) / 100.0, spec, band)
+                rho = (CL830_TIS_TARGETS[th][f"{tag}_{inter}"] / 100.0 / m
+                       - synthetic.clipped_gaussian_lobe_tis(a, sigma, np.radians(th)))
+                if rho <= 0:
+                    raise ValidationError("lobe carries more than the target TIS", field=f"{inter}.{side}.{th}")
+                rows.append(synthetic.LobeParams(rho=rho, A=a, sigma=sigma, kappa=kappa / 100.0, lambda_ref=lref))
+            tables[inter][side] = rows
+        tables["biys"][side] = [synthetic.ConversionParams(T=CL830_TIS_TARGETS[th][f"{tag}_biys"] / 100.0,
+                                                           epsilon=_CL830_EPSILON[side]) for th in angles]
+    return synthetic.PhosphorPlateTruth(
+        name="cl830-synthetic", theta_i_deg=angles,
+        bibs={s: tuple(v) for s, v in tables["bibs"].items()},
+        yiys={s: tuple(v) for s, v in tables["yiys"].items()},
+        biys={s: tuple(v) for s, v in tables["biys"].items()},
+    )
+
+
+def truth_manifest_section(truth: synthetic.PhosphorPlateTruth, goniometer: VirtualGoniometer | None = None) -> dict:
+    """The ``[truth]`` manifest table: parameters and the exact TIS per incidence (percent)."""
+    gonio = goniometer or VirtualGoniometer()
+    lam = gonio.spectrometer.wavelength
+    blue = BLUE.incident_power(lam, 1.0)
+    yellow = YELLOW.incident_power(lam, 1.0)
+    tis = {f"{th:g}": synthetic.exact_tis_table(truth, th, lam, blue, yellow) for th in truth.theta_i_deg}
+    return {"truth": {"model": "bsdfkit.simulation.truth.PhosphorPlateTruth", "parameters_json": truth.to_json(),
+                      "tis_percent": tis}}
+
+
+def cl830_synthetic(seed: int = 830, plan: ScanPlan | None = None,
+                    goniometer: VirtualGoniometer | None = None) -> RawExport:
+    """The bundled measurement: the cl830 truth measured with the default plan (``measurements/cl830-synthetic``)."""
+    gonio = goniometer or VirtualGoniometer()
+    truth = cl830_truth(gonio)
+    extra = truth_manifest_section(truth, gonio)
+    extra["provenance_command"] = f"bsdfkit simulate --preset cl830-synthetic --seed {seed} -o measurements/cl830-synthetic"
+    return simulate_scan(truth, plan, gonio, seed=seed, sample_name="cl830-synthetic", extra_manifest=extra)

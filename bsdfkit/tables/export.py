@@ -1,0 +1,508 @@
+"""Export a BSDF to a ray-tracer table (TracePro, Zemax, ASAP-style) and read such tables back.
+
+The data flow is one direction::
+
+    source ──► BSDF callable(s) per side ──► grid (bsdfkit.tables.grids) ──► property/table object ──► file
+                                                                                         (bsdfkit.io.*)
+    file ──► reader ──► table object ──► TIS recomputed with the writer's quadrature ──► summary
+
+A *source* is one of
+
+* a BSDF callable ``bsdf_fn(theta_i_deg, side, directions) -> bsdf`` (contract in :mod:`bsdfkit.tables.grids`);
+  the incidences must then be given;
+* a **fit result**: an :class:`xarray.Dataset` (or a netCDF path) with attribute ``model`` =
+  ``"lambert"`` | ``"lambert+gaussian"`` | ``"abg"`` | ``"lambert+abg"`` (the models of
+  :mod:`bsdfkit.fit.least_squares`) and parameter variables over ``theta_i`` (degrees): ``rho`` (Lambert fraction,
+  f = ρ/π), ``A`` and ``sigma`` (Gaussian lobe A·exp(−|β−β0|²/2σ²)), ``A``, ``B``, ``g`` (ABg
+  A/(B + |β−β0|^g)); optional ``side`` and ``interaction`` dimensions (or attributes) select the data;
+* a **calibrated scan** (a Dataset without ``model``): the hemisphere is reconstructed by
+  ``bsdfkit.reduction.tis.hemisphere_bsdf_fn(ds, interaction, side)``, imported only when needed.
+
+Every write is atomic and refuses to overwrite an existing file unless ``force`` (bsdfkit.io.atomic).
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core import frames
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.io import atomic
+from bsdfkit.tables import grids
+from bsdfkit.tables.formats import asap, tracepro, zemax
+
+__all__ = [
+    "FORMATS",
+    "FIT_MODELS",
+    "ExportResult",
+    "ExportSettings",
+    "FileSummary",
+    "export",
+    "fit_bsdf_fn",
+    "read_any",
+    "sniff_format",
+]
+
+FORMATS: tuple[str, ...] = ("tracepro", "zemax", "asap")
+FIT_MODELS: dict[str, tuple[str, ...]] = {
+    "lambert": ("rho",),
+    "lambert+gaussian": ("rho", "A", "sigma"),
+    "abg": ("A", "B", "g"),
+    "lambert+abg": ("rho", "A", "B", "g"),
+}
+_SIDE_CHOICES = ("reflection", "transmission", "both")
+_THETA_MATCH_DEG = 1e-9
+
+ExportFormat = Literal["tracepro", "zemax", "asap"]
+
+
+@dataclass(frozen=True)
+class ExportSettings:
+    """Choices of an export beyond source, format, side and path. ``None`` means the documented default.
+
+    ``theta_i_deg``: incidences to export (default: those of the fit result or scan).
+    ``harvey_shack_axes`` / ``specular_axes``: table axes (default :meth:`grids.HarveyShackAxes.default`
+    with TracePro's ``zero_azimuth_deg`` or 0 for ASAP, and :meth:`grids.SpecularAxes.default`).
+    ``zemax_symmetry``: ``PlaneSymmetrical`` (the mirror average of the source, refused when the source
+    deviates from plane symmetry by more than ``symmetry_tolerance`` of the block maximum) or
+    ``Asymmetrical``. ``tracepro_scatter``: ``table`` (Scatter 5) or ``abg`` (Scatter 1, ABg fit results
+    only). ``specular_reflectance``/``specular_transmittance`` enter TracePro's energy balance.
+    """
+
+    theta_i_deg: tuple[float, ...] | None = None
+    harvey_shack_axes: grids.HarveyShackAxes | None = None
+    specular_axes: grids.SpecularAxes | None = None
+    zemax_symmetry: str = "PlaneSymmetrical"
+    tracepro: tracepro.TraceProOptions = field(default_factory=tracepro.TraceProOptions)
+    tracepro_scatter: str = "table"
+    specular_reflectance: float = 0.0
+    specular_transmittance: float = 0.0
+    comments: tuple[str, ...] = ()
+    symmetry_tolerance: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
+            raise ValidationError("unsupported Zemax symmetry", field="zemax_symmetry",
+                                  expected="PlaneSymmetrical or Asymmetrical", got=self.zemax_symmetry)
+        if self.tracepro_scatter not in ("table", "abg"):
+            raise ValidationError("unknown TracePro scatter mode", field="tracepro_scatter",
+                                  expected="table or abg", got=self.tracepro_scatter)
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What was written: TIS of the source (direct integral) and of the written table, per side and incidence."""
+
+    format: str
+    path: str
+    sides: tuple[str, ...]
+    incidences_deg: tuple[float, ...]
+    tis_source: dict[str, list[float]]
+    tis_table: dict[str, list[float]]
+    plane_symmetry_deviation: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": self.format, "path": self.path, "sides": list(self.sides),
+                "incidences_deg": list(self.incidences_deg), "tis_source": self.tis_source,
+                "tis_table": self.tis_table, "plane_symmetry_deviation": self.plane_symmetry_deviation}
+
+
+@dataclass(frozen=True)
+class FileSummary:
+    """Summary of a table file: its format, incidences and TIS (recomputed and, where stated, as stated).
+
+    ``tis_computed`` / ``tis_stated`` map a key to one value per entry of ``incidences_deg``. Keys are the
+    sides (``reflection``, ``transmission``); TracePro files state only the total scatter implied by their
+    energy balance (1 − Abso − Refl − Tran), reported under ``total`` (``tis_computed['total']`` is the
+    sum of the sides, for comparison). Several Zemax sample rotations
+    get keys ``<side>@rotation=<deg>``.
+    """
+
+    format: str
+    path: str
+    incidences_deg: list[float]
+    tis_computed: dict[str, list[float]]
+    tis_stated: dict[str, list[float]]
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": self.format, "path": self.path, "incidences_deg": self.incidences_deg,
+                "tis_computed": self.tis_computed, "tis_stated": self.tis_stated, "details": self.details}
+
+
+# --------------------------------------------------------------------------------------------------
+# sources
+# --------------------------------------------------------------------------------------------------
+BsdfFn = grids.BsdfFn
+
+
+def _open_dataset(path: str | Path) -> xr.Dataset:
+    path = Path(path)
+    if not path.exists():
+        raise InputError("source file does not exist", file=path)
+    try:
+        with xr.open_dataset(path) as ds:
+            return ds.load()
+    except (OSError, ValueError) as exc:
+        raise FormatError("cannot read the source as netCDF", file=path, expected="a netCDF dataset",
+                          got=type(exc).__name__) from None
+
+
+def _select(ds: xr.Dataset, dim: str, value: str, what: str) -> xr.Dataset:
+    """Select ``value`` along ``dim`` if present, else check the attribute of that name."""
+    if dim in ds.dims:
+        values = [str(v) for v in ds[dim].values]
+        if value not in values:
+            raise ValidationError(f"{what} not in the source", field=dim, expected=" or ".join(values), got=value)
+        return ds.sel({dim: value})
+    stated = ds.attrs.get(dim)
+    if stated is not None and str(stated) != value:
+        raise ValidationError(f"source holds another {what}", field=dim, expected=str(stated), got=value)
+    return ds
+
+
+def _fit_parameters(ds: xr.Dataset, model: str) -> dict[float, dict[str, float]]:
+    if "theta_i" not in ds.coords:
+        raise ValidationError("fit result has no theta_i coordinate", field="theta_i",
+                              expected="parameters over theta_i (degrees)", got=list(ds.coords))
+    theta = np.atleast_1d(np.asarray(ds["theta_i"].values, dtype=np.float64))
+    params: dict[float, dict[str, float]] = {float(t): {} for t in theta}
+    for name in FIT_MODELS[model]:
+        if name not in ds.data_vars:
+            raise ValidationError(f"fit result lacks parameter '{name}' of model {model}", field=name,
+                                  expected=", ".join(FIT_MODELS[model]), got=sorted(ds.data_vars))
+        var = ds[name]
+        extra = [d for d in var.dims if d != "theta_i"]
+        if extra:
+            raise ValidationError(f"parameter '{name}' has extra dimensions", field=name,
+                                  expected="dims (theta_i,)", got=str(var.dims))
+        values = np.broadcast_to(np.asarray(var.values, dtype=np.float64), theta.shape)
+        for t, v in zip(theta, values):
+            if not np.isfinite(v):
+                raise ValidationError(f"parameter '{name}' is not finite", field=f"{name}[theta_i={t:g}]",
+                                      expected="a finite number", got=float(v))
+            params[float(t)][name] = float(v)
+    for t, p in params.items():
+        where = f"[theta_i={t:g}]"
+        if "rho" in p and not 0.0 <= p["rho"] <= 1.0:
+            raise ValidationError("Lambert fraction out of range", field="rho" + where, expected="0..1", got=p["rho"])
+        if "sigma" in p and p["sigma"] <= 0:
+            raise ValidationError("Gaussian width must be positive", field="sigma" + where, expected="> 0",
+                                  got=p["sigma"])
+        if "A" in p and p["A"] < 0:
+            raise ValidationError("lobe amplitude must be >= 0", field="A" + where, expected=">= 0", got=p["A"])
+        if "B" in p and (p["B"] < 0 or (p["B"] == 0 and p["g"] != 0)):
+            raise ValidationError("ABg B must be > 0 unless g = 0", field="B" + where, expected="> 0", got=p["B"])
+    return params
+
+
+def _model_bsdf_fn(model: str, params: Mapping[float, Mapping[str, float]], side: str) -> BsdfFn:
+    thetas = np.array(sorted(params))
+
+    def lookup(theta_i_deg: float) -> Mapping[str, float]:
+        k = int(np.argmin(np.abs(thetas - theta_i_deg)))
+        if abs(thetas[k] - theta_i_deg) > _THETA_MATCH_DEG:
+            raise ValidationError("no fitted parameters at this incidence", field="theta_i",
+                                  expected=f"one of {thetas.tolist()}", got=theta_i_deg)
+        return params[float(thetas[k])]
+
+    def bsdf_fn(theta_i_deg: float, side_: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        if side_ != side:
+            raise ValidationError("fit result does not describe this side", field="side", expected=side, got=side_)
+        p = lookup(theta_i_deg)
+        if model == "lambert":
+            return np.full(directions.shape[:-1], p["rho"] / np.pi)
+        rho, _ = frames.harvey_shack_from_direction(directions, np.radians(theta_i_deg))
+        if model == "lambert+gaussian":
+            return p["rho"] / np.pi + p["A"] * np.exp(-(rho**2) / (2.0 * p["sigma"] ** 2))
+        lobe = p["A"] / (p["B"] + rho ** p["g"])
+        return lobe if model == "abg" else p["rho"] / np.pi + lobe
+
+    return bsdf_fn
+
+
+def fit_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> BsdfFn:
+    """BSDF callable of a fit result (see the module docstring for the dataset layout)."""
+    model = str(ds.attrs.get("model", ""))
+    if model not in FIT_MODELS:
+        raise ValidationError("unknown fit model", field="model", expected=" | ".join(FIT_MODELS), got=model)
+    sub = _select(_select(ds, "interaction", interaction, "interaction"), "side", side, "side")
+    return _model_bsdf_fn(model, _fit_parameters(sub, model), side)
+
+
+@dataclass(frozen=True)
+class _Source:
+    fns: dict[str, BsdfFn]
+    theta_i_deg: NDArray[np.float64]
+    abg: tuple[asap.AbgParameters, ...]
+    description: str
+
+
+def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...], theta_i_deg: Sequence[float] | None) -> _Source:
+    if callable(source) and not isinstance(source, xr.Dataset):
+        if theta_i_deg is None:
+            raise ValidationError("a BSDF callable needs explicit incidences", field="theta_i_deg",
+                                  expected="a list of incidence angles (deg)", got=None)
+        return _Source({s: source for s in sides}, np.asarray(theta_i_deg, dtype=np.float64), (),
+                       "BSDF callable")
+    label = "dataset"
+    if isinstance(source, (str, Path)):
+        label = Path(source).name
+        source = _open_dataset(source)
+    if not isinstance(source, xr.Dataset):
+        raise ValidationError("unsupported export source", field="source",
+                              expected="a BSDF callable, an xarray Dataset or a netCDF path", got=type(source).__name__)
+    ds = source
+    if "model" in ds.attrs:
+        model = str(ds.attrs["model"])
+        fns = {s: fit_bsdf_fn(ds, interaction, s) for s in sides}
+        theta = np.atleast_1d(np.asarray(ds["theta_i"].values, dtype=np.float64))
+        abg: list[asap.AbgParameters] = []
+        if model == "abg":
+            for s in sides:
+                sub = _select(_select(ds, "interaction", interaction, "interaction"), "side", s, "side")
+                for t, p in _fit_parameters(sub, model).items():
+                    abg.append(asap.AbgParameters(s, t, p["A"], p["B"], p["g"]))
+        chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
+        return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}")
+    if importlib.util.find_spec("bsdfkit.reduction.tis") is None:
+        raise InputError("exporting a calibrated scan needs bsdfkit.reduction.tis.hemisphere_bsdf_fn, which this "
+                         "installation lacks", file=label, expected="a fit result (attribute 'model')",
+                         got="a dataset without 'model'")
+    angular = importlib.import_module("bsdfkit.reduction.tis")
+    hemisphere_bsdf_fn = getattr(angular, "hemisphere_bsdf_fn", None)
+    if hemisphere_bsdf_fn is None:
+        raise InputError("bsdfkit.reduction.tis has no hemisphere_bsdf_fn; cannot reconstruct the scan hemisphere",
+                         file=label, expected="a fit result (attribute 'model')", got="a calibrated scan")
+    fns = {s: hemisphere_bsdf_fn(ds, interaction, s) for s in sides}
+    if theta_i_deg is None:
+        measured = [set(np.round(np.asarray(f.incidences_deg, dtype=float), 9))
+                    for f in fns.values() if hasattr(f, "incidences_deg")]
+        if measured:
+            common = sorted(set.intersection(*measured))
+            if not common:
+                raise ValidationError("the sides share no measured incidence; give the incidences",
+                                      field="theta_i_deg", expected="incidence angles (deg)", got=None)
+            theta_i_deg = np.asarray(common)
+        elif "theta_i" not in ds.coords:
+            raise ValidationError("scan has no theta_i coordinate; give the incidences", field="theta_i_deg",
+                                  expected="incidence angles (deg)", got=None)
+        else:
+            theta_i_deg = np.unique(np.asarray(ds["theta_i"].values, dtype=np.float64))
+    return _Source(fns, np.asarray(theta_i_deg, dtype=np.float64), (),
+                   f"calibrated scan {label}, interaction {interaction}")
+
+
+def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
+    def bsdf_fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
+
+    return bsdf_fn
+
+
+# --------------------------------------------------------------------------------------------------
+# export
+# --------------------------------------------------------------------------------------------------
+def _plane_symmetric_grid(
+    fn: BsdfFn, theta: NDArray, side: str, axes: grids.SpecularAxes, tolerance: float
+) -> tuple[xr.DataArray, float]:
+    """Specular grid for a PlaneSymmetrical file: the mirror average (f(a) + f(360° − a))/2 of the source.
+
+    Plane symmetry is a property the *source* must have; measured reconstructions hold it only to their
+    noise. The deviation max|f(a) − f(360° − a)| / max f (per incidence block) is returned; above
+    ``tolerance`` the export is refused (use Asymmetrical). The average leaves the TIS unchanged (the
+    projected solid angle is symmetric under the mirror y → −y).
+    """
+    mirrored = tuple(sorted({float(np.mod(360.0 - a, 360.0)) for a in axes.azimuth_deg}))
+    half = grids.specular_grid(fn, theta, side, axes)
+    full = grids.specular_grid(fn, theta, side, grids.SpecularAxes(axes.radial_deg, mirrored))
+    mirror = np.stack([full.sel(azimuth=float(np.mod(360.0 - a, 360.0))).values for a in axes.azimuth_deg], axis=-2)
+    scale = np.max(half.values, axis=(-1, -2), keepdims=True)
+    deviation = np.abs(half.values - mirror) / np.where(scale > 0, scale, 1.0)
+    worst = float(np.max(deviation))
+    if worst > tolerance:
+        _, t, k, _ = np.unravel_index(int(np.argmax(deviation)), deviation.shape)
+        a = axes.azimuth_deg[k]
+        raise ValidationError(
+            f"source is not plane-symmetric at theta_i={theta[t]:g} deg (azimuth {a:g} vs {np.mod(360 - a, 360):g})",
+            field="zemax_symmetry", expected=f"deviation <= {tolerance:g} of the block maximum, or Asymmetrical",
+            got=f"{worst:.3g}",
+        )
+    return half.copy(data=0.5 * (half.values + mirror)), worst
+
+
+def _abg_rows(params: Sequence[asap.AbgParameters], side: str, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(A, B, g) per exported incidence for ``side`` from the fit's parameter list."""
+    rows = []
+    for t in theta:
+        match = [p for p in params if p.side == side and abs(p.theta_i_deg - t) <= _THETA_MATCH_DEG]
+        if not match:
+            raise ValidationError("no fitted ABg parameters at this incidence", field="theta_i",
+                                  expected=f"one of {sorted({p.theta_i_deg for p in params})}", got=float(t))
+        rows.append([match[0].a, match[0].b, match[0].g])
+    return np.array(rows)
+
+
+def export(
+    source: Any,
+    to: ExportFormat,
+    interaction: str,
+    side: str,
+    path: str | Path,
+    force: bool = False,
+    *,
+    settings: ExportSettings | None = None,
+    generated_at: datetime | None = None,
+) -> ExportResult:
+    """Write ``source`` as a ``to`` table for ``side`` (reflection, transmission or both) at ``path``.
+
+    TracePro takes both sides in one file (BRDF and BTDF columns; a side not exported is zero); Zemax
+    holds one ScatterType per file (``both`` is refused); ASAP-style tables list the sides as rows.
+    Returns the TIS of the source (direct integral, :func:`bsdfkit.tables.grids.tis_reference`) and of the
+    written table (the reader's quadrature) so that grid adequacy is visible.
+    """
+    settings = settings or ExportSettings()
+    if to not in FORMATS:
+        raise ValidationError("unknown export format", field="to", expected=" | ".join(FORMATS), got=to)
+    if side not in _SIDE_CHOICES:
+        raise ValidationError("unknown side", field="side", expected=" | ".join(_SIDE_CHOICES), got=side)
+    if to == "zemax" and side == "both":
+        raise ValidationError("a Zemax BSDF file holds one ScatterType; export each side to its own file",
+                              field="side", expected="reflection or transmission", got=side)
+    atomic.check_writable(path, force)
+    sides = frames.SIDES if side == "both" else (side,)
+    src = _resolve_source(source, interaction, sides, settings.theta_i_deg)
+    theta = np.asarray(src.theta_i_deg, dtype=np.float64)
+    fn = _dispatch(src.fns)
+    comments = (f"source: {src.description}",) + tuple(settings.comments)
+    deviation: float | None = None
+    tis_table: dict[str, NDArray[np.float64]]
+    if to == "tracepro":
+        opts = settings.tracepro
+        if settings.tracepro_scatter == "abg":
+            if not src.abg:
+                raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
+                                      expected="table for this source", got="abg")
+            by_side = {s: _abg_rows(src.abg, s, theta) for s in sides}
+            prop = tracepro.abg_property(
+                theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
+                specular_reflectance=settings.specular_reflectance,
+                specular_transmittance=settings.specular_transmittance,
+            )
+        else:
+            axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=opts.zero_azimuth_deg)
+            grid = grids.harvey_shack_grid(fn, theta, sides, axes)
+            prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
+                                           specular_transmittance=settings.specular_transmittance)
+        tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
+        tis_table = {s: v for s, v in prop.tis_computed().items() if s in sides}
+    elif to == "zemax":
+        axes = settings.specular_axes or grids.SpecularAxes.default(
+            plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
+        if settings.zemax_symmetry == "PlaneSymmetrical":
+            grid, deviation = _plane_symmetric_grid(fn, theta, side, axes, settings.symmetry_tolerance)
+        else:
+            grid = grids.specular_grid(fn, theta, side, axes)
+        bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
+        zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
+        tis_table = {side: bsdf.tis_computed().values[0]}
+    else:
+        axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=0.0)
+        grid = grids.harvey_shack_grid(fn, theta, sides, axes)
+        chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
+        table = asap.asap_table(grid, abg=chosen, comments=comments)
+        asap.write_asap(path, table, force=force, generated_at=generated_at)
+        computed = table.tis_computed()
+        tis_table = {s: computed.sel(side=s).values for s in sides}
+    tis_source = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+    return ExportResult(
+        format=to, path=str(path), sides=tuple(sides), incidences_deg=tuple(float(t) for t in theta),
+        tis_source={s: [float(v) for v in vals] for s, vals in tis_source.items()},
+        tis_table={s: [float(v) for v in np.asarray(vals)] for s, vals in tis_table.items()},
+        plane_symmetry_deviation=deviation,
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# reading any table
+# --------------------------------------------------------------------------------------------------
+def sniff_format(path: str | Path) -> str:
+    """``tracepro`` | ``zemax`` | ``asap`` from the first lines of the file (FormatError otherwise)."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096).decode("utf-8", errors="replace")
+    except OSError as exc:
+        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
+    lines = head.splitlines()
+    first = lines[0].strip() if lines else ""
+    if first == tracepro.MAGIC:
+        return "tracepro"
+    if first == asap.MAGIC:
+        return "asap"
+    for line in lines:
+        body = line.split("#", 1)[0].strip()
+        if body:
+            if body.split()[0].lower() in ("source", "symmetry", "spectralcontent", "scattertype"):
+                return "zemax"
+            break
+    raise FormatError("unrecognised table format", file=path, line=1, field="format",
+                      expected="a TracePro, Zemax BSDF or bsdfkit ASAP-style file", got=first[:60])
+
+
+def _floats(values: Any) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def read_any(path: str | Path) -> FileSummary:
+    """Read a TracePro, Zemax or ASAP-style table and summarise incidences and TIS (see :class:`FileSummary`)."""
+    fmt = sniff_format(path)
+    path = str(path)
+    if fmt == "tracepro":
+        prop = tracepro.read_tracepro(path)
+        computed = prop.tis_computed()
+        theta = prop.theta_i_deg
+        if prop.table is not None:
+            theta = prop.table["theta_i"].values
+        return FileSummary(
+            format=fmt, path=path, incidences_deg=_floats(theta),
+            tis_computed={**{s: _floats(v) for s, v in computed.items()},
+                          "total": _floats(sum(computed.values()))},
+            tis_stated={"total": _floats(prop.tis_stated())},
+            details={"scatter": prop.scatter, "name": prop.options.name,
+                     "zero_azimuth_deg": prop.options.zero_azimuth_deg,
+                     "absorptance": _floats(prop.absorptance),
+                     "table_shape": None if prop.table is None else dict(prop.table.sizes)},
+        )
+    if fmt == "zemax":
+        bsdf = zemax.read_zemax(path)
+        computed, stated = bsdf.tis_computed(), bsdf.tis_stated
+        rotations = _floats(bsdf.table["sample_rotation"].values)
+        keys = [bsdf.side] if len(rotations) == 1 else [f"{bsdf.side}@rotation={r:g}" for r in rotations]
+        return FileSummary(
+            format=fmt, path=path, incidences_deg=_floats(bsdf.table["theta_i"].values),
+            tis_computed={k: _floats(computed.values[r]) for r, k in enumerate(keys)},
+            tis_stated={k: _floats(stated.values[r]) for r, k in enumerate(keys)},
+            details={"symmetry": bsdf.symmetry, "scatter_type": bsdf.scatter_type, "source": bsdf.source,
+                     "table_shape": dict(bsdf.table.sizes)},
+        )
+    table = asap.read_asap(path)
+    computed = table.tis_computed()
+    sides = [str(s) for s in table.table["side"].values]
+    return FileSummary(
+        format=fmt, path=path, incidences_deg=_floats(table.table["theta_i"].values),
+        tis_computed={s: _floats(computed.sel(side=s).values) for s in sides},
+        tis_stated={s: _floats(table.tis_stated.sel(side=s).values) for s in sides},
+        details={"abg": [vars(p) for p in table.abg], "harvey": [vars(p) for p in table.harvey],
+                 "table_shape": dict(table.table.sizes)},
+    )
+

@@ -1,0 +1,628 @@
+"""TracePro surface-property text files: Asymmetric Table (Scatter 5) and ABg (Scatter 1).
+
+Layout (formats.md §2.1, from TracePro Help "Surface Property Import/Export Format" and a genuine
+TracePro 19.6 export): a 16-line header (magic line, File Name, TracePro Release, Database Version,
+timestamp, blank, Name, Catalog, Description, Coating, Scatter, Interaction, Polarization, User_Data,
+Solve, blank), a column-header line starting ``Temperature``, one 22-column surface-data row per
+incidence angle, then for Scatter 5 a ``Table_BSDF_Data`` line, its 8-column header and one row per
+IncAngle × ScatterBeta × ScatterAzimuth (IncAngle outer, ScatterAzimuth inner, as TP-3P), and
+``SAVE-DATA``. bsdfkit writes tabs and CRLF line ends like TracePro itself.
+
+Conventions (formats.md §2.2, §2.4):
+
+* ScatterBeta = |β − β0| and ScatterAzimuth = azimuth of β − β0 on one grid shared by all incidences
+  (TracePro cannot use per-incidence ScatterBeta lists). BRDF and BTDF are columns of the same row.
+  For a plate in air β0 = (sin θi, 0) on both sides (:mod:`bsdfkit.core.frames`).
+* TracePro's floating zero-azimuth axis is "always orthogonal to the plane of incidence" (TP-UM); which
+  of the two perpendicular directions it is was not recoverable (formats.md §8 question 1). bsdfkit
+  writes ScatterAzimuth = ψ_sample − ``zero_azimuth_deg`` with a default of 270°: TracePro's x axis is
+  the sample −y axis, i.e. unit(k × n) for the incident propagation vector k (the s-polarisation
+  direction), so forward scatter (away from the source) lies at ScatterAzimuth 90° and the source side
+  at 270°. The choice is recorded in the Description as ``[bsdfkit zero_azimuth_deg=270]`` and read
+  back from there. It is immaterial for lobes symmetric about β0 (Lambertian, Gaussian, ABg).
+* Energy: TracePro requires a + Rs + Ts + TS_R + TS_T = 1 (TP-UM eq. 7.30). The writer sets
+  Abso_S = Abso_P = 1 − TS_R − TS_T − Refl − Tran with TS computed from the written (rounded) table by
+  :func:`bsdfkit.tables.grids.tis_harvey_shack_table` — the same function the reader uses — so the file's
+  implied total scatter and its recomputed TIS agree to rounding.
+* ABg (Scatter 1): BSDF = A/(B + |β − β0|^g) (TP-UM eq. 7.25); TIS by :func:`tis_abg` (polar
+  quadrature over the unit disk about β0).
+
+Not supported (FormatError when read): Scatter codes other than 0, 1, 5; direction-sensitive
+properties (Side1_Data/Side2_Data); GratingData; several Temperature/Wavelength pairs or several
+properties in one file.
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from numpy.typing import ArrayLike, NDArray
+
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.frames import SIDES
+from bsdfkit.io import atomic
+from bsdfkit.tables import grids
+
+__all__ = [
+    "DEFAULT_ZERO_AZIMUTH_DEG",
+    "SURFACE_COLUMNS",
+    "TABLE_COLUMNS",
+    "TraceProOptions",
+    "TraceProProperty",
+    "abg_property",
+    "read_tracepro",
+    "table_property",
+    "tis_abg",
+    "tracepro_text",
+    "write_tracepro",
+]
+
+MAGIC = "TracePro Surface Property Data"
+DEFAULT_ZERO_AZIMUTH_DEG = 270.0
+SURFACE_COLUMNS: tuple[str, ...] = (
+    "Temperature", "Wavelength", "IncAngle", "AziAngle", "Abso_S", "Abso_P", "Refl_S", "Refl_P",
+    "Tran_S", "Tran_P", "PhaseRefl", "PhaseTran", "BRDF_A", "BRDF_B", "BRDF_By", "BRDF_g", "BRDF_gy",
+    "BTDF_A", "BTDF_B", "BTDF_By", "BTDF_g", "BTDF_gy",
+)
+TABLE_COLUMNS: tuple[str, ...] = (
+    "Temperature", "Wavelength", "IncAngle", "AziAngle", "ScatterBeta", "ScatterAzimuth", "BRDF", "BTDF",
+)
+_HEADER_KEYS = ("Name", "Catalog", "Description", "Coating", "Scatter", "Interaction", "Polarization",
+                "User_Data", "Solve")
+_MONTHS = ("January", "February", "March", "April", "May", "June", "July", "August", "September",
+           "October", "November", "December")
+_ZERO_TAG = re.compile(r"\[bsdfkit zero_azimuth_deg=([-+0-9.eE]+)\]")
+_VALUE_FMT = ".7g"
+_ANGLE_FMT = ".10g"
+_ENERGY_SLACK = 1e-6
+
+
+@dataclass(frozen=True)
+class TraceProOptions:
+    """Header and bookkeeping choices of a TracePro export (defaults follow formats.md §2.3)."""
+
+    name: str = "bsdfkit_export"
+    catalog: str = "bsdfkit"
+    description: str = "exported by bsdfkit"
+    temperature_K: float = 300.0
+    wavelength_um: float = 0.55
+    zero_azimuth_deg: float = DEFAULT_ZERO_AZIMUTH_DEG
+    release: str = "19 6 0"
+    database_version: str = "4 1 0"
+    db_file_name: str = r"C:\bsdfkit\TracePro.db"
+
+    def __post_init__(self) -> None:
+        for key in ("name", "catalog", "description"):
+            text = getattr(self, key)
+            if "\n" in text or "\r" in text or "\t" in text or (key != "description" and not text.strip()):
+                raise ValidationError("TracePro header text must be one non-empty line without tabs",
+                                      field=key, expected="one line of text without tabs", got=text)
+        if not (np.isfinite(self.temperature_K) and self.temperature_K > 0):
+            raise ValidationError("temperature must be positive", field="temperature_K", expected="> 0 K",
+                                  got=self.temperature_K)
+        if not (np.isfinite(self.wavelength_um) and self.wavelength_um > 0):
+            raise ValidationError("wavelength must be positive", field="wavelength_um",
+                                  expected="> 0 micrometres", got=self.wavelength_um)
+
+
+@dataclass(frozen=True, eq=False)
+class TraceProProperty:
+    """One TracePro surface property, as written or as read.
+
+    ``table`` (Scatter 5) has dims ``(side, theta_i, rho, psi)`` with both sides, ψ in TracePro's
+    ScatterAzimuth frame; ``abg`` (Scatter 1) has dims ``(side, theta_i, param)`` with param A, B, g.
+    Per-incidence arrays align with ``theta_i_deg`` (the surface-data IncAngles).
+    """
+
+    options: TraceProOptions
+    scatter: int
+    theta_i_deg: NDArray[np.float64]
+    absorptance: NDArray[np.float64]
+    specular_reflectance: NDArray[np.float64]
+    specular_transmittance: NDArray[np.float64]
+    table: xr.DataArray | None = None
+    abg: xr.DataArray | None = None
+    coating: int = 1
+    solve: str = "<None>"
+    path: str | None = field(default=None)
+
+    def tis_computed(self) -> dict[str, NDArray[np.float64]]:
+        """Total integrated scatter per side and incidence, recomputed from the scatter data."""
+        if self.scatter == 5 and self.table is not None:
+            tis = grids.tis_harvey_shack_table(
+                self.table.values, self.table["rho"].values, self.table["psi"].values,
+                self.table["theta_i"].values, self.options.zero_azimuth_deg,
+            )
+            return {side: tis[k] for k, side in enumerate(self.table["side"].values.tolist())}
+        if self.scatter == 1 and self.abg is not None:
+            return {
+                side: np.array([tis_abg(*self.abg.sel(side=side, theta_i=t).values, theta_i_deg=t)
+                                for t in self.theta_i_deg])
+                for side in SIDES
+            }
+        return {side: np.zeros(self.theta_i_deg.size) for side in SIDES}
+
+    def tis_stated(self) -> NDArray[np.float64]:
+        """Total scatter (BRDF + BTDF) implied by the energy balance: 1 − Abso − Refl − Tran."""
+        return 1.0 - self.absorptance - self.specular_reflectance - self.specular_transmittance
+
+
+# --------------------------------------------------------------------------------------------------
+# building properties
+# --------------------------------------------------------------------------------------------------
+def tis_abg(a: float, b: float, g: float, theta_i_deg: float) -> float:
+    """TIS of A/(B + |β − β0|^g) over the unit disk at incidence θi (formats.md §6), 0 when A = 0."""
+    if a == 0.0:
+        return 0.0
+
+    def fn(_theta: float, _side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        d = directions[..., :2] - np.array([np.sin(np.radians(theta_i_deg)), 0.0])
+        return a / (b + np.hypot(d[..., 0], d[..., 1]) ** g)
+
+    return grids.tis_reference(fn, theta_i_deg, "reflection")
+
+
+def _quantize(values: NDArray[np.float64], fmt: str = _VALUE_FMT) -> NDArray[np.float64]:
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    return np.array([format(v, fmt) for v in flat], dtype=np.float64).reshape(np.shape(values))
+
+
+def _per_incidence(name: str, value: ArrayLike, n: int) -> NDArray[np.float64]:
+    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy()
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 1):
+        raise ValidationError("specular term must be a fraction in [0, 1]", field=name, got=arr.tolist())
+    return arr
+
+
+def _absorptance(theta: NDArray, scatter_total: NDArray, refl: NDArray, tran: NDArray) -> NDArray:
+    abso = 1.0 - scatter_total - refl - tran
+    bad = abso < -_ENERGY_SLACK
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise ValidationError(
+            f"energy balance exceeds 1 at IncAngle {theta[k]:g} deg (TIS_R + TIS_T + Refl + Tran)",
+            field="absorptance", expected="<= 1", got=float(scatter_total[k] + refl[k] + tran[k]),
+        )
+    return _quantize(np.clip(abso, 0.0, 1.0))
+
+
+def table_property(
+    grid: xr.DataArray,
+    *,
+    options: TraceProOptions = TraceProOptions(),
+    specular_reflectance: ArrayLike = 0.0,
+    specular_transmittance: ArrayLike = 0.0,
+) -> TraceProProperty:
+    """Asymmetric-table (Scatter 5) property from a Harvey–Shack grid.
+
+    ``grid`` comes from :func:`bsdfkit.tables.grids.harvey_shack_grid` with
+    ``zero_azimuth_deg = options.zero_azimuth_deg``; a missing side is written as zeros. Values are
+    rounded to what the file will hold before the TIS and the absorptance are computed.
+    """
+    if tuple(grid.dims) != ("side", "theta_i", "rho", "psi"):
+        raise ValidationError("grid must have dims (side, theta_i, rho, psi)", field="grid", got=str(grid.dims))
+    zero = float(grid.attrs.get("zero_azimuth_deg", 0.0))
+    if abs(zero - options.zero_azimuth_deg) > 1e-9:
+        raise ValidationError("grid azimuth frame differs from the TracePro option", field="zero_azimuth_deg",
+                              expected=f"{options.zero_azimuth_deg:g}", got=zero)
+    theta = np.asarray(grid["theta_i"].values, dtype=np.float64)
+    full = np.zeros((2,) + grid.shape[1:])
+    for k, side in enumerate(SIDES):
+        if side in grid["side"].values:
+            full[k] = _quantize(grid.sel(side=side).values)
+    table = xr.DataArray(
+        full, dims=grid.dims,
+        coords={"side": list(SIDES), "theta_i": theta, "rho": _quantize(grid["rho"].values, _ANGLE_FMT),
+                "psi": _quantize(grid["psi"].values, _ANGLE_FMT)},
+        name="bsdf", attrs={"units": "1/sr", "frame": "harvey_shack", "zero_azimuth_deg": zero},
+    )
+    refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)
+    tran = _per_incidence("specular_transmittance", specular_transmittance, theta.size)
+    tis = grids.tis_harvey_shack_table(full, table["rho"].values, table["psi"].values, theta, zero)
+    return TraceProProperty(
+        options=options, scatter=5, theta_i_deg=theta, absorptance=_absorptance(theta, tis.sum(axis=0), refl, tran),
+        specular_reflectance=refl, specular_transmittance=tran, table=table,
+    )
+
+
+def abg_property(
+    theta_i_deg: Sequence[float],
+    brdf_abg: ArrayLike | None,
+    btdf_abg: ArrayLike | None = None,
+    *,
+    options: TraceProOptions = TraceProOptions(),
+    specular_reflectance: ArrayLike = 0.0,
+    specular_transmittance: ArrayLike = 0.0,
+) -> TraceProProperty:
+    """ABg (Scatter 1) property: ``brdf_abg``/``btdf_abg`` are (A, B, g) per incidence, shape (n, 3) or (3,)."""
+    theta = np.asarray(theta_i_deg, dtype=np.float64)
+    params = np.zeros((2, theta.size, 3))
+    for k, (side, value) in enumerate(zip(SIDES, (brdf_abg, btdf_abg))):
+        if value is None:
+            continue
+        arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (theta.size, 3))
+        a, b, g = arr[:, 0], arr[:, 1], arr[:, 2]
+        if not np.all(np.isfinite(arr)) or np.any(a < 0) or np.any((b <= 0) & (g != 0)) or np.any(b < 0):
+            raise ValidationError("ABg parameters need A >= 0 and B > 0 (B >= 0 when g = 0)",
+                                  field=f"{side} ABg", got=arr.tolist())
+        params[k] = _quantize(arr)
+    abg = xr.DataArray(params, dims=("side", "theta_i", "param"),
+                       coords={"side": list(SIDES), "theta_i": theta, "param": ["A", "B", "g"]})
+    refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)
+    tran = _per_incidence("specular_transmittance", specular_transmittance, theta.size)
+    total = np.array([sum(tis_abg(*params[s, t], theta_i_deg=theta[t]) for s in range(2)) for t in range(theta.size)])
+    return TraceProProperty(
+        options=options, scatter=1, theta_i_deg=theta, absorptance=_absorptance(theta, total, refl, tran),
+        specular_reflectance=refl, specular_transmittance=tran, abg=abg,
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------------------
+def _timestamp(when: datetime) -> str:
+    return f"Data generated at {when:%H:%M:%S} {_MONTHS[when.month - 1]} {when.day}, {when.year}"
+
+
+def _fmt(value: float, fmt: str = _VALUE_FMT) -> str:
+    return format(float(value), fmt)
+
+
+def tracepro_text(prop: TraceProProperty, generated_at: datetime | None = None) -> str:
+    """The file text (LF line ends; :func:`write_tracepro` converts to CRLF)."""
+    o = prop.options
+    when = generated_at or datetime.now()
+    description = f"{o.description} [bsdfkit zero_azimuth_deg={o.zero_azimuth_deg:g}]".strip()
+    lines = [
+        MAGIC,
+        f"File Name\t{o.db_file_name}",
+        f"TracePro Release: {o.release}",
+        f"Database Version: {o.database_version}",
+        _timestamp(when),
+        "",
+        f"Name\t{o.name}",
+        f"Catalog\t{o.catalog}",
+        f"Description\t{description}",
+        f"Coating    {prop.coating}",
+        f"Scatter    {prop.scatter}",
+        "Interaction 0",
+        "Polarization\t0",
+        "User_Data  1",
+        f"Solve\t{prop.solve}",
+        "",
+        "\t".join(SURFACE_COLUMNS),
+    ]
+    prefix = f"{_fmt(o.temperature_K, _ANGLE_FMT)}\t{_fmt(o.wavelength_um, _ANGLE_FMT)}"
+    for t, theta in enumerate(prop.theta_i_deg):
+        abg = np.zeros((2, 3)) if prop.abg is None else prop.abg.values[:, t, :]
+        a_r, b_r, g_r = abg[0]
+        a_t, b_t, g_t = abg[1]
+        cells = [
+            _fmt(theta, _ANGLE_FMT), "0",
+            _fmt(prop.absorptance[t]), _fmt(prop.absorptance[t]),
+            _fmt(prop.specular_reflectance[t]), _fmt(prop.specular_reflectance[t]),
+            _fmt(prop.specular_transmittance[t]), _fmt(prop.specular_transmittance[t]),
+            "0", "0",
+            _fmt(a_r), _fmt(b_r), _fmt(b_r), _fmt(g_r), _fmt(g_r),
+            _fmt(a_t), _fmt(b_t), _fmt(b_t), _fmt(g_t), _fmt(g_t),
+        ]
+        lines.append(prefix + "\t" + "\t".join(cells))
+    if prop.scatter == 5 and prop.table is not None:
+        lines.append("Table_BSDF_Data")
+        lines.append("\t".join(TABLE_COLUMNS))
+        rho = [_fmt(r, _ANGLE_FMT) for r in prop.table["rho"].values]
+        psi = [_fmt(p, _ANGLE_FMT) for p in prop.table["psi"].values]
+        values = prop.table.values
+        for t, theta in enumerate(prop.table["theta_i"].values):
+            head = f"{prefix}\t{_fmt(theta, _ANGLE_FMT)}\t0\t"
+            brdf, btdf = values[0, t], values[1, t]
+            for j, r in enumerate(rho):
+                lines.extend(
+                    f"{head}{r}\t{p}\t{_fmt(brdf[j, k])}\t{_fmt(btdf[j, k])}" for k, p in enumerate(psi)
+                )
+    lines.append("SAVE-DATA")
+    return "\n".join(lines) + "\n"
+
+
+def write_tracepro(
+    path: str | Path, prop: TraceProProperty, *, force: bool = False, generated_at: datetime | None = None
+) -> Path:
+    """Write ``prop`` atomically (CRLF, tabs); refuses to overwrite unless ``force``."""
+    atomic.check_writable(path, force)
+    return atomic.write_text(path, tracepro_text(prop, generated_at), force=force, newline="\r\n")
+
+
+# --------------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------------
+def _numbers(tokens: list[str], columns: Sequence[str], path: str, line: int) -> list[float]:
+    """One row of numbers, or a FormatError naming the line and the column."""
+    if len(tokens) != len(columns):
+        raise FormatError("wrong number of columns", file=path, line=line,
+                          field=f"{columns[0]}..{columns[-1]}", expected=f"{len(columns)} values", got=len(tokens))
+    out = []
+    for token, name in zip(tokens, columns):
+        try:
+            value = float(token)
+        except ValueError:
+            raise FormatError("not a number", file=path, line=line, field=name, expected="a number",
+                              got=token) from None
+        if not np.isfinite(value):
+            raise FormatError("not a finite number", file=path, line=line, field=name, expected="a finite number",
+                              got=token)
+        out.append(value)
+    return out
+
+
+def _rows(texts: list[str], line_numbers: list[int], columns: Sequence[str], path: str) -> NDArray[np.float64]:
+    """Parse many rows at once; on any problem fall back to :func:`_numbers` to name line and column."""
+    tokens = [t.split() for t in texts]
+    if all(len(t) == len(columns) for t in tokens):
+        try:
+            arr = np.array(tokens, dtype=np.float64)
+        except ValueError:
+            arr = None
+        if arr is not None and np.all(np.isfinite(arr)):
+            return arr.reshape(len(texts), len(columns))
+    for tok, line in zip(tokens, line_numbers):
+        _numbers(tok, columns, path, line)
+    raise AssertionError("unreachable: _numbers raises for the row that failed")  # pragma: no cover
+
+
+def _numeric_block(lines: list[str], index: int) -> tuple[list[str], list[int], int]:
+    """Collect the data lines from ``index`` up to the next line starting with a letter."""
+    texts: list[str] = []
+    numbers: list[int] = []
+    while index < len(lines):
+        stripped = lines[index].strip()
+        if stripped:
+            if stripped[0].isalpha():
+                break
+            texts.append(stripped)
+            numbers.append(index + 1)
+        index += 1
+    return texts, numbers, index
+
+
+def _keyword_value(lines: list[str], index: int, key: str, path: str) -> str:
+    if index >= len(lines):
+        raise FormatError("file ends inside the header", file=path, line=len(lines), field=key,
+                          expected=f"a '{key}' line")
+    text = lines[index]
+    parts = text.strip().split(None, 1)
+    if not parts or parts[0] != key:
+        raise FormatError("missing header keyword", file=path, line=index + 1, field=key,
+                          expected=f"a line starting with '{key}'", got=text.strip())
+    return parts[1].strip() if len(parts) > 1 else ""
+
+
+def _int_value(text: str, key: str, path: str, line: int, allowed: range) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise FormatError("not an integer", file=path, line=line, field=key,
+                          expected=f"an integer in {allowed.start}..{allowed.stop - 1}", got=text) from None
+    if value not in allowed:
+        raise FormatError("value out of range", file=path, line=line, field=key,
+                          expected=f"an integer in {allowed.start}..{allowed.stop - 1}", got=value)
+    return value
+
+
+def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) -> TraceProProperty:
+    """Read a TracePro surface-property file (Scatter 0, 1 or 5).
+
+    The table's azimuth frame is taken from a ``[bsdfkit zero_azimuth_deg=…]`` tag in the Description,
+    else from ``zero_azimuth_deg``, else :data:`DEFAULT_ZERO_AZIMUTH_DEG`. Errors name file, line and
+    field.
+    """
+    path = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    lines = text.splitlines()
+    if not lines or lines[0].strip() != MAGIC:
+        raise FormatError("not a TracePro surface property file", file=path, line=1, field="magic",
+                          expected=repr(MAGIC), got=lines[0].strip() if lines else "")
+    # lines 2-5: File Name, Release, Database Version, timestamp (only Database Version is read by TracePro)
+    for index, prefix in ((1, "File Name"), (2, "TracePro Release:"), (3, "Database Version:"), (4, "Data generated")):
+        if index >= len(lines) or not lines[index].strip().startswith(prefix):
+            raise FormatError("missing header line", file=path, line=index + 1, field=prefix.rstrip(":"),
+                              expected=f"a line starting with '{prefix}'",
+                              got=lines[index].strip() if index < len(lines) else "end of file")
+    index = 5
+    while index < len(lines) and not lines[index].strip():
+        index += 1
+    header: dict[str, str] = {}
+    for key in _HEADER_KEYS:
+        header[key] = _keyword_value(lines, index, key, path)
+        header[key + "@line"] = str(index + 1)
+        index += 1
+    coating = _int_value(header["Coating"], "Coating", path, int(header["Coating@line"]), range(0, 8))
+    scatter = _int_value(header["Scatter"], "Scatter", path, int(header["Scatter@line"]), range(0, 9))
+    if scatter not in (0, 1, 5):
+        raise FormatError("scatter model not supported by bsdfkit", file=path, line=int(header["Scatter@line"]),
+                          field="Scatter", expected="0 (none), 1 (ABg) or 5 (asymmetric table)", got=scatter)
+    polarization = _int_value(header["Polarization"], "Polarization", path, int(header["Polarization@line"]),
+                              range(0, 2))
+    _int_value(header["Interaction"], "Interaction", path, int(header["Interaction@line"]), range(0, 2))
+    _int_value(header["User_Data"], "User_Data", path, int(header["User_Data@line"]), range(0, 2))
+    while index < len(lines) and not lines[index].strip():
+        index += 1
+    if index < len(lines) and lines[index].strip().startswith(("Side1_Data", "Side2_Data")):
+        raise FormatError("direction-sensitive properties are not supported", file=path, line=index + 1,
+                          field="Side1_Data", expected="a single-sided property", got=lines[index].strip())
+    if index >= len(lines) or not lines[index].strip().startswith("Temperature"):
+        raise FormatError("missing surface-data column header", file=path, line=min(index + 1, len(lines)),
+                          field="Temperature", expected="a line starting with 'Temperature'",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    surface_texts, surface_lines, index = _numeric_block(lines, index + 1)
+    if not surface_texts:
+        raise FormatError("no surface-data rows", file=path, line=min(index + 1, len(lines)),
+                          field="surface data", expected=f"rows of {len(SURFACE_COLUMNS)} numbers",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    rows = _rows(surface_texts, surface_lines, SURFACE_COLUMNS, path)
+    temperature, wavelength = rows[0, 0], rows[0, 1]
+    for k in range(1, rows.shape[0]):
+        if rows[k, 0] != temperature or rows[k, 1] != wavelength:
+            raise FormatError("several Temperature/Wavelength pairs are not supported", file=path,
+                              line=surface_lines[k], field="Temperature/Wavelength",
+                              expected=f"{temperature:g}/{wavelength:g}", got=f"{rows[k, 0]:g}/{rows[k, 1]:g}")
+    theta = rows[:, 2]
+    if np.any(np.diff(theta) <= 0):
+        k = int(np.argmax(np.diff(theta) <= 0)) + 1
+        raise FormatError("IncAngle rows must be strictly increasing", file=path, line=surface_lines[k],
+                          field="IncAngle", expected=f"> {theta[k - 1]:g}", got=theta[k])
+    if np.any(theta < 0) or np.any(theta >= 90):
+        k = int(np.argmax((theta < 0) | (theta >= 90)))
+        raise FormatError("incidence angle out of range", file=path, line=surface_lines[k], field="IncAngle",
+                          expected="0 <= IncAngle < 90", got=theta[k])
+    if polarization == 0:
+        absorptance, refl, tran = rows[:, 4], rows[:, 6], rows[:, 8]
+    else:
+        absorptance, refl, tran = rows[:, 4:6].mean(axis=1), rows[:, 6:8].mean(axis=1), rows[:, 8:10].mean(axis=1)
+    description = header["Description"]
+    tag = _ZERO_TAG.search(description)
+    zero = float(tag.group(1)) if tag else (DEFAULT_ZERO_AZIMUTH_DEG if zero_azimuth_deg is None else zero_azimuth_deg)
+    try:
+        options = TraceProOptions(
+            name=header["Name"], catalog=header["Catalog"], description=_ZERO_TAG.sub("", description).strip(),
+            temperature_K=temperature, wavelength_um=wavelength, zero_azimuth_deg=zero,
+            release=lines[2].split(":", 1)[1].strip(), database_version=lines[3].split(":", 1)[1].strip(),
+            db_file_name=lines[1].strip()[len("File Name"):].strip(),
+        )
+    except ValidationError as exc:
+        key = {"name": "Name", "catalog": "Catalog", "description": "Description"}.get(exc.field or "")
+        line = int(header[key + "@line"]) if key else surface_lines[0]
+        raise FormatError("invalid header value", file=path, line=line, field=key or exc.field,
+                          expected=exc.expected, got=exc.got) from None
+    abg = None
+    if scatter == 1:
+        for col_a, col_b, col_g in ((12, 13, 15), (17, 18, 20)):
+            bad = (rows[:, col_a] < 0) | (rows[:, col_b] < 0) | ((rows[:, col_b] == 0) & (rows[:, col_g] != 0)
+                                                                   & (rows[:, col_a] > 0))
+            if np.any(bad):
+                k = int(np.argmax(bad))
+                raise FormatError("invalid ABg parameters", file=path, line=surface_lines[k],
+                                  field=f"{SURFACE_COLUMNS[col_a]}/{SURFACE_COLUMNS[col_b]}",
+                                  expected="A >= 0 and B > 0 (B = 0 only with g = 0)",
+                                  got=f"A={rows[k, col_a]:g}, B={rows[k, col_b]:g}, g={rows[k, col_g]:g}")
+        params = np.stack([rows[:, [12, 13, 15]], rows[:, [17, 18, 20]]])
+        abg = xr.DataArray(params, dims=("side", "theta_i", "param"),
+                           coords={"side": list(SIDES), "theta_i": theta, "param": ["A", "B", "g"]})
+    table = None
+    rest_start = index
+    if index < len(lines) and lines[index].strip().startswith("GratingData"):
+        raise FormatError("grating data are not supported", file=path, line=index + 1, field="GratingData",
+                          expected="Table_BSDF_Data or SAVE-DATA", got=lines[index].strip())
+    if index < len(lines) and lines[index].strip() == "Table_BSDF_Data":
+        table, index = _read_table(lines, index + 1, path, temperature, wavelength, theta, surface_lines, zero)
+    elif scatter == 5:
+        raise FormatError("Scatter 5 needs a Table_BSDF_Data section", file=path, line=min(rest_start + 1, len(lines)),
+                          field="Table_BSDF_Data", expected="'Table_BSDF_Data'",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    while index < len(lines) and not lines[index].strip():
+        index += 1
+    if index < len(lines):
+        if lines[index].strip() != "SAVE-DATA":
+            raise FormatError("unexpected line", file=path, line=index + 1, field="SAVE-DATA",
+                              expected="'SAVE-DATA' or end of file", got=lines[index].strip())
+        for extra in range(index + 1, len(lines)):
+            if lines[extra].strip():
+                raise FormatError("several properties in one file are not supported", file=path, line=extra + 1,
+                                  field="SAVE-DATA", expected="end of file after SAVE-DATA", got=lines[extra].strip())
+    return TraceProProperty(
+        options=options, scatter=scatter, theta_i_deg=theta, absorptance=absorptance,
+        specular_reflectance=refl, specular_transmittance=tran, table=table, abg=abg, coating=coating,
+        solve=header["Solve"], path=path,
+    )
+
+
+def _read_table(
+    lines: list[str], index: int, path: str, temperature: float, wavelength: float,
+    theta: NDArray[np.float64], surface_lines: list[int], zero: float,
+) -> tuple[xr.DataArray, int]:
+    while index < len(lines) and not lines[index].strip():
+        index += 1
+    if index >= len(lines) or not lines[index].strip().startswith("Temperature"):
+        raise FormatError("missing Table_BSDF_Data column header", file=path, line=min(index + 1, len(lines)),
+                          field="Table_BSDF_Data", expected="a line starting with 'Temperature'",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    texts, row_lines, index = _numeric_block(lines, index + 1)
+    if not texts:
+        raise FormatError("empty Table_BSDF_Data section", file=path, line=min(index + 1, len(lines)),
+                          field="Table_BSDF_Data", expected=f"rows of {len(TABLE_COLUMNS)} numbers",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    rows = _rows(texts, row_lines, TABLE_COLUMNS, path)
+    bad = (rows[:, 0] != temperature) | (rows[:, 1] != wavelength)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise FormatError("table Temperature/Wavelength differ from the surface data", file=path,
+                          line=row_lines[k], field="Temperature/Wavelength",
+                          expected=f"{temperature:g}/{wavelength:g}", got=f"{rows[k, 0]:g}/{rows[k, 1]:g}")
+    bad = (rows[:, 4] < 0) | (rows[:, 4] > 2)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise FormatError("ScatterBeta out of range", file=path, line=row_lines[k], field="ScatterBeta",
+                          expected="0 <= |beta-beta0| <= 2", got=rows[k, 4])
+    for col, name in ((6, "BRDF"), (7, "BTDF")):
+        if np.any(rows[:, col] < 0):
+            k = int(np.argmax(rows[:, col] < 0))
+            raise FormatError("negative BSDF", file=path, line=row_lines[k], field=name, expected=">= 0",
+                              got=rows[k, col])
+    inc = np.unique(rows[:, 2])
+    beta = np.unique(rows[:, 4])
+    azimuth = np.unique(np.mod(rows[:, 5], 360.0))
+    missing_inc = [t for t in inc if not np.any(theta == t)]
+    if missing_inc:
+        k = int(np.argmax(rows[:, 2] == missing_inc[0]))
+        raise FormatError("table IncAngle has no surface-data row", file=path, line=row_lines[k], field="IncAngle",
+                          expected=f"one of {theta.tolist()}", got=missing_inc[0])
+    if inc.size != theta.size:
+        absent = [t for t in theta if not np.any(inc == t)][0]
+        raise FormatError("surface-data IncAngle has no table rows", file=path,
+                          line=surface_lines[int(np.argmax(theta == absent))], field="IncAngle",
+                          expected="table rows for every IncAngle", got=absent)
+    expected = inc.size * beta.size * azimuth.size
+    t_idx = np.searchsorted(inc, rows[:, 2])
+    b_idx = np.searchsorted(beta, rows[:, 4])
+    a_idx = np.searchsorted(azimuth, np.mod(rows[:, 5], 360.0))
+    flat = (t_idx * beta.size + b_idx) * azimuth.size + a_idx
+    order = np.argsort(flat, kind="stable")
+    repeat = np.flatnonzero(np.diff(flat[order]) == 0)
+    if repeat.size:
+        first, second = sorted((int(order[repeat[0]]), int(order[repeat[0] + 1])))
+        raise FormatError("duplicate table row", file=path, line=row_lines[second],
+                          field="IncAngle/ScatterBeta/ScatterAzimuth",
+                          expected="each combination once", got=f"same cell as line {row_lines[first]}")
+    seen = np.full(expected, -1)
+    seen[flat] = np.arange(flat.size)
+    if rows.shape[0] != expected:
+        hole = int(np.argmax(seen < 0))
+        t, rest = divmod(hole, beta.size * azimuth.size)
+        b, a = divmod(rest, azimuth.size)
+        raise FormatError(
+            f"table is not rectangular: {rows.shape[0]} rows for {inc.size} IncAngle x {beta.size} ScatterBeta x "
+            f"{azimuth.size} ScatterAzimuth", file=path, line=row_lines[-1], field="Table_BSDF_Data",
+            expected=f"{expected} rows", got=f"no row for IncAngle {inc[t]:g}, ScatterBeta {beta[b]:g}, "
+                                             f"ScatterAzimuth {azimuth[a]:g}",
+        )
+    data = np.zeros((2, inc.size, beta.size, azimuth.size))
+    data[0].reshape(-1)[flat] = rows[:, 6]
+    data[1].reshape(-1)[flat] = rows[:, 7]
+    table = xr.DataArray(
+        data, dims=("side", "theta_i", "rho", "psi"),
+        coords={"side": list(SIDES), "theta_i": inc, "rho": beta, "psi": azimuth},
+        name="bsdf", attrs={"units": "1/sr", "frame": "harvey_shack", "zero_azimuth_deg": zero},
+    )
+    return table, index
+
