@@ -49,7 +49,7 @@ def speed(rays: int, repeats: int) -> None:
     rows = []
     for label, kw in (("JAX minimal kernel", {}), ("JAX full kernel (forced)", {"full_kernel": True})):
         trace(scene, 20_000, seed=1, **kw)  # compile
-        r, dt = best_of(lambda: trace(scene, rays, seed=1, **kw), repeats)
+        r, dt = best_of(lambda kw=kw: trace(scene, rays, seed=1, **kw), repeats)
         rows.append((label, r.interactions, dt, r.LER, r.std_err["LER"], r.ledger_error))
     ref, dt = best_of(lambda: trace_numpy(scene, rays, seed=1), repeats)
     rows.append(("NumPy reference (baseline)", ref.interactions, dt, ref.LER, ref.se_LER, ref.ledger_error))

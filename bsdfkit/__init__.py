@@ -1,7 +1,37 @@
 """bsdfkit: goniophotometer spectral scans in, validated BSDF models and ray-tracer tables out.
 
-Modules follow the data flow (see docs/architecture.md):
-``io.goniometer`` → ``calibrate`` → ``spectral`` / ``angular`` → ``budget``; ``models`` / ``fit``;
-``frames`` / ``export``; ``trace``. Importing the package is cheap: submodules are imported on use.
+The package follows the data flow (``docs/architecture.md``)::
+
+    core → io → measurement → models → reduction → fit → tables → simulation → trace → plotting
+         → pipeline / bench → cli
+
+The public API (:mod:`bsdfkit.api`) is importable from here: ``ingest``, ``tis``, ``budget``, ``profile``, ``describe``,
+``save``, ``fit_bsdf``, ``fit_spectrum``, ``export``, ``read``, ``load_scene``, ``trace`` and ``run``. Names
+are resolved on first use, so ``import bsdfkit`` is cheap and does not import JAX. Importing bsdfkit
+registers the ``ds.bsdf`` accessor on xarray datasets (:mod:`bsdfkit.accessor`).
 """
+from __future__ import annotations
+
+from typing import Any
+
 __version__ = "0.1.0"
+
+API = ("ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
+       "load_scene", "trace", "run")
+__all__ = ["__version__", *API]
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: the API module (and with it numpy, xarray, JAX …) is imported on first use of a public name.
+    if name in API:
+        import bsdfkit.api
+
+        return getattr(bsdfkit.api, name)
+    raise AttributeError(f"module 'bsdfkit' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *API])
+
+
+from bsdfkit import accessor as accessor  # noqa: E402  (registers ds.bsdf; needs __getattr__ above)

@@ -11,7 +11,8 @@ TOKENS = ["nan", "NaN", "inf", "-inf", "1e309", "1e-400", "-1", "0", "", " ", "\
 def damaged(draw, text: str) -> str:
     """Apply 1-3 random edits: replace/delete/insert spans, drop/duplicate/swap lines, truncate, inject tokens."""
     for _ in range(draw(st.integers(1, 3))):
-        op = draw(st.sampled_from(["replace", "delete", "insert", "drop_line", "dup_line", "swap_lines", "truncate", "token"]))
+        op = draw(st.sampled_from(["replace", "delete", "insert", "drop_line", "dup_line", "swap_lines", "truncate",
+                                   "token"]))
         n = len(text)
         if n == 0:
             text = draw(st.sampled_from(TOKENS))

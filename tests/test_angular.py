@@ -137,7 +137,8 @@ def test_error_bars_are_honest_over_20_realisations(tmp_path):
                             perpendicular_deg=virtual.default_plan().perpendicular_deg)
     lam = g.spectrometer.wavelength
     from bsdfkit.simulation import truth as synthetic
-    exact = synthetic.exact_tis_table(truth, 45.0, lam, virtual.BLUE.incident_power(lam, 1), virtual.YELLOW.incident_power(lam, 1))
+    exact = synthetic.exact_tis_table(truth, 45.0, lam, virtual.BLUE.incident_power(lam, 1),
+                                      virtual.YELLOW.incident_power(lam, 1))
     inside = []
     for seed in range(20):
         folder = tmp_path / f"s{seed}"
@@ -146,14 +147,16 @@ def test_error_bars_are_honest_over_20_realisations(tmp_path):
         for inter in ("bibs", "biys", "yiys"):
             for tag, side in (("B", "reflection"), ("F", "transmission")):
                 sel = dict(interaction=inter, side=side, theta_i=45.0)
-                z = (100 * float(table.tis.sel(**sel)) - exact[f"{tag}_{inter}"]) / (100 * float(table.tis_std.sel(**sel)))
+                z = ((100 * float(table.tis.sel(**sel)) - exact[f"{tag}_{inter}"])
+                     / (100 * float(table.tis_std.sel(**sel))))
                 inside.append(abs(z) <= 2)
     assert len(inside) == 120
     assert np.mean(inside) >= 0.9
 
 
 def test_grazing_incidence_85_is_finite_and_bounded(tmp_path):
-    g = virtual.VirtualGoniometer(spectrometer=virtual.Spectrometer(wavelength_step_nm=5.0), dark_frames=3, reference_frames=3)
+    g = virtual.VirtualGoniometer(spectrometer=virtual.Spectrometer(wavelength_step_nm=5.0), dark_frames=3,
+                                  reference_frames=3)
     truth = virtual.cl830_truth(g)
     plan = virtual.ScanPlan(theta_i_deg=(85.0,), in_plane_deg=tuple(float(x) for x in np.arange(-88, 89, 4.0)),
                             perpendicular_deg=tuple(float(x) for x in np.arange(-60, 61, 5.0)))

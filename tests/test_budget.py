@@ -86,7 +86,8 @@ def test_bundled_interaction_table(bundled_scan):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "bsdfkit", *map(str, args)], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "bsdfkit", *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
 
 
 def test_cli_tis_and_budget_json(tmp_path):

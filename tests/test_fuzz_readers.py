@@ -44,7 +44,8 @@ def _parses_or_bsdfkit_error(fn, path):
 def test_raw_scan_file(tiny_folder, tmp_path_factory, data):
     work = tmp_path_factory.mktemp("case") / "scan"
     shutil.copytree(tiny_folder, work)
-    target = data.draw(st.sampled_from(["scans/blue.csv.gz", "reference/yellow.csv.gz", "dark.csv.gz", "responsivity.csv"]))
+    target = data.draw(st.sampled_from(["scans/blue.csv.gz", "reference/yellow.csv.gz", "dark.csv.gz",
+                                        "responsivity.csv"]))
     path = work / target
     raw = path.read_bytes()
     text = (gzip.decompress(raw) if target.endswith(".gz") else raw).decode()
@@ -65,8 +66,10 @@ def test_manifest(tiny_folder, tmp_path_factory, data):
     _parses_or_bsdfkit_error(read_scan, work)
 
 
-@pytest.mark.parametrize("name,reader", [("tracepro_lambert_table.txt", read_tracepro), ("tracepro_abg.txt", read_tracepro),
-                                         ("zemax_lambert_brdf.bsdf", read_zemax), ("zemax_asymmetric_btdf.bsdf", read_zemax),
+@pytest.mark.parametrize("name,reader", [("tracepro_lambert_table.txt", read_tracepro),
+                                         ("tracepro_abg.txt", read_tracepro),
+                                         ("zemax_lambert_brdf.bsdf", read_zemax),
+                                         ("zemax_asymmetric_btdf.bsdf", read_zemax),
                                          ("asap_lambert.txt", read_asap)])
 def test_table_readers(name, reader, tmp_path_factory):
     source = (GOLDEN / name).read_bytes().decode("utf-8")

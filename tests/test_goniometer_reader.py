@@ -114,7 +114,7 @@ def _wrong_field_count(f):
 def _missing_dark_exposure(f):
     path = f / "dark.csv.gz"
     lines = read_gz_lines(path)
-    write_gz_lines(path, [lines[0]] + [l for l in lines[1:] if l.split(",")[1] != "20"])
+    write_gz_lines(path, [lines[0]] + [line for line in lines[1:] if line.split(",")[1] != "20"])
     return ValidationError, "dark.csv.gz", "exposure_s"
 
 

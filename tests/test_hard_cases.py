@@ -82,7 +82,8 @@ def test_tis_of_a_narrow_lobe_on_dense_arcs():
 @pytest.mark.parametrize("theta_s", [89.0, 89.9, 90.0])
 def test_grazing_scatter_is_masked_or_finite(tiny_export, theta_s):
     raw = read_scan(tiny_export)
-    raw = raw.assign_coords(theta_s=("record", np.where(np.arange(raw.sizes["record"]) == 0, theta_s, raw.theta_s.values)))
+    raw = raw.assign_coords(theta_s=("record", np.where(np.arange(raw.sizes["record"]) == 0, theta_s,
+                                                        raw.theta_s.values)))
     ds = calibrate(raw)
     half = np.degrees(Instrument(886.0, 25.4, 14.0).half_angle_rad)
     row = ds.bsdf.values[0]
@@ -111,7 +112,8 @@ def test_pure_dark_record_gives_unbiased_negative_values(tiny_export):
 def test_near_grazing_incidence_truth_stays_physical(theta_i):
     truth = virtual.cl830_truth()
     lam = np.arange(380.0, 780.01, 5.0)
-    tis = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1), virtual.YELLOW.incident_power(lam, 1))
+    tis = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1),
+                                    virtual.YELLOW.incident_power(lam, 1))
     assert all(np.isfinite(v) for v in tis.values())
     assert tis["blue_losses"] >= 0 and tis["yellow_losses"] >= 0
 

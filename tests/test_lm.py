@@ -1,4 +1,5 @@
-"""bsdfkit.fit.lm: the batched Levenberg–Marquardt solver, directly and as bsdfkit.fit.least_squares's default solver."""
+"""bsdfkit.fit.lm: the batched Levenberg–Marquardt solver, directly and as bsdfkit.fit.least_squares's default
+solver."""
 import math
 
 import jax
@@ -127,7 +128,7 @@ def test_jacobian_products_match_the_analytic_jacobian():
     assert float(aux) == 1.5
 
 
-# ------------------------------------------------------------------------------- through bsdfkit.fit.least_squares (JAX)
+# ------------------------------------------------------------------------------ through bsdfkit.fit.least_squares (JAX)
 C = 4.0 * math.log(2.0)
 
 

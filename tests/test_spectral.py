@@ -28,8 +28,10 @@ def test_weighted_mean_of_a_constant_is_the_constant():
          "incident_spectrum": (("configuration", "wavelength"), [np.exp(-((lam - 460) / 8) ** 2)]),
          "incident_valid": (("configuration", "wavelength"), [np.ones(lam.size, bool)])},
         coords={"wavelength": lam, "configuration": ["blue"], "config": ("record", ["blue"] * 3),
-                "theta_i": ("record", [45.0] * 3), "phi_i": ("record", [180.0] * 3), "theta_s": ("record", [0, 10, 20.0]),
-                "phi_s": ("record", [0.0] * 3), "side": ("record", ["reflection"] * 3), "arc": ("record", ["in_plane"] * 3)})
+                "theta_i": ("record", [45.0] * 3), "phi_i": ("record", [180.0] * 3),
+                "theta_s": ("record", [0, 10, 20.0]),
+                "phi_s": ("record", [0.0] * 3), "side": ("record", ["reflection"] * 3),
+                "arc": ("record", ["in_plane"] * 3)})
     led = colour.SpectralDistribution(dict(zip(lam, np.linspace(1, 3, lam.size))))
     out = spectral.weighted_mean_bsdf(ds, "blue", (450, 470), led)
     np.testing.assert_allclose(out.bsdf.values, 0.25, rtol=1e-12)
@@ -58,16 +60,22 @@ def test_donaldson_reduction_agrees_with_band_averages():
     th = np.radians(45.0)
     d = sample_direction(np.radians([0.0, 30.0, 60.0]), np.radians([0.0, 180.0, 0.0]))
     q = truth.donaldson("reflection", th, d, lam, lam)
-    don = xr.DataArray(q, dims=["record", "wavelength_i", "wavelength"], coords={"wavelength_i": lam, "wavelength": lam})
+    don = xr.DataArray(q, dims=["record", "wavelength_i", "wavelength"],
+                       coords={"wavelength_i": lam, "wavelength": lam})
     incident = virtual.BLUE.incident_power(lam, 1.0)
-    reduced = spectral.bispectral_weighted_mean(don, xr.DataArray(incident, dims=["wavelength"], coords={"wavelength": lam}))
+    reduced = spectral.bispectral_weighted_mean(don, xr.DataArray(incident, dims=["wavelength"],
+                                                                  coords={"wavelength": lam}))
     # the same quantity from its definition: elastic f(λ)·p_i(λ) + converted f_conv·e(λ)·⟨g⟩
     p_i = incident / np.sum(incident * np.gradient(lam))
     blue = lam < truth.elastic_split_nm
-    f_el = np.where(blue, truth.elastic_angular("bibs", "reflection", th, d)[:, None] * truth.elastic_spectral("bibs", "reflection", th, lam),
-                    truth.elastic_angular("yiys", "reflection", th, d)[:, None] * truth.elastic_spectral("yiys", "reflection", th, lam))
+    f_el = np.where(blue,
+                    truth.elastic_angular("bibs", "reflection", th, d)[:, None]
+                    * truth.elastic_spectral("bibs", "reflection", th, lam),
+                    truth.elastic_angular("yiys", "reflection", th, d)[:, None]
+                    * truth.elastic_spectral("yiys", "reflection", th, lam))
     g_mean = np.sum(truth.excitation(lam) * p_i * np.gradient(lam))
-    expected = f_el * p_i + truth.conversion_angular("reflection", th, d)[:, None] * truth.emission_density(lam) * g_mean
+    expected = (f_el * p_i
+                + truth.conversion_angular("reflection", th, d)[:, None] * truth.emission_density(lam) * g_mean)
     np.testing.assert_allclose(reduced.values, expected, rtol=1e-10, atol=1e-15)
     # its band integral over 470-740 nm is the conversion TIS density (the eq. 13 integrand): T/π(...)·1
     inside = (lam >= 470) & (lam <= 740)
@@ -79,7 +87,8 @@ def test_photon_energy_of_a_line():
     lam = np.arange(500.0, 700.0, 0.5)
     line = xr.DataArray(np.where(np.isclose(lam, 600.0), 1.0, 0.0), dims=["wavelength"], coords={"wavelength": lam})
     assert spectral.mean_wavelength(line, (500, 700)) == pytest.approx(600.0)
-    assert spectral.mean_photon_energy(line, (500, 700)) == pytest.approx(6.62607015e-34 * 299792458 / 600e-9, rel=1e-12)
+    assert spectral.mean_photon_energy(line, (500, 700)) == pytest.approx(6.62607015e-34 * 299792458 / 600e-9,
+                                                                          rel=1e-12)
 
 
 def test_photon_ratio_is_ratio_of_mean_wavelengths():
@@ -87,4 +96,5 @@ def test_photon_ratio_is_ratio_of_mean_wavelengths():
     a = xr.DataArray(np.exp(-((lam - 460) / 10) ** 2), dims=["wavelength"], coords={"wavelength": lam})
     b = xr.DataArray(np.exp(-((lam - 600) / 60) ** 2), dims=["wavelength"], coords={"wavelength": lam})
     r = spectral.photon_ratio(a, (440, 480), b, (470, 740))
-    assert r == pytest.approx(spectral.mean_wavelength(b, (470, 740)) / spectral.mean_wavelength(a, (440, 480)), rel=1e-12)
+    assert r == pytest.approx(spectral.mean_wavelength(b, (470, 740)) / spectral.mean_wavelength(a, (440, 480)),
+                              rel=1e-12)

@@ -24,14 +24,16 @@ def test_truth_conserves_energy_at_every_incidence(theta_i):
     truth = virtual.cl830_truth()
     g = virtual.VirtualGoniometer()
     lam = g.spectrometer.wavelength
-    tis = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1), virtual.YELLOW.incident_power(lam, 1))
+    tis = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1),
+                                    virtual.YELLOW.incident_power(lam, 1))
     assert tis["blue_losses"] >= 0 and tis["yellow_losses"] >= 0
     assert all(np.isfinite(v) for v in tis.values())
 
 
 def test_specular_share_grows_with_incidence():
     truth = virtual.cl830_truth()
-    shares = [truth.lobe_tis("bibs", "reflection", np.radians(t)) / truth.elastic_tis("bibs", "reflection", np.radians(t))
+    shares = [truth.lobe_tis("bibs", "reflection", np.radians(t))
+              / truth.elastic_tis("bibs", "reflection", np.radians(t))
               for t in (5.0, 45.0, 56.0)]
     assert shares[0] < shares[1] < shares[2]
 
@@ -40,7 +42,8 @@ def test_lobe_tis_matches_closed_form_inside_disk_and_brute_force_when_clipped()
     truth = virtual.cl830_truth()
     p = truth.lobe("bibs", "reflection", np.radians(5.0))
     # small lobe well inside the unit disk: 2πσ²A
-    assert truth.lobe_tis("bibs", "reflection", np.radians(5.0)) == pytest.approx(2 * np.pi * p.sigma**2 * p.A, rel=1e-9)
+    assert truth.lobe_tis("bibs", "reflection", np.radians(5.0)) == pytest.approx(2 * np.pi * p.sigma**2 * p.A,
+                                                                                  rel=1e-9)
     # broad transmission lobe at 56°: compare with a dense Cartesian (βx, βy) quadrature
     th = np.radians(56.0)
     q = truth.lobe("bibs", "transmission", th)

@@ -33,7 +33,8 @@ class Study:
     groups: tuple[str, ...] = ()  # optional: rows are tagged by extra["group"] (e.g. two methods compared)
 
     def cheapest(self, target: float, group: str | None = None) -> Row | None:
-        return cheapest(self.rows if group is None else tuple(r for r in self.rows if r.extra.get("group") == group), target)
+        return cheapest(self.rows if group is None else tuple(r for r in self.rows if r.extra.get("group") == group),
+                        target)
 
 
 def cheapest(rows: tuple[Row, ...], target: float) -> Row | None:
@@ -53,13 +54,15 @@ def study_markdown(study: Study, figure_name: str | None) -> str:
     if study.notes:
         lines += [study.notes, ""]
     extra_keys = sorted({k for r in study.rows for k in r.extra if k != "group"})
-    head = ["setting"] + (["method"] if study.groups else []) + ["error", "wall time (s)", study.cost_label] + extra_keys
+    head = (["setting"] + (["method"] if study.groups else []) + ["error", "wall time (s)", study.cost_label]
+            + extra_keys)
     lines.append("| " + " | ".join(head) + " |")
     lines.append("|" + "---|" * len(head))
     for r in study.rows:
         cells = [r.setting] + ([str(r.extra.get("group", ""))] if study.groups else [])
         cells += [f"{100 * r.error:.3g} %" if np.isfinite(r.error) else "n/a", f"{r.wall_s:.3g}", _fmt(r.cost)]
-        cells += [_fmt(r.extra[k]) if isinstance(r.extra.get(k), (int, float)) else str(r.extra.get(k, "")) for k in extra_keys]
+        cells += [_fmt(r.extra[k]) if isinstance(r.extra.get(k), (int, float)) else str(r.extra.get(k, ""))
+                  for k in extra_keys]
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
     for group in (study.groups or (None,)):
@@ -112,7 +115,8 @@ def report_header(command: str, quick: bool, elapsed_s: float) -> str:
     ])
 
 
-def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float, force: bool = True) -> Path:
+def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float,
+                 force: bool = True) -> Path:
     from bsdfkit.io.atomic import write_text
     from bsdfkit.plotting.figures import save_figure
 

@@ -15,7 +15,8 @@ from bsdfkit.reduction import tis as angular
 from bsdfkit.simulation import truth as synthetic
 from bsdfkit.simulation import virtual_goniometer as virtual
 
-ENTRIES = [(i, tag, side) for i in ("bibs", "biys", "yiys") for tag, side in (("B", "reflection"), ("F", "transmission"))]
+ENTRIES = [(i, tag, side) for i in ("bibs", "biys", "yiys")
+           for tag, side in (("B", "reflection"), ("F", "transmission"))]
 
 
 def _measure_tis(truth, plan, gonio, seed: int, theta_i: float) -> tuple[float, float, float]:
@@ -30,8 +31,10 @@ def _measure_tis(truth, plan, gonio, seed: int, theta_i: float) -> tuple[float, 
         table = angular.tis_table(calibrate(read_scan(Path(tmp) / "scan")))
         wall = time.perf_counter() - start
     lam = gonio.spectrometer.wavelength
-    exact = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1), virtual.YELLOW.incident_power(lam, 1))
-    err = max(abs(100 * float(table.tis.sel(interaction=i, side=s, theta_i=theta_i)) - exact[f"{t}_{i}"]) / exact[f"{t}_{i}"]
+    exact = synthetic.exact_tis_table(truth, theta_i, lam, virtual.BLUE.incident_power(lam, 1),
+                                      virtual.YELLOW.incident_power(lam, 1))
+    err = max(abs(100 * float(table.tis.sel(interaction=i, side=s, theta_i=theta_i)) - exact[f"{t}_{i}"])
+              / exact[f"{t}_{i}"]
               for i, t, s in ENTRIES)
     return err, wall, instrument_s
 
@@ -43,19 +46,22 @@ def tis_vs_step(quick: bool) -> Study:
     rows = []
     for step in ((8.0, 4.0, 2.0) if quick else (16.0, 8.0, 4.0, 2.0, 1.0)):
         plan = virtual.ScanPlan(theta_i_deg=(45.0,), in_plane_deg=tuple(float(x) for x in np.arange(-88, 88.01, step)),
-                                perpendicular_deg=tuple(float(x) for x in np.arange(-60, 60.01, step)), fine_halfwidth_deg=0.0)
+                                perpendicular_deg=tuple(float(x) for x in np.arange(-60, 60.01, step)),
+                                fine_halfwidth_deg=0.0)
         err, wall, inst = _measure_tis(truth, plan, gonio, seed=11, theta_i=45.0)
         n = sum(len(plan.positions(45.0, s)) for s in plan.sides)
         rows.append(Row(f"step {step:g}°", err, wall, inst, {"positions": n}))
     return Study("tis_step", "TIS error vs goniometer angular step (θi = 45°, both arcs, no fine region)",
                  "max over the six TIS entries of |TIS − exact truth| / truth", "instrument time (s)", tuple(rows),
-                 notes="Positions are counted per configuration; the instrument time sums every exposure, reference and dark.")
+                 notes="Positions are counted per configuration; the instrument time sums every exposure, "
+                       "reference and dark.")
 
 
 def tis_vs_exposure(quick: bool) -> Study:
     """TIS error against total measurement time (exposure budget), default scan plan at 45°."""
     base = virtual.default_plan()
-    plan = virtual.ScanPlan(theta_i_deg=(45.0,), in_plane_deg=base.in_plane_deg, perpendicular_deg=base.perpendicular_deg)
+    plan = virtual.ScanPlan(theta_i_deg=(45.0,), in_plane_deg=base.in_plane_deg,
+                            perpendicular_deg=base.perpendicular_deg)
     rows = []
     for max_exp in ((0.005, 0.1, 20.0) if quick else (0.002, 0.01, 0.05, 0.5, 5.0, 20.0)):
         gonio = virtual.VirtualGoniometer(spectrometer=virtual.Spectrometer(wavelength_step_nm=2.5 if quick else 1.0),
@@ -65,7 +71,8 @@ def tis_vs_exposure(quick: bool) -> Study:
         rows.append(Row(f"max exposure {max_exp:g} s", err, wall, inst))
     return Study("tis_exposure", "TIS error vs measurement time (exposure cap; default plan, θi = 45°)",
                  "max over the six TIS entries of |TIS − exact truth| / truth", "instrument time (s)", tuple(rows),
-                 notes="Shorter exposures raise shot and read noise; the floor is the reconstruction error of the two-arc scan.")
+                 notes="Shorter exposures raise shot and read noise; the floor is the reconstruction error of the "
+                       "two-arc scan.")
 
 
 def quadrature(quick: bool) -> Study:
@@ -83,14 +90,17 @@ def quadrature(quick: bool) -> Study:
         value = angular.tis_rectangle_sum(f_sph, step, step)
         wall = time.perf_counter() - start
         n = (int(90 / step) + 1) * int(360 / step)
-        rows.append(Row(f"Δθ = Δφ = {step:g}°", abs(value - exact) / exact, wall, n, {"group": "eq. (7) rectangle sum"}))
+        rows.append(Row(f"Δθ = Δφ = {step:g}°", abs(value - exact) / exact, wall, n,
+                        {"group": "eq. (7) rectangle sum"}))
     b0 = (np.sin(th), 0.0)
-    for n_psi, n_r in ((16, 25), (32, 50), (64, 100), (128, 200)) if quick else ((8, 12), (16, 25), (32, 50), (64, 100), (128, 200), (256, 400)):
+    for n_psi, n_r in (((16, 25), (32, 50), (64, 100), (128, 200)) if quick
+                       else ((8, 12), (16, 25), (32, 50), (64, 100), (128, 200), (256, 400))):
         start = time.perf_counter()
         grid = angular.polar_grid(b0, n_psi, n_r)
         d = np.stack([b0[0] + grid.r * np.cos(grid.psi), grid.r * np.sin(grid.psi)], axis=-1)
         z = np.sqrt(np.clip(1 - (d**2).sum(-1), 0, None))
-        value = float(np.sum(truth.elastic_angular("bibs", "reflection", th, np.concatenate([d, z[:, None]], -1)) * grid.w))
+        value = float(np.sum(truth.elastic_angular("bibs", "reflection", th, np.concatenate([d, z[:, None]], -1))
+                             * grid.w))
         wall = time.perf_counter() - start
         rows.append(Row(f"{n_psi} × {n_r} polar nodes", abs(value - exact) / exact, wall, n_psi * n_r,
                         {"group": "projected solid angle (polar about β0)"}))
@@ -129,4 +139,5 @@ def spectral_resolution(quick: bool) -> Study:
     return Study("spectral", "Spectral resolution vs error of weighted means and photon conversion",
                  "max relative error of ⟨q⟩_blue, ⟨q⟩_yellow (eqs. 5, 8) and λ̄s/λ̄i (eq. 16) vs a 0.05 nm grid",
                  "wavelength samples", tuple(rows),
-                 notes="The 450-470 nm filter band holds only 21 samples at 1 nm and 5 at 5 nm: the band-edge weights dominate.")
+                 notes="The 450-470 nm filter band holds only 21 samples at 1 nm and 5 at 5 nm: the band-edge "
+                       "weights dominate.")

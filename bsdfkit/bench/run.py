@@ -21,7 +21,8 @@ def study_functions() -> list[tuple[str, Callable[[bool], Study]]]:
     from bsdfkit.bench import fitting, tracing
 
     studies += [("fit", fitting.fit_tolerance), ("fit_batch", fitting.batched_vs_loop),
-                ("trace_rays", tracing.rays), ("trace_termination", tracing.termination), ("trace_precision", tracing.precision)]
+                ("trace_rays", tracing.rays), ("trace_termination", tracing.termination),
+                ("trace_precision", tracing.precision)]
     return studies
 
 

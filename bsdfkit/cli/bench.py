@@ -18,7 +18,8 @@ def _run(args: argparse.Namespace) -> int:
     from bsdfkit.bench.run import run_bench
 
     command = "bsdfkit bench" + (" --quick" if args.quick else "")
-    studies = run_bench(args.output, args.quick, args.force, command, args.only, log=lambda m: print(m, file=sys.stderr))
+    studies = run_bench(args.output, args.quick, args.force, command, args.only,
+                        log=lambda m: print(m, file=sys.stderr))
     for study in studies:
         for target in (0.01, 0.001):
             for group in (study.groups or (None,)):

@@ -49,9 +49,11 @@ def _run(args: argparse.Namespace) -> int:
     print(f"η_MC = {args.eta_mc:g}; cumulative extracted (% of LED power) per plate interaction")
     print("  k   blue  yellow   total  losses  in flight")
     for k, row in enumerate(result["iterations"], start=1):
-        print(f"  {k:<2d} {row['blue']:6.2f} {row['yellow']:7.2f} {row['total']:7.2f} {row['losses']:7.2f} {row['backscattered']:9.2f}")
+        print(f"  {k:<2d} {row['blue']:6.2f} {row['yellow']:7.2f} {row['total']:7.2f} {row['losses']:7.2f} "
+              f"{row['backscattered']:9.2f}")
     c = result["converged"]
     print(f"  ∞  {c['blue']:6.2f} {c['yellow']:7.2f} {c['total']:7.2f} {c['losses']:7.2f}")
     f = result["first_iteration"]
-    print(f"  first interaction: forward {f['forward']:.1f}, lost {f['lost']:.1f}, backscattered {f['backscattered']:.1f}")
+    print(f"  first interaction: forward {f['forward']:.1f}, lost {f['lost']:.1f}, "
+          f"backscattered {f['backscattered']:.1f}")
     return 0

@@ -8,7 +8,8 @@ from bsdfkit.cli._common import emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("info", help="summarise a scan: incidences, sides, positions per arc, wavelengths, configurations")
+    p = sub.add_parser("info",
+                       help="summarise a scan: incidences, sides, positions per arc, wavelengths, configurations")
     p.add_argument("scan", help="netCDF written by bsdfkit, or a raw measurement folder")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_run)
@@ -31,7 +32,8 @@ def _run(args: argparse.Namespace) -> int:
     w = info["wavelength_nm"]
     print(f"  wavelength: {w['min']:g}-{w['max']:g} nm, step {w['step']:g} nm ({w['count']} values)")
     for c in info["configurations"]:
-        print(f"  configuration {c['name']}: {c['description']} (band {c['incident_band_nm'][0]:g}-{c['incident_band_nm'][1]:g} nm)")
+        print(f"  configuration {c['name']}: {c['description']} "
+              f"(band {c['incident_band_nm'][0]:g}-{c['incident_band_nm'][1]:g} nm)")
     for th, sides in info["positions"].items():
         parts = [f"{side}: " + ", ".join(f"{n} {arc}" for arc, n in arcs.items()) for side, arcs in sides.items()]
         print(f"  θi = {th}°: " + "; ".join(parts))

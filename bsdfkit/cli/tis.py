@@ -33,6 +33,7 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     print(f"θi = {table.theta_i:g}°   [%] initial power        [%] initial photons")
     for k in KEYS:
-        print(f"  {k:14s} {table.power[k]:7.2f} ± {table.power_std[k]:.2f}      {table.photons[k]:7.2f} ± {table.photons_std[k]:.2f}")
+        print(f"  {k:14s} {table.power[k]:7.2f} ± {table.power_std[k]:.2f}      "
+              f"{table.photons[k]:7.2f} ± {table.photons_std[k]:.2f}")
     print(f"  EQE = {table.eqe:.3f} ± {table.eqe_std:.3f}")
     return 0

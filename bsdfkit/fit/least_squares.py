@@ -975,7 +975,7 @@ def fit_bsdf(
                          np.sin(ts[b, :k]) * np.sin(ps[b, :k]))
         if options.specular_core_deg > 0:
             # Angle between the scatter and the specular direction, from the 3-D unit vectors.
-            sx, sy, sz = np.sin(ts[b, :k]) * np.cos(ps[b, :k]), np.sin(ts[b, :k]) * np.sin(ps[b, :k]), np.cos(ts[b, :k])
+            sx, sz = np.sin(ts[b, :k]) * np.cos(ps[b, :k]), np.cos(ts[b, :k])
             cos_dev = sx * np.sin(ti[b, :k]) + sz * np.cos(ti[b, :k])
             use &= np.degrees(np.arccos(np.clip(cos_dev, -1, 1))) > options.specular_core_deg
         m[b, :k] = use

@@ -301,7 +301,7 @@ def levenberg_marquardt(
             a[acc] = s2[ok, None, None] * lin.jtj[ok]
             jtj_raw[acc] = lin.jtj[ok]
 
-            def keep(store: np.ndarray, new: np.ndarray) -> np.ndarray:
+            def keep(store: np.ndarray, new: np.ndarray, acc=acc, ok=ok) -> np.ndarray:
                 store[acc] = new[ok]
                 return store
 

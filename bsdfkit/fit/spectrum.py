@@ -342,8 +342,8 @@ def fit_spectrum(
 def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[float, float]) -> float:
     """Σ values(λi)·Δλi over lo ≤ λi ≤ hi (inclusive), the band sum of §4.2 of the cylindrical-module paper.
 
-    λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.reduction.spectral.band_sum` on a validated
-    grid. Result in value-unit·nm (W for W/nm).
+    λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.reduction.spectral.band_sum` on a
+    validated grid. Result in value-unit·nm (W for W/nm).
     """
     wl = _validated_grid(wavelength)
     lo, hi = band_nm

@@ -78,7 +78,8 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
     and per configuration the normalised incident spectrum ``incident_spectrum`` (1/nm, unit integral).
     """
     source = raw.attrs.get("source", "<dataset>")
-    instrument = Instrument(raw.attrs["detector_distance_mm"], raw.attrs["aperture_diameter_mm"], raw.attrs["beam_diameter_mm"])
+    instrument = Instrument(raw.attrs["detector_distance_mm"], raw.attrs["aperture_diameter_mm"],
+                            raw.attrs["beam_diameter_mm"])
     gain = float(raw.attrs["gain_e_per_count"])
     full_scale = float(raw.attrs["full_scale_counts"])
     lam = raw["wavelength"].values
@@ -111,7 +112,8 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         peak = p_i[c].max()
         valid[c] = (p_i[c] > INCIDENT_THRESHOLD * peak) & (p_i[c] > 10.0 * np.sqrt(var_p_i[c]))
         if not valid[c].any():
-            raise NumericalError("zero incident power in the reference beam", file=source, field=f"configuration '{name}'",
+            raise NumericalError("zero incident power in the reference beam", file=source,
+                                 field=f"configuration '{name}'",
                                  expected="a reference spectrum above 10 standard uncertainties somewhere",
                                  got=f"peak {peak:.3g} counts/s")
         power = np.where(valid[c], p_i[c] / resp, 0.0)
@@ -143,7 +145,8 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         bisp_var = var_rate / denom_b**2 + bisp**2 * (var_phi[cfg_index] / phi[cfg_index] ** 2)[:, None]
         floor_b = np.sqrt(dark_var) / t[:, None] / denom_b
 
-    coords = {k: raw[k] for k in ("config", "theta_i", "phi_i", "theta_s", "phi_s", "side", "arc", "exposure", "source_line")}
+    coords = {k: raw[k] for k in ("config", "theta_i", "phi_i", "theta_s", "phi_s", "side", "arc", "exposure",
+                                  "source_line")}
     ds = xr.Dataset(
         {
             "bsdf": (("record", "wavelength"), bsdf),
@@ -162,12 +165,14 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
             "incident_band": raw["incident_band"],
             "configuration_description": raw["configuration_description"],
         },
-        coords={**coords, "wavelength": raw["wavelength"], "configuration": raw["configuration"], "band_edge": raw["band_edge"]},
+        coords={**coords, "wavelength": raw["wavelength"], "configuration": raw["configuration"],
+                "band_edge": raw["band_edge"]},
     )
     ds["bsdf"].attrs.update(units="1/sr", long_name="BSDF", note="NaN where incident_valid is false or grazing is true")
     ds["bsdf_std"].attrs.update(units="1/sr", long_name="standard uncertainty of bsdf (counting and dark noise)")
     ds["noise_floor"].attrs.update(units="1/sr", long_name="noise-equivalent BSDF (dark noise)")
-    ds["bsdf_bispectral"].attrs.update(units="1/(sr nm)", long_name="band-averaged bi-spectral BSDF <q_lambda>(lambda_s)",
+    ds["bsdf_bispectral"].attrs.update(units="1/(sr nm)",
+                                       long_name="band-averaged bi-spectral BSDF <q_lambda>(lambda_s)",
                                        note="eq. (10) of the power-budget paper; NaN only where grazing")
     ds["bsdf_bispectral_std"].attrs.update(units="1/(sr nm)")
     ds["noise_floor_bispectral"].attrs.update(units="1/(sr nm)")
@@ -186,7 +191,8 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         frame="sample",
         side="reflection transmission",
         units="1/sr",
-        angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; transmission angles from the back normal",
+        angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
+                         "transmission angles from the back normal",
         sample_name=raw.attrs.get("sample_name", ""),
         synthetic=raw.attrs.get("synthetic", 0),
         source=source,

@@ -42,7 +42,8 @@ def describe(ds: xr.Dataset) -> dict:
         "wavelength_nm": {"min": float(lam.min()), "max": float(lam.max()),
                           "step": float(np.median(np.diff(lam))) if lam.size > 1 else None, "count": int(lam.size)},
         "configurations": configs,
-        "instrument": {k: float(ds.attrs[k]) for k in ("detector_distance_mm", "aperture_diameter_mm", "beam_diameter_mm")},
+        "instrument": {k: float(ds.attrs[k])
+                       for k in ("detector_distance_mm", "aperture_diameter_mm", "beam_diameter_mm")},
     }
     if "solid_angle_sr" in ds.attrs:
         out["instrument"]["solid_angle_sr"] = float(ds.attrs["solid_angle_sr"])

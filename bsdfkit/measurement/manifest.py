@@ -62,9 +62,11 @@ def _get(table: Any, key: str, kind: type | tuple, path: Path, dotted: str, requ
     if kind is float:
         kind = _NUMBER
     if isinstance(value, bool) and kind is not bool:
-        raise InputError("manifest value of the wrong type", file=path, field=dotted, expected=_kind_name(kind), got=value)
+        raise InputError("manifest value of the wrong type", file=path, field=dotted, expected=_kind_name(kind),
+                         got=value)
     if not isinstance(value, kind):
-        raise InputError("manifest value of the wrong type", file=path, field=dotted, expected=_kind_name(kind), got=value)
+        raise InputError("manifest value of the wrong type", file=path, field=dotted, expected=_kind_name(kind),
+                         got=value)
     return value
 
 
@@ -114,8 +116,10 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
     inst = _get(data, "instrument", dict, path, "instrument")
     try:
         instrument = Instrument(
-            detector_distance_mm=float(_get(inst, "detector_distance_mm", float, path, "instrument.detector_distance_mm")),
-            aperture_diameter_mm=float(_get(inst, "aperture_diameter_mm", float, path, "instrument.aperture_diameter_mm")),
+            detector_distance_mm=float(_get(inst, "detector_distance_mm", float, path,
+                                            "instrument.detector_distance_mm")),
+            aperture_diameter_mm=float(_get(inst, "aperture_diameter_mm", float, path,
+                                            "instrument.aperture_diameter_mm")),
             beam_diameter_mm=float(_get(inst, "beam_diameter_mm", float, path, "instrument.beam_diameter_mm")),
         )
     except ValidationError as exc:
@@ -138,7 +142,8 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
     dark_file = _file(folder, _get(dark, "file", str, path, "dark.file"), path, "dark.file")
     configs_raw = _get(data, "configuration", list, path, "configuration")
     if not configs_raw:
-        raise InputError("no incident configuration", file=path, field="configuration", expected="at least one [[configuration]]")
+        raise InputError("no incident configuration", file=path, field="configuration",
+                         expected="at least one [[configuration]]")
     configs = []
     seen = set()
     for k, c in enumerate(configs_raw):
@@ -148,7 +153,8 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
             raise ValidationError("duplicate configuration name", file=path, field=f"{pre}.name", got=cname)
         seen.add(cname)
         band = _get(c, "incident_band_nm", list, path, f"{pre}.incident_band_nm")
-        if len(band) != 2 or not all(isinstance(b, _NUMBER) and not isinstance(b, bool) for b in band) or not band[1] > band[0]:
+        if (len(band) != 2 or not all(isinstance(b, _NUMBER) and not isinstance(b, bool) for b in band)
+                or not band[1] > band[0]):
             raise ValidationError("bad incident band", file=path, field=f"{pre}.incident_band_nm",
                                   expected="[low_nm, high_nm] with low < high", got=band)
         configs.append(ConfigurationEntry(
@@ -158,7 +164,8 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
             scan_file=_file(folder, _get(c, "scan_file", str, path, f"{pre}.scan_file"), path, f"{pre}.scan_file"),
             reference_file=_file(folder, _get(c, "reference_file", str, path, f"{pre}.reference_file"), path,
                                  f"{pre}.reference_file"),
-            reference_attenuation=_positive(_get(c, "reference_attenuation", float, path, f"{pre}.reference_attenuation"),
+            reference_attenuation=_positive(_get(c, "reference_attenuation", float, path,
+                                                 f"{pre}.reference_attenuation"),
                                             path, f"{pre}.reference_attenuation"),
         ))
     return Manifest(path=path, sample_name=name, synthetic=synthetic, instrument=instrument, wavelength_min_nm=wmin,

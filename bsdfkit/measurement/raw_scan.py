@@ -59,7 +59,8 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
     text = _open_text(path)
     rows = [r for r in csv.reader(io.StringIO(text))]
     # Skip blank and '#' comment lines but keep 1-based line numbers for messages.
-    numbered = [(k + 1, r) for k, r in enumerate(rows) if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+    numbered = [(k + 1, r) for k, r in enumerate(rows)
+                if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
     if not numbered:
         raise InputError("empty file", file=path, expected="a header line and at least one data row")
     header_line, header = numbered[0]
@@ -69,18 +70,19 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
         raise InputError("no data rows", file=path, line=header_line, expected="at least one data row after the header")
     names: list[str] = []
     wl: list[float] = []
-    for k, h in enumerate(header):
+    for _k, h in enumerate(header):
         try:
             value = float(h)
         except ValueError:
             if wl:
                 raise FormatError("text column after the wavelength columns", file=path, line=header_line, field=h,
-                                  expected="wavelength (nm) headers only after the named columns")
+                                  expected="wavelength (nm) headers only after the named columns") from None
             if h not in required and h not in optional:
                 raise FormatError("unknown column", file=path, line=header_line, field=h,
-                                  expected="one of " + ", ".join(required + optional) + " or a wavelength in nm")
+                                  expected="one of " + ", ".join(required + optional)
+                                           + " or a wavelength in nm") from None
             if h in names:
-                raise FormatError("column appears twice", file=path, line=header_line, field=h)
+                raise FormatError("column appears twice", file=path, line=header_line, field=h) from None
             names.append(h)
         else:
             if not np.isfinite(value):
@@ -91,13 +93,15 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
         raise FormatError("required column missing", file=path, line=header_line, field=missing[0],
                           expected="columns " + ", ".join(required))
     if not wl:
-        raise FormatError("no wavelength columns", file=path, line=header_line, expected="count columns headed by wavelength in nm")
+        raise FormatError("no wavelength columns", file=path, line=header_line,
+                          expected="count columns headed by wavelength in nm")
     wavelength = np.asarray(wl)
     steps = np.diff(wavelength)
     if np.any(steps <= 0):
         bad = int(np.argmax(steps <= 0)) + 1
         raise ValidationError("wavelength grid not strictly increasing", file=path, line=header_line,
-                              field=header[len(names) + bad], expected=f"> {wavelength[bad - 1]:g} nm", got=wavelength[bad])
+                              field=header[len(names) + bad], expected=f"> {wavelength[bad - 1]:g} nm",
+                              got=wavelength[bad])
     n_named = len(names)
     width = n_named + wavelength.size
     columns: dict[str, list[str]] = {n: [] for n in names}
@@ -123,14 +127,16 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
     return SpectraTable(path=path, columns=columns, wavelength=wavelength, counts=counts, first_data_line=data[0][0])
 
 
-def _floats(table: SpectraTable, name: str, lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> NDArray[np.float64]:
+def _floats(table: SpectraTable, name: str, lo: float, hi: float, lo_open: bool = False,
+            hi_open: bool = False) -> NDArray[np.float64]:
     out = np.empty(len(table.columns[name]))
     for k, cell in enumerate(table.columns[name]):
         try:
             value = float(cell)
         except ValueError:
             value = np.nan
-        ok = np.isfinite(value) and (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+        ok = (np.isfinite(value) and (value > lo if lo_open else value >= lo)
+              and (value < hi if hi_open else value <= hi))
         if not ok:
             rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
             raise ValidationError("value out of range", file=table.path, line=_line_of(table, k), field=name,
@@ -149,12 +155,14 @@ def _check_grid(table: SpectraTable, grid: NDArray[np.float64], manifest: Manife
         raise ValidationError("wavelength grid does not match the manifest", file=table.path, field="wavelength header",
                               expected=f"{grid.size} values {grid[0]:g}..{grid[-1]:g} nm step "
                                        f"{manifest.wavelength_step_nm:g} (from {manifest.path.name})",
-                              got=f"{table.wavelength.size} values {table.wavelength[0]:g}..{table.wavelength[-1]:g} nm")
+                              got=f"{table.wavelength.size} values "
+                                  f"{table.wavelength[0]:g}..{table.wavelength[-1]:g} nm")
     off = np.flatnonzero(~np.isclose(table.wavelength, grid, atol=1e-6, rtol=0))
     if off.size:
         k = int(off[0])
         raise ValidationError("wavelength grid does not match the manifest", file=table.path, field="wavelength header",
-                              expected=f"{grid[k]:g} nm in wavelength column {k + 1} (grid {grid[0]:g}..{grid[-1]:g} nm "
+                              expected=f"{grid[k]:g} nm in wavelength column {k + 1} "
+                                       f"(grid {grid[0]:g}..{grid[-1]:g} nm "
                                        f"step {manifest.wavelength_step_nm:g} from {manifest.path.name})",
                               got=f"{table.wavelength[k]:g} nm")
 
@@ -169,13 +177,16 @@ def _read_responsivity(path: Path, grid: NDArray[np.float64]) -> NDArray[np.floa
         try:
             lam, val = float(r[0]), float(r[1])
         except (ValueError, IndexError):
-            raise FormatError("bad responsivity row", file=path, line=k, expected="wavelength_nm,relative_responsivity", got=",".join(r)) from None
+            raise FormatError("bad responsivity row", file=path, line=k, expected="wavelength_nm,relative_responsivity",
+                              got=",".join(r)) from None
         if not (np.isfinite(val) and val > 0):
-            raise ValidationError("responsivity must be positive", file=path, line=k, field="relative_responsivity", got=r[1])
+            raise ValidationError("responsivity must be positive", file=path, line=k, field="relative_responsivity",
+                                  got=r[1])
         values.append((lam, val))
     arr = np.asarray(values)
     if arr.shape[0] != grid.size or not np.allclose(arr[:, 0], grid, atol=1e-6):
-        raise ValidationError("responsivity wavelengths do not match the manifest grid", file=path, field="wavelength_nm",
+        raise ValidationError("responsivity wavelengths do not match the manifest grid", file=path,
+                              field="wavelength_nm",
                               expected=f"{grid.size} values {grid[0]:g}..{grid[-1]:g} nm", got=f"{arr.shape[0]} rows")
     return arr[:, 1]
 
@@ -243,18 +254,21 @@ def read_scan(folder: str | Path) -> xr.Dataset:
         refs.append(xr.Dataset(
             {"reference_counts": (("reference_record", "wavelength"), ref.counts)},
             coords={"reference_config": ("reference_record", np.array([cfg.name] * ref.counts.shape[0], dtype=object)),
-                    "reference_exposure": ("reference_record", _floats(ref, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True))},
+                    "reference_exposure": ("reference_record", _floats(ref, "exposure_s", 0.0, np.inf,
+                                                                       lo_open=True, hi_open=True))},
         ))
     dark = read_spectra_table(manifest.dark_file, FRAME_COLUMNS)
     _check_grid(dark, grid, manifest)
     dark_exposure = _floats(dark, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
-    needed = set(np.concatenate([p["exposure"].values for p in parts] + [r["reference_exposure"].values for r in refs]).tolist())
+    needed = set(np.concatenate([p["exposure"].values for p in parts]
+                                + [r["reference_exposure"].values for r in refs]).tolist())
     have = {}
     for t in dark_exposure:
         have[round(t, 12)] = have.get(round(t, 12), 0) + 1
     for t in sorted(needed):
         if have.get(round(t, 12), 0) < 2:
-            raise ValidationError("not enough dark frames for an exposure time", file=manifest.dark_file, field="exposure_s",
+            raise ValidationError("not enough dark frames for an exposure time", file=manifest.dark_file,
+                                  field="exposure_s",
                                   expected=f"≥ 2 dark frames at {t:g} s (used by a scan or reference)",
                                   got=have.get(round(t, 12), 0))
     responsivity = (_read_responsivity(manifest.responsivity_file, grid) if manifest.responsivity_file
@@ -269,7 +283,8 @@ def read_scan(folder: str | Path) -> xr.Dataset:
     ds["reference_attenuation"] = ("configuration", [c.reference_attenuation for c in manifest.configurations])
     ds["incident_band"] = (("configuration", "band_edge"), [list(c.incident_band_nm) for c in manifest.configurations])
     ds = ds.assign_coords(band_edge=["low", "high"])
-    ds["configuration_description"] = ("configuration", np.array([c.description for c in manifest.configurations], dtype=object))
+    ds["configuration_description"] = ("configuration",
+                                       np.array([c.description for c in manifest.configurations], dtype=object))
     for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
         ds[name].attrs["units"] = "deg"
     ds["wavelength"].attrs.update(units="nm", long_name="scattered (detected) wavelength")

@@ -359,7 +359,8 @@ def tis_abg_normal_incidence(A: float, B: float, g: float) -> float:
     return math.pi * A / B * float(hyp2f1(1.0, 2.0 / g, 1.0 + 2.0 / g, -1.0 / B))
 
 
-def _abg_radial_integral(t_max: jnp.ndarray, B: jnp.ndarray, g: jnp.ndarray, n_panels: int, n_nodes: int) -> jnp.ndarray:
+def _abg_radial_integral(t_max: jnp.ndarray, B: jnp.ndarray, g: jnp.ndarray, n_panels: int,
+                         n_nodes: int) -> jnp.ndarray:
     """∫₀^{t_max} t/(B + t^g) dt by composite Gauss–Legendre in v = ln t over [ln t_max − 60, ln t_max].
 
     In v the integrand e^{2v}/(B + e^{gv}) is smooth (nearest complex pole at distance π/g from the real

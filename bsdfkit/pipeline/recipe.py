@@ -123,7 +123,8 @@ def _typed(table: dict, key: str, kind: type | tuple, path: Path, dotted: str, d
     value = table[key]
     ok = isinstance(value, kind) and not (isinstance(value, bool) and kind is not bool)
     if not ok:
-        raise InputError("recipe value of the wrong type", file=path, field=dotted, expected=getattr(kind, "__name__", str(kind)), got=value)
+        raise InputError("recipe value of the wrong type", file=path, field=dotted,
+                         expected=getattr(kind, "__name__", str(kind)), got=value)
     return value
 
 
@@ -144,11 +145,13 @@ def load_recipe(path: str | Path) -> Recipe:
     rep = data.get("report", {})
     report = ReportOptions(
         figure_config=_typed(rep, "figure_config", str, path, "report.figure_config", "blue"),
-        figure_wavelength_nm=float(_typed(rep, "figure_wavelength_nm", (int, float), path, "report.figure_wavelength_nm", 460.0)),
+        figure_wavelength_nm=float(_typed(rep, "figure_wavelength_nm", (int, float), path,
+                                          "report.figure_wavelength_nm", 460.0)),
     )
     red = data.get("reductions", {})
     reductions = ReductionOptions(
-        budget_incidence_deg=float(_typed(red, "budget_incidence_deg", (int, float), path, "reductions.budget_incidence_deg", 45.0)),
+        budget_incidence_deg=float(_typed(red, "budget_incidence_deg", (int, float), path,
+                                          "reductions.budget_incidence_deg", 45.0)),
         eta_mc=float(_typed(red, "eta_mc", (int, float), path, "reductions.eta_mc", 0.94)),
         iterations=int(_typed(red, "iterations", int, path, "reductions.iterations", 7)),
     )
@@ -179,7 +182,8 @@ def load_recipe(path: str | Path) -> Recipe:
     fits = FitStageOptions(
         bsdf_model=_typed(ft, "bsdf_model", str, path, "fits.bsdf_model", "lambert+gaussian"),
         emission_model=_typed(ft, "emission_model", str, path, "fits.emission_model", "split-gaussian"),
-        emission_incidence_deg=float(_typed(ft, "emission_incidence_deg", (int, float), path, "fits.emission_incidence_deg", 45.0)),
+        emission_incidence_deg=float(_typed(ft, "emission_incidence_deg", (int, float), path,
+                                            "fits.emission_incidence_deg", 45.0)),
         led_peak_nm=float(_typed(ft, "led_peak_nm", (int, float), path, "fits.led_peak_nm", 450.1)),
         led_fwhm_nm=float(_typed(ft, "led_fwhm_nm", (int, float), path, "fits.led_fwhm_nm", 22.9)),
         fallback_flux_W=(float(fallback[0]), float(fallback[1])),
@@ -196,7 +200,8 @@ def _numbers(table: dict, key: str, path: Path, section: str = "trace") -> list[
     return value
 
 
-def _choices(table: dict, key: str, allowed: tuple[str, ...], path: Path, default: tuple[str, ...] | None = None) -> list[str]:
+def _choices(table: dict, key: str, allowed: tuple[str, ...], path: Path,
+             default: tuple[str, ...] | None = None) -> list[str]:
     value = table.get(key, list(default or allowed))
     if not isinstance(value, list) or not all(isinstance(v, str) and v in allowed for v in value):
         raise InputError("recipe value must be a list of names", file=path, field=f"exports.{key}",
@@ -257,7 +262,8 @@ def stage_reductions(state: RunState) -> None:
     state.tables = tables
     key = f"{opts.budget_incidence_deg:g}"
     if key not in tables:
-        raise InputError("budget incidence not measured", file=state.recipe.path, field="reductions.budget_incidence_deg",
+        raise InputError("budget incidence not measured", file=state.recipe.path,
+                         field="reductions.budget_incidence_deg",
                          expected="one of " + ", ".join(tables), got=opts.budget_incidence_deg)
     t = tables[key]
     power = budget.module_budget(t.power, opts.eta_mc, opts.iterations)
@@ -282,8 +288,9 @@ def stage_reductions(state: RunState) -> None:
         lines.append(f"  {k:14s} {t.power[k]:6.2f} ± {t.power_std[k]:.2f}   {t.photons[k]:6.2f}{extra}")
     lines.append(f"  EQE {t.eqe:.3f} ± {t.eqe_std:.3f}")
     last = power.iterations[-1]
-    lines.append(f"module budget (η_MC = {opts.eta_mc:g}, {opts.iterations} plate interactions): blue {last['blue']:.2f}, "
-                 f"yellow {last['yellow']:.2f}, total {last['total']:.2f} %; converged total {power.converged['total']:.2f} %")
+    lines.append(f"module budget (η_MC = {opts.eta_mc:g}, {opts.iterations} plate interactions): "
+                 f"blue {last['blue']:.2f}, yellow {last['yellow']:.2f}, total {last['total']:.2f} %; "
+                 f"converged total {power.converged['total']:.2f} %")
     state.summary.setdefault("report_lines", []).extend(lines)
 
 
@@ -366,8 +373,9 @@ def stage_trace(state: RunState) -> None:
         run("specular_fraction", {"wall.specular_fraction": spec, "base.specular_fraction": spec})
     results["studies"] = studies
     results["trends"] = _trends(device, studies)
-    state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity", "ledger_error",
-                                                                         "rays", "elapsed_s", "interactions_per_s")},
+    state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity",
+                                                                         "ledger_error", "rays", "elapsed_s",
+                                                                         "interactions_per_s")},
                               "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
                               "trends": results["trends"]}
     state.outputs["trace.json"] = lambda p, force: write_text(p, dumps(results), force)
@@ -375,7 +383,8 @@ def stage_trace(state: RunState) -> None:
     state.outputs["trace_device.nc"] = lambda p, force: netcdf.save(device_ds, p, force)
     fig = trace_studies_figure(device, studies)
     state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
-    lines = [f"module trace ({opts.rays} rays, plate from this run): LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
+    lines = [f"module trace ({opts.rays} rays, plate from this run): "
+             f"LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
              f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f}, non-uniformity {device.non_uniformity:.3f}, "
              f"ledger error {device.ledger_error:.1e}"]
     lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({t['detail']})"
@@ -418,18 +427,21 @@ def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
             "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['non_uniformity']:.3f}" for r in rows)}
     if studies.get("led_fwhm_deg") and studies.get("reflectance") and studies.get("height_mm"):
         # "Barely moves" as the paper ranks it: the FWHM effect is the smallest of the studied LER effects.
-        spans = {k: max(r["LER"] for r in studies[k]) - min(r["LER"] for r in studies[k]) for k in ("reflectance", "height_mm")}
+        spans = {k: max(r["LER"] for r in studies[k]) - min(r["LER"] for r in studies[k])
+                 for k in ("reflectance", "height_mm")}
         moves = max(abs(r["LER"] - device.LER) for r in studies["led_fwhm_deg"])
         out["LER barely moves with LED FWHM (Fig. 13)"] = {
             "holds": bool(moves < min(spans.values())),
             "detail": f"largest change {moves:.3f} vs the Lambertian device; LER spans {spans['reflectance']:.3f} over "
-                      f"reflectance and {spans['height_mm']:.3f} over height (criterion: smallest effect); " + ", ".join(
-                          f"FWHM {r['values']['leds.fwhm_deg']:g}°: {r['LER']:.3f}" for r in studies["led_fwhm_deg"])}
+                      f"reflectance and {spans['height_mm']:.3f} over height (criterion: smallest effect); "
+                      + ", ".join(f"FWHM {r['values']['leds.fwhm_deg']:g}°: {r['LER']:.3f}"
+                                  for r in studies["led_fwhm_deg"])}
     if studies.get("specular_fraction"):
         rows = sorted(studies["specular_fraction"], key=lambda r: r["values"]["wall.specular_fraction"])
         out["non-uniformity larger for mirror walls (Fig. 10)"] = {
             "holds": bool(rows[-1]["non_uniformity"] > rows[0]["non_uniformity"]),
-            "detail": ", ".join(f"specular {r['values']['wall.specular_fraction']:g}: {r['non_uniformity']:.3f}" for r in rows)}
+            "detail": ", ".join(f"specular {r['values']['wall.specular_fraction']:g}: {r['non_uniformity']:.3f}"
+                                for r in rows)}
     return out
 
 
@@ -484,7 +496,8 @@ def stage_fits(state: RunState) -> None:
         f"BSDF fits: {sum(r['converged'] for r in rows)}/{len(rows)} converged; fitted-model TIS within "
         f"{abs(worst['tis_difference_pp']):.3f} pp of the measured TIS (worst {worst['interaction']} {worst['side']} "
         f"{worst['theta_i_deg']:g} deg)",
-        f"emission fit ({opts.emission_model}, θi = {th:g}°): peak {emission['peak_nm']:.1f} nm, FWHM {emission['fwhm_nm']:.1f} nm, "
+        f"emission fit ({opts.emission_model}, θi = {th:g}°): peak {emission['peak_nm']:.1f} nm, "
+        f"FWHM {emission['fwhm_nm']:.1f} nm, "
         f"α {emission.get('alpha', 0.0):.3f}, R² {emission['r2']:.4f}"])
 
 
@@ -501,7 +514,8 @@ def stage_spectrum(state: RunState) -> None:
     if not state.emission:
         return
     lam = np.arange(380.0, 780.0 + 1e-9, 1.0)
-    s_blue = spectrum_model_values("gaussian", {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm, "amplitude": 1.0}, lam)
+    s_blue = spectrum_model_values("gaussian", {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm,
+                                                "amplitude": 1.0}, lam)
     e = state.emission["fit"]
     s_yellow = spectrum_model_values(opts.emission_model, {"peak_nm": e["peak_nm"], "fwhm_nm": e["fwhm_nm"],
                                                            "alpha": e.get("alpha", 0.0), "amplitude": 1.0}, lam)
@@ -518,7 +532,8 @@ def stage_spectrum(state: RunState) -> None:
               "colour": {"x": colour_.x, "y": colour_.y, "cct_K": colour_.cct_K, "duv": colour_.duv,
                          "luminous_efficacy_lm_per_W": colour_.luminous_efficacy_lm_per_W, "ybr": colour_.ybr}}
     state.summary["module_spectrum"] = result
-    csv = "wavelength_nm,spectral_flux_W_per_nm\n" + "".join(f"{w:.1f},{v:.8e}\n" for w, v in zip(sd.wavelengths, sd.values))
+    csv = "wavelength_nm,spectral_flux_W_per_nm\n" + "".join(f"{w:.1f},{v:.8e}\n"
+                                                             for w, v in zip(sd.wavelengths, sd.values))
     state.outputs["module_spectrum.csv"] = lambda p, force: write_text(p, csv, force)
     fig = module_spectrum_figure(lam, s_blue, s_yellow, state.emission, sd)
     state.outputs["module_spectrum.png"] = lambda p, force: save_figure(fig, p, force)
@@ -562,7 +577,8 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         worst = max(checks, key=lambda c: c["relative_difference"])
         state.summary.setdefault("report_lines", []).append(
             f"exports: {len({c['file'] for c in checks})} tables re-read; TIS of every table within "
-            f"{100 * worst['relative_difference']:.3f} % of its source (worst: {worst['file']} at {worst['theta_i_deg']:g} deg)")
+            f"{100 * worst['relative_difference']:.3f} % of its source "
+            f"(worst: {worst['file']} at {worst['theta_i_deg']:g} deg)")
     summary = {"recipe": recipe.name, "recipe_file": str(recipe.path), "measurement": str(recipe.measurement),
                "outputs": names, "stage_seconds": timings, **state.summary}
     from bsdfkit.io.jsonout import dumps
@@ -587,7 +603,8 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
     channels = {}
     for inter in ("bibs", "biys", "yiys"):
         for side in ("reflection", "transmission"):
-            values = tuple(float(np.clip(tis["tis"].sel(interaction=inter, side=side, theta_i=t), 0.0, 1.0)) for t in grid)
+            values = tuple(float(np.clip(tis["tis"].sel(interaction=inter, side=side, theta_i=t), 0.0, 1.0))
+                           for t in grid)
             if inter == "biys":
                 dists = (Lambertian(),) * len(grid)
             else:

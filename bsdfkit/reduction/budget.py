@@ -140,7 +140,8 @@ def module_budget(table: dict[str, float], eta_mc: float, iterations: int = 7) -
             raise InputError("negative TIS in the interaction table", field=k, expected="≥ 0", got=table[k])
     if table["blue_losses"] < -1e-9 or table["yellow_losses"] < -1e-9:
         raise InputError("interaction table creates energy", field="losses",
-                         expected="B + F ≤ 100 % for blue and for yellow", got=(table["blue_losses"], table["yellow_losses"]))
+                         expected="B + F ≤ 100 % for blue and for yellow",
+                         got=(table["blue_losses"], table["yellow_losses"]))
     back, forward = _matrices(table)
     x = np.array([1.0, 0.0])
     extracted = np.zeros(2)

@@ -102,7 +102,8 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: Spectr
               else spectrum_on(spectrum, lam))
     usable = _band_mask(lam, band) & sub["incident_valid"].sel(configuration=config).values & (weight > 0)
     if not usable.any():
-        raise InputError("band with no signal: no wavelength in the band carries incident light", file=ds.attrs.get("source"),
+        raise InputError("band with no signal: no wavelength in the band carries incident light",
+                         file=ds.attrs.get("source"),
                          field="band", expected=f"overlap with the incident light of '{config}'", got=band)
     w = weight * np.gradient(lam) * usable
     q = sub["bsdf"].values
@@ -193,7 +194,8 @@ def _profile(sub: xr.Dataset, value: NDArray, std: NDArray, units: str, name: st
     out.attrs.update({k: v for k, v in sub.attrs.items() if k in (
         "source", "sample_name", "aperture_half_angle_deg", "solid_angle_sr", "detector_distance_mm",
         "aperture_diameter_mm", "beam_diameter_mm")})
-    out["bsdf_std"].attrs["note"] = "per-record (independent) part; see attrs['common_relative_std'] for the shared scale"
+    out["bsdf_std"].attrs["note"] = ("per-record (independent) part; see attrs['common_relative_std'] "
+                                     "for the shared scale")
     out.attrs["quantity"] = "bsdf_profile"
     return out
 
@@ -218,7 +220,8 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
     elif interaction == "biys":
         out = bispectral_band_integral(ds, configs["blue"], bands["yellow"])
     else:
-        raise InputError("unknown interaction", field="interaction", expected=" or ".join(INTERACTIONS), got=interaction)
+        raise InputError("unknown interaction", field="interaction", expected=" or ".join(INTERACTIONS),
+                         got=interaction)
     out.attrs["interaction"] = interaction
     if side is not None:
         if side not in ("reflection", "transmission"):

@@ -34,7 +34,8 @@ the half-axis sampled farthest out holds its last value.
 
 Error bars: the measurement part propagates the per-record standard uncertainties through the (linear)
 quadrature weights and adds the scale uncertainty common to all records (the reference beam,
-``attrs['common_relative_std']`` of the profile); the TIS value itself interpolates half-profiles in ln f where neighbouring samples are
+``attrs['common_relative_std']`` of the profile); the TIS value itself interpolates half-profiles in ln f where
+neighbouring samples are
 positive (linear in f elsewhere), which follows the convex tails of lobes between sparse samples
 (metrology.md §4.4). The reconstruction part adds in quadrature (i) the change when the quadrature grid is
 halved, (ii) the change when half-profiles are interpolated in f instead of ln f, (iii) the largest change
@@ -93,7 +94,8 @@ def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> 
     return QuadratureGrid(r=r.ravel(), psi=np.repeat(psi, n_r), w=w.ravel())
 
 
-def _interp_weights(samples: NDArray[np.float64], query: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _interp_weights(samples: NDArray[np.float64],
+                    query: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Indices and weights of linear interpolation with constant extrapolation (same as np.interp)."""
     m = samples.size
     if m == 1:
@@ -135,7 +137,8 @@ class Hemisphere:
         if th.size == 0:
             raise InputError("empty profile", field="record", expected="records of one incidence and side")
         if np.ptp(th) > 1e-9 or len(set(profile["side"].values)) != 1:
-            raise InputError("profile mixes incidences or sides", field="theta_i/side", expected="one incidence and one side")
+            raise InputError("profile mixes incidences or sides", field="theta_i/side",
+                             expected="one incidence and one side")
         phi_i = np.radians(profile["phi_i"].values[0])
         theta_i = th[0]
         if center == "specular":
@@ -188,7 +191,8 @@ class Hemisphere:
         measured = {}
         for k, h in halves.items():
             radii = r_all[own[k]]
-            measured[k] = (float(radii.min()), float(radii.max())) if h is not None and radii.size else (np.inf, -np.inf)
+            measured[k] = ((float(radii.min()), float(radii.max())) if h is not None and radii.size
+                           else (np.inf, -np.inf))
         filled = _fill(halves)
         return cls(beta0=(float(b0[0]), float(b0[1])), halves=filled, n_records=value.size, measured_range=measured,
                    axis=(float(u_dir[0]), float(u_dir[1])))
@@ -285,7 +289,8 @@ def _fill(halves: dict[str, HalfProfile | None]) -> dict[str, tuple[tuple[HalfPr
         if h[a] is None and h[b] is not None:
             h[a] = h[b]
     if h["+alpha"] is None and h["+beta"] is None:
-        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf", expected="finite values on an arc")
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
+                         expected="finite values on an arc")
     out: dict[str, tuple[tuple[HalfProfile, float], ...]] = {}
     for name, other in (("+alpha", ("+beta", "-beta")), ("-alpha", ("+beta", "-beta")),
                         ("+beta", ("+alpha", "-alpha")), ("-beta", ("+alpha", "-alpha"))):

@@ -170,7 +170,8 @@ class PhosphorPlateTruth:
         p = self.lobe(interaction, side, theta_i)
         return p.rho / np.pi + p.A * np.exp(-self._dbeta2(theta_i, directions) / (2 * p.sigma**2))
 
-    def elastic_spectral(self, interaction: str, side: str, theta_i: float, wavelength: ArrayLike) -> NDArray[np.float64]:
+    def elastic_spectral(self, interaction: str, side: str, theta_i: float,
+                         wavelength: ArrayLike) -> NDArray[np.float64]:
         p = self.lobe(interaction, side, theta_i)
         return 1.0 + p.kappa * (np.asarray(wavelength, dtype=np.float64) - p.lambda_ref) / 100.0
 
@@ -192,8 +193,10 @@ class PhosphorPlateTruth:
         out = conv * self.excitation(lam_i)[:, None] * self.emission_density(lam)[None, :]
         if lam_i.shape == lam.shape and np.allclose(lam_i, lam):
             blue = lam < self.elastic_split_nm
-            f_b = self.elastic_angular("bibs", side, theta_i, directions)[..., None] * self.elastic_spectral("bibs", side, theta_i, lam)
-            f_y = self.elastic_angular("yiys", side, theta_i, directions)[..., None] * self.elastic_spectral("yiys", side, theta_i, lam)
+            f_b = (self.elastic_angular("bibs", side, theta_i, directions)[..., None]
+                   * self.elastic_spectral("bibs", side, theta_i, lam))
+            f_y = (self.elastic_angular("yiys", side, theta_i, directions)[..., None]
+                   * self.elastic_spectral("yiys", side, theta_i, lam))
             diag = np.where(blue, f_b, f_y) / np.gradient(lam)
             idx = np.arange(lam.size)
             out[..., idx, idx] += diag
@@ -273,11 +276,13 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
     th = np.radians(theta_i_deg)
     out: dict[str, float] = {}
     for tag, side in (("B", "reflection"), ("F", "transmission")):
-        m_b = weighted_mean(wavelength, truth.elastic_spectral("bibs", side, th, wavelength), blue_incident, BLUE_BAND_NM)
+        m_b = weighted_mean(wavelength, truth.elastic_spectral("bibs", side, th, wavelength), blue_incident,
+                            BLUE_BAND_NM)
         out[f"{tag}_bibs"] = 100 * m_b * truth.elastic_tis("bibs", side, th)
         g = weighted_mean(wavelength, truth.excitation(wavelength), blue_incident, BLUE_BAND_NM)
         out[f"{tag}_biys"] = 100 * g * truth.conversion(side, th).T
-        m_y = weighted_mean(wavelength, truth.elastic_spectral("yiys", side, th, wavelength), yellow_incident, YELLOW_BAND_NM)
+        m_y = weighted_mean(wavelength, truth.elastic_spectral("yiys", side, th, wavelength), yellow_incident,
+                            YELLOW_BAND_NM)
         out[f"{tag}_yiys"] = 100 * m_y * truth.elastic_tis("yiys", side, th)
     out["blue_losses"] = 100 - out["B_bibs"] - out["F_bibs"] - out["B_biys"] - out["F_biys"]
     out["yellow_losses"] = 100 - out["B_yiys"] - out["F_yiys"]

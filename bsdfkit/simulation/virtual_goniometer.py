@@ -9,7 +9,8 @@ Signal chain per spectral pixel (counts):
     raw = clip(round(N_e/G + bias + N(0, σ_read)), 0, full scale),  N_e ~ Poisson(G·t·(rate + dark_rate))
 with rate = R(λ)·P(λ) (R: relative responsivity, P: spectral power reaching the detector). The scattered
 power is the aperture integral P_s(λ) = P_i(λ)·∫_ap f(ω, λ) cos θ dΩ (elastic) plus
-Φ_exc·e(λ)·∫_ap f_conv(ω) cos θ dΩ (converted), evaluated with :func:`bsdfkit.measurement.instrument.aperture_quadrature`,
+Φ_exc·e(λ)·∫_ap f_conv(ω) cos θ dΩ (converted), evaluated with
+:func:`bsdfkit.measurement.instrument.aperture_quadrature`,
 so finite-aperture averaging of sharp lobes is part of the simulation. Everything is deterministic per seed:
 each file draws from its own ``numpy.random.SeedSequence`` stream.
 """
@@ -59,7 +60,8 @@ class Spectrometer:
 
 @dataclass(frozen=True)
 class Configuration:
-    """An incident configuration: the lamp through a filter. ``filter`` is ("bandpass", lo, hi) or ("longpass", cut_on)."""
+    """An incident configuration: the lamp through a filter. ``filter`` is ("bandpass", lo, hi) or
+    ("longpass", cut_on)."""
 
     name: str
     description: str
@@ -122,7 +124,8 @@ def default_plan() -> ScanPlan:
     """The cl830-synthetic plan: in-plane −88…88° every 4° plus 1° steps within ±10° of specular; the
     perpendicular arc −60…60° every 5° plus 1° steps within ±8°."""
     coarse = tuple(float(x) for x in np.arange(-88.0, 88.0 + 1e-9, 4.0))
-    perp = sorted(set(np.round(np.arange(-60.0, 60.0 + 1e-9, 5.0), 6)) | set(np.round(np.arange(-8.0, 8.0 + 1e-9, 1.0), 6)))
+    perp = sorted(set(np.round(np.arange(-60.0, 60.0 + 1e-9, 5.0), 6))
+                  | set(np.round(np.arange(-8.0, 8.0 + 1e-9, 1.0), 6)))
     return ScanPlan(in_plane_deg=coarse, perpendicular_deg=tuple(float(x) for x in perp))
 
 
@@ -189,13 +192,15 @@ class VirtualGoniometer:
 
     def read_counts(self, rate: NDArray[np.float64], exposure_s: NDArray[np.float64] | float,
                     rng: np.random.Generator) -> NDArray[np.int64]:
-        """Raw counts for mean signal ``rate`` (counts/s) integrated for ``exposure_s``, with dark, shot and read noise."""
+        """Raw counts for mean signal ``rate`` (counts/s) integrated for ``exposure_s``, with dark, shot and read
+        noise."""
         sp = self.spectrometer
         t = np.asarray(exposure_s, dtype=np.float64)
         if t.ndim == 1:
             t = t[:, None]
         electrons = rng.poisson(sp.gain_e_per_count * t * (np.clip(rate, 0, None) + sp.dark_rate_counts_per_s))
-        counts = electrons / sp.gain_e_per_count + sp.bias_counts + rng.normal(0.0, sp.read_noise_counts, electrons.shape)
+        counts = (electrons / sp.gain_e_per_count + sp.bias_counts
+                  + rng.normal(0.0, sp.read_noise_counts, electrons.shape))
         return np.clip(np.rint(counts), 0, sp.full_scale_counts).astype(np.int64)
 
 
@@ -230,7 +235,8 @@ def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = N
     scans: dict[str, dict] = {}
     references: dict[str, dict] = {}
     for config in configurations:
-        cols: dict[str, list] = {k: [] for k in ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc", "exposure_s")}
+        cols: dict[str, list] = {k: [] for k in ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side",
+                                                 "arc", "exposure_s")}
         blocks = []
         for th in plan.theta_i_deg:
             for side in plan.sides:
@@ -250,7 +256,8 @@ def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = N
                 cols["arc"] += [p[2] for p in pos]
                 cols["exposure_s"] += exposure.tolist()
         scans[config.name] = {"columns": cols, "counts": np.concatenate(blocks, axis=0)}
-        ref_rate = sp.responsivity(lam) * config.incident_power(lam, gonio.beam_peak_counts_per_s) * config.reference_attenuation
+        ref_rate = (sp.responsivity(lam) * config.incident_power(lam, gonio.beam_peak_counts_per_s)
+                    * config.reference_attenuation)
         t_ref = gonio.choose_exposure(ref_rate.max())
         used_exposures.add(t_ref)
         rng = _stream(seed, "reference", config.name)
@@ -319,13 +326,15 @@ def write_raw_export(export: RawExport, folder: str | Path, force: bool = False)
                  f"{c['phi_s_deg'][k]:.6f}", c["side"][k], c["arc"][k], f"{c['exposure_s'][k]:g}"]
                 + scan["counts"][k].tolist() for k in range(len(c["side"]))]
         atomic.write_bytes(folder / "scans" / f"{name}.csv.gz",
-                           _csv_gz(["theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc", "exposure_s"] + wl, rows),
+                           _csv_gz(["theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc",
+                                    "exposure_s"] + wl, rows),
                            force)
     for name, ref in export.references.items():
         rows = [[k, f"{ref['exposure_s']:g}"] + ref["counts"][k].tolist() for k in range(ref["counts"].shape[0])]
         atomic.write_bytes(folder / "reference" / f"{name}.csv.gz", _csv_gz(["frame", "exposure_s"] + wl, rows), force)
     d = export.dark
-    rows = [[int(d["frame"][k]), f"{d['exposure_s'][k]:g}"] + d["counts"][k].tolist() for k in range(d["counts"].shape[0])]
+    rows = [[int(d["frame"][k]), f"{d['exposure_s'][k]:g}"] + d["counts"][k].tolist()
+            for k in range(d["counts"].shape[0])]
     atomic.write_bytes(folder / "dark.csv.gz", _csv_gz(["frame", "exposure_s"] + wl, rows), force)
     resp_rows = "wavelength_nm,relative_responsivity\n" + "".join(
         f"{x:.1f},{r:.8f}\n" for x, r in zip(export.wavelength, export.responsivity))
@@ -407,5 +416,6 @@ def cl830_synthetic(seed: int = 830, plan: ScanPlan | None = None,
     gonio = goniometer or VirtualGoniometer()
     truth = cl830_truth(gonio)
     extra = truth_manifest_section(truth, gonio)
-    extra["provenance_command"] = f"bsdfkit simulate --preset cl830-synthetic --seed {seed} -o measurements/cl830-synthetic"
+    extra["provenance_command"] = (f"bsdfkit simulate --preset cl830-synthetic --seed {seed} "
+                                   "-o measurements/cl830-synthetic")
     return simulate_scan(truth, plan, gonio, seed=seed, sample_name="cl830-synthetic", extra_manifest=extra)

@@ -247,7 +247,8 @@ class _Source:
     description: str
 
 
-def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...], theta_i_deg: Sequence[float] | None) -> _Source:
+def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
+                    theta_i_deg: Sequence[float] | None) -> _Source:
     if callable(source) and not isinstance(source, xr.Dataset):
         if theta_i_deg is None:
             raise ValidationError("a BSDF callable needs explicit incidences", field="theta_i_deg",

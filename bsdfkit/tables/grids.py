@@ -32,7 +32,8 @@ TIS), so a file is self-consistent by construction:
 For a Lambertian table (constant BSDF) the Harvey–Shack rule is exact on any uniform azimuth grid with
 an even number of nodes (the mean of ρmax(ψ)² over such a grid is exactly 1); the specular rule is exact
 at normal incidence and converges geometrically in the number of azimuths otherwise (default 5° grid:
-< 1e-13 up to 70°, 2e-8 at 80°, 5e-6 at 85°, 3e-4 at 89°). Peaked lobes need dense radial nodes near the specular point: the default axes use
+< 1e-13 up to 70°, 2e-8 at 80°, 5e-6 at 85°, 3e-4 at 89°). Peaked lobes need dense radial nodes near the specular
+point: the default axes use
 log-spaced radii there (see :class:`HarveyShackAxes` and :class:`SpecularAxes`, and docs/exports.md
 for the measured round-trip errors).
 
@@ -196,7 +197,8 @@ class SpecularAxes:
 # --------------------------------------------------------------------------------------------------
 # evaluating a callable
 # --------------------------------------------------------------------------------------------------
-def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
+                  directions: NDArray[np.float64]) -> NDArray[np.float64]:
     """Call ``bsdf_fn`` and check its answer: shape ``directions.shape[:-1]``, finite, ≥ 0.
 
     Raises :class:`~bsdfkit.core.errors.ValidationError` naming the incidence, side and offending value

@@ -77,8 +77,8 @@ def trace(
         while done < rays:
             n_valid = min(chunk, rays - done)
             out = jax.device_get(compiled(params, key_words, np.uint32(done), np.int32(n_valid)))
-            for acc, h, l in zip(sums, out["hi"].tolist(), out["lo"].tolist()):
-                acc.add(h, l)
+            for acc, h, lo in zip(sums, out["hi"].tolist(), out["lo"].tolist()):
+                acc.add(h, lo)
             counts = [a + b for a, b in zip(counts, out["counts"].tolist())]
             for name in arrays:
                 if out[name].size:

@@ -303,7 +303,8 @@ def read_zemax(path: str | Path) -> ZemaxBsdf:
                                        "AngleOfIncidence, ScatterAzimuth, ScatterRadial, Monochrome or DataBegin",
                               got=tokens[0])
     begin_line = entries[k][0]
-    required = {"source": "Source", "symmetry": "Symmetry", "spectralcontent": "SpectralContent", "scattertype": "ScatterType",
+    required = {"source": "Source", "symmetry": "Symmetry", "spectralcontent": "SpectralContent",
+                "scattertype": "ScatterType",
                 **_LIST_NAMES, "indicator": "Monochrome"}
     for key, name in required.items():
         if key not in header:

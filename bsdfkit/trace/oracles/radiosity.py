@@ -263,10 +263,10 @@ def module_radiosity(scene: Scene, n_base: int = 48, n_wall: int = 96, n_top: in
     rho_b = np.where(top, tis["bibs_reflection"], rho_cav)
     rho_y = np.where(top, tis["yiys_reflection"], rho_cav)
     n = p.kind.size
-    I = np.eye(n)
-    Gb = np.linalg.solve(I - F.T * rho_b[None, :], D)
+    eye = np.eye(n)
+    Gb = np.linalg.solve(eye - F.T * rho_b[None, :], D)
     sy = np.where(top, tis["biys_reflection"] * Gb, 0.0)
-    Gy = np.linalg.solve(I - F.T * rho_y[None, :], F.T @ sy)
+    Gy = np.linalg.solve(eye - F.T * rho_y[None, :], F.T @ sy)
     ext_b = tis["bibs_transmission"] * Gb[top].sum()
     ext_y = tis["biys_transmission"] * Gb[top].sum() + tis["yiys_transmission"] * Gy[top].sum()
     cav_abs = (1.0 - rho_cav) * (Gb + Gy)

@@ -1,0 +1,46 @@
+"""``ds.bsdf``: the toolkit on any BSDF dataset, registered as an xarray accessor when bsdfkit is imported.
+
+>>> import bsdfkit, xarray as xr
+>>> ds = bsdfkit.ingest("measurements/cl830-synthetic")   # doctest: +SKIP
+>>> ds.bsdf.tis(45)                                        # doctest: +SKIP
+>>> ds.bsdf.profile("bibs", "reflection")                  # doctest: +SKIP
+>>> ds.bsdf.save("scan.nc")                                # doctest: +SKIP
+
+The methods go through the top-level API (``bsdfkit.tis`` …), which imports the heavy modules on first use.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import xarray as xr
+
+import bsdfkit
+
+
+@xr.register_dataset_accessor("bsdf")
+class BsdfAccessor:
+    """Methods of bsdfkit on a dataset read by :func:`bsdfkit.ingest` (or any dataset of the same schema)."""
+
+    def __init__(self, ds: xr.Dataset) -> None:
+        self._ds = ds
+
+    def tis(self, incidence: float | None = None) -> Any:
+        """TIS per interaction and side with power and photon budgets (:func:`bsdfkit.tis`)."""
+        return bsdfkit.tis(self._ds, incidence)
+
+    def profile(self, interaction: str, side: str | None = None) -> xr.Dataset:
+        """Band-averaged BSDF profile [1/sr] of one interaction (:func:`bsdfkit.profile`)."""
+        return bsdfkit.profile(self._ds, interaction, side)
+
+    def describe(self) -> dict:
+        """Incidences, sides, positions per arc, wavelength range and configurations."""
+        return bsdfkit.describe(self._ds)
+
+    def fit(self, interaction: str, side: str, model: str = "lambert+gaussian", **options: Any) -> xr.Dataset:
+        """Fit a BSDF model (:func:`bsdfkit.fit_bsdf`)."""
+        return bsdfkit.fit_bsdf(self._ds, interaction, side, model, **options)
+
+    def save(self, path: str | Path, force: bool = False) -> Path:
+        """Write the dataset to netCDF atomically (never overwrites without ``force``)."""
+        return bsdfkit.save(self._ds, path, force)

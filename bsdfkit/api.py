@@ -1,0 +1,152 @@
+"""The public API: a scan to an exported table in a handful of calls.
+
+Every CLI verb is a thin wrapper over one of these functions, and ``import bsdfkit`` exposes them lazily
+(``bsdfkit.ingest`` …) so that the import itself stays cheap.
+
+>>> import bsdfkit
+>>> ds = bsdfkit.ingest("measurements/cl830-synthetic")            # doctest: +SKIP
+>>> table = bsdfkit.tis(ds, incidence=45)                          # doctest: +SKIP
+>>> fit = bsdfkit.fit_bsdf(ds, "bibs", "reflection")               # doctest: +SKIP
+>>> bsdfkit.export(fit, "zemax", "bibs", "reflection", "out.bsdf")  # doctest: +SKIP
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from bsdfkit.core.errors import InputError
+from bsdfkit.core.records import incidences
+from bsdfkit.fit.least_squares import BsdfFitOptions
+from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
+from bsdfkit.fit.spectrum import fit_spectrum
+from bsdfkit.io import netcdf
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.describe import describe
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.pipeline.recipe import run
+from bsdfkit.reduction.budget import InteractionTable, interaction_table
+from bsdfkit.reduction.spectral import interaction_profile
+from bsdfkit.reduction.tis import tis_table
+from bsdfkit.tables.export import ExportResult, ExportSettings, FileSummary, read_any
+from bsdfkit.tables.export import export as _export
+from bsdfkit.trace import TraceResult, load_scene
+from bsdfkit.trace import trace as _trace
+from bsdfkit.trace.scene import Scene
+
+__all__ = ["ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
+           "load_scene", "trace", "run"]
+
+
+def ingest(path: str | Path, **options: Any) -> xr.Dataset:
+    """Read a measurement into a calibrated BSDF dataset.
+
+    Parameters
+    ----------
+    path
+        A raw goniometer export (folder with ``manifest.toml``) or a netCDF file written by bsdfkit.
+    **options
+        Passed to :func:`bsdfkit.measurement.calibrate.calibrate` for raw exports (e.g. ``noise_floor_sigma``).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf`` and ``bsdf_std`` [1/sr] per record and wavelength, with angles [deg] and wavelengths [nm].
+    """
+    path = Path(path)
+    if path.is_dir():
+        return calibrate(read_scan(path), **options)
+    if path.is_file():
+        if options:
+            raise InputError("options apply to raw exports only", file=path, field=", ".join(options),
+                             expected="no options for a netCDF dataset")
+        return netcdf.load(path, quantity="bsdf")
+    raise InputError("no such measurement", file=path, expected="a raw export folder or a netCDF dataset")
+
+
+def tis(ds: xr.Dataset, incidence: float | None = None) -> xr.Dataset:
+    """TIS [fraction] per interaction, side and incidence, with measurement and reconstruction error bars.
+
+    Parameters
+    ----------
+    ds
+        Calibrated dataset from :func:`ingest`.
+    incidence
+        Incidence angle [deg], one of the measured ones; ``None`` gives every measured incidence.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``tis`` and its standard uncertainties on (interaction, side, theta_i); the two-arc hemisphere
+        reconstruction of ``docs/reductions.md``. The power and photon budget of Table 2 of the power-budget
+        paper [1]_ is :func:`budget`.
+
+    References
+    ----------
+    .. [1] ``docs/references.md``, [Power-budget].
+    """
+    table = tis_table(ds)
+    if incidence is None:
+        return table
+    if not any(abs(t - float(incidence)) < 1e-6 for t in incidences(ds)):
+        raise InputError("no records at this incidence", file=ds.attrs.get("source"), field="incidence",
+                         expected="one of " + ", ".join(f"{t:g}" for t in incidences(ds)) + " deg", got=incidence)
+    return table.sel(theta_i=float(incidence), method="nearest")
+
+
+def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
+    """Table 2 of the power-budget paper [1]_ at one measured incidence [deg]: TIS in % of the initial power
+    and photons per interaction and side, losses and EQE.
+
+    References
+    ----------
+    .. [1] ``docs/references.md``, [Power-budget].
+    """
+    return interaction_table(ds, float(incidence))
+
+
+def profile(ds: xr.Dataset, interaction: str, side: str | None = None) -> xr.Dataset:
+    """The band-averaged BSDF profile [1/sr] of one interaction (bibs, biys, yiys) per record."""
+    return interaction_profile(ds, interaction, side)
+
+
+def save(ds: xr.Dataset, path: str | Path, force: bool = False) -> Path:
+    """Write a dataset to netCDF atomically; an existing file is replaced only with ``force``."""
+    return netcdf.save(ds, path, force)
+
+
+def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+gaussian", *,
+             options: BsdfFitOptions | None = None, incidence_deg: float | None = None) -> xr.Dataset:
+    """Fit a BSDF model to one interaction and side of a calibrated dataset, one fit per incidence.
+
+    ``ds`` may also be a profile (a dataset on ``record`` with ``bsdf``, ``bsdf_std`` and one side), which is
+    fitted as it is. Models and parameters: :mod:`bsdfkit.models.registry`.
+    """
+    prof = ds if "config" not in ds.dims and "configuration" not in ds.dims and "wavelength" not in ds.dims \
+        else interaction_profile(ds, interaction, side)
+    prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
+    return _fit_bsdf_profile(prof, model, options=options, incidence_deg=incidence_deg)
+
+
+def export(source: Any, to: str, interaction: str, side: str, path: str | Path, force: bool = False, *,
+           settings: ExportSettings | None = None) -> ExportResult:
+    """Write a TracePro, Zemax or ASAP-style table of a dataset or fit, with the TIS check of the written file."""
+    return _export(source, to, interaction, side, path, force, settings=settings)
+
+
+def read(path: str | Path) -> FileSummary:
+    """Read a TracePro, Zemax or ASAP-style table back: its grid, stated TIS and recomputed TIS."""
+    return read_any(path)
+
+
+def trace(scene: Scene | str | Path, rays: int, seed: int = 0, **options: Any) -> TraceResult:
+    """Monte Carlo of a mixing cavity with a phosphor plate (a scene object or a scene TOML path)."""
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    return _trace(scene, rays, seed, **options)
+
+
+# re-exported under their own names: fit_spectrum, describe, load_scene, run
+_REEXPORTED = (fit_spectrum, describe, load_scene, run)

@@ -1,0 +1,133 @@
+"""The package layout is a checked contract: layers, no cycles, module-level imports, a cheap top-level import."""
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+
+import grimp
+from conftest import ROOT
+
+PACKAGE = ROOT / "bsdfkit"
+# The two places where an import is deferred on purpose: the command line imports only the verb it runs, and the
+# top-level package resolves its public names on first use (so that `import bsdfkit` does not import JAX).
+DEFERRED_OK = {PACKAGE / "cli" / "main.py", PACKAGE / "__init__.py"}
+
+
+def test_import_linter_contracts_hold():
+    lint = ROOT / ".venv" / "bin" / "lint-imports"
+    command = [str(lint)] if lint.exists() else [sys.executable, "-m", "importlinter.cli"]
+    done = subprocess.run(command + ["--config", str(ROOT / "pyproject.toml")], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-2000:]
+    assert "0 broken" in done.stdout
+
+
+def _cycles(graph: grimp.ImportGraph) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    found = []
+    counter = 0
+    for root in sorted(graph.modules):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph.find_modules_directly_imported_by(root))))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            advanced = False
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.find_modules_directly_imported_by(child)))))
+                    advanced = True
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            if advanced:
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+def test_no_import_cycle_among_bsdfkit_modules():
+    graph = grimp.build_graph("bsdfkit")
+    # package __init__ modules that only re-export their children are not edges of the data flow
+    assert _cycles(graph) == []
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    graph = grimp.ImportGraph()
+    for name in ("p", "p.a", "p.b", "p.c"):
+        graph.add_module(name)
+    graph.add_import(importer="p.a", imported="p.b")
+    graph.add_import(importer="p.b", imported="p.a")
+    graph.add_import(importer="p.b", imported="p.c")
+    assert _cycles(graph) == [["p.a", "p.b"]]
+
+
+def _deferred_internal_imports(path) -> list[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for inner in ast.walk(node):
+                if isinstance(inner, ast.ImportFrom) and (inner.module or "").startswith("bsdfkit"):
+                    found.append(f"{path.relative_to(ROOT)}:{inner.lineno}")
+                elif isinstance(inner, ast.Import) and any(a.name.startswith("bsdfkit") for a in inner.names):
+                    found.append(f"{path.relative_to(ROOT)}:{inner.lineno}")
+    return found
+
+
+def test_dependencies_are_module_level_imports():
+    deferred = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path not in DEFERRED_OK:
+            deferred += _deferred_internal_imports(path)
+        assert "importlib" not in path.read_text() or path in DEFERRED_OK, path
+    assert deferred == []
+
+
+def test_import_bsdfkit_is_cheap_and_imports_no_jax():
+    code = "import sys, bsdfkit; print(sorted(m for m in ('jax', 'matplotlib', 'colour', 'scipy') if m in sys.modules))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert done.stdout.strip() == "[]"
+
+
+def test_no_global_state_changed_by_the_library():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text()
+        assert not re.search(r"matplotlib\.use\(|plt\.switch_backend|jax_enable_x64\", *True|config\.update\(",
+                             text), path
+
+
+def test_nothing_points_outside_the_repository():
+    pattern = re.compile(r"metrology\.md|formats\.md|shared/|\.\./")
+    offenders = []
+    for path in [*PACKAGE.rglob("*.py"), *(ROOT / "docs").glob("*.md"), ROOT / "README.md"]:
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            if pattern.search(line):
+                offenders.append(f"{path.relative_to(ROOT)}:{number}")
+    assert offenders == []
