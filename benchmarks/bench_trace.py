@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bsdfkit.trace import PhosphorPlate, load_scene, trace, with_values
-from bsdfkit.trace.oracles.numpy_reference import trace_numpy
-from bsdfkit.trace.oracles.radiosity import module_radiosity
+from bsdfkit.raytrace import PhosphorPlate, load_scene, trace, with_values
+from bsdfkit.raytrace.oracles.numpy_reference import trace_numpy
+from bsdfkit.raytrace.oracles.radiosity import module_radiosity
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "fitting" / "scenes" / "example.toml"

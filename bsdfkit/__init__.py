@@ -2,7 +2,7 @@
 
 The package follows the data flow (``docs/architecture.md``)::
 
-    core → io → measurement → models → reduction → fit → tables → simulation → trace → plotting
+    core → io → measurement → models → reduction → fit → tables → simulation → raytrace → plotting
          → pipeline / bench → cli
 
 The public API (:mod:`bsdfkit.api`) is importable from here: ``ingest``, ``tis``, ``budget``, ``profile``, ``describe``,
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__version__ = "0.1.0"
+from bsdfkit.core.version import __version__
 
 API = ("ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
        "load_scene", "trace", "run")
@@ -34,4 +34,4 @@ def __dir__() -> list[str]:
     return sorted([*globals(), *API])
 
 
-from bsdfkit import accessor as accessor  # noqa: E402  (registers ds.bsdf; needs __getattr__ above)
+from bsdfkit import accessor as accessor  # noqa: E402  (registers ds.bsdf on xarray datasets)

@@ -6,7 +6,11 @@
 >>> ds.bsdf.profile("bibs", "reflection")                  # doctest: +SKIP
 >>> ds.bsdf.save("scan.nc")                                # doctest: +SKIP
 
-The methods go through the top-level API (``bsdfkit.tis`` …), which imports the heavy modules on first use.
+Attribute access ``ds.bsdf`` therefore means the accessor: the BSDF data variable is ``ds["bsdf"]``.
+
+The accessor is registered by ``import bsdfkit``, which must stay cheap (no JAX): its methods therefore import
+:mod:`bsdfkit.api` when first called, one of the two deferred imports of the package (the other is the CLI's
+per-verb import).
 """
 from __future__ import annotations
 
@@ -14,8 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import xarray as xr
-
-import bsdfkit
 
 
 @xr.register_dataset_accessor("bsdf")
@@ -27,20 +29,30 @@ class BsdfAccessor:
 
     def tis(self, incidence: float | None = None) -> Any:
         """TIS per interaction and side with power and photon budgets (:func:`bsdfkit.tis`)."""
-        return bsdfkit.tis(self._ds, incidence)
+        from bsdfkit import api
+
+        return api.tis(self._ds, incidence)
 
     def profile(self, interaction: str, side: str | None = None) -> xr.Dataset:
         """Band-averaged BSDF profile [1/sr] of one interaction (:func:`bsdfkit.profile`)."""
-        return bsdfkit.profile(self._ds, interaction, side)
+        from bsdfkit import api
+
+        return api.profile(self._ds, interaction, side)
 
     def describe(self) -> dict:
         """Incidences, sides, positions per arc, wavelength range and configurations."""
-        return bsdfkit.describe(self._ds)
+        from bsdfkit import api
+
+        return api.describe(self._ds)
 
     def fit(self, interaction: str, side: str, model: str = "lambert+gaussian", **options: Any) -> xr.Dataset:
         """Fit a BSDF model (:func:`bsdfkit.fit_bsdf`)."""
-        return bsdfkit.fit_bsdf(self._ds, interaction, side, model, **options)
+        from bsdfkit import api
+
+        return api.fit_bsdf(self._ds, interaction, side, model, **options)
 
     def save(self, path: str | Path, force: bool = False) -> Path:
         """Write the dataset to netCDF atomically (never overwrites without ``force``)."""
-        return bsdfkit.save(self._ds, path, force)
+        from bsdfkit import api
+
+        return api.save(self._ds, path, force)

@@ -23,18 +23,17 @@ from bsdfkit.fit.least_squares import BsdfFitOptions
 from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
 from bsdfkit.fit.spectrum import fit_spectrum
 from bsdfkit.io import netcdf
-from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.describe import describe
-from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.pipeline.recipe import run
+from bsdfkit.raytrace import TraceResult, load_scene
+from bsdfkit.raytrace import trace as _trace
+from bsdfkit.raytrace.scene import Scene
 from bsdfkit.reduction.budget import InteractionTable, interaction_table
 from bsdfkit.reduction.spectral import interaction_profile
 from bsdfkit.reduction.tis import tis_table
 from bsdfkit.tables.export import ExportResult, ExportSettings, FileSummary, read_any
 from bsdfkit.tables.export import export as _export
-from bsdfkit.trace import TraceResult, load_scene
-from bsdfkit.trace import trace as _trace
-from bsdfkit.trace.scene import Scene
+from bsdfkit.tables.to_dataset import ingest as _ingest_any
 
 __all__ = ["ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
            "load_scene", "trace", "run"]
@@ -46,24 +45,20 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     Parameters
     ----------
     path
-        A raw goniometer export (folder with ``manifest.toml``) or a netCDF file written by bsdfkit.
+        A raw goniometer export (folder with ``manifest.toml``; read and calibrated), a measured text table
+        (:func:`bsdfkit.measurement.table.read_table`), a Zemax/Radiant ``.bsdf``, TracePro or ASAP-style file
+        (:func:`bsdfkit.tables.to_dataset.vendor_dataset`) or a netCDF file written by bsdfkit.
     **options
-        Passed to :func:`bsdfkit.measurement.calibrate.calibrate` for raw exports (e.g. ``noise_floor_sigma``).
+        For text tables and vendor files: ``quantity`` (brdf, btdf, ccbrdf, ccbtdf, reflectance-factor,
+        transmittance-factor), ``side``, ``relative_std``, ``wavelength`` [nm], ``incidence`` / ``phi_i`` [deg],
+        ``zeros`` (auto, keep, missing), ``sample``; refused for raw exports and netCDF files.
 
     Returns
     -------
     xarray.Dataset
         ``bsdf`` and ``bsdf_std`` [1/sr] per record and wavelength, with angles [deg] and wavelengths [nm].
     """
-    path = Path(path)
-    if path.is_dir():
-        return calibrate(read_scan(path), **options)
-    if path.is_file():
-        if options:
-            raise InputError("options apply to raw exports only", file=path, field=", ".join(options),
-                             expected="no options for a netCDF dataset")
-        return netcdf.load(path, quantity="bsdf")
-    raise InputError("no such measurement", file=path, expected="a raw export folder or a netCDF dataset")
+    return _ingest_any(path, **options)
 
 
 def tis(ds: xr.Dataset, incidence: float | None = None) -> xr.Dataset:

@@ -54,9 +54,9 @@ def test_dataset_tags_and_units(bundled_scan):
         assert np.sum(spec * np.gradient(ds.wavelength.values)) == pytest.approx(1.0, rel=1e-12)
     # bsdf is defined exactly where the incident light is (and nowhere else)
     blue = ds.isel(record=np.flatnonzero(ds.config.values == "blue"))
-    defined = np.isfinite(blue.bsdf.values).any(axis=0)
+    defined = np.isfinite(blue["bsdf"].values).any(axis=0)
     assert np.array_equal(defined, ds.incident_valid.sel(configuration="blue").values)
-    assert not np.isinf(ds.bsdf.values).any()
+    assert not np.isinf(ds["bsdf"].values).any()
 
 
 def test_netcdf_round_trip_is_lossless(bundled_scan, tmp_path):
@@ -82,8 +82,8 @@ def test_grazing_positions_are_masked_not_infinite(tiny_export):
     raw = raw.assign_coords(theta_s=("record", np.where(np.arange(raw.sizes["record"]) == 0, 90.0, raw.theta_s.values)))
     ds = calibrate(raw)
     assert bool(ds.grazing.values[0]) and not ds.grazing.values[1:].any()
-    assert np.isnan(ds.bsdf.values[0]).all()
-    assert np.isfinite(ds.bsdf.values[1:]).any() and not np.isinf(ds.bsdf.values).any()
+    assert np.isnan(ds["bsdf"].values[0]).all()
+    assert np.isfinite(ds["bsdf"].values[1:]).any() and not np.isinf(ds["bsdf"].values).any()
 
 
 def test_zero_incident_power_is_a_clear_error(tiny_export):

@@ -1,12 +1,9 @@
 """``bsdfkit export`` / ``bsdfkit read``: fit-result and scan sources, JSON summaries, errors, --force."""
 from __future__ import annotations
 
-import importlib.machinery
-import importlib.util
 import json
 import subprocess
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -127,41 +124,21 @@ def scan_dataset() -> xr.Dataset:
                       coords={"theta_i": [0.0, 45.0]}, attrs={"quantity": "bsdf"})
 
 
-def test_scan_source_uses_angular_hemisphere_bsdf_fn(tmp_path, monkeypatch):
+def test_scan_source_uses_the_hemisphere_reconstruction(tmp_path, monkeypatch):
+    import bsdfkit.tables.export as export_module
+
     calls = []
 
     def hemisphere_bsdf_fn(ds, interaction, side):
         calls.append((interaction, side, float(ds["bsdf"].sum())))
         return lambda theta_i_deg, side_, d: np.full(d.shape[:-1], 0.25 / np.pi)
 
-    fake = types.ModuleType("bsdfkit.reduction.tis")
-    fake.__spec__ = importlib.machinery.ModuleSpec("bsdfkit.reduction.tis", None)
-    fake.hemisphere_bsdf_fn = hemisphere_bsdf_fn
-    monkeypatch.setitem(sys.modules, "bsdfkit.reduction.tis", fake)
-    from bsdfkit.tables.export import export, read_any
-
-    result = export(scan_dataset(), "tracepro", "yiys", "both", tmp_path / "scan.txt")
+    monkeypatch.setattr(export_module, "hemisphere_bsdf_fn", hemisphere_bsdf_fn)
+    result = export_module.export(scan_dataset(), "tracepro", "yiys", "both", tmp_path / "scan.txt")
     assert calls == [("yiys", "reflection", 6.0), ("yiys", "transmission", 6.0)]
     assert result.incidences_deg == (0.0, 45.0)
-    summary = read_any(tmp_path / "scan.txt")
+    summary = export_module.read_any(tmp_path / "scan.txt")
     np.testing.assert_allclose(summary.tis_computed["reflection"], [0.25, 0.25], rtol=1e-6)
-
-
-def test_scan_source_without_angular_support(tmp_path, monkeypatch):
-    from bsdfkit.core.errors import InputError
-    from bsdfkit.tables.export import export
-
-    fake = types.ModuleType("bsdfkit.reduction.tis")
-    fake.__spec__ = importlib.machinery.ModuleSpec("bsdfkit.reduction.tis", None)
-    monkeypatch.setitem(sys.modules, "bsdfkit.reduction.tis", fake)
-    with pytest.raises(InputError, match="has no hemisphere_bsdf_fn"):
-        export(scan_dataset(), "zemax", "bibs", "reflection", tmp_path / "x.bsdf")
-    real_find_spec = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "bsdfkit.reduction.tis" else real_find_spec(name, *a))
-    with pytest.raises(InputError, match="needs bsdfkit.reduction.tis.hemisphere_bsdf_fn"):
-        export(scan_dataset(), "zemax", "bibs", "reflection", tmp_path / "x.bsdf")
-    assert not (tmp_path / "x.bsdf").exists()
 
 
 def test_read_real_zemax_file_text_and_json(capsys):

@@ -86,7 +86,7 @@ def test_default_masks_drop_grazing_and_noise_floor_points(noisy_fit):
     profile = make_profile(TRUTH, seed=1)
     # Points whose value is below 3·bsdf_std are below the noise floor and must be ignored.
     low = profile.theta_s.values > 60
-    profile["bsdf_std"] = profile.bsdf_std.where(~low, profile.bsdf / 2.0)
+    profile["bsdf_std"] = profile.bsdf_std.where(~low, profile["bsdf"] / 2.0)
     ds = fit.fit_bsdf(profile)
     assert int(ds.n_points.sel(theta_i=45.0)) == int(np.sum((th <= 85.0) & ~(th > 60)))
     with_core = fit.fit_bsdf(make_profile(TRUTH, seed=1), options=fit.BsdfFitOptions(specular_core_deg=2.5))
@@ -143,7 +143,7 @@ def test_bsdf_input_errors_are_one_line():
     two_sides = profile.assign_coords(side=("record", np.where(np.arange(profile.sizes["record"]) % 2, "reflection",
                                                                "transmission").astype(object)))
     bad = profile.copy()
-    bad["bsdf"] = bad.bsdf.where(np.arange(bad.sizes["record"]) != 3)
+    bad["bsdf"] = bad["bsdf"].where(np.arange(bad.sizes["record"]) != 3)
     cases = [
         (two_sides, InputError, "one side"),
         (profile.drop_vars("bsdf_std"), InputError, "bsdf_std"),

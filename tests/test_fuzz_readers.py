@@ -99,7 +99,7 @@ SCENES = ROOT / "fitting" / "scenes"
 
 @pytest.mark.parametrize("name", ["example.toml", "study_height.toml"])
 def test_scene_toml(name):
-    from bsdfkit.trace import loads_scene
+    from bsdfkit.raytrace import loads_scene
 
     source = (SCENES / name).read_text()
 
@@ -115,7 +115,7 @@ def test_scene_toml(name):
 
 
 def test_plate_json(tmp_path_factory):
-    from bsdfkit.trace import PhosphorPlate, load_plate
+    from bsdfkit.raytrace import PhosphorPlate, load_plate
 
     table2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
               "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}

@@ -40,7 +40,7 @@ def test_specular_peak_six_decades_above_diffuse(tmp_path):
     virtual.write_raw_export(virtual.simulate_scan(truth, plan, gonio, configurations=(virtual.BLUE,), seed=4),
                              tmp_path / "glossy")
     ds = calibrate(read_scan(tmp_path / "glossy"))
-    q = ds.bsdf.sel(wavelength=460.0).values
+    q = ds["bsdf"].sel(wavelength=460.0).values
     assert np.isfinite(q).all()
     expected = gonio.expected_bsdf(truth, virtual.BLUE, 30.0, "reflection", ds.theta_s.values, ds.phi_s.values)["bsdf"]
     expected = expected[:, list(gonio.spectrometer.wavelength).index(460.0)]
@@ -86,12 +86,12 @@ def test_grazing_scatter_is_masked_or_finite(tiny_export, theta_s):
                                                         raw.theta_s.values)))
     ds = calibrate(raw)
     half = np.degrees(Instrument(886.0, 25.4, 14.0).half_angle_rad)
-    row = ds.bsdf.values[0]
+    row = ds["bsdf"].values[0]
     if theta_s > 90 - 2 * half:
         assert bool(ds.grazing.values[0]) and np.isnan(row).all()
     else:
         assert np.isfinite(row[ds.incident_valid.sel(configuration=ds.config.values[0]).values]).all()
-    assert not np.isinf(ds.bsdf.values).any() and not np.isinf(ds.bsdf_std.values).any()
+    assert not np.isinf(ds["bsdf"].values).any() and not np.isinf(ds.bsdf_std.values).any()
 
 
 def test_pure_dark_record_gives_unbiased_negative_values(tiny_export):
@@ -149,7 +149,7 @@ def _next_hit(p, d, dtype, radius=35.0, height=43.0):
     import jax.numpy as jnp
 
     from bsdfkit.core.jaxconfig import x64
-    from bsdfkit.trace.geometry import next_hit
+    from bsdfkit.raytrace.geometry import next_hit
 
     with x64(dtype == "float64"):
         arrays = [jnp.asarray(np.asarray(v), dtype=dtype) for v in (*p, *d)]
@@ -208,7 +208,7 @@ def test_float32_tracing_agrees_with_float64():
 
     from conftest import ROOT
 
-    from bsdfkit.trace import load_scene, trace
+    from bsdfkit.raytrace import load_scene, trace
 
     scene = load_scene(ROOT / "fitting" / "scenes" / "example.toml")
     r32 = trace(replace(scene, trace=replace(scene.trace, precision="float32")), 20000, 4)

@@ -11,7 +11,7 @@ import pytest
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
-from bsdfkit.trace import (
+from bsdfkit.raytrace import (
     LambertGaussian,
     Lambertian,
     PhosphorPlate,
@@ -24,9 +24,9 @@ from bsdfkit.trace import (
     threshold_bias,
     trace,
 )
-from bsdfkit.trace.effects import kernel_params
-from bsdfkit.trace.oracles.radiosity import module_radiosity
-from bsdfkit.trace.rayfile import RaySet, format_rays
+from bsdfkit.raytrace.effects import kernel_params
+from bsdfkit.raytrace.oracles.radiosity import module_radiosity
+from bsdfkit.raytrace.rayfile import RaySet, format_rays
 
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
           "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import pytest
 
-from bsdfkit.trace import PhosphorPlate, loads_scene, trace
-from bsdfkit.trace.oracles.numpy_reference import trace_numpy
-from bsdfkit.trace.oracles.radiosity import module_radiosity
+from bsdfkit.raytrace import PhosphorPlate, loads_scene, trace
+from bsdfkit.raytrace.oracles.numpy_reference import trace_numpy
+from bsdfkit.raytrace.oracles.radiosity import module_radiosity
 
 CHUNK, LANES = 20_000, 512  # one compiled kernel per effects record for the whole module
 

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from bsdfkit.trace import loads_scene
-from bsdfkit.trace.oracles.radiosity import (
+from bsdfkit.raytrace import loads_scene
+from bsdfkit.raytrace.oracles.radiosity import (
     BASE,
     TOP,
     WALL,

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from bsdfkit.core.errors import BsdfkitError, InputError, OutputExistsError, ValidationError
 from bsdfkit.io.toml_write import dumps
-from bsdfkit.trace import (
+from bsdfkit.raytrace import (
     LambertGaussian,
     Lambertian,
     PhosphorPlate,
@@ -26,7 +26,7 @@ from bsdfkit.trace import (
     save_scene,
     with_values,
 )
-from bsdfkit.trace.rayfile import RaySet, format_rays
+from bsdfkit.raytrace.rayfile import RaySet, format_rays
 
 EXAMPLE = """
 [cavity]
@@ -127,30 +127,32 @@ def test_unknown_section_and_missing_section(tmp_path):
         loads_scene("[cavity\n", "s.toml")
 
 
-def test_phosphor_from_recipe_is_resolved_lazily_by_the_recipe_module(tmp_path, monkeypatch):
-    import sys
-    import types
+def test_phosphor_from_recipe_is_resolved_by_the_plate_builder(tmp_path, monkeypatch):
+    import bsdfkit.raytrace.plate_from_scan as plate_source
 
     text = EXAMPLE.replace('kind = "exit"                # all light reaching the top leaves the module',
                            'kind = "phosphor"\nfrom = "fitting/cl830.toml"')
     calls = []
-    fake = types.ModuleType("bsdfkit.pipeline.recipe")
 
-    def phosphor_plate(path):
+    def from_recipe(path):
         calls.append(path)
         return PhosphorPlate.constant(TABLE2, name="from recipe")
 
-    fake.phosphor_plate = phosphor_plate
-    monkeypatch.setitem(sys.modules, "bsdfkit.pipeline.recipe", fake)
+    monkeypatch.setattr(plate_source, "plate_from_recipe", from_recipe)
     s = loads_scene(text, tmp_path / "s.toml")
     assert s.top.plate.name == "from recipe" and s.top.plate_recipe == "fitting/cl830.toml"
     assert str(calls[0]).endswith("cl830.toml")
     assert tomllib.loads(dumps_scene(s))["top"]["from"] == "fitting/cl830.toml"
-    # without the function: one clear bsdfkit error naming the key
-    monkeypatch.setitem(sys.modules, "bsdfkit.pipeline.recipe", types.ModuleType("bsdfkit.pipeline.recipe"))
-    with pytest.raises(InputError) as info:
-        loads_scene(text, tmp_path / "s.toml")
-    assert "bsdfkit.pipeline.recipe.phosphor_plate" in str(info.value) and "top.from" in str(info.value)
+
+
+def test_a_recipe_without_a_measurement_gives_one_clear_error(tmp_path):
+    import bsdfkit.raytrace.plate_from_scan as plate_source
+
+    (tmp_path / "r.toml").write_text('[recipe]\nname = "x"\n')
+    with pytest.raises(InputError, match="recipe.measurement"):
+        plate_source.plate_from_recipe(tmp_path / "r.toml")
+    with pytest.raises(InputError, match="recipe not found"):
+        plate_source.plate_from_recipe(tmp_path / "missing.toml")
 
 
 def test_plate_json_round_trip_with_every_distribution_kind(tmp_path):

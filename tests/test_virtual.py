@@ -82,14 +82,41 @@ def test_bundled_measurement_is_labelled_small_and_reproducible():
     assert set(manifest["truth"]["tis_percent"]) == {"5", "45", "56"}
     size = sum(p.stat().st_size for p in BUNDLED.rglob("*") if p.is_file())
     assert size < 5 * 1024**2
-    # the truth in the manifest is the truth the generator uses
-    recorded = synthetic.PhosphorPlateTruth.from_dict(json.loads(manifest["truth"]["parameters_json"]))
-    assert recorded == virtual.cl830_truth()
+    # The truth in the manifest is the truth the generator uses. Numbers, not bytes: ρ is solved by quadrature,
+    # whose last-place rounding may differ between numpy/JAX versions; 1e-12 relative is far above that
+    # (a few ulps summed over 4096 nodes) and far below any physical difference.
+    recorded = json.loads(manifest["truth"]["parameters_json"])
+    generated = virtual.cl830_truth().to_dict()
+    assert _numbers(recorded) == pytest.approx(_numbers(generated), rel=1e-12, abs=1e-15)
+    assert _labels(recorded) == _labels(generated)
+
+
+def _leaves(node, path=()):
+    if isinstance(node, dict):
+        for key in sorted(node):
+            yield from _leaves(node[key], (*path, key))
+    elif isinstance(node, (list, tuple)):
+        for k, item in enumerate(node):
+            yield from _leaves(item, (*path, k))
+    else:
+        yield path, node
+
+
+def _numbers(node):
+    return [v for _, v in _leaves(node) if isinstance(v, (int, float)) and not isinstance(v, bool)]
+
+
+def _labels(node):
+    return [(p, v) for p, v in _leaves(node) if not isinstance(v, (int, float)) or isinstance(v, bool)]
 
 
 def test_bundled_measurement_regenerates_bit_for_bit(tmp_path):
-    seed = tomllib.loads((BUNDLED / "manifest.toml").read_text())["provenance"]["seed"]
-    virtual.write_raw_export(virtual.cl830_synthetic(seed=seed), tmp_path / "regen")
+    provenance = tomllib.loads((BUNDLED / "manifest.toml").read_text())["provenance"]
+    # Byte identity holds under the library versions that made the files (the locked ones, recorded in the
+    # manifest); elsewhere the numbers test above applies.
+    if provenance["versions"] != virtual.generator_versions():
+        pytest.skip(f"bundled data made with {provenance['versions']}, running {virtual.generator_versions()}")
+    virtual.write_raw_export(virtual.cl830_synthetic(seed=provenance["seed"]), tmp_path / "regen")
     for name in ("scans/blue.csv.gz", "scans/yellow.csv.gz", "reference/blue.csv.gz", "dark.csv.gz", "manifest.toml"):
         assert (tmp_path / "regen" / name).read_bytes() == (BUNDLED / name).read_bytes(), name
 

@@ -10,6 +10,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from bsdfkit.io.atomic import write_text
+from bsdfkit.plotting.figures import save_figure
+
 
 @dataclass(frozen=True)
 class Row:
@@ -117,8 +120,6 @@ def report_header(command: str, quick: bool, elapsed_s: float) -> str:
 
 def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float,
                  force: bool = True) -> Path:
-    from bsdfkit.io.atomic import write_text
-    from bsdfkit.plotting.figures import save_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     parts = [report_header(command, quick, elapsed_s)]

@@ -5,12 +5,13 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from bsdfkit.bench import fitting, measurement, tracing
 from bsdfkit.bench.core import Study, write_report
+from bsdfkit.io.atomic import check_writable
 
 
 def study_functions() -> list[tuple[str, Callable[[bool], Study]]]:
     """The studies in report order (imported lazily: each pulls in its own part of the toolkit)."""
-    from bsdfkit.bench import measurement
 
     studies: list[tuple[str, Callable[[bool], Study]]] = [
         ("tis_step", measurement.tis_vs_step),
@@ -18,7 +19,6 @@ def study_functions() -> list[tuple[str, Callable[[bool], Study]]]:
         ("quadrature", measurement.quadrature),
         ("spectral", measurement.spectral_resolution),
     ]
-    from bsdfkit.bench import fitting, tracing
 
     studies += [("fit", fitting.fit_tolerance), ("fit_batch", fitting.batched_vs_loop),
                 ("trace_rays", tracing.rays), ("trace_termination", tracing.termination),
@@ -29,7 +29,6 @@ def study_functions() -> list[tuple[str, Callable[[bool], Study]]]:
 def run_bench(folder: str | Path, quick: bool = False, force: bool = False, command: str = "bsdfkit bench",
               only: list[str] | None = None, log: Callable[[str], None] = lambda m: None) -> list[Study]:
     """Run every study (or ``only`` those named) and write accuracy.md + figures into ``folder``."""
-    from bsdfkit.io.atomic import check_writable
 
     folder = Path(folder)
     check_writable(folder / "accuracy.md", force)

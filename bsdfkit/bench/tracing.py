@@ -1,6 +1,6 @@
 """Tracer studies: LER error vs rays, roulette vs the flux threshold Th, float32 vs float64.
 
-The truth is the two-wavelength radiosity oracle with exact view factors (:mod:`bsdfkit.trace.oracles.radiosity`) of
+The truth is the two-wavelength radiosity oracle with exact view factors (:mod:`bsdfkit.raytrace.oracles.radiosity`) of
 the same scene: a fully diffuse cavity with Lambertian LEDs, exit top or the Table-2 plate taken as
 angle-independent and Lambertian. Errors are relative; for a Monte Carlo run the reported error is
 max(|LER − oracle|, 2σ)/oracle, so a lucky run cannot claim an accuracy its statistics do not support.
@@ -12,8 +12,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from bsdfkit.bench.core import Row, Study
-from bsdfkit.trace import load_scene, trace, with_values
-from bsdfkit.trace.oracles.radiosity import module_radiosity
+from bsdfkit.raytrace import PhosphorPlate, Top, load_scene, trace, with_values
+from bsdfkit.raytrace.oracles.radiosity import module_radiosity
 
 SCENES = Path(__file__).resolve().parents[2] / "fitting" / "scenes"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
@@ -23,7 +23,6 @@ TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection
 def _example(plate: bool):
     scene = load_scene(SCENES / "example.toml")
     if plate:
-        from bsdfkit.trace import PhosphorPlate, Top
 
         scene = replace(scene, top=Top(kind="phosphor", plate=PhosphorPlate.constant(TABLE2, name="Table 2, 45°")))
     return scene

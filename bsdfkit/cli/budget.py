@@ -6,7 +6,9 @@ import json
 from pathlib import Path
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.cli.tis import load_scan
 from bsdfkit.core.errors import FormatError, InputError
+from bsdfkit.reduction.budget import interaction_table, module_budget, table_from_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,8 +23,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.cli.tis import load_scan
-    from bsdfkit.reduction.budget import interaction_table, module_budget, table_from_json
 
     if (args.scan is None) == (args.table is None):
         raise InputError("give either a scan (with --incidence) or --table", field="scan/--table")

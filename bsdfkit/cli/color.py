@@ -5,6 +5,8 @@ import argparse
 import sys
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.io.spectrum_file import read_spectrum
+from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,8 +18,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.io.spectrum_file import read_spectrum
-    from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
 
     sd = read_spectrum(args.file)
     c = colorimetric_summary(sd)

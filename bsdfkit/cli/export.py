@@ -9,6 +9,8 @@ import argparse
 
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.tables.export import ExportSettings, export
+from bsdfkit.tables.formats.tracepro import TraceProOptions
 
 
 def _incidences(text: str) -> tuple[float, ...]:
@@ -53,8 +55,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from bsdfkit.tables.export import ExportSettings, export
-    from bsdfkit.tables.formats.tracepro import TraceProOptions
 
     tp = TraceProOptions()
     changes = {k: v for k, v in (("name", args.name), ("wavelength_um", args.wavelength_um),

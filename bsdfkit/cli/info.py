@@ -5,6 +5,9 @@ import argparse
 from pathlib import Path
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.io import netcdf
+from bsdfkit.measurement.describe import describe
+from bsdfkit.measurement.raw_scan import read_scan
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,9 +19,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.io import netcdf
-    from bsdfkit.measurement.describe import describe
-    from bsdfkit.measurement.raw_scan import read_scan
 
     path = Path(args.scan)
     ds = read_scan(path) if path.is_dir() else netcdf.load(path, quantity=("bsdf", "raw_counts"))

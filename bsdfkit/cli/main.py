@@ -14,11 +14,11 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from bsdfkit import __version__
 from bsdfkit.core.errors import BsdfkitError
+from bsdfkit.core.version import __version__
 
-VERBS = ("bench", "budget", "color", "export", "fit", "info", "ingest", "read", "run", "simulate", "sweep", "tis",
-         "trace")
+VERBS = ("bench", "budget", "color", "convert", "export", "fit", "info", "ingest", "read", "run", "simulate", "sweep",
+         "tis", "trace")
 
 
 def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:

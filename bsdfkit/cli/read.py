@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.tables.export import read_any
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,7 +21,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bsdfkit.tables.export import read_any
 
     summary = read_any(args.file)
     if args.json:

@@ -4,6 +4,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from bsdfkit.cli._common import emit_json
+from bsdfkit.pipeline.recipe import run
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a fit/run recipe (fitting/*.toml) and write its outputs")
@@ -15,8 +18,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.cli._common import emit_json
-    from bsdfkit.pipeline.recipe import run
 
     summary = run(args.recipe, args.output, args.force, log=lambda m: print(m, file=sys.stderr))
     if args.json:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from bsdfkit.simulation import virtual_goniometer as virtual
+
 PRESETS = ("cl830-synthetic",)
 
 
@@ -16,7 +18,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.simulation import virtual_goniometer as virtual
 
     export = virtual.cl830_synthetic(seed=args.seed)
     virtual.write_raw_export(export, args.output, args.force)

@@ -4,6 +4,10 @@ from __future__ import annotations
 import argparse
 
 from bsdfkit.cli._common import Progress, emit_json
+from bsdfkit.core.errors import InputError
+from bsdfkit.plotting.figures import sweep_figure
+from bsdfkit.raytrace import load_scene
+from bsdfkit.raytrace.sweep import run_sweep
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,9 +29,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bsdfkit.core.errors import InputError
-    from bsdfkit.trace import load_scene
-    from bsdfkit.trace.sweep import run_sweep
 
     scene = load_scene(args.scene)
     defaults = scene.sweep
@@ -45,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         ds = run_sweep(scene, params, args.output, rays=rays, seed=seed, chunk=args.chunk, force=args.force,
-                       plots=not args.no_plots, progress=progress)
+                       figure=None if args.no_plots else sweep_figure, progress=progress)
     finally:
         bar.close()
     summary = {"output": args.output, "dims": {d: int(n) for d, n in ds["LER"].sizes.items()},

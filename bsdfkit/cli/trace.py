@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 
 from bsdfkit.cli._common import Progress, emit_json
+from bsdfkit.io.atomic import check_writable, write_with
+from bsdfkit.raytrace import load_scene, trace
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,8 +24,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bsdfkit.io.atomic import check_writable, write_with
-    from bsdfkit.trace import load_scene, trace
 
     scene = load_scene(args.scene)
     if args.output:

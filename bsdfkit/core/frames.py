@@ -4,8 +4,8 @@ All functions are vectorised over leading axes, work in float64 and take **radia
 used at the user boundary: CLI, file readers/writers, :mod:`bsdfkit.tables.export`). Unit vectors carry their
 three components in the last axis.
 
-Frames (metrology.md §2, formats.md §1, §2.2, §4.2)
----------------------------------------------------
+Frames (docs/exports.md §1; sources in docs/references.md)
+----------------------------------------------------------
 **Sample frame.** z = surface normal on the side of the scattered light, x and y in the surface plane.
 The source lies at azimuth φi = π by default, so the specular direction lies at φs = 0:
 
@@ -15,14 +15,15 @@ For *transmission* the scattered light leaves through the back face; its angles 
 back normal. The transmission frame is the reflection frame mirrored in the surface plane,
 (x, y, z) → (x, y, −z): x and y (hence β and the azimuths) are shared by both sides and the
 direct-transmission direction of a plate in air has the same β0 as the specular reflection
-(metrology.md §2.3). The mirrored frame is left-handed; for plane-symmetric data this is immaterial,
-for asymmetric BTDF tables it fixes the sense of azimuth (see docs/exports.md).
+(the plate displaces the beam without deviating it). The mirrored frame is left-handed; for
+plane-symmetric data this is immaterial, for asymmetric BTDF tables it fixes the sense of azimuth (see
+docs/exports.md).
 
-**Instrument frame** (metrology.md §2.2 worked example). Lab y_L vertical = rotation axis of the sample
-stage and of the detector arm; the source is fixed at s_L = (0, 0, 1) (unit vector from the sample to
-the source). The sample is rotated by θr about y_L, so its axes in the lab are
-x_s = (cos θr, 0, −sin θr), y_s = (0, 1, 0), n = (sin θr, 0, cos θr). The detector arm sits at azimuth
-γ (about y_L, measured from the source direction) and elevation ε:
+**Instrument frame** (goniometer of §2 of [Power-budget], sample rotated about a vertical axis). Lab y_L
+vertical = rotation axis of the sample stage and of the detector arm; the source is fixed at
+s_L = (0, 0, 1) (unit vector from the sample to the source). The sample is rotated by θr about y_L, so its
+axes in the lab are x_s = (cos θr, 0, −sin θr), y_s = (0, 1, 0), n = (sin θr, 0, cos θr). The detector arm
+sits at azimuth γ (about y_L, measured from the source direction) and elevation ε:
 d_L = (sin γ cos ε, sin ε, cos γ cos ε). Then θi = θr, φi = π and
 
     d = (cos ε sin(γ − θr), sin ε, cos ε cos(γ − θr))                                       (2)
@@ -30,26 +31,26 @@ d_L = (sin γ cos ε, sin ε, cos γ cos ε). Then θi = θr, φi = π and
 in the (front) sample frame; d_z < 0 is the transmission hemisphere. In-plane (ε = 0) the signed
 scatter angle is γ − θr and the specular direction is at γ = 2θr.
 
-**Harvey–Shack (direction-cosine) frame** (formats.md §1, metrology.md §2.3). β = (ω_x, ω_y), the
-projection of the scattered unit vector on the surface plane; β0 = the projection of the specular
+**Harvey–Shack (direction-cosine) frame** ([Harvey-Shack]; as in [TracePro-UM] and [OpticStudio-Help]).
+β = (ω_x, ω_y), the projection of the scattered unit vector on the surface plane; β0 = the projection of the specular
 direction = sin θi (cos(φi + π), sin(φi + π)) = (sin θi, 0) for φi = π, for reflection and for
 transmission through a plate in air. Polar coordinates of β − β0:
 
     ρ = |β − β0| ∈ [0, 2],   ψ = atan2((β − β0)_y, (β − β0)_x) ∈ [0, 2π)                     (3)
 
 (ψ from the sample +x axis, counter-clockwise seen from +z). Only |β| ≤ 1 are directions; the inverse
-is ω = (β_x, β_y, +√(1 − |β|²)). Projected solid angle: cos θ dΩ = dβ_x dβ_y (formats.md §1).
+is ω = (β_x, β_y, +√(1 − |β|²)). Projected solid angle: cos θ dΩ = dβ_x dβ_y (docs/exports.md §3).
 
-**Specular-centred (Zemax) frame** (formats.md §4.2, metrology.md §2.4). With the specular (or
+**Specular-centred (Zemax) frame** ([Zemax-BSDF]). With the specular (or
 direct-transmission) unit vector r0, e1 = unit(n − (n·r0) r0) points from r0 toward the normal and
 e2 = r0 × e1 (right-handed, azimuth counter-clockwise):
 
     radial = angle(ω, r0),   azimuth = atan2(ω·e2, ω·e1) ∈ [0, 2π)                          (4)
 
 For r0 = (sin θ0, 0, cos θ0): e1 = (−cos θ0, 0, sin θ0), e2 = (0, −1, 0), i.e.
-azimuth = atan2(−ω_y, −ω_x cos θ0 + ω_z sin θ0), the mapping of Ansys' converter (formats.md §4.2).
-At θ0 = 0 e1 is undefined; the sample x axis is used (e1 = x, e2 = y; metrology.md §2.4). Note that the
-limit θ0 → 0⁺ of e1 is −x (the normal lies on the source side of the specular direction), so the
+azimuth = atan2(−ω_y, −ω_x cos θ0 + ω_z sin θ0), the mapping of Ansys' converter ([Ansys-OA]).
+At θ0 = 0 e1 is undefined; the sample x axis is used (e1 = x, e2 = y; a convention, [Zemax-BSDF] leaves it
+open). Note that the limit θ0 → 0⁺ of e1 is −x (the normal lies on the source side of the specular direction), so the
 azimuth origin turns by π exactly at normal incidence; rotationally symmetric normal-incidence data are
 unaffected.
 
@@ -69,6 +70,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import ValidationError
 
 __all__ = [
@@ -92,7 +94,6 @@ __all__ = [
     "to_side_frame",
 ]
 
-SIDES: tuple[str, str] = ("reflection", "transmission")
 """The two scattering sides, in the order used for the ``side`` dimension."""
 
 BETA_TOLERANCE: float = 1e-9
@@ -160,7 +161,7 @@ def to_side_frame(direction: ArrayLike, side: str) -> NDArray[np.float64]:
 
 
 # --------------------------------------------------------------------------------------------------
-# instrument <-> sample (metrology.md §2.2)
+# instrument <-> sample (instrument frame of the module docstring)
 # --------------------------------------------------------------------------------------------------
 class SampleGeometry(NamedTuple):
     """Incidence and scatter angles in the sample frame (radians); θs is measured in the frame of its side."""
@@ -173,7 +174,7 @@ class SampleGeometry(NamedTuple):
 
 
 class InstrumentGeometry(NamedTuple):
-    """Goniometer angles of the metrology.md §2.2 instrument (radians)."""
+    """Goniometer angles of the instrument frame of the module docstring (radians)."""
 
     theta_r: NDArray[np.float64]
     gamma: NDArray[np.float64]
@@ -183,7 +184,7 @@ class InstrumentGeometry(NamedTuple):
 def sample_from_instrument(theta_r: ArrayLike, gamma: ArrayLike, epsilon: ArrayLike) -> SampleGeometry:
     """Sample-stage rotation θr, detector azimuth γ and elevation ε → sample-frame angles.
 
-    metrology.md §2.2: θi = θr, φi = π, d = (cos ε sin(γ − θr), sin ε, cos ε cos(γ − θr)) (eq. 2).
+    Instrument frame: θi = θr, φi = π, d = (cos ε sin(γ − θr), sin ε, cos ε cos(γ − θr)) (eq. 2).
     ``transmission`` is d_z < 0 (the grazing plane d_z = 0 counts as reflection); θs, φs are then the
     angles of (d_x, d_y, |d_z|) in the transmission frame (θs from the back normal).
     """
@@ -236,7 +237,7 @@ def beta0(theta_i: ArrayLike, phi_i: ArrayLike = np.pi) -> NDArray[np.float64]:
 
 
 def beta_from_direction(direction: ArrayLike) -> NDArray[np.float64]:
-    """β = (ω_x, ω_y) for a unit vector in the frame of its side (formats.md §1)."""
+    """β = (ω_x, ω_y) for a unit vector in the frame of its side (Harvey–Shack frame, eq. (3))."""
     return _f64(direction)[..., :2].copy()
 
 
@@ -294,7 +295,7 @@ def specular_axes(
     """(e1, e2, r0) of the specular-centred frame, eq. (4).
 
     e1 = unit(n − (n·r0) r0) = (−cos θi cos(φi + π), −cos θi sin(φi + π), sin θi) for θi > 0;
-    e1 = x and e2 = y where sin θi = 0 (normal incidence, metrology.md §2.4); e2 = r0 × e1.
+    e1 = x and e2 = y where sin θi = 0 (normal incidence, the convention of the module docstring); e2 = r0 × e1.
     """
     theta_i, phi_i = np.broadcast_arrays(_f64(theta_i), _f64(phi_i))
     r0 = specular_direction(theta_i, phi_i)
@@ -315,7 +316,7 @@ def specular_from_direction(
 
     radial = atan2(|(ω·e1, ω·e2)|, ω·r0) (the angle between ω and r0, accurate at 0 and π);
     azimuth = atan2(ω·e2, ω·e1) mod 2π, 0 where radial is 0 or π. Azimuth 0 points from the specular
-    direction toward the surface normal (formats.md §4.2).
+    direction toward the surface normal ([Zemax-BSDF]).
     """
     v = _f64(direction)
     e1, e2, r0 = specular_axes(theta_i, phi_i)

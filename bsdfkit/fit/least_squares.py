@@ -51,7 +51,8 @@ import xarray as xr
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import lm
-from bsdfkit.models import functions as models
+from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
+from bsdfkit.models.registry import BSDF_MODELS, Parameter, bsdf_model
 
 __all__ = [
     "Parameter",
@@ -72,35 +73,6 @@ _U_CLIP_EXP = 60.0
 _U_CLIP_SIGMOID = 40.0
 # Stand-in for a non-finite residual at a trial point: large, so the step is rejected, and finite.
 _BAD_RESIDUAL = 1e100
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """A fitted parameter: name, bounds (inclusive limits never reached; ±inf for none) and unit."""
-
-    name: str
-    lower: float = -math.inf
-    upper: float = math.inf
-    unit: str = ""
-
-    def __post_init__(self) -> None:
-        if not (self.lower < self.upper):
-            raise ValidationError(
-                "parameter bounds are empty", field=self.name, expected="lower < upper",
-                got=(self.lower, self.upper),
-            )
-
-    @property
-    def transform(self) -> str:
-        """'logit', 'log', 'neglog' or 'identity' (see the module docstring)."""
-        lo, hi = math.isfinite(self.lower), math.isfinite(self.upper)
-        if lo and hi:
-            return "logit"
-        if lo:
-            return "log"
-        if hi:
-            return "neglog"
-        return "identity"
 
 
 @dataclass(frozen=True)
@@ -719,22 +691,6 @@ def least_squares(
 # ------------------------------------------------------------------------------------------------
 # BSDF model fitting
 # ------------------------------------------------------------------------------------------------
-def _lambert_model(theta, x):
-    return jnp.broadcast_to(models.lambert(theta[0]), x["theta_s"].shape)
-
-
-def _lambert_gaussian_model(theta, x):
-    return models.lambert_gaussian(x["theta_i"], x["theta_s"], x["phi_s"], theta[0], theta[1], theta[2])
-
-
-def _abg_model(theta, x):
-    return models.abg(models.delta_beta(x["theta_i"], x["theta_s"], x["phi_s"]), theta[0], theta[1], theta[2])
-
-
-def _lambert_abg_model(theta, x):
-    return models.lambert_abg(x["theta_i"], x["theta_s"], x["phi_s"], theta[0], theta[1], theta[2], theta[3])
-
-
 def _aperture_average(function: Callable, theta, x):
     """The model as the goniometer reports it: averaged over the detector aperture.
 
@@ -747,40 +703,9 @@ def _aperture_average(function: Callable, theta, x):
     return jnp.sum(function(theta, nodes) * x["weight"], axis=-1)
 
 
-@dataclass(frozen=True)
-class _BsdfModel:
-    function: Callable
-    parameters: tuple[Parameter, ...]
-
-    @property
-    def aperture_function(self) -> Callable:
-        return _APERTURE_FUNCTIONS[self.function]
-
-
-#: BSDF models known to :func:`fit_bsdf`: name → (JAX model, parameters with bounds and units).
-BSDF_MODELS: dict[str, _BsdfModel] = {
-    "lambert": _BsdfModel(_lambert_model, (Parameter("rho", 0.0, 1.0, "1"),)),
-    "lambert+gaussian": _BsdfModel(
-        _lambert_gaussian_model,
-        (Parameter("rho", 0.0, 1.0, "1"), Parameter("A", 0.0, math.inf, "1/sr"),
-         Parameter("sigma", 0.0, math.inf, "1")),
-    ),
-    "abg": _BsdfModel(
-        _abg_model,
-        (Parameter("A", 0.0, math.inf, "1/sr"), Parameter("B", 0.0, math.inf, "1"),
-         Parameter("g", 0.0, 3.0, "1")),
-    ),
-    "lambert+abg": _BsdfModel(
-        _lambert_abg_model,
-        (Parameter("rho", 0.0, 1.0, "1"), Parameter("A", 0.0, math.inf, "1/sr"),
-         Parameter("B", 0.0, math.inf, "1"), Parameter("g", 0.0, 3.0, "1")),
-    ),
-}
-
-
-#: Aperture-averaged versions of the model functions (module-level objects: hashable, compiled once).
-_APERTURE_FUNCTIONS: dict[Callable, Callable] = {
-    m.function: functools.partial(_aperture_average, m.function) for m in BSDF_MODELS.values()}
+#: Aperture-averaged versions of the registry's model functions (module-level objects: hashable, compiled once).
+_APERTURE_FUNCTIONS: dict[str, Callable] = {
+    name: functools.partial(_aperture_average, m.function) for name, m in BSDF_MODELS.items()}
 
 
 @dataclass(frozen=True)
@@ -811,38 +736,13 @@ class BsdfFitOptions:
 
 
 def bsdf_model_values(model: str, params: dict[str, float], theta_i_deg, theta_s_deg, phi_s_deg) -> np.ndarray:
-    """Evaluate a named BSDF model (sr⁻¹) at angles in **degrees** (source at φi = 180°)."""
-    spec = _bsdf_model(model)
-    theta = jnp.asarray([params[p.name] for p in spec.parameters], dtype=float)
-    with x64():
-        x = {k: jnp.asarray(np.radians(np.asarray(v, dtype=float)))
-             for k, v in (("theta_i", theta_i_deg), ("theta_s", theta_s_deg), ("phi_s", phi_s_deg))}
-        shape = np.broadcast_shapes(*(np.shape(v) for v in x.values()))
-        x = {k: jnp.broadcast_to(v, shape) for k, v in x.items()}
-        return np.asarray(jax.jit(spec.function)(jnp.asarray(theta, dtype=jnp.float64), x))
-
-
-def _bsdf_model(model: str) -> _BsdfModel:
-    try:
-        return BSDF_MODELS[model]
-    except KeyError:
-        raise ValidationError("unknown BSDF model", field="model", expected=" | ".join(BSDF_MODELS),
-                              got=model) from None
+    """Evaluate a named BSDF model [1/sr] at angles in **degrees** (source at φi = 180°)."""
+    return bsdf_model(model).values(params, theta_i_deg, theta_s_deg, phi_s_deg)
 
 
 def _model_tis(model: str, theta_i_rad: np.ndarray, p: dict[str, np.ndarray]) -> np.ndarray:
-    """TIS of the fitted models, all incidences in one compiled call (θi in radians)."""
-    if model == "lambert":
-        return np.asarray(p["rho"], dtype=float)
-    functions = {
-        "lambert+gaussian": (models.tis_lambert_gaussian, ("rho", "A", "sigma")),
-        "abg": (models.tis_abg, ("A", "B", "g")),
-        "lambert+abg": (models.tis_lambert_abg, ("rho", "A", "B", "g")),
-    }
-    function, names = functions[model]
-    with x64():
-        args = [jnp.asarray(theta_i_rad, dtype=jnp.float64)] + [jnp.asarray(p[k], dtype=jnp.float64) for k in names]
-        return np.asarray(jax.jit(function)(*args))
+    """TIS of the fitted models, all incidences in one call (θi in radians)."""
+    return bsdf_model(model).total_integrated_scatter(p, np.degrees(theta_i_rad))
 
 
 def _initial_bsdf_parameters(model: str, d: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -914,7 +814,7 @@ def fit_bsdf(
     the hemisphere (exact numerical integral of the lobe clipped by the unit disk).
     """
     options = options or BsdfFitOptions()
-    spec = _bsdf_model(model)
+    spec = bsdf_model(model)
     names = ("bsdf", "bsdf_std", "theta_i", "phi_i", "theta_s", "phi_s", "side")
     fields = {n: _profile_field(profile, n) for n in names}
     sides = np.unique(fields["side"].astype(str))
@@ -990,7 +890,6 @@ def fit_bsdf(
     geometry = ("detector_distance_mm", "aperture_diameter_mm")
     with_aperture = options.aperture and all(k in profile.attrs for k in geometry)
     if with_aperture:
-        from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
 
         inst = Instrument(float(profile.attrs["detector_distance_mm"]), float(profile.attrs["aperture_diameter_mm"]),
                           float(profile.attrs.get("beam_diameter_mm", 1.0)))
@@ -1000,7 +899,7 @@ def fit_bsdf(
         x["theta_s_nodes"] = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
         x["phi_s_nodes"] = np.arctan2(d[..., 1], d[..., 0])
         x["weight"] = quad.weights * cos_nodes / (inst.solid_angle_sr * np.cos(ts)[..., None])
-        function = spec.aperture_function
+        function = _APERTURE_FUNCTIONS[spec.name]
     ds = least_squares(function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
                        batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
                        model_name=model)

@@ -1,6 +1,7 @@
 """Raw counts → calibrated BSDF (1/sr) and bi-spectral BSDF (1/(sr·nm)) with standard uncertainties.
 
-Measurement equation (ASTM E2387 form, metrology.md §1.1 and §1.4; eq. (1) of the power-budget paper):
+Measurement equation ([ASTM-E2387] form of eq. (1) of [Power-budget]; keys in docs/references.md, assumptions
+in docs/raw-format.md "Measurement equation"):
 
     f(λ) = P_s(λ) / (P_i(λ) · Ω · cos θs),      P_s = (C_s − D)/t_s,   P_i = (C_ref − D)/(t_ref · T_ND)
 
@@ -8,7 +9,7 @@ with C raw counts, D the mean dark at the same exposure, T_ND the transmittance 
 reference (direct-beam) spectrum, taken by the same detector so the spectral responsivity cancels pixel by
 pixel, and Ω the exact solid angle of the circular aperture (:func:`aperture_solid_angle`).
 
-Wavelength conversion (eqs. (2), (9)-(10) of the power-budget paper): light scattered at λs comes from the whole
+Wavelength conversion (eqs. (2), (9)-(10) of [Power-budget]): light scattered at λs comes from the whole
 incident band, so the quantity measured per configuration is the band-averaged bi-spectral BSDF
 
     ⟨q_λ⟩(λs) = [P_s(λs)/R(λs)] / (Φ_i · Ω · cos θs),   Φ_i = Σ_λi P_i(λi)/R(λi) Δλi
@@ -16,14 +17,14 @@ incident band, so the quantity measured per configuration is the band-averaged b
 in 1/(sr·nm); here the detector's relative spectral responsivity R does not cancel and is taken from the
 manifest. Inside the incident band ⟨q_λ⟩ = f(λ)·p_i(λ) with p_i the normalised incident spectrum.
 
-Negative values after dark subtraction are kept (ISO 11146-3 §3.1, metrology.md §1.3): clipping would bias
+Negative values after dark subtraction are kept (ISO 11146-3 clause 3.1, [ISO-11146-3]): clipping would bias
 every mean upward. Positions whose aperture reaches within one aperture diameter of the horizon
 (θs > 90° − 2·atan(a/d)) are flagged ``grazing`` and their BSDF is masked, never infinite.
 
-Uncertainty (GUM, uncorrelated): Var(C − D) = max(C − D, 0)/G + σ_D² + σ_D²/n_D with G the conversion gain
+Uncertainty ([GUM], uncorrelated): Var(C − D) = max(C − D, 0)/G + σ_D² + σ_D²/n_D with G the conversion gain
 (e⁻/count), σ_D² the variance of the dark frames (read + dark-current noise) and n_D their number; the same for
 the averaged reference frames. Only counting and dark noise are propagated; systematic terms (Ω, alignment,
-linearity, stray light; metrology.md §1.6) are not.
+linearity, stray light, T_ND; listed in docs/raw-format.md) are not.
 """
 from __future__ import annotations
 

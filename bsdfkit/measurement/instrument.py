@@ -1,8 +1,9 @@
 """Goniometer geometry: detector solid angle and aperture quadrature.
 
 The detector is a circular aperture of radius ``a`` at distance ``d`` from the sample (§2 of the power-budget
-paper: a ≤ 12.7 mm, d = 886 mm). A beam that is wholly inside the detector's field of view is assumed
-("over-filled field of view"), so BSDF = P_s / (P_i Ω cos θs) holds (metrology.md §1.1).
+paper, [Power-budget]: a ≤ 12.7 mm, d = 886 mm). A beam that is wholly inside the detector's field of view is
+assumed ("over-filled field of view"), so BSDF = P_s / (P_i Ω cos θs) holds ([ASTM-E2387]; why, in
+docs/raw-format.md "Measurement equation").
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.core.quadrature import gauss_legendre
 
 
 @dataclass(frozen=True)
@@ -47,7 +49,8 @@ def aperture_solid_angle(distance: ArrayLike, radius: ArrayLike) -> NDArray[np.f
     """Exact solid angle of a circular aperture of radius ``a`` on axis at distance ``d``.
 
     Ω = 2π(1 − cos(atan(a/d))) = 2π(1 − d/√(d² + a²)), written as 2π a² / (√(d²+a²)(√(d²+a²) + d))
-    to avoid cancellation for small a/d (metrology.md §1.2). Units: sr; ``d`` and ``a`` in the same unit.
+    to avoid cancellation for small a/d (docs/raw-format.md "Measurement equation"). Units: sr; ``d`` and
+    ``a`` in the same unit.
     """
     d = np.asarray(distance, dtype=np.float64)
     a = np.asarray(radius, dtype=np.float64)
@@ -56,7 +59,7 @@ def aperture_solid_angle(distance: ArrayLike, radius: ArrayLike) -> NDArray[np.f
 
 
 def aperture_solid_angle_small(distance: ArrayLike, radius: ArrayLike) -> NDArray[np.float64]:
-    """Small-angle form Ω ≈ π a²/d²; over-estimates the exact Ω by ≈ (3/4)(a/d)² (metrology.md §1.2)."""
+    """Small-angle form Ω ≈ π a²/d²; over-estimates the exact Ω by ≈ (3/4)(a/d)² relative."""
     d = np.asarray(distance, dtype=np.float64)
     a = np.asarray(radius, dtype=np.float64)
     return np.pi * a * a / (d * d)
@@ -92,7 +95,7 @@ def aperture_quadrature(
     """
     d = instrument.detector_distance_mm
     a = instrument.aperture_diameter_mm / 2
-    x, wx = np.polynomial.legendre.leggauss(n_radial)
+    x, wx = gauss_legendre(n_radial)
     rho = 0.5 * a * (x + 1.0)
     w_rho = 0.5 * a * wx * rho  # ρ dρ
     psi = (np.arange(n_azimuth) + 0.5) * (2 * np.pi / n_azimuth)

@@ -17,13 +17,13 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.measurement.manifest import Manifest, read_manifest
 
 SCAN_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "exposure_s")
 SCAN_OPTIONAL = ("arc",)
 FRAME_COLUMNS = ("frame", "exposure_s")
-SIDES = ("reflection", "transmission")
 ARCS = ("in_plane", "perpendicular", "other")
 
 

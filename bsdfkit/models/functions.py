@@ -26,6 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
+from bsdfkit.core.quadrature import gauss_legendre
+
 __all__ = [
     "C_FWHM",
     "gaussian_spectrum",
@@ -368,7 +370,7 @@ def _abg_radial_integral(t_max: jnp.ndarray, B: jnp.ndarray, g: jnp.ndarray, n_p
     below t_max·e^{−60} is < (t_max e^{−60})²/(2B) ≈ 4e-53/B, i.e. nil for B ≥ 1e-30.
     """
     span = 60.0
-    nodes, weights = np.polynomial.legendre.leggauss(n_nodes)
+    nodes, weights = gauss_legendre(n_nodes)
     width = span / n_panels
     starts = -span + width * np.arange(n_panels)
     # Offsets from ln t_max (≤ 0) and weights of all panels, flattened.

@@ -18,7 +18,30 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import FormatError, InputError, NumericalError
+from bsdfkit.core.records import incidences
+from bsdfkit.fit.least_squares import fit_bsdf
+from bsdfkit.fit.spectrum import fit_spectrum, reconstruct_two_band_spectrum, spectrum_model_values
 from bsdfkit.io import atomic, netcdf
+from bsdfkit.io.atomic import write_text
+from bsdfkit.io.jsonout import dumps
+from bsdfkit.measurement.calibrate import calibrate, truth_tis
+from bsdfkit.measurement.describe import describe
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.plotting.figures import (
+    bsdf_fits_figure,
+    budget_figure,
+    in_plane_bsdf_figure,
+    module_spectrum_figure,
+    save_figure,
+    trace_studies_figure,
+)
+from bsdfkit.raytrace import trace, with_values
+from bsdfkit.raytrace.plate_from_scan import plate_from_scan
+from bsdfkit.raytrace.scene import parse_scene
+from bsdfkit.reduction import budget, spectral
+from bsdfkit.reduction import tis as angular
+from bsdfkit.reduction.colorimetry import colorimetric_summary
+from bsdfkit.tables import export as exporter
 
 KNOWN_SECTIONS = {
     "recipe": {"name", "measurement", "description"},
@@ -227,9 +250,6 @@ class RunState:
 
 def stage_ingest(state: RunState) -> None:
     """Read the raw export, calibrate it, and queue ``scan.nc``."""
-    from bsdfkit.measurement.calibrate import calibrate
-    from bsdfkit.measurement.describe import describe
-    from bsdfkit.measurement.raw_scan import read_scan
 
     state.scan = calibrate(read_scan(state.recipe.measurement))
     scan = state.scan
@@ -239,7 +259,6 @@ def stage_ingest(state: RunState) -> None:
 
 def stage_report(state: RunState) -> None:
     """Queue the in-plane BSDF figure (Fig. 6 analogue)."""
-    from bsdfkit.plotting.figures import in_plane_bsdf_figure, save_figure
 
     opts = state.recipe.report
     fig = in_plane_bsdf_figure(state.scan, opts.figure_config, opts.figure_wavelength_nm)
@@ -248,12 +267,6 @@ def stage_report(state: RunState) -> None:
 
 def stage_reductions(state: RunState) -> None:
     """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget."""
-    from bsdfkit.core.records import incidences
-    from bsdfkit.io.atomic import write_text
-    from bsdfkit.io.jsonout import dumps
-    from bsdfkit.plotting.figures import budget_figure, save_figure
-    from bsdfkit.reduction import budget
-    from bsdfkit.reduction import tis as angular
 
     opts = state.recipe.reductions
     scan = state.scan
@@ -268,7 +281,6 @@ def stage_reductions(state: RunState) -> None:
     t = tables[key]
     power = budget.module_budget(t.power, opts.eta_mc, opts.iterations)
     photons = budget.module_budget(t.photons, opts.eta_mc, opts.iterations)
-    from bsdfkit.measurement.calibrate import truth_tis
 
     truth = truth_tis(scan)
     table_json = {k: v.as_dict() for k, v in tables.items()}
@@ -301,7 +313,6 @@ def stage_exports(state: RunState) -> None:
     records, per file, the source TIS (direct integral of the reconstructed hemisphere) and the TIS recomputed
     from the file as read back, and fails the run if they differ by more than the recipe's tolerance.
     """
-    from bsdfkit.tables import export as exporter
 
     opts = state.recipe.exports
     scan = state.scan
@@ -340,10 +351,6 @@ def stage_trace(state: RunState) -> None:
     larger for mirror walls than diffuse ones (Fig. 10) and for short cavities (Fig. 12).
     """
 
-    from bsdfkit.io.atomic import write_text
-    from bsdfkit.io.jsonout import dumps
-    from bsdfkit.plotting.figures import save_figure, trace_studies_figure
-    from bsdfkit.trace import trace, with_values
 
     opts = state.recipe.trace
     if opts.scene is None:
@@ -396,7 +403,6 @@ def _scene_with_plate(path: Path, plate):
     """The scene at ``path`` with its phosphor plate given (instead of recomputing it from ``from = ...``)."""
     import tomllib as _toml
 
-    from bsdfkit.trace.scene import parse_scene
 
     data = _toml.loads(path.read_text(encoding="utf-8"))
     top = data.get("top", {})
@@ -448,13 +454,6 @@ def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
 def stage_fits(state: RunState) -> None:
     """Lobe fits of every elastic interaction and side (aperture-averaged), a Lambert fit of the converted light,
     and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper)."""
-    from bsdfkit.fit.least_squares import fit_bsdf
-    from bsdfkit.fit.spectrum import fit_spectrum
-    from bsdfkit.io.atomic import write_text
-    from bsdfkit.io.jsonout import dumps
-    from bsdfkit.plotting.figures import bsdf_fits_figure, save_figure
-    from bsdfkit.reduction import spectral
-    from bsdfkit.reduction import tis as angular
 
     opts = state.recipe.fits
     scan, tis = state.scan, state.tis
@@ -504,11 +503,6 @@ def stage_fits(state: RunState) -> None:
 def stage_spectrum(state: RunState) -> None:
     """The module's absolute spectrum from the two-wavelength result (§4.2, Fig. 7 of the cylindrical-module
     paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR."""
-    from bsdfkit.fit.spectrum import reconstruct_two_band_spectrum, spectrum_model_values
-    from bsdfkit.io.atomic import write_text
-    from bsdfkit.io.jsonout import dumps
-    from bsdfkit.plotting.figures import module_spectrum_figure, save_figure
-    from bsdfkit.reduction.colorimetry import colorimetric_summary
 
     opts = state.recipe.fits
     if not state.emission:
@@ -581,53 +575,6 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
             f"(worst: {worst['file']} at {worst['theta_i_deg']:g} deg)")
     summary = {"recipe": recipe.name, "recipe_file": str(recipe.path), "measurement": str(recipe.measurement),
                "outputs": names, "stage_seconds": timings, **state.summary}
-    from bsdfkit.io.jsonout import dumps
 
     atomic.write_text(out_dir / "summary.json", dumps(summary), force)
     return summary
-
-
-# ------------------------------------------------------------------------------------- the plate
-def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str = "", fits: dict | None = None):
-    """A :class:`bsdfkit.trace.PhosphorPlate` from a calibrated scan: the toolkit's own TIS per interaction,
-    side and measured incidence, with angular shapes from lambert+gaussian fits for the elastic
-    interactions (bibs, yiys) and Lambertian for the converted light (biys, §4.2 of the power-budget paper).
-    ``fits`` may hold lambert+gaussian fits already made, keyed by (interaction, side)."""
-    from bsdfkit.fit.least_squares import fit_bsdf
-    from bsdfkit.reduction import spectral
-    from bsdfkit.reduction import tis as angular
-    from bsdfkit.trace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel
-
-    tis = tis if tis is not None else angular.tis_table(scan)
-    grid = tuple(float(t) for t in tis["theta_i"].values)
-    channels = {}
-    for inter in ("bibs", "biys", "yiys"):
-        for side in ("reflection", "transmission"):
-            values = tuple(float(np.clip(tis["tis"].sel(interaction=inter, side=side, theta_i=t), 0.0, 1.0))
-                           for t in grid)
-            if inter == "biys":
-                dists = (Lambertian(),) * len(grid)
-            else:
-                fit = (fits or {}).get((inter, side))
-                if fit is None or fit.attrs.get("model") not in (None, "lambert+gaussian") or "sigma" not in fit:
-                    prof = spectral.interaction_profile(scan, inter, side)
-                    prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
-                    fit = fit_bsdf(prof, "lambert+gaussian")
-                dists = tuple(LambertGaussian(rho_per_sr=float(fit["rho"].sel(theta_i=t)) / np.pi,
-                                              a_per_sr=float(fit["A"].sel(theta_i=t)),
-                                              sigma=float(fit["sigma"].sel(theta_i=t))) for t in grid)
-            channels[f"{inter}_{side}"] = PlateChannel(values, dists)
-    plate = PhosphorPlate(theta_i_deg=grid, name=name or scan.attrs.get("sample_name", ""),
-                          notes=f"from {scan.attrs.get('source', '')}: bsdfkit TIS (two-arc reconstruction) and "
-                                "lambert+gaussian fits", **channels)
-    plate.validate()
-    return plate
-
-
-def phosphor_plate(recipe_path: str | Path):
-    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``)."""
-    from bsdfkit.measurement.calibrate import calibrate
-    from bsdfkit.measurement.raw_scan import read_scan
-
-    recipe = load_recipe(recipe_path)
-    return plate_from_scan(calibrate(read_scan(recipe.measurement)), name=recipe.name)

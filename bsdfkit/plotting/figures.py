@@ -1,6 +1,7 @@
 """Figures for run reports. Uses matplotlib's object API (no pyplot, so no global backend state)."""
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
+from bsdfkit.fit.least_squares import bsdf_model_values
 from bsdfkit.io.atomic import write_with
 
 
@@ -93,7 +95,6 @@ def trace_studies_figure(device, studies: dict[str, list[dict]]) -> Figure:
 
 def bsdf_fits_figure(fits: dict) -> Figure:
     """In-plane data vs fitted model for each interaction and side (one curve per incidence)."""
-    from bsdfkit.fit.least_squares import bsdf_model_values
 
     keys = [k for k in (("bibs", "reflection"), ("bibs", "transmission"), ("yiys", "reflection"),
                         ("yiys", "transmission"), ("biys", "reflection"), ("biys", "transmission")) if k in fits]
@@ -144,4 +145,37 @@ def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> 
     right.set_title(sd.name, fontsize=9)
     right.grid(True, alpha=0.3)
     fig.tight_layout()
+    return fig
+
+
+def sweep_figure(ds: xr.Dataset) -> Figure:
+    """LER, YBR and non-uniformity vs the first parameter (one line per combination of the others)."""
+    dims = [d for d in ds["LER"].dims]
+    panels = [("LER", "std_err_LER"), ("YBR", "std_err_YBR")]
+    if np.any(np.isfinite(ds["non_uniformity"].values)):
+        panels.append(("non_uniformity", None))
+    fig = Figure(figsize=(4.2 * len(panels), 3.6))
+    axes = fig.subplots(1, len(panels), squeeze=False)
+    x_dim = dims[0] if dims else None
+    others = dims[1:]
+    combos = list(itertools.product(*[range(ds.sizes[d]) for d in others])) or [()]
+    for ax, (var, err) in zip(axes[0], panels):
+        for combo in combos:
+            sel = dict(zip(others, combo))
+            y = ds[var].isel(sel)
+            label = ", ".join(f"{d}={ds[d].values[i]}" for d, i in sel.items()) or None
+            if x_dim is None:
+                ax.errorbar([0], [float(y)], yerr=None if err is None else [float(ds[err].isel(sel))], fmt="o")
+                continue
+            xv = ds[x_dim].values
+            ax.errorbar(xv, y.values, yerr=None if err is None else ds[err].isel(sel).values, marker="o",
+                        capsize=2, label=label)
+        ax.set_xlabel(x_dim or "")
+        ax.set_ylabel(var)
+        ax.grid(True, alpha=0.3)
+        if len(combos) > 1:
+            ax.legend(fontsize=7)
+    fig.suptitle(f"bsdfkit sweep ({ds.attrs.get('rays')} rays per point)", fontsize=9)
+    fig.tight_layout()
+    FigureCanvasAgg(fig)
     return fig

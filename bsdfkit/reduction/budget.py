@@ -1,5 +1,7 @@
 """Power and photon budgets of the phosphor plate and of the module (power-budget paper, §§5-6).
 
+Numbers refer to [Power-budget] (docs/references.md).
+
 * :func:`interaction_table` — Table 2 of the power-budget paper at one incidence: back (B) and forward (F)
   TIS of bibs, biys and yiys, blue and yellow losses, in percent of incident power and of incident photons,
   with standard uncertainties, and the external quantum efficiency EQE = emitted yellow photons / absorbed
@@ -19,6 +21,8 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import InputError, NumericalError
+from bsdfkit.reduction import spectral
+from bsdfkit.reduction import tis as angular
 
 KEYS = ("B_bibs", "F_bibs", "B_biys", "F_biys", "blue_losses", "B_yiys", "F_yiys", "yellow_losses")
 TIS_KEYS = ("B_bibs", "F_bibs", "B_biys", "F_biys", "B_yiys", "F_yiys")
@@ -65,8 +69,6 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
                       blue_band: tuple[float, float] = (450.0, 470.0),
                       yellow_band: tuple[float, float] = (470.0, 740.0)) -> InteractionTable:
     """Table 2 of the power-budget paper at incidence ``theta_i`` (deg) from a calibrated scan."""
-    from bsdfkit.reduction import spectral
-    from bsdfkit.reduction import tis as angular
 
     tis = tis if tis is not None else angular.tis_table(ds, theta_i=[theta_i])
     sel = tis.sel(theta_i=theta_i, method="nearest")

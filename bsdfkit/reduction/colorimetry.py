@@ -12,7 +12,7 @@
   ``colour.luminous_flux`` and ``colour.luminous_efficacy`` (CIE 1924 photopic V(λ), K_m = 683 lm/W).
 * Yellow-to-blue ratio YBR = ∫_yellow S dλ / ∫_blue S dλ with blue = 380–470 nm and yellow = 471–780 nm
   by default (definitions of the cylindrical-module paper, docs/reference/seed_figures.json); band
-  sums as :func:`bsdfkit.fit.spectrum.band_integral`.
+  sums as :func:`bsdfkit.reduction.spectral.band_sum`.
 
 Grids: uniform 5, 10 or 20 nm grids starting on a whole nanometre are passed to colour unchanged
 (ASTM E308 practice, weighting-factor method). Any other grid (1 nm, or an irregular
@@ -27,20 +27,20 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
+import colour
 import numpy as np
+from colour import SpectralDistribution
 
-from bsdfkit.core.errors import InputError, NumericalError
-
-if TYPE_CHECKING:
-    from colour import SpectralDistribution
+from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM
+from bsdfkit.core.errors import InputError, NumericalError, ValidationError
+from bsdfkit.reduction.spectral import band_sum
 
 __all__ = [
     "CMFS_NAME",
     "DUV_LIMIT",
-    "YBR_BLUE_BAND_NM",
-    "YBR_YELLOW_BAND_NM",
+    "COLORIMETRY_BLUE_BAND_NM",
+    "COLORIMETRY_YELLOW_BAND_NM",
     "chromaticity_xy",
     "cct_duv",
     "cct_is_meaningful",
@@ -57,16 +57,12 @@ CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
 DUV_LIMIT = 0.05
 #: Planckian table range of colour's Ohno (2013) solver (its defaults ``start`` and ``end``), in K.
 CCT_RANGE_K: tuple[float, float] = (1000.0, 100000.0)
-YBR_BLUE_BAND_NM: tuple[float, float] = (380.0, 470.0)
-YBR_YELLOW_BAND_NM: tuple[float, float] = (471.0, 780.0)
 
 _ASTM_INTERVALS = (1.0, 5.0, 10.0, 20.0)
 
 
 def _checked(sd):
     """Validate a SpectralDistribution (finite values, some positive power) and return (λ, values)."""
-    import colour
-
     if not isinstance(sd, colour.SpectralDistribution):
         raise InputError("spectrum must be a colour.SpectralDistribution", field="sd",
                          got=type(sd).__name__)
@@ -86,8 +82,6 @@ def _checked(sd):
 def _uniform_sd(sd):
     """The spectrum on a uniform grid: unchanged if already uniform, else interpolated by colour onto
     1 nm over its own (whole-nanometre) range."""
-    import colour
-
     wl, _ = _checked(sd)
     steps = np.diff(wl)
     if np.allclose(steps, steps[0], rtol=0, atol=1e-9):
@@ -100,8 +94,6 @@ def _uniform_sd(sd):
 
 def _colorimetric_sd(sd):
     """The spectrum on a grid colour's ASTM E308 path accepts without re-aligning it (module docstring)."""
-    import colour
-
     wl, _ = _checked(sd)
     steps = np.diff(wl)
     uniform = np.allclose(steps, steps[0], rtol=0, atol=1e-9)
@@ -119,8 +111,6 @@ def _colorimetric_sd(sd):
 
 
 def _xyz(sd) -> np.ndarray:
-    import colour
-
     cmfs = colour.MSDS_CMFS[CMFS_NAME]
     with warnings.catch_warnings():
         # colour reports each internal re-alignment of illuminant E / the 5 nm ASTM tables as a runtime
@@ -135,8 +125,6 @@ def _xyz(sd) -> np.ndarray:
 
 def chromaticity_xy(sd: SpectralDistribution) -> tuple[float, float]:
     """CIE 1931 2° chromaticity (x, y) of an emission spectrum (wavelength in nm, any radiometric unit)."""
-    import colour
-
     x, y = np.asarray(colour.XYZ_to_xy(_xyz(sd)), dtype=float)
     return float(x), float(y)
 
@@ -146,8 +134,6 @@ def cct_duv(sd: SpectralDistribution) -> tuple[float, float]:
 
     Duv is the signed distance from the Planckian locus in CIE 1960 uv (positive above the locus).
     """
-    import colour
-
     xy = np.array(chromaticity_xy(sd))
     uv = colour.xy_to_UCS_uv(xy)
     with warnings.catch_warnings():
@@ -169,15 +155,11 @@ def cct_is_meaningful(duv: float, cct_K: float | None = None) -> bool:
 
 def luminous_flux_lm(sd: SpectralDistribution) -> float:
     """Luminous flux in lm of a spectral radiant flux in W/nm (``colour.luminous_flux``, K_m = 683 lm/W)."""
-    import colour
-
     return float(colour.luminous_flux(_uniform_sd(sd)))
 
 
 def luminous_efficacy_of_radiation(sd: SpectralDistribution) -> float:
     """Luminous efficacy of radiation K = Φ_v/Φ_e in lm/W (``colour.luminous_efficacy``); unit-free input."""
-    import colour
-
     value = float(colour.luminous_efficacy(_uniform_sd(sd)))
     if not math.isfinite(value):
         raise NumericalError(f"{sd.name}: luminous efficacy is undefined (zero radiant flux)")
@@ -186,15 +168,16 @@ def luminous_efficacy_of_radiation(sd: SpectralDistribution) -> float:
 
 def yellow_blue_ratio(
     sd: SpectralDistribution,
-    blue_band_nm: tuple[float, float] = YBR_BLUE_BAND_NM,
-    yellow_band_nm: tuple[float, float] = YBR_YELLOW_BAND_NM,
+    blue_band_nm: tuple[float, float] = COLORIMETRY_BLUE_BAND_NM,
+    yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM,
 ) -> float:
     """YBR = Σ_yellow S Δλ / Σ_blue S Δλ (inclusive band limits in nm; defaults 380–470 and 471–780 nm)."""
-    from bsdfkit.fit.spectrum import band_integral
-
+    for name, band in (("blue_band_nm", blue_band_nm), ("yellow_band_nm", yellow_band_nm)):
+        if not band[0] < band[1]:
+            raise ValidationError("empty band", field=name, expected="lower < upper [nm]", got=band)
     wl, values = _checked(sd)
-    blue = band_integral(wl, values, blue_band_nm)
-    yellow = band_integral(wl, values, yellow_band_nm)
+    blue = band_sum(wl, values, blue_band_nm)
+    yellow = band_sum(wl, values, yellow_band_nm)
     if not blue > 0:
         raise NumericalError(f"{sd.name}: no flux in the blue band {blue_band_nm[0]:g}-{blue_band_nm[1]:g} nm; "
                              "YBR is undefined")

@@ -1,6 +1,7 @@
 """Spectral reductions: weighted mean BSDFs, bi-spectral band averages, band integrals, photons.
 
-Equation numbers refer to the power-budget paper ("Power and photon budget of a remote phosphor LED module").
+Equation numbers refer to the power-budget paper ("Power and photon budget of a remote phosphor LED module",
+[Power-budget] in docs/references.md).
 
 * Weighted mean BSDF over an incident spectrum E (eqs. (3)-(5), (8)); only the relative shape of E matters:
   ⟨q⟩ = Σ_band q(λ) E(λ) Δλ / Σ_band E(λ) Δλ.
@@ -23,13 +24,11 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, EXCITATION_BAND_NM, INTERACTIONS
 from bsdfkit.core.errors import InputError, NumericalError
 
 PLANCK_H = 6.62607015e-34  # J s (exact, SI 2019)
 LIGHT_C = 299_792_458.0  # m/s (exact)
-
-BLUE_BAND_NM = (450.0, 470.0)
-YELLOW_BAND_NM = (470.0, 740.0)
 
 Band = tuple[float, float]
 SpectrumLike = colour.SpectralDistribution | xr.DataArray
@@ -122,7 +121,7 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: Spectr
     return out
 
 
-def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = YELLOW_BAND_NM) -> xr.Dataset:
+def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSION_BAND_NM) -> xr.Dataset:
     """Σ_band ⟨q_λ⟩(λs) Δλs per record, in 1/sr: ⟨⟨q_λ⟩⟩·ΔΛs of eqs. (11)-(13)."""
     sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
     lam = sub["wavelength"].values
@@ -141,7 +140,7 @@ def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = YELLOW_BA
     return out
 
 
-def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = YELLOW_BAND_NM) -> xr.Dataset:
+def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = CONVERSION_BAND_NM) -> xr.Dataset:
     """⟨⟨q_λ⟩⟩ per record (eq. (12)), in 1/(sr·nm): the band integral divided by ΔΛs = high − low."""
     out = bispectral_band_integral(ds, config, band)
     width = band[1] - band[0]
@@ -200,8 +199,6 @@ def _profile(sub: xr.Dataset, value: NDArray, std: NDArray, units: str, name: st
     return out
 
 
-INTERACTIONS = ("bibs", "biys", "yiys")
-
 
 def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = None,
                         bands: dict[str, Band] | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
@@ -211,7 +208,7 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
     band with the yellow configuration; biys: eq. (13) integrand ⟨⟨q_λ⟩⟩·ΔΛs from the blue configuration.
     Optionally restricted to one ``side``. Band and configuration names can be overridden.
     """
-    bands = {"blue": BLUE_BAND_NM, "yellow": YELLOW_BAND_NM, **(bands or {})}
+    bands = {"blue": EXCITATION_BAND_NM, "yellow": CONVERSION_BAND_NM, **(bands or {})}
     configs = {"blue": "blue", "yellow": "yellow", **(configs or {})}
     if interaction == "bibs":
         out = weighted_mean_bsdf(ds, configs["blue"], bands["blue"])

@@ -1,9 +1,9 @@
 """Angular reductions: hemisphere reconstruction from two measured arcs, and TIS with error bars.
 
-A goniometer scan of the power-budget paper (§2) measures two arcs per incidence and side: the plane of
-incidence, and the plane perpendicular to it through the specular direction. The TIS needs the whole
-hemisphere. We work in Harvey–Shack direction cosines, where the projected solid angle is exactly
-cos θs dΩ = dβx dβy (metrology.md §1.7; formats.md §1), so
+A goniometer scan of the power-budget paper (§2 of [Power-budget], docs/references.md) measures two arcs
+per incidence and side: the plane of incidence, and the plane perpendicular to it through the specular
+direction. The TIS needs the whole hemisphere. We work in Harvey–Shack direction cosines, where the
+projected solid angle is exactly cos θs dΩ = dβx dβy (docs/exports.md §3), so
 
     TIS = ∫∫_{|β| ≤ 1} f(β) dβx dβy,
 
@@ -12,10 +12,10 @@ light transmitted through a plate). With Δ = β − β0 = r(cos ψ, sin ψ):
 
 * the in-plane arc gives two half-profiles along ±Δα (Δβ = 0): f_+α(r), f_−α(r);
 * the perpendicular arc gives two half-profiles along ±Δβ; it is **not** a line of constant α — its points
-  are Δα = −sin θi (1 − cos ε), Δβ = sin ε (metrology.md §2.3) — so each point is placed at its true radius
+  are Δα = −sin θi (1 − cos ε), Δβ = sin ε (docs/reductions.md, step 2) — so each point is placed at its true radius
   r = |Δ|, not at sin ε;
-* the hemisphere is the elliptical blend (metrology.md §4.7, option 3, done in f rather than ln f so that the
-  TIS is linear in the data and negative values after dark subtraction are kept):
+* the hemisphere is the elliptical blend of the two arcs (docs/reductions.md, step 3; done in f rather than
+  ln f so that the TIS is linear in the data and negative values after dark subtraction are kept):
 
       f(r, ψ) = cos²ψ · f_{sgn cos ψ · α}(r) + sin²ψ · f_{sgn sin ψ · β}(r).
 
@@ -37,12 +37,12 @@ quadrature weights and adds the scale uncertainty common to all records (the ref
 ``attrs['common_relative_std']`` of the profile); the TIS value itself interpolates half-profiles in ln f where
 neighbouring samples are
 positive (linear in f elsewhere), which follows the convex tails of lobes between sparse samples
-(metrology.md §4.4). The reconstruction part adds in quadrature (i) the change when the quadrature grid is
+(docs/reductions.md, step 5). The reconstruction part adds in quadrature (i) the change when the quadrature grid is
 halved, (ii) the change when half-profiles are interpolated in f instead of ln f, (iii) the largest change
 when the blend exponent goes from 2 (cos²ψ) to 1 or 4, and (iv) the change when data ends are held instead of
 borrowed. The single-arc (radially symmetric) reconstructions are reported for comparison.
 
-The paper's own rectangle sum, eq. (7) of the power-budget paper, is :func:`tis_rectangle_sum`.
+The paper's own rectangle sum, eq. (7) of [Power-budget], is :func:`tis_rectangle_sum`.
 """
 from __future__ import annotations
 
@@ -54,7 +54,9 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core.errors import InputError, NumericalError
-from bsdfkit.core.records import incidences
+from bsdfkit.core.quadrature import gauss_legendre
+from bsdfkit.core.records import incidences, select
+from bsdfkit.reduction.spectral import bispectral_band_integral, interaction_profile
 
 HALVES = ("+alpha", "-alpha", "+beta", "-beta")
 
@@ -87,7 +89,7 @@ def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> 
     bu = bx * np.cos(psi) + by * np.sin(psi)
     t_max = -bu + np.sqrt(bu * bu + 1.0 - b2)
     # Gauss–Legendre in r: spectral convergence for smooth f (the trapezoid rule was only O(h²) here).
-    x, tw = np.polynomial.legendre.leggauss(n_r)
+    x, tw = gauss_legendre(n_r)
     x, tw = 0.5 * (x + 1.0), 0.5 * tw
     r = t_max[:, None] * x[None, :]
     w = (t_max[:, None] ** 2) * x[None, :] * tw[None, :] * (2 * np.pi / n_psi)
@@ -331,7 +333,7 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
     f = np.nan_to_num(profile["bsdf"].values, nan=0.0)
     s = np.nan_to_num(profile["bsdf_std"].values, nan=0.0) if "bsdf_std" in profile else np.zeros_like(f)
     linear = float(w @ f)
-    # ln-f interpolation follows convex lobe tails between sparse samples (metrology.md §4.4); the linear
+    # ln-f interpolation follows convex lobe tails between sparse samples (docs/reductions.md); the linear
     # form (exactly w·f) gives the first-order propagation of the measurement uncertainty.
     value = hemi.tis("log", n_psi, n_r)
     # per-record noise through the linear weights, plus the scale common to all records (reference beam)
@@ -355,7 +357,6 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
               theta_i: list[float] | None = None) -> xr.Dataset:
     """TIS per interaction, side and incidence from a calibrated scan: a Dataset with ``tis``, ``tis_std``,
     ``tis_std_measurement``, ``tis_std_reconstruction`` (fractions) over (interaction, side, theta_i)."""
-    from bsdfkit.reduction.spectral import interaction_profile
 
     angles = theta_i if theta_i is not None else incidences(ds)
     sides = ["reflection", "transmission"]
@@ -390,8 +391,6 @@ def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: st
     The hemisphere weights of the band-integrated profile are linear in the data, so one reconstruction
     integrates every wavelength: Φ_λ,s/Φ_i = Σ_k w_k ⟨q_λ⟩_k(λs). Its integral over ``band`` is the TIS.
     """
-    from bsdfkit.core.records import select
-    from bsdfkit.reduction.spectral import bispectral_band_integral
 
     sub = select(ds, config=config, theta_i=theta_i, side=side)
     prof = bispectral_band_integral(sub, config, band)
@@ -408,7 +407,6 @@ def hemisphere_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> Callable[
 
     Only measured incidences are available (no interpolation across incidence); others raise InputError.
     """
-    from bsdfkit.reduction.spectral import interaction_profile
 
     prof = interaction_profile(ds, interaction, side)
     cache: dict[float, Hemisphere] = {}

@@ -23,25 +23,25 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Literal
 
+import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, EXCITATION_BAND_NM, SIDES
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.models.functions import split_gaussian_spectrum, tis_gaussian_lobe
+from bsdfkit.reduction.spectral import band_sum
 
 Side = Literal["reflection", "transmission"]
-SIDES: tuple[str, str] = ("reflection", "transmission")
-C_FWHM = 4.0 * np.log(2.0)
-
-BLUE_BAND_NM = (450.0, 470.0)
-YELLOW_BAND_NM = (470.0, 740.0)
 
 
 # --------------------------------------------------------------------------------------------- spectra
 def split_gaussian(wavelength: ArrayLike, peak: float, fwhm: float, alpha: float = 0.0) -> NDArray[np.float64]:
-    """exp(−C((λ−λp)/(Δλ(1 + sign(λ−λp)·α)))²), C = 4 ln 2: eqs. (2)-(3) of the cylindrical-module paper."""
-    lam = np.asarray(wavelength, dtype=np.float64)
-    width = fwhm * (1.0 + np.sign(lam - peak) * alpha)
-    return np.exp(-C_FWHM * ((lam - peak) / width) ** 2)
+    """Eqs. (2)-(3) of [Cylindrical-module]: the registry's split Gaussian
+    (:func:`bsdfkit.models.functions.split_gaussian_spectrum`) in float64 NumPy."""
+    with x64():
+        return np.asarray(split_gaussian_spectrum(jnp.asarray(wavelength, dtype=jnp.float64), peak, fwhm, alpha))
 
 
 def smoothstep(x: ArrayLike) -> NDArray[np.float64]:
@@ -83,9 +83,9 @@ def emission_shape(wavelength: ArrayLike, peak: float = 596.7, fwhm: float = 154
 
 
 def band_integral(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: tuple[float, float]) -> float:
-    """Trapezoid integral of ``values`` over wavelengths inside the closed ``band``."""
-    inside = (wavelength >= band[0] - 1e-9) & (wavelength <= band[1] + 1e-9)
-    return float(np.trapezoid(values[..., inside], wavelength[inside], axis=-1))
+    """Σ_band values Δλ: the band sum of the reductions (:func:`bsdfkit.reduction.spectral.band_sum`), so that the
+    truth and the measurement's reductions integrate the same way."""
+    return band_sum(wavelength, values, band)
 
 
 # ------------------------------------------------------------------------------------------ the truth
@@ -147,10 +147,10 @@ class PhosphorPlateTruth:
     def emission_density(self, wavelength: ArrayLike) -> NDArray[np.float64]:
         """e(λ) in 1/nm, normalised to ∫ e dλ = 1 over the yellow band 470–740 nm (fine grid)."""
         em = self.emission
-        fine = np.linspace(*YELLOW_BAND_NM, 27001)
+        fine = np.linspace(*CONVERSION_BAND_NM, 27001)
         shape = lambda lam: emission_shape(lam, em["peak"], em["fwhm"], em["alpha"],  # noqa: E731
                                            (em["onset_start"], em["onset_end"]))
-        norm = np.trapezoid(shape(fine), fine)
+        norm = band_integral(fine, shape(fine), CONVERSION_BAND_NM)
         return shape(wavelength) / norm
 
     def excitation(self, wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -247,16 +247,10 @@ class PhosphorPlateTruth:
 
 
 def clipped_gaussian_lobe_tis(A: float, sigma: float, theta_i: float, n_psi: int = 4096) -> float:
-    """∬_{|β|≤1} A exp(−|β−β0|²/2σ²) dβ with |β0| = sin θi (radians): the lobe TIS clipped by the unit disk.
-
-    In polar coordinates (t, ψ) centred on β0 the radial integral is analytic, Aσ²(1 − e^{−t_max²/2σ²}) with
-    t_max(ψ) = −b cos ψ + √(b² cos² ψ + 1 − b²); the periodic ψ integral uses the midpoint rule.
-    """
-    b = np.sin(theta_i)
-    psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
-    bu = b * np.cos(psi)
-    t_max = -bu + np.sqrt(bu * bu + 1.0 - b * b)
-    return float(A * sigma**2 * np.sum(-np.expm1(-t_max**2 / (2 * sigma**2))) * (2 * np.pi / n_psi))
+    """TIS of a Gaussian lobe clipped by the unit disk (θi in radians): the registry's formula
+    (:func:`bsdfkit.models.functions.tis_gaussian_lobe`) in float64, as a Python float."""
+    with x64():
+        return float(tis_gaussian_lobe(theta_i, A, sigma, n_psi))
 
 
 def weighted_mean(wavelength: NDArray[np.float64], values: NDArray[np.float64], weight: NDArray[np.float64],
@@ -277,12 +271,12 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
     out: dict[str, float] = {}
     for tag, side in (("B", "reflection"), ("F", "transmission")):
         m_b = weighted_mean(wavelength, truth.elastic_spectral("bibs", side, th, wavelength), blue_incident,
-                            BLUE_BAND_NM)
+                            EXCITATION_BAND_NM)
         out[f"{tag}_bibs"] = 100 * m_b * truth.elastic_tis("bibs", side, th)
-        g = weighted_mean(wavelength, truth.excitation(wavelength), blue_incident, BLUE_BAND_NM)
+        g = weighted_mean(wavelength, truth.excitation(wavelength), blue_incident, EXCITATION_BAND_NM)
         out[f"{tag}_biys"] = 100 * g * truth.conversion(side, th).T
         m_y = weighted_mean(wavelength, truth.elastic_spectral("yiys", side, th, wavelength), yellow_incident,
-                            YELLOW_BAND_NM)
+                            CONVERSION_BAND_NM)
         out[f"{tag}_yiys"] = 100 * m_y * truth.elastic_tis("yiys", side, th)
     out["blue_losses"] = 100 - out["B_bibs"] - out["F_bibs"] - out["B_biys"] - out["F_biys"]
     out["yellow_losses"] = 100 - out["B_yiys"] - out["F_yiys"]

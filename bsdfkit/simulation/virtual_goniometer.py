@@ -1,8 +1,8 @@
 """The virtual goniometer: simulate the raw export of a spectral goniometer scan from a truth BSDF.
 
 Users plan measurements with it (how fine a scan, how long an exposure, what uncertainty to expect); the test
-suite uses it as ground truth. It models the set-up of §2 of the power-budget paper: a collimated Xe beam
-through an interference or cut-on filter, a circular detector aperture at distance d feeding a CCD
+suite uses it as ground truth. It models the set-up of §2 of the power-budget paper ([Power-budget]): a
+collimated Xe beam through an interference or cut-on filter, a circular detector aperture at distance d feeding a CCD
 spectrometer, and a reference (direct-beam) spectrum taken by the same detector through an ND filter.
 
 Signal chain per spectral pixel (counts):
@@ -23,11 +23,15 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import jax
+import jaxlib
 import numpy as np
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, EXCITATION_BAND_NM
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.io import atomic
+from bsdfkit.io.toml_write import dumps as toml_dumps
 from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
 from bsdfkit.simulation import truth as synthetic
 
@@ -291,12 +295,19 @@ def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = N
             for c in configurations
         ],
         "provenance": {"generator": "bsdfkit.simulation.virtual_goniometer.simulate_scan", "seed": int(seed),
+                       "versions": generator_versions(),
                        "plan": asdict(plan), "goniometer": json.loads(json.dumps(asdict(gonio)))},
     }
     if extra_manifest:
         manifest.update(extra_manifest)
     return RawExport(manifest=manifest, scans=scans, references=references, dark=dark,
                      responsivity=sp.responsivity(lam), wavelength=lam)
+
+
+def generator_versions() -> dict[str, str]:
+    """Versions of the numerical libraries that made a simulated export: the files regenerate bit for bit under
+    these (the locked ones); other versions may round differently in the last place."""
+    return {"numpy": np.__version__, "jax": jax.__version__, "jaxlib": jaxlib.__version__}
 
 
 # --------------------------------------------------------------------------------------------- writing
@@ -315,7 +326,6 @@ def _wl_header(lam: NDArray[np.float64]) -> list[str]:
 
 def write_raw_export(export: RawExport, folder: str | Path, force: bool = False) -> Path:
     """Write ``export`` as manifest.toml + gzip CSV files (docs/raw-format.md); atomic per file."""
-    from bsdfkit.io.toml_write import dumps as toml_dumps
 
     folder = Path(folder)
     atomic.check_writable(folder / "manifest.toml", force)
@@ -377,7 +387,7 @@ def cl830_truth(goniometer: VirtualGoniometer | None = None) -> synthetic.Phosph
     angles = tuple(sorted(CL830_TIS_TARGETS))
     tables: dict[str, dict[str, list]] = {"bibs": {}, "yiys": {}, "biys": {}}
     for side, tag in (("reflection", "B"), ("transmission", "F")):
-        for inter, band, spec in (("bibs", synthetic.BLUE_BAND_NM, blue), ("yiys", synthetic.YELLOW_BAND_NM, yellow)):
+        for inter, band, spec in (("bibs", EXCITATION_BAND_NM, blue), ("yiys", CONVERSION_BAND_NM, yellow)):
             kappa, lref = _CL830_KAPPA[inter]
             rows = []
             for th in angles:

@@ -22,8 +22,6 @@ Every write is atomic and refuses to overwrite an existing file unless ``force``
 """
 from __future__ import annotations
 
-import importlib
-import importlib.util
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -37,6 +35,8 @@ from numpy.typing import NDArray
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic
+from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
+from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import grids
 from bsdfkit.tables.formats import asap, tracepro, zemax
 
@@ -53,12 +53,8 @@ __all__ = [
 ]
 
 FORMATS: tuple[str, ...] = ("tracepro", "zemax", "asap")
-FIT_MODELS: dict[str, tuple[str, ...]] = {
-    "lambert": ("rho",),
-    "lambert+gaussian": ("rho", "A", "sigma"),
-    "abg": ("A", "B", "g"),
-    "lambert+abg": ("rho", "A", "B", "g"),
-}
+#: Parameter names of every registered BSDF model (:mod:`bsdfkit.models.registry`).
+FIT_MODELS: dict[str, tuple[str, ...]] = {name: m.parameter_names for name, m in BSDF_MODELS.items()}
 _SIDE_CHOICES = ("reflection", "transmission", "both")
 _THETA_MATCH_DEG = 1e-9
 
@@ -219,13 +215,8 @@ def _model_bsdf_fn(model: str, params: Mapping[float, Mapping[str, float]], side
         if side_ != side:
             raise ValidationError("fit result does not describe this side", field="side", expected=side, got=side_)
         p = lookup(theta_i_deg)
-        if model == "lambert":
-            return np.full(directions.shape[:-1], p["rho"] / np.pi)
-        rho, _ = frames.harvey_shack_from_direction(directions, np.radians(theta_i_deg))
-        if model == "lambert+gaussian":
-            return p["rho"] / np.pi + p["A"] * np.exp(-(rho**2) / (2.0 * p["sigma"] ** 2))
-        lobe = p["A"] / (p["B"] + rho ** p["g"])
-        return lobe if model == "abg" else p["rho"] / np.pi + lobe
+        distance, _ = frames.harvey_shack_from_direction(directions, np.radians(theta_i_deg))
+        return bsdf_model(model).values_at_distance(p, distance)
 
     return bsdf_fn
 
@@ -275,15 +266,6 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
                     abg.append(asap.AbgParameters(s, t, p["A"], p["B"], p["g"]))
         chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
         return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}")
-    if importlib.util.find_spec("bsdfkit.reduction.tis") is None:
-        raise InputError("exporting a calibrated scan needs bsdfkit.reduction.tis.hemisphere_bsdf_fn, which this "
-                         "installation lacks", file=label, expected="a fit result (attribute 'model')",
-                         got="a dataset without 'model'")
-    angular = importlib.import_module("bsdfkit.reduction.tis")
-    hemisphere_bsdf_fn = getattr(angular, "hemisphere_bsdf_fn", None)
-    if hemisphere_bsdf_fn is None:
-        raise InputError("bsdfkit.reduction.tis has no hemisphere_bsdf_fn; cannot reconstruct the scan hemisphere",
-                         file=label, expected="a fit result (attribute 'model')", got="a calibrated scan")
     fns = {s: hemisphere_bsdf_fn(ds, interaction, s) for s in sides}
     if theta_i_deg is None:
         measured = [set(np.round(np.asarray(f.incidences_deg, dtype=float), 9))

@@ -38,8 +38,8 @@ log-spaced radii there (see :class:`HarveyShackAxes` and :class:`SpecularAxes`, 
 for the measured round-trip errors).
 
 :func:`tis_reference` integrates a callable directly (polar coordinates centred on β0 with log-spaced
-radius, formats.md §6) and is the reference for the tables; :func:`tis_abg_normal` is the closed form of
-formats.md §6.
+radius, formats.md §6) and is the reference for the tables; the closed forms of the models' TIS live in
+:mod:`bsdfkit.models.functions`.
 """
 from __future__ import annotations
 
@@ -49,10 +49,10 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
-from scipy import special
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import NumericalError, ValidationError
+from bsdfkit.core.quadrature import gauss_legendre
 
 __all__ = [
     "BsdfFn",
@@ -63,7 +63,6 @@ __all__ = [
     "horizon_radial",
     "rho_max",
     "specular_grid",
-    "tis_abg_normal",
     "tis_harvey_shack_table",
     "tis_reference",
     "tis_specular_table",
@@ -406,7 +405,7 @@ def tis_harvey_shack_table(
     return np.sum(row * weights, axis=-1)
 
 
-_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(8)
+_GL_NODES, _GL_WEIGHTS = gauss_legendre(8)
 
 
 def tis_specular_table(
@@ -503,17 +502,3 @@ def tis_reference(
     if not np.isfinite(total):
         raise NumericalError(f"TIS of the BSDF callable is not finite at theta_i={theta_i_deg:g} deg")
     return total
-
-
-def tis_abg_normal(a: float, b: float, g: float) -> float:
-    """Closed-form TIS of the ABg model A/(B + |β−β0|^g) at normal incidence (formats.md §6).
-
-    TIS = 2πA ∫_0^1 x/(B + x^g) dx = (πA/B) ₂F₁(1, 2/g; 1 + 2/g; −1/B); g = 0 gives πA/(B + 1).
-    Checked values (formats.md §6): (0.0025, 0.001, 1.8) → 0.041344; (0.01, 0.01, 2) → 0.144988;
-    (0.001, 1e-4, 2.5) → 0.072190.
-    """
-    if b <= 0.0 and g != 0.0:
-        raise ValidationError("ABg B must be > 0 unless g = 0", field="B", expected="> 0", got=b)
-    if g == 0.0:
-        return float(np.pi * a / (b + 1.0))
-    return float(np.pi * a / b * special.hyp2f1(1.0, 2.0 / g, 1.0 + 2.0 / g, -1.0 / b))

@@ -1,9 +1,9 @@
 """ASAP-style export: a plain, documented BSDF table in Harvey–Shack coordinates plus model parameters.
 
-**No ASAP manual was available** while this was written (formats.md §3: the syntax of ASAP's
-``HARVEY``, ``BSDDATA``, ``MODELS`` and ``SCATTER MODEL`` commands could not be retrieved). This module
+**No ASAP manual was available** while this was written ([ASAP] in docs/references.md: the syntax of
+ASAP's ``HARVEY``, ``BSDDATA``, ``MODELS`` and ``SCATTER MODEL`` commands could not be retrieved). This module
 therefore does *not* write an ASAP command deck and claims no compatibility with any ASAP command. It
-writes what formats.md §3 recommends as the safe subset: the BSDF tabulated in the Harvey–Shack
+writes the subset that is safe without the manual (docs/exports.md §2.3): the BSDF tabulated in the Harvey–Shack
 direction-cosine coordinates that ASAP, FRED and TracePro share, and — when given — fitted ABg and
 Harvey parameters, for a user to transfer into ASAP by hand.
 
@@ -21,8 +21,8 @@ rho = |β − β0|, psi = azimuth of β − β0 from the sample +x axis (the pla
 from the source), counter-clockwise; β0 = (sin θi, 0) for reflection and for transmission through a
 plate in air; BSDF in 1/sr, not cosine-weighted; nodes with |β| > 1 hold 0. ``tis`` is
 :func:`bsdfkit.tables.grids.tis_harvey_shack_table` of the written table, the same integral the reader uses.
-The Harvey form is the "modified three-term Harvey model" as FRED parameterises it (formats.md §3,
-marked there as inferred); ABg ↔ Harvey: g = −S, B = L^g, A = b0·L^g (formats.md §6, exact for g = 2).
+The Harvey form is the "modified three-term Harvey model" as FRED parameterises it ([FRED]; the written
+formula is inferred); ABg ↔ Harvey: g = −S, B = L^g, A = b0·L^g (docs/fitting.md §5, exact for g = 2).
 """
 from __future__ import annotations
 
@@ -35,9 +35,9 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit import __version__
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.frames import SIDES
+from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.tables import grids
 
@@ -66,7 +66,7 @@ _DOC = """\
 
 @dataclass(frozen=True)
 class AbgParameters:
-    """ABg parameters of one side and incidence: BSDF = A/(B + |β − β0|^g) (formats.md §2.4, §6)."""
+    """ABg parameters of one side and incidence: BSDF = A/(B + |β − β0|^g) ([TracePro-UM]; docs/fitting.md §5)."""
 
     side: str
     theta_i_deg: float
@@ -85,7 +85,7 @@ class AbgParameters:
 
 @dataclass(frozen=True)
 class HarveyParameters:
-    """Harvey parameters of one side and incidence: BSDF = b0 (1 + (ρ/L)²)^(S/2) (formats.md §3)."""
+    """Harvey parameters of one side and incidence: BSDF = b0 (1 + (ρ/L)²)^(S/2) ([FRED])."""
 
     side: str
     theta_i_deg: float

@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.frames import SIDES
 from bsdfkit.io import atomic
+from bsdfkit.models.registry import bsdf_model
 from bsdfkit.tables import grids
 
 __all__ = [
@@ -156,15 +157,10 @@ class TraceProProperty:
 # building properties
 # --------------------------------------------------------------------------------------------------
 def tis_abg(a: float, b: float, g: float, theta_i_deg: float) -> float:
-    """TIS of A/(B + |β − β0|^g) over the unit disk at incidence θi (formats.md §6), 0 when A = 0."""
+    """TIS of A/(B + |β − β0|^g) over the unit disk at incidence θi [deg], 0 when A = 0 (the registry's ABg)."""
     if a == 0.0:
         return 0.0
-
-    def fn(_theta: float, _side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        d = directions[..., :2] - np.array([np.sin(np.radians(theta_i_deg)), 0.0])
-        return a / (b + np.hypot(d[..., 0], d[..., 1]) ** g)
-
-    return grids.tis_reference(fn, theta_i_deg, "reflection")
+    return float(bsdf_model("abg").total_integrated_scatter({"A": a, "B": b, "g": g}, theta_i_deg))
 
 
 def _quantize(values: NDArray[np.float64], fmt: str = _VALUE_FMT) -> NDArray[np.float64]:

@@ -1,19 +1,19 @@
 """Zemax OpticStudio tabular BSDF files (``*.bsdf``, "BSDF Data Interchange"), Monochrome.
 
-Layout (formats.md §4.1, ZX-SPEC Table 1): keyword lines ``Source``, ``Symmetry``, ``SpectralContent``,
-``ScatterType``, then ``SampleRotation n`` / ``AngleOfIncidence n`` / ``ScatterAzimuth n`` /
+Layout ([Zemax-BSDF] in docs/references.md; docs/exports.md §2.2): keyword lines ``Source``, ``Symmetry``,
+``SpectralContent``, ``ScatterType``, then ``SampleRotation n`` / ``AngleOfIncidence n`` / ``ScatterAzimuth n`` /
 ``ScatterRadial n`` each followed by a line of n angles (degrees), a blank line, the spectral indicator
 ``Monochrome``, ``DataBegin``, then for each SampleRotation and each AngleOfIncidence one block — a line
 ``TIS t`` and one row per ScatterAzimuth holding the ScatterRadial values — and ``DataEnd``.
 
-Conventions (formats.md §4.2–4.3):
+Conventions ([Zemax-BSDF]; docs/exports.md §2.2, §4):
 
 * AngleOfIncidence is the specular (BRDF) or direct-transmission (BTDF) angle; for a plate in air it
   equals θi. ScatterRadial/ScatterAzimuth are spherical coordinates about that direction; azimuth 0
   points from it toward the surface normal, counter-clockwise (:func:`bsdfkit.core.frames.specular_from_direction`).
 * PlaneSymmetrical tables give azimuths 0…180° and stand for their mirror images 360° − φ;
-  Asymmetrical tables give the full circle (the handedness of asymmetric data is formats.md §8
-  question 2; bsdfkit uses the right-handed specular frame of Ansys' converter).
+  Asymmetrical tables give the full circle (the handedness of asymmetric data is open question 2 of
+  docs/exports.md §5; bsdfkit uses the right-handed specular frame of Ansys' converter, [Ansys-OA]).
 * Values are BSDF in 1/sr, not cosine-weighted. ``TIS`` = ∫ BSDF cos θs dΩ of the block. The writer
   computes it from the written (rounded) table with :func:`bsdfkit.tables.grids.tis_specular_table`, the
   integral the reader uses, so stated and recomputed TIS agree to the printed digits.
@@ -35,8 +35,8 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit import __version__
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.tables import grids
 

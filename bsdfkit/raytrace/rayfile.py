@@ -1,4 +1,4 @@
-"""Source ray files: the "septuples" of §2 of the cylindrical-module paper (position, direction, flux).
+"""Source ray files: the "septuples" of §2 of [Cylindrical-module] (position, direction, flux).
 
 Format (text, UTF-8): one ray per line, seven whitespace- or comma-separated numbers
 

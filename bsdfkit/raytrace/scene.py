@@ -37,11 +37,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import bsdfkit.raytrace.plate_from_scan as plate_source
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import toml_write
 from bsdfkit.io.atomic import write_text
-from bsdfkit.trace.plate import PhosphorPlate, load_plate
-from bsdfkit.trace.rayfile import RaySet, read_ray_file
+from bsdfkit.raytrace.plate import PhosphorPlate, load_plate
+from bsdfkit.raytrace.rayfile import RaySet, read_ray_file
 
 TOP_KINDS = ("exit", "lambertian", "phosphor")
 TERMINATIONS = ("roulette", "threshold")
@@ -109,8 +110,8 @@ class Top:
 
     ``exit``: all light reaching it leaves the module. ``lambertian``: a non-converting diffuser with
     ``reflectance`` and ``transmittance`` (both Lambertian). ``phosphor``: the plate of
-    :mod:`bsdfkit.trace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe resolved
-    by ``bsdfkit.pipeline.recipe.phosphor_plate``) or given inline.
+    :mod:`bsdfkit.raytrace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe resolved
+    by :func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`) or given inline.
     """
 
     kind: str = "exit"
@@ -158,7 +159,7 @@ class Tallies:
 
 @dataclass(frozen=True)
 class SweepDefaults:
-    """Defaults for ``bsdfkit sweep``: parameter specs (see :mod:`bsdfkit.trace.sweep`), rays, seed."""
+    """Defaults for ``bsdfkit sweep``: parameter specs (see :mod:`bsdfkit.raytrace.sweep`), rays, seed."""
 
     params: tuple[str, ...] = ()
     rays: int | None = None
@@ -449,18 +450,8 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
 
 
 def plate_from_recipe(recipe: Path, scene_file: str | Path | None) -> PhosphorPlate:
-    """The plate of a fitting recipe, via the lead's ``bsdfkit.pipeline.recipe.phosphor_plate`` (imported lazily)."""
-    try:
-        from bsdfkit.pipeline.recipe import phosphor_plate  # type: ignore[attr-defined]
-    except ImportError:
-        raise InputError("plate from a fitting recipe needs bsdfkit.pipeline.recipe.phosphor_plate, which this bsdfkit "
-                         "does not provide", file=scene_file, field="top.from",
-                         expected="plate = 'file.json' or an inline [top.plate] instead", got=str(recipe)) from None
-    plate = phosphor_plate(recipe)
-    if not isinstance(plate, PhosphorPlate):
-        raise InputError("recipe did not give a phosphor plate", file=scene_file, field="top.from",
-                         expected="PhosphorPlate", got=type(plate).__name__)
-    return plate
+    """The plate of a fitting recipe (:func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`)."""
+    return plate_source.plate_from_recipe(recipe)
 
 
 def loads_scene(text: str, file: str | Path | None = None) -> Scene:

@@ -1,6 +1,6 @@
 """Effects: the static configuration a scene compiles to, and the numeric parameters of the kernel.
 
-The kernel (:mod:`bsdfkit.trace.kernel`) is specialised on an :class:`Effects` record passed as a static
+The kernel (:mod:`bsdfkit.raytrace.kernel`) is specialised on an :class:`Effects` record passed as a static
 argument to ``jax.jit``: code for a feature the scene does not use is never traced, so a diffuse-only
 cavity with an exit top carries no specular, conversion, plate, map, histogram or budget code. Everything
 that is a number (reflectances, geometry, plate tables) goes into :func:`kernel_params`, a pytree of arrays,
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from bsdfkit.trace.plate import PhosphorPlate, PlateTables, plate_tables
-from bsdfkit.trace.scene import Scene
+from bsdfkit.raytrace.plate import PhosphorPlate, PlateTables, plate_tables
+from bsdfkit.raytrace.scene import Scene
 
 
 @dataclass(frozen=True)

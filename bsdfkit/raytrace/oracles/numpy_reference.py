@@ -1,7 +1,7 @@
 """A plain vectorised NumPy tracer with the same physics as the JAX kernel (baseline and cross-check).
 
 Same geometry, sampling formulas, implicit capture, plate rules (TIS linear in θi, clamped outside the
-grid) and Russian roulette as :mod:`bsdfkit.trace.kernel`, written the obvious NumPy way: all live rays
+grid) and Russian roulette as :mod:`bsdfkit.raytrace.kernel`, written the obvious NumPy way: all live rays
 of a batch advance one interaction per step and dead rays are compacted away. Random numbers come from
 ``numpy.random.Generator(PCG64(seed))`` in draw order, so results depend on the batch size (unlike the
 kernel); the estimates agree with the kernel's within their standard errors.
@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bsdfkit.core.errors import ValidationError
-from bsdfkit.trace.effects import top_plate
-from bsdfkit.trace.plate import plate_tables
-from bsdfkit.trace.scene import Scene
+from bsdfkit.raytrace.effects import top_plate
+from bsdfkit.raytrace.plate import plate_tables
+from bsdfkit.raytrace.scene import Scene
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,14 @@
 """The remote phosphor converter (RPC) plate in the two-wavelength approach.
 
 The plate is the "one virtual surface to which three BSDFs are attributed" of §3 of the cylindrical-module
-paper (Leyre et al., "Impact of the geometrical and optical parameters on the performance of a cylindrical
-remote phosphor LED"): blue-incident blue-scattered (``bibs``), blue-incident yellow-scattered (``biys``)
-and yellow-incident yellow-scattered (``yiys``), each on the reflection (backward, into the cavity) and
-the transmission (forward, out of the module) side. For each of these six channels the plate holds, on a
-grid of incidence angles θi (degrees, measured from the plate normal):
+paper ([Cylindrical-module] in docs/references.md, "Impact of the geometrical and optical parameters on the
+performance of a cylindrical remote phosphor LED"): blue-incident blue-scattered (``bibs``), blue-incident
+yellow-scattered (``biys``) and yellow-incident yellow-scattered (``yiys``), each on the reflection
+(backward, into the cavity) and the transmission (forward, out of the module) side. For each of these six
+channels the plate holds, on a grid of incidence angles θi (degrees, measured from the plate normal):
 
 * the TIS, the fraction of the incident power scattered into the channel (Eqs. (7) and (13) of the
-  power-budget paper, Table 2 at 45°), and
+  power-budget paper [Power-budget], Table 2 at 45°), and
 * the normalised angular distribution of the scattered power, one of
 
   - :class:`Lambertian` (radiance independent of direction),
@@ -23,7 +23,7 @@ A blue ray meeting the plate is scattered back/forward blue (bibs), converted ba
 absorbed with probabilities given by the TIS at its incidence; a yellow ray follows yiys. How the tracer
 samples these (linear interpolation in θi, clamping outside the measured grid, mixture sampling of the
 Lambert and lobe parts, rejection of lobe samples outside the unit disk) is described in
-:mod:`bsdfkit.trace.kernel` and docs/tracer.md.
+:mod:`bsdfkit.raytrace.kernel` and docs/tracer.md.
 
 Plates are stored as JSON (:meth:`PhosphorPlate.save` / :func:`load_plate`); a scene can also hold the same
 mapping inline under ``[top.plate]``.
@@ -39,13 +39,12 @@ from typing import Any, Union
 
 import numpy as np
 
+from bsdfkit.core.conventions import INTERACTIONS, SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io.atomic import write_text
 
 FORMAT = "bsdfkit-phosphor-plate"
 VERSION = 1
-INTERACTIONS = ("bibs", "biys", "yiys")
-SIDES = ("reflection", "transmission")
 #: Order of the six channels in the kernel tables.
 CHANNELS = tuple(f"{i}_{s}" for i in INTERACTIONS for s in SIDES)
 #: The three backward (reflection) channels whose directions the tracer samples, in kernel order.

@@ -1,6 +1,6 @@
 """Counter-based random numbers and direction sampling (pure JAX functions on arrays of rays).
 
-Random numbers. Every random word is Threefry-2x32 (Salmon et al., SC'11; ``jax.extend.random``) of the
+Random numbers. Every random word is Threefry-2x32 ([Salmon-2011]; ``jax.extend.random``) of the
 key derived from the seed and the counter pair ``(ray, event·4 + h)``: ``ray`` is the global ray index
 (< 2³¹), ``event`` the ray's interaction number (0 = emission), ``h`` ∈ {0, 1, 2} gives 6 words per event.
 Lobe-rejection attempts use ``(ray + 2³¹, event·1024 + attempt)``. A ray's random numbers therefore depend
@@ -16,7 +16,7 @@ Directions (θ from the surface normal n, φ azimuth, u uniform in [0, 1)):
 * Tabulated BSDF linear in s = sin²θ: invert the piecewise-quadratic CDF exactly (see :func:`table_s`).
 
 Local frames use the branchless orthonormal basis of Duff et al., "Building an orthonormal basis,
-revisited", JCGT 6(1), 2017.
+revisited", JCGT 6(1), 2017 ([Duff-2017]). Keys: docs/references.md.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Parameter sweeps over a scene: the studies of §5 of the cylindrical-module paper.
+"""Parameter sweeps over a scene: the studies of §5 of the cylindrical-module paper ([Cylindrical-module]).
 
 A parameter spec is ``KEYS=VALUES``:
 
@@ -10,7 +10,7 @@ A parameter spec is ``KEYS=VALUES``:
 
 Each spec is one dimension of the result (named after its first key); the grid is the outer product. Every
 grid point is a full trace at the same seed (common random numbers, so differences between points are
-smoother than their individual errors). Points that share an :class:`~bsdfkit.trace.effects.Effects`
+smoother than their individual errors). Points that share an :class:`~bsdfkit.raytrace.effects.Effects`
 reuse one compiled kernel.
 """
 from __future__ import annotations
@@ -20,13 +20,15 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import xarray as xr
 
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.io.atomic import check_writable, write_with
-from bsdfkit.trace.scene import Scene, dumps_scene, with_values
-from bsdfkit.trace.tracer import trace
+from bsdfkit.raytrace.scene import Scene, dumps_scene, with_values
+from bsdfkit.raytrace.tracer import trace
 
 _INT = re.compile(r"^[+-]?\d+$")
 
@@ -98,8 +100,6 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
     standard errors (``std_err_*``), ledger_error, non_uniformity and, when the scene tallies it, the
     irradiance map (dims …, y_mm, x_mm).
     """
-    import xarray as xr
-
     names = [p.name for p in spec.parameters]
     if len(set(names)) != len(names):
         raise ValidationError("two sweep parameters start with the same key", field="--param",
@@ -170,52 +170,16 @@ def plot_paths(out: Path) -> list[Path]:
     return [out.with_name(out.stem + "_LER_YBR.png")]
 
 
-def write_plots(ds, out: Path, force: bool = False) -> list[Path]:
-    """LER, YBR and non-uniformity vs the first parameter (one line per combination of the others)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    dims = [d for d in ds["LER"].dims]
-    panels = [("LER", "std_err_LER"), ("YBR", "std_err_YBR")]
-    if np.any(np.isfinite(ds["non_uniformity"].values)):
-        panels.append(("non_uniformity", None))
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
-    x_dim = dims[0] if dims else None
-    others = dims[1:]
-    combos = list(itertools.product(*[range(ds.sizes[d]) for d in others])) or [()]
-    for ax, (var, err) in zip(axes[0], panels):
-        for combo in combos:
-            sel = dict(zip(others, combo))
-            y = ds[var].isel(sel)
-            label = ", ".join(f"{d}={ds[d].values[i]}" for d, i in sel.items()) or None
-            if x_dim is None:
-                ax.errorbar([0], [float(y)], yerr=None if err is None else [float(ds[err].isel(sel))], fmt="o")
-                continue
-            xv = ds[x_dim].values
-            ax.errorbar(xv, y.values, yerr=None if err is None else ds[err].isel(sel).values, marker="o",
-                        capsize=2, label=label)
-        ax.set_xlabel(x_dim or "")
-        ax.set_ylabel(var)
-        ax.grid(True, alpha=0.3)
-        if len(combos) > 1:
-            ax.legend(fontsize=7)
-    fig.suptitle(f"bsdfkit sweep ({ds.attrs.get('rays')} rays per point)", fontsize=9)
-    fig.tight_layout()
-    path = plot_paths(out)[0]
-    write_with(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"), force)
-    plt.close(fig)
-    return [path]
-
-
 def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays: int, seed: int,
-              chunk: int | None = None, force: bool = False, plots: bool = True,
+              chunk: int | None = None, force: bool = False, figure: Callable[[xr.Dataset], Any] | None = None,
               progress: Callable[[int, int], None] | None = None):
-    """Sweep ``scene`` over ``parameters`` (specs), write ``out`` (netCDF) and PNG plots atomically.
+    """Sweep ``scene`` over ``parameters`` (specs), write ``out`` (netCDF) and, with ``figure``, a PNG beside it.
 
-    Existing outputs are kept unless ``force``; this is checked before any tracing. Returns the dataset.
+    ``figure(ds)`` returns a matplotlib figure (e.g. :func:`bsdfkit.plotting.figures.sweep_figure`); the tracer
+    itself draws nothing. Existing outputs are kept unless ``force``; this is checked before any tracing.
+    Returns the dataset.
     """
+    plots = figure is not None
     out = Path(out)
     check_writable(out, force)
     if plots:
@@ -224,6 +188,7 @@ def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays:
     params = tuple(parse_parameter(p) for p in parameters)
     ds = sweep_dataset(scene, SweepSpec(params, rays, seed, chunk), progress)
     write_with(out, lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), force)
-    if plots:
-        write_plots(ds, out, force)
+    if figure is not None:
+        fig = figure(ds)
+        write_with(plot_paths(out)[0], lambda tmp: fig.savefig(tmp, dpi=110, format="png"), force)
     return ds

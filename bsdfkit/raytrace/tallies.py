@@ -1,6 +1,6 @@
 """Tallies: the kernel's exact fixed-point sums turned into powers and figures of merit.
 
-The kernel (:mod:`bsdfkit.trace.kernel`) returns, per chunk, int64 limb sums of per-ray tallies rounded to
+The kernel (:mod:`bsdfkit.raytrace.kernel`) returns, per chunk, int64 limb sums of per-ray tallies rounded to
 2⁻⁴⁰ ray weights (squares to 2⁻³²). :class:`FixedSum` adds chunks as Python ints, so totals are exact and
 independent of chunking and order; values are converted to float once, at the end.
 
@@ -20,6 +20,7 @@ from fractions import Fraction
 from typing import Any
 
 import numpy as np
+import xarray as xr
 
 
 class FixedSum:
@@ -172,8 +173,6 @@ class TraceResult:
 
     def to_dataset(self):
         """The result as an ``xarray.Dataset`` (scalars, irradiance map, incidence histogram, budget)."""
-        import xarray as xr
-
         data: dict[str, Any] = {
             "LER": ((), self.LER, {"units": "1", "long_name": "light extraction ratio"}),
             "YBR": ((), self.YBR, {"units": "1", "long_name": "yellow-to-blue ratio"}),

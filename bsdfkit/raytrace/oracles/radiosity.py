@@ -2,7 +2,8 @@
 
 The cavity (radius R, height H) is discretised into base annuli, wall rings and top annuli. View factors
 between these axisymmetric patches follow from two closed forms (Howell, *A Catalog of Radiation Heat
-Transfer Configuration Factors*, cases C-41 and B-13; Modest, *Radiative Heat Transfer*, App. D):
+Transfer Configuration Factors*, cases C-41 and B-13; Modest, *Radiative Heat Transfer*, App. D;
+[Howell-catalog], [Modest] in docs/references.md):
 
 * coaxial parallel disks of radii r₁, r₂ at distance h, with Rᵢ = rᵢ/h and S = 1 + (1 + R₂²)/R₁²:
   F₁₂ = ½ [S − √(S² − 4 (r₂/r₁)²)]  (:func:`disk_to_disk`);
@@ -43,8 +44,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bsdfkit.core.errors import ValidationError
-from bsdfkit.trace.plate import PhosphorPlate
-from bsdfkit.trace.scene import Scene
+from bsdfkit.core.quadrature import gauss_legendre
+from bsdfkit.raytrace.plate import PhosphorPlate
+from bsdfkit.raytrace.scene import Scene
 
 BASE, WALL, TOP = 0, 1, 2
 
@@ -170,7 +172,7 @@ def view_factors(p: Patches) -> np.ndarray:
 
 def _gauss_disk(n: int = 24):
     """Nodes (ρ, φ) and weights of a polar Gauss–Legendre rule on the unit disk (weights sum to 1)."""
-    x, wx = np.polynomial.legendre.leggauss(n)
+    x, wx = gauss_legendre(n)
     rho = 0.5 * (x + 1.0)
     wr = 0.5 * wx * rho * 2.0  # ∫_0^1 2ρ dρ = 1
     phi = (np.arange(2 * n) + 0.5) * (2.0 * math.pi / (2 * n))

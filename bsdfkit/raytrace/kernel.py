@@ -1,11 +1,11 @@
 """The Monte Carlo kernel: trace one chunk of rays through the cavity (JAX, specialised by :class:`Effects`).
 
-Algorithm (the ray-level form of Fig. 6 of the cylindrical-module paper). ``lanes`` rays are in flight;
-each ``lax.while_loop`` iteration (1) refills empty lanes with the next rays of the chunk (emission
+Algorithm (the ray-level form of Fig. 6 of the cylindrical-module paper, [Cylindrical-module]). ``lanes``
+rays are in flight; each ``lax.while_loop`` iteration (1) refills empty lanes with the next rays of the chunk (emission
 precomputed in a rolling buffer of 4·lanes rays), (2) moves every live ray to its next surface and
 applies one interaction, (3) retires finished rays by adding their per-ray tallies to exact fixed-point
 sums (below). The loop ends when the chunk is exhausted and no lane is live. Because every random number is keyed by
-(seed, ray, event) (:mod:`bsdfkit.trace.sampling`), results do not depend on ``lanes`` or the chunk size.
+(seed, ray, event) (:mod:`bsdfkit.raytrace.sampling`), results do not depend on ``lanes`` or the chunk size.
 
 Weights. A ray is emitted with weight 1 (one ray's share of the source power). At a cavity surface of
 reflectance ρ the weight becomes wρ and w − wρ is tallied as absorbed by that surface ("implicit capture").
@@ -48,8 +48,8 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from bsdfkit.trace import geometry, sampling
-from bsdfkit.trace.effects import Effects
+from bsdfkit.raytrace import geometry, sampling
+from bsdfkit.raytrace.effects import Effects
 
 # per-ray float64 tallies, accumulated in lanes and summed when the ray retires
 COLUMNS = ("extracted_blue", "extracted_yellow", "absorbed_wall", "absorbed_base", "absorbed_leds",

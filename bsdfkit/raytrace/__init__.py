@@ -3,14 +3,14 @@
 Data flow: scene TOML → :class:`Scene` (frozen dataclasses) → :class:`Effects` (static kernel
 configuration) + kernel parameters → chunked, compiled kernel → exact tallies → :class:`TraceResult`.
 
->>> from bsdfkit.trace import load_scene, trace
+>>> from bsdfkit.raytrace import load_scene, trace
 >>> result = trace(load_scene("scene.toml"), rays=100_000, seed=1)   # doctest: +SKIP
 >>> result.LER, result.std_err["LER"], result.ledger_error            # doctest: +SKIP
 """
-from bsdfkit.trace.effects import Effects, scene_effects
-from bsdfkit.trace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated, load_plate
-from bsdfkit.trace.rayfile import RaySet, read_ray_file
-from bsdfkit.trace.scene import (
+from bsdfkit.raytrace.effects import Effects, scene_effects
+from bsdfkit.raytrace.plate import LambertGaussian, Lambertian, PhosphorPlate, PlateChannel, Tabulated, load_plate
+from bsdfkit.raytrace.rayfile import RaySet, read_ray_file
+from bsdfkit.raytrace.scene import (
                                  Cavity,
                                  Leds,
                                  Scene,
@@ -24,8 +24,8 @@ from bsdfkit.trace.scene import (
                                  save_scene,
                                  with_values,
 )
-from bsdfkit.trace.tallies import TraceResult
-from bsdfkit.trace.tracer import threshold_bias, trace
+from bsdfkit.raytrace.tallies import TraceResult
+from bsdfkit.raytrace.tracer import threshold_bias, trace
 
 __all__ = [
     "Cavity", "Effects", "LambertGaussian", "Lambertian", "Leds", "PhosphorPlate", "PlateChannel", "RaySet",

@@ -11,10 +11,10 @@ import numpy as np
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
-from bsdfkit.trace import kernel
-from bsdfkit.trace.effects import Effects, kernel_params, scene_effects
-from bsdfkit.trace.scene import Scene
-from bsdfkit.trace.tallies import FixedSum, TraceResult, mean_and_se, non_uniformity, ratio_and_se
+from bsdfkit.raytrace import kernel
+from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
+from bsdfkit.raytrace.scene import Scene
+from bsdfkit.raytrace.tallies import FixedSum, TraceResult, mean_and_se, non_uniformity, ratio_and_se
 
 MAX_RAYS = 2 ** 31  # ray indices are 31-bit counters of the random-number generator
 

@@ -1,0 +1,41 @@
+"""Names and bands shared by every layer: sides, interactions, configurations and spectral bands.
+
+Each band has one name that says what it is for; the same numbers are never redefined elsewhere.
+Wavelengths in nm, band limits inclusive.
+
+References
+----------
+``docs/references.md``: [Power-budget] (§2 filter bands, eqs. (4)-(16)) and [Cylindrical-module] (§4.2
+two-wavelength spectrum reconstruction, YBR).
+"""
+from __future__ import annotations
+
+#: The two sides of a sample: light scattered back (reflection) or through it (transmission).
+SIDES: tuple[str, str] = ("reflection", "transmission")
+
+#: Interactions of the two-wavelength approach of [Power-budget]: blue in → blue scattered (bibs), blue in →
+#: yellow emitted (biys, conversion), yellow in → yellow scattered (yiys).
+INTERACTIONS: tuple[str, str, str] = ("bibs", "biys", "yiys")
+
+#: Names of the two incident-light configurations of a phosphor-plate measurement (manifest ``configuration``).
+BLUE_CONFIGURATION = "blue"
+YELLOW_CONFIGURATION = "yellow"
+
+#: Blue (excitation) band of the power-budget measurement: the blue interference filter, [Power-budget] §2.
+EXCITATION_BAND_NM: tuple[float, float] = (450.0, 470.0)
+#: Yellow (converted-light) band of the power-budget measurement, [Power-budget] eqs. (8)-(13).
+CONVERSION_BAND_NM: tuple[float, float] = (470.0, 740.0)
+
+#: Blue and yellow parts of a module spectrum for the two-band reconstruction and the tracer's YBR,
+#: [Cylindrical-module] §4.2.
+MODULE_BLUE_BAND_NM: tuple[float, float] = (380.0, 500.0)
+MODULE_YELLOW_BAND_NM: tuple[float, float] = (501.0, 780.0)
+
+#: Blue and yellow parts of a spectrum for the colorimetric yellow-to-blue ratio of ``bsdfkit color``.
+COLORIMETRY_BLUE_BAND_NM: tuple[float, float] = (380.0, 470.0)
+COLORIMETRY_YELLOW_BAND_NM: tuple[float, float] = (471.0, 780.0)
+
+
+def band_label(band: tuple[float, float]) -> str:
+    """``"380-500 nm"``: how a band is written next to every ratio that uses it."""
+    return f"{band[0]:g}-{band[1]:g} nm"

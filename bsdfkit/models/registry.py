@@ -1,0 +1,169 @@
+"""One registry of the parametric BSDF models: each model once, with its parameters, JAX function and TIS.
+
+Every consumer takes a model from here: the fits (:mod:`bsdfkit.fit.least_squares`), the exports
+(:mod:`bsdfkit.tables.export`), the TracePro ABg property (:mod:`bsdfkit.tables.formats.tracepro`), the
+figures and the command line (``--model`` choices). A model is a function of the Harvey–Shack distance
+d = |β − β0| from the specular (or undeviated) direction, β0 = (sin θi, 0), [1]_; its TIS over the unit disk
+is exact for the clipped lobe (:mod:`bsdfkit.models.functions`).
+
+>>> from bsdfkit.models.registry import bsdf_model
+>>> m = bsdf_model("lambert+gaussian")
+>>> [p.name for p in m.parameters]
+['rho', 'A', 'sigma']
+
+References
+----------
+.. [1] ``docs/references.md``, [Harvey-Shack] and [Power-budget] §4.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.models import functions as f
+
+__all__ = ["Parameter", "BsdfModel", "BSDF_MODELS", "bsdf_model"]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A model parameter: name, bounds (inclusive limits never reached; ±inf for none) and unit."""
+
+    name: str
+    lower: float = -math.inf
+    upper: float = math.inf
+    unit: str = ""
+
+    def __post_init__(self) -> None:
+        if not (self.lower < self.upper):
+            raise ValidationError(
+                "parameter bounds are empty", field=self.name, expected="lower < upper",
+                got=(self.lower, self.upper),
+            )
+
+    @property
+    def transform(self) -> str:
+        """'logit', 'log', 'neglog' or 'identity': the map to unconstrained space used by the fits."""
+        lo, hi = math.isfinite(self.lower), math.isfinite(self.upper)
+        if lo and hi:
+            return "logit"
+        if lo:
+            return "log"
+        if hi:
+            return "neglog"
+        return "identity"
+
+
+@dataclass(frozen=True)
+class BsdfModel:
+    """A BSDF model of the registry.
+
+    Attributes
+    ----------
+    name
+        Registry key, e.g. ``"lambert+gaussian"``.
+    parameters
+        Parameters in the order of the parameter vector, with bounds and units.
+    radial
+        JAX function ``radial(p, d) -> f [1/sr]`` of the parameter vector ``p`` and d = |β − β0|.
+    tis
+        JAX function ``tis(theta_i [rad], *p) -> TIS [1]`` over the unit disk (clipped lobe, exact).
+    description
+        One line for help texts.
+    """
+
+    name: str
+    parameters: tuple[Parameter, ...]
+    radial: Callable
+    tis: Callable
+    description: str
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    def function(self, p: jnp.ndarray, x: Mapping[str, jnp.ndarray]) -> jnp.ndarray:
+        """JAX model at angles ``x`` = {theta_i, theta_s, phi_s} [rad] (source at φi = π), in 1/sr."""
+        d = f.delta_beta(x["theta_i"], x["theta_s"], x["phi_s"])
+        return self.radial(p, d)
+
+    def vector(self, params: Mapping[str, float]) -> NDArray[np.float64]:
+        """The parameter vector of a name → value mapping (raises naming a missing parameter)."""
+        missing = [n for n in self.parameter_names if n not in params]
+        if missing:
+            raise ValidationError(f"model {self.name} lacks parameters", field=", ".join(missing),
+                                  expected=", ".join(self.parameter_names), got=sorted(params))
+        return np.array([float(params[n]) for n in self.parameter_names], dtype=np.float64)
+
+    def values_at_distance(self, params: Mapping[str, float], d: ArrayLike) -> NDArray[np.float64]:
+        """NumPy evaluator: the BSDF [1/sr] at Harvey–Shack distances d = |β − β0| (float64)."""
+        with x64():
+            return np.asarray(self.radial(jnp.asarray(self.vector(params)), jnp.asarray(d, dtype=jnp.float64)))
+
+    def values(self, params: Mapping[str, float], theta_i_deg: ArrayLike, theta_s_deg: ArrayLike,
+               phi_s_deg: ArrayLike) -> NDArray[np.float64]:
+        """NumPy evaluator: the BSDF [1/sr] at angles in degrees (source at φi = 180°)."""
+        with x64():
+            d = f.delta_beta(*(jnp.radians(jnp.asarray(a, dtype=jnp.float64))
+                               for a in (theta_i_deg, theta_s_deg, phi_s_deg)))
+            return np.asarray(self.radial(jnp.asarray(self.vector(params)), d))
+
+    def total_integrated_scatter(self, params: Mapping[str, ArrayLike], theta_i_deg: ArrayLike) -> NDArray:
+        """TIS [1] over the unit disk at incidences [deg]; parameters may be arrays over the incidences."""
+        with x64():
+            args = [jnp.asarray(params[n], dtype=jnp.float64) for n in self.parameter_names]
+            return np.asarray(self.tis(jnp.radians(jnp.asarray(theta_i_deg, dtype=jnp.float64)), *args))
+
+
+def _lambert(p, d):
+    return jnp.broadcast_to(f.lambert(p[0]), jnp.shape(d))
+
+
+def _lambert_gaussian(p, d):
+    return f.lambert(p[0]) + f.gaussian_lobe(d, p[1], p[2])
+
+
+def _abg(p, d):
+    return f.abg(d, p[0], p[1], p[2])
+
+
+def _lambert_abg(p, d):
+    return f.lambert(p[0]) + f.abg(d, p[1], p[2], p[3])
+
+
+def _tis_lambert(theta_i, rho):
+    return jnp.broadcast_to(f.tis_lambert(rho), jnp.broadcast_shapes(jnp.shape(theta_i), jnp.shape(rho)))
+
+
+_RHO = Parameter("rho", 0.0, 1.0, "1")
+_A = Parameter("A", 0.0, math.inf, "1/sr")
+_SIGMA = Parameter("sigma", 0.0, math.inf, "1")
+_B = Parameter("B", 0.0, math.inf, "1")
+_G = Parameter("g", 0.0, 3.0, "1")
+
+#: The BSDF models, by name.
+BSDF_MODELS: dict[str, BsdfModel] = {
+    m.name: m for m in (
+        BsdfModel("lambert", (_RHO,), _lambert, _tis_lambert, "Lambertian: rho/pi"),
+        BsdfModel("lambert+gaussian", (_RHO, _A, _SIGMA), _lambert_gaussian, f.tis_lambert_gaussian,
+                  "rho/pi + A exp(-d^2 / 2 sigma^2) (Gaussian lobe in direction cosines)"),
+        BsdfModel("abg", (_A, _B, _G), _abg, f.tis_abg, "A / (B + d^g)"),
+        BsdfModel("lambert+abg", (_RHO, _A, _B, _G), _lambert_abg, f.tis_lambert_abg, "rho/pi + A / (B + d^g)"),
+    )
+}
+
+
+def bsdf_model(name: str) -> BsdfModel:
+    """The registered BSDF model ``name`` (raises naming the known models otherwise)."""
+    try:
+        return BSDF_MODELS[name]
+    except KeyError:
+        raise ValidationError("unknown BSDF model", field="model", expected=" | ".join(BSDF_MODELS),
+                              got=name) from None

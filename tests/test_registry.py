@@ -1,0 +1,57 @@
+"""The model registry: one definition per model, used by fits, exports and the command line."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.models.functions import tis_abg_normal_incidence
+from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
+from bsdfkit.tables import export
+
+PARAMS = {"lambert": {"rho": 0.3}, "lambert+gaussian": {"rho": 0.3, "A": 2.0, "sigma": 0.05},
+          "abg": {"A": 0.0025, "B": 0.001, "g": 1.8}, "lambert+abg": {"rho": 0.3, "A": 0.0025, "B": 0.001, "g": 1.8}}
+
+
+def test_every_model_has_parameters_with_units_and_bounds():
+    assert set(BSDF_MODELS) == set(PARAMS)
+    for name, model in BSDF_MODELS.items():
+        assert model.parameter_names == tuple(PARAMS[name])
+        assert all(p.unit and p.lower < p.upper for p in model.parameters)
+
+
+@pytest.mark.parametrize("name", sorted(PARAMS))
+def test_numpy_evaluator_matches_the_formula(name):
+    model = bsdf_model(name)
+    theta_i, theta_s = 30.0, np.array([0.0, 10.0, 30.0, 31.0, 60.0])
+    values = model.values(PARAMS[name], theta_i, theta_s, 0.0)
+    d = np.abs(np.sin(np.radians(theta_s)) - np.sin(np.radians(theta_i)))  # in-plane, specular side
+    p = PARAMS[name]
+    expected = p.get("rho", 0.0) / np.pi + np.zeros_like(d)
+    if "sigma" in p:
+        expected += p["A"] * np.exp(-d**2 / (2 * p["sigma"] ** 2))
+    if "g" in p:
+        expected += p["A"] / (p["B"] + d ** p["g"])
+    np.testing.assert_allclose(values, expected, rtol=1e-12)
+    np.testing.assert_allclose(model.values_at_distance(p, d), expected, rtol=1e-12)
+
+
+def test_tis_closed_forms():
+    assert float(bsdf_model("lambert").total_integrated_scatter({"rho": 0.37}, 40.0)) == pytest.approx(0.37)
+    # a narrow lobe far from the horizon: 2πσ²A (exact to exp(−t_max²/2σ²), i.e. to double precision here)
+    tis = float(bsdf_model("lambert+gaussian").total_integrated_scatter({"rho": 0.0, "A": 2.0, "sigma": 0.02}, 10.0))
+    assert tis == pytest.approx(2 * math.pi * 0.02**2 * 2.0, rel=1e-10)
+    # ABg at normal incidence: (πA/B)·2F1(1, 2/g; 1 + 2/g; −1/B), checked value 0.041344
+    abg = float(bsdf_model("abg").total_integrated_scatter(PARAMS["abg"], 0.0))
+    assert abg == pytest.approx(tis_abg_normal_incidence(0.0025, 0.001, 1.8), rel=1e-9)
+    assert abg == pytest.approx(0.041344, abs=5e-7)
+
+
+def test_exports_and_fits_take_their_models_from_the_registry():
+    assert export.FIT_MODELS == {name: m.parameter_names for name, m in BSDF_MODELS.items()}
+    with pytest.raises(ValidationError, match="unknown BSDF model"):
+        bsdf_model("phong")
+    with pytest.raises(ValidationError, match="lacks parameters"):
+        bsdf_model("abg").values({"A": 1.0}, 0.0, 0.0, 0.0)
