@@ -1,4 +1,4 @@
-"""Frames: round trips to 1e-12 (hypothesis) and known points (metrology.md §2, formats.md §1, §4.2)."""
+"""Frames: round trips to 1e-12 (hypothesis) and known points (docs/reductions.md, docs/exports.md)."""
 from __future__ import annotations
 
 import numpy as np
@@ -87,7 +87,7 @@ def test_instrument_round_trip(theta_r, gamma, epsilon):
     assert abs(back.theta_r - theta_r) < TOL
     assert abs(back.epsilon - epsilon) < TOL
     assert abs(angle_diff(back.gamma, gamma)) < TOL
-    # metrology.md §2.2 closed forms (front frame)
+    # closed forms of the front frame (docs/reductions.md)
     cos_front = np.cos(epsilon) * np.cos(gamma - theta_r)
     assert bool(g.transmission) == (cos_front < 0)
     assert abs(np.cos(g.theta_s) - abs(cos_front)) < TOL
@@ -162,7 +162,7 @@ def test_harvey_shack_in_plane_and_perpendicular_plane():
     assert rho == pytest.approx(abs(np.sin(ts) - np.sin(ti)), abs=1e-15) and psi == 0.0
     rho, psi = frames.harvey_shack_from_direction(frames.direction_from_angles(ts, np.pi), ti)
     assert rho == pytest.approx(np.sin(ts) + np.sin(ti), abs=1e-15) and psi == pytest.approx(np.pi)
-    # metrology.md §2.3: perpendicular scan through the specular point (gamma = 2 theta_r)
+    # docs/reductions.md: perpendicular scan through the specular point (gamma = 2 theta_r)
     eps = 25 * DEG
     g = frames.sample_from_instrument(ti, 2 * ti, eps)
     rho, _ = frames.harvey_shack_from_direction(frames.direction_from_angles(g.theta_s, g.phi_s), ti)

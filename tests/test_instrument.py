@@ -23,7 +23,7 @@ def test_solid_angle_paper_geometry_and_small_angle_difference():
     exact = aperture_solid_angle(d, a)
     assert abs(exact - 2 * np.pi * (1 - np.cos(np.arctan(a / d)))) < 1e-12
     small = aperture_solid_angle_small(d, a)
-    # small-angle form over-estimates by (3/4)(a/d)^2 to leading order (metrology.md §1.2)
+    # small-angle form over-estimates by (3/4)(a/d)^2 to leading order (docs/raw-format.md, measurement equation)
     rel = small / exact - 1
     assert rel > 0
     assert rel == pytest.approx(0.75 * (a / d) ** 2, rel=1e-3)

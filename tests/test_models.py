@@ -27,7 +27,7 @@ def test_gaussian_spectrum_fwhm_is_true_fwhm_and_matches_colour():
     assert s[wl == 450.0][0] == 1.0
     half = _np(models.gaussian_spectrum, np.array([439.0, 461.0]), 450.0, 22.0)
     np.testing.assert_allclose(half, 0.5, rtol=1e-14)
-    # colour-science 0.4.7 sd_gaussian_fwhm is the same function (docs/metrology.md §6).
+    # colour-science 0.4.7 sd_gaussian_fwhm is the same function (docs/fitting.md §1).
     ref = colour.sd_gaussian(450.0, 22.0, colour.SpectralShape(380, 780, 1), method="FWHM").values
     np.testing.assert_allclose(s, ref, rtol=1e-12, atol=1e-300)
 
@@ -87,7 +87,7 @@ def test_lambert_gaussian_and_abg_peak_and_far_values():
 
 
 def test_harvey_shack_equals_abg_for_g_2():
-    """ABg with g = −S, B = L^g, A = b0·L^g equals Harvey–Shack exactly for g = 2 (formats.md §6)."""
+    """ABg with g = −S, B = L^g, A = b0·L^g equals Harvey–Shack exactly for g = 2 (docs/fitting.md §5)."""
     d = np.linspace(0.0, 1.5, 31)
     b0, L = 50.0, 0.02
     hs = _np(models.harvey_shack, d, b0, L, -2.0)
@@ -97,7 +97,7 @@ def test_harvey_shack_equals_abg_for_g_2():
 
 # ---------------------------------------------------------------------------------------------- TIS
 def test_tis_closed_forms_at_normal_incidence_match_reference_values():
-    # formats.md §6, verified there by independent quadrature
+    # docs/fitting.md §5, verified there by independent quadrature
     for (A, B, g), ref in [((0.0025, 0.001, 1.8), 0.041344), ((0.01, 0.01, 2.0), 0.144988),
                            ((0.001, 1e-4, 2.5), 0.072190)]:
         assert models.tis_abg_normal_incidence(A, B, g) == pytest.approx(ref, abs=5e-7)
@@ -107,7 +107,7 @@ def test_tis_closed_forms_at_normal_incidence_match_reference_values():
 
 
 def test_tis_abg_oblique_falls_with_clipping():
-    # formats.md §6: (0.0025, 0.001, 1.8) → 0.0413 at 0°, 0.0326 at 60°
+    # docs/fitting.md §5: (0.0025, 0.001, 1.8) → 0.0413 at 0°, 0.0326 at 60°
     assert float(_np(models.tis_abg, math.radians(60.0), 0.0025, 0.001, 1.8)) == pytest.approx(0.0326, abs=5e-5)
 
 

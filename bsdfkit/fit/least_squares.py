@@ -12,7 +12,7 @@ How a fit is set up (docs/fitting.md has the derivations):
 * **Bounds** by parameter transforms θ = T(u) on an unconstrained u: lower and upper bound →
   θ = lo + (hi − lo)·sigmoid(u) (logit); lower only → θ = lo + eᵘ (log); upper only → θ = hi − eᵘ;
   none → θ = u. The solver works in u; the results are reported in θ.
-* **Residual kinds** (docs/metrology.md §5.2): ``absolute`` r = f − y; ``relative`` r = (f − y)/|y|;
+* **Residual kinds** (docs/fitting.md §6): ``absolute`` r = f − y; ``relative`` r = (f − y)/|y|;
   ``log`` r = ln(f + ε) − ln(y + ε), for BSDFs spanning decades. With standard uncertainties u(y) each
   residual is divided by its propagated uncertainty: u(y), u(y)/|y| and u(y)/(y + ε) respectively.
 * **Robust losses** as in :func:`scipy.optimize.least_squares` (cost ½Σ c²ρ(r²/c²), c = ``f_scale``):
@@ -696,8 +696,8 @@ def _aperture_average(function: Callable, theta, x):
 
     A detector of solid angle Ω centred at θs reports Σ_n w_n f(ω_n) cos θ_n / (Ω cos θs) over aperture nodes
     ω_n (:func:`bsdfkit.measurement.instrument.aperture_quadrature`); ``x["weight"]`` holds w_n cos θ_n / (Ω cos θs).
-    Fitting the point model to such data would bias sharp lobes (metrology.md §4.6: convolve the model rather
-    than deconvolve the data).
+    Fitting the point model to such data would bias sharp lobes; convolving the model is safer than
+    deconvolving the data (docs/fitting.md §7, "Finite aperture").
     """
     nodes = {"theta_i": x["theta_i"][..., None], "theta_s": x["theta_s_nodes"], "phi_s": x["phi_s_nodes"]}
     return jnp.sum(function(theta, nodes) * x["weight"], axis=-1)

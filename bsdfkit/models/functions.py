@@ -7,7 +7,7 @@ Units, everywhere in this module:
   the CLI);
 * BSDF values in **sr⁻¹**; direction cosines β are dimensionless.
 
-Geometry (Harvey–Shack direction-cosine space, docs/formats.md §1): a direction (θ, φ) has direction
+Geometry (Harvey–Shack direction-cosine space, [Harvey-Shack]; docs/exports.md §1): a direction (θ, φ) has direction
 cosines β = (sin θ cos φ, sin θ sin φ); the projected solid angle is cos θ dΩ = dβx dβy, so the total
 integrated scatter (TIS) of a BSDF f is ∫∫_{|β|≤1} f dβx dβy. The source sits at azimuth φi = π
 (180°), so the specular (reflection) or direct (transmission, angles from the back normal) direction is
@@ -117,7 +117,7 @@ def gaussian_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -
 
     Eq. (2) of the cylindrical-module paper ("Impact of the geometrical and optical parameters on the
     performance of a cylindrical remote phosphor LED"); with C = 4 ln 2 the width Δλ is the true full
-    width at half maximum. Identical to colour-science 0.4.7 ``sd_gaussian_fwhm`` (docs/metrology.md §6).
+    width at half maximum. Identical to colour-science 0.4.7 ``sd_gaussian_fwhm`` ([colour-science]).
 
     Parameters
     ----------
@@ -141,7 +141,7 @@ def split_gaussian_spectrum(
     S(λ) = exp(−C((λ − λp) / (Δλ(1 + sign(λ − λp)·α)))²), C = 4 ln 2.
 
     The half width is Δλ(1 − α)/2 on the short-wavelength side and Δλ(1 + α)/2 on the long side, so the
-    full width at half maximum is Δλ for every α and the peak stays at λp (docs/metrology.md §6).
+    full width at half maximum is Δλ for every α and the peak stays at λp (docs/fitting.md §1).
     α ∈ (−1, 1); at α = ±1 one side collapses to a step (value 0 there, still finite).
 
     Parameters
@@ -218,12 +218,12 @@ def delta_beta(theta_i: ArrayLike, theta_s: ArrayLike, phi_s: ArrayLike) -> jnp.
 # BSDF models (sr⁻¹)
 # ------------------------------------------------------------------------------------------------
 def lambert(rho: ArrayLike) -> jnp.ndarray:
-    """Lambertian BSDF f = ρ/π in sr⁻¹ for a diffuse reflectance (or transmittance) ρ (metrology.md §5.1)."""
+    """Lambertian BSDF f = ρ/π in sr⁻¹ for a diffuse reflectance (or transmittance) ρ (docs/fitting.md §5)."""
     return jnp.asarray(rho) / jnp.pi
 
 
 def gaussian_lobe(dbeta: ArrayLike, amplitude: ArrayLike, sigma: ArrayLike) -> jnp.ndarray:
-    """Gaussian lobe in direction cosines: f = A·exp(−|β − β0|²/(2σ²)) (metrology.md §5.1).
+    """Gaussian lobe in direction cosines: f = A·exp(−|β − β0|²/(2σ²)) (docs/fitting.md §5).
 
     Parameters
     ----------
@@ -238,7 +238,7 @@ def gaussian_lobe(dbeta: ArrayLike, amplitude: ArrayLike, sigma: ArrayLike) -> j
 
 
 def abg(dbeta: ArrayLike, A: ArrayLike, B: ArrayLike, g: ArrayLike) -> jnp.ndarray:
-    """ABg scatter model f = A/(B + |β − β0|^g) in sr⁻¹ (docs/formats.md §6).
+    """ABg scatter model f = A/(B + |β − β0|^g) in sr⁻¹ ([TracePro-UM], [OpticStudio-Help]; docs/fitting.md §5).
 
     Peak A/B on specular, knee at |β − β0| ≈ B^{1/g}, far-field log–log slope −g. Defined for A ≥ 0,
     B ≥ 0, g ≥ 0. Edge handling: |β−β0|^g is evaluated as exp(g ln|β−β0|) only where |β−β0| > 0
@@ -257,8 +257,8 @@ def harvey_shack(dbeta: ArrayLike, b0: ArrayLike, L: ArrayLike, S: ArrayLike) ->
     """Three-parameter Harvey–Shack (FRED) form f = b0·(1 + (|β − β0|/L)²)^{S/2} in sr⁻¹.
 
     b0 is the specular value (sr⁻¹), L the shoulder (roll-off) in direction cosines, S the far-field
-    log–log slope (negative). docs/metrology.md §5.1 [S32]; equal to ABg with g = −S, B = L^g, A = b0·L^g
-    for g = 2 (formats.md §6). L → 0 gives b0 on specular and the power-law limit 0 (S < 0) elsewhere.
+    log–log slope (negative) ([FRED]); equal to ABg with g = −S, B = L^g, A = b0·L^g
+    for g = 2 (docs/fitting.md §5). L → 0 gives b0 on specular and the power-law limit 0 (S < 0) elsewhere.
     """
     log_term = _log1p_ratio_squared(dbeta, L)
     finite = jnp.isfinite(log_term)
@@ -307,7 +307,7 @@ def tis_lambert(rho: ArrayLike) -> jnp.ndarray:
 
 
 def tis_gaussian_lobe_unclipped(A: ArrayLike, sigma: ArrayLike) -> jnp.ndarray:
-    """Closed-form TIS 2πσ²A of a Gaussian lobe lying entirely inside the unit disk (metrology.md §5.1).
+    """Closed-form TIS 2πσ²A of a Gaussian lobe lying entirely inside the unit disk (docs/fitting.md §5).
 
     Exact only when the lobe does not reach |β| = 1 (|β0| + several σ < 1); use
     :func:`tis_gaussian_lobe` otherwise.
@@ -345,7 +345,7 @@ def tis_gaussian_lobe(theta_i: ArrayLike, A: ArrayLike, sigma: ArrayLike, n_psi:
 
 
 def tis_abg_normal_incidence(A: float, B: float, g: float) -> float:
-    """Closed-form ABg TIS at normal incidence (β0 = 0), docs/formats.md §6.
+    """Closed-form ABg TIS at normal incidence (β0 = 0), docs/fitting.md §5.
 
     TIS = 2πA ∫₀¹ β/(B + β^g) dβ = (πA/B)·₂F₁(1, 2/g; 1 + 2/g; −1/B); g = 2 → πA ln(1 + 1/B);
     g → 0 → πA/(B + 1). Evaluated with :func:`scipy.special.hyp2f1` (NumPy, not traced by JAX: JAX's
@@ -393,8 +393,8 @@ def tis_abg(
 ) -> jnp.ndarray:
     """Exact numerical TIS of an ABg lobe clipped by the unit disk (θi in radians; A sr⁻¹; B, g ≥ 0).
 
-    TIS = ∫₀^{2π} ∫₀^{t_max(ψ)} A t/(B + t^g) dt dψ in polar coordinates centred on β0 (formats.md §6:
-    "polar coordinates centred on β0 with log-spaced radius"); periodic trapezoid in ψ, composite
+    TIS = ∫₀^{2π} ∫₀^{t_max(ψ)} A t/(B + t^g) dt dψ in polar coordinates centred on β0, with a log-spaced
+    radius because the integrand peaks sharply at t ≲ B^{1/g} (docs/fitting.md §5); periodic trapezoid in ψ, composite
     Gauss–Legendre in ln t. Agrees with :func:`tis_abg_normal_incidence` at θi = 0.
     """
     psi = _psi_grid(n_psi)

@@ -11,7 +11,7 @@
 * Luminous flux (lm, for a spectrum in W/nm) and luminous efficacy of radiation (lm/W):
   ``colour.luminous_flux`` and ``colour.luminous_efficacy`` (CIE 1924 photopic V(λ), K_m = 683 lm/W).
 * Yellow-to-blue ratio YBR = ∫_yellow S dλ / ∫_blue S dλ with blue = 380–470 nm and yellow = 471–780 nm
-  by default (definitions of the cylindrical-module paper, docs/reference/seed_figures.json); band
+  by default (definitions of §5.1 of the cylindrical-module paper, [Cylindrical-module] in docs/references.md); band
   sums as :func:`bsdfkit.reduction.spectral.band_sum`.
 
 Grids: uniform 5, 10 or 20 nm grids starting on a whole nanometre are passed to colour unchanged

@@ -10,13 +10,13 @@ returns the BSDF (1/sr, not cosine-weighted) for scattered unit vectors in the f
 
 Two table geometries are built from it:
 
-* **Harvey–Shack grid** (TracePro asymmetric table, ASAP-style table; formats.md §2.2): |β − β0| × azimuth
+* **Harvey–Shack grid** (TracePro asymmetric table, ASAP-style table; docs/exports.md §2.1): |β − β0| × azimuth
   of β − β0, one pair of axes for all incidences (TracePro cannot use per-incidence ScatterBeta lists,
-  formats.md §2.2). Nodes with |β| > 1 are not directions and hold 0.
-* **Specular grid** (Zemax tabular BSDF; formats.md §4.2): radial angle × azimuth about the specular
+  [TracePro-examples] in docs/references.md). Nodes with |β| > 1 are not directions and hold 0.
+* **Specular grid** (Zemax tabular BSDF; docs/exports.md §2.2): radial angle × azimuth about the specular
   direction. Nodes below the horizon hold 0.
 
-TIS = ∫∫ BSDF cos θs dΩ = ∫∫_{|β|≤1} BSDF dβx dβy (formats.md §1). Each table format has exactly one
+TIS = ∫∫ BSDF cos θs dΩ = ∫∫_{|β|≤1} BSDF dβx dβy (docs/exports.md §3). Each table format has exactly one
 quadrature, used by its writer (for the stated TIS / absorptance) and by its reader (for the recomputed
 TIS), so a file is self-consistent by construction:
 
@@ -38,7 +38,7 @@ log-spaced radii there (see :class:`HarveyShackAxes` and :class:`SpecularAxes`, 
 for the measured round-trip errors).
 
 :func:`tis_reference` integrates a callable directly (polar coordinates centred on β0 with log-spaced
-radius, formats.md §6) and is the reference for the tables; the closed forms of the models' TIS live in
+radius; docs/exports.md §3) and is the reference for the tables; the closed forms of the models' TIS live in
 :mod:`bsdfkit.models.functions`.
 """
 from __future__ import annotations
@@ -121,7 +121,7 @@ class HarveyShackAxes:
     ``azimuth_deg`` is measured in the *table* frame, whose 0 axis lies at sample-frame azimuth
     ``zero_azimuth_deg`` (counter-clockwise from the sample +x axis). ASAP-style tables use 0 (sample x
     axis); TracePro's floating zero-azimuth axis is orthogonal to the plane of incidence
-    (formats.md §2.2), i.e. 90° or 270° — see :mod:`bsdfkit.tables.formats.tracepro`.
+    ([TracePro-UM]; docs/exports.md §2.1), i.e. 90° or 270° — see :mod:`bsdfkit.tables.formats.tracepro`.
     """
 
     rho: tuple[float, ...]
@@ -303,7 +303,7 @@ def specular_grid(
 
     Node (radial, azimuth) is :func:`bsdfkit.core.frames.direction_from_specular`; nodes below the horizon
     (ω_z < 0) hold 0. ``theta_i`` is the specular (= direct-transmission) angle, which is what Zemax
-    calls AngleOfIncidence (formats.md §4.2).
+    calls AngleOfIncidence ([Zemax-BSDF]; docs/exports.md §2.2).
     """
     thetas = _check_incidences(theta_i_deg)
     sides = _check_sides(sides)
@@ -382,7 +382,7 @@ def tis_harvey_shack_table(
     TIS(θi) = Σ_k w_k ∫_0^{min(ρmax(ψ_k), ρ_last)} f_k(ρ) ρ dρ, with f_k the piecewise-linear
     interpolant of row k over the nodes inside the unit disk (ρ_j ≤ ρmax), held constant from the last
     inside node to the edge; ρmax from :func:`rho_max` at sample azimuth ψ_k + ``zero_azimuth_deg``;
-    w_k periodic trapezoid weights in ψ (radians). This is ∫∫_{|β|≤1} BSDF dβx dβy of formats.md §1.
+    w_k periodic trapezoid weights in ψ (radians). This is ∫∫_{|β|≤1} BSDF dβx dβy of docs/exports.md §3.
     Used by the TracePro and ASAP-style writers and readers.
     """
     f = np.asarray(values, dtype=np.float64)
@@ -472,7 +472,7 @@ def tis_reference(
     n_panels: int = 36,
     t_min: float = 1e-7,
 ) -> float:
-    """∫∫_{|β|≤1} BSDF dβx dβy of a callable, accurate for sharply peaked lobes (formats.md §6).
+    """∫∫_{|β|≤1} BSDF dβx dβy of a callable, accurate for sharply peaked lobes (docs/exports.md §3).
 
     Polar coordinates centred on β0: for each of ``n_azimuth`` uniform ψ (periodic trapezoid) the
     radius runs from 0 to the edge ρmax(ψ); with ρ = ρmax·e^s the row integral ∫ f ρ dρ = ∫ f ρ² ds is

@@ -1,30 +1,30 @@
 """TracePro surface-property text files: Asymmetric Table (Scatter 5) and ABg (Scatter 1).
 
-Layout (formats.md §2.1, from TracePro Help "Surface Property Import/Export Format" and a genuine
-TracePro 19.6 export): a 16-line header (magic line, File Name, TracePro Release, Database Version,
-timestamp, blank, Name, Catalog, Description, Coating, Scatter, Interaction, Polarization, User_Data,
-Solve, blank), a column-header line starting ``Temperature``, one 22-column surface-data row per
-incidence angle, then for Scatter 5 a ``Table_BSDF_Data`` line, its 8-column header and one row per
-IncAngle × ScatterBeta × ScatterAzimuth (IncAngle outer, ScatterAzimuth inner, as TP-3P), and
-``SAVE-DATA``. bsdfkit writes tabs and CRLF line ends like TracePro itself.
+Layout ([TracePro-IO] in docs/references.md: TracePro Help "Surface Property Import/Export Format", and a
+genuine TracePro 19.6 export, [TracePro-examples]; docs/exports.md §2.1): a 16-line header (magic line,
+File Name, TracePro Release, Database Version, timestamp, blank, Name, Catalog, Description, Coating,
+Scatter, Interaction, Polarization, User_Data, Solve, blank), a column-header line starting ``Temperature``,
+one 22-column surface-data row per incidence angle, then for Scatter 5 a ``Table_BSDF_Data`` line, its
+8-column header and one row per IncAngle × ScatterBeta × ScatterAzimuth (IncAngle outer, ScatterAzimuth
+inner, as [TracePro-examples]), and ``SAVE-DATA``. bsdfkit writes tabs and CRLF line ends like TracePro itself.
 
-Conventions (formats.md §2.2, §2.4):
+Conventions ([TracePro-UM]; docs/exports.md §2.1):
 
 * ScatterBeta = |β − β0| and ScatterAzimuth = azimuth of β − β0 on one grid shared by all incidences
   (TracePro cannot use per-incidence ScatterBeta lists). BRDF and BTDF are columns of the same row.
   For a plate in air β0 = (sin θi, 0) on both sides (:mod:`bsdfkit.core.frames`).
-* TracePro's floating zero-azimuth axis is "always orthogonal to the plane of incidence" (TP-UM); which
-  of the two perpendicular directions it is was not recoverable (formats.md §8 question 1). bsdfkit
+* TracePro's floating zero-azimuth axis is "always orthogonal to the plane of incidence" ([TracePro-UM]); which
+  of the two perpendicular directions it is was not recoverable (docs/exports.md §5, question 1). bsdfkit
   writes ScatterAzimuth = ψ_sample − ``zero_azimuth_deg`` with a default of 270°: TracePro's x axis is
   the sample −y axis, i.e. unit(k × n) for the incident propagation vector k (the s-polarisation
   direction), so forward scatter (away from the source) lies at ScatterAzimuth 90° and the source side
   at 270°. The choice is recorded in the Description as ``[bsdfkit zero_azimuth_deg=270]`` and read
   back from there. It is immaterial for lobes symmetric about β0 (Lambertian, Gaussian, ABg).
-* Energy: TracePro requires a + Rs + Ts + TS_R + TS_T = 1 (TP-UM eq. 7.30). The writer sets
+* Energy: TracePro requires a + Rs + Ts + TS_R + TS_T = 1 (eq. 7.30 of [TracePro-UM]). The writer sets
   Abso_S = Abso_P = 1 − TS_R − TS_T − Refl − Tran with TS computed from the written (rounded) table by
   :func:`bsdfkit.tables.grids.tis_harvey_shack_table` — the same function the reader uses — so the file's
   implied total scatter and its recomputed TIS agree to rounding.
-* ABg (Scatter 1): BSDF = A/(B + |β − β0|^g) (TP-UM eq. 7.25); TIS by :func:`tis_abg` (polar
+* ABg (Scatter 1): BSDF = A/(B + |β − β0|^g) (eq. 7.25 of [TracePro-UM]); TIS by :func:`tis_abg` (polar
   quadrature over the unit disk about β0).
 
 Not supported (FormatError when read): Scatter codes other than 0, 1, 5; direction-sensitive
@@ -85,7 +85,7 @@ _ENERGY_SLACK = 1e-6
 
 @dataclass(frozen=True)
 class TraceProOptions:
-    """Header and bookkeeping choices of a TracePro export (defaults follow formats.md §2.3)."""
+    """Header and bookkeeping choices of a TracePro export (defaults as a genuine export; docs/exports.md §2.1)."""
 
     name: str = "bsdfkit_export"
     catalog: str = "bsdfkit"
