@@ -131,3 +131,16 @@ def test_nothing_points_outside_the_repository():
             if pattern.search(line):
                 offenders.append(f"{path.relative_to(ROOT)}:{number}")
     assert offenders == []
+
+
+def test_every_module_imports():
+    """The fast lane (-m "not slow") touches every module at least through its import."""
+    import importlib
+    import pkgutil
+
+    import bsdfkit
+
+    names = [m.name for m in pkgutil.walk_packages(bsdfkit.__path__, "bsdfkit.") if not m.name.endswith("__main__")]
+    assert len(names) > 60
+    for name in names:
+        importlib.import_module(name)

@@ -3,6 +3,7 @@ import re
 import subprocess
 import sys
 
+import pytest
 from conftest import ROOT
 
 
@@ -13,6 +14,7 @@ def _structure(text: str) -> list[str]:
     return heads + targets
 
 
+@pytest.mark.slow
 def test_quick_bench_matches_committed_report(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "bsdfkit", "bench", "--quick", "-o", str(tmp_path)],
                           capture_output=True, text=True, timeout=600)

@@ -3,6 +3,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from conftest import BUNDLED, ROOT
 
 
@@ -53,6 +54,7 @@ def _small_recipe(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_run_writes_outputs_and_refuses_to_clobber(tmp_path):
     out = tmp_path / "out"
     recipe = _small_recipe(tmp_path)

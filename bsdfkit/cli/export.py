@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import argparse
 
+from bsdfkit import api
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import ValidationError
-from bsdfkit.tables.export import ExportSettings, export
+from bsdfkit.tables.export import ExportSettings
 from bsdfkit.tables.formats.tracepro import TraceProOptions
 
 
@@ -67,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         tracepro=replace(tp, **changes),
         tracepro_scatter=args.tracepro_scatter,
     )
-    result = export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings)
+    result = api.export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings)
     if args.json:
         emit_json(result.to_dict())
         return 0

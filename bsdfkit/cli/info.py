@@ -4,9 +4,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bsdfkit import api
 from bsdfkit.cli._common import emit_json
 from bsdfkit.io import netcdf
-from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 
 
@@ -22,7 +22,7 @@ def _run(args: argparse.Namespace) -> int:
 
     path = Path(args.scan)
     ds = read_scan(path) if path.is_dir() else netcdf.load(path, quantity=("bsdf", "raw_counts"))
-    info = describe(ds)
+    info = api.describe(ds)
     info["file"] = str(path)
     if args.json:
         emit_json(info)

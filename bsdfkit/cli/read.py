@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import argparse
 
+from bsdfkit import api
 from bsdfkit.cli._common import emit_json
-from bsdfkit.tables.export import read_any
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
-    summary = read_any(args.file)
+    summary = api.read(args.file)
     if args.json:
         emit_json(summary.to_dict())
         return 0

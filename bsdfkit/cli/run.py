@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from bsdfkit import api
 from bsdfkit.cli._common import emit_json
-from bsdfkit.pipeline.recipe import run
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
 
-    summary = run(args.recipe, args.output, args.force, log=lambda m: print(m, file=sys.stderr))
+    summary = api.run(args.recipe, args.output, args.force, log=lambda m: print(m, file=sys.stderr))
     if args.json:
         emit_json(summary)
     else:
