@@ -30,7 +30,10 @@ def _run(args: argparse.Namespace) -> int:
     print(f"{path}: {info['quantity']} of '{info['sample']}'{' (SYNTHETIC)' if info['synthetic'] else ''}")
     print(f"  records: {info['records']}; incidences (deg): {', '.join(f'{t:g}' for t in info['incidences_deg'])}")
     w = info["wavelength_nm"]
-    print(f"  wavelength: {w['min']:g}-{w['max']:g} nm, step {w['step']:g} nm ({w['count']} values)")
+    if w["step"] is None:
+        print(f"  wavelength: {w['min']:g} nm (a single wavelength)")
+    else:
+        print(f"  wavelength: {w['min']:g}-{w['max']:g} nm, step {w['step']:g} nm ({w['count']} values)")
     for c in info["configurations"]:
         print(f"  configuration {c['name']}: {c['description']} "
               f"(band {c['incident_band_nm'][0]:g}-{c['incident_band_nm'][1]:g} nm)")

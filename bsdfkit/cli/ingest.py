@@ -1,33 +1,73 @@
-"""``bsdfkit ingest FOLDER -o scan.nc``: read a raw export, calibrate, write netCDF."""
+"""``bsdfkit ingest PATH -o scan.nc``: a raw export, a measured text table or a vendor BSDF file → netCDF dataset.
+
+PATH is a raw goniometer export folder (read + calibrated, ``docs/raw-format.md``), a measured text table
+(:func:`bsdfkit.measurement.table.read_table`) or a Zemax/Radiant ``.bsdf``, TracePro or ASAP-style file
+(:func:`bsdfkit.tables.to_dataset.vendor_dataset`); see :func:`bsdfkit.api.ingest`. The table
+options say what the file does not: ``--quantity``, ``--side``, ``--relative-std``, ``--wavelength`` ….
+"""
 from __future__ import annotations
 
 import argparse
 
+from bsdfkit import api
 from bsdfkit.cli._common import emit_json
+from bsdfkit.io import atomic
+from bsdfkit.measurement.table import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("ingest", help="read + calibrate a raw goniometer export into a netCDF BSDF dataset")
-    p.add_argument("folder", help="measurement folder holding manifest.toml")
+    p = sub.add_parser(
+        "ingest", help="read a raw export, a measured text table or a vendor BSDF file into a netCDF dataset",
+        description="Read a raw goniometer export (calibrated), a measured text table (wide or long; comma, "
+                    "semicolon or tab separated) or a Zemax/Radiant .bsdf, TracePro or ASAP-style file into the "
+                    "calibrated BSDF dataset (docs/raw-format.md).")
+    p.add_argument("path", metavar="PATH", help="raw export folder (manifest.toml), text table or vendor file")
     p.add_argument("-o", "--output", required=True, help="netCDF file to write")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--quantity", choices=QUANTITIES, default=None, type=str.lower,
+                   help="what a table holds where the file does not say (never guessed); brdf/btdf also fix the "
+                        "side, cosine-corrected values are divided by cos(theta_s), factors by pi")
+    p.add_argument("--side", choices=("reflection", "transmission"), default=None,
+                   help="scattering side where neither a side column nor the quantity says")
+    p.add_argument("--relative-std", type=float, default=None, metavar="R",
+                   help=f"standard uncertainty as a fraction of the value when the table has none "
+                        f"(default: the file's '# relative_std:', else {DEFAULT_RELATIVE_STD:g})")
+    p.add_argument("--wavelength", type=float, default=None, metavar="NM",
+                   help="wavelength of a monochrome table or Zemax/ASAP file (default: NaN, recorded as unknown)")
+    p.add_argument("--incidence", type=float, default=None, metavar="DEG",
+                   help="incidence of a table without an incidence column")
+    p.add_argument("--phi-i", type=float, default=None, metavar="DEG",
+                   help="source azimuth of a table without a phi_i column (default 180: specular at phi_s = 0)")
+    p.add_argument("--zeros", choices=ZERO_POLICIES, default=None,
+                   help="exact zeros: auto (tables: a record zero at every wavelength is a gap), keep, missing")
+    p.add_argument("--sample", default=None, help="sample name (default: from the file or its name)")
     p.add_argument("--json", action="store_true", help="print the dataset summary as JSON")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.io import atomic, netcdf
-    from bsdfkit.measurement.calibrate import calibrate
-    from bsdfkit.measurement.describe import describe
-    from bsdfkit.measurement.raw_scan import read_scan
-
     atomic.check_writable(args.output, args.force)
-    ds = calibrate(read_scan(args.folder))
-    netcdf.save(ds, args.output, args.force)
-    info = describe(ds)
+    ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
+                wavelength=args.wavelength, incidence=args.incidence, phi_i=args.phi_i, zeros=args.zeros,
+                sample=args.sample)
+    api.save(ds, args.output, args.force)
+    info = api.describe(ds)
+    extra = {k: ds.attrs[k] for k in ("source_format", "source_layout", "source_quantity", "bsdf_std_origin",
+                                      "gap_records_dropped", "zero_records_as_gaps", "wavelength_note")
+             if k in ds.attrs}
     if args.json:
-        emit_json(info)
-    else:
-        print(f"wrote {args.output}: {info['records']} records, incidences {info['incidences_deg']} deg, "
-              f"{info['wavelength_nm']['count']} wavelengths")
+        emit_json({**info, "output": str(args.output), **extra})
+        return 0
+    w = info["wavelength_nm"]
+    lam = f"{w['count']} wavelengths" if w["count"] > 1 else (
+        f"1 wavelength ({w['min']:g} nm)" if w["min"] == w["min"] else "1 wavelength (unknown)")
+    print(f"wrote {args.output}: {info['records']} records, incidences {info['incidences_deg']} deg, {lam}, "
+          f"sides {', '.join(info['sides'])}")
+    if "source_format" in extra:
+        print(f"  from {extra['source_format']} ({extra.get('source_layout', '')}), quantity "
+              f"{extra.get('source_quantity', '')}; gaps dropped: {extra.get('gap_records_dropped', 0)} records"
+              + (f" ({extra['zero_records_as_gaps']} all-zero)" if extra.get("zero_records_as_gaps") else ""))
+        print(f"  bsdf_std: {extra.get('bsdf_std_origin', '')}")
+        if "wavelength_note" in extra:
+            print(f"  wavelength: {extra['wavelength_note']}")
     return 0

@@ -17,6 +17,9 @@ SIDES: tuple[str, str] = ("reflection", "transmission")
 #: yellow emitted (biys, conversion), yellow in → yellow scattered (yiys).
 INTERACTIONS: tuple[str, str, str] = ("bibs", "biys", "yiys")
 
+#: The interaction of any non-converting sample: light scattered at the wavelength it came in with.
+ELASTIC_INTERACTION = "elastic"
+
 #: Names of the two incident-light configurations of a phosphor-plate measurement (manifest ``configuration``).
 BLUE_CONFIGURATION = "blue"
 YELLOW_CONFIGURATION = "yellow"

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 import warnings
 from collections.abc import Callable, Sequence
@@ -888,7 +889,9 @@ def fit_bsdf(
     x = {"theta_i": ti, "theta_s": ts, "phi_s": ps}
     function = spec.function
     geometry = ("detector_distance_mm", "aperture_diameter_mm")
-    with_aperture = options.aperture and all(k in profile.attrs for k in geometry)
+    # tables from other instruments may not state the geometry (NaN): then the point model is fitted
+    with_aperture = options.aperture and all(
+        k in profile.attrs and math.isfinite(float(profile.attrs[k])) for k in geometry)
     if with_aperture:
 
         inst = Instrument(float(profile.attrs["detector_distance_mm"]), float(profile.attrs["aperture_diameter_mm"]),
@@ -921,4 +924,74 @@ def fit_bsdf(
             if name in ds and f"{name}_std" in ds:
                 ds[f"{name}_std"] = np.hypot(ds[f"{name}_std"], common * np.abs(ds[name]))
         ds.attrs["common_relative_std"] = common
+    return _with_plausibility(ds, model, incidences.astype(float))
+
+
+#: A fitted TIS is impossible when it exceeds 1 by more than this many standard uncertainties.
+TIS_SIGMA_LIMIT = 3.0
+#: A parameter is "at a bound" when within this relative distance of a finite bound.
+BOUND_RTOL = 1e-9
+#: A parameter is undetermined when its standard error exceeds this multiple of its magnitude.
+UNDETERMINED_RATIO = 1e3
+
+
+def _tis_std(model: str, theta_i_deg: np.ndarray, ds: xr.Dataset) -> np.ndarray:
+    """Standard uncertainty of the model TIS from the parameter covariance (central differences)."""
+    spec = bsdf_model(model)
+    names = spec.parameter_names
+    values = np.stack([np.atleast_1d(ds[n].values).astype(float) for n in names], axis=-1)
+    grad = np.zeros_like(values)
+    for k in range(len(names)):
+        h = 1e-6 * np.maximum(np.abs(values[:, k]), 1e-12)
+        up, down = values.copy(), values.copy()
+        up[:, k] += h
+        down[:, k] = np.maximum(down[:, k] - h, 0.0) if spec.parameters[k].lower == 0 else down[:, k] - h
+        t_up = spec.total_integrated_scatter(dict(zip(names, up.T)), theta_i_deg)
+        t_down = spec.total_integrated_scatter(dict(zip(names, down.T)), theta_i_deg)
+        grad[:, k] = (t_up - t_down) / (up[:, k] - down[:, k])
+    cov = np.asarray(ds["covariance"].values, dtype=float).reshape(len(theta_i_deg), len(names), len(names))
+    var = np.einsum("bi,bij,bj->b", grad, cov, grad)
+    return np.sqrt(np.where(np.isfinite(var) & (var > 0), var, np.nan))
+
+
+def _with_plausibility(ds: xr.Dataset, model: str, theta_i_deg: np.ndarray) -> xr.Dataset:
+    """Flag fits that are physically impossible or undetermined; ``warnings`` lists why (never silent).
+
+    Per incidence: TIS above 1 beyond :data:`TIS_SIGMA_LIMIT` standard uncertainties, R² < 0, a parameter
+    stuck at a bound, or a parameter whose standard error is non-finite or exceeds :data:`UNDETERMINED_RATIO`
+    times its value. ``physically_possible`` is False for the first two, ``determined`` for the last two;
+    exports refuse a fit that is either.
+    """
+    spec = bsdf_model(model)
+    tis = np.atleast_1d(ds["tis"].values).astype(float)
+    tis_std = _tis_std(model, theta_i_deg, ds)
+    ds["tis_std"] = ("theta_i", tis_std, {"long_name": "standard uncertainty of the model TIS (from the "
+                                                        "parameter covariance)"})
+    possible = np.ones(theta_i_deg.size, bool)
+    determined = np.ones(theta_i_deg.size, bool)
+    warnings_: list[str] = []
+    r2 = np.atleast_1d(ds["r2"].values).astype(float)
+    for b, t in enumerate(theta_i_deg):
+        where = f"incidence {t:g} deg"
+        excess = tis[b] - 1.0
+        if excess > TIS_SIGMA_LIMIT * (tis_std[b] if np.isfinite(tis_std[b]) else 0.0):
+            possible[b] = False
+            warnings_.append(f"{where}: model TIS {tis[b]:.4f} exceeds 1 (uncertainty {tis_std[b]:.2g}): "
+                             "physically impossible")
+        if not r2[b] >= 0:
+            possible[b] = False
+            warnings_.append(f"{where}: R² = {r2[b]:.3g} < 0, the model describes the data worse than a constant")
+        for p in spec.parameters:
+            value = float(np.atleast_1d(ds[p.name].values)[b])
+            std = float(np.atleast_1d(ds[f"{p.name}_std"].values)[b])
+            for bound in (p.lower, p.upper):
+                if math.isfinite(bound) and abs(value - bound) <= BOUND_RTOL * max(abs(bound), 1.0):
+                    determined[b] = False
+                    warnings_.append(f"{where}: {p.name} = {value:.4g} is at its bound {bound:g}")
+            if not math.isfinite(std) or std > UNDETERMINED_RATIO * max(abs(value), 1e-300):
+                determined[b] = False
+                warnings_.append(f"{where}: {p.name} = {value:.4g} is undetermined (standard error {std:.3g})")
+    ds["physically_possible"] = ("theta_i", possible)
+    ds["determined"] = ("theta_i", determined)
+    ds.attrs["warnings"] = json.dumps(warnings_)
     return ds

@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import CONVERSION_BAND_NM, EXCITATION_BAND_NM, INTERACTIONS
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, EXCITATION_BAND_NM, INTERACTIONS
 from bsdfkit.core.errors import InputError, NumericalError
 
 PLANCK_H = 6.62607015e-34  # J s (exact, SI 2019)
@@ -200,13 +200,26 @@ def _profile(sub: xr.Dataset, value: NDArray, std: NDArray, units: str, name: st
 
 
 
+def _only_configuration(ds: xr.Dataset) -> str:
+    names = [str(n) for n in ds["configuration"].values] if "configuration" in ds else sorted(
+        {str(c) for c in ds["config"].values})
+    if len(names) != 1:
+        raise InputError("the elastic interaction needs one configuration or a named one", file=ds.attrs.get("source"),
+                         field="configuration", expected="one configuration (or configs={'elastic': NAME})",
+                         got=", ".join(names))
+    return names[0]
+
+
 def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = None,
                         bands: dict[str, Band] | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
-    """The per-record BSDF profile (1/sr) of one interaction of the two-wavelength approach.
+    """The per-record BSDF profile (1/sr) of one interaction of the two-wavelength approach, or of any sample.
 
     bibs: eq. (5) weighted mean over the blue band with the blue configuration; yiys: eq. (8) over the yellow
     band with the yellow configuration; biys: eq. (13) integrand ⟨⟨q_λ⟩⟩·ΔΛs from the blue configuration.
-    Optionally restricted to one ``side``. Band and configuration names can be overridden.
+    ``elastic``: any sample (a measured table, a vendor file, a monochrome scan): the weighted mean over the
+    whole measured range (or ``bands["elastic"]``) of the dataset's only configuration (or
+    ``configs["elastic"]``). Optionally restricted to one ``side``. Band and configuration names can be
+    overridden.
     """
     bands = {"blue": EXCITATION_BAND_NM, "yellow": CONVERSION_BAND_NM, **(bands or {})}
     configs = {"blue": "blue", "yellow": "yellow", **(configs or {})}
@@ -216,9 +229,13 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
         out = weighted_mean_bsdf(ds, configs["yellow"], bands["yellow"])
     elif interaction == "biys":
         out = bispectral_band_integral(ds, configs["blue"], bands["yellow"])
+    elif interaction == ELASTIC_INTERACTION:
+        config = configs.get(ELASTIC_INTERACTION) or _only_configuration(ds)
+        lam = ds["wavelength"].values
+        out = weighted_mean_bsdf(ds, config, bands.get(ELASTIC_INTERACTION) or (float(lam.min()), float(lam.max())))
     else:
-        raise InputError("unknown interaction", field="interaction", expected=" or ".join(INTERACTIONS),
-                         got=interaction)
+        raise InputError("unknown interaction", file=ds.attrs.get("source"), field="interaction",
+                         expected=" or ".join((*INTERACTIONS, ELASTIC_INTERACTION)), got=interaction)
     out.attrs["interaction"] = interaction
     if side is not None:
         if side not in ("reflection", "transmission"):

@@ -22,6 +22,7 @@ Every write is atomic and refuses to overwrite an existing file unless ``force``
 """
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -92,6 +93,18 @@ class ExportSettings:
         if self.tracepro_scatter not in ("table", "abg"):
             raise ValidationError("unknown TracePro scatter mode", field="tracepro_scatter",
                                   expected="table or abg", got=self.tracepro_scatter)
+        if not (np.isfinite(self.symmetry_tolerance) and 0.0 <= self.symmetry_tolerance <= 1.0):
+            raise ValidationError("symmetry tolerance out of range", field="symmetry_tolerance",
+                                  expected="a fraction of the block maximum in [0, 1]", got=self.symmetry_tolerance)
+        for t in self.theta_i_deg or ():
+            if not (np.isfinite(t) and 0.0 <= t < 90.0):
+                raise ValidationError("incidence angle out of range", field="theta_i_deg", expected="[0, 90) deg",
+                                      got=t)
+        for key in ("specular_reflectance", "specular_transmittance"):
+            v = getattr(self, key)
+            if not (np.isfinite(v) and 0.0 <= v <= 1.0):
+                raise ValidationError("specular fraction out of range", field=key, expected="a number in [0, 1]",
+                                      got=v)
 
 
 @dataclass(frozen=True)
@@ -221,6 +234,16 @@ def _model_bsdf_fn(model: str, params: Mapping[float, Mapping[str, float]], side
     return bsdf_fn
 
 
+def _refuse_implausible_fit(ds: xr.Dataset, label: str) -> None:
+    """A fit flagged physically impossible or undetermined (:func:`bsdfkit.fit.least_squares.fit_bsdf`) is not
+    exported: the table would carry a number that is not a result."""
+    for flag, what in (("physically_possible", "physically impossible"), ("determined", "undetermined")):
+        if flag in ds and not bool(np.all(ds[flag].values)):
+            reasons = json.loads(ds.attrs.get("warnings", "[]"))
+            raise ValidationError(f"the fit is {what}: " + ("; ".join(reasons[:3]) or "see its warnings"),
+                                  file=label, field=flag, expected="a fit without warnings", got=False)
+
+
 def fit_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> BsdfFn:
     """BSDF callable of a fit result (see the module docstring for the dataset layout)."""
     model = str(ds.attrs.get("model", ""))
@@ -256,6 +279,7 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
     ds = source
     if "model" in ds.attrs:
         model = str(ds.attrs["model"])
+        _refuse_implausible_fit(ds, label)
         fns = {s: fit_bsdf_fn(ds, interaction, s) for s in sides}
         theta = np.atleast_1d(np.asarray(ds["theta_i"].values, dtype=np.float64))
         abg: list[asap.AbgParameters] = []
@@ -361,7 +385,8 @@ def export(
     if to == "zemax" and side == "both":
         raise ValidationError("a Zemax BSDF file holds one ScatterType; export each side to its own file",
                               field="side", expected="reflection or transmission", got=side)
-    atomic.check_writable(path, force)
+    # before computing: existing output, output that is the source itself (refused even with force), writability
+    atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
     sides = frames.SIDES if side == "both" else (side,)
     src = _resolve_source(source, interaction, sides, settings.theta_i_deg)
     theta = np.asarray(src.theta_i_deg, dtype=np.float64)

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
+from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+from scipy.spatial import QhullError
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
@@ -470,13 +472,60 @@ def _elastic_profile(ds: xr.Dataset, side: str, wavelength: float | None, band: 
     return prof, chosen, what
 
 
-def _profile_fn(prof: xr.Dataset, side: str, label: str) -> tuple[BsdfFn, list[float]]:
-    cache: dict[float, Hemisphere] = {}
+#: Fraction of off-arc records (``arc = other``) above which an incidence is interpolated as scattered data.
+SCATTERED_FRACTION = 0.1
+
+
+class _Scattered:
+    """Piecewise-linear interpolation of scattered records over the projected disk (β = (ω_x, ω_y), source at
+    φi = 180°), nearest record outside their convex hull; records on one half of the plane of incidence only are
+    mirrored (plane symmetry assumed)."""
+
+    def __init__(self, prof: xr.Dataset) -> None:
+        ts = np.radians(prof["theta_s"].values)
+        rel = np.radians(prof["phi_s"].values - (prof["phi_i"].values - 180.0))
+        beta = np.stack([np.sin(ts) * np.cos(rel), np.sin(ts) * np.sin(rel)], axis=-1)
+        values = np.asarray(prof["bsdf"].values, dtype=np.float64)
+        by = beta[:, 1]
+        self.mirrored = bool((np.all(by >= -1e-9) or np.all(by <= 1e-9)) and np.any(np.abs(by) > 1e-9))
+        if self.mirrored:
+            off = np.abs(by) > 1e-9
+            beta = np.concatenate([beta, beta[off] * np.array([1.0, -1.0])])
+            values = np.concatenate([values, values[off]])
+        self.linear = LinearNDInterpolator(beta, values)
+        self.nearest = NearestNDInterpolator(beta, values)
+
+    def bsdf(self, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        b = np.asarray(directions, dtype=np.float64)[..., :2]
+        shape = b.shape[:-1]
+        flat = b.reshape(-1, 2)
+        v = self.linear(flat)
+        missing = ~np.isfinite(v)
+        if missing.any():
+            v[missing] = self.nearest(flat[missing])
+        return v.reshape(shape)
+
+
+def _profile_fn(prof: xr.Dataset, side: str, label: str, notes: list[str] | None = None
+                ) -> tuple[BsdfFn, list[float]]:
+    cache: dict[float, Hemisphere | _Scattered] = {}
     thetas = incidences(prof)
     for t in thetas:
         sel = np.isclose(prof["theta_i"].values, t, atol=_MATCH_DEG)
+        one = prof.isel(record=np.flatnonzero(sel))
+        off_arc = int(np.sum(one["arc"].values == "other"))
         try:
-            cache[round(t, 6)] = Hemisphere.from_profile(prof.isel(record=np.flatnonzero(sel)), center="specular")
+            if off_arc >= max(3, SCATTERED_FRACTION * one.sizes["record"]):
+                try:
+                    cache[round(t, 6)] = scattered = _Scattered(one)
+                    if notes is not None:
+                        notes.append(f"theta_i = {t:g} deg, {side}: {one.sizes['record']} records interpolated "
+                                     "over the projected disk (scattered data"
+                                     + (", mirrored: plane symmetry assumed)" if scattered.mirrored else ")"))
+                    continue
+                except (QhullError, ValueError):
+                    pass  # degenerate point set: fall back to the two arcs
+            cache[round(t, 6)] = Hemisphere.from_profile(one, center="specular")
         except InputError as exc:
             raise InputError(f"cannot reconstruct the hemisphere at theta_i = {t:g} deg, {side}: {exc}",
                              file=label) from None
@@ -601,13 +650,10 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
                 ds = ds.assign_coords(wavelength=[float(wavelength)])
             for s in use_sides:
                 prof, chosen_lambda, what = _elastic_profile(ds, s, wavelength, band, label)
-                fns[s], th = _profile_fn(prof, s, label)
+                fns[s], th = _profile_fn(prof, s, label, notes)
                 theta_sets.append(set(np.round(th, 9)))
-            notes.append(f"values at {what}; hemisphere reconstructed from the in-plane and perpendicular arcs "
-                         "(bsdfkit.reduction.tis.Hemisphere, specular centre)")
-            if any((ds["arc"].values == "other") & np.isin(ds["side"].values, use_sides)):
-                notes.append(f"{int(np.sum(ds['arc'].values == 'other'))} records off the two arcs are not used "
-                             "by the reconstruction")
+            notes.insert(0, f"values at {what}; hemisphere reconstructed from the in-plane and perpendicular "
+                            "arcs about the specular point (bsdfkit.reduction.tis.Hemisphere) unless noted")
         else:
             if interaction is None:
                 raise InputError("a calibrated scan holds several interactions; choose one", file=label,

@@ -1,0 +1,85 @@
+"""``bsdfkit convert IN --to tracepro|zemax|asap -o OUT [--force]``: any readable table or dataset to a
+ray-tracer table, with the TIS of the written file checked against the source.
+
+IN is a Zemax/Radiant ``.bsdf``, TracePro or ASAP-style file (converted on its own grid), a measured text
+table or raw export (ingested first, table options as for ``bsdfkit ingest``) or a bsdfkit netCDF dataset; see
+:func:`bsdfkit.tables.to_dataset.convert`. Exit status 0 when every re-read TIS is within ``--tis-tolerance``
+of the source's, 1 when the file was written but the check failed, 2 for bad input.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.measurement.table import QUANTITIES, ZERO_POLICIES
+from bsdfkit.tables.export import FORMATS, ExportSettings
+from bsdfkit.tables.to_dataset import convert
+
+
+def _floats(text: str, name: str, count: int | None = None) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.replace(" ", "").split(",") if v)
+    except ValueError:
+        raise ValidationError("expected comma-separated numbers", field=name, got=text) from None
+    if not values or (count is not None and len(values) != count):
+        raise ValidationError("wrong number of values", field=name,
+                              expected=f"{count} numbers" if count else "numbers", got=text)
+    return values
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("convert", help="convert a BSDF table or dataset to TracePro, Zemax or ASAP-style",
+                       description="Convert any readable BSDF source (Zemax/Radiant .bsdf, TracePro, ASAP-style, "
+                                   "measured text table, raw export, netCDF dataset) to a TracePro, Zemax or "
+                                   "ASAP-style table and compare the TIS of the re-read file with the source's.")
+    p.add_argument("source", metavar="IN", help="vendor file, text table, raw export folder or netCDF dataset")
+    p.add_argument("--to", required=True, choices=FORMATS, help="target format")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--side", choices=("reflection", "transmission", "both"), default=None,
+                   help="side(s) to write (default: all of the source; Zemax holds one)")
+    p.add_argument("--wavelength", type=float, default=None, metavar="NM",
+                   help="wavelength to write from a spectral source (or the label of a monochrome table)")
+    p.add_argument("--band", default=None, metavar="LO,HI", help="write the mean over the wavelengths in this band")
+    p.add_argument("--interaction", default=None, help="bibs, biys or yiys for calibrated raw scans")
+    p.add_argument("--incidences", default=None, metavar="DEG,DEG,...", help="incidences to write (default: all)")
+    p.add_argument("--quantity", choices=QUANTITIES, default=None, type=str.lower,
+                   help="for text tables (see bsdfkit ingest)")
+    p.add_argument("--relative-std", type=float, default=None, metavar="R", help="for text tables")
+    p.add_argument("--zeros", choices=ZERO_POLICIES, default=None, help="for text tables (see bsdfkit ingest)")
+    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
+                   help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
+                   help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
+    p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
+                   help="largest accepted |TIS written / TIS source - 1| (default 0.01)")
+    p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance)
+    result = convert(
+        args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,
+        band=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
+        theta_i_deg=_floats(args.incidences, "--incidences") if args.incidences else None, settings=settings,
+        tolerance=args.tis_tolerance, quantity=args.quantity, relative_std=args.relative_std, zeros=args.zeros,
+    )
+    if args.json:
+        emit_json(result.to_dict())
+    else:
+        print(f"wrote {result.export.format} table {result.export.path} from {result.source_kind} {result.source}")
+        for note in result.notes:
+            print(f"  note: {note}")
+        print(f"{'side':<13}{'theta_i':>8}{'TIS source':>13}{'TIS written':>13}{'diff %':>9}")
+        for side in result.tis_original:
+            for t, a, b in zip(result.incidences_deg, result.tis_original[side], result.tis_written[side]):
+                diff = 100.0 * (b / a - 1.0) if a else 0.0
+                print(f"{side:<13}{t:>8g}{a:>13.6g}{b:>13.6g}{diff:>+9.3f}")
+    if not result.ok:
+        print(f"bsdfkit convert: TIS check failed: largest difference {100 * result.worst_relative_difference:.3g} % "
+              f"> {100 * result.tolerance:.3g} % (file written: {result.export.path})", file=sys.stderr)
+        return 1
+    return 0

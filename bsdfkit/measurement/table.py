@@ -1,0 +1,1185 @@
+"""Measured BSDF text tables → the calibrated BSDF dataset of :func:`bsdfkit.measurement.calibrate.calibrate`.
+
+Instruments and vendors export scattering data as plain text tables. :func:`read_table` turns any such table
+into the dataset every later step uses (dims ``record`` × ``wavelength``; per-record coords ``theta_i``,
+``phi_i``, ``theta_s``, ``phi_s`` [deg], ``side``, ``arc``, ``config``; ``bsdf``, ``bsdf_std`` [1/sr]; see
+``docs/raw-format.md``, section "Measured tables and vendor files", for the rules in full).
+
+Accepted text
+    comma, semicolon, tab (or, when none of these separates the header, whitespace) separated; ``#`` comment
+    lines anywhere (``# key: value`` comments before the header are read as metadata: quantity, side,
+    wavelength, incidence, phi_i, relative_std, sample); a preamble of ``key: value`` / ``key,value`` lines
+    before the header is read the same way; UTF-8 with or without BOM, UTF-16 with BOM, else Windows-1252;
+    quoted cells; a decimal comma when the separator is not a comma.
+
+Layouts
+    LONG: one row per direction (and wavelength): columns for θi, φi, θs, φs, wavelength, side, the value
+    and its standard uncertainty, recognised by the usual spellings (``theta_i``, ``AOI``,
+    ``Incidence angle (deg)``, ``scatter angle``, ``phi_s``, ``azimuth``, ``lambda``, ``BRDF``, ``value``,
+    ``std``, ``uncertainty`` …) and units in the header (``deg``, ``rad``, ``nm``, ``um``, ``%``).
+    WIDE: the angle columns, then one value column per wavelength whose header carries the wavelength
+    (``550``, ``550nm``, `` 550 nm ``, ``BRDF 550 nm``, ``0.55 um``); or one value column per incidence
+    (``AOI 10``, ``10 deg``, ``theta_i=10``).
+    Without a φs column, θs is a *signed in-plane* angle: positive on the specular side (φs = 0), negative on
+    the source side (φs = 180°). Angles follow docs/raw-format.md: sample frame, source at φi (180° unless a
+    φi column or ``# phi_i:`` says otherwise), φs = 0 on the specular side; in transmission θs from the back
+    normal and φs = 0 at the undeviated direction.
+
+Quantities
+    ``brdf``, ``btdf`` (1/sr, and they fix the side), ``ccbrdf``, ``ccbtdf`` (cosine-corrected, f·cos θs:
+    divided by cos θs), ``reflectance-factor``, ``transmittance-factor`` (R = π·BSDF: divided by π), and
+    ``bsdf`` (side from a side column or ``side``). The quantity is taken from the headers or the metadata, or
+    from the ``quantity`` argument; it is never guessed: if neither says, :class:`InputError`.
+
+Gaps
+    Empty cells, ``NaN``, ``-``, ``N/A`` are gaps (NaN in the dataset; records without any value are
+    dropped), never zeros. ``zeros="auto"`` (default) also treats a record whose every value is exactly 0 as a
+    gap (instruments write 0 where the source blocks the detector near retro-reflection); ``"keep"`` keeps
+    zeros as data, ``"missing"`` makes every exact 0 a gap.
+
+Uncertainty
+    A std/uncertainty column (absolute, or relative when its header says ``rel`` or ``%`` on a non-%
+    value) is converted like the value; without one, ``bsdf_std = relative_std · |bsdf|`` with
+    ``relative_std`` from the argument, the metadata, or :data:`DEFAULT_RELATIVE_STD` (5 %), recorded in the
+    attributes (``bsdf_std_origin``).
+
+Every problem raises a one-line :class:`~bsdfkit.core.errors.InputError` / :class:`FormatError` /
+:class:`ValidationError` naming the file, the line and the column.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.version import __version__
+
+__all__ = ["QUANTITIES", "DEFAULT_RELATIVE_STD", "CONFIG_NAME", "read_table", "guess_can_open", "records_dataset",
+           "to_bsdf", "side_of_quantity", "normalise_quantity", "arc_labels"]
+
+#: Quantities a table may hold, and what the reader does with them.
+QUANTITIES: tuple[str, ...] = ("brdf", "btdf", "ccbrdf", "ccbtdf", "reflectance-factor", "transmittance-factor",
+                               "bsdf")
+_QUANTITY_SIDE = {"brdf": "reflection", "ccbrdf": "reflection", "reflectance-factor": "reflection",
+                  "btdf": "transmission", "ccbtdf": "transmission", "transmittance-factor": "transmission",
+                  "bsdf": None}
+#: Relative standard uncertainty assumed when a table states none (fraction of the value).
+DEFAULT_RELATIVE_STD = 0.05
+#: The configuration name of datasets read from tables and vendor files (one elastic configuration).
+CONFIG_NAME = "measured"
+SIDES = ("reflection", "transmission")
+ZERO_POLICIES = ("auto", "keep", "missing")
+_MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
+            "?", "#n/a", "#value!", "nv", "n.v."}
+_ANGLE_ATOL = 1e-9
+
+
+# ------------------------------------------------------------------------------------------- quantities
+def normalise_quantity(text: str, *, file: str | None = None, field: str = "quantity",
+                       line: int | None = None) -> str:
+    """One of :data:`QUANTITIES` from a user or file spelling (``BRDF``, ``cc-BRDF``, ``reflectance factor`` …)."""
+    q = _quantity_from_words(str(text))
+    if q is None:
+        raise InputError("unknown quantity", file=file, line=line, field=field,
+                         expected=" | ".join(QUANTITIES[:-1]), got=str(text))
+    return q
+
+
+def _quantity_from_words(text: str) -> str | None:
+    t = text.lower().replace("_", " ").replace("-", " ").strip()
+    t = re.sub(r"\s+", " ", t)
+    compact = t.replace(" ", "").replace(".", "")
+    if re.search(r"(cc|cos(ine)?(corr(ected)?)?)brdf|brdf(\*|x)?cos|cosinecorrectedbrdf|brdfcos", compact):
+        return "ccbrdf"
+    if re.search(r"(cc|cos(ine)?(corr(ected)?)?)btdf|btdf(\*|x)?cos|cosinecorrectedbtdf|btdfcos", compact):
+        return "ccbtdf"
+    if re.search(r"(reflectance|refl|reflection|radiance)factor|^b?rf$|bidirectionalreflectancefactor", compact):
+        return "reflectance-factor"
+    if re.search(r"(transmittance|trans|transmission)factor|^tf$", compact):
+        return "transmittance-factor"
+    if "brdf" in compact:
+        return "brdf"
+    if "btdf" in compact:
+        return "btdf"
+    if "bsdf" in compact:
+        return "bsdf"
+    return None
+
+
+def side_of_quantity(quantity: str) -> str | None:
+    """The side a quantity fixes (``brdf`` → reflection …), or None for ``bsdf``."""
+    return _QUANTITY_SIDE[quantity]
+
+
+def _side_word(text: str) -> str | None:
+    t = text.strip().lower()
+    if t in ("reflection", "reflected", "reflectance", "refl", "r", "brdf", "front", "reflect"):
+        return "reflection"
+    if t in ("transmission", "transmitted", "transmittance", "trans", "t", "btdf", "back", "transmit"):
+        return "transmission"
+    return None
+
+
+def to_bsdf(values: NDArray[np.float64], quantity: str, theta_s_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """BSDF [1/sr] from a table quantity: cosine-corrected values / cos θs, factors / π (broadcast over the
+    last axis = wavelength when ``values`` is 2-D). cos θs = 0 gives NaN (no finite BSDF at grazing)."""
+    v = np.asarray(values, dtype=np.float64)
+    theta = np.asarray(theta_s_deg, dtype=np.float64)
+    if quantity in ("ccbrdf", "ccbtdf"):
+        cos = np.cos(np.radians(theta))
+        cos = np.where(cos > 1e-12, cos, np.nan)
+        return v / (cos[:, None] if v.ndim == 2 else cos)
+    if quantity in ("reflectance-factor", "transmittance-factor"):
+        return v / np.pi
+    return v
+
+
+# ------------------------------------------------------------------------------------------- columns
+@dataclass
+class _Column:
+    index: int
+    header: str
+    role: str = "ignore"  # theta_i, phi_i, theta_s, phi_s, wavelength, side, value, std, ignore
+    scale: float = 1.0  # multiply numbers by this (rad -> deg, um -> nm, % -> fraction)
+    percent: bool = False
+    quantity: str | None = None
+    wavelength: float | None = None  # wide layout: this column's wavelength [nm]
+    incidence: float | None = None  # wide layout: this column's incidence [deg]
+    relative: bool = False  # std columns: relative to the value
+    pair: int | None = None  # std columns: index of the value column they belong to
+
+
+_UNIT_RE = re.compile(r"[\(\[\{]([^\)\]\}]*)[\)\]\}]")
+
+
+def _clean_header(text: str) -> str:
+    t = text.replace("\ufeff", "").strip().strip('"').strip("'").strip()
+    for a, b in (("θ", "theta"), ("ϑ", "theta"), ("φ", "phi"), ("ϕ", "phi"), ("λ", "lambda"), ("°", " deg "),
+                 ("µ", "u"), ("μ", "u"), ("σ", "sigma"), ("±", " std ")):
+        t = t.replace(a, b)
+    return t
+
+
+def _units_of(text: str) -> tuple[str, str]:
+    """(header without bracketed units, units text) — units also recognised as a trailing _deg/_nm/_rad."""
+    units = " ".join(m.group(1) for m in _UNIT_RE.finditer(text)).strip().lower()
+    name = _UNIT_RE.sub(" ", text).lower()
+    m = re.search(r"(?:[_\s])(deg|degrees?|rad|radians?|mrad|nm|um|microns?|pct|percent)$", name.strip())
+    if m and not units:
+        units = m.group(1)
+        name = name.strip()[: m.start()]
+    name = re.sub(r"(?<!\d)\.|\.(?!\d)|[_\-:/]+", " ", name)
+    return re.sub(r"\s+", " ", name).strip(), units
+
+
+def _angle_scale(units: str, header: str, file: str, line: int) -> float:
+    u = units.replace(" ", "")
+    if u in ("", "deg", "degree", "degrees", "°", "d"):
+        return 1.0
+    if u in ("rad", "radian", "radians"):
+        return 180.0 / math.pi
+    if u in ("mrad",):
+        return 0.180 / math.pi
+    raise FormatError("unknown angle unit in a column header", file=file, line=line, field=header,
+                      expected="deg or rad", got=units)
+
+
+def _wavelength_scale(units: str, header: str, file: str, line: int) -> float:
+    u = units.replace(" ", "")
+    if u in ("", "nm", "nanometer", "nanometers", "nanometre", "nanometres"):
+        return 1.0
+    if u in ("um", "micron", "microns", "micrometer", "micrometers", "micrometre", "micrometres"):
+        return 1000.0
+    if u in ("a", "å", "angstrom", "angstroms"):
+        return 0.1
+    raise FormatError("unknown wavelength unit in a column header", file=file, line=line, field=header,
+                      expected="nm or um", got=units)
+
+
+_STD_WORDS = re.compile(r"\b(std|stdev|stddev|std dev|sd|sigma|uncertainty|unc|u|error|err|stderr|"
+                        r"standard deviation|standard uncertainty|deviation)\b")
+_NUMBER_IN = re.compile(r"(?<![a-z])([0-9]+(?:[.,][0-9]+)?)\s*(nm|um|deg|d)?(?![0-9])")
+
+_ROLE_PATTERNS: tuple[tuple[str, re.Pattern[str]], ...] = (
+    ("phi_i", re.compile(r"^(phi ?i|phii|phi inc(ident|idence)?|phi in|incident azimuth|incidence azimuth|"
+                         r"azimuth of incidence|source azimuth|illumination azimuth|azimuth i|azi i|"
+                         r"phi source|incident phi|phi_i)$")),
+    ("theta_i", re.compile(r"^(theta ?i|thetai|theta inc(ident|idence)?|theta in|aoi|angle of incidence|"
+                           r"incidence( angle)?|incident( angle)?|inc( angle)?|illumination( angle)?|"
+                           r"illumination zenith|source angle|incidence zenith|zenith i|polar i|"
+                           r"incident zenith|incident theta|theta source|incident polar angle|ai)$")),
+    ("phi_s", re.compile(r"^(phi ?s|phis|phi ?r|phir|phi ?o|phio|phi out|phi scat(ter(ed|ing)?)?|phi det(ector)?|"
+                         r"phi v(iew)?|phi|azimuth( angle)?|scatter(ed|ing)? azimuth|detector azimuth|"
+                         r"view(ing)? azimuth|observation azimuth|azimuth s|azi|azi s|outgoing azimuth|"
+                         r"receiver azimuth|azimuthal angle)$")),
+    ("theta_s", re.compile(r"^(theta ?s|thetas|theta ?r|thetar|theta ?o|thetao|theta out|theta scat(ter(ed|ing)?)?|"
+                           r"theta det(ector)?|theta v(iew)?|theta|scatter(ed|ing)?( angle)?|measure(ment|d)?( angle)?|"
+                           r"detector( angle)?|observation( angle)?|view(ing)?( angle)?|reflection angle|aov|aos|det|"
+                           r"angle of (view|observation|scatter(ing)?|reflection|detection|emergence)|"
+                           r"emergence( angle)?|exit( angle)?|outgoing( angle)?|polar( angle)?|zenith( angle)?|"
+                           r"zenith s|polar s|receiver( angle)?|angle|in plane angle|signed angle|"
+                           r"signed scatter(ing)? angle|scatter angle signed|as)$")),
+    ("wavelength", re.compile(r"^(wavelength|wave length|lambda|wl|wvl|nm|um|wavelength nm)$")),
+    ("side", re.compile(r"^(side|hemisphere|mode|type|r ?t|scatter type|geometry)$")),
+    ("value", re.compile(r"^(value|values|data)$")),
+)
+
+
+def _classify(header: str, index: int, file: str, line: int) -> _Column:
+    raw = _clean_header(header)
+    name, units = _units_of(raw)
+    col = _Column(index=index, header=header.strip())
+    if not name and not units:
+        raise FormatError("empty column header", file=file, line=line, field=f"column {index + 1}",
+                          expected="a column name", got=header)
+    low = raw.lower()
+    percent = "%" in low or units in ("pct", "percent")
+    # uncertainty columns first ("BRDF std", "u(BRDF)", "uncertainty (%)")
+    if _STD_WORDS.search(name) or re.match(r"^u ?\(", raw.strip().lower()):
+        col.role = "std"
+        col.relative = bool(re.search(r"\brel(ative)?\b|rsd|cv", name))
+        col.percent = percent
+        col.quantity = _quantity_from_words(name)
+        return col
+    for role, pattern in _ROLE_PATTERNS:
+        if pattern.match(name):
+            col.role = role
+            if role in ("theta_i", "phi_i", "theta_s", "phi_s"):
+                col.scale = _angle_scale(units, col.header, file, line)
+            elif role == "wavelength":
+                col.scale = _wavelength_scale("um" if name == "um" else units, col.header, file, line)
+            elif role == "value":
+                col.percent = percent
+            return col
+    quantity = _quantity_from_words(name)
+    # a number in the header: wide layout (wavelength or incidence per column)
+    number = _NUMBER_IN.search(name)
+    if number is not None:
+        value = float(number.group(1).replace(",", "."))
+        unit = (number.group(2) or "").lower()
+        if not unit and units.replace(" ", "") in ("nm", "um", "deg", "micron", "microns"):
+            unit = units.replace(" ", "")[:2]
+        rest = (name[: number.start()] + " " + name[number.end():]).strip()
+        incidence_words = re.search(r"\b(aoi|inc|incidence|incident|theta ?i|thetai|ai)\b", rest)
+        if unit in ("deg", "d") or incidence_words:
+            if not 0.0 <= value < 90.0:
+                raise FormatError("incidence in a column header out of range", file=file, line=line,
+                                  field=col.header, expected="0 <= incidence < 90 deg", got=value)
+            col.role, col.incidence, col.quantity, col.percent = "value", value, quantity, percent
+            return col
+        scale = 1.0
+        if unit == "um" or units in ("um", "micron", "microns"):
+            scale = 1000.0
+        lam = value * scale
+        if unit or units in ("nm",) or 100.0 <= lam <= 100000.0 or quantity or re.search(r"lambda|wl|wavelength",
+                                                                                            rest):
+            if not lam > 0:
+                raise FormatError("wavelength in a column header must be positive", file=file, line=line,
+                                  field=col.header, expected="> 0 nm", got=value)
+            col.role, col.wavelength, col.quantity, col.percent = "value", lam, quantity, percent
+            return col
+        raise FormatError("column header holds a number that is neither a wavelength nor an incidence",
+                          file=file, line=line, field=col.header,
+                          expected="'550 nm' (wavelength) or 'AOI 10' / '10 deg' (incidence)", got=header.strip())
+    if quantity is not None or re.match(r"^(reflectance|transmittance|r|t)$", name):
+        col.role, col.quantity, col.percent = "value", quantity, percent
+        if quantity is None:
+            col.quantity = None  # "Reflectance", "R": a value whose quantity the file does not say
+        return col
+    col.role = "ignore"
+    return col
+
+
+# ------------------------------------------------------------------------------------------- text
+@dataclass
+class _Text:
+    path: str
+    lines: list[tuple[int, str]]  # (line number, text) of non-empty, non-comment lines
+    comments: list[tuple[int, str]]
+    encoding: str
+    last_line: int
+
+
+def _decode(raw: bytes, path: str) -> tuple[str, str]:
+    if raw.startswith(b"\xef\xbb\xbf"):
+        return raw[3:].decode("utf-8", errors="strict"), "utf-8-sig"
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return raw.decode("utf-16"), "utf-16"
+        except UnicodeDecodeError:
+            raise FormatError("undecodable UTF-16 text", file=path, line=1, expected="text") from None
+    if b"\x00" in raw[:4096]:
+        raise FormatError("binary file, not a text table", file=path, line=1, expected="a text table")
+    try:
+        return raw.decode("utf-8"), "utf-8"
+    except UnicodeDecodeError:
+        return raw.decode("cp1252", errors="replace"), "cp1252"
+
+
+def _load_text(path: str) -> _Text:
+    p = Path(path)
+    if p.is_dir():
+        raise InputError("is a folder, not a table", file=path, expected="a text table file")
+    if not p.is_file():
+        raise InputError("file not found", file=path, expected="a text table")
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
+    text, encoding = _decode(raw, path)
+    lines, comments = [], []
+    all_lines = text.splitlines()
+    for number, line in enumerate(all_lines, start=1):
+        body = line.strip().lstrip("\ufeff").strip()
+        if not body or not body.strip(",;\t "):
+            continue
+        if body.startswith(("#", "//", "%", "!")):
+            comments.append((number, body.lstrip("#/%! ").strip()))
+            continue
+        lines.append((number, line.lstrip("\ufeff")))
+    return _Text(path, lines, comments, encoding, len(all_lines))
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    return [c.strip() for c in next(csv.reader([line], delimiter=delimiter, quotechar='"', skipinitialspace=True))]
+
+
+def _fields(line: str, delimiter: str | None) -> list[str]:
+    """Cells of a line without trailing empty cells (trailing separators are common in exports)."""
+    cells = _split(line, delimiter)
+    while len(cells) > 1 and not cells[-1].strip():
+        cells.pop()
+    return cells
+
+
+def _sniff_delimiter(lines: list[str]) -> str | None:
+    """Tab, semicolon or comma: the first that splits the first line into ≥ 2 fields with a consistent count
+    over the following lines; whitespace when none does."""
+    head = lines[0]
+    following = lines[1:20]
+    best: str | None = None
+    for delim in ("\t", ";", ","):
+        n = len(_fields(head, delim))
+        if n < 2:
+            continue
+        if not following or all(len(_fields(x, delim)) == n for x in following):
+            return delim
+        if best is None and sum(len(_fields(x, delim)) == n for x in following) >= 0.5 * len(following):
+            best = delim
+    if best is not None:
+        return best
+    return None
+
+
+_META_KEYS = {
+    "quantity": re.compile(r"^(quantity|type|data type|measured quantity|measurand|units? of data|data)$"),
+    "side": re.compile(r"^(side|hemisphere|scatter type|scattertype)$"),
+    "wavelength": re.compile(r"^(wavelength|lambda|wl|wavelength nm)$"),
+    "incidence": re.compile(r"^(incidence|aoi|theta i|thetai|angle of incidence|incidence angle|incident angle)$"),
+    "phi_i": re.compile(r"^(phi i|phii|incident azimuth|source azimuth)$"),
+    "relative_std": re.compile(r"^(relative std|relative uncertainty|rel std|relative standard uncertainty)$"),
+    "sample": re.compile(r"^(sample|sample name|material|specimen|name)$"),
+}
+
+
+def _metadata(entries: list[tuple[int, str]]) -> dict[str, tuple[str, int]]:
+    """``key: value`` / ``key = value`` / ``key,value`` pairs → known metadata keys (value, line)."""
+    out: dict[str, tuple[str, int]] = {}
+    for number, text in entries:
+        m = re.match(r"^\s*([^:=,;\t]+?)\s*[:=,;\t]\s*(.+?)\s*$", text)
+        if not m:
+            continue
+        key_raw = _clean_header(m.group(1))
+        key, units = _units_of(key_raw)
+        value = m.group(2).strip().strip('"').strip(",;").strip()
+        for name, pattern in _META_KEYS.items():
+            if pattern.match(key) and name not in out:
+                out[name] = (value + (f" {units}" if units else ""), number)
+    return out
+
+
+def _meta_number(meta: dict[str, tuple[str, int]], key: str, path: str, unit_scale: dict[str, float],
+                 default_unit: str) -> float | None:
+    if key not in meta:
+        return None
+    text, number = meta[key]
+    m = re.match(r"^\s*([+-]?[0-9]*[.,]?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([a-zA-Zµ%°]*)\s*$", text)
+    if not m:
+        raise FormatError("metadata value is not a number", file=path, line=number, field=key,
+                          expected=f"a number in {default_unit}", got=text)
+    unit = (m.group(2) or default_unit).lower().replace("µ", "u").replace("°", "deg")
+    if unit not in unit_scale:
+        raise FormatError("unknown unit in metadata", file=path, line=number, field=key,
+                          expected=" or ".join(unit_scale), got=m.group(2))
+    return float(m.group(1).replace(",", ".")) * unit_scale[unit]
+
+
+# ------------------------------------------------------------------------------------------- numbers
+def _number(cell: str, decimal_comma: bool) -> float:
+    """float of a cell; NaN for a gap; raises ValueError for text."""
+    t = cell.strip().strip('"').strip()
+    if t.lower() in _MISSING:
+        return math.nan
+    if decimal_comma:
+        t = t.replace(",", ".")
+    t = t.replace("\u2212", "-")
+    value = float(t)
+    return value
+
+
+# ------------------------------------------------------------------------------------------- the reader
+@dataclass
+class _Rows:
+    """What the parser found: one entry per (row, value column) with a finite or NaN value."""
+
+    theta_i: list[float] = field(default_factory=list)
+    phi_i: list[float] = field(default_factory=list)
+    theta_s: list[float] = field(default_factory=list)  # signed for in-plane tables
+    phi_s: list[float] = field(default_factory=list)
+    side: list[str | None] = field(default_factory=list)
+    wavelength: list[float] = field(default_factory=list)
+    value: list[float] = field(default_factory=list)
+    std: list[float] = field(default_factory=list)
+    std_relative: list[bool] = field(default_factory=list)
+    quantity: list[str] = field(default_factory=list)
+    line: list[int] = field(default_factory=list)
+    column: list[str] = field(default_factory=list)
+
+
+def _find_header(text: _Text) -> tuple[int, str | None, list[_Column], list[tuple[int, str]]]:
+    """Index (in text.lines) of the header row, its delimiter and columns, and the preamble lines before it."""
+    if not text.lines:
+        raise FormatError("empty table (no header, no data)", file=text.path, line=max(text.last_line, 1),
+                          expected="a header line and data rows")
+    preamble: list[tuple[int, str]] = []
+    first_error: FormatError | None = None
+    for k, (number, line) in enumerate(text.lines[:200]):
+        following = [x for _, x in text.lines[k + 1: k + 21]]
+        delim = _sniff_delimiter([line, *following])
+        cells = _fields(line, delim)
+        if (delim is None or len(cells) <= 2) and re.match(r"^\s*[^\d\s,;\t][^,;\t]*?\s*[:=]\s*\S", line) \
+                and not re.search(r"[:=]\s*[\d.]+\s*(nm|um|deg)?\s*[,;\t]", line):
+            preamble.append((number, line))  # 'key: value' metadata, not a header
+            continue
+        if cells and all(_is_numberlike(c) for c in cells if c.strip()):
+            if first_error is not None:
+                raise first_error
+            raise FormatError("data before a header line", file=text.path, line=number, field="header",
+                              expected="a header naming the columns (e.g. theta_i, theta_s, BRDF)",
+                              got=line.strip()[:60])
+        try:
+            columns = [_classify(c, i, text.path, number) for i, c in enumerate(cells)]
+        except FormatError as exc:
+            first_error = first_error or exc
+            preamble.append((number, line))
+            continue
+        roles = {c.role for c in columns}
+        angle = roles & {"theta_s", "theta_i"} or any(c.incidence is not None for c in columns)
+        if angle and ("value" in roles) and len(cells) >= 2:
+            return k, delim, columns, preamble
+        if ("theta_s" in roles or "theta_i" in roles) and "value" not in roles:
+            first_error = first_error or FormatError(
+                "header has no value column", file=text.path, line=number, field="header",
+                expected="a value column (BRDF, BTDF, value, reflectance factor, or one per wavelength '550 nm')",
+                got=[c.header for c in columns][:8])
+        preamble.append((number, line))
+    if first_error is not None:
+        raise first_error
+    number, line = text.lines[0]
+    raise FormatError("no header line with angle and value columns", file=text.path, line=number, field="header",
+                      expected="columns such as theta_i, theta_s (or a signed scatter angle), BRDF",
+                      got=line.strip()[:60])
+
+
+def _is_numberlike(cell: str) -> bool:
+    t = cell.strip().strip('"').replace(",", ".").replace("\u2212", "-")
+    if t.lower() in _MISSING:
+        return True
+    try:
+        float(t)
+    except ValueError:
+        return False
+    return True
+
+
+def _resolve_quantity(columns: list[_Column], meta: dict[str, tuple[str, int]], quantity: str | None,
+                      path: str, header_line: int) -> None:
+    """Give every value/std column its quantity; errors when none is stated or statements disagree."""
+    given = normalise_quantity(quantity, field="--quantity") if quantity is not None else None
+    # a 'type:'/'data:' line that names no quantity is not a statement
+    meta_q = _quantity_from_words(meta["quantity"][0]) if "quantity" in meta else None
+    for col in columns:
+        if col.role not in ("value", "std"):
+            continue
+        stated = col.quantity or meta_q
+        where_line = header_line if col.quantity else (meta["quantity"][1] if meta_q else header_line)
+        if given is not None and stated is not None and stated != given:
+            if not (stated == "bsdf" and given in ("brdf", "btdf")):
+                raise InputError("the table states another quantity than --quantity", file=path, line=where_line,
+                                 field=col.header, expected=given, got=stated)
+        q = given or stated
+        if q is None:
+            if col.role == "std":
+                continue
+            raise InputError("the table does not say which quantity it holds; pass --quantity", file=path,
+                             line=header_line, field=col.header,
+                             expected="--quantity " + "|".join(QUANTITIES[:-1]), got=col.header)
+        col.quantity = q
+    for col in columns:
+        if col.role == "std" and col.quantity is None:
+            col.quantity = next((c.quantity for c in columns if c.role == "value"), None)
+
+
+def _pair_std(columns: list[_Column], path: str, line: int) -> None:
+    values = [c for c in columns if c.role == "value"]
+    stds = [c for c in columns if c.role == "std"]
+    if not stds:
+        return
+    if len(values) == 1:
+        if len(stds) > 1:
+            raise FormatError("several uncertainty columns for one value column", file=path, line=line,
+                              field=stds[1].header, expected="one std column", got=[s.header for s in stds])
+        stds[0].pair = values[0].index
+        return
+    # wide/several values: pair by wavelength/incidence in the header, else by quantity, else by position
+    for s_col in stds:
+        number = _NUMBER_IN.search(_units_of(_clean_header(s_col.header))[0])
+        match = None
+        if number is not None:
+            v = float(number.group(1).replace(",", "."))
+            for c in values:
+                if (c.wavelength is not None and abs(c.wavelength - v) < 1e-6) or (
+                        c.incidence is not None and abs(c.incidence - v) < 1e-9):
+                    match = c
+                    break
+        if match is None and s_col.quantity is not None:
+            same = [c for c in values if c.quantity == s_col.quantity]
+            if len(same) == 1:
+                match = same[0]
+        if match is None:
+            before = [c for c in values if c.index < s_col.index]
+            match = before[-1] if before else None
+        if match is None:
+            raise FormatError("cannot tell which value column an uncertainty column belongs to", file=path,
+                              line=line, field=s_col.header, expected="a std column right after its value column")
+        s_col.pair = match.index
+
+
+def read_table(path: str | Path, quantity: str | None = None, side: str | None = None,
+               relative_std: float | None = None, *, wavelength: float | None = None,
+               incidence: float | None = None, phi_i: float | None = None, zeros: str = "auto",
+               sample: str | None = None) -> xr.Dataset:
+    """Read a measured BSDF text table into the calibrated BSDF dataset schema.
+
+    Parameters
+    ----------
+    path
+        The table (layouts, headers and rules in the module docstring and ``docs/raw-format.md``).
+    quantity
+        What the values are where the file does not say: ``brdf``, ``btdf``, ``ccbrdf``, ``ccbtdf``,
+        ``reflectance-factor``, ``transmittance-factor`` (also ``bsdf``, with ``side``). Never guessed.
+    side
+        ``reflection`` or ``transmission`` where neither a side column nor the quantity fixes it.
+    relative_std
+        Standard uncertainty as a fraction of the value when the table has no uncertainty column
+        (default: the file's ``# relative_std:``, else :data:`DEFAULT_RELATIVE_STD` = 0.05).
+    wavelength
+        Wavelength [nm] of a monochrome table (one without wavelength columns); without it such a table gets
+        a single NaN wavelength and the attribute ``wavelength_note``.
+    incidence, phi_i
+        θi and φi [deg] when the table has no such column (default φi = 180°, the specular side at φs = 0).
+    zeros
+        ``auto`` | ``keep`` | ``missing``: what an exact 0 means (module docstring).
+    sample
+        Sample name (default: the file's ``# sample:``, else the file name).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf``, ``bsdf_std`` [1/sr] on (record, wavelength [nm]) with the coords and attributes of
+        :func:`bsdfkit.measurement.calibrate.calibrate` (``quantity = "bsdf"``); the table's own quantity is
+        ``attrs['source_quantity']``.
+    """
+    path = str(path)
+    if zeros not in ZERO_POLICIES:
+        raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
+    if side is not None and side not in SIDES:
+        raise InputError("unknown side", field="--side", expected="reflection | transmission", got=side)
+    if relative_std is not None and not (np.isfinite(relative_std) and relative_std > 0):
+        raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
+                         expected="> 0 (e.g. 0.05 for 5 %)", got=relative_std)
+    if wavelength is not None and not (np.isfinite(wavelength) and wavelength > 0):
+        raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+    text = _load_text(path)
+    k_header, delim, columns, preamble = _find_header(text)
+    header_line = text.lines[k_header][0]
+    meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
+    data = text.lines[k_header + 1:]
+    if data and _units_row(data[0][1], delim, columns, path, data[0][0]):
+        data = data[1:]
+    if not data:
+        raise FormatError("header only, no data rows", file=path, line=header_line, field="data",
+                          expected="data rows after the header")
+    roles: dict[str, list[_Column]] = {}
+    for c in columns:
+        roles.setdefault(c.role, []).append(c)
+    for role in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "side"):
+        if len(roles.get(role, [])) > 1:
+            raise FormatError(f"two columns for {role}", file=path, line=header_line, field=roles[role][1].header,
+                              expected=f"one {role} column", got=[c.header for c in roles[role]])
+    values = roles.get("value", [])
+    wide_wl = [c for c in values if c.wavelength is not None]
+    wide_inc = [c for c in values if c.incidence is not None]
+    if wide_wl and "wavelength" in roles:
+        raise FormatError("wavelength both in a column and in value headers", file=path, line=header_line,
+                          field=roles["wavelength"][0].header, expected="one of the two layouts")
+    if wide_inc and "theta_i" in roles:
+        raise FormatError("incidence both in a column and in value headers", file=path, line=header_line,
+                          field=roles["theta_i"][0].header, expected="one of the two layouts")
+    if "theta_s" not in roles:
+        raise FormatError("no scatter-angle column", file=path, line=header_line, field="header",
+                          expected="theta_s (with phi_s) or a signed in-plane scatter angle",
+                          got=[c.header for c in columns][:8])
+    if wavelength is not None and (wide_wl or "wavelength" in roles):
+        raise InputError("the table states its wavelengths; --wavelength is for monochrome tables", file=path,
+                         line=header_line, field="--wavelength", got=wavelength)
+    wl_list = [c.wavelength for c in wide_wl]
+    if len(set(np.round(wl_list, 9))) != len(wl_list):
+        dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][-1]
+        raise FormatError("wavelength given twice in the header", file=path, line=header_line, field=dup.header,
+                          expected="distinct wavelengths", got=dup.wavelength)
+    if len(wl_list) > 1 and np.any(np.diff(wl_list) <= 0):
+        bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
+        raise FormatError("wavelength columns not increasing", file=path, line=header_line, field=bad.header,
+                          expected="increasing wavelengths", got=bad.wavelength)
+    _resolve_quantity(columns, meta, quantity, path, header_line)
+    _pair_std(columns, path, header_line)
+    meta_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+    meta_inc = _meta_number(meta, "incidence", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    meta_phi = _meta_number(meta, "phi_i", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    meta_rel = _meta_number(meta, "relative_std", path, {"": 1.0, "%": 0.01}, "")
+    mono_lambda = wavelength if wavelength is not None else meta_lambda
+    theta_i_default = incidence if incidence is not None else meta_inc
+    phi_i_default = phi_i if phi_i is not None else (meta_phi if meta_phi is not None else 180.0)
+    block_comments = [c for c in text.comments if c[0] > header_line]
+    if "theta_i" not in roles and not wide_inc and theta_i_default is None \
+            and "incidence" not in _metadata(block_comments) \
+            and not any("incidence" in _metadata([entry]) for entry in data if not _is_numberlike(
+                _fields(entry[1], delim)[0])):
+        raise FormatError("no incidence column", file=path, line=header_line, field="header",
+                          expected="a theta_i / AOI / incidence column, '# incidence: 10 deg', or --incidence",
+                          got=[c.header for c in columns][:8])
+    side_meta = None
+    if "side" in meta:
+        side_meta = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
+        if side_meta is None:
+            raise InputError("unknown side in the metadata", file=path, line=meta["side"][1], field="side",
+                             expected="reflection or transmission", got=meta["side"][0])
+    if side is not None and side_meta is not None and side != side_meta:
+        raise InputError("--side contradicts the table", file=path, line=meta["side"][1], field="side",
+                         expected=side_meta, got=side)
+    default_side = side or side_meta
+    rel = relative_std if relative_std is not None else (meta_rel if meta_rel is not None else None)
+    decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
+    rows = _parse_rows(path, data, delim, columns, roles, decimal_comma, theta_i_default, phi_i_default,
+                       default_side, mono_lambda, block_comments, _fields(text.lines[k_header][1], delim))
+    signed = "phi_s" not in roles
+    ds = _assemble(path, rows, signed, rel, zeros,
+                   wavelength_known=bool(np.isfinite(np.asarray(rows.wavelength, dtype=np.float64)).any()))
+    stated = sorted({q for q in rows.quantity})
+    provenance = {
+        "format": "measured-table",
+        "reader": f"bsdfkit.measurement.table {__version__}",
+        "layout": "wide" if (wide_wl or wide_inc) else "long",
+        "delimiter": {"\t": "tab", ";": "semicolon", ",": "comma", None: "whitespace"}[delim],
+        "decimal_comma": bool(decimal_comma),
+        "encoding": text.encoding,
+        "header_line": header_line,
+        "columns": {c.header: (c.role if c.role not in ("value", "std") else
+                               f"{c.role} ({c.quantity}"
+                               + (f", {c.wavelength:g} nm" if c.wavelength is not None else "")
+                               + (f", theta_i {c.incidence:g} deg" if c.incidence is not None else "") + ")")
+                    for c in columns},
+        "metadata": {k: v for k, (v, _) in meta.items()},
+        "comments": [c for _, c in text.comments][:50],
+        "quantity": stated,
+        "signed_in_plane_angle": signed,
+    }
+    ds.attrs.update(
+        source_format="text table",
+        source_layout=provenance["layout"],
+        source_quantity=" ".join(stated),
+        sample_name=sample or (meta["sample"][0] if "sample" in meta else Path(path).stem),
+        manifest_json=json.dumps(provenance),
+    )
+    return ds
+
+
+_UNIT_CELL = re.compile(r"^[\(\[]?\s*(deg|degrees?|°|rad|radians?|mrad|nm|um|µm|μm|micron|a|å|1/sr|sr-1|sr\^-1|/sr|"
+                        r"sr⁻¹|%|-|a\.u\.|au|arb\.?|none|1|counts)?\s*[\)\]]?$", re.IGNORECASE)
+
+
+def _units_row(line: str, delim: str | None, columns: list[_Column], path: str, number: int) -> bool:
+    """A row of units right after the header (``deg, deg, nm, 1/sr``): apply it to the columns and return True."""
+    cells = _fields(line, delim)
+    if len(cells) > len(columns) or any(_is_numberlike(c) and c.strip() not in ("-", "") for c in cells):
+        return False
+    units = [c.strip().strip('"').lower().strip("()[] ").replace("µ", "u").replace("μ", "u").replace("°", "deg")
+             for c in cells]
+    if not any(units) or not all(_UNIT_CELL.match(c.strip().strip('"')) for c in cells):
+        return False
+    for col, unit in zip(columns, units):
+        if not unit:
+            continue
+        if col.role in ("theta_i", "phi_i", "theta_s", "phi_s"):
+            col.scale = _angle_scale(unit, col.header, path, number)
+        elif col.role == "wavelength":
+            col.scale = _wavelength_scale(unit, col.header, path, number)
+        elif col.role in ("value", "std") and unit == "%":
+            col.percent = True
+    return True
+
+
+def _side_of_words(text: str) -> str | None:
+    q = _quantity_from_words(text)
+    return None if q is None else side_of_quantity(q)
+
+
+def _uses_decimal_comma(data: list[tuple[int, str]], delim: str | None) -> bool:
+    pattern = re.compile(r"^[+-]?\d*,\d+([eE][+-]?\d+)?$")
+    for _, line in data[:50]:
+        for cell in _split(line, delim):
+            c = cell.strip()
+            if pattern.match(c):
+                return True
+            if re.match(r"^[+-]?\d*\.\d+", c):
+                return False
+    return False
+
+
+def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, columns: list[_Column],
+                roles: dict[str, list[_Column]], decimal_comma: bool, theta_i_default: float | None,
+                phi_i_default: float, default_side: str | None, mono_lambda: float | None,
+                block_comments: list[tuple[int, str]], header_cells: list[str]) -> _Rows:
+    """Rows → one entry per value cell. Between blocks, a repeated header is skipped, and ``# incidence: 20``
+    comments or ``Incidence: 20`` lines set the incidence (wavelength, phi_i, side) of the rows that follow."""
+    rows = _Rows()
+    pending = sorted(block_comments)
+    header_norm = [c.strip().strip('"').lower() for c in header_cells]
+
+    def apply_block(meta: dict[str, tuple[str, int]]) -> None:
+        nonlocal theta_i_default, phi_i_default, mono_lambda, default_side
+        angle = {"deg": 1.0, "rad": 180.0 / math.pi}
+        if "incidence" in meta:
+            theta_i_default = _meta_number(meta, "incidence", path, angle, "deg")
+        if "phi_i" in meta:
+            phi_i_default = _meta_number(meta, "phi_i", path, angle, "deg")
+        if "wavelength" in meta:
+            mono_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+        if "side" in meta:
+            word = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
+            if word is None:
+                raise InputError("unknown side", file=path, line=meta["side"][1], field="side",
+                                 expected="reflection or transmission", got=meta["side"][0])
+            default_side = word
+
+    n_cols = len(columns)
+    values = roles["value"]
+    std_of = {c.pair: c for c in roles.get("std", [])}
+    signed = "phi_s" not in roles
+
+    def num(cells: list[str], col: _Column, line: int, what: str) -> float:
+        try:
+            v = _number(cells[col.index], decimal_comma)
+        except ValueError:
+            raise FormatError(f"not a number in the {what} column", file=path, line=line,
+                              field=f"column {col.index + 1} '{col.header}'", expected="a number or an empty cell",
+                              got=cells[col.index]) from None
+        if math.isinf(v):
+            raise FormatError(f"infinite number in the {what} column", file=path, line=line,
+                              field=f"column {col.index + 1} '{col.header}'", expected="a finite number",
+                              got=cells[col.index])
+        return v * col.scale
+
+    def required(cells: list[str], role: str, line: int, default: float | None) -> float:
+        if role not in roles:
+            return math.nan if default is None else default
+        col = roles[role][0]
+        v = num(cells, col, line, role)
+        if math.isnan(v):
+            raise FormatError(f"missing {role}", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
+                              expected="a number (angles and wavelengths cannot be gaps)", got=cells[col.index])
+        return v
+
+    specs = [(c, std_of.get(c.index), bool(std_of.get(c.index) is not None and (
+        std_of[c.index].relative or (std_of[c.index].percent and not c.percent))), side_of_quantity(c.quantity))
+             for c in values]
+    quantities = [c.quantity for c in values]
+    headers = [c.header for c in values]
+    out_side: list[str | None] = []
+    out_value: list[float] = []
+    out_std: list[float] = []
+    out_rel: list[bool] = []
+    for line, text in data:
+        while pending and pending[0][0] < line:
+            apply_block(_metadata([pending.pop(0)]))
+        cells = _split(text, delim)
+        if [c.strip().strip('"').lower() for c in _fields(text, delim)] == header_norm:
+            continue  # the header repeated at the start of the next block
+        if cells and not _is_numberlike(cells[0]):
+            meta = _metadata([(line, text.strip())])
+            if meta and re.match(r"^\s*[^:=]+[:=]", text):
+                apply_block(meta)
+                continue
+        while len(cells) > n_cols and not cells[-1].strip():
+            cells.pop()  # trailing separators
+        if len(cells) != n_cols:
+            raise FormatError("wrong number of fields", file=path, line=line, field="row",
+                              expected=f"{n_cols} fields like the header", got=len(cells))
+        th_i = required(cells, "theta_i", line, theta_i_default)
+        if math.isnan(th_i) and not any(c.incidence is not None for c in values):
+            raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
+                              expected="a theta_i column, or '# incidence: <deg>' before the block")
+        ph_i = required(cells, "phi_i", line, phi_i_default)
+        th_s = required(cells, "theta_s", line, None)
+        ph_s = required(cells, "phi_s", line, 0.0)
+        lam = required(cells, "wavelength", line, mono_lambda)
+        row_side = default_side
+        if "side" in roles:
+            col = roles["side"][0]
+            word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
+            if word is None:
+                raise FormatError("unknown side", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
+                                  expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
+            row_side = word
+        _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, signed, roles)
+        if "wavelength" in roles and not lam > 0:
+            col = roles["wavelength"][0]
+            raise FormatError("wavelength must be positive", file=path, line=line,
+                              field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm",
+                              got=cells[col.index])
+        for spec in specs:
+            col, scol = spec[0], spec[1]
+            text_v = cells[col.index]
+            try:
+                v = float(text_v)  # fast path; gaps, decimal commas and errors go through num()
+            except ValueError:
+                v = num(cells, col, line, "value")
+            else:
+                if math.isinf(v) or decimal_comma:
+                    v = num(cells, col, line, "value")
+            if col.percent:
+                v *= 0.01
+            s, s_rel = math.nan, False
+            if scol is not None:
+                s = num(cells, scol, line, "uncertainty")
+                if not math.isnan(s) and s < 0:
+                    raise FormatError("negative uncertainty", file=path, line=line,
+                                      field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
+                                      got=cells[scol.index])
+                s_rel = spec[2]
+                if scol.percent:
+                    s *= 0.01
+            this_side = row_side
+            q_side = spec[3]
+            if q_side is not None:
+                if this_side is not None and this_side != q_side:
+                    raise InputError(f"side contradicts the quantity {col.quantity}", file=path, line=line,
+                                     field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
+                this_side = q_side
+            if this_side is None:
+                raise InputError("the table does not say which side it holds; pass --side", file=path, line=line,
+                                 field=f"column {col.index + 1} '{col.header}'",
+                                 expected="--side reflection|transmission, a side column, or --quantity brdf|btdf")
+            out_side.append(this_side)
+            out_value.append(v)
+            out_std.append(s)
+            out_rel.append(s_rel)
+        n_v = len(specs)
+        rows.theta_i.extend(th_i if c.incidence is None else c.incidence for c in values)
+        rows.phi_i.extend([ph_i] * n_v)
+        rows.theta_s.extend([th_s] * n_v)
+        rows.phi_s.extend([ph_s] * n_v)
+        rows.wavelength.extend(lam if c.wavelength is None else c.wavelength for c in values)
+        rows.quantity.extend(quantities)
+        rows.line.extend([line] * n_v)
+        rows.column.extend(headers)
+    rows.side, rows.value, rows.std, rows.std_relative = out_side, out_value, out_std, out_rel
+    return rows
+
+
+def _check_angles(path: str, line: int, th_i: float, ph_i: float, th_s: float, ph_s: float, signed: bool,
+                  roles: dict[str, list[_Column]]) -> None:
+    def where(role: str) -> str:
+        c = roles.get(role)
+        return f"column {c[0].index + 1} '{c[0].header}'" if c else role
+
+    if not 0.0 <= th_i < 90.0:
+        raise ValidationError("incidence angle out of range", file=path, line=line, field=where("theta_i"),
+                              expected="0 <= theta_i < 90 deg", got=th_i)
+    if signed:
+        if not -90.0 <= th_s <= 90.0:
+            raise ValidationError("signed in-plane scatter angle out of range", file=path, line=line,
+                                  field=where("theta_s"),
+                                  expected="-90..90 deg (transmission: from the back normal, with --side)", got=th_s)
+    elif not 0.0 <= th_s <= 90.0:
+        raise ValidationError("scatter angle out of range", file=path, line=line, field=where("theta_s"),
+                              expected="0 <= theta_s <= 90 deg (with a phi_s column)", got=th_s)
+    for role, v in (("phi_i", ph_i), ("phi_s", ph_s)):
+        if not -360.0 <= v <= 360.0:
+            raise ValidationError("azimuth out of range", file=path, line=line, field=where(role),
+                                  expected="-360..360 deg", got=v)
+
+
+# ------------------------------------------------------------------------------------------- dataset
+def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArray) -> NDArray[np.object_]:
+    """``in_plane`` (φs on the specular or source side, or θs = 0), ``perpendicular`` (the great circle
+    through the specular direction normal to the plane of incidence) or ``other``, per record (degrees)."""
+    ti, pi_, ts, ps = (np.radians(np.asarray(a, dtype=np.float64)) for a in (theta_i, phi_i, theta_s, phi_s))
+    rel = np.mod(ps - (pi_ - np.pi) + np.pi, 2 * np.pi) - np.pi  # φs relative to the specular azimuth
+    in_plane = (np.abs(np.sin(rel)) * np.sin(ts) < 1e-9) | (ts < 1e-12)
+    # d = (sin θs cos rel, sin θs sin rel, cos θs) in a frame with the specular azimuth on +x;
+    # the perpendicular great circle through r0 = (sin θi, 0, cos θi) has normal (−cos θi, 0, sin θi)
+    dot = -np.cos(ti) * np.sin(ts) * np.cos(rel) + np.sin(ti) * np.cos(ts)
+    perp = (np.abs(dot) < 1e-7) & ~in_plane
+    return np.where(in_plane, "in_plane", np.where(perp, "perpendicular", "other")).astype(object)
+
+
+def records_dataset(
+    theta_i: Sequence[float], phi_i: Sequence[float], theta_s: Sequence[float], phi_s: Sequence[float],
+    side: Sequence[str], wavelength: Sequence[float], bsdf: NDArray[np.float64], bsdf_std: NDArray[np.float64],
+    *, source: str, source_line: Sequence[int] | None = None, arc: Sequence[str] | None = None,
+    std_origin: str = "", description: str = "", wavelength_note: str = "",
+) -> xr.Dataset:
+    """The calibrated-dataset schema of :func:`bsdfkit.measurement.calibrate.calibrate` from per-record angles
+    [deg], sides and BSDF values [1/sr] (records × wavelengths, NaN = gap).
+
+    One configuration (:data:`CONFIG_NAME`) with a flat incident spectrum over the wavelengths (elastic data:
+    each wavelength is scattered at itself); no bi-spectral values (NaN), no noise floor (NaN), no instrument
+    geometry (NaN attributes). Used by the table reader and by :mod:`bsdfkit.tables.to_dataset`.
+    """
+    n = len(theta_i)
+    lam = np.asarray(wavelength, dtype=np.float64)
+    f = np.asarray(bsdf, dtype=np.float64).reshape(n, lam.size)
+    s = np.asarray(bsdf_std, dtype=np.float64).reshape(n, lam.size)
+    th_i = np.asarray(theta_i, dtype=np.float64)
+    ph_i = np.asarray(phi_i, dtype=np.float64)
+    th_s = np.asarray(theta_s, dtype=np.float64)
+    ph_s = np.asarray(phi_s, dtype=np.float64)
+    arcs = np.asarray(arc, dtype=object) if arc is not None else arc_labels(th_i, ph_i, th_s, ph_s)
+    grazing = th_s >= 90.0 - 1e-9
+    if lam.size > 1 and np.all(np.isfinite(lam)):
+        spectrum = np.full(lam.size, 1.0 / float(np.sum(np.gradient(lam))))
+        band = [float(lam.min()), float(lam.max())]
+    else:
+        spectrum = np.ones(lam.size)
+        band = [float(lam[0]), float(lam[0])]
+    valid = np.ones(lam.size, dtype=bool)
+    nan2 = np.full((n, lam.size), np.nan)
+    ds = xr.Dataset(
+        {
+            "bsdf": (("record", "wavelength"), f),
+            "bsdf_std": (("record", "wavelength"), s),
+            "noise_floor": (("record", "wavelength"), nan2.copy()),
+            "bsdf_bispectral": (("record", "wavelength"), nan2.copy()),
+            "bsdf_bispectral_std": (("record", "wavelength"), nan2.copy()),
+            "noise_floor_bispectral": (("record", "wavelength"), nan2.copy()),
+            "saturated": (("record", "wavelength"), np.zeros((n, lam.size), dtype=bool)),
+            "grazing": ("record", grazing),
+            "incident_spectrum": (("configuration", "wavelength"), spectrum[None, :]),
+            "incident_relative_std": (("configuration", "wavelength"), np.zeros((1, lam.size))),
+            "incident_valid": (("configuration", "wavelength"), valid[None, :]),
+            "incident_power_relative_std": ("configuration", np.zeros(1)),
+            "incident_band": (("configuration", "band_edge"), np.array([band])),
+            "configuration_description": ("configuration", np.array([description or "measured table"], dtype=object)),
+        },
+        coords={
+            "config": ("record", np.full(n, CONFIG_NAME, dtype=object)),
+            "theta_i": ("record", th_i), "phi_i": ("record", ph_i), "theta_s": ("record", th_s),
+            "phi_s": ("record", ph_s), "side": ("record", np.asarray(side, dtype=object)),
+            "arc": ("record", arcs),
+            "exposure": ("record", np.full(n, np.nan)),
+            "source_line": ("record", np.asarray(source_line if source_line is not None else np.zeros(n),
+                                                 dtype=np.int64)),
+            "wavelength": lam,
+            "configuration": np.array([CONFIG_NAME], dtype=object),
+            "band_edge": np.array(["low", "high"], dtype=object),
+        },
+    )
+    for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
+        ds[name].attrs["units"] = "deg"
+    ds["wavelength"].attrs["units"] = "nm"
+    if wavelength_note:
+        ds["wavelength"].attrs["note"] = wavelength_note
+    ds["bsdf"].attrs.update(units="1/sr", long_name="BSDF", note="NaN where the table has no value (gap)")
+    ds["bsdf_std"].attrs.update(units="1/sr", long_name="standard uncertainty of bsdf", origin=std_origin)
+    ds["noise_floor"].attrs.update(units="1/sr", long_name="noise-equivalent BSDF (not stated by the source: NaN)")
+    ds["bsdf_bispectral"].attrs.update(units="1/(sr nm)", note="elastic data: no wavelength conversion measured (NaN)")
+    ds["bsdf_bispectral_std"].attrs["units"] = "1/(sr nm)"
+    ds["noise_floor_bispectral"].attrs["units"] = "1/(sr nm)"
+    ds["incident_spectrum"].attrs.update(units="1/nm", long_name="flat (equal-energy) weighting over the measured "
+                                         "wavelengths: the source states no incident spectrum")
+    ds["grazing"].attrs["long_name"] = "theta_s = 90 deg (no finite BSDF from a cosine-corrected value)"
+    sides = sorted(set(map(str, side)))
+    ds.attrs.update(
+        quantity="bsdf", frame="sample", side=" ".join(s for s in SIDES if s in sides), units="1/sr",
+        angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
+                         "transmission angles from the back normal",
+        sample_name="", synthetic=0, source=str(source), elastic=1,
+        bsdf_std_origin=std_origin,
+        solid_angle_sr=np.nan, aperture_half_angle_deg=np.nan, gain_e_per_count=np.nan,
+        detector_distance_mm=np.nan, aperture_diameter_mm=np.nan, beam_diameter_mm=np.nan,
+        manifest_json="{}",
+    )
+    try:
+        ds.attrs["source_sha256"] = hashlib.sha256(Path(source).read_bytes()).hexdigest()
+    except OSError:
+        pass
+    return ds
+
+
+def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str, wavelength_known: bool
+              ) -> xr.Dataset:
+    th_s = np.asarray(rows.theta_s)
+    ph_s = np.asarray(rows.phi_s)
+    if signed:
+        ph_i = np.asarray(rows.phi_i)
+        spec = np.mod(ph_i - 180.0, 360.0)
+        ph_s = np.where(th_s >= 0, spec, np.mod(ph_i, 360.0))
+        th_s = np.abs(th_s)
+    th_i = np.asarray(rows.theta_i)
+    ph_i = np.asarray(rows.phi_i)
+    lam_all = np.asarray(rows.wavelength)
+    phi_norm = np.mod(ph_s, 360.0)
+    phi_norm = np.where((th_s < 1e-12) | (phi_norm >= 360.0), 0.0, phi_norm)
+    side_code = np.array([SIDES.index(x) for x in rows.side], dtype=np.float64)
+    keys = np.stack([side_code, np.round(th_i, 9), np.round(np.mod(ph_i, 360.0), 9), np.round(th_s, 9),
+                     np.mod(np.round(phi_norm, 9), 360.0)], axis=1)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # records in order of first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    rec_of = rank[np.asarray(inverse).ravel()]
+    first = first[order]
+    n_rec = first.size
+    lines = np.asarray(rows.line, dtype=np.int64)
+    rec_line = lines[first].tolist()
+    rec_side = [SIDES[int(c)] for c in side_code[first]]
+    if np.all(np.isnan(lam_all)):
+        lam = np.array([np.nan])
+        lam_idx = np.zeros(th_s.size, dtype=np.int64)
+    else:
+        lam = np.unique(lam_all[np.isfinite(lam_all)])
+        lam_idx = np.searchsorted(lam, lam_all)
+    cell = rec_of * lam.size + lam_idx
+    _, first_cell, cell_inv, counts = np.unique(cell, return_index=True, return_inverse=True, return_counts=True)
+    if np.any(counts > 1):
+        cell_inv = np.asarray(cell_inv).ravel()
+        dup = np.flatnonzero(counts[cell_inv] > 1)
+        second = int(next(k for k in dup if k != first_cell[cell_inv[k]]))
+        raise ValidationError("duplicate direction and wavelength", file=path, line=rows.line[second],
+                              field=rows.column[second], expected="each (theta_i, phi_i, theta_s, phi_s, side, "
+                              "wavelength) once", got=f"also on line {rows.line[first_cell[cell_inv[second]]]}")
+    q_names = sorted(set(rows.quantity))
+    q_code = np.array([q_names.index(q) for q in rows.quantity])
+    q_first = q_code[first][rec_of]
+    if np.any(q_code != q_first):
+        k = int(np.argmax(q_code != q_first))
+        raise ValidationError("one direction holds two quantities", file=path, line=rows.line[k],
+                              field=rows.column[k], expected=q_names[q_first[k]], got=rows.quantity[k])
+    quantity = np.array([q_names[c] for c in q_code[first]], dtype=object)
+    v_all = np.asarray(rows.value, dtype=np.float64)
+    s_all = np.asarray(rows.std, dtype=np.float64)
+    s_all = np.where(np.asarray(rows.std_relative, dtype=bool), s_all * np.abs(v_all), s_all)
+    values = np.full((n_rec, lam.size), np.nan)
+    stds = np.full((n_rec, lam.size), np.nan)
+    values[rec_of, lam_idx] = v_all
+    stds[rec_of, lam_idx] = s_all
+    rec_th_i, rec_ph_i, rec_th_s, rec_ph_s = th_i[first], ph_i[first], th_s[first], phi_norm[first]
+    # gaps: exact zeros per the policy
+    zero_records = 0
+    if zeros == "missing":
+        values = np.where(values == 0.0, np.nan, values)
+    elif zeros == "auto":
+        stated = np.isfinite(values)
+        all_zero = stated.any(axis=1) & np.all(np.where(stated, values == 0.0, True), axis=1)
+        zero_records = int(all_zero.sum())
+        values[all_zero] = np.nan
+    has_std = np.isfinite(stds) & np.isfinite(values)
+    # convert to BSDF
+    f = np.full_like(values, np.nan)
+    s = np.full_like(values, np.nan)
+    for q in set(quantity.tolist()):
+        sel = quantity == q
+        f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
+        s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
+    rel_used = DEFAULT_RELATIVE_STD if rel is None else float(rel)
+    s = np.where(has_std, s, rel_used * np.abs(f))
+    s = np.where(np.isfinite(f), s, np.nan)
+    keep = np.isfinite(f).any(axis=1)
+    dropped = int((~keep).sum())
+    if not keep.any():
+        raise InputError("the table holds no values (every cell is a gap)", file=path, field="value",
+                         expected="at least one finite value")
+    if has_std.all():
+        origin = "the table's uncertainty column"
+    elif has_std.any():
+        origin = (f"the table's uncertainty column where given, else {rel_used:g} x |bsdf|"
+                  + (" (assumed default)" if rel is None else ""))
+    else:
+        origin = f"{rel_used:g} x |bsdf|" + (" (assumed default: the table states no uncertainty)" if rel is None
+                                              else " (relative_std given)")
+    idx = np.flatnonzero(keep)
+    quantities = sorted(set(quantity.tolist()))
+    note = "" if wavelength_known else "not stated by the table; pass --wavelength NM (NaN = unknown)"
+    ds = records_dataset(rec_th_i[idx], rec_ph_i[idx], rec_th_s[idx], rec_ph_s[idx], [rec_side[i] for i in idx],
+                         lam, f[idx], s[idx], source=path, source_line=[rec_line[i] for i in idx],
+                         std_origin=origin, wavelength_note=note,
+                         description=f"measured table {Path(path).name}: {', '.join(quantities)}, elastic")
+    ds.attrs.update(gap_records_dropped=dropped, zero_records_as_gaps=zero_records, zeros_policy=zeros,
+                    negative_values=int(np.sum(f[idx] < 0)), relative_std=rel_used)
+    if note:
+        ds.attrs["wavelength_note"] = note
+    return ds
+
+
+def guess_can_open(path: str | Path) -> bool:
+    """True when ``path`` looks like a measured text table :func:`read_table` can read (a header with angle and
+    value columns within the first lines); never raises."""
+    p = Path(path)
+    try:
+        if not p.is_file():
+            return False
+        with open(p, "rb") as fh:
+            head = fh.read(65536)
+        if head.startswith((b"\x89HDF", b"CDF\x01", b"CDF\x02", b"PK\x03\x04")):
+            return False
+        text, _ = _decode(head, str(p))
+        lines = [(n, ln) for n, ln in enumerate(text.splitlines()[:-1] or text.splitlines(), 1)
+                 if ln.strip() and not ln.strip().startswith(("#", "//", "%", "!"))]
+        if not lines:
+            return False
+        _find_header(_Text(str(p), lines[:220], [], "", len(lines)))
+        return True
+    except (InputError, OSError, ValueError, csv.Error):
+        return False
+
+
+def describe_columns(path: str | Path) -> dict[str, Any]:
+    """Which role bsdfkit gives each column of a table (for error messages and ``--json`` summaries)."""
+    text = _load_text(str(path))
+    _, delim, columns, _ = _find_header(text)
+    return {"delimiter": delim, "columns": [(c.header, c.role) for c in columns]}

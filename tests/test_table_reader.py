@@ -1,0 +1,348 @@
+"""Measured text tables → the calibrated dataset (bsdfkit.measurement.table), against exact synthetic truths.
+
+Truth: a Lambertian body plus a Harvey–Shack Gaussian lobe, f = ρ(λ)/π + A(λ)·exp(−|β − β0|²/2σ²) [1/sr],
+written in every layout the reader accepts (wide/long, in-plane/two arcs, reflection/transmission,
+comma/semicolon/tab, BOM, decimal comma, units in headers, cosine-corrected values and factors) with
+``repr`` floats, and read back to a relative 1e-12 (the only error is the rounding of π·f/π or f·cos/cos).
+"""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from bsdfkit.cli.main import main
+from bsdfkit.core.errors import BsdfkitError, InputError
+from bsdfkit.io import netcdf
+from bsdfkit.measurement.describe import describe
+from bsdfkit.measurement.table import DEFAULT_RELATIVE_STD, guess_can_open, read_table
+from bsdfkit.tables.to_dataset import ingest, source_kind
+
+DATA = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf"
+ANSYS_CSV = DATA / "inplane_spectral_goniometric_2D_data.csv"
+RADIANT = DATA / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+RTOL = 1e-12
+LAMBDAS = (450.0, 550.0, 650.0)
+INCIDENCES = (0.0, 20.0, 45.0)
+
+
+def truth(theta_i, theta_s, phi_s, lam):
+    """f [1/sr] of a Lambertian body plus a Gaussian lobe about β0, wavelength-dependent."""
+    rho = 0.3 + 0.2 * (lam - 450.0) / 200.0
+    amp = 2.0 + 0.01 * (lam - 450.0)
+    sigma = 0.08
+    bx = np.sin(np.radians(theta_s)) * np.cos(np.radians(phi_s)) - np.sin(np.radians(theta_i))
+    by = np.sin(np.radians(theta_s)) * np.sin(np.radians(phi_s))
+    return rho / np.pi + amp * np.exp(-(bx**2 + by**2) / (2 * sigma**2))
+
+
+def in_plane(theta_i):
+    """Signed in-plane angles (deg), positive on the specular side."""
+    return [a for a in range(-85, 90, 5)]
+
+
+def two_arcs(theta_i):
+    """(θs, φs) of the in-plane arc and of the perpendicular arc through the specular direction."""
+    out = [(abs(a), 0.0 if a >= 0 else 180.0) for a in in_plane(theta_i)]
+    ti = math.radians(theta_i)
+    for e in range(-60, 61, 10):
+        if e == 0:
+            continue
+        eps = math.radians(e)
+        d = (math.cos(eps) * math.sin(ti), math.sin(eps), math.cos(eps) * math.cos(ti))
+        out.append((math.degrees(math.atan2(math.hypot(d[0], d[1]), d[2])),
+                    math.degrees(math.atan2(d[1], d[0])) % 360.0))
+    return out
+
+
+def write(path: Path, lines: list[str], encoding: str = "utf-8", newline: str = "\n") -> Path:
+    path.write_bytes((newline.join(lines) + newline).encode(encoding))
+    return path
+
+
+def check_truth(ds, transform=lambda f, th: f):
+    """Every finite bsdf equals the truth at its record and wavelength."""
+    f = ds["bsdf"].values
+    expected = truth(ds["theta_i"].values[:, None], ds["theta_s"].values[:, None], ds["phi_s"].values[:, None],
+                     ds["wavelength"].values[None, :])
+    ok = np.isfinite(f)
+    assert ok.sum() > 0
+    np.testing.assert_allclose(f[ok], expected[ok], rtol=RTOL, atol=0)
+
+
+# ------------------------------------------------------------------------------------------- layouts
+def test_wide_in_plane_comma_reflection_exact(tmp_path):
+    lines = ["# quantity: BRDF", "# sample: truth plate",
+             "theta_i,scatter angle," + ",".join(f"{x:g}nm" for x in LAMBDAS)]
+    for ti in INCIDENCES:
+        for a in in_plane(ti):
+            phi = 0.0 if a >= 0 else 180.0
+            lines.append(f"{ti:g},{a:g}," + ",".join(repr(float(truth(ti, abs(a), phi, lam))) for lam in LAMBDAS))
+    ds = read_table(write(tmp_path / "wide.csv", lines))
+    check_truth(ds)
+    assert ds.sizes["wavelength"] == 3 and ds.sizes["record"] == len(INCIDENCES) * 35
+    assert set(ds["arc"].values) == {"in_plane"} and set(ds["side"].values) == {"reflection"}
+    assert ds.attrs["quantity"] == "bsdf" and ds.attrs["source_quantity"] == "brdf"
+    assert ds.attrs["sample_name"] == "truth plate"
+    # signed angle: negative = source side (phi_s = 180), positive = specular side (phi_s = 0)
+    neg = ds.isel(record=int(np.flatnonzero(ds["source_line"].values == 4)[0]))
+    assert float(neg["theta_s"]) == 85.0 and float(neg["phi_s"]) == 180.0
+    np.testing.assert_allclose(ds["bsdf_std"].values, DEFAULT_RELATIVE_STD * np.abs(ds["bsdf"].values))
+
+
+def test_long_two_arcs_semicolon_decimal_comma_transmission_exact(tmp_path):
+    lines = ["AOI (deg);theta_s (deg);phi_s (deg);wavelength (nm);BTDF (1/sr)"]
+    for ti in INCIDENCES:
+        for ts, ps in two_arcs(ti):
+            for lam in LAMBDAS:
+                cells = [repr(float(x)).replace(".", ",") for x in (ti, ts, ps, lam, truth(ti, ts, ps, lam))]
+                lines.append(";".join(cells))
+    ds = read_table(write(tmp_path / "long.csv", lines, newline="\r\n"))
+    check_truth(ds)
+    assert set(ds["side"].values) == {"transmission"}
+    arcs = ds["arc"].values
+    assert (arcs == "in_plane").sum() == len(INCIDENCES) * 35 and (arcs == "perpendicular").sum() > 0
+    assert (arcs == "other").sum() == 0
+    assert ds.attrs["manifest_json"].count('"decimal_comma": true') == 1
+
+
+def test_tab_bom_cosine_corrected_microns_exact(tmp_path):
+    lines = ["Incidence angle (deg)\tθs [deg]\tφs [deg]\tλ (µm)\tccBRDF"]
+    for ti in INCIDENCES:
+        for ts, ps in two_arcs(ti):
+            if ts >= 89.0:
+                continue
+            for lam in LAMBDAS:
+                cc = truth(ti, ts, ps, lam) * math.cos(math.radians(ts))
+                lines.append("\t".join([repr(ti), repr(ts), repr(ps), repr(lam / 1000.0), repr(float(cc))]))
+    ds = read_table(write(tmp_path / "tab.txt", lines, encoding="utf-8-sig"))
+    np.testing.assert_allclose(ds["wavelength"].values, LAMBDAS, rtol=1e-15)
+    check_truth(ds)
+    assert ds.attrs["source_quantity"] == "ccbrdf"
+
+
+def test_reflectance_factor_percent_and_quantity_option(tmp_path):
+    lines = ["theta_i;theta_s;value (%)"]
+    for a in in_plane(20.0):
+        lines.append(f"20;{a};{repr(100.0 * math.pi * float(truth(20.0, abs(a), 0.0 if a >= 0 else 180.0, 550.0)))}")
+    path = write(tmp_path / "rf.csv", lines)
+    with pytest.raises(InputError, match="does not say which quantity"):
+        read_table(path)
+    ds = read_table(path, quantity="reflectance-factor", wavelength=550.0)
+    check_truth(ds)
+    assert ds["wavelength"].values.tolist() == [550.0]
+
+
+def test_wide_by_incidence_monochrome_without_wavelength(tmp_path):
+    lines = ["# BRDF of a monochrome scan", "scatter angle,AOI 0,AOI 20,AOI 45"]
+    for a in in_plane(0.0):
+        lines.append(f"{a}," + ",".join(repr(float(truth(ti, abs(a), 0.0 if a >= 0 else 180.0, 550.0)))
+                                         for ti in INCIDENCES))
+    ds = read_table(write(tmp_path / "byinc.csv", lines), quantity="brdf")
+    assert np.isnan(ds["wavelength"].values).all() and "wavelength_note" in ds.attrs
+    f = ds["bsdf"].values[:, 0]
+    expected = truth(ds["theta_i"].values, ds["theta_s"].values, ds["phi_s"].values, 550.0)
+    np.testing.assert_allclose(f, expected, rtol=RTOL)
+    assert sorted(set(ds["theta_i"].values.tolist())) == list(INCIDENCES)
+
+
+def test_side_column_bsdf_radians_and_std_columns(tmp_path):
+    lines = ["thetai [rad],thetas [rad],phis [rad],side,BSDF,BSDF std"]
+    for side in ("R", "T"):
+        for ts, ps in two_arcs(45.0):
+            f = float(truth(45.0, ts, ps, 550.0))
+            lines.append(",".join([repr(math.radians(45.0)), repr(math.radians(ts)), repr(math.radians(ps)), side,
+                                   repr(f), repr(0.01 * f)]))
+    ds = read_table(write(tmp_path / "sides.csv", lines), wavelength=550.0)
+    assert sorted(set(ds["side"].values)) == ["reflection", "transmission"]
+    np.testing.assert_allclose(ds["theta_i"].values, 45.0, rtol=1e-14)
+    expected = truth(ds["theta_i"].values, ds["theta_s"].values, ds["phi_s"].values, 550.0)
+    np.testing.assert_allclose(ds["bsdf"].values[:, 0], expected, rtol=1e-12)
+    np.testing.assert_allclose(ds["bsdf_std"].values[:, 0], 0.01 * expected, rtol=1e-12)
+    assert "uncertainty column" in ds.attrs["bsdf_std_origin"]
+
+
+def test_relative_std_option_and_relative_column(tmp_path):
+    lines = ["theta_i,theta_s,BRDF,rel. uncertainty (%)", "10,5,0.5,2", "10,-5,0.25,"]
+    ds = read_table(write(tmp_path / "rel.csv", lines), relative_std=0.1)
+    np.testing.assert_allclose(ds["bsdf_std"].values[:, 0], [0.01, 0.025])  # 2 % of 0.5; 10 % of 0.25
+
+
+def test_gaps_are_gaps_not_zeros(tmp_path):
+    lines = ["theta_i,theta_s,500,600",
+             "10,-30,0.1,0.2",
+             "10,-15,,",  # empty cells: record dropped
+             "10,-10,0,0",  # all zero: the source blocking the detector -> gap (zeros=auto)
+             "10,0,NaN,0.3",  # one wavelength missing
+             "10,5,0.0,0.7",  # a zero next to a non-zero value is a value
+             "10,10,0.4,0.5"]
+    path = write(tmp_path / "gaps.csv", lines)
+    ds = read_table(path, quantity="brdf")
+    assert ds.sizes["record"] == 4 and ds.attrs["gap_records_dropped"] == 2 and ds.attrs["zero_records_as_gaps"] == 1
+    f = ds["bsdf"].values
+    assert np.isnan(f[1, 0]) and f[1, 1] == 0.3 and f[2, 0] == 0.0 and f[2, 1] == 0.7
+    assert np.isnan(ds["bsdf_std"].values[1, 0])
+    keep = read_table(path, quantity="brdf", zeros="keep")
+    assert keep.sizes["record"] == 5
+    missing = read_table(path, quantity="brdf", zeros="missing")
+    assert missing.sizes["record"] == 4 and np.isnan(missing["bsdf"].values[2, 0])
+
+
+def test_ansys_csv_reflectance_factor():
+    ds = read_table(ANSYS_CSV, quantity="reflectance-factor")
+    assert ds.sizes["wavelength"] == 35 and ds["wavelength"].values[0] == 390.0 and ds["wavelength"].values[-1] == 730
+    assert ds.attrs["zero_records_as_gaps"] == 26 and ds.sizes["record"] == 329 - 26
+    assert incidences_of(ds) == [10.0, 25.0, 40.0, 60.0, 80.0]
+    # line 2 of the file: 10,-78,0.7165,... -> theta_s 78 on the source side, BRDF = R/pi
+    rec = ds.isel(record=int(np.flatnonzero(ds["source_line"].values == 2)[0]))
+    assert float(rec["theta_s"]) == 78.0 and float(rec["phi_s"]) == 180.0
+    assert float(rec["bsdf"].sel(wavelength=390.0)) == pytest.approx(0.7165 / np.pi, rel=1e-15)
+    # the specular peak sits at +theta_i (phi_s = 0)
+    sub = ds.isel(record=np.flatnonzero(ds["theta_i"].values == 25.0))
+    peak = int(np.argmax(sub["bsdf"].sel(wavelength=550.0).values))
+    assert float(sub["theta_s"].values[peak]) == 25.0 and float(sub["phi_s"].values[peak]) == 0.0
+    info = describe(ds)
+    assert info["records"] == 303 and info["sides"] == ["reflection"]
+
+
+def incidences_of(ds):
+    return sorted(set(ds["theta_i"].values.tolist()))
+
+
+def test_netcdf_round_trip_and_dispatch(tmp_path):
+    ds = ingest(ANSYS_CSV, quantity="reflectance-factor")
+    out = netcdf.save(ds, tmp_path / "a.nc")
+    back = netcdf.load(out, quantity="bsdf")
+    np.testing.assert_array_equal(back["bsdf"].values, ds["bsdf"].values)
+    assert list(back["arc"].values) == list(ds["arc"].values)
+    assert source_kind(ANSYS_CSV) == "table" and source_kind(RADIANT) == "zemax" and source_kind(out) == "netcdf"
+    assert guess_can_open(ANSYS_CSV) and not guess_can_open(RADIANT) and not guess_can_open(out)
+    assert not guess_can_open(tmp_path) and not guess_can_open(tmp_path / "nothing.csv")
+    with pytest.raises(InputError, match="options apply to text tables"):
+        ingest(ROOT / "measurements" / "cl830-synthetic", quantity="brdf")
+
+
+def test_cli_ingest_table_and_info(tmp_path, capsys):
+    out = tmp_path / "a.nc"
+    assert main(["ingest", str(ANSYS_CSV), "--quantity", "reflectance-factor", "-o", str(out)]) == 0
+    assert "303 records" in capsys.readouterr().out
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "390-730 nm" in text and "θi = 80°" in text
+    assert main(["ingest", str(ANSYS_CSV), "--quantity", "reflectance-factor", "-o", str(out)]) == 2  # exists
+    assert "--force" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------- malformed tables
+GOOD_HEADER = "theta_i,theta_s,500nm,600nm"
+MALFORMED = [
+    # (name, lines, options, substrings the one-line message must contain)
+    ("text_cell", [GOOD_HEADER, "10,5,0.1,0.2", "10,10,abc,0.2"], {"quantity": "brdf"},
+     [":3", "column 3 '500nm'", "not a number"]),
+    ("field_count", [GOOD_HEADER, "10,5,0.1,0.2", "10,10,0.1"], {"quantity": "brdf"}, [":3", "wrong number of fields"]),
+    ("incidence_range", [GOOD_HEADER, "95,5,0.1,0.2"], {"quantity": "brdf"}, [":2", "theta_i", "out of range"]),
+    ("scatter_range", [GOOD_HEADER, "10,120,0.1,0.2"], {"quantity": "brdf"}, [":2", "theta_s", "out of range"]),
+    ("duplicate", [GOOD_HEADER, "10,5,0.1,0.2", "10,6,0.1,0.2", "10,5,0.3,0.2"], {"quantity": "brdf"},
+     [":4", "duplicate", "line 2"]),
+    ("no_quantity", [GOOD_HEADER, "10,5,0.1,0.2"], {}, [":1", "500nm", "--quantity"]),
+    ("quantity_conflict", ["theta_i,theta_s,BRDF", "10,5,0.1"], {"quantity": "btdf"}, [":1", "BRDF", "btdf"]),
+    ("side_conflict", ["theta_i,theta_s,BRDF", "10,5,0.1"], {"side": "transmission"}, [":2", "BRDF", "side"]),
+    ("wavelength_twice", ["theta_i,theta_s,550,550nm", "10,5,0.1,0.2"], {"quantity": "brdf"}, [":1", "550nm", "twice"]),
+    ("wavelength_order", ["theta_i,theta_s,600,550", "10,5,0.1,0.2"], {"quantity": "brdf"},
+     [":1", "550", "increasing"]),
+    ("infinite", [GOOD_HEADER, "10,5,inf,0.2"], {"quantity": "brdf"}, [":2", "500nm", "finite"]),
+    ("header_only", ["# comment", GOOD_HEADER], {"quantity": "brdf"}, [":2", "header only"]),
+    ("empty", ["# nothing here"], {}, [":1", "empty"]),
+    ("data_first", ["10,5,0.1,0.2", GOOD_HEADER], {"quantity": "brdf"}, [":1", "data before a header"]),
+    ("no_scatter_angle", ["theta_i,phi_i,BRDF", "10,180,0.1"], {}, [":1", "scatter-angle"]),
+    ("number_header", ["theta_i,theta_s,10,20", "10,5,0.1,0.2"], {"quantity": "brdf"}, [":1", "10", "wavelength"]),
+    ("side_value", ["theta_i,theta_s,side,BSDF", "10,5,X,0.1"], {}, [":2", "side", "'X'"]),
+    ("negative_std", ["theta_i,theta_s,BRDF,std", "10,5,0.1,-0.01"], {}, [":2", "std", "negative"]),
+    ("all_gaps", [GOOD_HEADER, "10,5,,", "10,6,nan,-"], {"quantity": "brdf"}, ["no values"]),
+    ("angle_unit", ["theta_i (grad),theta_s,BRDF", "10,5,0.1"], {}, [":1", "grad", "unit"]),
+    ("missing_angle", [GOOD_HEADER, "10,,0.1,0.2"], {"quantity": "brdf"}, [":2", "theta_s", "missing"]),
+    ("no_value_column", ["theta_i,theta_s,comment", "10,5,x"], {}, [":1", "value column"]),
+]
+
+
+@pytest.mark.parametrize("name,lines,options,parts", MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_malformed_tables_give_one_line_errors(tmp_path, name, lines, options, parts):
+    path = write(tmp_path / f"{name}.csv", lines)
+    with pytest.raises(BsdfkitError) as info:
+        read_table(path, **options)
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message, message
+    for part in parts:
+        assert part in message, (part, message)
+
+
+def test_missing_file_and_folder(tmp_path):
+    with pytest.raises(InputError, match="file not found"):
+        read_table(tmp_path / "absent.csv", quantity="brdf")
+    with pytest.raises(InputError, match="folder"):
+        read_table(tmp_path, quantity="brdf")
+
+
+@pytest.mark.parametrize("name", ["text_cell", "no_quantity", "duplicate", "field_count"])
+def test_cli_errors_exit_2_one_line(tmp_path, capsys, name):
+    _, lines, options, parts = next(m for m in MALFORMED if m[0] == name)
+    path = write(tmp_path / f"{name}.csv", lines)
+    argv = ["ingest", str(path), "-o", str(tmp_path / "out.nc")]
+    for key, value in options.items():
+        argv += [f"--{key.replace('_', '-')}", str(value)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("bsdfkit ingest: error: ") and "Traceback" not in err
+    assert all(p in err for p in parts)
+    assert not (tmp_path / "out.nc").exists()
+
+
+def test_cli_error_in_a_subprocess_has_no_traceback(tmp_path):
+    path = write(tmp_path / "bad.csv", [GOOD_HEADER, "10,5,0.1,0.2", "10,10,abc,0.2"])
+    done = subprocess.run([sys.executable, "-m", "bsdfkit", "ingest", str(path), "--quantity", "brdf", "-o",
+                           str(tmp_path / "o.nc")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.strip().count("\n") == 0 and "bad.csv:3" in done.stderr
+
+
+OTHER_LAYOUTS = [
+    # (name, text, encoding, options, expected (theta_i, theta_s, phi_s, side, bsdf) of the first two records)
+    ("whitespace", "AOI theta_s phi_s BRDF\n10 5 0 0.1\n10 20 180 0.2\n", "utf-8", {}, None),
+    ("preamble", "Sample: X\nDate: 2024-01-01\n\nAOI,theta_s,BRDF\n10,5,0.1\n10,-20,0.2\n", "utf-8", {}, None),
+    ("cp1252_degree", "Incidence (°);Scatter angle (°);BRDF\n10;5;0,1\n10;-20;0,2\n", "cp1252", {}, None),
+    ("utf16_tab_crlf", "theta_i\ttheta_s\tBRDF\r\n10\t5\t0.1\r\n10\t-20\t0.2\r\n", "utf-16", {}, None),
+    ("quoted", '"theta_i","theta_s","BRDF [1/sr]"\n"10","5","0.1"\n"10","-20","0.2"\n', "utf-8", {}, None),
+    ("trailing_separator", "theta_i;theta_s;BRDF;\n10;5;0,1;\n10;-20;0,2;\n", "utf-8", {}, None),
+    ("units_row", "theta_i,theta_s,BRDF\ndeg,deg,1/sr\n10,5,0.1\n10,-20,0.2\n", "utf-8", {}, None),
+    ("old_mac_cr", "theta_i,theta_s,BRDF\r10,5,0.1\r10,-20,0.2\r", "utf-8", {}, None),
+    ("blocks_by_comment", "# wavelength: 633 nm\n# incidence: 10\ntheta_s,BRDF\n5,0.1\n-20,0.2\n# incidence: 30\n"
+     "theta_s,BRDF\n5,0.3\n", "utf-8", {}, None),
+    ("blocks_by_lines", "Incidence: 10 deg\nAOV\tBRDF\n5\t0.1\n-20\t0.2\nIncidence: 30 deg\nAOV\tBRDF\n5\t0.3\n",
+     "utf-8", {}, None),
+]
+
+
+@pytest.mark.parametrize("name,text,encoding,options,_", OTHER_LAYOUTS, ids=[c[0] for c in OTHER_LAYOUTS])
+def test_other_instrument_layouts(tmp_path, name, text, encoding, options, _):
+    path = tmp_path / f"{name}.txt"
+    path.write_bytes(text.encode(encoding))
+    assert guess_can_open(path)
+    ds = read_table(path, **options)
+    assert ds["theta_i"].values[:2].tolist() == [10.0, 10.0]
+    assert ds["theta_s"].values[:2].tolist() == [5.0, 20.0]
+    assert ds["phi_s"].values[:2].tolist() == [0.0, 180.0]
+    assert ds["bsdf"].values[:2, 0].tolist() == [0.1, 0.2] and set(ds["side"].values) == {"reflection"}
+    if name.startswith("blocks"):
+        assert ds["theta_i"].values.tolist() == [10.0, 10.0, 30.0]
+
+
+def test_brdf_and_btdf_columns_give_both_sides(tmp_path):
+    path = write(tmp_path / "both.csv", ["theta_i,theta_s,BRDF,BTDF", "10,5,0.1,0.05", "10,-20,0.2,"])
+    ds = read_table(path, wavelength=550.0)
+    assert ds["side"].values.tolist() == ["reflection", "transmission", "reflection"]
+    assert ds["bsdf"].values[:, 0].tolist() == [0.1, 0.05, 0.2]
