@@ -1,4 +1,5 @@
-"""bsdfkit.io.spectrum_file: two-column spectra in their many spellings, and every bad-input class."""
+"""bsdfkit.io.spectrum_file: two-column spectra in their many spellings, multi-column tables, and every
+bad-input class."""
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,7 @@ from hypothesis import strategies as st
 
 from bsdfkit.cli.main import main
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
-from bsdfkit.io.spectrum_file import read_spectrum, read_spectrum_arrays
+from bsdfkit.io.spectrum_file import read_spectrum, read_spectrum_arrays, read_spectrum_table, select_columns
 
 BENKNER = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
 
@@ -76,6 +77,48 @@ def test_missing_file_directory_and_non_utf8(tmp_path):
         read_spectrum_arrays(tmp_path)
     with pytest.raises(FormatError, match="UTF-8"):
         read_spectrum_arrays(write(tmp_path, "450\t1\n451\t2\n452\t\xb5\n", encoding="latin-1"))
+
+
+@pytest.mark.parametrize("text, names", [
+    ("wl\tled A\tled B\n450\t1\t4\n451\t2\t5\n452\t3\t6\n", ["led A", "led B"]),
+    ("\ufeffnm;a;b\r\n450;1,0;4\r\n451;2;5,0\r\n452;3;6\r\n", ["a", "b"]),  # BOM, CRLF, decimal comma
+    ("450,1,4\n451,2,5\n452,3,6\n", ["column 2", "column 3"]),  # no header: file column numbers
+    ("wl,x,x\n450,1,4\n451,2,5\n452,3,6\n", ["column 2", "column 3"]),  # duplicate names: numbers
+    ("# two LEDs\nwl value1\n450 1 4\n451 2 5\n452 3 6\n", ["column 2", "column 3"]),  # header too short
+])
+def test_multi_column_table_names_and_values(tmp_path, text, names):
+    wl, columns, _ = read_spectrum_table(write(tmp_path, text))
+    np.testing.assert_array_equal(wl, [450.0, 451.0, 452.0])
+    assert list(columns) == names
+    np.testing.assert_array_equal(columns[names[0]], [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(columns[names[1]], [4.0, 5.0, 6.0])
+
+
+def test_two_column_file_is_a_one_column_table_and_isd_reads_alike():
+    wl, columns, header = read_spectrum_table(BENKNER / "blue_3.ISD")
+    wl2, v2, header2 = read_spectrum_arrays(BENKNER / "blue_3.ISD")
+    assert list(columns) == ["pwr"] and header == header2
+    np.testing.assert_array_equal(wl, wl2)
+    np.testing.assert_array_equal(columns["pwr"], v2)
+
+
+def test_table_errors_and_column_selection(tmp_path):
+    path = write(tmp_path, "wl,a,b\n450,1,4\n451,2\n452,3,6\n", name="t.csv")
+    with pytest.raises(FormatError) as exc:
+        read_spectrum_table(path)
+    assert "t.csv:3" in str(exc.value) and "expected 3 (as on the first data row)" in str(exc.value)
+    with pytest.raises(FormatError, match="column 3"):
+        read_spectrum_table(write(tmp_path, "450,1,4\n451,2,x\n452,3,6\n", name="u.csv"))
+    with pytest.raises(FormatError, match="wrong number of columns"):  # the two-column reader stays strict
+        read_spectrum_arrays(write(tmp_path, "450,1,4\n451,2,5\n452,3,6\n", name="v.csv"))
+    ok = write(tmp_path, "wl,a,b\n450,1,4\n451,2,5\n452,3,6\n", name="w.csv")
+    _, columns, _ = read_spectrum_table(ok)
+    assert select_columns(ok, columns, None) == ["a", "b"]
+    assert select_columns(ok, columns, ["b", "2"]) == ["b", "a"]
+    with pytest.raises(ValidationError) as exc:
+        select_columns(ok, columns, ["4"])
+    msg = str(exc.value)
+    assert "w.csv" in msg and "--column" in msg and "a | b" in msg and "'4'" in msg
 
 
 def test_cli_reports_bad_file_as_one_line(tmp_path, capsys):

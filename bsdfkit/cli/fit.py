@@ -1,40 +1,58 @@
-"""``bsdfkit fit spectrum FILE`` and ``bsdfkit fit bsdf SCAN``: model fits from the command line.
+"""``bsdfkit fit spectrum FILE [FILE ...]`` and ``bsdfkit fit bsdf SCAN``: model fits from the command line.
 
-``fit spectrum`` fits eq. (2) (gaussian), eq. (3) (split-gaussian) or both jointly (two-band) of the
-cylindrical-module paper to a two-column spectrum file (:mod:`bsdfkit.fit.spectrum`). ``fit bsdf`` reduces a
-scan (netCDF written by bsdfkit, or a raw measurement folder) to the profile of one interaction and side
-(:func:`bsdfkit.reduction.spectral.interaction_profile`) and fits a BSDF model per incidence
-(:func:`bsdfkit.fit.least_squares.fit_bsdf`). A fit that stops at the iteration limit is reported with a warning line on
-stderr; degenerate fits are one-line errors (exit status 2).
+``fit spectrum`` fits emission-spectrum models (:mod:`bsdfkit.fit.spectrum`: eqs. (2)-(3) of the
+cylindrical-module paper, the LED line shapes of :mod:`bsdfkit.models.led`, the two-band pump + phosphor sums,
+or ``best`` by AICc/BIC) to one or many spectrum files, or to the value columns of a multi-column table, in one
+batch per model (one compiled kernel), and reports the measured metrics beside the fitted ones. ``fit bsdf``
+reduces a scan (netCDF written by bsdfkit, or a raw measurement folder) to the profile of one interaction and
+side (:func:`bsdfkit.reduction.spectral.interaction_profile`) and fits a BSDF model per incidence
+(:func:`bsdfkit.fit.least_squares.fit_bsdf`). Suspicious fits (iteration limit, R² < 0, parameters on a bound,
+fitted peak or FWHM far from the measured) are reported with warning lines on stderr and, with ``--json``, in
+each record's ``warnings``; degenerate fits are one-line errors (exit status 2).
 """
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import FitError, ValidationError
+from bsdfkit.fit.least_squares import FitOptions, fit_bsdf
+from bsdfkit.fit.spectrum import CRITERIA, SPECTRUM_MODELS, analyse_spectra
+from bsdfkit.io import netcdf
+from bsdfkit.io.jsonout import to_jsonable
+from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
+from bsdfkit.measurement.calibrate import calibrate
+from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.reduction.spectral import interaction_profile
 
-SPECTRUM_MODELS = ("gaussian", "split-gaussian", "two-band")
 BSDF_MODELS = ("lambert+gaussian", "abg", "lambert+abg", "lambert")
 INTERACTIONS = ("bibs", "biys", "yiys")
 SIDES = ("reflection", "transmission")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fit", help="fit spectrum or BSDF models (jaxopt Levenberg-Marquardt, float64)")
+    p = sub.add_parser("fit", help="fit spectrum or BSDF models (Levenberg-Marquardt, float64)")
     p.set_defaults(func=lambda args: _help(p))
     fit_sub = p.add_subparsers(dest="fit_verb", metavar="{spectrum,bsdf}")
 
-    s = fit_sub.add_parser("spectrum", help="fit a Gaussian / split-Gaussian / two-band model to a spectrum file")
-    s.add_argument("file", help="two-column text spectrum: wavelength (nm), value")
-    s.add_argument("--model", choices=SPECTRUM_MODELS, default="gaussian")
+    s = fit_sub.add_parser("spectrum", help="fit emission-spectrum models to spectrum files (batched)")
+    s.add_argument("files", nargs="+", metavar="FILE",
+                   help="text spectra: wavelength (nm) and one or more value columns (.ISD, CSV, TSV ...)")
+    s.add_argument("--column", action="append", metavar="NAME",
+                   help="fit this value column (header name or 1-based column number); repeatable; "
+                        "default: every value column")
+    s.add_argument("--model", choices=("best",) + SPECTRUM_MODELS, default="gaussian",
+                   help="line shape; 'best' fits every single-band model and keeps the lowest --criterion")
+    s.add_argument("--criterion", choices=CRITERIA, default="aicc", help="information criterion for --model best")
     s.add_argument("--range", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="fit only wavelengths LO..HI nm (inclusive), e.g. the phosphor band")
-    s.add_argument("--split-nm", type=float, default=500.0,
-                   help="two-band: pump/phosphor split used to initialise the components (default 500 nm)")
+                   help="fit only wavelengths LO..HI nm (inclusive), e.g. 380 780 or the phosphor band")
+    s.add_argument("--split-nm", type=float, default=None,
+                   help="two-band: fixed pump/phosphor split (nm); default: each spectrum's valley")
     s.add_argument("--maxiter", type=int, default=200, help="iteration limit per pass (default 200)")
-    s.add_argument("--json", action="store_true", help="print model, params, std, r2, converged as JSON")
+    s.add_argument("--json", action="store_true", help="print one JSON record per spectrum (one per line)")
     s.set_defaults(func=_run_spectrum)
 
     b = fit_sub.add_parser("bsdf", help="fit a BSDF model per incidence to one interaction and side of a scan")
@@ -57,63 +75,78 @@ def _warn_unconverged(label: str, iterations: int) -> None:
           "the parameters are the last iterate", file=sys.stderr)
 
 
-def _run_spectrum(args: argparse.Namespace) -> int:
-    from bsdfkit.core.errors import ValidationError
-    from bsdfkit.fit.least_squares import FitOptions
-    from bsdfkit.fit.spectrum import fit_spectrum
-    from bsdfkit.io.spectrum_file import read_spectrum_arrays
+def _fmt(value, spec: str = ".2f") -> str:
+    return "n/a" if value is None else format(value, spec)
 
-    wl, values, _ = read_spectrum_arrays(args.file)
-    mask = None
-    if args.range is not None:
-        lo, hi = args.range
-        mask = (wl >= lo) & (wl <= hi)
+
+def _run_spectrum(args: argparse.Namespace) -> int:
     if args.maxiter < 1:
         raise ValidationError("iteration limit must be ≥ 1", field="--maxiter", got=args.maxiter)
-    ds = fit_spectrum(wl, values, args.model, mask=mask, split_nm=args.split_nm,
-                      options=FitOptions(maxiter=args.maxiter))
-    names = [str(n) for n in ds.parameter.values]
-    for n, hit in zip(names, ds.at_bound.values):
-        if hit:
-            print(f"bsdfkit fit: warning: {n} ended on its bound ({float(ds[n]):.6g}); the model may not "
-                  "describe this spectrum", file=sys.stderr)
-    params = {n: float(ds[n]) for n in names}
-    std = {n: float(ds[f"{n}_std"]) for n in names}
-    converged = bool(ds.converged)
-    if not converged:
-        _warn_unconverged(f"{args.model} fit of {args.file}", int(ds.iterations))
-    if args.json:
-        emit_json({"file": str(args.file), "model": args.model, "params": params, "std": std,
-                   "r2": float(ds.r2), "converged": converged,
-                   "range_nm": None if args.range is None else list(args.range),
-                   "n_points": int(ds.n_points)})
-        return 0
-    print(f"{Path(args.file).name}: {args.model} fit, {int(ds.n_points)} points"
-          + ("" if args.range is None else f" in {args.range[0]:g}-{args.range[1]:g} nm"))
-    for n in names:
-        unit = ds[n].attrs.get("units", "")
-        unit = "" if unit in ("1", "input units") else f" {unit}"
-        print(f"  {n:<18} {params[n]:.6g} ± {std[n]:.2g}{unit}")
-    print(f"  R² = {float(ds.r2):.5f}; {'converged' if converged else 'NOT converged'} "
-          f"after {int(ds.iterations)} iterations")
-    return 0
+    if args.range is not None and not args.range[0] < args.range[1]:
+        raise ValidationError("empty fit range", field="--range", expected="LO < HI", got=tuple(args.range))
+    spectra, sources = [], []
+    for file in args.files:
+        wl, table, _ = read_spectrum_table(file)
+        names = select_columns(file, table, args.column)
+        for name in names:
+            spectra.append((wl, table[name]))
+            sources.append((str(file), name if len(table) > 1 else None))
+    labels = [Path(f).name + (f" [{c}]" if c else "") for f, c in sources]
+    ranges = [None if args.range is None else tuple(args.range)] * len(spectra)
+    records = analyse_spectra(spectra, args.model, ranges=ranges, labels=labels, criterion=args.criterion,
+                              options=FitOptions(maxiter=args.maxiter), split_nm=args.split_nm)
+    failed = 0
+    for (file, column), label, rec in zip(sources, labels, records):
+        rec = {"file": file, "column": column, **rec}
+        if "error" in rec:
+            failed += 1
+            if len(records) == 1:
+                raise FitError(rec["error"])
+            print(f"bsdfkit fit: error: {rec['error']}", file=sys.stderr)
+        else:
+            for w in rec["warnings"]:
+                print(f"bsdfkit fit: warning: {label}: {w}", file=sys.stderr)
+        if args.json:  # JSON lines: one record per spectrum, one line each
+            print(json.dumps(to_jsonable(rec)), flush=True)
+        elif "error" not in rec:
+            _print_spectrum(label, rec)
+    return 2 if failed else 0
+
+
+def _print_spectrum(label: str, rec: dict) -> None:
+    rng = rec["range_nm"]
+    where = "" if rng is None else f" in {rng[0]:g}-{rng[1]:g} nm"
+    print(f"{label}: {rec['model']} fit, {rec['n_points']} points{where}")
+    for n, v in rec["params"].items():
+        print(f"  {n:<22} {v:.6g} ± {rec['std'][n]:.2g}")
+    print(f"  R² = {rec['r2']:.5f}; {'converged' if rec['converged'] else 'NOT converged'} "
+          f"after {rec['iterations']} iterations; AICc {rec['criteria']['aicc']:.1f}, BIC {rec['criteria']['bic']:.1f}")
+    me, fi, di = rec["measured"], rec["fitted"], rec["difference"]
+    print(f"  {'':<22}{'measured':>10}{'fitted':>10}{'fit-meas':>10}")
+    for key in ("peak_nm", "fwhm_nm", "centroid_nm", "dominant_wavelength_nm", "purity"):
+        if key in fi:
+            print(f"  {key:<22}{_fmt(me.get(key)):>10}{_fmt(fi.get(key)):>10}{_fmt(di.get(key), '+.2f'):>10}")
+    if "measured_split" in rec:
+        sp = rec["measured_split"]
+        print(f"  measured: pump maximum {sp['pump_peak_nm']:.2f} nm, valley {sp['valley_nm']:.2f} nm, "
+              f"phosphor maximum {sp['phosphor_peak_nm']:.2f} nm")
+    for part, c in rec.get("components", {}).items():
+        print(f"  {part}: peak {_fmt(c['peak_nm'])} nm, FWHM {_fmt(c['fwhm_nm'])} nm, power {c['power']:.4g} "
+              f"(input units·nm, {_fmt(c['power_fraction'], '.1%')} of the total)")
+    if "candidates" in rec:
+        crit = rec["criterion"]
+        ranked = sorted(rec["candidates"].items(), key=lambda kv: kv[1].get(crit, float("inf")))
+        print(f"  candidates by {crit}: " + ", ".join(
+            f"{n} {v[crit]:.1f}" if "error" not in v else f"{n} (failed)" for n, v in ranked))
 
 
 def _load_scan(path: Path):
-    from bsdfkit.io import netcdf
-
     if path.is_dir():
-        from bsdfkit.measurement.calibrate import calibrate
-        from bsdfkit.measurement.raw_scan import read_scan
-
         return calibrate(read_scan(path))
     return netcdf.load(path, quantity="bsdf")
 
 
 def _run_bsdf(args: argparse.Namespace) -> int:
-    from bsdfkit.fit.least_squares import fit_bsdf
-    from bsdfkit.reduction.spectral import interaction_profile
-
     ds = _load_scan(Path(args.scan))
     profile = interaction_profile(ds, args.interaction, args.side)
     result = fit_bsdf(profile, args.model, incidence_deg=args.incidence)

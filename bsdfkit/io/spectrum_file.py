@@ -1,4 +1,5 @@
-"""Reader for two-column text spectra: wavelength (nm), value.
+"""Reader for text spectra: wavelength (nm) and one value column (:func:`read_spectrum_arrays`) or several
+(:func:`read_spectrum_table`, e.g. the LEDs of a batch measurement side by side).
 
 Accepted: an optional header line (the first non-blank, non-comment line, if it is not numeric), fields
 separated by tab, comma, semicolon or blanks (detected from the first data line), UTF-8 with or without
@@ -8,8 +9,8 @@ locales write it. Instrument Systems ``.ISD`` exports (header ``wl<TAB>pwr``) ar
 
 Rejected with a one-line :class:`bsdfkit.core.errors.InputError` / :class:`~bsdfkit.core.errors.FormatError`
 naming the file, line and field: missing or unreadable file, not UTF-8, empty file, a line with other
-than two fields, a non-numeric cell, NaN or infinity, wavelengths not strictly increasing or not
-positive, fewer than three data rows.
+than two fields (a table: other than the first data row's number, at least two), a non-numeric cell, NaN
+or infinity, wavelengths not strictly increasing or not positive, fewer than three data rows.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from bsdfkit.core.errors import FormatError, InputError, ValidationError
 if TYPE_CHECKING:
     from colour import SpectralDistribution
 
-__all__ = ["read_spectrum", "read_spectrum_arrays", "MIN_ROWS"]
+__all__ = ["read_spectrum", "read_spectrum_arrays", "read_spectrum_table", "select_columns", "MIN_ROWS"]
 
 #: Fewest data rows accepted (a peak and its two flanks).
 MIN_ROWS = 3
@@ -57,8 +58,10 @@ def _number(text: str, sep: str | None) -> float | None:
         return None
 
 
-def read_spectrum_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray, str | None]:
-    """Read a two-column spectrum file → (wavelength nm, values, header line or None)."""
+def _parse(path: str | Path, columns: int | None) -> tuple[np.ndarray, np.ndarray, str | None, list[str]]:
+    """Parse a spectrum table → (wavelength nm, values (k, n), header or None, header fields). ``columns``:
+    the exact number of columns required (2 for a plain spectrum), or None for any number ≥ 2, the same on
+    every row."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -75,10 +78,11 @@ def read_spectrum_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray, str 
                           got=f"byte 0x{raw[exc.start]:02x} at offset {exc.start}") from None
 
     header: str | None = None
+    header_line = ""
     sep: str | None = None
     sep_known = False
-    wl: list[float] = []
-    val: list[float] = []
+    width = columns
+    rows: list[list[float]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
@@ -87,38 +91,87 @@ def read_spectrum_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray, str 
             sep = _delimiter(stripped)
         fields = _split(stripped, sep)
         numbers = [_number(f, sep) for f in fields]
-        if not sep_known and header is None and not wl and any(n is None for n in numbers):
+        if not sep_known and header is None and not rows and any(n is None for n in numbers):
             # First content line and not numeric: the header. The separator is taken from the data.
-            header = stripped
+            header = header_line = stripped
             continue
         sep_known = True
-        if len(fields) != 2:
-            raise FormatError("wrong number of columns", file=path, line=lineno,
-                              expected="2 (wavelength, value)", got=len(fields))
-        for name, cell, number in zip(_FIELDS, fields, numbers):
+        if width is None:
+            if len(fields) < 2:
+                raise FormatError("wrong number of columns", file=path, line=lineno,
+                                  expected="at least 2 (wavelength, value, ...)", got=len(fields))
+            width = len(fields)
+        if len(fields) != width:
+            expected = "2 (wavelength, value)" if width == 2 else f"{width} (as on the first data row)"
+            raise FormatError("wrong number of columns", file=path, line=lineno, expected=expected, got=len(fields))
+        for k, (cell, number) in enumerate(zip(fields, numbers)):
+            name = _FIELDS[min(k, 1)] if width == 2 else ("wavelength" if k == 0 else f"column {k + 1}")
             if number is None:
                 raise FormatError("non-numeric cell", file=path, line=lineno, field=name,
                                   expected="a number", got=cell)
             if not math.isfinite(number):
                 raise FormatError("value is not finite", file=path, line=lineno, field=name,
                                   expected="a finite number", got=cell)
-        w, v = numbers
+        w = numbers[0]
         if w <= 0:
             raise ValidationError("wavelength must be positive", file=path, line=lineno,
                                   field="wavelength", expected="> 0 nm", got=w)
-        if wl and not w > wl[-1]:
+        if rows and not w > rows[-1][0]:
             raise ValidationError("wavelengths must increase strictly", file=path, line=lineno,
-                                  field="wavelength", expected=f"> {wl[-1]:g}", got=w)
-        wl.append(w)
-        val.append(v)
+                                  field="wavelength", expected=f"> {rows[-1][0]:g}", got=w)
+        rows.append(numbers)
 
-    if not wl:
+    if not rows:
         raise FormatError("no data rows", file=path,
                           expected="two numeric columns (wavelength nm, value)",
                           got="an empty file" if header is None else f"only the header {header!r}")
-    if len(wl) < MIN_ROWS:
-        raise FormatError("too few data rows", file=path, expected=f"at least {MIN_ROWS}", got=len(wl))
-    return np.asarray(wl, dtype=float), np.asarray(val, dtype=float), header
+    if len(rows) < MIN_ROWS:
+        raise FormatError("too few data rows", file=path, expected=f"at least {MIN_ROWS}", got=len(rows))
+    table = np.asarray(rows, dtype=float)
+    header_fields = [f.strip().strip('"').strip("'") for f in _split(header_line, sep)] if header else []
+    return table[:, 0], table[:, 1:].T, header, header_fields
+
+
+def read_spectrum_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """Read a two-column spectrum file → (wavelength nm, values, header line or None)."""
+    wl, values, header, _ = _parse(path, 2)
+    return wl, values[0], header
+
+
+def read_spectrum_table(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray], str | None]:
+    """Read a spectrum table with one wavelength column [nm] and one or more value columns.
+
+    Same format rules as :func:`read_spectrum_arrays` (separators, header, BOM, decimal comma, comments), with
+    any number ≥ 2 of columns, the same on every row. Returns (wavelength, {column name: values}, header):
+    names are the header's fields when the header has one per column, else "column 2", "column 3", ...
+    (the 1-based column number in the file). A two-column file gives one column.
+    """
+    wl, values, header, fields = _parse(path, None)
+    k = values.shape[0]
+    if len(fields) == k + 1 and len(set(fields[1:])) == k and all(fields[1:]):
+        names = fields[1:]
+    else:
+        names = [f"column {j + 2}" for j in range(k)]
+    return wl, dict(zip(names, values)), header
+
+
+def select_columns(path: str | Path, table: dict[str, np.ndarray], wanted: list[str] | None) -> list[str]:
+    """Names of ``table`` picked by ``wanted`` (header names, or 1-based file column numbers ≥ 2); all if None.
+
+    Raises :class:`ValidationError` naming the file and the available columns for an unknown name."""
+    names = list(table)
+    if not wanted:
+        return names
+    out = []
+    for w in wanted:
+        if w in table:
+            out.append(w)
+        elif w.strip().isdigit() and 2 <= int(w) <= len(names) + 1:
+            out.append(names[int(w) - 2])
+        else:
+            raise ValidationError("no such column", file=path, field="--column",
+                                  expected=" | ".join(names) + f" or a column number 2..{len(names) + 1}", got=w)
+    return out
 
 
 def read_spectrum(path: str | Path) -> SpectralDistribution:
