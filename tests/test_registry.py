@@ -55,3 +55,15 @@ def test_exports_and_fits_take_their_models_from_the_registry():
         bsdf_model("phong")
     with pytest.raises(ValidationError, match="lacks parameters"):
         bsdf_model("abg").values({"A": 1.0}, 0.0, 0.0, 0.0)
+
+
+def test_spectrum_models_are_registered_once_with_the_fits_parameters():
+    from bsdfkit.fit import spectrum
+    from bsdfkit.models.registry import SPECTRUM_MODELS
+
+    assert tuple(SPECTRUM_MODELS) == spectrum.SPECTRUM_MODELS
+    for name, model in SPECTRUM_MODELS.items():
+        fitted = spectrum._parameters(name, 380.0, 780.0)
+        assert model.parameter_names == tuple(p.name for p in fitted), name
+        assert tuple(u for _, u in model.parameters) == tuple(p.unit for p in fitted), name
+        assert spectrum._FUNCTIONS[name] is model.function

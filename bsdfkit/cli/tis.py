@@ -1,33 +1,62 @@
-"""``bsdfkit tis SCAN --incidence 45 [--json]``: the plate's interaction table (Table 2 of the power-budget paper)."""
+"""``bsdfkit tis SCAN [--incidence DEG] [--band LO HI] [--json]``: TIS of a scan.
+
+Which reduction runs is decided by what the dataset holds (:func:`bsdfkit.reduction.hemispherical.reduction_kind`):
+
+* a phosphor scan of the two-wavelength approach (bi-spectral BSDF with converted light, configurations ``blue``
+  and ``yellow``, both sides, not marked elastic) gives the plate's interaction table (Table 2 of the
+  power-budget paper: bibs/biys/yiys, power and photons, EQE) at ``--incidence``;
+* anything else (any sample, any configuration names, one side or both, one wavelength or many) gives the
+  directional-hemispherical reflectance/transmittance per wavelength and its band average over ``--band``
+  (default: the measured range), with measurement and reconstruction error bars and the assumptions made.
+
+``--mode`` overrides the choice.
+"""
 from __future__ import annotations
 
 import argparse
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import InputError
+from bsdfkit.measurement.table import QUANTITIES
+from bsdfkit.reduction.budget import KEYS, interaction_table
+from bsdfkit.reduction.hemispherical import hemispherical, reduction_kind
+from bsdfkit.tables.to_dataset import ingest
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("tis", help="TIS per interaction and side, power and photons, EQE (Table 2 style)")
-    p.add_argument("scan", help="calibrated scan (netCDF from `bsdfkit ingest`) or a raw measurement folder")
-    p.add_argument("--incidence", type=float, required=True, help="incidence angle, deg (a measured one)")
+    p = sub.add_parser("tis", help="TIS: a phosphor plate's interaction table (Table 2 style), or the "
+                                   "hemispherical reflectance/transmittance of any elastic scan")
+    p.add_argument("scan", help="calibrated scan (netCDF from `bsdfkit ingest`), a raw measurement folder, a "
+                                "measured BSDF text table or a vendor file (as for `bsdfkit ingest`)")
+    p.add_argument("--incidence", type=float, help="incidence angle, deg (a measured one); required for the "
+                                                   "interaction table, else a filter (default: all incidences)")
+    p.add_argument("--band", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="wavelength band of the band average, nm (default: the measured range)")
+    p.add_argument("--mode", choices=("auto", "interactions", "hemispherical"), default="auto",
+                   help="reduction (default auto: decided by what the dataset holds)")
+    p.add_argument("--quantity", choices=QUANTITIES, help="for a text table that does not say what it holds")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_run)
 
 
-def load_scan(path: str):
-    from pathlib import Path
-
-    from bsdfkit.io import netcdf
-    from bsdfkit.measurement.calibrate import calibrate
-    from bsdfkit.measurement.raw_scan import read_scan
-
-    return calibrate(read_scan(path)) if Path(path).is_dir() else netcdf.load(path, quantity="bsdf")
+def load_scan(path: str, quantity: str | None = None):
+    """A calibrated dataset from a raw folder, a bsdfkit netCDF, a measured text table or a vendor file."""
+    return ingest(path, quantity=quantity)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bsdfkit.reduction.budget import KEYS, interaction_table
+    ds = load_scan(args.scan, getattr(args, "quantity", None))
+    kind = reduction_kind(ds) if args.mode == "auto" else args.mode
+    if kind == "interactions":
+        return _interactions(ds, args)
+    return _hemispherical(ds, args)
 
-    table = interaction_table(load_scan(args.scan), args.incidence)
+
+def _interactions(ds, args: argparse.Namespace) -> int:
+    if args.incidence is None:
+        raise InputError("the interaction table needs an incidence", file=args.scan, field="--incidence",
+                         expected="a measured incidence angle in degrees")
+    table = interaction_table(ds, args.incidence)
     if args.json:
         emit_json(table.as_dict())
         return 0
@@ -36,4 +65,26 @@ def _run(args: argparse.Namespace) -> int:
         print(f"  {k:14s} {table.power[k]:7.2f} ± {table.power_std[k]:.2f}      "
               f"{table.photons[k]:7.2f} ± {table.photons_std[k]:.2f}")
     print(f"  EQE = {table.eqe:.3f} ± {table.eqe_std:.3f}")
+    return 0
+
+
+def _hemispherical(ds, args: argparse.Namespace) -> int:
+    band = tuple(args.band) if args.band else None
+    results = hemispherical(ds, theta_i=None if args.incidence is None else [args.incidence])
+    quantity = {"reflection": "directional-hemispherical reflectance",
+                "transmission": "directional-hemispherical transmittance"}
+    records = [r.as_dict() | {"quantity": quantity[r.side]} for r in results]
+    bands = [r.band_average(band) | {"quantity": quantity[r.side]} for r in results]
+    if args.json:
+        emit_json({"reduction": "hemispherical", "source": str(args.scan), "units": "1 (fraction of incident power)",
+                   "rule": reduction_kind.__doc__.split("\n\n")[1].strip().replace("\n    ", " "),
+                   "hemispherical": records, "band_averaged": bands})
+        return 0
+    for r, b in zip(results, bands):
+        span = "monochrome" if b["band_nm"] is None else f"{b['band_nm'][0]:g}-{b['band_nm'][1]:g} nm"
+        note = f"; specular lobe {b['lobe']:.4f}" if r.lobe_region_deg is not None else ""
+        if r.extrapolated_beyond_deg is not None:
+            note += f"; extrapolated beyond {r.extrapolated_beyond_deg:g}°"
+        print(f"{r.side:12s} θi = {r.theta_i:5g}°  {r.config}: {b['value']:.4f} ± {b['std']:.4f} "
+              f"({span}, {b['wavelengths']} wavelengths{note})")
     return 0

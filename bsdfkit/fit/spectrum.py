@@ -48,8 +48,8 @@ from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalErr
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import lm
 from bsdfkit.fit.least_squares import FitOptions, Parameter, least_squares
-from bsdfkit.models import functions as models
-from bsdfkit.models import led
+from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODELS
+from bsdfkit.models.registry import pump_two_band, pump_two_band_led
 from bsdfkit.reduction.spectral import band_sum
 from bsdfkit.reduction.spectrum_metrics import spectrum_metrics
 
@@ -144,45 +144,12 @@ WARN_FWHM_RELATIVE: float = 0.10
 # ------------------------------------------------------------------------------------------------
 # Model functions (module level: hashable static arguments of the compiled solver)
 # ------------------------------------------------------------------------------------------------
-def _gaussian(theta, wavelength):
-    return theta[2] * models.gaussian_spectrum(wavelength, theta[0], theta[1])
-
-
-def _split_gaussian(theta, wavelength):
-    return theta[3] * models.split_gaussian_spectrum(wavelength, theta[0], theta[1], theta[2])
-
-
-def _ohno2005(theta, wavelength):
-    return theta[2] * led.ohno2005_fwhm_spectrum(wavelength, theta[0], theta[1])
-
-
-def _split_pseudo_voigt(theta, wavelength):
-    return theta[4] * led.split_pseudo_voigt_spectrum(wavelength, theta[0], theta[1], theta[2], theta[3])
-
-
-def _split_pearson7(theta, wavelength):
-    return theta[4] * led.split_pearson7_spectrum(wavelength, theta[0], theta[1], theta[2], theta[3])
-
-
-def _pseudo_voigt_shoulder(theta, wavelength):
-    return _split_pseudo_voigt(theta[:5], wavelength) + theta[7] * models.split_gaussian_spectrum(
-        wavelength, theta[0] + theta[5], theta[6], theta[8])
-
-
-def _pearson7_shoulder(theta, wavelength):
-    return _split_pearson7(theta[:5], wavelength) + theta[7] * models.split_gaussian_spectrum(
-        wavelength, theta[0] + theta[5], theta[6], theta[8])
-
-
-def _two_band(theta, wavelength):
-    return models.two_band_spectrum(
-        wavelength, theta[0], theta[1], theta[2], theta[3], theta[4], theta[5], theta[6]
-    )
-
-
-def _two_band_led(theta, wavelength):
-    return _pump_two_band_led(theta, wavelength) + theta[9] * models.split_gaussian_spectrum(
-        wavelength, theta[6], theta[7], theta[8])
+# The model functions are the registry's (:mod:`bsdfkit.models.registry`); module-level names for the solver.
+_FUNCTIONS = {name: m.function for name, m in _REGISTERED_SPECTRUM_MODELS.items()}
+_gaussian = _FUNCTIONS["gaussian"]
+_split_gaussian = _FUNCTIONS["split-gaussian"]
+_two_band = _FUNCTIONS["two-band"]
+_two_band_led = _FUNCTIONS["two-band-led"]
 
 
 # Two-band fits in relative coordinates: x = {"wl": λ, "pump": measured pump peak, "valley": split} (per point,
@@ -201,17 +168,6 @@ def _absolute(theta, x, k_phosphor):
     return theta + shift
 
 
-_FUNCTIONS = {
-    "gaussian": _gaussian,
-    "split-gaussian": _split_gaussian,
-    "ohno2005": _ohno2005,
-    "split-pseudo-voigt": _split_pseudo_voigt,
-    "split-pearson7": _split_pearson7,
-    "pseudo-voigt-shoulder": _pseudo_voigt_shoulder,
-    "pearson7-shoulder": _pearson7_shoulder,
-    "two-band": _two_band,
-    "two-band-led": _two_band_led,
-}
 _RELATIVE = {"two-band": (_two_band_rel, 3), "two-band-led": (_two_band_led_rel, 6)}
 
 
@@ -924,16 +880,7 @@ def _evaluate(theta, x, function):
     return jax.vmap(function)(theta, x)
 
 
-def _pump_two_band(theta, wavelength):
-    return theta[2] * models.gaussian_spectrum(wavelength, theta[0], theta[1])
-
-
-def _pump_two_band_led(theta, wavelength):
-    return theta[2] * models.gaussian_spectrum(wavelength, theta[0], theta[1]) + theta[5] * models.gaussian_spectrum(
-        wavelength, theta[0] + theta[3], theta[4])
-
-
-_PUMPS = {"two-band": _pump_two_band, "two-band-led": _pump_two_band_led}
+_PUMPS = {"two-band": pump_two_band, "two-band-led": pump_two_band_led}
 
 
 def _curves(model: str, ds: xr.Dataset, wl2: np.ndarray, m2: np.ndarray) -> dict[str, np.ndarray]:

@@ -1,4 +1,4 @@
-"""One registry of the parametric BSDF models: each model once, with its parameters, JAX function and TIS.
+"""One registry of the parametric models: each BSDF and spectrum model once, with parameters and JAX function.
 
 Every consumer takes a model from here: the fits (:mod:`bsdfkit.fit.least_squares`), the exports
 (:mod:`bsdfkit.tables.export`), the TracePro ABg property (:mod:`bsdfkit.tables.formats.tracepro`), the
@@ -28,8 +28,10 @@ from numpy.typing import ArrayLike, NDArray
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.models import functions as f
+from bsdfkit.models import led
 
-__all__ = ["Parameter", "BsdfModel", "BSDF_MODELS", "bsdf_model"]
+__all__ = ["Parameter", "BsdfModel", "BSDF_MODELS", "bsdf_model", "SpectrumModel", "SPECTRUM_MODELS",
+           "spectrum_model"]
 
 
 @dataclass(frozen=True)
@@ -166,4 +168,126 @@ def bsdf_model(name: str) -> BsdfModel:
         return BSDF_MODELS[name]
     except KeyError:
         raise ValidationError("unknown BSDF model", field="model", expected=" | ".join(BSDF_MODELS),
+                              got=name) from None
+
+
+# ------------------------------------------------------------------------------------------------
+# Spectrum models: S(λ) in the input's units; θ the parameter vector in the order of ``parameters``
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SpectrumModel:
+    """An emission-spectrum model of the registry.
+
+    Attributes
+    ----------
+    name
+        Registry key, e.g. ``"split-gaussian"``.
+    parameters
+        (name, unit) of each entry of the parameter vector. Bounds depend on the data (the fitted
+        wavelength range) and are set by :mod:`bsdfkit.fit.spectrum`.
+    function
+        JAX function ``function(theta, wavelength [nm]) -> S`` (module level: hashable, compiled once).
+    description
+        One line for help texts.
+    """
+
+    name: str
+    parameters: tuple[tuple[str, str], ...]
+    function: Callable
+    description: str
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(n for n, _ in self.parameters)
+
+
+def _gaussian(theta, wavelength):
+    return theta[2] * f.gaussian_spectrum(wavelength, theta[0], theta[1])
+
+
+def _split_gaussian(theta, wavelength):
+    return theta[3] * f.split_gaussian_spectrum(wavelength, theta[0], theta[1], theta[2])
+
+
+def _ohno2005(theta, wavelength):
+    return theta[2] * led.ohno2005_fwhm_spectrum(wavelength, theta[0], theta[1])
+
+
+def _split_pseudo_voigt(theta, wavelength):
+    return theta[4] * led.split_pseudo_voigt_spectrum(wavelength, theta[0], theta[1], theta[2], theta[3])
+
+
+def _split_pearson7(theta, wavelength):
+    return theta[4] * led.split_pearson7_spectrum(wavelength, theta[0], theta[1], theta[2], theta[3])
+
+
+def _side_band(theta, wavelength):
+    """The split-Gaussian side band of the ``*-shoulder`` models (offset from the main peak)."""
+    return theta[7] * f.split_gaussian_spectrum(wavelength, theta[0] + theta[5], theta[6], theta[8])
+
+
+def _pseudo_voigt_shoulder(theta, wavelength):
+    return _split_pseudo_voigt(theta[:5], wavelength) + _side_band(theta, wavelength)
+
+
+def _pearson7_shoulder(theta, wavelength):
+    return _split_pearson7(theta[:5], wavelength) + _side_band(theta, wavelength)
+
+
+def _two_band(theta, wavelength):
+    return f.two_band_spectrum(wavelength, theta[0], theta[1], theta[2], theta[3], theta[4], theta[5], theta[6])
+
+
+def pump_two_band(theta, wavelength):
+    """The pump (blue) component of ``two-band``: a Gaussian."""
+    return theta[2] * f.gaussian_spectrum(wavelength, theta[0], theta[1])
+
+
+def pump_two_band_led(theta, wavelength):
+    """The pump component of ``two-band-led``: a Gaussian line plus its Gaussian side band."""
+    return pump_two_band(theta, wavelength) + theta[5] * f.gaussian_spectrum(wavelength, theta[0] + theta[3], theta[4])
+
+
+def _two_band_led(theta, wavelength):
+    return pump_two_band_led(theta, wavelength) + theta[9] * f.split_gaussian_spectrum(
+        wavelength, theta[6], theta[7], theta[8])
+
+
+_NM, _ONE, _AMP = "nm", "1", "input units"
+_LINE = (("peak_nm", _NM), ("fwhm_nm", _NM))
+_SIDE = (("side_offset_nm", _NM), ("side_fwhm_nm", _NM), ("side_amplitude", _AMP), ("side_alpha", _ONE))
+_PUMP = (("blue_peak_nm", _NM), ("blue_fwhm_nm", _NM), ("blue_amplitude", _AMP))
+_PHOSPHOR = (("yellow_peak_nm", _NM), ("yellow_fwhm_nm", _NM), ("yellow_alpha", _ONE), ("yellow_amplitude", _AMP))
+
+#: The spectrum models, by name.
+SPECTRUM_MODELS: dict[str, SpectrumModel] = {
+    m.name: m for m in (
+        SpectrumModel("gaussian", (*_LINE, ("amplitude", _AMP)), _gaussian,
+                      "Gaussian, eq. (2) of [Cylindrical-module]"),
+        SpectrumModel("split-gaussian", (*_LINE, ("alpha", _ONE), ("amplitude", _AMP)), _split_gaussian,
+                      "asymmetric Gaussian, eq. (3) of [Cylindrical-module]"),
+        SpectrumModel("ohno2005", (*_LINE, ("amplitude", _AMP)), _ohno2005, "Ohno's LED model [Ohno-2005]"),
+        SpectrumModel("split-pseudo-voigt", (*_LINE, ("alpha", _ONE), ("eta", _ONE), ("amplitude", _AMP)),
+                      _split_pseudo_voigt, "split pseudo-Voigt line"),
+        SpectrumModel("split-pearson7", (*_LINE, ("alpha", _ONE), ("shape_m", _ONE), ("amplitude", _AMP)),
+                      _split_pearson7, "split Pearson VII line"),
+        SpectrumModel("pseudo-voigt-shoulder", (*_LINE, ("alpha", _ONE), ("eta", _ONE), ("amplitude", _AMP), *_SIDE),
+                      _pseudo_voigt_shoulder, "split pseudo-Voigt line with a split-Gaussian side band"),
+        SpectrumModel("pearson7-shoulder", (*_LINE, ("alpha", _ONE), ("shape_m", _ONE), ("amplitude", _AMP), *_SIDE),
+                      _pearson7_shoulder, "split Pearson VII line with a split-Gaussian side band"),
+        SpectrumModel("two-band", (*_PUMP, *_PHOSPHOR), _two_band,
+                      "Gaussian pump + split-Gaussian phosphor, §4.2 of [Cylindrical-module]"),
+        SpectrumModel("two-band-led", (*_PUMP, ("blue_side_offset_nm", _NM), ("blue_side_fwhm_nm", _NM),
+                                       ("blue_side_amplitude", _AMP), *_PHOSPHOR), _two_band_led,
+                      "pump line with side band + split-Gaussian phosphor"),
+    )
+}
+
+
+def spectrum_model(name: str) -> SpectrumModel:
+    """The registered spectrum model ``name`` (raises naming the known models otherwise)."""
+    try:
+        return SPECTRUM_MODELS[name]
+    except KeyError:
+        raise ValidationError("unknown spectrum model", field="model", expected=" | ".join(SPECTRUM_MODELS),
                               got=name) from None

@@ -1,0 +1,824 @@
+"""Directional-hemispherical reflectance and transmittance of elastic scatter, any sample, with error bars.
+
+The quantity is the TIS of :mod:`bsdfkit.reduction.tis` per wavelength: ρ(θi, λ) = ∬_{|β| ≤ 1} f dβx dβy in
+Harvey–Shack direction cosines, for each configuration, incidence and side a calibrated dataset holds
+(reflection-only, transmission-only, monochrome and many-wavelength scans alike).
+
+Decomposition (why one centre is not enough)
+    The commonest real sample is a diffuse body plus a specular lobe. The body is symmetric about the NORMAL
+    (it depends on |β| and, weakly, on the azimuth), the lobe about the SPECULAR point β0 = (sin θi, 0)
+    (Harvey–Shack shift invariance). Reconstructing everything about β0 reads a body that darkens toward
+    grazing at |β − β0| instead of |β| (a few % high at 10°, 10-20 % at 80°); about the normal, the lobe is
+    smeared over a whole ring. So f = D + L:
+
+    1. *Lobe region*: on the in-plane arc (and the perpendicular arc, if measured) the region around the
+       specular point where the profile stands above a smooth floor, found on the band-mean profile by
+       walking outward from the highest sample within ±:data:`PEAK_WINDOW` of β0 until the profile is locally
+       straight at two successive samples (:func:`_straight`: within :data:`TAIL_EXCESS` (2 %) + 2u of the line
+       through the next three samples, and within three times that of the line through the samples up to
+       :data:`WIDE_WINDOW` outward; a convex lobe tail lies above such lines, a concave core below) and has
+       stopped falling (by at most :data:`EDGE_DROP` of its fall from the peak over the next
+       :data:`WIDE_WINDOW`). An edge still on a finely sampled flat top is searched again farther out; the
+       shorter side is then extended to the radius of the longer (a Harvey–Shack lobe has one radius in every
+       direction), and the perpendicular arc's region to that radius too. No lobe when both walks stop at the
+       peak. The lobe's centre is the vertex of the parabola through ln f at the three highest in-plane
+       samples (β0 itself when the lobe sits where expected; a tilted sample moves it).
+    2. *Body D*: the records outside the lobe region, reconstructed about the normal with
+       :class:`~bsdfkit.reduction.tis.Hemisphere` (``center="normal"``); under the lobe it interpolates
+       linearly between the edges.
+    3. *Lobe L*: the residuals f − D at the records in the region (0 elsewhere), reconstructed about the lobe's
+       centre with the same machinery (``center="specular"``), so that D + L equals the data at every measured
+       record. The lobe is integrated with ln-f interpolation between samples (the ratio of its ln-f to its
+       linear integral on the band-mean profile scales the linear weights).
+
+    Both parts, and so ρ(λ) = Σ_k c_k f_k(λ), are linear in the data for a given region: the region and the tail
+    rule are chosen once per incidence and side on the band-mean profile, then every wavelength is one dot
+    product. A half-axis of the body that ends before 90° is extrapolated to |β| = 1 (and, where a lobe region
+    reaches the data end, bridged under it) by the *trend*: its last value plus the least-squares slope (in θs)
+    of its last three samples times the angle gone on, kept between 0 and the last value.
+
+Error bars
+    ``std_measurement``: per-record standard uncertainties through the weights c_k (independent), plus the
+    scale common to all records (``incident_relative_std`` of the configuration, or
+    ``attrs['common_relative_std']``). ``std_reconstruction``: in quadrature, for each group of alternative
+    reconstructions the largest |alternative − central|:
+
+    * ``tail``: beyond the last measured angle the body held at its last value, or going linearly to 0 at 90°
+      (only when something is extrapolated; the angle is reported as ``extrapolated_beyond_deg``);
+    * ``azimuth``: with in-plane data only, the body's and the lobe's perpendicular half-profiles are the
+      mean of the two in-plane halves (central), or either half alone; with both arcs the blend exponent
+      2 → 1 or 4;
+    * ``separation``: the lobe region one and two samples wider at each edge;
+    * ``interpolation``: the lobe integrated with f instead of ln f interpolation (without a lobe: the whole
+      profile with ln f instead of f);
+    * ``quadrature``: the polar grid halved.
+
+    The single-centre reconstructions (everything about β0, everything about the normal) are reported in the
+    components for comparison; they are not folded in when a lobe is found, because each one contradicts the
+    symmetry of one part (they are exact only for the part whose centre they use).
+
+Assumptions are returned in words with every result (``assumptions``); with in-plane data only the key one is
+that the body is rotationally symmetric about the normal and the lobe about the specular point.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import InputError
+from bsdfkit.core.records import incidences
+from bsdfkit.reduction.tis import HALVES, Hemisphere, polar_grid
+
+#: Half-width (in direction cosines) of the window around β0 in which the lobe's peak is looked for.
+PEAK_WINDOW = 0.1
+#: Width (direction cosines) of the wider window of the straightness test.
+WIDE_WINDOW = 0.1
+#: A floor edge falls over the next three samples by at most this fraction of the drop from the peak.
+EDGE_DROP = 0.2
+#: Relative excess over the outward secant that marks a lobe tail.
+TAIL_EXCESS = 0.02
+#: Angles (deg) at or beyond which a half-profile counts as reaching the horizon (no extrapolation).
+HORIZON_DEG = 89.9
+
+SIDES = ("reflection", "transmission")
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Per-record directions of one profile (one configuration, incidence and side)."""
+
+    theta_i: float  # deg
+    phi_i: float  # deg
+    theta_s: NDArray[np.float64]  # deg
+    phi_s: NDArray[np.float64]  # deg
+    arc: NDArray[np.str_]
+    side: str
+
+    @property
+    def n(self) -> int:
+        return self.theta_s.size
+
+    def frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(x, y): direction cosines along +α (toward the specular side) and perpendicular to it."""
+        ts, ps = np.radians(self.theta_s), np.radians(self.phi_s)
+        u = np.radians(self.phi_i) - np.pi
+        a, b = np.sin(ts) * np.cos(ps), np.sin(ts) * np.sin(ps)
+        return a * np.cos(u) + b * np.sin(u), -a * np.sin(u) + b * np.cos(u)
+
+    def dataset(self, keep: NDArray[np.int64], values: NDArray[np.float64] | None = None,
+                extra: list[tuple[float, float]] = (), theta_i: float | None = None) -> xr.Dataset:
+        """A profile dataset of the records ``keep`` plus virtual in-plane records (θs, φs) in ``extra``;
+        ``theta_i`` (deg) overrides the incidence, which places the specular centre of a reconstruction."""
+        ts = np.concatenate([self.theta_s[keep], [e[0] for e in extra]])
+        ps = np.concatenate([self.phi_s[keep], [e[1] for e in extra]])
+        arc = np.concatenate([self.arc[keep], ["in_plane"] * len(extra)])
+        n = ts.size
+        v = np.zeros(n) if values is None else np.asarray(values, dtype=np.float64)
+        return xr.Dataset({"bsdf": ("record", v)},
+                          coords={"theta_i": ("record", np.full(n, self.theta_i if theta_i is None else theta_i)),
+                                  "phi_i": ("record", np.full(n, self.phi_i)),
+                                  "theta_s": ("record", ts), "phi_s": ("record", ps),
+                                  "side": ("record", np.array([self.side] * n)), "arc": ("record", arc)})
+
+
+@dataclass(frozen=True)
+class Region:
+    """The lobe region: record indices (into the profile) and its in-plane extent (signed θs, deg)."""
+
+    records: NDArray[np.int64]
+    in_plane_deg: tuple[float, float] | None
+    perpendicular_deg: tuple[float, float] | None = None
+    center_deg: float | None = None  # lobe centre: signed in-plane θs of the peak (deg)
+    arcs: tuple = ()  # (record order along the arc, index of the lower edge, of the upper edge) per arc
+
+    def grown(self, geom: Geometry, k: int) -> "Region":
+        """The region with every edge moved outward by k samples (inward for k < 0)."""
+        return _region(geom, list(self.arcs), self.center_deg, k)
+
+
+@dataclass
+class Reconstruction:
+    """Weights c (per profile record) of the central reconstruction and of every alternative."""
+
+    central: NDArray[np.float64]
+    alternatives: dict[str, dict[str, NDArray[np.float64]]]  # group -> name -> weights
+    comparisons: dict[str, NDArray[np.float64]]  # single-centre reconstructions (not folded in)
+    lobe: NDArray[np.float64]  # weights of the lobe part alone (central)
+    region: Region
+    extrapolated_beyond_deg: float | None
+    assumptions: list[str]
+    method: str
+
+
+# ------------------------------------------------------------------------------------------- lobe region
+def _straight(x: NDArray, g: NDArray, s: NDArray, j: int, step: int, tail_excess: float) -> tuple[bool, float]:
+    """Whether g is locally straight at j, and the tolerance used.
+
+    Two scales: the least-squares line through the next three samples outward must pass within
+    τ·|line| + 2u_j of g_j, and the line through the samples up to :data:`WIDE_WINDOW` outward within three
+    times that (a lobe wide compared with the sampling step is straight on the first scale only). (False, 0)
+    without samples outward.
+    """
+    n = x.size
+    outer = [k for k in (j + step, j + 2 * step, j + 3 * step) if 0 <= k < n]
+    if not outer:
+        return False, 0.0
+    ok = True
+    tol = 0.0
+    wide = np.arange(j + step, n if step > 0 else -1, step)
+    wide = wide[np.abs(x[wide] - x[j]) <= WIDE_WINDOW]
+    # one sample outward gives no slope: compare with it at the wide tolerance
+    for ks, factor in ((np.array(outer), 1.0 if len(outer) > 1 else 3.0), (wide, 3.0)):
+        if ks.size < 2 and factor > 1.0 and ks is wide:
+            continue
+        pred = g[ks[0]] if ks.size == 1 else np.polyval(np.polyfit(x[ks], g[ks], 1), x[j])
+        t = factor * tail_excess * abs(pred) + 2.0 * s[j]
+        ok &= bool(abs(g[j] - pred) <= t)
+        tol = max(tol, t)
+    return ok, tol
+
+
+def _walk(x: NDArray, g: NDArray, s: NDArray, start: int, step: int, tail_excess: float,
+          min_fall: float = 0.0) -> int:
+    """Index of the floor's edge walking from the peak ``start`` in direction ``step`` (±1); −1 or len(x) when
+    the profile never reaches the floor before the data end.
+
+    Sample j is the edge when the profile is locally straight at j and at the next sample outward (a lobe's
+    convex tail lies above the line through the samples outward, its concave core below), and over the next
+    samples (up to :data:`WIDE_WINDOW`) falls by at most :data:`EDGE_DROP` of what it has already fallen from
+    the peak (this rejects the inflection point of a broad lobe, where the profile is straight but steep), and
+    it lies at least ``min_fall`` below the peak.
+    """
+    n = x.size
+    j = start
+    while 0 <= j < n:
+        if not 0 <= j + step < n:
+            return j + step  # lobe runs to the data end
+        if g[start] - g[j] < min_fall:
+            j += step
+            continue
+        here, tol = _straight(x, g, s, j, step, tail_excess)
+        wide = np.arange(j + step, n if step > 0 else -1, step)
+        wide = wide[np.abs(x[wide] - x[j]) <= WIDE_WINDOW]
+        far = g[wide[-1]] if wide.size >= 3 else g[min(max(j + 3 * step, 0), n - 1)]
+        settled = abs(g[j] - far) <= EDGE_DROP * abs(g[start] - g[j]) + tol
+        if here and settled:
+            nxt, _ = _straight(x, g, s, j + step, step, tail_excess)
+            if nxt or not 0 <= j + 2 * step < n:
+                return j
+        j += step
+    return j
+
+
+def _edges(x: NDArray, g: NDArray, s: NDArray, p: int, tail_excess: float) -> tuple[int, int]:
+    """Both floor edges around the peak p. An edge that has not fallen half-way from the peak to the other
+    edge (a lobe's flat top, sampled finely) is searched again farther out with that fall required."""
+    lo = _walk(x, g, s, p, -1, tail_excess)
+    hi = _walk(x, g, s, p, +1, tail_excess)
+    n = x.size
+    g_lo = g[lo] if 0 <= lo < n else np.nan
+    g_hi = g[hi] if 0 <= hi < n else np.nan
+    if np.isfinite(g_lo) and np.isfinite(g_hi):
+        half_lo, half_hi = 0.5 * (g[p] - g_hi), 0.5 * (g[p] - g_lo)
+        if g[p] - g_lo < half_lo:
+            lo = _walk(x, g, s, p, -1, tail_excess, half_lo)
+        if g[p] - g_hi < half_hi:
+            hi = _walk(x, g, s, p, +1, tail_excess, half_hi)
+    elif np.isfinite(g_lo) and lo == p:  # the other side runs to the data end: so must this one's flat top
+        lo = _walk(x, g, s, p, -1, tail_excess, 0.5 * (g[p] - np.min(g)))
+    elif np.isfinite(g_hi) and hi == p:
+        hi = _walk(x, g, s, p, +1, tail_excess, 0.5 * (g[p] - np.min(g)))
+    return lo, hi
+
+
+def find_region(geom: Geometry, g: NDArray[np.float64], s: NDArray[np.float64],
+                tail_excess: float = TAIL_EXCESS) -> Region:
+    """The lobe region of a profile from its band-mean values ``g`` and their uncertainties ``s`` (module doc)."""
+    x, y = geom.frame()
+    x0 = np.sin(np.radians(geom.theta_i))
+    ok = np.isfinite(g)
+    arcs: list[tuple[NDArray[np.int64], int, int]] = []
+    center = None
+    ip = np.flatnonzero(ok & (geom.arc == "in_plane"))
+    if ip.size:
+        order = ip[np.argsort(x[ip], kind="stable")]
+        xs, gs, ss = x[order], g[order], s[order]
+        near = np.flatnonzero(np.abs(xs - x0) <= PEAK_WINDOW)
+        if near.size:
+            p = int(near[np.argmax(gs[near])])
+            lo, hi = _edges(xs, gs, ss, p, tail_excess)
+            if hi - lo > 1:
+                center = _peak_vertex(xs, gs, p)
+                radius = max(abs(xs[k] - center) for k in (lo, hi) if 0 <= k < xs.size) if (
+                    0 <= lo or hi < xs.size) else np.inf
+                lo, hi = _symmetric(np.abs(xs - center), lo, hi, p, radius)
+                arcs.append((order, lo, hi))
+    pp = np.flatnonzero(ok & (geom.arc == "perpendicular"))
+    if arcs and pp.size:
+        order = pp[np.argsort(y[pp], kind="stable")]
+        ys, gs, ss = y[order], g[order], s[order]
+        d = np.hypot(x[order] - center, ys)
+        if d.min() <= PEAK_WINDOW:
+            p = int(np.argmin(d))
+            lo, hi = _edges(ys, gs, ss, p, tail_excess)
+            lo, hi = _symmetric(d, lo, hi, p, radius)
+            if hi - lo > 1:
+                arcs.append((order, lo, hi))
+    center_deg = None if center is None else float(np.degrees(np.arcsin(np.clip(center, -1.0, 1.0))))
+    return _region(geom, arcs, center_deg)
+
+
+def _symmetric(dist: NDArray, lo: int, hi: int, p: int, radius: float) -> tuple[int, int]:
+    """Edges moved outward (never inward) so that the region reaches ``radius`` from the lobe centre on both
+    sides of the peak p: a Harvey–Shack lobe has one radius in every direction, and noise or a sloping floor
+    can stop one walk early."""
+    n = dist.size
+    while lo >= 0 and lo < p and dist[lo] < radius - 1e-12:
+        lo -= 1
+    while hi < n and hi > p and dist[hi] < radius - 1e-12:
+        hi += 1
+    return lo, hi
+
+
+def _region(geom: Geometry, arcs: list[tuple[NDArray[np.int64], int, int]], center_deg: float | None,
+            grow: int = 0) -> Region:
+    """The Region of the samples strictly between the edges of each arc, edges moved out by ``grow`` samples."""
+    x, y = geom.frame()
+    members: list[int] = []
+    extents: list[tuple[float, float] | None] = [None, None]
+    for k, (order, lo, hi) in enumerate(arcs):
+        inside = np.arange(max(lo + 1 - grow, 0), min(hi + grow, order.size))
+        if inside.size == 0:
+            continue
+        members += order[inside].tolist()
+        coord = (x if k == 0 else y)[order[inside]]
+        ang = np.degrees(np.arcsin(np.clip(coord, -1.0, 1.0)))
+        extents[k] = (float(ang.min()), float(ang.max()))
+    return Region(np.array(sorted(set(members)), dtype=np.int64), extents[0], extents[1], center_deg,
+                  tuple(arcs))
+
+
+def _peak_vertex(x: NDArray, g: NDArray, p: int) -> float:
+    """In-plane position of a lobe's peak: vertex of the parabola through ln g at the highest sample and its
+    neighbours (exact for a Gaussian lobe), kept within one sample step of the highest sample."""
+    if p == 0 or p == x.size - 1 or not np.all(g[p - 1:p + 2] > 0):
+        return float(x[p])
+    a, b, _ = np.polyfit(x[p - 1:p + 2], np.log(g[p - 1:p + 2]), 2)
+    if not a < 0:
+        return float(x[p])
+    return float(np.clip(-b / (2 * a), x[p - 1], x[p + 1]))
+
+
+# ------------------------------------------------------------------------------------------- linear maps
+def _evaluation_matrix(hemi: Hemisphere, r: NDArray, psi: NDArray, p: float = 2.0) -> NDArray[np.float64]:
+    """M such that hemi's linear reconstruction at polar points (r, ψ) is M @ values (records of hemi)."""
+    coef = hemi.coefficients(r, psi, p)
+    m = np.zeros((r.size, hemi.n_records))
+    rows = np.arange(r.size)
+    for k, name in enumerate(HALVES):
+        for h, share in hemi.halves[name]:
+            if h.radius.size == 1:
+                lo = hi = np.zeros(r.size, dtype=np.int64)
+                wl, wh = np.ones(r.size), np.zeros(r.size)
+            else:
+                q = np.clip(r, h.radius[0], h.radius[-1])
+                hi = np.clip(np.searchsorted(h.radius, q, side="right"), 1, h.radius.size - 1)
+                lo = hi - 1
+                wh = (q - h.radius[lo]) / (h.radius[hi] - h.radius[lo])
+                wl = 1.0 - wh
+            a = coef[:, k] * share
+            np.add.at(m, (rows, h.record[lo]), a * wl)
+            np.add.at(m, (rows, h.record[hi]), a * wh)
+    return m
+
+
+def _weights(hemi: Hemisphere, n_psi: int, n_r: int, p: float = 2.0) -> NDArray[np.float64]:
+    """Integration weights of ``hemi`` (linear reconstruction) with blend exponent ``p`` (as
+    :meth:`Hemisphere.weights`, which has p = 2)."""
+    if p == 2.0:
+        return hemi.weights(n_psi, n_r)
+    grid = polar_grid((float(np.hypot(*hemi.beta0)), 0.0), n_psi, n_r)
+    coef = hemi.coefficients(grid.r, grid.psi, p)
+    w = np.zeros(hemi.n_records)
+    for k, name in enumerate(HALVES):
+        for h, share in hemi.halves[name]:
+            a = coef[:, k] * share * grid.w
+            if h.radius.size == 1:
+                w += np.bincount(h.record[:1], weights=[a.sum()], minlength=hemi.n_records)
+                continue
+            q = np.clip(grid.r, h.radius[0], h.radius[-1])
+            hi = np.clip(np.searchsorted(h.radius, q, side="right"), 1, h.radius.size - 1)
+            lo = hi - 1
+            t = (q - h.radius[lo]) / (h.radius[hi] - h.radius[lo])
+            w += np.bincount(h.record[lo], weights=a * (1.0 - t), minlength=hemi.n_records)
+            w += np.bincount(h.record[hi], weights=a * t, minlength=hemi.n_records)
+    return w
+
+
+def _polar(hemi: Hemisphere, geom: Geometry, idx: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
+    x, y = geom.frame()
+    dx, dy = x[idx] - hemi.beta0[0], y[idx] - hemi.beta0[1]
+    return np.hypot(dx, dy), np.arctan2(dy, dx)
+
+
+def _with_perpendicular(hemi: Hemisphere, source: str) -> Hemisphere:
+    """``hemi`` with both perpendicular half-axes replaced by the in-plane half ``source`` (azimuth bounds)."""
+    halves = dict(hemi.halves)
+    measured = dict(hemi.measured_range)
+    halves["+beta"] = halves["-beta"] = halves[source]
+    measured["+beta"] = measured["-beta"] = hemi.measured_range[source]
+    return dataclasses.replace(hemi, halves=halves, measured_range=measured)
+
+
+def _tail_rows(geom: Geometry, keep: NDArray[np.int64], finite: NDArray[np.bool_], x: NDArray, rule: str,
+               ref: NDArray[np.float64]) -> tuple[list[tuple[float, float]], NDArray[np.float64], list[float]]:
+    """Virtual in-plane records that end the body's half-profiles short of the horizon.
+
+    On each in-plane half (about the normal) whose body samples ``keep`` stop before 90°: if the data go on
+    (a lobe region reaching the data end), a record at the last measured angle by the *trend*; then a record at
+    90° by ``rule``: "trend", "hold" (the last value) or "zero". The trend is the last value plus the
+    least-squares slope in θs of the last three body samples times the angle gone on, kept between 0 and the
+    last value on the band-mean profile (a body rising toward a lobe is its tail: not extrapolated upward).
+    Returns the virtual records' (θs, φs), the matrix T (virtual × profile records) giving their values, and
+    the last measured angle of every extrapolated half.
+    """
+    extra, rows, ends = [], [], []
+    ip = keep[geom.arc[keep] == "in_plane"]
+    every = np.flatnonzero(finite & (geom.arc == "in_plane"))
+    phi_spec = (geom.phi_i - 180.0) % 360.0
+    for sign, phi in ((1.0, phi_spec), (-1.0, (phi_spec + 180.0) % 360.0)):
+        half = ip[sign * x[ip] >= -1e-12]
+        if half.size == 0:
+            continue
+        ang = geom.theta_s[half]
+        order = np.argsort(ang)
+        half, ang = half[order], ang[order]
+        data_end = float(geom.theta_s[every[sign * x[every] >= -1e-12]].max())
+        if data_end >= HORIZON_DEG:
+            continue
+        last_row = np.zeros(geom.n)
+        last_row[half[-1]] = 1.0
+        slope = np.zeros(geom.n)
+        if half.size >= 2:
+            a = geom.theta_s[half[-3:]]
+            slope[half[-3:]] = np.linalg.pinv(np.stack([np.ones_like(a), a], axis=1))[1]
+
+        def trend(at: float, base: NDArray, since: float, slope: NDArray = slope) -> NDArray[np.float64]:
+            row = base + (at - since) * slope
+            value = row @ np.nan_to_num(ref)
+            return np.zeros(geom.n) if value < 0 else base if value > base @ np.nan_to_num(ref) else row
+
+        end_row = last_row
+        if data_end > ang[-1] + 1e-9:  # bridge under the lobe to the data end
+            end_row = trend(data_end, last_row, float(ang[-1]))
+            extra.append((data_end, phi))
+            rows.append(end_row)
+        if rule == "trend":
+            row = trend(90.0, end_row, max(data_end, float(ang[-1])))
+        else:
+            row = end_row if rule == "hold" else np.zeros(geom.n)
+        rows.append(row)
+        extra.append((90.0, phi))
+        ends.append(data_end)
+    t = np.array(rows) if rows else np.zeros((0, geom.n))
+    return extra, t, ends
+
+
+def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: NDArray[np.float64],
+                   rule: str, n_psi: int, n_r: int, azimuth: str = "mean", p: float = 2.0,
+                   with_kappa: bool = False, body_center: str = "normal"
+                   ) -> tuple[NDArray, NDArray, list[float], float]:
+    """Weights over profile records of the body (about the normal) and of the lobe (about its centre).
+
+    Returns (body weights, lobe weights with linear interpolation, last measured angles of extrapolated halves,
+    κ = lobe with ln-f interpolation / lobe with f interpolation on the band-mean profile if ``with_kappa``,
+    else 1).
+    """
+    x, _ = geom.frame()
+    n = geom.n
+    region = reg.records
+    outside = np.setdiff1d(np.flatnonzero(finite), region)
+    extra, t, ends = _tail_rows(geom, outside, finite, x, rule, ref)
+    body = Hemisphere.from_profile(geom.dataset(outside, extra=extra), center=body_center)
+    if azimuth != "mean":
+        body = _with_perpendicular(body, azimuth)
+    wb = _weights(body, n_psi, n_r, p)
+    # body weights back onto profile records: own records + virtual ones through T
+    c_body = np.zeros(n)
+    np.add.at(c_body, outside, wb[:outside.size])
+    c_body += wb[outside.size:] @ t
+    c_lobe = np.zeros(n)
+    kappa = 1.0
+    if region.size:
+        # body at the region's records, as a linear map of the profile records
+        r, psi = _polar(body, geom, region)
+        m = _evaluation_matrix(body, r, psi, p)
+        e = np.zeros((region.size, n))
+        e[:, outside] += m[:, :outside.size]
+        e += m[:, outside.size:] @ t
+        resid = -e
+        resid[np.arange(region.size), region] += 1.0  # residual_j = f_j − D(β_j) for region records
+        lobe_keep = np.flatnonzero(finite)
+        lobe_values = np.zeros(lobe_keep.size)
+        pos = np.searchsorted(lobe_keep, region)
+        lobe_values[pos] = resid @ np.nan_to_num(ref)
+        center = min(max(reg.center_deg if reg.center_deg is not None else geom.theta_i, 0.0), 89.0)
+        lobe = Hemisphere.from_profile(geom.dataset(lobe_keep, lobe_values, theta_i=center), center="specular")
+        if azimuth != "mean":
+            lobe = _with_perpendicular(lobe, azimuth)
+        wl = _weights(lobe, n_psi, n_r, p)
+        c_lobe = wl[pos] @ resid
+        linear = float(wl @ lobe_values)
+        if with_kappa and linear > 0:
+            kappa = float(np.clip(lobe.tis("log", n_psi, n_r) / linear, 0.5, 1.5))
+    return c_body, c_lobe, ends, kappa
+
+
+def _mismatch(geom: Geometry, g: NDArray[np.float64], center: str) -> float:
+    """RMS relative difference of the in-plane profile at equal distances on the two sides of the normal
+    (``center="normal"``) or of the specular point; NaN with fewer than three matched distances."""
+    x, _ = geom.frame()
+    ip = np.flatnonzero(np.isfinite(g) & (geom.arc == "in_plane"))
+    c = 0.0 if center == "normal" else float(np.sin(np.radians(geom.theta_i)))
+    d = x[ip] - c
+    plus, minus = ip[d > 1e-9], ip[d < -1e-9]
+    if plus.size < 2 or minus.size < 2:
+        return float("nan")
+    dp, dm = x[plus] - c, c - x[minus]
+    op, om = np.argsort(dp), np.argsort(dm)
+    lo, hi = max(dp.min(), dm.min()), min(dp.max(), dm.max())
+    at = np.union1d(dp, dm)
+    at = at[(at >= lo) & (at <= hi)]
+    if at.size < 3:
+        return float("nan")
+    fp = np.interp(at, dp[op], g[plus][op])
+    fm = np.interp(at, dm[om], g[minus][om])
+    scale = 0.5 * (np.abs(fp) + np.abs(fm))
+    return float(np.sqrt(np.mean(((fp - fm) / np.where(scale > 0, scale, 1.0)) ** 2)))
+
+
+def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
+                n_psi: int = 256, n_r: int = 400) -> Reconstruction:
+    """Central weights and alternatives for one profile (module docstring); ``ref`` is the band-mean profile
+    (NaN = record without data), ``ref_std`` its standard uncertainty."""
+    finite = np.isfinite(ref)
+    if not finite.any():
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
+                         expected="finite values on an arc")
+    two_arcs = bool(np.any(finite & (geom.arc == "perpendicular")))
+    s = np.nan_to_num(ref_std)
+    region = find_region(geom, ref, s)
+    body_center, other_center, mismatch = "normal", None, {}
+    if not region.records.size:
+        # no separable lobe: the centre the in-plane profile is more symmetric about (a lobe as broad as the
+        # arc, e.g. forward scatter in transmission, or a body that depends on |β| only)
+        mismatch = {c: _mismatch(geom, ref, c) for c in ("normal", "specular")}
+        m_n, m_s = mismatch["normal"], mismatch["specular"]
+        if np.isfinite(m_s) and np.isfinite(m_n) and m_s < m_n:
+            body_center = "specular"
+        other = "specular" if body_center == "normal" else "normal"
+        if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
+            other_center = other
+    body, lobe, ends, kappa = _body_and_lobe(geom, region, finite, ref, "trend", n_psi, n_r, with_kappa=True,
+                                             body_center=body_center)
+
+    def variant(reg: Region = region, rule: str = "trend", grid: tuple[int, int] = (n_psi, n_r),
+                **kw) -> NDArray[np.float64]:
+        kw.setdefault("body_center", body_center)
+        b, lo, _, _ = _body_and_lobe(geom, reg, finite, ref, rule, *grid, **kw)
+        return b + kappa * lo
+
+    alt: dict[str, dict[str, NDArray]] = {}
+    if other_center is not None:
+        alt["centre"] = {f"{other_center}_centred": variant(body_center=other_center)}
+    if ends:
+        alt["tail"] = {rule: variant(rule=rule) for rule in ("hold", "zero")}
+    if two_arcs:
+        alt["azimuth"] = {f"blend_p{p:g}": variant(p=p) for p in (1.0, 4.0)}
+    else:
+        alt["azimuth"] = {"forward": variant(azimuth="+alpha"), "backward": variant(azimuth="-alpha")}
+    sep = {}
+    if region.records.size:
+        for name, k in (("wider_1", 1), ("wider_2", 2)):
+            other = region.grown(geom, k)
+            if other.records.size and not np.array_equal(other.records, region.records):
+                sep[name] = variant(reg=other)
+    if sep:
+        alt["separation"] = sep
+    if region.records.size:
+        alt["interpolation"] = {"linear_lobe": body + lobe}
+    else:  # the whole profile with ln-f instead of f interpolation (band-mean ratio)
+        keep = np.flatnonzero(finite)
+        extra, t, _ = _tail_rows(geom, keep, finite, geom.frame()[0], "trend", ref)
+        values = np.concatenate([ref[keep], t @ np.nan_to_num(ref)])
+        hemi = Hemisphere.from_profile(geom.dataset(keep, values, extra), center=body_center)
+        linear = hemi.tis("linear", n_psi, n_r)
+        if linear > 0:
+            alt["interpolation"] = {"log_f": body * float(np.clip(hemi.tis("log", n_psi, n_r) / linear, 0.5, 1.5))}
+    alt["quadrature"] = {"half_grid": variant(grid=(n_psi // 2, n_r // 2))}
+    comparisons = {}
+    keep = np.flatnonzero(finite)
+    for center in ("specular", "normal"):
+        hemi = Hemisphere.from_profile(geom.dataset(keep), center=center)
+        w = np.zeros(geom.n)
+        w[keep] = hemi.weights(n_psi, n_r)
+        comparisons[f"{center}_centred"] = w
+    assumptions = []
+    if region.records.size:
+        method = "body about the normal + lobe about its peak"
+        assumptions.append(
+            "diffuse body rotationally symmetric about the normal; specular lobe rotationally symmetric "
+            f"(Harvey-Shack) about its in-plane peak at {region.center_deg:.2f} deg "
+            f"(nominal specular {geom.theta_i:g} deg); lobe region found on the band-mean profile")
+    else:
+        what = {"normal": "the normal", "specular": "the specular direction (Harvey-Shack)"}
+        method = f"everything about {what[body_center].split(' (')[0]} (no separable specular lobe)"
+        sym = (f"; in-plane asymmetry {100 * mismatch['normal']:.1f} % about the normal, "
+               f"{100 * mismatch['specular']:.1f} % about the specular direction"
+               if np.isfinite(mismatch.get("normal", np.nan)) and np.isfinite(mismatch.get("specular", np.nan))
+               else "")
+        assumptions.append(f"no lobe separable from a floor near the specular direction: scatter taken as "
+                           f"rotationally symmetric about {what[body_center]}{sym}"
+                           + (f" (error bar: about {what[other_center]})" if other_center else ""))
+    if not two_arcs:
+        assumptions.append("in-plane data only: the perpendicular half-profiles are the mean of the two in-plane "
+                           "halves (error bar: either half alone)")
+    if ends:
+        assumptions.append(f"in-plane profile extrapolated beyond {min(ends):g} deg to the horizon along the trend of "
+                           "its last three samples (error bar: held at the last value, or linear to 0 at 90 deg)")
+    return Reconstruction(central=body + kappa * lobe, alternatives=alt, comparisons=comparisons,
+                          lobe=kappa * lobe, region=region, extrapolated_beyond_deg=min(ends) if ends else None,
+                          assumptions=assumptions, method=method)
+
+
+# ------------------------------------------------------------------------------------------- datasets
+@dataclass(frozen=True)
+class HemisphericalResult:
+    """Directional-hemispherical reflectance or transmittance (fractions) of one configuration, incidence and side,
+    per wavelength (nm), with standard uncertainties and the components of the reconstruction error."""
+
+    config: str
+    theta_i: float
+    side: str
+    wavelength: NDArray[np.float64]
+    value: NDArray[np.float64]
+    std_measurement: NDArray[np.float64]
+    std_reconstruction: NDArray[np.float64]
+    components: dict[str, NDArray[np.float64]]
+    method: str
+    assumptions: list[str]
+    extrapolated_beyond_deg: float | None
+    lobe_region_deg: tuple[float, float] | None
+    lobe: NDArray[np.float64]
+
+    @property
+    def std(self) -> NDArray[np.float64]:
+        return np.hypot(self.std_measurement, self.std_reconstruction)
+
+    def band_average(self, band: tuple[float, float] | None = None) -> dict:
+        """Δλ-weighted mean of ρ over a wavelength band (an equal-energy spectrum).
+
+        Parameters
+        ----------
+        band
+            (low, high) [nm], closed; default: every wavelength with data.
+
+        Returns
+        -------
+        dict
+            ``value``, ``std``, ``std_measurement`` (independent between wavelengths), ``std_reconstruction``
+            (fully correlated between wavelengths), ``lobe`` [fractions]; ``band_nm``, the number of
+            ``wavelengths``, and the labels, method, assumptions and band-averaged components.
+        """
+        wl = self.wavelength
+        if not np.all(np.isfinite(wl)):  # a monochrome dataset without a wavelength coordinate
+            return self._summary(np.ones(wl.size, dtype=bool), None)
+        lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
+        if not hi >= lo:
+            raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
+        sel = (wl >= lo - 1e-9) & (wl <= hi + 1e-9)
+        if not sel.any():
+            raise InputError("no measured wavelength in the band", field="band",
+                             expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))
+        return self._summary(sel, [lo, hi])
+
+    def _summary(self, sel: NDArray[np.bool_], band: list[float] | None) -> dict:
+        wl = self.wavelength
+        w = np.gradient(wl[sel]) if sel.sum() > 1 else np.ones(1)
+        a = w / w.sum()
+        value = float(a @ self.value[sel])
+        meas = float(np.sqrt(np.sum((a * self.std_measurement[sel]) ** 2)))
+        rec = float(a @ self.std_reconstruction[sel])
+        comps = {k: float(a @ v[sel]) for k, v in self.components.items()}
+        return {"incidence_deg": self.theta_i, "side": self.side, "config": self.config,
+                "band_nm": band, "wavelengths": int(sel.sum()), "value": value,
+                "std": float(np.hypot(meas, rec)), "std_measurement": meas, "std_reconstruction": rec,
+                "lobe": float(a @ self.lobe[sel]), "method": self.method,
+                "extrapolated_beyond_deg": self.extrapolated_beyond_deg, "assumptions": self.assumptions,
+                "components": comps}
+
+    def as_dict(self) -> dict:
+        return {"incidence_deg": self.theta_i, "side": self.side, "config": self.config,
+                "wavelength_nm": self.wavelength, "value": self.value, "std": self.std,
+                "std_measurement": self.std_measurement, "std_reconstruction": self.std_reconstruction,
+                "lobe": self.lobe, "method": self.method, "lobe_region_deg": self.lobe_region_deg,
+                "extrapolated_beyond_deg": self.extrapolated_beyond_deg, "assumptions": self.assumptions}
+
+
+def _scale_std(ds: xr.Dataset, config: str, n_wl: int) -> NDArray[np.float64]:
+    rel = np.full(n_wl, float(ds.attrs.get("common_relative_std", 0.0)))
+    if "incident_relative_std" in ds and "configuration" in ds["incident_relative_std"].dims:
+        names = [str(c) for c in ds["configuration"].values]
+        if config in names:
+            extra = np.nan_to_num(ds["incident_relative_std"].values[names.index(config)])
+            rel = np.hypot(rel, extra)
+    return rel
+
+
+def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
+                          n_r: int = 400) -> HemisphericalResult:
+    """Directional-hemispherical reflectance or transmittance ρ(λ) of one configuration, incidence and side.
+
+    Parameters
+    ----------
+    ds
+        Calibrated dataset (record × wavelength; ``bsdf`` and optionally ``bsdf_std`` [1/sr]; per-record
+        ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s`` [deg], ``side``, ``arc``, ``config``).
+    config
+        Configuration name (the ``config`` label of the records).
+    theta_i
+        Incidence angle [deg], a measured one.
+    side
+        ``"reflection"`` or ``"transmission"``.
+    n_psi, n_r
+        Quadrature nodes in azimuth and radius of the polar grids (the ``quadrature`` error halves both).
+
+    Returns
+    -------
+    HemisphericalResult
+        ρ [fraction of the incident power] per wavelength [nm] with finite data, its measurement and
+        reconstruction standard uncertainties [fraction], the lobe part, the components of the error, the
+        method and the assumptions (module docstring).
+    """
+    sel = (np.asarray(ds["config"].values).astype(str) == config) & (ds["side"].values == side) & np.isclose(
+        ds["theta_i"].values, theta_i, atol=1e-6, rtol=0)
+    if not sel.any():
+        raise InputError("no records for this configuration, incidence and side", file=ds.attrs.get("source"),
+                         field="theta_i", expected=f"records of '{config}' at {theta_i:g} deg, {side}")
+    idx = np.flatnonzero(sel)
+    f = np.atleast_2d(ds["bsdf"].values[idx].reshape(idx.size, -1))
+    u = (ds["bsdf_std"].values[idx].reshape(idx.size, -1) if "bsdf_std" in ds else np.zeros_like(f))
+    wl = np.atleast_1d(ds["wavelength"].values if "wavelength" in ds.dims else np.array([np.nan])).astype(float)
+    phi_i = ds["phi_i"].values[idx]
+    if np.ptp(phi_i) > 1e-9:
+        raise InputError("records of one incidence have different source azimuths", field="phi_i",
+                         expected="one phi_i per incidence")
+    arc = (np.asarray(ds["arc"].values[idx]).astype(str) if "arc" in ds.coords
+           else np.full(idx.size, "in_plane"))
+    geom = Geometry(theta_i=float(theta_i), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
+                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side)
+    finite = np.isfinite(f)
+    cols = np.flatnonzero(finite.any(axis=0))
+    if cols.size == 0:
+        raise InputError("no finite BSDF values", file=ds.attrs.get("source"), field="bsdf",
+                         expected=f"values for '{config}' at {theta_i:g} deg, {side}")
+    scale = _scale_std(ds, config, wl.size)
+    out = {k: np.full(cols.size, np.nan) for k in ("value", "meas", "rec", "lobe")}
+    comps: dict[str, NDArray] = {}
+    info = None
+    # wavelengths with the same set of finite records share one reconstruction
+    patterns: dict[bytes, list[int]] = {}
+    for j, c in enumerate(cols):
+        patterns.setdefault(finite[:, c].tobytes(), []).append(j)
+    for key, js in patterns.items():
+        mask = np.frombuffer(key, dtype=bool)
+        sub = f[:, cols[js]]
+        ref = np.where(mask, np.nan_to_num(sub).mean(axis=1), np.nan)
+        ref_std = np.sqrt(np.mean(np.nan_to_num(u[:, cols[js]]) ** 2, axis=1) / len(js))
+        rec = reconstruct(geom, ref, ref_std, n_psi, n_r)
+        info = rec if info is None or len(js) > 1 else info
+        fz = np.nan_to_num(sub)
+        uz = np.nan_to_num(u[:, cols[js]])
+        value = rec.central @ fz
+        lobe = rec.lobe @ fz
+        out["value"][js] = value
+        out["lobe"][js] = lobe
+        out["meas"][js] = np.hypot(np.sqrt((rec.central ** 2) @ uz ** 2), scale[cols[js]] * value)
+        parts = []
+        for group, alts in rec.alternatives.items():
+            dev = np.max([np.abs(w @ fz - value) for w in alts.values()], axis=0)
+            comps.setdefault(group, np.zeros(cols.size))[js] = dev
+            parts.append(dev)
+        out["rec"][js] = np.sqrt(np.sum(np.square(parts), axis=0))
+        for name, w in rec.comparisons.items():
+            comps.setdefault(name, np.full(cols.size, np.nan))[js] = w @ fz
+    assert info is not None
+    return HemisphericalResult(config=config, theta_i=float(theta_i), side=side, wavelength=wl[cols],
+                               value=out["value"], std_measurement=out["meas"], std_reconstruction=out["rec"],
+                               components=comps, method=info.method, assumptions=info.assumptions,
+                               extrapolated_beyond_deg=info.extrapolated_beyond_deg,
+                               lobe_region_deg=info.region.in_plane_deg, lobe=out["lobe"])
+
+
+def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tuple[str, ...] | None = None,
+                  configs: list[str] | None = None, n_psi: int = 256, n_r: int = 400) -> list[HemisphericalResult]:
+    """Directional-hemispherical reflectance/transmittance for every configuration, incidence and side.
+
+    Parameters
+    ----------
+    ds
+        Calibrated dataset (see :func:`hemispherical_profile`).
+    theta_i
+        Incidence angles [deg] to reduce; default: every measured one (per configuration and side).
+    sides
+        Sides to reduce; default: those the dataset holds.
+    configs
+        Configurations to reduce; default: all.
+    n_psi, n_r
+        Quadrature nodes (see :func:`hemispherical_profile`).
+
+    Returns
+    -------
+    list of HemisphericalResult
+        Ordered by configuration, side (reflection first) and incidence.
+    """
+    cfg_all = sorted(set(np.asarray(ds["config"].values).astype(str)))
+    out = []
+    for config in configs or cfg_all:
+        in_cfg = ds.isel(record=np.flatnonzero(np.asarray(ds["config"].values).astype(str) == config))
+        if in_cfg.sizes["record"] == 0:
+            raise InputError("no records with this configuration", file=ds.attrs.get("source"), field="config",
+                             expected="one of " + ", ".join(cfg_all), got=config)
+        for side in sides or SIDES:
+            on_side = in_cfg.isel(record=np.flatnonzero(in_cfg["side"].values == side))
+            if on_side.sizes["record"] == 0:
+                continue
+            for th in theta_i if theta_i is not None else incidences(on_side):
+                out.append(hemispherical_profile(ds, config, th, side, n_psi, n_r))
+    if not out:
+        raise InputError("no records to reduce", file=ds.attrs.get("source"), field="side",
+                         expected="reflection or transmission records")
+    return out
+
+
+# ------------------------------------------------------------------------------------------- which reduction
+def reduction_kind(ds: xr.Dataset) -> str:
+    """"interactions" for a phosphor scan of the two-wavelength approach, else "hemispherical".
+
+    Rule: the interaction table (bibs/biys/yiys, Table 2 of the power-budget paper) is made when the dataset
+    holds a bi-spectral BSDF (variable ``bsdf_bispectral`` with finite values), configurations named ``blue``
+    and ``yellow``, records on both sides, and is not marked elastic (``attrs['elastic']``, set by the table
+    reader). Any other dataset is reduced as elastic scatter: hemispherical reflectance/transmittance.
+    """
+    if int(ds.attrs.get("elastic", 0) or 0):
+        return "hemispherical"
+    configs = set(np.asarray(ds["config"].values).astype(str)) if "config" in ds.coords else set()
+    sides = set(np.asarray(ds["side"].values).astype(str)) if "side" in ds.coords else set()
+    bispectral = "bsdf_bispectral" in ds and bool(np.isfinite(ds["bsdf_bispectral"].values).any())
+    if bispectral and {"blue", "yellow"} <= configs and set(SIDES) <= sides:
+        return "interactions"
+    return "hemispherical"
