@@ -19,6 +19,7 @@ import xarray as xr
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.core.records import incidences
+from bsdfkit.fit.lambertian import at_wavelength
 from bsdfkit.fit.least_squares import BsdfFitOptions
 from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
 from bsdfkit.fit.spectrum import fit_spectrum
@@ -126,8 +127,20 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
 
 
 def export(source: Any, to: str, interaction: str, side: str, path: str | Path, force: bool = False, *,
-           settings: ExportSettings | None = None) -> ExportResult:
-    """Write a TracePro, Zemax or ASAP-style table of a dataset or fit, with the TIS check of the written file."""
+           settings: ExportSettings | None = None, wavelength_nm: float | None = None) -> ExportResult:
+    """Write a TracePro, Zemax or ASAP-style table of a dataset or fit, with the TIS check of the written file.
+
+    ``wavelength_nm`` [nm] picks one wavelength of a model with a wavelength dimension (e.g. the Lambertian
+    model of a reflectance standard, :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance`); the tables
+    are monochrome.
+    """
+    if wavelength_nm is not None:
+        model = source if isinstance(source, xr.Dataset) else netcdf.load(source)
+        if "wavelength" not in model.dims or "model" not in model.attrs:
+            raise InputError("--wavelength-nm applies to a model with a wavelength dimension",
+                             file=None if isinstance(source, xr.Dataset) else source, field="wavelength",
+                             expected="a per-wavelength model (bsdfkit fit reflectance)", got=wavelength_nm)
+        source = at_wavelength(model, float(wavelength_nm))
     return _export(source, to, interaction, side, path, force, settings=settings)
 
 

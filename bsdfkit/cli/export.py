@@ -6,6 +6,7 @@ SOURCE is a fit result netCDF (attribute ``model``) or a calibrated scan netCDF 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
@@ -48,15 +49,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="sample-frame azimuth of TracePro's ScatterAzimuth 0 (default 270; see docs/exports.md)")
     p.add_argument("--name", default=None, help="TracePro property name")
     p.add_argument("--wavelength-um", type=float, default=None, help="TracePro wavelength column (um)")
+    p.add_argument("--wavelength-nm", type=float, default=None, metavar="NM",
+                   help="the wavelength to export from a per-wavelength model (bsdfkit fit reflectance)")
     p.add_argument("--temperature-k", type=float, default=None, help="TracePro temperature column (K)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-
     tp = TraceProOptions()
     changes = {k: v for k, v in (("name", args.name), ("wavelength_um", args.wavelength_um),
                                  ("temperature_K", args.temperature_k), ("zero_azimuth_deg", args.zero_azimuth))
@@ -68,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
         tracepro=replace(tp, **changes),
         tracepro_scatter=args.tracepro_scatter,
     )
-    result = api.export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings)
+    result = api.export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings,
+                        wavelength_nm=args.wavelength_nm)
     if args.json:
         emit_json(result.to_dict())
         return 0

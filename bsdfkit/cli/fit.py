@@ -17,26 +17,28 @@ import json
 import sys
 from pathlib import Path
 
+from bsdfkit import api
 from bsdfkit.cli._common import emit_json
-from bsdfkit.core.errors import FitError, ValidationError
+from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES
+from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
+from bsdfkit.core.errors import FitError, InputError, ValidationError
+from bsdfkit.fit.lambertian import lambertian_from_reflectance
 from bsdfkit.fit.least_squares import FitOptions, fit_bsdf
 from bsdfkit.fit.spectrum import CRITERIA, SPECTRUM_MODELS, analyse_spectra
-from bsdfkit.io import netcdf
+from bsdfkit.io import atomic, netcdf
 from bsdfkit.io.jsonout import to_jsonable
 from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
-from bsdfkit.measurement.calibrate import calibrate
-from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
 from bsdfkit.reduction.spectral import interaction_profile
 
-BSDF_MODELS = ("lambert+gaussian", "abg", "lambert+abg", "lambert")
-INTERACTIONS = ("bibs", "biys", "yiys")
-SIDES = ("reflection", "transmission")
+BSDF_MODELS = tuple(REGISTERED_BSDF_MODELS)
+INTERACTIONS = (*PHOSPHOR_INTERACTIONS, ELASTIC_INTERACTION)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit spectrum or BSDF models (Levenberg-Marquardt, float64)")
     p.set_defaults(func=lambda args: _help(p))
-    fit_sub = p.add_subparsers(dest="fit_verb", metavar="{spectrum,bsdf}")
+    fit_sub = p.add_subparsers(dest="fit_verb", metavar="{spectrum,bsdf,reflectance}")
 
     s = fit_sub.add_parser("spectrum", help="fit emission-spectrum models to spectrum files (batched)")
     s.add_argument("files", nargs="+", metavar="FILE",
@@ -56,13 +58,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.set_defaults(func=_run_spectrum)
 
     b = fit_sub.add_parser("bsdf", help="fit a BSDF model per incidence to one interaction and side of a scan")
-    b.add_argument("scan", help="netCDF written by bsdfkit, or a raw measurement folder")
-    b.add_argument("--interaction", choices=INTERACTIONS, required=True)
+    b.add_argument("scan", help="a dataset (netCDF), raw measurement folder, measured table or vendor file")
+    b.add_argument("--interaction", choices=INTERACTIONS, required=True,
+                   help="bibs, biys, yiys (phosphor plates) or elastic (any sample)")
     b.add_argument("--side", choices=SIDES, required=True)
     b.add_argument("--model", choices=BSDF_MODELS, default="lambert+gaussian")
     b.add_argument("--incidence", type=float, metavar="DEG", help="fit only this incidence angle (degrees)")
+    b.add_argument("-o", "--output", metavar="FIT.nc", help="save the fit (netCDF) for `bsdfkit export`")
+    b.add_argument("--force", action="store_true", help="overwrite an existing output")
     b.add_argument("--json", action="store_true")
     b.set_defaults(func=_run_bsdf)
+
+    r = fit_sub.add_parser("reflectance", help="Lambertian surface model of a measured reflectance spectrum "
+                                            "(e.g. a Spectralon 8°/h calibration)")
+    r.add_argument("file", help="spectrum table: wavelength [nm], reflectance[, standard uncertainty]")
+    r.add_argument("--percent", action="store_true", help="the reflectance column is in percent")
+    r.add_argument("--side", choices=SIDES, default="reflection")
+    r.add_argument("-o", "--output", required=True, metavar="MODEL.nc", help="the model (netCDF)")
+    r.add_argument("--force", action="store_true", help="overwrite an existing output")
+    r.set_defaults(func=_run_reflectance)
 
 
 def _help(parser: argparse.ArgumentParser) -> int:
@@ -140,17 +154,34 @@ def _print_spectrum(label: str, rec: dict) -> None:
             f"{n} {v[crit]:.1f}" if "error" not in v else f"{n} (failed)" for n, v in ranked))
 
 
-def _load_scan(path: Path):
-    if path.is_dir():
-        return calibrate(read_scan(path))
-    return netcdf.load(path, quantity="bsdf")
+def _run_reflectance(args: argparse.Namespace) -> int:
+    atomic.check_writable(args.output, args.force)
+    wl, columns, _ = read_spectrum_table(args.file)
+    values = list(columns.values())
+    if len(values) > 2:
+        raise InputError("a reflectance table has 2 or 3 columns", file=args.file,
+                         expected="wavelength, reflectance[, uncertainty]", got=f"{len(values) + 1} columns")
+    scale = 0.01 if args.percent else 1.0
+    rho = values[0] * scale
+    std = values[1] * scale if len(values) == 2 else None
+    model = lambertian_from_reflectance(wl, rho, std, side=args.side, source=Path(args.file).name)
+    netcdf.save(model, args.output, args.force)
+    print(f"wrote {args.output}: Lambertian {args.side} model, {wl.size} wavelengths {wl[0]:g}-{wl[-1]:g} nm, "
+          f"mean reflectance {float(rho.mean()):.4f}; export one wavelength with "
+          f"`bsdfkit export {args.output} --interaction elastic --wavelength-nm NM ...`")
+    return 0
 
 
 def _run_bsdf(args: argparse.Namespace) -> int:
-    ds = _load_scan(Path(args.scan))
+    if args.output:
+        atomic.check_writable(args.output, args.force)
+    ds = api.ingest(args.scan)
     profile = interaction_profile(ds, args.interaction, args.side)
     result = fit_bsdf(profile, args.model, incidence_deg=args.incidence)
     result.attrs["interaction"] = args.interaction
+    warnings = json.loads(result.attrs.get("warnings", "[]"))
+    if args.output:
+        netcdf.save(result, args.output, args.force)
     names = [str(n) for n in result.parameter.values]
     fits = []
     for k, theta in enumerate(result.theta_i.values):
@@ -161,16 +192,22 @@ def _run_bsdf(args: argparse.Namespace) -> int:
             "theta_i_deg": float(theta),
             "params": {n: float(row[n]) for n in names},
             "std": {n: float(row[f"{n}_std"]) for n in names},
-            "r2": float(row.r2), "rms": float(row.rms), "tis": float(row.tis),
+            "r2": float(row.r2), "rms": float(row.rms), "tis": float(row.tis), "tis_std": float(row.tis_std),
             "converged": bool(row.converged), "n_points": int(row.n_points),
+            "physically_possible": bool(row.physically_possible), "determined": bool(row.determined),
         })
     if args.json:
         emit_json({"scan": str(args.scan), "interaction": args.interaction, "side": args.side,
-                   "model": args.model, "residual": result.attrs["residual"], "fits": fits})
+                   "model": args.model, "residual": result.attrs["residual"], "fits": fits,
+                   "warnings": warnings, "output": args.output})
         return 0
+    for w in warnings:
+        print(f"bsdfkit fit: warning: {w}", file=sys.stderr)
     print(f"{args.scan}: {args.interaction} {args.side}, model {args.model} ({result.attrs['residual']} residuals)")
     for f in fits:
         parts = ", ".join(f"{n} = {f['params'][n]:.4g} ± {f['std'][n]:.2g}" for n in names)
         print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f}; R² = {f['r2']:.4f}"
               f"{'' if f['converged'] else ' (NOT converged)'}")
+    if args.output:
+        print(f"wrote {args.output}" + (" (flagged: exports refuse it; see the warnings)" if warnings else ""))
     return 0
