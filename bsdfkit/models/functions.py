@@ -72,18 +72,22 @@ def _tiny_width(*arrays) -> jnp.ndarray:
     return jnp.sqrt(jnp.finfo(jnp.result_type(*arrays, float)).tiny)
 
 
-def _offset_over_width_squared(offset: ArrayLike, width: ArrayLike) -> jnp.ndarray:
-    """min((offset/width)², 1e4) with the width → 0 limit (0 on the peak, the cap elsewhere) taken
+def ratio_squared(offset: ArrayLike, width: ArrayLike, cap: float = _RATIO_SQ_CAP) -> jnp.ndarray:
+    """min((offset/width)², cap) with the width → 0 limit (0 on the peak, the cap elsewhere) taken
     safely: value and derivatives stay finite for any width ≥ 0, including 0 and subnormal widths."""
     offset = jnp.asarray(offset)
     width = jnp.asarray(width)
     ok = width > _tiny_width(offset, width)
     safe_width = jnp.where(ok, width, 1.0)
-    big = jnp.abs(offset) >= safe_width * math.sqrt(_RATIO_SQ_CAP)
+    big = jnp.abs(offset) >= safe_width * math.sqrt(cap)
     safe_offset = jnp.where(big, 0.0, offset)
     ratio_sq = (safe_offset / safe_width) ** 2
-    limit = jnp.where(offset == 0, 0.0, _RATIO_SQ_CAP)
-    return jnp.where(ok & ~big, ratio_sq, jnp.where(ok, _RATIO_SQ_CAP, limit))
+    limit = jnp.where(offset == 0, 0.0, cap)
+    return jnp.where(ok & ~big, ratio_sq, jnp.where(ok, cap, limit))
+
+
+def _offset_over_width_squared(offset: ArrayLike, width: ArrayLike) -> jnp.ndarray:
+    return ratio_squared(offset, width, _RATIO_SQ_CAP)
 
 
 def _log1p_ratio_squared(offset: ArrayLike, width: ArrayLike) -> jnp.ndarray:

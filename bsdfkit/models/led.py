@@ -24,6 +24,8 @@ import math
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from bsdfkit.models.functions import ratio_squared
+
 __all__ = [
     "OHNO2005_FWHM_PER_WIDTH",
     "ohno2005_spectrum",
@@ -50,23 +52,6 @@ _GAUSS_CAP = 1e4
 _POWER_CAP = 1e16
 
 
-def _tiny_width(*arrays) -> jnp.ndarray:
-    return jnp.sqrt(jnp.finfo(jnp.result_type(*arrays, float)).tiny)
-
-
-def _ratio_squared(offset: ArrayLike, width: ArrayLike, cap: float) -> jnp.ndarray:
-    """min((offset/width)², cap), with the width → 0 limit (0 on the peak, cap elsewhere) taken safely."""
-    offset = jnp.asarray(offset)
-    width = jnp.asarray(width)
-    ok = width > _tiny_width(offset, width)
-    safe_width = jnp.where(ok, width, 1.0)
-    big = jnp.abs(offset) >= safe_width * math.sqrt(cap)
-    safe_offset = jnp.where(big, 0.0, offset)
-    ratio_sq = (safe_offset / safe_width) ** 2
-    limit = jnp.where(offset == 0, 0.0, cap)
-    return jnp.where(ok & ~big, ratio_sq, jnp.where(ok, cap, limit))
-
-
 def _split_half_width(offset: jnp.ndarray, fwhm: ArrayLike, alpha: ArrayLike) -> jnp.ndarray:
     """Half width at half maximum on the side of ``offset``: Δλ(1 + sign(offset)·α)/2."""
     return 0.5 * fwhm * (1.0 + jnp.sign(offset) * alpha)
@@ -90,7 +75,7 @@ def ohno2005_spectrum(wavelength: ArrayLike, peak: ArrayLike, half_spectral_widt
     -------
     Dimensionless relative spectral value in [0, 1].
     """
-    z2 = _ratio_squared(jnp.asarray(wavelength) - peak, half_spectral_width, _GAUSS_CAP)
+    z2 = ratio_squared(jnp.asarray(wavelength) - peak, half_spectral_width, _GAUSS_CAP)
     return (jnp.exp(-z2) + 2.0 * jnp.exp(-5.0 * z2)) / 3.0
 
 
@@ -122,8 +107,8 @@ def split_pseudo_voigt_spectrum(
     """
     offset = jnp.asarray(wavelength) - peak
     h = _split_half_width(offset, fwhm, alpha)
-    gauss = jnp.exp(-math.log(2.0) * _ratio_squared(offset, h, _GAUSS_CAP))
-    lorentz = 1.0 / (1.0 + _ratio_squared(offset, h, _POWER_CAP))
+    gauss = jnp.exp(-math.log(2.0) * ratio_squared(offset, h, _GAUSS_CAP))
+    lorentz = 1.0 / (1.0 + ratio_squared(offset, h, _POWER_CAP))
     return eta * lorentz + (1.0 - eta) * gauss
 
 
@@ -152,4 +137,4 @@ def split_pearson7_spectrum(
     h = _split_half_width(offset, fwhm, alpha)
     m = jnp.asarray(m)
     c = jnp.expm1(math.log(2.0) / m)  # 2^{1/m} − 1
-    return jnp.exp(-m * jnp.log1p(c * _ratio_squared(offset, h, _POWER_CAP)))
+    return jnp.exp(-m * jnp.log1p(c * ratio_squared(offset, h, _POWER_CAP)))
