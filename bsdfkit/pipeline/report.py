@@ -1,0 +1,975 @@
+"""The run report: one self-contained ``report.html`` a lab can hand over (issue #16).
+
+:func:`write_report` turns a finished run folder (``bsdfkit run RECIPE -o OUT/``: ``summary.json``, the PNG
+figures, ``trace.json``, ``trace_*.nc``) into ``OUT/report.html``: one file, every figure embedded as a base64
+PNG data URI, inline CSS, no script and no reference to anything outside the file. It opens with what was
+measured and what was found, lists where the run disagrees with the papers, then gives one section per stage
+with this run's figure and numbers beside the published numbers of [Power-budget] and [Cylindrical-module]
+(``paper_values.json``, shipped with the package).
+
+Agreement rule (stated in the report): a run value agrees with a printed paper value when
+|run − paper| ≤ half a unit of the paper's last printed digit + 2 × the run's standard uncertainty (0 when the
+run gives none). The papers give no uncertainty for their printed values, so this rule only tells whether the
+run reproduces the printed number; a difference is reported, not judged.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import re
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from bsdfkit.core.errors import InputError
+from bsdfkit.core.version import __version__
+from bsdfkit.io import netcdf
+from bsdfkit.io.atomic import check_writable, write_text
+from bsdfkit.plotting.maps import MAP_DIMS, find_map_variable, irradiance_map_figure, irradiance_maps_figure
+
+__all__ = ["REPORT_NAME", "paper_values", "write_report"]
+
+REPORT_NAME = "report.html"
+
+#: Table 2 keys in the paper's order, with readable names.
+TABLE2_KEYS = {
+    "B_bibs": "backward blue→blue (B bibs)", "F_bibs": "forward blue→blue (F bibs)",
+    "B_biys": "backward blue→yellow (B biys)", "F_biys": "forward blue→yellow (F biys)",
+    "blue_losses": "blue losses", "B_yiys": "backward yellow→yellow (B yiys)",
+    "F_yiys": "forward yellow→yellow (F yiys)", "yellow_losses": "yellow losses",
+}
+
+#: Where each run figure goes and what it is (other PNGs land in "Other figures").
+FIGURE_CAPTIONS = {
+    "inplane_bsdf.png": "In-plane BSDF at the recipe's wavelength, reflection and transmission, per incidence, with "
+                        "standard uncertainties (cf. Fig. 6 of [Power-budget]).",
+    "module_budget.png": "Cumulative extracted power and losses per plate interaction (cf. Fig. 10 of "
+                         "[Power-budget]).",
+    "bsdf_fits.png": "Aperture-averaged BSDF fits per interaction and side: measured points and fitted model "
+                     "curves.",
+    "trace_studies.png": "LER, YBR and non-uniformity of the module studies (cf. Figs. 8, 9, 11, 13 of "
+                         "[Cylindrical-module]); the dotted line is the device.",
+    "module_spectrum.png": "Left: pump-LED and converted-light spectra (normalised). Right: the module spectrum "
+                           "rebuilt from the two-wavelength trace (cf. Fig. 7 of [Cylindrical-module]).",
+}
+
+#: The irradiance-map figures of [Cylindrical-module]: the study dimension and the three panels' values.
+PAPER_MAP_FIGURES = (
+    ("Fig. 10", "wall finish", ("wall.specular_fraction", "specular_fraction"),
+     ((1.0, "specular reflector"), (0.6, "diffuse-to-specular 40 %"), (0.0, "perfect diffuser"))),
+    ("Fig. 12", "cavity height", ("cavity.height_mm", "height_mm"),
+     ((10.0, "h = 10 mm"), (43.0, "h = 43 mm"), (80.0, "h = 80 mm"))),
+    ("Fig. 14", "LED FWHM", ("leds.fwhm_deg", "led_fwhm_deg"),
+     ((30.0, "FWHM 30°"), (70.0, "FWHM 70°"), (120.0, "FWHM 120° (Lambertian)"))),
+)
+
+_CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;margin:0;color:#1d232a;
+background:#f4f5f7;line-height:1.45}
+main{max-width:1180px;margin:0 auto;padding:24px 28px 48px;background:#fff}
+h1{font-size:1.7em;margin:0 0 4px}h2{font-size:1.3em;border-bottom:2px solid #2b5d8a;padding-bottom:3px;
+margin-top:38px}h3{font-size:1.05em;margin:20px 0 6px}
+.sub{color:#55606b;margin:0 0 14px}
+.banner{background:#fff4d6;border:1px solid #e0b443;border-left:6px solid #e0b443;padding:10px 14px;margin:12px 0}
+.disagree{background:#fdecea;border:1px solid #e3a19a;border-left:6px solid #c0392b;padding:8px 14px;margin:12px 0}
+.agree{color:#1e7b34}.differs{color:#b02a1a;font-weight:600}
+.cards{display:grid;grid-template-columns:repeat(auto-fit,minmax(210px,1fr));gap:10px;margin:10px 0}
+.card{border:1px solid #d5dbe1;border-radius:6px;padding:8px 12px;background:#f9fbfc}
+.card .v{font-size:1.35em;font-weight:600}.card .k{color:#55606b;font-size:.86em}
+.pair{display:grid;grid-template-columns:minmax(0,1.25fr) minmax(0,1fr);gap:22px;align-items:start}
+.pair>div,.wide{min-width:0;overflow-x:auto}.absent{color:#6b7580;font-style:italic}
+@media (max-width:900px){.pair{grid-template-columns:1fr}}
+figure{margin:8px 0 14px}figure img{display:block;box-sizing:border-box;max-width:100%;height:auto;
+border:1px solid #e3e6ea}
+figcaption{font-size:.86em;color:#414b55;margin-top:3px}
+table{border-collapse:collapse;font-size:.88em;margin:6px 0 12px}
+th,td{border:1px solid #d5dbe1;padding:3px 7px;text-align:right;vertical-align:top}
+th{background:#eef2f6}td.l,th.l{text-align:left}
+caption{caption-side:top;text-align:left;font-weight:600;padding-bottom:4px}
+nav ol{columns:2;font-size:.95em}code{font-size:.92em;background:#f1f3f5;padding:0 3px}
+pre{font-size:.8em;background:#f6f8fa;border:1px solid #e3e6ea;padding:8px;overflow-x:auto}
+.note{font-size:.88em;color:#414b55}
+@media print{body{background:#fff}main{padding:0}h2{break-before:auto}figure,table{break-inside:avoid}}
+"""
+
+
+# --------------------------------------------------------------------------------------------------
+# small helpers
+# --------------------------------------------------------------------------------------------------
+def paper_values() -> dict:
+    """The papers' published numbers bsdfkit compares against (``bsdfkit/pipeline/paper_values.json``)."""
+    text = resources.files("bsdfkit.pipeline").joinpath("paper_values.json").read_text(encoding="utf-8")
+    return json.loads(text)
+
+
+def _esc(text: Any) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _num(value: Any) -> float | None:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _f(value: Any, digits: int = 2, scale: float = 1.0) -> str:
+    x = _num(value)
+    return "—" if x is None else f"{x * scale:.{digits}f}"
+
+
+def _pm(value: Any, std: Any, digits: int = 2, scale: float = 1.0) -> str:
+    s = _num(std)
+    return _f(value, digits, scale) + ("" if s is None or _num(value) is None else f" ± {s * scale:.{digits}f}")
+
+
+def _pm_sig(value: Any, std: Any, max_decimals: int = 8) -> str:
+    """Value ± standard error with the error to two significant figures and the value to the same decimals."""
+    x, s = _num(value), _num(std)
+    if x is None:
+        return "—"
+    if s is None or s <= 0:
+        return f"{x:.4g}"
+    decimals = min(max(0, 1 - math.floor(math.log10(s))), max_decimals)
+    return f"{x:.{decimals}f} ± {s:.{decimals}f}"
+
+
+def _printed_half_unit(value: float) -> float:
+    """Half a unit of the last printed digit of a paper value (0.1 → 0.05, 58 → 0.5, 0.80 → 0.005)."""
+    text = repr(float(value)).rstrip("0").rstrip(".") if "e" not in repr(float(value)) else repr(float(value))
+    decimals = len(text.split(".")[1]) if "." in text else 0
+    return 0.5 * 10.0 ** (-decimals)
+
+
+class Verdicts:
+    """Comparisons of run values with paper values; collects the disagreements for the report's opening."""
+
+    def __init__(self) -> None:
+        self.disagreements: list[str] = []
+
+    def check(self, what: str, run: Any, paper: Any, std: Any = None, unit: str = "", digits: int = 2,
+              half_unit: float | None = None, note: str = "") -> str:
+        """HTML verdict cell content: 'agrees' or 'differs by …' (and remember the disagreement)."""
+        r, p = _num(run), _num(paper)
+        if r is None or p is None:
+            return "—"
+        tol = (half_unit if half_unit is not None else _printed_half_unit(p)) + 2.0 * (_num(std) or 0.0)
+        diff = r - p
+        if abs(diff) <= tol:
+            return '<span class="agree">agrees</span>'
+        text = f"differs by {diff:+.{digits}f}{(' ' + unit) if unit else ''}"
+        printed = f"{p:g}" if abs(p - round(p, digits)) < 1e-12 else f"{p:.{digits}f}"
+        self.disagreements.append(f"{what}: this run {r:.{digits}f}{(' ' + unit) if unit else ''}, paper "
+                                  f"{printed}{(' ' + unit) if unit else ''} ({text}){'; ' + note if note else ''}")
+        return f'<span class="differs">{_esc(text)}</span>'
+
+
+def _table(headers: Sequence[str], rows: Iterable[Sequence[Any]], caption: str = "", left: int = 1,
+           text_cols: Iterable[int] = ()) -> str:
+    """An HTML table; cells are HTML already (escape text before).
+
+    The first ``left`` columns and the columns ``text_cols`` align left, the others (numbers) right.
+    """
+    lefts = set(range(left)) | set(text_cols)
+    out = ["<table>"]
+    if caption:
+        out.append(f"<caption>{caption}</caption>")
+    out.append("<tr>" + "".join(f'<th class="{"l" if i in lefts else ""}">{h}</th>' for i, h in enumerate(headers))
+               + "</tr>")
+    for row in rows:
+        out.append("<tr>" + "".join(f'<td class="{"l" if i in lefts else ""}">{c}</td>' for i, c in enumerate(row))
+                   + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _png_uri(data: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def _fig_png(fig: Figure) -> bytes:
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return buf.getvalue()
+
+
+def _figure(png: bytes, caption: str, alt: str) -> str:
+    return (f'<figure><img src="{_png_uri(png)}" alt="{_esc(alt)}">'
+            f"<figcaption>{caption}</figcaption></figure>")
+
+
+def _pair(left: str, right: str) -> str:
+    return f'<div class="pair"><div>{left}</div><div>{right}</div></div>'
+
+
+def _section(anchor: str, title: str, body: str) -> str:
+    return f'<section id="{anchor}"><h2>{_esc(title)}</h2>\n{body}\n</section>'
+
+
+def _missing(what: str) -> str:
+    return f'<p class="note">{_esc(what)}</p>'
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+# --------------------------------------------------------------------------------------------------
+# figures drawn for the report (run beside paper)
+# --------------------------------------------------------------------------------------------------
+def _table2_figure(row: dict, paper: dict, theta: float) -> Figure:
+    """Table 2 at one incidence: this run's power TIS with error bars beside the paper's printed values."""
+    keys = [k for k in TABLE2_KEYS if _num(row.get("power", {}).get(k)) is not None]
+    x = np.arange(len(keys))
+    run = [row["power"][k] for k in keys]
+    err = [_num(row.get("power_std", {}).get(k)) or 0.0 for k in keys]
+    pap = [_num(paper.get(k)) for k in keys]
+    fig = Figure(figsize=(7.2, 3.8))
+    ax = fig.subplots()
+    ax.bar(x - 0.2, run, 0.4, yerr=err, capsize=3, color="#2b5d8a", label=f"this run, θi = {theta:g}° (± 1σ)")
+    ax.bar(x + 0.2, [np.nan if p is None else p for p in pap], 0.4, color="#e0a040",
+           label="[Power-budget] Table 2 (45°)")
+    ax.set_xticks(x, [k.replace("_", " ") for k in keys], rotation=30, ha="right")
+    ax.set_ylabel("TIS (% of incident power)")
+    ax.set_title("interaction table: this run vs the paper", fontsize=10)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _budget_figure(power: dict, paper: dict) -> Figure:
+    """Cumulative extracted total per plate interaction with the paper's Table 3 values at the last iteration."""
+    its = power.get("iterations", [])
+    k = np.arange(1, len(its) + 1)
+    fig = Figure(figsize=(6.4, 3.8))
+    ax = fig.subplots()
+    for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^")):
+        ax.plot(k, [r.get(key, np.nan) for r in its], style, ms=4, label=f"this run: extracted {key}")
+    last = len(its) if its else 7
+    for src, marker, name in (("iteration_model_45deg", "D", "Table 3 model (45°)"),
+                              ("experiments", "*", "Table 3 experiment")):
+        vals = paper.get(src, {})
+        ax.plot([last] * 3, [vals.get("total"), vals.get("yellow"), vals.get("blue")], marker, ls="none", ms=9,
+                mfc="none", mew=1.5, label=f"[Power-budget] {name}")
+    ax.set_xlabel("plate interaction k (1 = direct pass from the LEDs)")
+    ax.set_ylabel("cumulative extracted power (% of LED output)")
+    ax.set_title(f"module budget, η_MC = {power.get('eta_mc', float('nan')):g}", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7.5, loc="center right")
+    fig.tight_layout()
+    return fig
+
+
+def _study_rows(studies: dict, name: str, key: str) -> list[dict]:
+    rows = [r for r in studies.get(name, []) if _num(r.get("values", {}).get(key)) is not None]
+    return sorted(rows, key=lambda r: r["values"][key])
+
+
+def _studies_figure(studies: dict, points: list[dict]) -> Figure | None:
+    """LER and YBR vs wall reflectance (Fig. 8) and non-uniformity per configuration, run vs paper."""
+    refl = _study_rows(studies, "reflectance", "wall.reflectance")
+    nu_points = [p for p in points if p["paper"].get("non_uniformity") is not None and p["run"] is not None]
+    if not refl and not nu_points:
+        return None
+    fig = Figure(figsize=(12, 3.8))
+    axes = fig.subplots(1, 3)
+    fig8 = [p for p in points if p["study"] == "reflectance"]
+    for ax, q, scale, label in ((axes[0], "LER", 100.0, "LER (% of LED power)"), (axes[1], "YBR", 1.0, "YBR (1)")):
+        if refl:
+            ax.errorbar([r["values"]["wall.reflectance"] for r in refl], [r[q] * scale for r in refl],
+                        yerr=[2 * (_num(r.get(f"{q}_std")) or 0.0) * scale for r in refl], fmt="-o", ms=4,
+                        capsize=3, label="this run (± 2σ)")
+        px = [p["value"] for p in fig8 if p["paper"].get(q) is not None]
+        py = [p["paper"][q] for p in fig8 if p["paper"].get(q) is not None]
+        if px:
+            ax.plot(px, py, "s", ms=8, mfc="none", mew=1.5, color="#c0392b", label="[Cylindrical-module] Fig. 8 text")
+        ax.set_xlabel("wall and base reflectance (1)")
+        ax.set_ylabel(label)
+        ax.set_title(f"{q} vs cavity reflectance", fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    ax = axes[2]
+    if nu_points:
+        x = np.arange(len(nu_points))
+        ax.bar(x - 0.2, [100 * p["run"]["non_uniformity"] for p in nu_points], 0.4, color="#2b5d8a",
+               label="this run")
+        ax.bar(x + 0.2, [p["paper"]["non_uniformity"] for p in nu_points], 0.4, color="#e0a040",
+               label="[Cylindrical-module] text")
+        ax.set_xticks(x, [p["short"] for p in nu_points], rotation=30, ha="right", fontsize=8)
+        ax.legend(fontsize=8)
+    ax.set_ylabel("irradiance non-uniformity (%)")
+    ax.set_title("non-uniformity per configuration", fontsize=10)
+    ax.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+# --------------------------------------------------------------------------------------------------
+# the report
+# --------------------------------------------------------------------------------------------------
+class _Report:
+    def __init__(self, run_dir: Path, summary: dict, pv: dict) -> None:
+        self.dir = run_dir
+        self.s = summary
+        self.pv = pv
+        self.pb = pv["power_budget"]
+        self.cm = pv["cylindrical_module"]
+        self.v = Verdicts()
+        self.used_png: set[str] = set()
+        self.images = 0
+        trace_json = _read_json(run_dir / "trace.json")
+        self.trace_json = trace_json if isinstance(trace_json, dict) else {}
+
+    # -- figures -------------------------------------------------------------------------------
+    def run_png(self, name: str) -> str:
+        path = self.dir / name
+        if not path.is_file():
+            return _missing(f"{name} is not in the run folder.")
+        self.used_png.add(name)
+        self.images += 1
+        return _figure(path.read_bytes(), f"<code>{_esc(name)}</code> (this run). {FIGURE_CAPTIONS.get(name, '')}",
+                       f"figure {name}")
+
+    def drawn(self, fig: Figure | None, caption: str, alt: str) -> str:
+        if fig is None:
+            return ""
+        self.images += 1
+        return _figure(_fig_png(fig), caption, alt)
+
+    # -- pieces ------------------------------------------------------------------------------------
+    def scan(self) -> dict:
+        return self.s.get("scan") or {}
+
+    def table2_incidence(self) -> str | None:
+        tables = self.s.get("interaction_tables") or {}
+        if not tables:
+            return None
+        for want in ("45", "45.0"):
+            if want in tables:
+                return want
+        budget_inc = _num((self.s.get("module_budget") or {}).get("incidence_deg"))
+        for key, row in tables.items():
+            if budget_inc is not None and _num(row.get("theta_i_deg")) == budget_inc:
+                return key
+        return next(iter(tables))
+
+    def study_points(self) -> list[dict]:
+        """The studies' points for which the cylindrical-module paper prints a number."""
+        studies = self.trace_json.get("studies") or {}
+        cm = self.cm
+        fig8 = cm["fig8_reflectance"]
+        h = cm["fig11_fig12_height"]
+        fw = cm["fig13_fig14_led_fwhm"]
+        f10 = cm["fig10_non_uniformity_percent"]
+        wanted = [
+            ("reflectance", "wall.reflectance", fig8["reflectance"][0], "ρ 0.80",
+             {"LER": fig8["LER_percent"][0], "YBR": fig8["YBR"][0]}, "Fig. 8"),
+            ("reflectance", "wall.reflectance", fig8["reflectance"][1], "ρ 0.98",
+             {"LER": fig8["LER_percent"][1], "YBR": fig8["YBR"][1]}, "Fig. 8"),
+            ("specular_fraction", "wall.specular_fraction", 1.0, "mirror walls",
+             {"non_uniformity": f10["mirror"]}, "Fig. 10 (specular reflector)"),
+            ("specular_fraction", "wall.specular_fraction", 0.0, "diffuse walls",
+             {"non_uniformity": f10["perfect_diffuser"]}, "Fig. 10 (perfect diffuser)"),
+            ("height_mm", "cavity.height_mm", h["best_LER_height_mm"], "h 10 mm",
+             {"LER": h["best_LER_percent"], "non_uniformity": h["non_uniformity_percent"]["10"]},
+             "Figs. 11-12, §6 (best LER)"),
+            ("height_mm", "cavity.height_mm", 43.0, "h 43 mm", {"non_uniformity": h["non_uniformity_percent"]["42"]},
+             "Fig. 12 (the text says 42 mm)"),
+            ("led_fwhm_deg", "leds.fwhm_deg", 30.0, "FWHM 30°", {"non_uniformity": fw["non_uniformity_percent"]["30"]},
+             "Fig. 14"),
+        ]
+        out = []
+        for study, key, value, short, paper, where in wanted:
+            match = [r for r in _study_rows(studies, study, key) if abs(r["values"][key] - value) < 1e-9]
+            out.append({"study": study, "key": key, "value": value, "short": short, "paper": paper, "where": where,
+                        "run": match[0] if match else None})
+        return out
+
+    # -- sections ------------------------------------------------------------------------------
+    def sec_measurement(self) -> str:
+        sc = self.scan()
+        if not sc:
+            return _section("measurement", "1. Measurement (ingest)", _missing("No scan summary in summary.json."))
+        inst = sc.get("instrument") or {}
+        gon = self.pb["goniometer_section2"]
+        v = self.v
+        rows = [
+            ["beam diameter (mm)", _f(inst.get("beam_diameter_mm"), 1), _f(gon["beam_diameter_mm"], 0),
+             v.check("beam diameter", inst.get("beam_diameter_mm"), gon["beam_diameter_mm"], unit="mm", digits=1)],
+            ["detector aperture diameter (mm)", _f(inst.get("aperture_diameter_mm"), 1),
+             _f(gon["detector_aperture_diameter_mm"], 1) + " (max.)",
+             v.check("detector aperture", inst.get("aperture_diameter_mm"), gon["detector_aperture_diameter_mm"],
+                     unit="mm", digits=1)],
+            ["detector distance (mm)", _f(inst.get("detector_distance_mm"), 0), _f(gon["detector_distance_mm"], 0),
+             v.check("detector distance", inst.get("detector_distance_mm"), gon["detector_distance_mm"], unit="mm",
+                     digits=0)],
+            ["detector solid angle (1e-4 sr)", _f(inst.get("solid_angle_sr"), 3, 1e4),
+             _f(gon["detector_solid_angle_sr"], 2, 1e4),
+             v.check("detector solid angle (1e-4 sr)", _num(inst.get("solid_angle_sr")) and
+                     1e4 * inst["solid_angle_sr"], 1e4 * gon["detector_solid_angle_sr"], unit="× 1e-4 sr",
+                     digits=2, half_unit=0.005,
+                     note="a 25.4 mm aperture at 886 mm subtends 6.45e-4 sr (exact cone); the paper's 6.25e-4 sr "
+                          "corresponds to a 25 mm aperture")],
+            ["incidences (deg)", _esc(", ".join(f"{x:g}" for x in sc.get("incidences_deg", []))),
+             _esc(", ".join(f"{x:g}" for x in gon["incidence_angles_deg"])), ""],
+        ]
+        cal = sc.get("calibration") or {}
+        wl = sc.get("wavelength_nm") or {}
+        cal_rows = [[_esc(k.replace("_", " ")), _esc(cal[k])] for k in cal]
+        configs = "".join(f"<li><b>{_esc(c.get('name'))}</b>: {_esc(c.get('description', ''))}, incident band "
+                          f"{_esc('–'.join(f'{b:g}' for b in c.get('incident_band_nm', [])))} nm, "
+                          f"{_esc(c.get('records'))} records</li>" for c in sc.get("configurations", []))
+        right = (_table(["goniometer", "this run", "[Power-budget] §2", "comparison"], rows,
+                        "Instrument geometry beside the paper's goniometer")
+                 + f"<p>{_esc(sc.get('records'))} records, sides {_esc(', '.join(sc.get('sides', [])))}, spectrometer "
+                   f"{_f(wl.get('min'), 0)}–{_f(wl.get('max'), 0)} nm in steps of {_f(wl.get('step'), 1)} nm.</p>"
+                 + (f"<ul>{configs}</ul>" if configs else "")
+                 + _table(["calibration check", "count"], cal_rows, "Calibration counts (docs/summary.md)"))
+        body = _pair(self.run_png("inplane_bsdf.png"), right)
+        return _section("measurement", "1. Measurement (ingest)", body)
+
+    def truth_note(self, truth: dict) -> str:
+        """For synthetic data: how far the measured table is from the generator's exact values."""
+        key = self.table2_incidence()
+        if not truth or key is None:
+            return ""
+        power = (self.s["interaction_tables"][key].get("power") or {})
+        diffs = [abs(_num(power.get(k)) - _num(truth.get(k))) for k in TABLE2_KEYS
+                 if _num(power.get(k)) is not None and _num(truth.get(k)) is not None]
+        if not diffs:
+            return ""
+        return (f"<p>Synthetic data: the generator's exact TIS (last column of the table) is recovered within "
+                f"{max(diffs):.2f} percentage points by the calibration and the two-arc hemisphere reconstruction. "
+                "The generator was built from Table 2 with a blue-loss entry that adds up (31.7 %).</p>")
+
+    def sec_table2(self) -> str:
+        key = self.table2_incidence()
+        if key is None:
+            return _section("table2", "2. Interaction table (Table 2 of [Power-budget])",
+                            _missing("No interaction tables in summary.json."))
+        tables = self.s["interaction_tables"]
+        row = tables[key]
+        theta = _num(row.get("theta_i_deg")) or float(key)
+        t2 = self.pb["table2_tis_45deg_percent"]
+        truth = ((self.scan().get("truth_tis_percent") or {}).get(key)) or {}
+        v = self.v
+        at45 = abs(theta - 45.0) < 1e-9
+        rows = []
+        for k, name in TABLE2_KEYS.items():
+            cells = [_esc(name)]
+            for q in ("power", "photons"):
+                run, std = (row.get(q) or {}).get(k), (row.get(f"{q}_std") or {}).get(k)
+                note = "the paper's row does not add up (see the note below)" if k == "blue_losses" else ""
+                cells += [_pm(run, std), _f(t2[q].get(k), 1),
+                          v.check(f"Table 2 {q} {k} at {theta:g}°", run, t2[q].get(k), std, "%", note=note)
+                          if at45 else "(paper: 45° only)"]
+            if truth:
+                cells.append(_f(truth.get(k), 2))
+            rows.append(cells)
+        headers = ["interaction", "power, this run (%)", "power, paper (%)", "comparison", "photons, this run (%)",
+                   "photons, paper (%)", "comparison"] + (["generator truth, power (%)"] if truth else [])
+        eqe = self.pb["eqe_section6"]["EQE"]
+        eqe_html = (f"<p><b>EQE</b> (converted photons out per blue photon absorbed): this run "
+                    f"{_pm(row.get('eqe'), row.get('eqe_std'), 3)}, [Power-budget] §6: {eqe:.2f} — "
+                    + v.check(f"EQE at {theta:g}°", row.get("eqe"), eqe, row.get("eqe_std"), digits=3,
+                              half_unit=0.005) + ".</p>")
+        other = []
+        for k2, r2 in tables.items():
+            if not isinstance(r2, dict) or "power" not in r2:
+                continue
+            other.append([_esc(_f(r2.get("theta_i_deg"), 0) if _num(r2.get("theta_i_deg")) is not None else k2)]
+                         + [_pm((r2.get("power") or {}).get(k), (r2.get("power_std") or {}).get(k))
+                            for k in TABLE2_KEYS] + [_pm(r2.get("eqe"), r2.get("eqe_std"), 3)])
+        tab = _table(headers, rows, f"TIS at θi = {theta:g}°, % of the incident power and photons (± 1σ), beside "
+                                    "Table 2 of [Power-budget] (45°)")
+        fig = self.drawn(_table2_figure(row, t2["power"], theta),
+                         "This run's power TIS (blue, ± 1σ error bars) beside Table 2 of [Power-budget] (orange).",
+                         "bar chart of Table 2, run vs paper")
+        body = (_pair(fig, eqe_html + self.truth_note(truth)) + f'<div class="wide">{tab}</div>'
+                + f'<p class="note">Paper note: {_esc(t2["note"])} Agreement rule: |run − paper| ≤ half a unit of the '
+                  "paper's last printed digit + 2σ of the run.</p>"
+                + _table(["θi (deg)"] + [k.replace("_", " ") for k in TABLE2_KEYS] + ["EQE"], other,
+                         "Every measured incidence: power TIS (% ± 1σ) and EQE (± 1σ)"))
+        return _section("table2", "2. Interaction table (Table 2 of [Power-budget])", body)
+
+    def sec_budget(self) -> str:
+        mb = self.s.get("module_budget") or {}
+        power = mb.get("power") or {}
+        if not power.get("iterations"):
+            return _section("budget", "3. Module budget (Table 3 of [Power-budget])",
+                            _missing("No module budget in summary.json."))
+        t3 = self.pb["table3_power_budget_percent"]
+        it = self.pb["iterative_model_section5"]
+        last = power["iterations"][-1]
+        n = len(power["iterations"])
+        conv = power.get("converged") or {}
+        v = self.v
+        rows = []
+        for k in ("blue", "yellow", "total", "losses"):
+            six = power["iterations"][5].get(k) if n >= 6 else None
+            note = (f"Table 3 follows from Table 2 after six plate interactions, not seven (docs/reductions.md); "
+                    f"after six this run gives {_f(six)} %") if six is not None and n != 6 else ""
+            rows.append([k, _f(last.get(k)), _f(conv.get(k)), _f(t3["iteration_model_45deg"][k], 1),
+                         v.check(f"Table 3 {k} (model, {n} interactions)", last.get(k),
+                                 t3["iteration_model_45deg"][k], unit="%", note=note),
+                         _f(t3["experiments"][k], 1), _f(it["text_cumulative_percent"][k], 1)])
+        tab = _table(["extracted", f"this run, {n} plate interactions (%)", "this run, converged (%)",
+                      "Table 3 model, 45° (%)", "comparison", "Table 3 experiment (%)", "paper §5 text (%)"], rows,
+                     f"Module budget at θi = {_f(mb.get('incidence_deg'), 0)}°, η_MC = {_f(power.get('eta_mc'), 2)}, "
+                     "% of the LED output")
+        first = power.get("first_iteration") or {}
+        f_rows = [["forward (extracted)", _f(first.get("forward")), _f(it["first_iteration_forward_percent"], 1),
+                   v.check("first iteration forward", first.get("forward"), it["first_iteration_forward_percent"],
+                           unit="%")],
+                  ["backscattered", _f(first.get("backscattered")),
+                   _f(it["first_iteration_backscattered_percent"], 1),
+                   v.check("first iteration backscattered", first.get("backscattered"),
+                           it["first_iteration_backscattered_percent"], unit="%")],
+                  ["lost", _f(first.get("lost")), _f(it["first_iteration_lost_percent"], 1),
+                   v.check("first iteration lost", first.get("lost"), it["first_iteration_lost_percent"], unit="%")]]
+        ftab = _table(["first plate interaction", "this run (%)", "[Power-budget] §5 (%)", "comparison"], f_rows,
+                      "The first pass")
+        tab += f'<p class="note">Paper note: {_esc(it["note"])}</p>'
+        figs = self.run_png("module_budget.png") + self.drawn(
+            _budget_figure(power, t3), "This run's cumulative extracted power per plate interaction with the "
+                                       "values of Table 3 of [Power-budget] at the last interaction.",
+            "module budget, run vs Table 3")
+        return _section("budget", "3. Module budget (Table 3 of [Power-budget])",
+                        f'<div class="wide">{tab}</div>' + _pair(figs, ftab))
+
+    def sec_exports(self) -> str:
+        checks = self.s.get("export_checks") or []
+        if not checks:
+            return _section("exports", "4. Ray-tracer tables", _missing("No export checks in summary.json."))
+        files = sorted({c.get("file") for c in checks})
+        worst = max(checks, key=lambda c: abs(_num(c.get("relative_difference")) or 0.0))
+        bad = [c for c in checks if not c.get("ok")]
+        rows = [[f"<code>{_esc(f)}</code>",
+                 _esc(", ".join(f"{_num(c.get('theta_i_deg')) or 0:g}" for c in checks if c.get("file") == f)),
+                 _f(max(abs(_num(c.get("relative_difference")) or 0.0) for c in checks if c.get("file") == f), 4,
+                    100.0),
+                 "yes" if all(c.get("ok") for c in checks if c.get("file") == f) else
+                 '<span class="differs">NO</span>'] for f in files]
+        text = (f"<p>{len(files)} tables written and re-read; TIS of the table as read back vs its source: worst "
+                f"{100 * abs(_num(worst.get('relative_difference')) or 0):.3f} % "
+                f"(<code>{_esc(worst.get('file'))}</code>"
+                f" at {_f(worst.get('theta_i_deg'), 0)}°). "
+                + (f'<span class="differs">{len(bad)} checks outside the tolerance.</span>' if bad else
+                   "Every check within the recipe's tolerance.") + " The papers print no such check.</p>")
+        return _section("exports", "4. Ray-tracer tables", text + _table(
+            ["file", "θi (deg)", "largest |Δ TIS| (% of source)", "within tolerance"], rows, "Re-read checks"))
+
+    def sec_fits(self) -> str:
+        fits = self.s.get("bsdf_fits") or []
+        ef = self.s.get("emission_fit") or {}
+        rows = []
+        for f in fits:
+            p, sd = f.get("params") or {}, f.get("std") or {}
+            rows.append([_esc(f.get("interaction")), _esc(f.get("side")), _f(f.get("theta_i_deg"), 0),
+                         _esc(f.get("model")), _pm_sig(p.get("rho"), sd.get("rho")),
+                         _pm_sig(p.get("A"), sd.get("A")) if "A" in p else "—",
+                         _pm_sig(p.get("sigma"), sd.get("sigma")) if "sigma" in p else "—", _f(f.get("r2"), 4),
+                         _f(f.get("tis_difference_pp"), 3),
+                         "yes" if f.get("converged") else '<span class="differs">no</span>'])
+        tab = _table(["interaction", "side", "θi (deg)", "model", "ρ (1)", "A (1/sr)", "σ (direction cosines)", "R²",
+                      "TIS model − data (pp)", "converged"], rows,
+                     "BSDF fits (± 1σ); ρ/π is the Lambertian term") if rows else _missing("No BSDF fits.")
+        biys = [f for f in fits if f.get("interaction") == "biys"]
+        note = ("<p>[Power-budget] §4.2: converted light (biys) is Lambertian, without a specular peak; this run fits "
+                f"biys with <b>{_esc(', '.join(sorted({f.get('model', '?') for f in biys})))}</b>.</p>") if biys else ""
+        t2 = self.cm["table2_spectrum_fit"]
+        v = self.v
+        if ef:
+            e_rows = [
+                ["peak (nm)", _pm(ef.get("peak_nm"), ef.get("peak_nm_std"), 1), _f(t2["yellow_peak_nm"], 1),
+                 v.check("converted-light peak", ef.get("peak_nm"), t2["yellow_peak_nm"], ef.get("peak_nm_std"), "nm",
+                         1)],
+                ["FWHM (nm)", _pm(ef.get("fwhm_nm"), ef.get("fwhm_nm_std"), 1), _f(t2["yellow_fwhm_nm"], 1),
+                 v.check("converted-light FWHM", ef.get("fwhm_nm"), t2["yellow_fwhm_nm"], ef.get("fwhm_nm_std"), "nm",
+                         1)],
+                ["asymmetry α (1)", _pm(ef.get("alpha"), ef.get("alpha_std"), 3), _f(t2["yellow_alpha"], 2),
+                 v.check("converted-light asymmetry α", ef.get("alpha"), t2["yellow_alpha"], ef.get("alpha_std"),
+                         digits=3)],
+                ["R² (1)", _f(ef.get("r2"), 4), "0.99", ""],
+            ]
+            etab = _table(["converted-light spectrum", f"this run ({_esc(ef.get('model', ''))}, θi = "
+                                                       f"{_f(ef.get('incidence_deg'), 0)}°)",
+                           "[Cylindrical-module] Table 2", "comparison"], e_rows,
+                          "Emission fit (eq. (3) of [Cylindrical-module]), ± 1σ")
+        else:
+            etab = _missing("No emission fit in summary.json.")
+        body = _pair(self.run_png("bsdf_fits.png"), note + etab) + f'<div class="wide">{tab}</div>'
+        return _section("fits", "5. BSDF and emission fits", body)
+
+    def sec_trace(self) -> str:
+        tr = self.s.get("trace") or {}
+        dev = tr.get("device") or {}
+        se = tr.get("device_std_err") or {}
+        if not dev:
+            return _section("trace", "6. Module trace ([Cylindrical-module])", _missing("No trace in summary.json."))
+        v = self.v
+        cm = self.cm
+        defs = cm["definitions_section5_1"]
+        t1 = cm["table1_flux_W"]
+        ms = self.s.get("module_spectrum") or {}
+        flux = ms.get("flux_W") or (self.trace_json.get("device") or {}).get("extracted") or {}
+        b, y = _num(flux.get("blue")), _num(flux.get("yellow"))
+        t1_rows = []
+        for label, src in (("simulation", t1["simulation"]), ("measurement", t1["measurement"])):
+            t1_rows.append([f"paper Table 1, {label}", _f(src["blue"], 3), _f(src["yellow"], 3), _f(src["total"], 3),
+                            _f(src["yellow"] / src["blue"], 2), _f(src["blue"] / src["total"], 1, 100.0)])
+        if b is not None and y is not None:
+            t1_rows.append(["this run (1 W emitted)", _f(b, 4), _f(y, 4), _f(b + y, 4), _f(y / b, 2),
+                            _f(b / (b + y), 1, 100.0)])
+        t1tab = _table(["", "blue (W)", "yellow (W)", "total (W)", "yellow / blue (1)", "blue share (%)"], t1_rows,
+                       "Extracted flux beside Table 1 of [Cylindrical-module]")
+        t1note = ('<p class="note">The paper\'s fluxes are those of its four LEDs, whose emitted flux Table 1 does not '
+                  "give; this run's are for 1 W emitted. Compare the split (yellow/blue, blue share), not the watts."
+                  "</p>")
+        if b is not None and y is not None:
+            t1note += (f"<p>Yellow/blue of the extracted flux: this run {y / b:.2f} ± {_f(se.get('YBR'), 2)}, paper "
+                       f"simulation {t1['simulation']['yellow'] / t1['simulation']['blue']:.2f} — "
+                       + v.check("yellow/blue vs Table 1 simulation", y / b,
+                                 t1["simulation"]["yellow"] / t1["simulation"]["blue"], se.get("YBR"),
+                                 half_unit=0.005, note="ratio of the printed Table 1 fluxes")
+                       + f"; paper measurement {t1['measurement']['yellow'] / t1['measurement']['blue']:.2f} — "
+                       + v.check("yellow/blue vs Table 1 measurement", y / b,
+                                 t1["measurement"]["yellow"] / t1["measurement"]["blue"], se.get("YBR"),
+                                 half_unit=0.005, note="ratio of the printed Table 1 fluxes") + ".</p>")
+        dev_rows = [
+            ["LER (%)", _pm(dev.get("LER"), se.get("LER"), 2, 100.0), _esc(defs["LER"])],
+            ["YBR (1)", _pm(dev.get("YBR"), se.get("YBR"), 2),
+             "extracted yellow ray power / extracted blue ray power of the two-wavelength trace; the paper's "
+             f"definition: {_esc(defs['YBR'])}"],
+            ["non-uniformity (%)", _f(dev.get("non_uniformity"), 1, 100.0), _esc(defs["non_uniformity"])],
+            ["ledger error (1)", f"{_num(dev.get('ledger_error')) or float('nan'):.1e}",
+             "|emitted − extracted − absorbed − terminated| / emitted"],
+            ["rays", _esc(dev.get("rays")), f"in {_f(dev.get('elapsed_s'), 1)} s"],
+        ]
+        devtab = _table(["device", "this run (± 1σ)", "definition"], dev_rows, "The traced device", text_cols=[2])
+        points = self.study_points()
+        p_rows = []
+        for p in points:
+            r = p["run"]
+            for q, unit, scale in (("LER", "%", 100.0), ("YBR", "", 1.0), ("non_uniformity", "%", 100.0)):
+                if p["paper"].get(q) is None:
+                    continue
+                name = {"LER": "LER (%)", "YBR": "YBR (1)", "non_uniformity": "non-uniformity (%)"}[q]
+                if r is None:
+                    p_rows.append([_esc(p["short"]), name, "not in this run", _f(p["paper"][q], 0), _esc(p["where"]),
+                                   "—"])
+                    continue
+                std = r.get(f"{q}_std")
+                run_val = _num(r.get(q))
+                p_rows.append([_esc(p["short"]), name, _pm(run_val, std, 2, scale),
+                               _f(p["paper"][q], 0), _esc(p["where"]),
+                               v.check(f"{p['short']} {q}", None if run_val is None else run_val * scale, p["paper"][q],
+                                       None if _num(std) is None else _num(std) * scale, unit, 1)])
+        ptab = _table(["study point", "quantity", "this run (± 1σ)", "paper", "where in the paper", "comparison"],
+                      p_rows, "Study points the paper prints a number for", text_cols=[1, 4]) if p_rows else _missing(
+            "trace.json with the studies is not in the run folder.")
+        trends = tr.get("trends") or {}
+        trend_rows = [[_esc(name), '<span class="agree">holds</span>' if t.get("holds") else
+                       '<span class="differs">does not hold</span>', _esc(t.get("detail", ""))]
+                      for name, t in trends.items()]
+        for name, t in trends.items():
+            if not t.get("holds"):
+                self.v.disagreements.append(f"trend of [Cylindrical-module] not reproduced: {name} ({t.get('detail')})")
+        ttab = _table(["trend of the paper", "this run", "numbers"], trend_rows,
+                      "Trends of §5 of [Cylindrical-module], checked", text_cols=[2]) if trend_rows else ""
+        sfig = self.drawn(_studies_figure(self.trace_json.get("studies") or {}, points),
+                          "Left and centre: LER and YBR of this run's reflectance study (± 2σ) with the two values "
+                          "the text of [Cylindrical-module] gives for Fig. 8. Right: irradiance non-uniformity of "
+                          "this run's study points beside the paper's values (Figs. 10, 12, 14).",
+                          "studies, run vs paper")
+        first = cm["first_interaction_percent_section4"]
+        body = (_pair(devtab, t1tab + t1note) + self.run_png("trace_studies.png")
+                + sfig + _pair(ptab, ttab)
+                + f'<p class="note">[Cylindrical-module] §4: after the first plate interaction {first["forward"]} % '
+                  f"forward and {first['backward']} % backward; {first['extracted_total']} % extracted in total. The "
+                  "paper's device: r = 35 mm, h = 43 mm, wall ρ = 0.985 with 1.5 % specular, four Lambertian LEDs.</p>")
+        return _section("trace", "6. Module trace ([Cylindrical-module])", body)
+
+    def map_files(self) -> list[tuple[str, xr.Dataset, str]]:
+        found = []
+        for path in sorted(self.dir.glob("trace_*.nc")):
+            try:
+                ds = netcdf.load(path)
+            except InputError:
+                continue
+            name = find_map_variable(ds)
+            if name is not None:
+                found.append((path.name, ds, name))
+        return found
+
+    def sec_maps(self) -> str:
+        found = self.map_files()
+        parts = []
+        covered: dict[str, set[float]] = {}
+        dev_study = self.device_configuration()
+        for fname, ds, var in found:
+            da = ds[var]
+            emitted = _num(ds.attrs.get("emitted_W"))
+            extra = [d for d in da.dims if d not in MAP_DIMS]
+            if extra:
+                fig = irradiance_maps_figure(da, emitted_W=emitted, title=f"{fname}: {var}")
+                for d in extra:
+                    covered.setdefault(d, set()).update(float(x) for x in np.atleast_1d(da[d].values)
+                                                        if _num(x) is not None)
+            else:
+                nu = _num(ds["non_uniformity"].values) if "non_uniformity" in ds and ds["non_uniformity"].ndim == 0 \
+                    else None
+                fig = irradiance_map_figure(da, title=f"{fname}: {da.attrs.get('long_name', var)}", non_uniformity=nu,
+                                            emitted_W=emitted)
+                for d, value in (dev_study.items() if fname == "trace_device.nc" else ()):
+                    covered.setdefault(d, set()).add(value)
+            scale = ("one colour scale for all panels, from the smallest E_min to the largest E_max" if extra else
+                     "colour bar from E_min to E_max")
+            parts.append(self.drawn(fig, f"Irradiance map from <code>{_esc(fname)}</code> (variable "
+                                         f"<code>{_esc(var)}</code>): bins entirely inside the plate (dashed circle: "
+                                         f"plate edge), {scale}.", f"irradiance map {fname}"))
+        if not found:
+            parts.append(_missing("No trace_*.nc file with an irradiance map in the run folder."))
+        rows = []
+        missing_text = []
+        studies = self.trace_json.get("studies") or {}
+        for fig_no, _what, dims, panels in PAPER_MAP_FIGURES:
+            have = set()
+            for d in dims:
+                have |= covered.get(d, set())
+            for value, label in panels:
+                present = any(abs(value - h) < 1e-9 for h in have)
+                nu = [r for r in _study_rows(studies, dims[1], dims[0]) if abs(r["values"][dims[0]] - value) < 1e-9]
+                nu_text = f"{100 * nu[0]['non_uniformity']:.1f} %" if nu and _num(nu[0].get("non_uniformity")) \
+                    is not None else "—"
+                rows.append([fig_no, _esc(label), "yes" if present else '<span class="absent">not in this run</span>',
+                             nu_text])
+                if not present:
+                    missing_text.append(f"{fig_no} {label}")
+        dev_note = ""
+        if dev_study:
+            dev_note = ("<p>The device map stands for " + _esc(", ".join(f"{k} = {x:g}" for k, x in dev_study.items()))
+                        + " (the device's LER equals that study point's exactly: the same scene and seed).</p>")
+        cov = _table(["paper figure", "panel", "map in this run", "non-uniformity of this run's study point"], rows,
+                     "The irradiance maps of [Cylindrical-module] and this run", left=2)
+        text = (dev_note + "<p>Maps of the paper not in this run: " + _esc("; ".join(missing_text) or "none")
+                + ". The run saves only the maps listed above; the studies' non-uniformity numbers are in section 6."
+                  "</p>")
+        paper_nu = self.cm["fig10_non_uniformity_percent"]
+        dev = (self.s.get("trace") or {}).get("device") or {}
+        if _num(dev.get("non_uniformity")) is not None:
+            text += ("<p>Device non-uniformity: this run "
+                     f"{100 * dev['non_uniformity']:.1f} %, paper {paper_nu['perfect_diffuser']} % (near-diffuse walls,"
+                     " h = 43 mm; Figs. 10 and 12) — "
+                     + self.v.check("device irradiance non-uniformity", 100 * dev["non_uniformity"],
+                                    paper_nu["perfect_diffuser"], unit="%", digits=1) + ".</p>")
+        body = _pair(parts[0], cov + text) + "".join(parts[1:]) if found else parts[0] + cov + text
+        return _section("maps", "7. Irradiance maps (Figs. 10, 12, 14 of [Cylindrical-module])", body)
+
+    def device_configuration(self) -> dict[str, float]:
+        """Study parameters the device shares with a study point: the point whose trace is the device's exactly."""
+        dev = (self.trace_json.get("device") or {})
+        ler = _num(dev.get("LER"))
+        out: dict[str, float] = {}
+        if ler is None:
+            return out
+        for rows in (self.trace_json.get("studies") or {}).values():
+            for r in rows:
+                if _num(r.get("LER")) == ler:
+                    for k, x in (r.get("values") or {}).items():
+                        if _num(x) is not None:
+                            out[k] = float(x)
+        return out
+
+    def sec_spectrum(self) -> str:
+        ms = self.s.get("module_spectrum") or {}
+        col = ms.get("colour") or {}
+        if not col:
+            return _section("spectrum", "8. Module spectrum and colour",
+                            _missing("No module spectrum in summary.json."))
+        led = ms.get("led_spectrum") or {}
+        t2 = self.cm["table2_spectrum_fit"]
+        rows = [["x (1)", _f(col.get("x"), 4)], ["y (1)", _f(col.get("y"), 4)], ["CCT (K)", _f(col.get("cct_K"), 0)],
+                ["Duv (1)", _f(col.get("duv"), 4)],
+                ["luminous efficacy of radiation (lm/W)", _f(col.get("luminous_efficacy_lm_per_W"), 1)],
+                ["YBR of the spectrum (1)", _f(col.get("ybr"), 2)]]
+        tab = _table(["colour of the rebuilt spectrum", "this run"], rows, "CIE 1931 2°, CCT and Duv (Ohno 2013)")
+        v = self.v
+        led_rows = [["LED peak (nm)", _f(led.get("peak_nm"), 1), _f(t2["blue_peak_nm"], 1),
+                     v.check("pump LED peak", led.get("peak_nm"), t2["blue_peak_nm"], unit="nm", digits=1)],
+                    ["LED FWHM (nm)", _f(led.get("fwhm_nm"), 1), _f(t2["blue_fwhm_nm"], 1),
+                     v.check("pump LED FWHM", led.get("fwhm_nm"), t2["blue_fwhm_nm"], unit="nm", digits=1)]]
+        tab += _table(["pump LED spectrum", "this run", "[Cylindrical-module] Table 2", "comparison"], led_rows,
+                      "Blue LED spectrum used for the rebuild")
+        ybr_dev = _num(((self.s.get("trace") or {}).get("device") or {}).get("YBR"))
+        tab += ("<p><b>Two YBRs.</b> The spectrum's YBR = Σ 471–780 nm / Σ 380–470 nm of the rebuilt spectrum "
+                f"({_f(col.get('ybr'), 2)}), the paper's §5.1 definition; the trace's YBR = yellow / blue ray power of "
+                f"the two-wavelength model ({_f(ybr_dev, 2)}). They differ because the trace counts all pump light as "
+                "blue and all converted light as yellow, while the spectral YBR splits the rebuilt spectrum at 470 nm, "
+                "where the LED's tail and the phosphor emission overlap (the rebuild itself matches the band sums "
+                "380–500 / 501–780 nm of Table 2 of [Cylindrical-module]). The paper prints no colour point or CCT "
+                "for the module.</p>"
+                f"<p class=\"note\">Fluxes from {_esc(ms.get('flux_source', '?'))}.</p>")
+        return _section("spectrum", "8. Module spectrum and colour", _pair(self.run_png("module_spectrum.png"), tab))
+
+    def sec_other_figures(self) -> str:
+        rest = [p.name for p in sorted(self.dir.glob("*.png")) if p.name not in self.used_png]
+        if not rest:
+            return ""
+        return _section("other", "9. Other figures of the run", "".join(self.run_png(n) for n in rest))
+
+    def sec_details(self) -> str:
+        st = self.s.get("stage_seconds") or {}
+        rows = [[_esc(k), _f(x, 2)] for k, x in st.items()]
+        outs = "".join(f"<li><code>{_esc(o)}</code></li>" for o in self.s.get("outputs", []))
+        lines = "\n".join(str(x) for x in self.s.get("report_lines", []))
+        body = (_table(["stage", "wall time (s)"], rows, "Stage timings") if rows else "") + (
+            f"<h3>Files of the run</h3><ul>{outs}</ul>" if outs else "") + (
+            f"<h3>What the run printed</h3><pre>{_esc(lines)}</pre>" if lines else "")
+        return _section("details", "Run details", body or _missing("No run details in summary.json."))
+
+    def sec_sources(self) -> str:
+        src = self.pv["source"]
+        items = "".join(f"<li>[{_esc(p['key'])}] “{_esc(p['title'])}”, <i>{_esc(p['journal'])}</i>. Used: "
+                        f"{_esc(p['used'])}.</li>" for p in (src["power_budget"], src["cylindrical_module"]))
+        return _section("sources", "Sources", f"<p>{_esc(src['about'])}</p><ul>{items}</ul>"
+                                               f'<p class="note">Written by bsdfkit {_esc(__version__)}.</p>')
+
+    # -- opening -------------------------------------------------------------------------------
+    def opening(self) -> str:
+        sc = self.scan()
+        s = self.s
+        sample = sc.get("sample") or s.get("recipe") or self.dir.name
+        synthetic = bool(sc.get("synthetic"))
+        when = ""
+        with_summary = self.dir / "summary.json"
+        if with_summary.is_file():
+            when = datetime.fromtimestamp(with_summary.stat().st_mtime, UTC).strftime("%Y-%m-%d %H:%M UTC")
+        head = (f"<h1>BSDF and module report: {_esc(sample)}</h1>"
+                f'<p class="sub">recipe <code>{_esc(s.get("recipe", "?"))}</code> ({_esc(s.get("recipe_file", ""))}), '
+                f"measurement <code>{_esc(Path(str(s.get('measurement', '?'))).name)}</code>, run finished {when}</p>")
+        if synthetic:
+            head += ('<div class="banner"><b>Synthetic data.</b> This measurement was made by bsdfkit\'s virtual '
+                     "goniometer from a known truth, not measured on a real plate: agreement with the papers' numbers "
+                     "that the generator was built from (Table 2 of [Power-budget]) is by construction.</div>")
+        else:
+            head += '<div class="banner"><b>Measured data</b> (not synthetic).</div>'
+        inc = ", ".join(f"{x:g}°" for x in sc.get("incidences_deg", []))
+        wl = sc.get("wavelength_nm") or {}
+        configs = ", ".join(f"{c.get('name')} ({c.get('description', '')})" for c in sc.get("configurations", []))
+        measured = (f"<h2>What was measured</h2><p>Sample <b>{_esc(sample)}</b> "
+                    f"({'synthetic' if synthetic else 'measured'}): goniometric BSDF at incidences {_esc(inc or '?')}, "
+                    f"sides {_esc(', '.join(sc.get('sides', [])) or '?')}, {_esc(sc.get('records', '?'))} detector "
+                    f"positions, spectra {_f(wl.get('min'), 0)}–{_f(wl.get('max'), 0)} nm; incident light: "
+                    f"{_esc(configs or '?')}. From it the run computed the interaction table and module budget "
+                    "([Power-budget]), ray-tracer tables, BSDF and emission fits, a Monte Carlo of the module and its "
+                    "rebuilt spectrum ([Cylindrical-module]).</p>")
+        return head + measured
+
+    def found(self) -> str:
+        cards = []
+
+        def card(key: str, value: str, note: str = "") -> None:
+            cards.append(f'<div class="card"><div class="k">{key}</div><div class="v">{value}</div>'
+                         f'<div class="k">{note}</div></div>')
+
+        key = self.table2_incidence()
+        t2html = ""
+        if key is not None:
+            row = self.s["interaction_tables"][key]
+            t2 = self.pb["table2_tis_45deg_percent"]["power"]
+            t2html = _table(["TIS at " + _esc(f"{_num(row.get('theta_i_deg')) or float(key):g}") + "°",
+                             "this run (% power, ± 1σ)", "paper Table 2 (%)"],
+                            [[_esc(k.replace("_", " ")), _pm((row.get("power") or {}).get(k),
+                                                             (row.get("power_std") or {}).get(k)), _f(t2.get(k), 1)]
+                             for k in TABLE2_KEYS], "Interaction table")
+            card("EQE (1)", _pm(row.get("eqe"), row.get("eqe_std"), 3), "paper §6: 0.80")
+        power = (self.s.get("module_budget") or {}).get("power") or {}
+        if power.get("iterations"):
+            last = power["iterations"][-1]
+            card(f"module budget, {len(power['iterations'])} plate interactions", f"{_f(last.get('total'), 1)} %",
+                 f"blue {_f(last.get('blue'), 2)} %, yellow {_f(last.get('yellow'), 2)} %, losses "
+                 f"{_f(last.get('losses'), 1)} %; converged {_f((power.get('converged') or {}).get('total'), 1)} %; "
+                 "paper Table 3: 53.6 %")
+        tr = self.s.get("trace") or {}
+        dev, se = tr.get("device") or {}, tr.get("device_std_err") or {}
+        if dev:
+            card("LER: extracted / emitted LED power", f"{_pm(dev.get('LER'), se.get('LER'), 2, 100.0)} %",
+                 "Monte Carlo of the device with this run's plate")
+            card("YBR (1)", _pm(dev.get("YBR"), se.get("YBR"), 2),
+                 "yellow / blue extracted ray power of the two-wavelength trace")
+            card("irradiance non-uniformity", f"{_f(dev.get('non_uniformity'), 1, 100.0)} %",
+                 "(E_max − E_min)/(E_max + E_min) on the plate")
+        col = (self.s.get("module_spectrum") or {}).get("colour") or {}
+        if col:
+            card("colour of the module", f"x {_f(col.get('x'), 4)}, y {_f(col.get('y'), 4)}",
+                 f"CCT {_f(col.get('cct_K'), 0)} K, Duv {_f(col.get('duv'), 4)}, "
+                 f"{_f(col.get('luminous_efficacy_lm_per_W'), 0)} lm/W; spectrum YBR {_f(col.get('ybr'), 2)} "
+                 "(Σ 471–780 nm / Σ 380–470 nm)")
+        trends = tr.get("trends") or {}
+        if trends:
+            held = sum(1 for t in trends.values() if t.get("holds"))
+            card("trends of [Cylindrical-module] §5", f"{held} of {len(trends)} hold", "section 6")
+        return ("<h2>What was found</h2>" + _pair(t2html or _missing("No interaction table."),
+                                                 f'<div class="cards">{"".join(cards)}</div>'))
+
+    def build(self) -> str:
+        sections = [self.sec_measurement(), self.sec_table2(), self.sec_budget(), self.sec_exports(), self.sec_fits(),
+                    self.sec_trace(), self.sec_maps(), self.sec_spectrum(), self.sec_other_figures(),
+                    self.sec_details(), self.sec_sources()]
+        if self.v.disagreements:
+            dis = ('<div class="disagree"><b>Where this run disagrees with the papers</b> (|run − paper| larger than '
+                   "half the paper's last printed digit + 2σ of the run):<ul>"
+                   + "".join(f"<li>{_esc(d)}</li>" for d in self.v.disagreements) + "</ul></div>")
+        else:
+            dis = "<p>This run agrees with every paper number it is compared with.</p>"
+        titles = [(m.group(1), html.unescape(m.group(2))) for m in
+                  (re.match(r'<section id="([^"]+)"><h2>([^<]+)</h2>', s) for s in sections) if m]
+        nav = "<nav><h2>Contents</h2><ol>" + "".join(f'<li><a href="#{a}">{_esc(t)}</a></li>' for a, t in titles) + \
+              "</ol></nav>"
+        title = _esc(f"bsdfkit report: {self.scan().get('sample') or self.s.get('recipe') or self.dir.name}")
+        return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+                "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+                f"<title>{title}</title><style>{_CSS}</style></head><body><main>\n"
+                + self.opening() + self.found() + dis + nav + "\n".join(sections)
+                + "\n</main></body></html>\n")
+
+
+def write_report(run_dir: str | Path, force: bool = False) -> Path:
+    """Write ``run_dir/report.html`` from a finished run folder; return its path.
+
+    One self-contained HTML file (figures as base64 PNG data URIs, inline CSS, no script, no external
+    reference), written atomically; an existing report is replaced only with ``force``. Needs
+    ``run_dir/summary.json``; every other input (PNG figures, ``trace.json``, ``trace_*.nc`` maps) is used
+    when present and said to be missing otherwise.
+    """
+    run_dir = Path(run_dir)
+    target = check_writable(run_dir / REPORT_NAME, force)
+    summary_path = run_dir / "summary.json"
+    if not summary_path.is_file():
+        raise InputError("not a finished run folder: summary.json is missing", file=run_dir,
+                         expected="the output folder of `bsdfkit run`")
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"summary.json cannot be read ({type(exc).__name__})", file=summary_path) from None
+    if not isinstance(summary, dict):
+        raise InputError("summary.json does not hold an object", file=summary_path, expected="a JSON object")
+    text = _Report(run_dir, summary, paper_values()).build()
+    return write_text(target, text, force)

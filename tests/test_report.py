@@ -1,0 +1,257 @@
+"""The HTML run report (issue #16): one self-contained file, written atomically, readable in a browser."""
+from __future__ import annotations
+
+import base64
+import json
+import re
+import shutil
+import subprocess
+import tomllib
+
+import numpy as np
+import pytest
+import xarray as xr
+from conftest import ROOT
+from matplotlib import image as mpimg
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from bsdfkit.core.errors import InputError, OutputExistsError
+from bsdfkit.io import netcdf
+from bsdfkit.pipeline import report as report_module
+from bsdfkit.pipeline.report import REPORT_NAME, paper_values, write_report
+from bsdfkit.plotting.maps import (
+    find_map_variable,
+    irradiance_map_figure,
+    irradiance_maps_figure,
+    map_non_uniformity,
+)
+from bsdfkit.raytrace.tallies import non_uniformity
+
+SMALL_SUMMARY = ROOT / "tests" / "data" / "run_summary_small.json"
+DATA_URI = '<img src="data:image/png;base64,'
+RADIUS_MM = 35.0
+BINS = 16
+
+
+def _map(scale: float = 1.0, tilt: float = 0.0) -> np.ndarray:
+    """A smooth irradiance map (W/mm^2 for 1 W emitted) peaked in the centre."""
+    c = (np.arange(BINS) + 0.5) / BINS * 2 * RADIUS_MM - RADIUS_MM
+    x, y = np.meshgrid(c, c)
+    return scale * 2e-4 * (1.0 + 0.3 * np.exp(-(x ** 2 + y ** 2) / 400.0) + tilt * x / RADIUS_MM)
+
+
+def _coords() -> dict:
+    c = (np.arange(BINS) + 0.5) / BINS * 2 * RADIUS_MM - RADIUS_MM
+    return {"y_mm": ("y_mm", c, {"units": "mm"}), "x_mm": ("x_mm", c, {"units": "mm"})}
+
+
+def _device_dataset() -> xr.Dataset:
+    """Like ``TraceResult.to_dataset()``: the map and its non-uniformity as the tracer computes it."""
+    e = _map()
+    ds = xr.Dataset({"irradiance": (("y_mm", "x_mm"), e, {"units": "W/mm^2",
+                                                          "long_name": "irradiance on the cavity side of the top"}),
+                     "non_uniformity": ((), non_uniformity(e), {"units": "1"}),
+                     "LER": ((), 0.56, {"units": "1"})}, coords=_coords())
+    ds.attrs.update(rays=1000, seed=1, emitted_W=1.0)
+    return ds
+
+
+def _sweep_dataset() -> xr.Dataset:
+    """Like ``sweep_dataset``: maps with a swept parameter (wall finish: diffuse and mirror walls)."""
+    maps = np.stack([_map(), _map(1.1, tilt=0.4)])
+    coords = _coords() | {"wall.specular_fraction": ("wall.specular_fraction", [0.0, 1.0])}
+    ds = xr.Dataset({"irradiance": (("wall.specular_fraction", "y_mm", "x_mm"), maps, {"units": "W/mm^2"})},
+                    coords=coords)
+    ds.attrs.update(emitted_W=1.0)
+    return ds
+
+
+def _png(path, colour: str) -> None:
+    fig = Figure(figsize=(3, 2))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    ax.plot([0, 1, 2], [1, 3, 2], color=colour, label="data")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (1)")
+    ax.legend()
+    fig.savefig(path, format="png", dpi=60)
+
+
+def _trace_json(summary: dict) -> dict:
+    device_ler = summary["trace"]["device"]["LER"]
+
+    def row(values, ler, nu):
+        return {"values": values, "LER": ler, "LER_std": 4e-4, "YBR": 6.0 + 3 * ler, "YBR_std": 0.05,
+                "non_uniformity": nu, "ledger_error": 1e-14}
+
+    return {"device": {"LER": device_ler},
+            "studies": {"reflectance": [row({"wall.reflectance": 0.8, "base.reflectance": 0.8}, 0.30, 0.23),
+                                        row({"wall.reflectance": 0.98, "base.reflectance": 0.98}, 0.55, 0.16)],
+                        "height_mm": [row({"cavity.height_mm": 10.0}, 0.59, 0.70),
+                                      row({"cavity.height_mm": 43.0}, device_ler, 0.16)],
+                        "specular_fraction": [row({"wall.specular_fraction": 0.0}, 0.56, 0.16),
+                                              row({"wall.specular_fraction": 1.0}, 0.57, 0.47)]}}
+
+
+def _make_run(folder):
+    """A small finished run folder: summary, trace.json, two map files, one file without a map, two figures."""
+    folder.mkdir(parents=True)
+    summary = json.loads(SMALL_SUMMARY.read_text(encoding="utf-8"))
+    (folder / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    (folder / "trace.json").write_text(json.dumps(_trace_json(summary)), encoding="utf-8")
+    netcdf.save(_device_dataset(), folder / "trace_device.nc")
+    netcdf.save(_sweep_dataset(), folder / "trace_specular_fraction.nc")
+    netcdf.save(xr.Dataset({"LER": ((), 0.5)}), folder / "trace_nomap.nc")
+    _png(folder / "inplane_bsdf.png", "tab:blue")
+    _png(folder / "extra_figure.png", "tab:red")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    folder = _make_run(tmp_path_factory.mktemp("report") / "run")
+    path = write_report(folder)
+    return folder, path, path.read_text(encoding="utf-8")
+
+
+def test_report_is_one_self_contained_file(built):
+    folder, path, text = built
+    assert path == folder / REPORT_NAME
+    # every image is an embedded PNG: the run's figures, the two maps and the comparison figures drawn
+    images = re.findall(r"<img\b", text)
+    assert len(images) == text.count(DATA_URI)
+    pngs = sorted(folder.glob("*.png"))
+    assert text.count(DATA_URI) >= len(pngs) + 2 + 3
+    for png in pngs:
+        assert base64.b64encode(png.read_bytes()).decode("ascii") in text, png.name
+    for uri in re.findall(r'src="data:image/png;base64,([^"]+)"', text):
+        assert base64.b64decode(uri)[:8] == b"\x89PNG\r\n\x1a\n"
+    # nothing leaves the file: no URL, no script, no external stylesheet or font
+    assert not re.search(r"https?://", text, re.IGNORECASE)
+    assert "<script" not in text.lower()
+    assert "<link" not in text.lower() and "@import" not in text and "url(" not in text
+    assert not re.search(r'\bsrc="(?!data:image/png;base64,)', text)
+
+
+def test_report_opens_with_the_measurement_and_findings_and_compares_with_the_papers(built):
+    _, _, text = built
+    opening = text[:text.index('<section id="measurement">')]
+    for needle in ("What was measured", "What was found", "cl830-synthetic", "Synthetic data", "5°, 45°, 56°",
+                   "10.91 ± 0.06", "0.802 ± 0.001", "53.8 %", "56.17 ± 0.02 %", "8.47 ± 0.05",
+                   "yellow / blue extracted ray power", "x 0.4411, y 0.4413", "CCT 3213 K",
+                   "Where this run disagrees with the papers"):
+        assert needle in opening, needle
+    # Table 2's printed blue-loss entry does not add up: the report says the run differs there
+    assert re.search(r"Table 2 power blue_losses at 45°: this run 31\.67 %, paper 32\.7 %", text)
+    for section in ("Table 2 of [Power-budget]", "Table 3 of [Power-budget]", "Table 1 of [Cylindrical-module]",
+                    "Fig. 8", "Figs. 10, 12, 14"):
+        assert section in text, section
+    # the maps: the sweep file covers Fig. 10's mirror and diffuser panels; the missing panels are named
+    assert "trace_device.nc" in text and "trace_specular_fraction.nc" in text and "trace_nomap.nc" not in text
+    missing = re.search(r"Maps of the paper not in this run: ([^<]*)</p>", text).group(1)
+    assert "Fig. 12 h = 10 mm" in missing and "Fig. 14 FWHM 30°" in missing
+    assert "Fig. 10 specular reflector" not in missing and "Fig. 10 perfect diffuser" not in missing
+    assert "Fig. 12 h = 43 mm" not in missing  # the device is the h = 43 mm study point (same trace)
+    assert "extra_figure.png" in text[text.index('id="other"'):]
+
+
+def test_report_is_written_atomically_and_never_overwritten_without_force(tmp_path, monkeypatch):
+    folder = _make_run(tmp_path / "run")
+    (folder / REPORT_NAME).write_text("previous report", encoding="utf-8")
+    with pytest.raises(OutputExistsError):
+        write_report(folder)
+    assert (folder / REPORT_NAME).read_text(encoding="utf-8") == "previous report"
+
+    def boom(self):
+        raise RuntimeError("killed while writing")
+
+    # a failure while the report is built leaves the previous report and no temporary file
+    monkeypatch.setattr(report_module._Report, "build", boom)
+    with pytest.raises(RuntimeError):
+        write_report(folder, force=True)
+    assert (folder / REPORT_NAME).read_text(encoding="utf-8") == "previous report"
+    monkeypatch.undo()
+    path = write_report(folder, force=True)
+    assert path.read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
+    assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == []
+
+
+def test_report_needs_a_finished_run_folder(tmp_path):
+    with pytest.raises(InputError, match="summary.json"):
+        write_report(tmp_path)
+    assert not (tmp_path / REPORT_NAME).exists()
+
+
+def test_report_of_a_run_without_trace_or_figures_says_what_is_missing(tmp_path):
+    summary = json.loads(SMALL_SUMMARY.read_text(encoding="utf-8"))
+    for key in ("trace", "module_spectrum", "bsdf_fits", "emission_fit"):
+        summary.pop(key)
+    (tmp_path / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    text = write_report(tmp_path).read_text(encoding="utf-8")
+    assert "No trace in summary.json." in text and "No trace_*.nc file with an irradiance map" in text
+    assert "inplane_bsdf.png is not in the run folder." in text
+    assert text.count(DATA_URI) == len(re.findall(r"<img\b", text)) >= 2  # the drawn Table 2 and budget figures
+
+
+def test_paper_values_ship_with_the_package_and_name_their_sources():
+    values = paper_values()
+    titles = {p["title"] for p in values["source"].values() if isinstance(p, dict)}
+    assert "Power and photon budget of a remote phosphor LED module" in titles
+    assert ("Impact of the Geometrical and Optical Parameters on the Performance of a Cylindrical Remote Phosphor "
+            "LED") in titles
+    assert values["power_budget"]["table2_tis_45deg_percent"]["power"]["B_bibs"] == 10.9
+    assert values["cylindrical_module"]["table1_flux_W"]["simulation"]["total"] == 0.530
+    raw = (ROOT / "bsdfkit" / "pipeline" / "paper_values.json").read_text(encoding="utf-8")
+    assert "/work" not in raw and "seed" not in raw.lower()
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    assert "pipeline/*.json" in setuptools["package-data"]["bsdfkit"]
+
+
+def test_irradiance_map_figure_reads_like_an_engineering_figure():
+    ds = _device_dataset()
+    assert find_map_variable(ds) == "irradiance"
+    assert map_non_uniformity(ds["irradiance"]) == pytest.approx(float(ds["non_uniformity"]), rel=1e-12)
+    fig = irradiance_map_figure(ds["irradiance"], emitted_W=1.0)
+    ax, bar = fig.axes
+    assert "(mm)" in ax.get_xlabel() and "(mm)" in ax.get_ylabel()
+    assert ax.get_aspect() == 1.0
+    assert f"{100 * float(ds['non_uniformity']):.1f} %" in ax.get_title()
+    assert "W/m²" in bar.get_ylabel()
+    # the colour bar spans exactly E_min … E_max of the bins inside the plate (W/mm^2 → W/m^2)
+    lo, hi = ax.collections[0].get_clim()
+    assert (hi - lo) / (hi + lo) == pytest.approx(float(ds["non_uniformity"]), rel=1e-9)
+
+
+def test_irradiance_maps_grid_of_a_sweep_shares_one_colour_bar():
+    da = _sweep_dataset()["irradiance"]
+    fig = irradiance_maps_figure(da, emitted_W=1.0)
+    panels = [ax for ax in fig.axes if ax.get_visible() and ax.get_xlabel()]
+    assert len(panels) == 2
+    assert all("wall.specular_fraction" in ax.get_title() and "non-uniformity" in ax.get_title() for ax in panels)
+    assert len({ax.collections[0].get_clim() for ax in panels}) == 1
+    grid = irradiance_maps_figure({f"h = {h} mm": _device_dataset()["irradiance"] for h in (10, 43, 80)},
+                                  shared_scale=False)
+    assert len([ax for ax in grid.axes if "W/m²" in ax.get_ylabel()]) == 3  # one colour bar per panel
+
+
+def test_report_renders_in_headless_chromium(built, tmp_path):
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("chromium is not on PATH (Debian: apt-get install chromium): the report is not rendered")
+    _, path, _ = built
+    shot = tmp_path / "report.png"
+    profile = tmp_path / "profile"
+    profile.mkdir()
+    done = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                           "--no-first-run", "--disable-background-networking", "--disable-component-update",
+                           "--disable-sync", f"--user-data-dir={profile}", f"--screenshot={shot}",
+                           "--window-size=1200,3000", path.resolve().as_uri()],
+                          capture_output=True, text=True, timeout=120)
+    assert shot.is_file(), done.stderr[-2000:]
+    assert shot.stat().st_size > 20_000
+    pixels = mpimg.imread(shot)
+    assert pixels.shape[0] >= 2000 and pixels.shape[1] >= 1000
+    colours = np.unique((pixels[..., :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)
+    assert len(colours) > 100  # text, tables and embedded figures, not one blank colour
+    assert float(pixels[..., :3].std()) > 0.05
