@@ -1,62 +1,234 @@
 """Benchmarks and accuracy runs of the tracer (not a test; numbers go into docs/tracer.md).
 
-    /tmp/venv/bin/python benchmarks/bench_trace.py                # speed: minimal vs full kernel vs NumPy
-    /tmp/venv/bin/python benchmarks/bench_trace.py --oracle       # 9-case LER grid vs radiosity at 1e6 rays
-    /tmp/venv/bin/python benchmarks/bench_trace.py --threshold    # bias of the flux threshold Th
-    /tmp/venv/bin/python benchmarks/bench_trace.py --trends       # non-uniformity / LER trends of §5
-    /tmp/venv/bin/python benchmarks/bench_trace.py --all
+    .venv/bin/python benchmarks/bench_trace.py                  # speed: kernel vs NumPy vs Mitsuba 3 (if installed)
+    .venv/bin/python benchmarks/bench_trace.py --baseline HEAD  # + the kernel of a git revision, same run
+    .venv/bin/python benchmarks/bench_trace.py --phosphor       # full phosphor kernel of the main job
+    .venv/bin/python benchmarks/bench_trace.py --backend        # paths/s and segments/s on the JAX backend present
+    .venv/bin/python benchmarks/bench_trace.py --oracle         # 9-case LER grid vs radiosity at 1e6 rays
+    .venv/bin/python benchmarks/bench_trace.py --threshold      # bias of the flux threshold Th
+    .venv/bin/python benchmarks/bench_trace.py --trends         # non-uniformity / LER trends of §5
+    .venv/bin/python benchmarks/bench_trace.py --all
 
-Speed is measured after compilation, on the example scene (fitting/scenes/example.toml), in the same
-process for all three implementations; ratios are against the NumPy baseline of the same run.
+Speed is measured after compilation, in one process for every implementation, as the median of
+``--repeats`` runs; ratios are between implementations of the same run (the machine may be shared). The
+speed scene is fitting/scenes/example.toml: diffuse cylinder r 35 mm, h 43 mm, ρ 0.90, four Lambertian LEDs,
+exit top; LER is checked against the radiosity answer (z = (LER − LER_rad)/σ).
+
+Mitsuba 3 (``pip install -c requirements.lock '.[bench]'``; its LLVM variant needs a system libLLVM, e.g.
+Debian's libllvm19, found through DRJIT_LIBLLVM_PATH — the script tries the usual library folders) traces the
+same cavity with its forward light tracer (``ptracer``, LLVM backend, all cores): four diffuse area-light
+disks in the base, a two-sided diffuse tube and base, and the exit top as an irradiance meter; paths/s is light
+paths (samples) per second after a warm-up render. The meter's reading is not compared as an LER (its scale
+was not calibrated: reading/LER differs by 7 % between rho 0 and 0.9), only the speed.
 """
 from __future__ import annotations
 
 import argparse
+import glob
+import importlib.util
+import math
 import os
 import platform
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
+from bsdfkit.cli.main import DEVICES_FLAG, MAX_CPU_DEVICES
 
-from bsdfkit.raytrace import PhosphorPlate, load_scene, trace, with_values
-from bsdfkit.raytrace.oracles.numpy_reference import trace_numpy
-from bsdfkit.raytrace.oracles.radiosity import module_radiosity
+# like the command line: one JAX CPU device per core (the tracer runs a chunk on each), unless XLA_FLAGS says
+if DEVICES_FLAG not in os.environ.get("XLA_FLAGS", ""):
+    _cores = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1,
+                 MAX_CPU_DEVICES)
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {DEVICES_FLAG}={_cores}".strip()
+
+import jax  # noqa: E402  (after XLA_FLAGS)
+import numpy as np  # noqa: E402
+
+from bsdfkit.raytrace import PhosphorPlate, load_scene, trace, with_values  # noqa: E402
+from bsdfkit.raytrace.oracles.numpy_reference import trace_numpy  # noqa: E402
+from bsdfkit.raytrace.oracles.radiosity import module_radiosity  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "fitting" / "scenes" / "example.toml"
+DEVICE = ROOT / "fitting" / "scenes" / "cl830_device.toml"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
           "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
 
 
-def best_of(fn, repeats: int):
-    """Run ``fn`` ``repeats`` times; return the result with the shortest wall time and that time."""
-    best = None
+def median_of(fn, repeats: int):
+    """Run ``fn`` ``repeats`` times; return the last result and the median wall time."""
+    times, out = [], None
     for _ in range(repeats):
         t = time.perf_counter()
         out = fn()
-        dt = time.perf_counter() - t
-        if best is None or dt < best[1]:
-            best = (out, dt)
-    return best
+        times.append(time.perf_counter() - t)
+    return out, statistics.median(times)
 
 
-def speed(rays: int, repeats: int) -> None:
+# --- the kernel of another git revision, for "today vs now" ratios in one run ---------------------------------------
+
+def baseline_trace(rev: str):
+    """``trace`` of the tracer at git revision ``rev`` (kernel, sampling, effects, tracer taken from git; the other
+    modules are today's), imported from a temporary package."""
+    tmp = Path(tempfile.mkdtemp(prefix="bsdfkit_baseline_"))
+    pkg = tmp / "baseline_raytrace"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    for name in ("kernel", "sampling", "effects", "tracer"):
+        text = subprocess.run(["git", "show", f"{rev}:bsdfkit/raytrace/{name}.py"], cwd=ROOT, check=True,
+                              capture_output=True, text=True).stdout
+        for mod in ("kernel", "sampling", "effects", "tracer"):
+            text = text.replace(f"from bsdfkit.raytrace.{mod} import", f"from baseline_raytrace.{mod} import")
+        text = text.replace("from bsdfkit.raytrace import geometry, sampling",
+                            "from bsdfkit.raytrace import geometry\nfrom baseline_raytrace import sampling")
+        text = text.replace("from bsdfkit.raytrace import kernel", "from baseline_raytrace import kernel")
+        (pkg / f"{name}.py").write_text(text)
+    sys.path.insert(0, str(tmp))
+    spec = importlib.util.find_spec("baseline_raytrace.tracer")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.trace
+
+
+# --- Mitsuba 3 -------------------------------------------------------------------------------------------------------
+
+def _find_libllvm() -> str | None:
+    if os.environ.get("DRJIT_LIBLLVM_PATH"):
+        return os.environ["DRJIT_LIBLLVM_PATH"]
+    found = glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*")
+
+    def version(path: str) -> tuple:  # the newest LLVM (Dr.Jit needs a recent one)
+        return tuple(int(x) for x in re.findall(r"\d+", Path(path).name))
+
+    return max(found, key=version) if found else None
+
+
+def mitsuba_tracer(scene):
+    """A function paths → (seconds, LER) tracing ``scene`` (exit top) with Mitsuba 3's ``ptracer``, or None."""
+    if importlib.util.find_spec("mitsuba") is None:
+        return None, "mitsuba not installed (pip install -c requirements.lock '.[bench]')"
+    lib = _find_libllvm()
+    if lib:
+        os.environ.setdefault("DRJIT_LIBLLVM_PATH", lib)
+    import mitsuba as mi  # optional benchmark dependency, imported only when present
+
+    try:
+        mi.set_variant("llvm_ad_mono")
+    except Exception as exc:  # no usable libLLVM
+        return None, f"mitsuba LLVM variant unavailable ({exc})"
+    R, H = scene.cavity.radius_mm, scene.cavity.height_mm
+    rho = scene.wall.reflectance
+    k, pitch, a = scene.leds.grid, scene.leds.pitch_mm, scene.leds.emitter_radius_mm
+    T = mi.ScalarTransform4f
+    diffuse = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": rho}}}
+    base_rho = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum",
+                                                                                 "value": scene.base.reflectance}}}
+    led_area = math.pi * a * a
+    radiance = scene.leds.power_W / (k * k) / (led_area * math.pi)  # Lambertian disk of power P/k²
+    d = {"type": "scene",
+         "integrator": {"type": "ptracer", "max_depth": -1, "rr_depth": 5, "hide_emitters": False},
+         "wall": {"type": "cylinder", "p0": [0, 0, 0], "p1": [0, 0, H], "radius": R, "bsdf": diffuse},
+         "base": {"type": "disk", "to_world": T().scale([R, R, 1]), "bsdf": base_rho},
+         "top": {"type": "disk", "to_world": T().translate([0, 0, H]).scale([R, R, 1]).rotate([1, 0, 0], 180),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.0}},
+                 "sensor": {"type": "irradiancemeter",
+                            "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"},
+                                     "pixel_format": "luminance"}}}}
+    for i in range(k):
+        for j in range(k):
+            cx, cy = (i - (k - 1) / 2) * pitch, (j - (k - 1) / 2) * pitch
+            d[f"led{i}{j}"] = {"type": "disk", "to_world": T().translate([cx, cy, 1e-4]).scale([a, a, 1]),
+                               "bsdf": base_rho,
+                               "emitter": {"type": "area", "radiance": {"type": "spectrum", "value": radiance}}}
+    mscene = mi.load_dict(d)
+    top_area = math.pi * R * R
+
+    def run(paths: int, seed: int = 1):
+        t = time.perf_counter()
+        img = mi.render(mscene, spp=paths, seed=seed)
+        value = float(np.asarray(img).ravel()[0])
+        return time.perf_counter() - t, value * top_area / scene.leds.power_W  # irradiance × area = flux
+
+    return run, "ok"
+
+
+# --- speed -----------------------------------------------------------------------------------------------------------
+
+def speed(rays: int, repeats: int, baseline: str | None, with_mitsuba: bool = True) -> None:
     scene = load_scene(EXAMPLE)
-    print(f"# speed: {EXAMPLE.name}, {rays} rays, best of {repeats}; {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} CPUs (shared)")
+    rad = module_radiosity(scene).LER
+    print(f"# speed: {EXAMPLE.name} (r 35, h 43, rho 0.90, 4 Lambertian LEDs, exit top), {rays} paths, median of "
+          f"{repeats}; {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs (shared), JAX backend "
+          f"{jax.default_backend()} x {len(jax.local_devices())} devices; radiosity LER {rad:.5f}")
+    rows = []  # (label, paths, segments, seconds, LER, se)
+    trace(scene, 1000, seed=1)  # compile (the rays below reuse it: same emission width)
+    trace(scene, rays, seed=1)
+    r, dt = median_of(lambda: trace(scene, rays, seed=1), repeats)
+    rows.append(("bsdfkit JAX kernel", rays, r.interactions, dt, r.LER, r.std_err["LER"]))
+    trace(scene, rays, seed=1, full_kernel=True)
+    r, dt = median_of(lambda: trace(scene, rays, seed=1, full_kernel=True), repeats)
+    rows.append(("bsdfkit JAX kernel, every effect", rays, r.interactions, dt, r.LER, r.std_err["LER"]))
+    if baseline:
+        old = baseline_trace(baseline)
+        old(scene, 20_000, seed=1)
+        r, dt = median_of(lambda: old(scene, rays, seed=1), repeats)
+        rows.append((f"bsdfkit kernel at {baseline}", rays, r.interactions, dt, r.LER, r.std_err["LER"]))
+    ref, dt = median_of(lambda: trace_numpy(scene, rays, seed=1), repeats)
+    rows.append(("NumPy reference", rays, ref.interactions, dt, ref.LER, ref.se_LER))
+    mitsuba_row = None
+    if with_mitsuba:
+        run, why = mitsuba_tracer(scene)
+        if run is None:
+            print(f"(Mitsuba 3 skipped: {why})")
+        else:
+            run(rays)  # JIT warm-up
+            times = [run(rays, seed=s + 1) for s in range(repeats)]
+            dt = statistics.median(t for t, _ in times)
+            # the meter's reading is not a calibrated LER (its scale depends on the angular distribution at the
+            # top: reading/LER_rad = 8.9e3 at rho 0, 9.5e3 at rho 0.9), so only the time is compared
+            mitsuba_row = ("Mitsuba 3 llvm ptracer", rays, float("nan"), dt, float("nan"), float("nan"))
+            rows.append(mitsuba_row)
+    base = mitsuba_row or rows[-1]
+    print(f"{'implementation':34s} {'paths/s':>10s} {'segments/s':>11s} {'vs ' + base[0].split()[0]:>12s} "
+          f"{'LER':>9s} {'± se':>8s} {'z vs rad':>8s}")
+    for label, n, seg, dt, ler, se in rows:
+        z = (ler - rad) / se if se == se and se > 0 else float("nan")
+        print(f"{label:34s} {n / dt:10.3e} {seg / dt:11.3e} {(n / dt) / (base[1] / base[3]):12.2f} {ler:9.5f} "
+              f"{se:8.5f} {z:8.2f}")
+
+
+def phosphor(rays: int, repeats: int, baseline: str | None) -> None:
+    """The full phosphor kernel of the main job: the test device with the recipe's own plate."""
+    scene = load_scene(DEVICE)
+    print(f"# phosphor kernel: {DEVICE.name} (plate from fitting/cl830.toml), {rays} rays, median of {repeats}")
     rows = []
-    for label, kw in (("JAX minimal kernel", {}), ("JAX full kernel (forced)", {"full_kernel": True})):
-        trace(scene, 20_000, seed=1, **kw)  # compile
-        r, dt = best_of(lambda kw=kw: trace(scene, rays, seed=1, **kw), repeats)
-        rows.append((label, r.interactions, dt, r.LER, r.std_err["LER"], r.ledger_error))
-    ref, dt = best_of(lambda: trace_numpy(scene, rays, seed=1), repeats)
-    rows.append(("NumPy reference (baseline)", ref.interactions, dt, ref.LER, ref.se_LER, ref.ledger_error))
-    base = rows[-1][1] / rows[-1][2]
-    print(f"{'implementation':30s} {'interactions/s':>15s} {'vs NumPy':>9s} {'LER':>9s} {'± se':>8s} {'ledger':>9s}")
-    for label, n, dt, ler, se, led in rows:
-        print(f"{label:30s} {n / dt:15.3e} {n / dt / base:9.2f} {ler:9.5f} {se:8.5f} {led:9.1e}")
+    trace(scene, rays, seed=1)
+    r, dt = median_of(lambda: trace(scene, rays, seed=1), repeats)
+    rows.append(("bsdfkit JAX kernel", r, dt))
+    if baseline:
+        old = baseline_trace(baseline)
+        old(scene, 20_000, seed=1)
+        r0, dt0 = median_of(lambda: old(scene, rays, seed=1), repeats)
+        rows.append((f"bsdfkit kernel at {baseline}", r0, dt0))
+    base = rows[-1]
+    print(f"{'implementation':30s} {'interactions/s':>14s} {'ratio':>6s} {'LER':>9s} {'YBR':>7s} {'NU':>6s}")
+    for label, r, dt in rows:
+        print(f"{label:30s} {r.interactions / dt:14.3e} {(r.interactions / dt) / (base[1].interactions / base[2]):6.2f}"
+              f" {r.LER:9.5f} {r.YBR:7.3f} {r.non_uniformity:6.3f}")
+
+
+def backend(rays: int, repeats: int) -> None:
+    """Paths/s and segments/s on whatever JAX backend is present (CPU, GPU)."""
+    scene = load_scene(EXAMPLE)
+    print(f"# backend {jax.default_backend()} ({', '.join(str(d) for d in jax.devices())}), {rays} paths")
+    trace(scene, rays, seed=1)
+    r, dt = median_of(lambda: trace(scene, rays, seed=1), repeats)
+    print(f"paths/s {rays / dt:.3e}  segments/s {r.interactions / dt:.3e}  (LER {r.LER:.5f} ± {r.std_err['LER']:.5f})")
 
 
 def oracle(rays: int) -> None:
@@ -135,8 +307,12 @@ def trends(rays: int, tmp: Path) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--rays", type=int, default=1_000_000)
+    p.add_argument("--rays", type=int, default=2 ** 21)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--baseline", default=None, metavar="REV", help="also time the kernel of this git revision")
+    p.add_argument("--no-mitsuba", action="store_true")
+    p.add_argument("--phosphor", action="store_true")
+    p.add_argument("--backend", action="store_true")
     p.add_argument("--oracle", action="store_true")
     p.add_argument("--threshold", action="store_true")
     p.add_argument("--trends", action="store_true")
@@ -145,12 +321,17 @@ def main() -> None:
     a = p.parse_args()
     tmp = Path(a.tmp)
     tmp.mkdir(parents=True, exist_ok=True)
-    if a.all or not (a.oracle or a.threshold or a.trends):
-        speed(a.rays, a.repeats)
+    only = a.phosphor or a.backend or a.oracle or a.threshold or a.trends
+    if a.all or not only:
+        speed(a.rays, a.repeats, a.baseline, not a.no_mitsuba)
+    if a.all or a.phosphor:
+        phosphor(min(a.rays, 400_000), a.repeats, a.baseline)
+    if a.backend:
+        backend(a.rays, a.repeats)
     if a.all or a.oracle:
-        oracle(a.rays)
+        oracle(min(a.rays, 1_000_000))
     if a.all or a.threshold:
-        threshold(a.rays, tmp)
+        threshold(min(a.rays, 1_000_000), tmp)
     if a.all or a.trends:
         trends(min(a.rays, 400_000), tmp)
 

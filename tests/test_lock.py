@@ -1,7 +1,8 @@
 """Installs are locked: every dependency that pyproject.toml names is pinned in requirements.lock.
 
-The lock is made by ``uv pip compile pyproject.toml --extra test --python-version 3.11 -o requirements.lock
---no-header`` (README, "Refreshing the lock"); both README commands install with ``-c requirements.lock``.
+The lock is made by ``uv pip compile pyproject.toml --extra test --extra bench --python-version 3.11
+-o requirements.lock --no-header`` (README, "Refreshing the lock"); both README commands install with
+``-c requirements.lock``.
 """
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.core.errors import InputError
 from bsdfkit.plotting.figures import sweep_figure
 from bsdfkit.raytrace import load_scene
-from bsdfkit.raytrace.sweep import run_sweep
+from bsdfkit.raytrace.sweep import Cluster, run_sweep
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,6 +22,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rays", type=int, default=None, help="rays per point (default: [sweep] rays or 200000)")
     p.add_argument("--seed", type=int, default=None, help="seed (default: [sweep] seed or 0)")
     p.add_argument("--chunk", type=int, default=None, help="rays per compiled call")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="run the points as tasks on a local dask.distributed cluster of N worker processes")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the points on an existing dask.distributed scheduler (e.g. tcp://host:8786)")
     p.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -38,6 +42,10 @@ def run(args: argparse.Namespace) -> int:
                          expected="--param KEYS=VALUES or a [sweep] params list in the scene")
     rays = args.rays or (defaults.rays if defaults and defaults.rays else 200_000)
     seed = args.seed if args.seed is not None else (defaults.seed if defaults and defaults.seed is not None else 0)
+    if args.workers is not None and args.scheduler:
+        raise InputError("--workers and --scheduler exclude each other", field="--workers",
+                         expected="a local cluster (--workers N) or an existing one (--scheduler ADDRESS)")
+    cluster = Cluster(args.workers, args.scheduler) if args.workers is not None or args.scheduler else None
     bar = Progress(1, label="sweep")
 
     def progress(done: int, total: int) -> None:
@@ -46,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         ds = run_sweep(scene, params, args.output, rays=rays, seed=seed, chunk=args.chunk, force=args.force,
-                       figure=None if args.no_plots else sweep_figure, progress=progress)
+                       figure=None if args.no_plots else sweep_figure, progress=progress, cluster=cluster)
     finally:
         bar.close()
     summary = {"output": args.output, "dims": {d: int(n) for d, n in ds["LER"].sizes.items()},

@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import argparse
 
-from bsdfkit import api
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.io.atomic import check_writable, write_with
+from bsdfkit.raytrace import load_scene, trace
+
+# the tracer's own entry points (what bsdfkit.api.trace calls), not bsdfkit.api: importing the whole API (fits,
+# plotting of spectra) would add time to every cold start of this verb
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,12 +28,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
-    scene = api.load_scene(args.scene)
+    scene = load_scene(args.scene)
     if args.output:
         check_writable(args.output, args.force)
     bar = Progress(args.rays, label="trace")
     try:
-        result = api.trace(scene, args.rays, args.seed, chunk=args.chunk, lanes=args.lanes,
+        result = trace(scene, args.rays, args.seed, chunk=args.chunk, lanes=args.lanes,
                        full_kernel=args.full_kernel, progress=bar.update)
     finally:
         bar.close()

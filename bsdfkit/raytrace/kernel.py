@@ -1,11 +1,12 @@
 """The Monte Carlo kernel: trace one chunk of rays through the cavity (JAX, specialised by :class:`Effects`).
 
-Algorithm (the ray-level form of Fig. 6 of the cylindrical-module paper, [Cylindrical-module]). ``lanes``
-rays are in flight; each ``lax.while_loop`` iteration (1) refills empty lanes with the next rays of the chunk (emission
-precomputed in a rolling buffer of 4·lanes rays), (2) moves every live ray to its next surface and
-applies one interaction, (3) retires finished rays by adding their per-ray tallies to exact fixed-point
-sums (below). The loop ends when the chunk is exhausted and no lane is live. Because every random number is keyed by
-(seed, ray, event) (:mod:`bsdfkit.raytrace.sampling`), results do not depend on ``lanes`` or the chunk size.
+Algorithm (the ray-level form of Fig. 6 of the cylindrical-module paper, [Cylindrical-module]), batch-synchronous
+over wide lanes: a call emits its whole chunk (vectorised), then each ``lax.while_loop`` iteration (1) refills
+empty lanes with the next emitted rays, (2) applies ``substeps`` interactions to every lane (move to the next
+surface, interact), (3) retires finished rays by adding their per-ray tallies to exact fixed-point sums
+(below). When the chunk is exhausted and few lanes are live, the live lanes are compacted into a narrower
+state for the tail. Because every random number is keyed by (seed, ray, event) (:mod:`bsdfkit.raytrace.sampling`),
+results do not depend on ``lanes``, ``substeps``, the chunk size or the device a chunk runs on.
 
 Weights. A ray is emitted with weight 1 (one ray's share of the source power). At a cavity surface of
 reflectance ρ the weight becomes wρ and w − wρ is tallied as absorbed by that surface ("implicit capture").
@@ -29,13 +30,14 @@ TIS share A·L/(ρ + A·L) at the grid incidence (L the lobe's integral over the
 β0 = (dx, dy) (the specular direction's tangential part, |β0| = sin θi); lobe samples outside the unit
 disk are redrawn. Forward channels end the ray outside the module, so their directions are not sampled.
 
-Sums. When a ray retires, its per-ray tallies x (float64, in ray weights) are rounded to integers
-X = rint(x·2⁴⁰) (its squares/products for the standard errors to rint(x²·2³²)), split exactly into 31-bit
-limbs X = hi·2³¹ + lo (both integer-valued doubles) and added to per-lane accumulators; at the end of the
-chunk each lane's limb sums are converted to int64 and summed. Every partial sum is an integer below 2⁵³
-(|hi|, lo < 2³¹ and at most 2²² rays per lane per chunk), so all of this is exact integer arithmetic:
-the totals do not depend on lanes, chunking or order, and a trace is bit-for-bit reproducible for any chunk
-size. The rounding is ≤ 2⁻⁴¹ ≈ 4.5·10⁻¹³ of a ray weight per tally, far below the 10⁻⁹ ledger tolerance.
+Sums. When a ray retires, its per-ray tallies x (float64, in ray weights; only the columns the effects can
+fill) are rounded to integers X = rint(x·2⁴⁰) (its squares/products for the standard errors to rint(x²·2³²)),
+split exactly into 31-bit limbs X = hi·2³¹ + lo (both integer-valued doubles, |hi|, lo < 2³¹), summed over
+the lanes in float64 (every partial sum an integer below 2⁵³, so exact in any order) and added to int64
+totals. All of this is exact integer arithmetic: the totals do not depend on lanes, chunking or order, and
+a trace is bit-for-bit reproducible for any chunk size. (float64 limbs rather than int64 because XLA:CPU
+has no vectorised float → int64 conversion.) The rounding is ≤ 2⁻⁴¹ ≈ 4.5·10⁻¹³ of a ray weight per tally,
+far below the 10⁻⁹ ledger tolerance.
 Array tallies (map, histogram, budget) are int64 fixed point in units of 2⁻³² ray weights per deposit,
 likewise exact. Magnitudes: |x| ≤ 1 + τ·max_events (roulette adds at most τ per event), required < 2¹⁵
 (checked by the tracer), so |X| < 2⁶² for sums and squares.
@@ -72,6 +74,12 @@ MAX_RAY_TALLY = 2.0 ** 15
 LIMB = 31
 #: rays per kernel call; keeps every per-lane limb sum below 2⁵³
 MAX_CHUNK = 2 ** 22
+#: interactions per iteration of the outer loop (between refill and retirement)
+SUBSTEPS = 2
+#: tail compaction: each level has 1/TAIL_SHRINK of the lanes of the previous one, at most TAIL_LEVELS levels
+TAIL_SHRINK = 16
+TAIL_LEVELS = 2
+MIN_TAIL_LANES = 64
 
 
 def _fixed(w):
@@ -133,7 +141,7 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
         for g in range(1, G - 1):
             j = j + (th >= grid[g]).astype(jnp.int32)
         g0, g1 = _pick(grid, j), _pick(grid, j + 1)
-        t = ((th - g0) / (g1 - g0)).astype(jnp.float64)
+        t, j = sampling.materialise(key_words, [((th - g0) / (g1 - g0)).astype(jnp.float64), j])
         T0 = [_pick(P["tis"][:, c], j) for c in range(6)]
         T1 = [_pick(P["tis"][:, c], j + 1) for c in range(6)]
         tis = [(1.0 - t) * a + t * b for a, b in zip(T0, T1)]
@@ -147,7 +155,6 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
             probs = [tis[0], tis[1]]
         S = sum(probs)
         w_out = w * S
-        absorbed = w - w_out
         v = u[0].astype(jnp.float64) * S
         edges = []
         acc = jnp.zeros_like(S)
@@ -169,6 +176,10 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
         q0 = (1.0 - t) * q0
         q1 = t * q1
         g = jnp.where(u[4].astype(jnp.float64) * (q0 + q1) < q0, j, j + 1)
+        # computed once (see sampling.materialise): every later plate quantity depends on these
+        w_out, forward, new_colour, channel, g = sampling.materialise(
+            key_words, [w_out, forward, new_colour.astype(jnp.int32), channel.astype(jnp.int32), g])
+        absorbed = w - w_out
 
         def per_channel(table):  # table (G, 3, ...) → value at (g, channel) per lane
             rows = _pick(table, g)  # (L, 3, ...)
@@ -201,226 +212,303 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
     return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped
 
 
-def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: int):
-    """Trace rays ``start … start + n_valid − 1`` and return their summed tallies.
+def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
+    """One interaction of every live lane (the body of the kernel; also used by the benchmark).
 
-    ``start`` and ``n_valid`` are traced values, so one compiled kernel serves every chunk size; memory is
-    bounded by ``lanes`` (live rays plus a rolling buffer of 4·lanes precomputed emissions).
+    ``lane``: dict of per-lane arrays (ids, live, px … dz, w, colour, acc, cnt); ``arrays``: (map, histogram,
+    budget) int64 tallies. Returns the updated (lane, arrays); lanes not live are left unchanged.
+    """
+    dt = effects.dtype
+    R, H = params["radius"], params["height"]
+    new_map, new_hist, new_budget = arrays
+    nmap, nhist, nbud = new_map.shape[0], new_hist.shape[0], new_budget.shape[0]
+    ids, live, px, py, pz, dx, dy, dz, w, colour = (lane[k] for k in ("ids", "live", "px", "py", "pz", "dx",
+                                                                       "dy", "dz", "w", "colour"))
+    acc, cnt = list(lane["acc"]), list(lane["cnt"])
+
+    def add(col, value):
+        if acc[col] is not None:
+            acc[col] = acc[col] + value
+
+    ray = start_u + jnp.where(live, ids, 0).astype(jnp.uint32)
+    event = cnt[CNT_EVENTS] + 1
+    u = sampling.event_uniforms(key_words, ray, event, dt, 6 if effects.top == "plate" else 4)
+    surf, x, y, z = sampling.materialise(key_words, geometry.next_hit(px, py, pz, dx, dy, dz, R, H))
+    top = live & (surf == geometry.TOP)
+    wall = live & (surf == geometry.WALL)
+    base_any = live & (surf == geometry.BASE)
+    led = base_any & geometry.on_led(x, y, params["led_grid"].astype(dt), params["pitch"],
+                                     params["emitter_radius"])
+    base = base_any & ~led
+    cav = wall | base_any
+
+    # cavity surfaces
+    rho = jnp.where(wall, params["rho"][0], jnp.where(led, params["rho"][2], params["rho"][1]))
+    w_ref = w * rho
+    absorbed = w - w_ref
+    inv_r = 1.0 / R
+    nx = jnp.where(wall, -x * inv_r, 0.0).astype(dt)
+    ny = jnp.where(wall, -y * inv_r, 0.0).astype(dt)
+    nz = jnp.where(wall, 0.0, 1.0).astype(dt)
+    sin_t, cos_t, phi = sampling.lambertian_angles(u[1], u[2])
+    sin_t, cos_t, c_phi, s_phi = sampling.materialise(key_words, [sin_t, cos_t, jnp.cos(phi), jnp.sin(phi)])
+    cdx, cdy, cdz = sampling.local_to_world_cs(sin_t, cos_t, c_phi, s_phi, nx, ny, nz)
+    if effects.specular:
+        with jax.named_scope("specular_reflection"):
+            spec = jnp.where(wall, params["spec"][0], jnp.where(led, params["spec"][2], params["spec"][1]))
+            mirror = u[0].astype(jnp.float64) < spec
+            mdx, mdy, mdz = sampling.mirror(dx, dy, dz, nx, ny, nz)
+            cdx = jnp.where(mirror, mdx, cdx)
+            cdy = jnp.where(mirror, mdy, cdy)
+            cdz = jnp.where(mirror, mdz, cdz)
+
+    zero = jnp.zeros_like(w)
+    add(ABS_WALL, jnp.where(wall, absorbed, zero))
+    add(ABS_BASE, jnp.where(base, absorbed, zero))
+    add(ABS_LED, jnp.where(led, absorbed, zero))
+    budget_cav = jnp.where(cav, absorbed, zero)
+
+    # top
+    n_plate = cnt[CNT_PLATE]
+    if effects.top == "exit":
+        ext_w = jnp.where(top, w, zero)
+        ext_colour = colour
+        new_w = jnp.where(cav, w_ref, zero)
+        alive = cav
+        new_colour = colour
+        ndx, ndy, ndz = cdx, cdy, cdz
+        plate_abs = zero
+    else:
+        w_out, p_abs, forward, p_colour, pdx, pdy, pdz, clamped = _plate_interaction(
+            params, key_words, ray, event, u, x, y, dx, dy, dz, w, colour, top, effects)
+        plate_abs = jnp.where(top, p_abs, zero)
+        add(ABS_PLATE, plate_abs)
+        ext_w = jnp.where(top & forward, w_out, zero)
+        ext_colour = p_colour
+        back = top & ~forward & (w_out > 0)
+        new_w = jnp.where(cav, w_ref, jnp.where(back, w_out, zero))
+        alive = cav | back
+        new_colour = jnp.where(top, p_colour, colour)
+        ndx = jnp.where(top, pdx, cdx)
+        ndy = jnp.where(top, pdy, cdy)
+        ndz = jnp.where(top, pdz, cdz)
+        cnt[CNT_PLATE] = cnt[CNT_PLATE] + top.astype(jnp.int32)
+        if effects.plate_clamp:
+            cnt[CNT_CLAMP] = cnt[CNT_CLAMP] + clamped.astype(jnp.int32)
+    if effects.conversion:
+        ext_b = jnp.where(ext_colour == 0, ext_w, zero)
+        ext_y = jnp.where(ext_colour == 0, zero, ext_w)
+    else:
+        ext_b, ext_y = ext_w, zero
+    add(EXT_B, ext_b)
+    add(EXT_Y, ext_y)
+    alive = alive & (new_w > 0)
+
+    # termination
+    other = zero
+    if effects.termination == "roulette":
+        tau = params["roulette_threshold"]
+        low = alive & (new_w < tau)
+        survive = u[3].astype(jnp.float64) * tau < new_w
+        killed = low & ~survive
+        rr = jnp.where(killed, new_w, jnp.where(low, new_w - tau, zero))
+        add(ROULETTE, rr)
+        other = other + rr
+        new_w = jnp.where(low, jnp.where(survive, tau, zero), new_w)
+        alive = alive & ~killed
+    else:
+        low = alive & (new_w < params["threshold"])
+        dropped = jnp.where(low, new_w, zero)
+        add(DISCARDED, dropped)
+        other = other + dropped
+        new_w = jnp.where(low, zero, new_w)
+        alive = alive & ~low
+    cnt[CNT_EVENTS] = cnt[CNT_EVENTS] + live.astype(jnp.int32)
+    capped = alive & (cnt[CNT_EVENTS] >= params["max_events"])
+    trunc = jnp.where(capped, new_w, zero)
+    add(TRUNCATED, trunc)
+    other = other + trunc
+    alive = alive & ~capped
+
+    if effects.irradiance_map:
+        with jax.named_scope("irradiance_map"):
+            idx = geometry.map_index(x, y, R, effects.map_bins)
+            new_map = new_map.at[jnp.where(top, idx, nmap)].add(_fixed(w), mode="drop")
+    if effects.incidence_histogram:
+        with jax.named_scope("incidence_histogram"):
+            theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
+            hb = effects.histogram_bins
+            b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + colour * hb
+            new_hist = new_hist.at[jnp.where(top, b, nhist)].add(_fixed(w), mode="drop")
+    if effects.interaction_budget:
+        with jax.named_scope("interaction_budget"):
+            k = jnp.minimum(n_plate, effects.budget_bins - 1) * len(BUDGET_COLUMNS)
+            sink = jnp.where(live, 0, nbud)
+            for c, val in enumerate((ext_b, ext_y, budget_cav, plate_abs, other)):
+                new_budget = new_budget.at[k + c + sink].add(_fixed(val), mode="drop")
+    lane = dict(ids=ids, live=alive, px=x, py=y, pz=z, dx=ndx.astype(dt), dy=ndy.astype(dt), dz=ndz.astype(dt),
+                w=new_w, colour=new_colour.astype(jnp.int32), acc=acc, cnt=cnt)
+    return lane, (new_map, new_hist, new_budget)
+
+
+def active_columns(effects: Effects) -> tuple[bool, ...]:
+    """Which per-ray tallies of :data:`COLUMNS` the compiled kernel carries (the others are always zero)."""
+    on = {"extracted_blue": True, "extracted_yellow": effects.conversion, "absorbed_wall": True,
+          "absorbed_base": True, "absorbed_leds": True, "absorbed_plate": effects.top == "plate",
+          "roulette": effects.termination == "roulette", "discarded": effects.termination != "roulette",
+          "truncated": True}
+    return tuple(on[c] for c in COLUMNS)
+
+
+def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: int, chunk: int | None = None,
+                substeps: int = SUBSTEPS):
+    """Trace rays ``start … start + n_valid − 1`` (``n_valid`` ≤ ``chunk``) and return their summed tallies.
+
+    ``start`` and ``n_valid`` are traced values; ``chunk`` (static, default ``lanes``) is the number of
+    emissions computed up front, so one compiled kernel serves every chunk of at most that size.
+
+    Batch-synchronous: each iteration of the loop refills empty lanes with the next emitted rays, applies
+    ``substeps`` interactions to every lane (a lane whose ray ends mid-iteration idles until the next
+    refill) and then retires finished rays into exact integer sums. Once the chunk is exhausted and few rays
+    are live, the live lanes are compacted into a narrower state (``lanes``/16, then /256) so the tail of long
+    paths does not pay for empty lanes. None of this changes a ray's random numbers or its tallies.
 
     Returns a dict of int64 arrays: ``hi``, ``lo`` limbs of the fixed-point sums of :data:`COLUMNS` then
     :data:`SQUARES`; ``counts`` (sums of :data:`COUNTERS`); ``map`` (bins²,), ``histogram`` (2·bins,),
-    ``budget`` (bins·5,) fixed point (empty when not compiled in); and ``iterations`` of the while loop.
+    ``budget`` (bins·5,) fixed point (empty when not compiled in); and ``iterations`` of the loop.
     """
     dt = effects.dtype
-    L = lanes
-    R, H = params["radius"], params["height"]
+    W = lanes
+    C = int(chunk or lanes)
     start_u = jnp.asarray(start, jnp.uint32)
-    n_valid = jnp.asarray(n_valid, jnp.int32)  # ≤ MAX_CHUNK (exactness of the per-lane limb sums)
-    B = 4 * L
-    buffer_ids = jnp.arange(B, dtype=jnp.uint32)
-
-    def emit_block(first):
-        return emission(params, key_words, start_u + first.astype(jnp.uint32) + buffer_ids, effects)
-
+    n_valid = jnp.asarray(n_valid, jnp.int32)  # ≤ min(chunk, MAX_CHUNK) (exactness of the limb sums)
     ncol, ncnt, nsq = len(COLUMNS), len(COUNTERS), len(SQUARES)
-    scales = jnp.asarray([SCALE_SUM] * ncol + [SCALE_SQUARE] * nsq, jnp.float64)
+    active = active_columns(effects)
     nmap = effects.map_bins ** 2 if effects.irradiance_map else 0
     nhist = 2 * effects.histogram_bins if effects.incidence_histogram else 0
     nbud = effects.budget_bins * len(BUDGET_COLUMNS) if effects.interaction_budget else 0
-    zf = jnp.zeros(L, dt)
+    # every emission of the chunk, computed once (vectorised) before the loop
+    with jax.named_scope("emission"):
+        emitted = emission(params, key_words, start_u + jnp.arange(C, dtype=jnp.uint32), effects)
+
+    zf = jnp.zeros(W, dt)
     state = dict(
         next=jnp.int32(0), it=jnp.int32(0),
-        buf_start=jnp.int32(0), buf=emit_block(jnp.int32(0)),
-        ray=jnp.full(L, -1, jnp.int32),
-        px=zf, py=zf, pz=zf, dx=zf, dy=zf, dz=zf,
-        w=jnp.zeros(L, jnp.float64), colour=jnp.zeros(L, jnp.int32),
-        acc=tuple(jnp.zeros(L, jnp.float64) for _ in range(ncol)),
-        cnt=tuple(jnp.zeros(L, jnp.int32) for _ in range(ncnt)),
-        hi=jnp.zeros((ncol + nsq, L), jnp.float64), lo=jnp.zeros((ncol + nsq, L), jnp.float64),
-        counts=jnp.zeros((ncnt, L), jnp.int64),
+        lanes=dict(ray=jnp.full(W, -1, jnp.int32), px=zf, py=zf, pz=zf, dx=zf, dy=zf, dz=zf,
+                   w=jnp.zeros(W, jnp.float64), colour=jnp.zeros(W, jnp.int32),
+                   acc=[jnp.zeros(W, jnp.float64) if a else None for a in active],
+                   cnt=[jnp.zeros(W, jnp.int32) for _ in range(ncnt)]),
+        hi=jnp.zeros(ncol + nsq, jnp.int64), lo=jnp.zeros(ncol + nsq, jnp.int64),
+        counts=jnp.zeros(ncnt, jnp.int64),
         map=jnp.zeros(nmap, jnp.int64), hist=jnp.zeros(nhist, jnp.int64), budget=jnp.zeros(nbud, jnp.int64),
     )
 
-    def cond(s):
-        return (s["next"] < n_valid) | jnp.any(s["ray"] >= 0)
-
     def step(lane, arrays):
-        """One interaction of every live lane (stage (2))."""
-        ids, live, px, py, pz, dx, dy, dz, w, colour = (lane[k] for k in ("ids", "live", "px", "py", "pz", "dx",
-                                                                           "dy", "dz", "w", "colour"))
-        acc, cnt = list(lane["acc"]), list(lane["cnt"])
-        ray = start_u + jnp.where(live, ids, 0).astype(jnp.uint32)
-        event = cnt[CNT_EVENTS] + 1
-        u = sampling.event_uniforms(key_words, ray, event, dt, 6 if effects.top == "plate" else 4)
-        surf, x, y, z = geometry.next_hit(px, py, pz, dx, dy, dz, R, H)
-        top = live & (surf == geometry.TOP)
-        wall = live & (surf == geometry.WALL)
-        base_any = live & (surf == geometry.BASE)
-        led = base_any & geometry.on_led(x, y, params["led_grid"].astype(dt), params["pitch"],
-                                         params["emitter_radius"])
-        base = base_any & ~led
-        cav = wall | base_any
+        return interaction(params, key_words, start_u, lane, arrays, effects)
 
-        # cavity surfaces
-        rho = jnp.where(wall, params["rho"][0], jnp.where(led, params["rho"][2], params["rho"][1]))
-        w_ref = w * rho
-        absorbed = w - w_ref
-        inv_r = 1.0 / R
-        nx = jnp.where(wall, -x * inv_r, 0.0).astype(dt)
-        ny = jnp.where(wall, -y * inv_r, 0.0).astype(dt)
-        nz = jnp.where(wall, 0.0, 1.0).astype(dt)
-        sin_t, cos_t, phi = sampling.lambertian_angles(u[1], u[2])
-        cdx, cdy, cdz = sampling.local_to_world(sin_t, cos_t, phi, nx, ny, nz)
-        if effects.specular:
-            with jax.named_scope("specular_reflection"):
-                spec = jnp.where(wall, params["spec"][0], jnp.where(led, params["spec"][2], params["spec"][1]))
-                mirror = u[0].astype(jnp.float64) < spec
-                mdx, mdy, mdz = sampling.mirror(dx, dy, dz, nx, ny, nz)
-                cdx = jnp.where(mirror, mdx, cdx)
-                cdy = jnp.where(mirror, mdy, cdy)
-                cdz = jnp.where(mirror, mdz, cdz)
+    def substep(_, carry):
+        lane, arrays = carry
+        return step(lane, arrays)
 
-        zero = jnp.zeros_like(w)
-        acc[ABS_WALL] = acc[ABS_WALL] + jnp.where(wall, absorbed, zero)
-        acc[ABS_BASE] = acc[ABS_BASE] + jnp.where(base, absorbed, zero)
-        acc[ABS_LED] = acc[ABS_LED] + jnp.where(led, absorbed, zero)
-        budget_cav = jnp.where(cav, absorbed, zero)
-
-        # top
-        n_plate = cnt[CNT_PLATE]
-        if effects.top == "exit":
-            ext_w = jnp.where(top, w, zero)
-            ext_colour = colour
-            new_w = jnp.where(cav, w_ref, zero)
-            alive = cav
-            new_colour = colour
-            ndx, ndy, ndz = cdx, cdy, cdz
-            plate_abs = zero
-        else:
-            w_out, p_abs, forward, p_colour, pdx, pdy, pdz, clamped = _plate_interaction(
-                params, key_words, ray, event, u, x, y, dx, dy, dz, w, colour, top, effects)
-            plate_abs = jnp.where(top, p_abs, zero)
-            acc[ABS_PLATE] = acc[ABS_PLATE] + plate_abs
-            ext_w = jnp.where(top & forward, w_out, zero)
-            ext_colour = p_colour
-            back = top & ~forward & (w_out > 0)
-            new_w = jnp.where(cav, w_ref, jnp.where(back, w_out, zero))
-            alive = cav | back
-            new_colour = jnp.where(top, p_colour, colour)
-            ndx = jnp.where(top, pdx, cdx)
-            ndy = jnp.where(top, pdy, cdy)
-            ndz = jnp.where(top, pdz, cdz)
-            cnt[CNT_PLATE] = cnt[CNT_PLATE] + top.astype(jnp.int32)
-            if effects.plate_clamp:
-                cnt[CNT_CLAMP] = cnt[CNT_CLAMP] + clamped.astype(jnp.int32)
-        ext_b = jnp.where(ext_colour == 0, ext_w, zero)
-        ext_y = jnp.where(ext_colour == 0, zero, ext_w)
-        acc[EXT_B] = acc[EXT_B] + ext_b
-        acc[EXT_Y] = acc[EXT_Y] + ext_y
-        alive = alive & (new_w > 0)
-
-        # termination
-        other = zero
-        if effects.termination == "roulette":
-            tau = params["roulette_threshold"]
-            low = alive & (new_w < tau)
-            survive = u[3].astype(jnp.float64) * tau < new_w
-            killed = low & ~survive
-            rr = jnp.where(killed, new_w, jnp.where(low, new_w - tau, zero))
-            acc[ROULETTE] = acc[ROULETTE] + rr
-            other = other + rr
-            new_w = jnp.where(low, jnp.where(survive, tau, zero), new_w)
-            alive = alive & ~killed
-        else:
-            low = alive & (new_w < params["threshold"])
-            dropped = jnp.where(low, new_w, zero)
-            acc[DISCARDED] = acc[DISCARDED] + dropped
-            other = other + dropped
-            new_w = jnp.where(low, zero, new_w)
-            alive = alive & ~low
-        cnt[CNT_EVENTS] = cnt[CNT_EVENTS] + live.astype(jnp.int32)
-        capped = alive & (cnt[CNT_EVENTS] >= params["max_events"])
-        trunc = jnp.where(capped, new_w, zero)
-        acc[TRUNCATED] = acc[TRUNCATED] + trunc
-        other = other + trunc
-        alive = alive & ~capped
-
-        new_map, new_hist, new_budget = arrays
-        if effects.irradiance_map:
-            with jax.named_scope("irradiance_map"):
-                idx = geometry.map_index(x, y, R, effects.map_bins)
-                new_map = new_map.at[jnp.where(top, idx, nmap)].add(_fixed(w), mode="drop")
-        if effects.incidence_histogram:
-            with jax.named_scope("incidence_histogram"):
-                theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
-                hb = effects.histogram_bins
-                b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + colour * hb
-                new_hist = new_hist.at[jnp.where(top, b, nhist)].add(_fixed(w), mode="drop")
-        if effects.interaction_budget:
-            with jax.named_scope("interaction_budget"):
-                k = jnp.minimum(n_plate, effects.budget_bins - 1) * len(BUDGET_COLUMNS)
-                sink = jnp.where(live, 0, nbud)
-                for c, val in enumerate((ext_b, ext_y, budget_cav, plate_abs, other)):
-                    new_budget = new_budget.at[k + c + sink].add(_fixed(val), mode="drop")
-        lane = dict(ids=ids, live=alive, px=x, py=y, pz=z, dx=ndx.astype(dt), dy=ndy.astype(dt), dz=ndz.astype(dt),
-                    w=new_w, colour=new_colour.astype(jnp.int32), acc=acc, cnt=cnt)
-        return lane, (new_map, new_hist, new_budget)
+    def retire_sums(acc, cnt, retire):
+        """Exact sums over the retiring lanes: integer-valued float64 limbs (all partial sums < 2⁵³)."""
+        zero = None
+        total = acc[EXT_B] if acc[EXT_Y] is None else acc[EXT_B] + acc[EXT_Y]
+        sq = {"total": total, "blue": acc[EXT_B] if acc[EXT_Y] is not None else None,
+              "yellow": acc[EXT_Y], "blue_yellow": None if acc[EXT_Y] is None else acc[EXT_B] * acc[EXT_Y],
+              "absorbed_wall": acc[ABS_WALL], "absorbed_base": acc[ABS_BASE], "absorbed_leds": acc[ABS_LED],
+              "absorbed_plate": acc[ABS_PLATE]}
+        values = [(a, SCALE_SUM) for a in acc]
+        for name in SQUARES:
+            v = sq[name]
+            if name in ("yellow", "absorbed_wall", "absorbed_base", "absorbed_leds", "absorbed_plate", "total",
+                        "blue") and v is not None:
+                v = v * v
+            values.append((v, SCALE_SQUARE))
+        his, los = [], []
+        for v, scale in values:
+            if v is None:
+                his.append(zero)
+                los.append(zero)
+                continue
+            X = jnp.where(retire, jnp.rint(v * scale), 0.0)  # integer-valued doubles, |X| < 2⁶²
+            h = jnp.floor(X * 2.0 ** -LIMB)  # |h| < 2³¹
+            his.append(jnp.sum(h))
+            los.append(jnp.sum(X - h * 2.0 ** LIMB))  # in [0, 2³¹)
+        if acc[EXT_Y] is None:  # no yellow: the blue square is the total's
+            i_total, i_blue = ncol + SQUARES.index("total"), ncol + SQUARES.index("blue")
+            his[i_blue], los[i_blue] = his[i_total], los[i_total]
+        f0 = jnp.zeros((), jnp.float64)
+        hi = jnp.stack([f0 if v is None else v for v in his]).astype(jnp.int64)
+        lo = jnp.stack([f0 if v is None else v for v in los]).astype(jnp.int64)
+        counts = jnp.stack([jnp.sum(jnp.where(retire, c, 0)) for c in cnt]).astype(jnp.int64)
+        return hi, lo, counts
 
     def body(s):
-        # (1) refill empty lanes with the next rays of the chunk, from the rolling emission buffer, which is
-        # regenerated from ray ``next`` on whenever the next L rays are not all in it
-        refresh = s["next"] + L > s["buf_start"] + B
-        buf_start, buf = lax.cond(refresh, lambda: (s["next"], emit_block(s["next"])),
-                                  lambda: (s["buf_start"], s["buf"]))
-        ex, ey, ez, edx, edy, edz = buf
-        empty = s["ray"] < 0
+        # (1) refill empty lanes with the next rays of the chunk
+        ln = s["lanes"]
+        empty = ln["ray"] < 0
         rank = jnp.cumsum(empty, dtype=jnp.int32) - 1
         new_id = s["next"] + rank
         take = empty & (new_id < n_valid)
-        src = jnp.clip(new_id - buf_start, 0, B - 1)
-        ids = jnp.where(take, new_id, s["ray"])
+        src = jnp.clip(new_id, 0, C - 1)
+        ids = jnp.where(take, new_id, ln["ray"])
         live = ids >= 0
-        px = jnp.where(take, ex[src], s["px"])
-        py = jnp.where(take, ey[src], s["py"])
-        pz = jnp.where(take, ez[src], s["pz"])
-        dx = jnp.where(take, edx[src], s["dx"])
-        dy = jnp.where(take, edy[src], s["dy"])
-        dz = jnp.where(take, edz[src], s["dz"])
-        w = jnp.where(take, 1.0, s["w"])
-        colour = jnp.where(take, 0, s["colour"])
-        acc = [jnp.where(take, 0.0, a) for a in s["acc"]]
-        cnt = [jnp.where(take, 0, c) for c in s["cnt"]]
+        px, py, pz, dx, dy, dz = (jnp.where(take, e[src], ln[k]) for e, k in zip(emitted, ("px", "py", "pz", "dx",
+                                                                                            "dy", "dz")))
+        w = jnp.where(take, 1.0, ln["w"])
+        colour = jnp.where(take, 0, ln["colour"])
+        acc = [None if a is None else jnp.where(take, 0.0, a) for a in ln["acc"]]
+        cnt = [jnp.where(take, 0, c) for c in ln["cnt"]]
         nxt = jnp.minimum(s["next"] + jnp.sum(empty, dtype=jnp.int32), n_valid)
         lane = dict(ids=ids, live=live, px=px, py=py, pz=pz, dx=dx, dy=dy, dz=dz, w=w, colour=colour, acc=acc,
                     cnt=cnt)
         arrays = (s["map"], s["hist"], s["budget"])
-        lane, arrays = step(lane, arrays)
+        # (2) several interactions of every lane per iteration
+        if substeps == 1:
+            lane, arrays = step(lane, arrays)
+        else:
+            lane, arrays = lax.fori_loop(0, substeps, substep, (lane, arrays))
         new_map, new_hist, new_budget = arrays
         alive, acc, cnt = lane["live"], lane["acc"], lane["cnt"]
-
         # (3) retire finished rays
-        retire = live & ~alive
         with jax.named_scope("retire"):
-            total = acc[EXT_B] + acc[EXT_Y]
-            values = jnp.stack(list(acc) + [total * total, acc[EXT_B] * acc[EXT_B], acc[EXT_Y] * acc[EXT_Y],
-                                            acc[EXT_B] * acc[EXT_Y]] + [acc[c] * acc[c] for c in
-                                                                        (ABS_WALL, ABS_BASE, ABS_LED, ABS_PLATE)])
-            X = jnp.where(retire[None, :], jnp.rint(values * scales[:, None]), 0.0)  # integer-valued doubles
-            h = jnp.floor(X * 2.0 ** -LIMB)
-            hi = s["hi"] + h
-            lo = s["lo"] + (X - h * 2.0 ** LIMB)
-            counts = s["counts"] + jnp.where(retire[None, :], jnp.stack(cnt), 0).astype(jnp.int64)
+            hi, lo, counts = retire_sums(acc, cnt, live & ~alive)
         return dict(
-            next=nxt, it=s["it"] + 1, buf_start=buf_start, buf=buf, ray=jnp.where(alive, ids, -1),
-            px=lane["px"], py=lane["py"], pz=lane["pz"], dx=lane["dx"], dy=lane["dy"], dz=lane["dz"],
-            w=lane["w"], colour=lane["colour"], acc=tuple(acc), cnt=tuple(cnt), hi=hi, lo=lo, counts=counts,
-            map=new_map, hist=new_hist, budget=new_budget,
+            next=nxt, it=s["it"] + 1,
+            lanes=dict(ray=jnp.where(alive, ids, -1), px=lane["px"], py=lane["py"], pz=lane["pz"], dx=lane["dx"],
+                       dy=lane["dy"], dz=lane["dz"], w=lane["w"], colour=lane["colour"], acc=acc, cnt=cnt),
+            hi=s["hi"] + hi, lo=s["lo"] + lo, counts=s["counts"] + counts, map=new_map, hist=new_hist,
+            budget=new_budget,
         )
 
-    final = lax.while_loop(cond, body, state)
-    return {"hi": jnp.sum(final["hi"].astype(jnp.int64), axis=1), "lo": jnp.sum(final["lo"].astype(jnp.int64), axis=1),
-            "counts": jnp.sum(final["counts"], axis=1), "map": final["map"],
+    def compact(s, L):
+        """The live lanes of ``s`` moved into a state of ``L`` lanes (all live rays fit)."""
+        ln = s["lanes"]
+        live = ln["ray"] >= 0
+        (idx,) = jnp.nonzero(live, size=L, fill_value=0)
+        keep = jnp.arange(L) < jnp.sum(live, dtype=jnp.int32)
+        new = jax.tree_util.tree_map(lambda a: a[idx], ln)
+        new["ray"] = jnp.where(keep, new["ray"], -1)
+        return dict(s, lanes=new)
+
+    # the widths the tail is compacted into (each level is its own loop over the same body)
+    widths = [W]
+    while widths[-1] // TAIL_SHRINK >= MIN_TAIL_LANES and len(widths) < TAIL_LEVELS:
+        widths.append(widths[-1] // TAIL_SHRINK)
+    final = state
+    for level, width in enumerate(widths):
+        if level:
+            final = compact(final, width)
+        narrower = widths[level + 1] if level + 1 < len(widths) else 0
+
+        def cond(s, narrower=narrower):
+            n_live = jnp.sum(s["lanes"]["ray"] >= 0, dtype=jnp.int32)
+            return (s["next"] < n_valid) | (n_live > narrower)
+
+        final = lax.while_loop(cond, body, final)
+    return {"hi": final["hi"], "lo": final["lo"], "counts": final["counts"], "map": final["map"],
             "histogram": final["hist"], "budget": final["budget"], "iterations": final["it"]}
 
 
-trace_chunk_jit = partial(jax.jit, static_argnames=("effects", "lanes"))(trace_chunk)
+trace_chunk_jit = partial(jax.jit, static_argnames=("effects", "lanes", "chunk", "substeps"))(trace_chunk)

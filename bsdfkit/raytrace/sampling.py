@@ -22,10 +22,40 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 from jax import lax
-from jax.extend.random import threefry_2x32
 
 TWO_PI = 2.0 * 3.141592653589793
 LOBE_STREAM = 2 ** 31
+#: lobe retries run on 1/LOBE_NARROW of the lanes (see :func:`lobe_beta`)
+LOBE_NARROW = 32
+
+
+_ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
+_PARITY = 0x1BD11BDA
+
+
+def _rotl(x, r: int):
+    return (x << jnp.uint32(r)) | (x >> jnp.uint32(32 - r))
+
+
+def threefry2x32(key_words, x0, x1):
+    """Threefry-2x32 (20 rounds, [Salmon-2011]) of the counter pairs (x0, x1) under ``key_words``.
+
+    Written out element-wise (no concatenation or reshaping of the counters), bit-identical to
+    ``jax.extend.random.threefry_2x32`` applied to ``concatenate([x0, x1])`` (tested), so XLA fuses it into
+    the surrounding kernel.
+    """
+    k0, k1 = key_words[0], key_words[1]
+    ks = (k0, k1, k0 ^ k1 ^ jnp.uint32(_PARITY))
+    x0 = x0 + ks[0]
+    x1 = x1 + ks[1]
+    for i in range(5):
+        for r in _ROTATIONS[i % 2]:
+            x0 = x0 + x1
+            x1 = _rotl(x1, r)
+            x1 = x0 ^ x1
+        x0 = x0 + ks[(i + 1) % 3]
+        x1 = x1 + ks[(i + 2) % 3] + jnp.uint32(i + 1)
+    return x0, x1
 
 
 def random_words(key_words, ray, counters):
@@ -34,15 +64,9 @@ def random_words(key_words, ray, counters):
     ``key_words`` (2,) uint32, ``ray`` (n,) uint32, ``counters`` list of (n,) uint32. Returns a list of
     2·len(counters) arrays (n,) uint32, the two words of counter h at positions 2h and 2h + 1.
     """
-    n = ray.shape[0]
-    m = len(counters)
-    x0 = jnp.concatenate([ray] * m)
-    x1 = jnp.concatenate(counters)
-    out = threefry_2x32((key_words[0], key_words[1]), jnp.concatenate([x0, x1]))
-    a, b = out[: n * m], out[n * m:]
     words = []
-    for i in range(m):
-        words += [a[i * n:(i + 1) * n], b[i * n:(i + 1) * n]]
+    for c in counters:
+        words += list(threefry2x32(key_words, ray, c))
     return words
 
 
@@ -53,8 +77,35 @@ def event_uniforms(key_words, ray, event, dtype, count: int = 6):
     """
     base = event.astype(jnp.uint32) * jnp.uint32(4)
     blocks = [base + jnp.uint32(h) for h in range((count + 1) // 2)]
-    words = random_words(key_words, ray, blocks)[:count]
+    words = materialise(key_words, random_words(key_words, ray, blocks)[:count])
     return [to_unit(w, dtype) for w in words]
+
+
+def materialise(key_words, arrays):
+    """``arrays`` (a list) unchanged, but each computed once into memory before any use.
+
+    XLA fuses cheap element-wise producers into each of their consumers; for the 20 Threefry rounds behind a
+    uniform used in several places (or a hit point used by every branch) that means recomputing them several
+    times (measured ~2-3x slower interactions on CPU). ``lax.optimization_barrier`` is removed before fusion on
+    CPU, so the arrays pass through a one-trip ``while`` loop whose trip count XLA cannot see (it depends on
+    the key): loop operands are always materialised. The loop body is the identity on its only trip.
+    """
+    one = ((key_words[0] | jnp.uint32(1)) > 0).astype(jnp.uint32)  # 1, but not a compile-time constant
+
+    def ident(a, i):
+        if a.dtype == jnp.bool_:
+            return a ^ (i > 0)
+        if jnp.issubdtype(a.dtype, jnp.floating):
+            ut = jnp.uint32 if a.dtype == jnp.float32 else jnp.uint64
+            return lax.bitcast_convert_type(lax.bitcast_convert_type(a, ut) ^ i.astype(ut), a.dtype)
+        return a ^ i.astype(a.dtype)
+
+    def body(state):
+        i, xs = state
+        return i + jnp.uint32(1), [ident(a, i) for a in xs]  # i = 0 on the only trip: identity
+
+    _, out = lax.while_loop(lambda s: s[0] < one, body, (jnp.uint32(0), list(arrays)))
+    return out
 
 
 def to_unit(bits, dtype):
@@ -76,8 +127,12 @@ def orthonormal_basis(nx, ny, nz):
 
 def local_to_world(sin_t, cos_t, phi, nx, ny, nz):
     """Direction with polar angle θ (from n) and azimuth φ in the frame of n."""
+    return local_to_world_cs(sin_t, cos_t, jnp.cos(phi), jnp.sin(phi), nx, ny, nz)
+
+
+def local_to_world_cs(sin_t, cos_t, c, s, nx, ny, nz):
+    """:func:`local_to_world` with cos φ and sin φ given."""
     (ax, ay, az), (bx, by, bz) = orthonormal_basis(nx, ny, nz)
-    c, s = jnp.cos(phi), jnp.sin(phi)
     lx, ly = sin_t * c, sin_t * s
     return (lx * ax + ly * bx + cos_t * nx, lx * ay + ly * by + cos_t * ny, lx * az + ly * bz + cos_t * nz)
 
@@ -107,27 +162,58 @@ def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype, max_
     (ray + 2³¹, event·1024 + a). Returns (βx, βy, accepted); a lane not accepted after ``max_attempts``
     (probability < (1 − p_acc)^1024, p_acc ≳ 0.1 for σ ≤ 2) reports accepted = False and the caller
     falls back to a Lambertian direction.
+
+    Attempt 0 runs on every lane; the few rays it rejects (lobes reaching past the unit disk) are compacted
+    into 1/:data:`LOBE_NARROW` of the lanes for the remaining attempts, so the retries do not cost a pass over
+    every lane each (full-width retries only while more rays are pending than fit). A ray's attempts and
+    their random numbers are the same either way.
     """
+    n = ray.shape[0]
     ray_lobe = ray + jnp.uint32(LOBE_STREAM)
     base = event.astype(jnp.uint32) * jnp.uint32(1024)
     zero = jnp.zeros_like(beta0x)
 
-    def cond(state):
-        attempt, todo, _, _ = state
-        return jnp.any(todo) & (attempt < max_attempts)
-
-    def body(state):
-        attempt, todo, bx, by = state
-        w1, w2 = random_words(key_words, ray_lobe, [base + attempt.astype(jnp.uint32)])
+    def attempt(a, rl, bs, b0x, b0y, sg):
+        w1, w2 = materialise(key_words, random_words(key_words, rl, [bs + a]))
         u1, u2 = to_unit(w1, dtype), to_unit(w2, dtype)
         r = jnp.sqrt(-2.0 * jnp.log1p(-u1))
-        gx = beta0x + sigma * r * jnp.cos(TWO_PI * u2)
-        gy = beta0y + sigma * r * jnp.sin(TWO_PI * u2)
-        ok = gx * gx + gy * gy < 1.0
-        take = todo & ok
-        return attempt + 1, todo & ~ok, jnp.where(take, gx, bx), jnp.where(take, gy, by)
+        gx = b0x + sg * r * jnp.cos(TWO_PI * u2)
+        gy = b0y + sg * r * jnp.sin(TWO_PI * u2)
+        return gx, gy, gx * gx + gy * gy < 1.0
 
-    _, todo, bx, by = lax.while_loop(cond, body, (jnp.int32(0), pending, zero, zero))
+    def body_full(state):
+        a, todo, bx, by = state
+        gx, gy, ok = attempt(a, ray_lobe, base, beta0x, beta0y, sigma)
+        take = todo & ok
+        return a + jnp.uint32(1), todo & ~ok, jnp.where(take, gx, bx), jnp.where(take, gy, by)
+
+    a, todo, bx, by = body_full((jnp.uint32(0), pending, zero, zero))
+    narrow = max(n // LOBE_NARROW, 1)
+
+    def cond_full(state):
+        return (jnp.sum(state[1], dtype=jnp.int32) > narrow) & (state[0] < max_attempts)
+
+    a, todo, bx, by = lax.while_loop(cond_full, body_full, (a, todo, bx, by))
+    # the remaining rays, compacted
+    count = jnp.sum(todo, dtype=jnp.int32)
+    (idx,) = jnp.nonzero(todo, size=narrow, fill_value=0)
+    valid = jnp.arange(narrow) < count
+    sub = (ray_lobe[idx], base[idx], beta0x[idx], beta0y[idx], sigma[idx])
+
+    def cond_narrow(state):
+        return jnp.any(state[1]) & (state[0] < max_attempts)
+
+    def body_narrow(state):
+        a, t, sx, sy = state
+        gx, gy, ok = attempt(a, *sub)
+        take = t & ok
+        return a + jnp.uint32(1), t & ~ok, jnp.where(take, gx, sx), jnp.where(take, gy, sy)
+
+    _, t, sx, sy = lax.while_loop(cond_narrow, body_narrow, (a, valid, zero[:narrow], zero[:narrow]))
+    dest = jnp.where(valid, idx, n)  # out of range: dropped
+    bx = bx.at[dest].set(sx, mode="drop")
+    by = by.at[dest].set(sy, mode="drop")
+    todo = todo.at[dest].set(t, mode="drop")
     return bx, by, pending & ~todo
 
 

@@ -132,8 +132,8 @@ class TraceOptions:
     per ray: a ray whose weight drops below ``threshold`` is dropped (biased; the dropped power is a
     ledger line). ``max_events`` caps surface interactions per ray (the rest is tallied as truncated).
     ``precision`` is the float type of positions and directions; weights and tallies are float64.
-    ``lanes`` rays are in flight at once (memory is bounded by lanes, whatever the ray count); ``chunk``
-    rays are traced per call of the compiled kernel (progress granularity). Neither changes results.
+    ``lanes`` rays are in flight at once; ``chunk`` rays are emitted and traced per call of the compiled
+    kernel (memory ∝ lanes + chunk; progress granularity). Neither changes results.
     """
 
     termination: str = "roulette"
@@ -141,8 +141,8 @@ class TraceOptions:
     threshold: float = 0.01
     max_events: int = 10000
     precision: str = "float32"
-    lanes: int = 512
-    chunk: int = 100000
+    lanes: int = 16384
+    chunk: int = 1048576
 
 
 @dataclass(frozen=True)

@@ -12,20 +12,30 @@ Each spec is one dimension of the result (named after its first key); the grid i
 grid point is a full trace at the same seed (common random numbers, so differences between points are
 smoother than their individual errors). Points that share an :class:`~bsdfkit.raytrace.effects.Effects`
 reuse one compiled kernel.
+
+Beyond one process: with ``workers`` (a ``distributed.LocalCluster`` of that many single-threaded worker
+processes on the loopback interface) or ``scheduler`` (the address of an existing dask.distributed
+scheduler) every grid point is one task. A task traces its point with the same function, rays and seed as
+the serial sweep, so the dataset is identical bit for bit (the tallies are exact integers; on a cluster of
+different CPUs the float32 arithmetic of the kernel could differ in the last bits). Tasks that fail are
+reported, never dropped: the dataset gets NaN there and a ``failed_points`` attribute, and
+:class:`SweepPointsFailed` is raised after the outputs are written.
 """
 from __future__ import annotations
 
 import itertools
+import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import distributed
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.errors import InputError, ValidationError
+from bsdfkit.core.errors import BsdfkitError, InputError, ValidationError
 from bsdfkit.io.atomic import check_writable, write_with
 from bsdfkit.raytrace.scene import Scene, dumps_scene, with_values
 from bsdfkit.raytrace.tracer import trace
@@ -93,34 +103,123 @@ class SweepSpec:
     chunk: int | None = None
 
 
-def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], None] | None = None):
+@dataclass(frozen=True)
+class Cluster:
+    """Where sweep points run: ``workers`` local worker processes, or an existing ``scheduler`` address."""
+
+    workers: int | None = None
+    scheduler: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.workers is not None and (not isinstance(self.workers, int) or self.workers < 1):
+            raise ValidationError("worker count must be positive", field="--workers", expected="an integer >= 1",
+                                  got=self.workers)
+
+
+class SweepPointsFailed(BsdfkitError):
+    """Some sweep points failed on the cluster (the others were computed and written)."""
+
+
+def trace_point(scene: Scene, values: dict, rays: int, seed: int, chunk: int | None):
+    """One grid point: ``scene`` with ``values`` set, traced (the task of a distributed sweep)."""
+    point = with_values(scene, values) if values else scene
+    return trace(point, rays, seed, chunk=chunk)
+
+
+def _describe(values: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in values.items()) or "the scene"
+
+
+DEVICES_FLAG = "--xla_force_host_platform_device_count"
+
+
+def _worker_env(workers: int) -> dict[str, str]:
+    """Environment of local workers: the cores shared out as JAX CPU devices (the tracer runs a chunk on each),
+    so N workers on N cores do not oversubscribe them; the rest of ``XLA_FLAGS`` is kept."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith(DEVICES_FLAG)]
+    return {"XLA_FLAGS": " ".join(flags + [f"{DEVICES_FLAG}={max(1, cores // workers)}"])}
+
+
+def _run_distributed(scene: Scene, spec: SweepSpec, points: list, cluster: Cluster,
+                     progress: Callable[[int, int], None] | None) -> tuple[dict, list[str]]:
+    """Trace ``points`` [(index, values)] as tasks on dask.distributed; returns (results, failures)."""
+    local = None
+    if cluster.scheduler:
+        client = distributed.Client(cluster.scheduler, timeout="30s")
+    else:
+        # single-threaded worker processes on the loopback interface, no dashboard; workers inherit the
+        # environment (JAX's compilation cache settings of the command line)
+        local = distributed.LocalCluster(n_workers=cluster.workers or 1, threads_per_worker=1, processes=True,
+                                         host="127.0.0.1", dashboard_address=None, silence_logs=40,
+                                         env=_worker_env(cluster.workers or 1))
+        client = distributed.Client(local)
+    results, failures = {}, []
+    try:
+        futures = {}
+        for index, values in points:
+            fut = client.submit(trace_point, scene, values, spec.rays, spec.seed, spec.chunk, pure=False)
+            futures[fut] = (index, values)
+        done = 0
+        for fut in distributed.as_completed(list(futures)):
+            index, values = futures[fut]
+            if fut.status == "finished":
+                results[index] = fut.result()
+            else:
+                exc = fut.exception()
+                text = (str(exc).splitlines() or [""])[0]
+                failures.append(f"{_describe(values)}: {type(exc).__name__}: {text}")
+            done += 1
+            if progress is not None:
+                progress(done, len(points))
+    finally:
+        client.close()
+        if local is not None:
+            local.close()
+    return results, failures
+
+
+def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], None] | None = None,
+                  cluster: Cluster | None = None):
     """Run every grid point and return an ``xarray.Dataset`` with one dimension per parameter.
 
     Variables: LER, YBR, extracted_{blue,yellow,total} (W), absorbed_{wall,base,leds,plate} (W), their
     standard errors (``std_err_*``), ledger_error, non_uniformity and, when the scene tallies it, the
-    irradiance map (dims …, y_mm, x_mm).
+    irradiance map (dims …, y_mm, x_mm). With ``cluster`` the points run as dask.distributed tasks (module
+    docstring); failed points are NaN and listed in the ``failed_points`` attribute.
     """
     names = [p.name for p in spec.parameters]
     if len(set(names)) != len(names):
         raise ValidationError("two sweep parameters start with the same key", field="--param",
                               expected="distinct first keys", got=names)
     shape = tuple(len(p.values) for p in spec.parameters)
-    results = {}
     total = int(np.prod(shape)) if shape else 1
-    for n, index in enumerate(itertools.product(*[range(s) for s in shape])):
+    points = []
+    for index in itertools.product(*[range(s) for s in shape]):
         values = {}
         for p, i in zip(spec.parameters, index):
             for key in p.keys:
                 values[key] = p.values[i]
-        point = with_values(scene, values) if values else scene
-        results[index] = trace(point, spec.rays, spec.seed, chunk=spec.chunk)
-        if progress is not None:
-            progress(n + 1, total)
+        points.append((index, values))
+    failures: list[str] = []
+    if cluster is None:
+        results = {}
+        for n, (index, values) in enumerate(points):
+            results[index] = trace_point(scene, values, spec.rays, spec.seed, spec.chunk)
+            if progress is not None:
+                progress(n + 1, total)
+    else:
+        results, failures = _run_distributed(scene, spec, points, cluster, progress)
+        if not results:
+            raise SweepPointsFailed(f"all {total} sweep points failed; first: {failures[0]}")
 
     first = next(iter(results.values()))
 
     def grid(getter) -> np.ndarray:
-        out = np.empty(shape, dtype=float)
+        out = np.full(shape, np.nan, dtype=float)
         for idx, r in results.items():
             v = getter(r)
             out[idx] = np.nan if v is None else v
@@ -148,7 +247,7 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
         coords[p.name] = (p.name, vals, {"keys": ",".join(p.keys)})
     if first.irradiance is not None:
         bins = first.irradiance.shape[0]
-        maps = np.empty(shape + (bins, bins))
+        maps = np.full(shape + (bins, bins), np.nan)
         for idx, r in results.items():
             maps[idx] = r.irradiance
         R = scene.cavity.radius_mm
@@ -162,6 +261,8 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
                     parameters=";".join(",".join(p.keys) + "=" + ",".join(str(v) for v in p.values)
                                         for p in spec.parameters),
                     source="bsdfkit sweep")
+    if failures:
+        ds.attrs["failed_points"] = "\n".join(failures)  # one line per failed point
     return ds
 
 
@@ -172,12 +273,12 @@ def plot_paths(out: Path) -> list[Path]:
 
 def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays: int, seed: int,
               chunk: int | None = None, force: bool = False, figure: Callable[[xr.Dataset], Any] | None = None,
-              progress: Callable[[int, int], None] | None = None):
+              progress: Callable[[int, int], None] | None = None, cluster: Cluster | None = None):
     """Sweep ``scene`` over ``parameters`` (specs), write ``out`` (netCDF) and, with ``figure``, a PNG beside it.
 
     ``figure(ds)`` returns a matplotlib figure (e.g. :func:`bsdfkit.plotting.figures.sweep_figure`); the tracer
     itself draws nothing. Existing outputs are kept unless ``force``; this is checked before any tracing.
-    Returns the dataset.
+    ``cluster`` runs the points on dask.distributed (module docstring). Returns the dataset.
     """
     plots = figure is not None
     out = Path(out)
@@ -186,9 +287,12 @@ def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays:
         for p in plot_paths(out):
             check_writable(p, force)
     params = tuple(parse_parameter(p) for p in parameters)
-    ds = sweep_dataset(scene, SweepSpec(params, rays, seed, chunk), progress)
+    ds = sweep_dataset(scene, SweepSpec(params, rays, seed, chunk), progress, cluster)
     write_with(out, lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), force)
     if figure is not None:
         fig = figure(ds)
         write_with(plot_paths(out)[0], lambda tmp: fig.savefig(tmp, dpi=110, format="png"), force)
+    if "failed_points" in ds.attrs:
+        failed = ds.attrs["failed_points"].splitlines()
+        raise SweepPointsFailed(f"{len(failed)} sweep point(s) failed, written as NaN: " + " | ".join(failed), file=out)
     return ds

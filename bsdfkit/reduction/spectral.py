@@ -19,7 +19,8 @@ sums use the data's own wavelength grid with Δλ from :func:`numpy.gradient` (e
 """
 from __future__ import annotations
 
-import colour
+from typing import TYPE_CHECKING
+
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
@@ -30,8 +31,17 @@ from bsdfkit.core.errors import InputError, NumericalError
 PLANCK_H = 6.62607015e-34  # J s (exact, SI 2019)
 LIGHT_C = 299_792_458.0  # m/s (exact)
 
+if TYPE_CHECKING:
+    import colour
+
 Band = tuple[float, float]
-SpectrumLike = colour.SpectralDistribution | xr.DataArray
+SpectrumLike = "colour.SpectralDistribution | xr.DataArray"
+
+
+def _is_spectral_distribution(spectrum: object) -> bool:
+    # Duck-typed so that this module does not import colour-science (about 1 s, and it pulls in matplotlib):
+    # the tracer reaches these reductions through the plate builder and needs no colorimetry.
+    return hasattr(spectrum, "wavelengths") and hasattr(spectrum, "values") and not isinstance(spectrum, xr.DataArray)
 
 
 def _band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
@@ -43,7 +53,7 @@ def _band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]
 
 def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
     """Values of ``spectrum`` on ``wavelength`` (nm): linear interpolation, zero outside its domain."""
-    if isinstance(spectrum, colour.SpectralDistribution):
+    if _is_spectral_distribution(spectrum):
         wl, values = spectrum.wavelengths, spectrum.values
     elif isinstance(spectrum, xr.DataArray):
         wl, values = spectrum["wavelength"].values, spectrum.values
@@ -59,6 +69,8 @@ def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDAr
 
 def to_spectral_distribution(da: xr.DataArray, name: str = "") -> colour.SpectralDistribution:
     """A 1-D DataArray over ``wavelength`` as a colour SpectralDistribution."""
+    import colour  # only here: see _is_spectral_distribution
+
     return colour.SpectralDistribution(dict(zip(da["wavelength"].values.tolist(), da.values.tolist())), name=name)
 
 
@@ -68,7 +80,7 @@ def incident_spectrum(ds: xr.Dataset, config: str) -> colour.SpectralDistributio
 
 
 def _arrays(spectrum: SpectrumLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    if isinstance(spectrum, colour.SpectralDistribution):
+    if _is_spectral_distribution(spectrum):
         return spectrum.wavelengths, spectrum.values
     return spectrum["wavelength"].values, spectrum.values
 

@@ -1,0 +1,199 @@
+"""The batch-synchronous kernel: bit-identical results for any lanes, chunks and sub-steps, its samplers
+against the straightforward versions, one kernel for specular fractions, and the CLI's compilation cache."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from conftest import ROOT
+from jax.extend.random import threefry_2x32
+from test_trace_kernel import TABLE2, scene
+
+from bsdfkit.cli.main import compile_cache, compile_cache_dir, compile_cache_wanted
+from bsdfkit.core.jaxconfig import x64
+from bsdfkit.raytrace import PhosphorPlate, kernel, sampling, scene_effects, trace
+from bsdfkit.raytrace.effects import kernel_params
+from bsdfkit.raytrace.tracer import emission_width
+
+
+def full(result) -> dict:
+    """Every number of a result that must not depend on lanes or chunking."""
+    d = result.to_dict()
+    for k in ("elapsed_s", "rays_per_s", "interactions_per_s", "compile_s", "chunk"):
+        d.pop(k)
+    for name in ("irradiance", "incidence_histogram", "budget"):
+        value = getattr(result, name)
+        d[name] = None if value is None else value.tolist()
+    return d
+
+
+def plate_scene(tmp_path, spec=0.0, extra="[tallies]\ninteraction_budget = true"):
+    if not (tmp_path / "p.json").exists():
+        PhosphorPlate.constant(TABLE2).save(tmp_path / "p.json")
+    return scene(f'kind = "phosphor"\nplate = "{tmp_path / "p.json"}"', rho=0.95, spec=spec, extra=extra)
+
+
+def test_threefry_is_bit_identical_to_jax():
+    key = jnp.asarray([0x12345678, 0x9ABCDEF0], jnp.uint32)
+    ray = jnp.arange(4096, dtype=jnp.uint32) * jnp.uint32(2654435761)
+    counter = jnp.arange(4096, dtype=jnp.uint32) * jnp.uint32(4) + jnp.uint32(2)
+    ref = threefry_2x32((key[0], key[1]), jnp.concatenate([ray, counter]))
+    a, b = sampling.threefry2x32(key, ray, counter)
+    assert bool(jnp.all(a == ref[:4096])) and bool(jnp.all(b == ref[4096:]))
+
+
+def test_materialise_is_the_identity():
+    key = jnp.asarray([7, 9], jnp.uint32)
+    xs = [jnp.arange(5, dtype=jnp.int32) - 2, jnp.asarray([-0.0, 1.5, np.inf], jnp.float32),
+          jnp.asarray([True, False]), jnp.arange(3, dtype=jnp.uint32)]
+    out = jax.jit(sampling.materialise)(key, xs)
+    for a, b in zip(xs, out):
+        assert a.dtype == b.dtype and np.array_equal(np.asarray(a), np.asarray(b))
+    assert np.signbit(np.asarray(out[1])[0])  # bit patterns are kept (−0.0 stays −0.0)
+
+
+def test_lanes_and_chunks_do_not_change_a_single_bit(tmp_path):
+    s = plate_scene(tmp_path, spec=0.2)
+    ref = full(trace(s, 12_000, seed=11, chunk=12_000, lanes=16384))
+    for chunk, lanes in ((5_000, 256), (3_000, 1024), (12_000, 64), (7_001, 4096)):
+        assert full(trace(s, 12_000, seed=11, chunk=chunk, lanes=lanes)) == ref, (chunk, lanes)
+    assert ref["ledger_error"] <= 1e-9
+
+
+def test_substeps_and_tail_levels_do_not_change_the_sums(tmp_path, monkeypatch):
+    s = plate_scene(tmp_path)
+    eff = scene_effects(s)
+    with x64():
+        params = jax.tree_util.tree_map(jnp.asarray, kernel_params(s, eff))
+        key = jax.random.key_data(jax.random.key(3)).astype(jnp.uint32)
+        outs = []
+        for substeps, lanes in ((1, 1024), (2, 1024), (5, 4096), (3, 64)):
+            out = kernel.trace_chunk_jit(params, key, np.uint32(100), np.int32(3000), effects=eff, lanes=lanes,
+                                         chunk=4096, substeps=substeps)
+            outs.append({k: np.asarray(v).tolist() for k, v in out.items() if k != "iterations"})
+    assert all(o == outs[0] for o in outs[1:])
+
+
+def _lobe_reference(key_words, ray, event, pending, b0x, b0y, sigma, dtype, max_attempts=1024):
+    """The plain rejection loop over every lane (the definition the compacted sampler must reproduce)."""
+    ray_lobe = ray + jnp.uint32(sampling.LOBE_STREAM)
+    base = event.astype(jnp.uint32) * jnp.uint32(1024)
+
+    def body(state):
+        attempt, todo, bx, by = state
+        w1, w2 = sampling.random_words(key_words, ray_lobe, [base + attempt.astype(jnp.uint32)])
+        u1, u2 = sampling.to_unit(w1, dtype), sampling.to_unit(w2, dtype)
+        r = jnp.sqrt(-2.0 * jnp.log1p(-u1))
+        gx = b0x + sigma * r * jnp.cos(sampling.TWO_PI * u2)
+        gy = b0y + sigma * r * jnp.sin(sampling.TWO_PI * u2)
+        ok = gx * gx + gy * gy < 1.0
+        take = todo & ok
+        return attempt + 1, todo & ~ok, jnp.where(take, gx, bx), jnp.where(take, gy, by)
+
+    zero = jnp.zeros_like(b0x)
+    _, todo, bx, by = jax.lax.while_loop(lambda s: jnp.any(s[1]) & (s[0] < max_attempts), body,
+                                         (jnp.int32(0), pending, zero, zero))
+    return bx, by, pending & ~todo
+
+
+def test_compacted_lobe_sampler_equals_plain_rejection():
+    n = 4096
+    rng = np.random.default_rng(5)
+    theta = np.arcsin(np.sqrt(rng.random(n)))
+    phi = rng.random(n) * 2 * np.pi
+    b0x = jnp.asarray(np.sin(theta) * np.cos(phi) * 0.999, jnp.float32)
+    b0y = jnp.asarray(np.sin(theta) * np.sin(phi) * 0.999, jnp.float32)
+    sigma = jnp.asarray(rng.choice([0.05, 0.3, 1.5], n), jnp.float32)
+    ray = jnp.arange(n, dtype=jnp.uint32) * jnp.uint32(3)
+    event = jnp.asarray(rng.integers(1, 50, n), jnp.int32)
+    key = jnp.asarray([11, 12], jnp.uint32)
+    for share in (0.02, 0.3, 1.0):  # few pending (compacted at once) … all pending (full-width retries first)
+        pending = jnp.asarray(rng.random(n) < share)
+        got = jax.jit(sampling.lobe_beta, static_argnums=(7,))(key, ray, event, pending, b0x, b0y, sigma,
+                                                                jnp.float32)
+        ref = jax.jit(_lobe_reference, static_argnums=(7,))(key, ray, event, pending, b0x, b0y, sigma, jnp.float32)
+        for a, b in zip(got, ref):
+            assert np.array_equal(np.asarray(a), np.asarray(b)), share
+
+
+def test_specular_fraction_is_a_number_for_plate_scenes(tmp_path):
+    diffuse, mirror = plate_scene(tmp_path, spec=0.0), plate_scene(tmp_path, spec=0.5)
+    assert scene_effects(diffuse) == scene_effects(mirror)  # one compiled kernel for both
+    a = trace(diffuse, 8_000, seed=4, chunk=8_000)
+    b = trace(diffuse, 8_000, seed=4, chunk=8_000, effects=replace(scene_effects(diffuse), specular=False))
+    assert full(a) == full(b)  # the mirror branch with fraction 0 changes nothing
+    assert trace(mirror, 8_000, seed=4, chunk=8_000).LER != a.LER
+
+
+def test_emission_width_buckets():
+    assert [emission_width(n) for n in (1, 1024, 1025, 400_000, 2 ** 20)] == [1024, 1024, 2048, 2 ** 19, 2 ** 20]
+
+
+# --- the command line's persistent compilation cache -------------------------------------------------------------
+
+def _cli(args, env_extra, cwd):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_") and k != "BSDFKIT_NO_COMPILE_CACHE"}
+    env.update(env_extra)
+    return subprocess.Popen([sys.executable, "-m", "bsdfkit", *args], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _numbers(stdout: str) -> dict:
+    d = json.loads(stdout)
+    return {k: d[k] for k in ("LER", "extracted", "absorbed", "ledger_error", "interactions")}
+
+
+def test_compile_cache_is_on_by_default_and_can_be_switched_off(tmp_path):
+    args = ["trace", str(ROOT / "fitting" / "scenes" / "example.toml"), "--rays", "3000", "--json"]
+    runs = {
+        "default": ({"XDG_CACHE_HOME": str(tmp_path / "a")}, []),
+        "flag": ({"XDG_CACHE_HOME": str(tmp_path / "b")}, ["--no-compile-cache"]),
+        "env": ({"XDG_CACHE_HOME": str(tmp_path / "c"), "BSDFKIT_NO_COMPILE_CACHE": "1"}, []),
+    }
+    procs = {name: _cli(args + extra, env, tmp_path) for name, (env, extra) in runs.items()}
+    outs = {name: p.communicate(timeout=600) for name, p in procs.items()}
+    assert all(p.returncode == 0 for p in procs.values()), {k: v[1][-2000:] for k, v in outs.items()}
+    assert any((tmp_path / "a" / "bsdfkit" / "jax").glob("*-cache"))
+    assert not (tmp_path / "b" / "bsdfkit").exists() and not (tmp_path / "c" / "bsdfkit").exists()
+    assert _numbers(outs["default"][0]) == _numbers(outs["flag"][0]) == _numbers(outs["env"][0])
+
+
+def test_concurrent_processes_share_the_cache_without_corrupting_it(tmp_path):
+    args = ["trace", str(ROOT / "fitting" / "scenes" / "example.toml"), "--rays", "3000", "--json"]
+    env = {"XDG_CACHE_HOME": str(tmp_path / "x")}
+    procs = [_cli(args, env, tmp_path) for _ in range(3)]  # all start with an empty cache: concurrent writers
+    outs = [p.communicate(timeout=600) for p in procs]
+    assert all(p.returncode == 0 for p in procs), [o[1][-2000:] for o in outs]
+    entries = list((tmp_path / "x" / "bsdfkit" / "jax").glob("*-cache"))
+    assert entries
+    after = _cli(args, env, tmp_path)  # a reader of what the three wrote
+    out, err = after.communicate(timeout=600)
+    assert after.returncode == 0
+    for text in [err] + [o[1] for o in outs]:
+        assert "Error reading persistent compilation cache" not in text
+        assert "persistent compilation cache" not in text.lower() or "error" not in text.lower()
+    assert all(_numbers(o[0]) == _numbers(out) for o in outs)
+
+
+def test_cli_cache_settings_are_scoped_and_not_made_on_import(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert compile_cache_dir() == tmp_path / "bsdfkit" / "jax"
+    monkeypatch.setenv("BSDFKIT_NO_COMPILE_CACHE", "1")
+    assert not compile_cache_wanted() and not compile_cache_wanted(True)
+    monkeypatch.setenv("BSDFKIT_NO_COMPILE_CACHE", "0")
+    assert compile_cache_wanted() and not compile_cache_wanted(True)
+    before = dict(os.environ)
+    with compile_cache(True) as where:  # JAX is imported in this process: its configuration is left alone
+        assert where is None and dict(os.environ) == before
+    assert dict(os.environ) == before
+    code = ("import os, bsdfkit, bsdfkit.cli.main; "
+            "print(any(k.startswith('JAX_') for k in os.environ), 'jax' in __import__('sys').modules)")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert done.stdout.split() == ["False", "False"]
