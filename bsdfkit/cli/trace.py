@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     lines = [
         f"scene        {args.scene}  ({result.rays} rays, seed {result.seed})",
         f"LER          {result.LER:.5f} ± {se['LER']:.5f}",
-        f"YBR          {result.YBR:.4f} ± {se['YBR']:.4f}" if e["blue"] > 0 else "YBR          n/a (no blue extracted)",
+        (f"YBR          {result.YBR:.4f} ± {se['YBR']:.4f}  (yellow / blue extracted ray power)" if e["blue"] > 0
+         else "YBR          n/a (no blue extracted)"),
         f"extracted W  blue {e['blue']:.6g}  yellow {e['yellow']:.6g}  total {e['total']:.6g}",
         "absorbed W   " + "  ".join(f"{k} {v:.6g}" for k, v in a.items()),
         f"ledger       roulette {result.roulette:.3g} W, threshold {result.discarded:.3g} W, truncated "

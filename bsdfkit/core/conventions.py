@@ -39,6 +39,12 @@ COLORIMETRY_BLUE_BAND_NM: tuple[float, float] = (380.0, 470.0)
 COLORIMETRY_YELLOW_BAND_NM: tuple[float, float] = (471.0, 780.0)
 
 
+#: What the tracer's YBR is: the two-wavelength model has blue (pump) and yellow (converted) rays, not spectra.
+RAY_YBR_DEFINITION = ("extracted yellow-ray power / extracted blue-ray power (two-wavelength model: blue rays = pump "
+                      f"light, {EXCITATION_BAND_NM[0]:g}-{EXCITATION_BAND_NM[1]:g} nm as measured; yellow rays = "
+                      f"converted light, {CONVERSION_BAND_NM[0]:g}-{CONVERSION_BAND_NM[1]:g} nm)")
+
+
 def band_label(band: tuple[float, float]) -> str:
     """``"380-500 nm"``: how a band is written next to every ratio that uses it."""
     return f"{band[0]:g}-{band[1]:g} nm"

@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.conventions import RAY_YBR_DEFINITION
+
 
 class FixedSum:
     """Exact running sum of fixed-point values given as int64 limb sums (hi·2^limb + lo) at a scale."""
@@ -144,6 +146,7 @@ class TraceResult:
             "extracted": dict(self.extracted),
             "LER": self.LER,
             "YBR": self.YBR,
+            "YBR_definition": RAY_YBR_DEFINITION,
             "absorbed": dict(self.absorbed),
             "ledger_error": self.ledger_error,
             "std_err": dict(self.std_err),
@@ -175,7 +178,8 @@ class TraceResult:
         """The result as an ``xarray.Dataset`` (scalars, irradiance map, incidence histogram, budget)."""
         data: dict[str, Any] = {
             "LER": ((), self.LER, {"units": "1", "long_name": "light extraction ratio"}),
-            "YBR": ((), self.YBR, {"units": "1", "long_name": "yellow-to-blue ratio"}),
+            "YBR": ((), self.YBR, {"units": "1", "long_name": "yellow-to-blue ratio",
+                                   "definition": RAY_YBR_DEFINITION}),
             "ledger_error": ((), self.ledger_error, {"units": "1"}),
         }
         for k, v in self.extracted.items():
