@@ -60,3 +60,26 @@ def test_killed_cli_export_leaves_nothing_behind(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert out.stat().st_size > 0
+    # and no temporary file outlives its process: the rerun removed the killed run's .part file
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")] == []
+
+
+def test_killed_output_set_leaves_previous_set(tmp_path):
+    """A multi-file output set (as `bsdfkit run` writes) killed while writing: the previous set stays whole."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    for k in range(5):
+        (folder / f"f{k}.txt").write_text("OLD")
+    script = (
+        "import sys, time\n"
+        "from bsdfkit.io.atomic import OutputSet, write_text\n"
+        "with OutputSet(sys.argv[1], [f'f{k}.txt' for k in range(5)], force=True) as out:\n"
+        "    for k in range(5):\n"
+        "        write_text(out.path(f'f{k}.txt'), 'NEW', True)\n"
+        "        if k == 2:\n"
+        "            print('half', flush=True); time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script, str(folder)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "half"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert sorted(p.read_text() for p in folder.iterdir()) == ["OLD"] * 5

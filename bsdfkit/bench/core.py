@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from bsdfkit.io.atomic import write_text
+from bsdfkit.io.atomic import OutputSet, write_text
 from bsdfkit.plotting.figures import save_figure
 
 
@@ -118,13 +118,27 @@ def report_header(command: str, quick: bool, elapsed_s: float) -> str:
     ])
 
 
-def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float,
-                 force: bool = True) -> Path:
+def figure_name(study_name: str) -> str:
+    return f"accuracy_{study_name}.png"
 
-    folder.mkdir(parents=True, exist_ok=True)
-    parts = [report_header(command, quick, elapsed_s)]
-    for study in studies:
-        name = f"accuracy_{study.name}.png"
-        save_figure(study_figure(study), folder / name, force)
-        parts.append(study_markdown(study, name))
-    return write_text(folder / "accuracy.md", "\n".join(parts), force)
+
+def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float,
+                 force: bool = False, out: OutputSet | None = None) -> Path:
+    """Write accuracy.md and one figure per study into ``folder`` as one atomic output set (or into ``out``)."""
+    names = [figure_name(s.name) for s in studies] + ["accuracy.md"]
+    own = out is None
+    out = out if out is not None else OutputSet(folder, names, force)
+    try:
+        parts = [report_header(command, quick, elapsed_s)]
+        for study in studies:
+            name = figure_name(study.name)
+            save_figure(study_figure(study), out.path(name), True)
+            parts.append(study_markdown(study, name))
+        write_text(out.path("accuracy.md"), "\n".join(parts), True)
+    except BaseException:
+        if own:
+            out.abort()
+        raise
+    if own:
+        out.commit()
+    return Path(folder) / "accuracy.md"

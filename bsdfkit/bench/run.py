@@ -6,8 +6,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bsdfkit.bench import fitting, measurement, tracing
-from bsdfkit.bench.core import Study, write_report
-from bsdfkit.io.atomic import check_writable
+from bsdfkit.bench.core import Study, figure_name, write_report
+from bsdfkit.core.errors import InputError
+from bsdfkit.io.atomic import OutputSet
+
+#: Study keys whose Study.name (and figure) differ from the key.
+FIGURE_STEMS = {"fit": "fit_tolerance"}
 
 
 def study_functions() -> list[tuple[str, Callable[[bool], Study]]]:
@@ -31,15 +35,20 @@ def run_bench(folder: str | Path, quick: bool = False, force: bool = False, comm
     """Run every study (or ``only`` those named) and write accuracy.md + figures into ``folder``."""
 
     folder = Path(folder)
-    check_writable(folder / "accuracy.md", force)
-    start = time.perf_counter()
-    studies = []
-    for name, fn in study_functions():
-        if only and name not in only:
-            continue
-        t0 = time.perf_counter()
-        log(f"study {name} ...")
-        studies.append(fn(quick))
-        log(f"study {name}: {time.perf_counter() - t0:.1f} s")
-    write_report(studies, folder, command, quick, time.perf_counter() - start, force=True)
+    known = [name for name, _ in study_functions()]
+    for name in only or ():
+        if name not in known:
+            raise InputError("unknown study", field="--only", expected="one of " + ", ".join(known), got=name)
+    chosen = [(name, fn) for name, fn in study_functions() if not only or name in only]
+    names = [figure_name(FIGURE_STEMS.get(name, name)) for name, _ in chosen] + ["accuracy.md"]
+    # every output is checked before the studies run (minutes); they are written as one atomic set
+    with OutputSet(folder, names, force) as out:
+        start = time.perf_counter()
+        studies = []
+        for name, fn in chosen:
+            t0 = time.perf_counter()
+            log(f"study {name} ...")
+            studies.append(fn(quick))
+            log(f"study {name}: {time.perf_counter() - t0:.1f} s")
+        write_report(studies, folder, command, quick, time.perf_counter() - start, force, out=out)
     return studies

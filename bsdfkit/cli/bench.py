@@ -12,7 +12,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="fewer settings (under 2 minutes)")
     p.add_argument("-o", "--output", default="docs", help="folder for accuracy.md and figures (default: docs)")
     p.add_argument("--only", action="append", help="run only this study (repeatable)")
-    p.add_argument("--force", action="store_true", help="replace an existing accuracy.md")
+    p.add_argument("--force", action="store_true", help="replace an existing accuracy.md and figures")
     p.set_defaults(func=_run)
 
 

@@ -3,12 +3,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from bsdfkit.cli._common import emit_json
 from bsdfkit.cli.tis import load_scan
 from bsdfkit.core.errors import FormatError, InputError
-from bsdfkit.reduction.budget import interaction_table, module_budget, table_from_json
+from bsdfkit.reduction.budget import MAX_ITERATIONS, interaction_table, module_budget, table_from_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,16 +25,32 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
 
+    if not (math.isfinite(args.eta_mc) and 0.0 <= args.eta_mc <= 1.0):
+        raise InputError("option out of range", field="--eta-mc", expected="a mixing-chamber efficiency in [0, 1]",
+                         got=args.eta_mc)
+    if not 1 <= args.iterations <= MAX_ITERATIONS:
+        raise InputError("option out of range", field="--iterations", expected=f"an integer in [1, {MAX_ITERATIONS}]",
+                         got=args.iterations)
+    if args.incidence is not None and not (math.isfinite(args.incidence) and 0.0 <= args.incidence < 90.0):
+        raise InputError("option out of range", field="--incidence", expected="an angle in [0, 90) deg",
+                         got=args.incidence)
     if (args.scan is None) == (args.table is None):
         raise InputError("give either a scan (with --incidence) or --table", field="scan/--table")
     if args.table is not None:
         path = Path(args.table)
         if not path.is_file():
-            raise InputError("file not found", file=path)
+            raise InputError("a folder, not a table file" if path.is_dir() else "file not found", file=path,
+                             expected="a JSON interaction table")
         try:
             data = json.loads(path.read_text(encoding="utf-8-sig"))
         except json.JSONDecodeError as exc:
             raise FormatError(f"not valid JSON ({exc.msg})", file=path, line=exc.lineno) from None
+        except UnicodeDecodeError as exc:
+            raise FormatError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
+                              file=path, expected="a UTF-8 JSON file") from None
+        except (OSError, RecursionError) as exc:
+            raise InputError(f"cannot read the table ({getattr(exc, 'strerror', None) or type(exc).__name__})",
+                             file=path) from None
         tables = table_from_json(data, str(path))
     else:
         if args.incidence is None:

@@ -5,6 +5,7 @@ import argparse
 import sys
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.io.spectrum_file import read_spectrum
 from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
 
@@ -20,7 +21,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
 
     sd = read_spectrum(args.file)
-    c = colorimetric_summary(sd)
+    try:
+        c = colorimetric_summary(sd)
+    except BsdfkitError as exc:  # name the file: colorimetry only knows the spectrum's name
+        if exc.file is not None:
+            raise
+        raise type(exc)(str(exc), file=args.file) from None
     if not c.cct_meaningful:
         print(f"bsdfkit color: warning: |Duv| = {abs(c.duv):.3f} > {DUV_LIMIT} — the CCT of {args.file} "
               "is not meaningful (CIE 015)", file=sys.stderr)

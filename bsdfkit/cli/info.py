@@ -40,4 +40,8 @@ def _run(args: argparse.Namespace) -> int:
     for th, sides in info["positions"].items():
         parts = [f"{side}: " + ", ".join(f"{n} {arc}" for arc, n in arcs.items()) for side, arcs in sides.items()]
         print(f"  θi = {th}°: " + "; ".join(parts))
+    cal = info.get("calibration", {})
+    if cal.get("below_dark_pixels") or cal.get("negative_raw_counts"):
+        print(f"  WARNING: {cal.get('below_dark_pixels', 0)} pixels far below the dark level (dark frames above "
+              f"the signal?), {cal.get('negative_raw_counts', 0)} negative raw counts (flag below_dark)")
     return 0

@@ -6,16 +6,26 @@ that a notebook user can make too.
 
 User errors (:class:`bsdfkit.core.errors.BsdfkitError`) are printed as one line on stderr with exit status 2;
 no traceback is shown for them.
+
+Compiled kernels persist between runs: the entry point switches on JAX's persistent compilation cache in a
+per-user folder (:func:`compile_cache_dir`, ``$XDG_CACHE_HOME/bsdfkit/jax`` or ``~/.cache/bsdfkit/jax``)
+unless ``--no-compile-cache`` is given or ``BSDFKIT_NO_COMPILE_CACHE=1`` is set. Nothing is configured on
+``import bsdfkit``; JAX is not imported here (its settings go through its environment variables when it has
+not been imported yet; dask workers started by a verb inherit them), and the environment is restored after
+each call of :func:`main`. Likewise the CPU cores become JAX CPU devices (:func:`cpu_devices`), on which the
+tracer runs chunks of rays in parallel.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import signal
 import sys
 import zlib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 
 from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.core.version import __version__
@@ -25,6 +35,89 @@ VERBS = ("bench", "budget", "color", "convert", "export", "fit", "info", "ingest
          "tis", "trace")
 
 
+NO_CACHE_ENV = "BSDFKIT_NO_COMPILE_CACHE"
+NO_CACHE_FLAG = "--no-compile-cache"
+#: JAX settings of the persistent compilation cache (besides its folder). A maximum size switches on JAX's file
+#: lock around every read and write of the cache (package ``filelock``), so concurrent processes (parallel
+#: runs, dask workers) never read an entry another process is still writing.
+CACHE_SETTINGS = {
+    "jax_persistent_cache_min_compile_time_secs": 0.5,
+    "jax_persistent_cache_min_entry_size_bytes": 0,
+    "jax_compilation_cache_max_size": 4 * 1024 ** 3,
+}
+
+
+def compile_cache_dir() -> Path:
+    """The per-user folder of compiled kernels: ``$XDG_CACHE_HOME/bsdfkit/jax`` or ``~/.cache/bsdfkit/jax``."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "bsdfkit" / "jax"
+
+
+def compile_cache_wanted(flag_off: bool = False) -> bool:
+    """False with ``--no-compile-cache`` or ``BSDFKIT_NO_COMPILE_CACHE`` set to anything but "" or "0"."""
+    return not flag_off and os.environ.get(NO_CACHE_ENV, "").strip() in ("", "0")
+
+
+@contextlib.contextmanager
+def compile_cache(enabled: bool) -> Iterator[Path | None]:
+    """JAX's persistent compilation cache in :func:`compile_cache_dir` for the duration of the block.
+
+    The settings go into JAX's environment variables, which JAX reads when it is imported (the verbs import it
+    after this point; dask workers started by a verb inherit them). If JAX was already imported by the calling
+    process (``main`` called from Python), its configuration is left alone and None is returned. The
+    environment is restored on exit; an explicit ``JAX_COMPILATION_CACHE_DIR`` of the user is respected.
+    """
+    if not enabled or "jax" in sys.modules:
+        yield None
+        return
+    settings = {"jax_compilation_cache_dir": os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(compile_cache_dir()),
+                **CACHE_SETTINGS}
+    saved = {k.upper(): os.environ.get(k.upper()) for k in settings}
+    try:
+        os.environ.update({k.upper(): str(v) for k, v in settings.items()})
+        yield Path(settings["jax_compilation_cache_dir"])
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+DEVICES_FLAG = "--xla_force_host_platform_device_count"
+#: at most this many CPU devices (one chunk of rays runs on each at the same time)
+MAX_CPU_DEVICES = 8
+
+
+@contextlib.contextmanager
+def cpu_devices() -> Iterator[int | None]:
+    """One JAX CPU device per usable core (at most :data:`MAX_CPU_DEVICES`) for the duration of the block.
+
+    XLA runs one program on one CPU device essentially on one core; the tracer runs its chunks on all local
+    devices at once (:func:`bsdfkit.raytrace.tracer.compiled_kernel`), so on a CPU the command line exposes the
+    cores as devices through ``XLA_FLAGS`` (read when JAX is imported; code that does not ask for a device
+    uses the first one, as before). Nothing happens when JAX is already imported or ``XLA_FLAGS`` already sets
+    the device count; ``XLA_FLAGS`` is restored on exit.
+    """
+    flags = os.environ.get("XLA_FLAGS")
+    if "jax" in sys.modules or DEVICES_FLAG in (flags or ""):
+        yield None
+        return
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    count = max(1, min(cores, MAX_CPU_DEVICES))
+    os.environ["XLA_FLAGS"] = f"{flags or ''} {DEVICES_FLAG}={count}".strip()
+    try:
+        yield count
+    finally:
+        if flags is None:
+            os.environ.pop("XLA_FLAGS", None)
+        else:
+            os.environ["XLA_FLAGS"] = flags
+
+
 def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
     """The parser with the given verbs registered (all by default; `main` registers only the one it runs)."""
     parser = argparse.ArgumentParser(
@@ -32,6 +125,9 @@ def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
         description="Goniometer scans to calibrated BSDFs, fits, ray-tracer tables and module budgets.",
     )
     parser.add_argument("--version", action="version", version=f"bsdfkit {__version__}")
+    parser.add_argument(NO_CACHE_FLAG, action="store_true",
+                        help=f"do not use the persistent cache of compiled kernels ({compile_cache_dir()}; "
+                             f"also {NO_CACHE_ENV}=1)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for verb in verbs:
         # a verb's module (and the libraries it needs) is imported only when that verb is registered
@@ -42,6 +138,14 @@ def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    no_cache = NO_CACHE_FLAG in argv  # accepted before or after the verb
+    argv = [a for a in argv if a != NO_CACHE_FLAG]
+    # before the verb's modules (and so JAX) are imported: JAX reads its cache settings when imported
+    with compile_cache(compile_cache_wanted(no_cache)), cpu_devices():
+        return _run(argv)
+
+
+def _run(argv: list[str]) -> int:
     parser = build_parser((argv[0],) if argv and argv[0] in VERBS else VERBS)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
+from bsdfkit.core.errors import InputError
+from bsdfkit.io import atomic
 from bsdfkit.simulation import virtual_goniometer as virtual
 
 PRESETS = ("cl830-synthetic",)
@@ -19,6 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
 
+    if not 0 <= args.seed < 2**63:
+        raise InputError("option out of range", field="--seed", expected="an integer in [0, 2**63)", got=args.seed)
+    atomic.check_writable(Path(args.output) / "manifest.toml", args.force)  # before simulating
     export = virtual.cl830_synthetic(seed=args.seed)
     virtual.write_raw_export(export, args.output, args.force)
     n = sum(len(s["columns"]["side"]) for s in export.scans.values())

@@ -1,73 +1,485 @@
-"""Atomic, non-clobbering output.
+"""Atomic, non-clobbering output: single files and whole output sets.
 
-Every file bsdfkit writes goes to a temporary file in the destination directory, is flushed and fsynced,
-and is then renamed over the target (``os.replace`` is atomic on POSIX and Windows). A reader therefore
-sees either the old file or the complete new one, never a partial file, even if the process is killed
-mid-write. An existing target is only replaced when ``force`` is true.
+**Single files.** Every file bsdfkit writes goes to a temporary file ``.<name>.<pid>.<token>.part`` in the
+destination directory, is flushed and fsynced, and is then moved to the target. Without ``force`` the move is
+an exclusive create (``os.link`` of the finished temporary file, which fails if the target exists), so of two
+concurrent writers exactly one succeeds and the other gets :class:`OutputExistsError`; with ``force`` it is
+``os.replace``. A reader therefore sees either the old file or the complete new one, never a partial file,
+even if the process is killed mid-write. Temporary files of processes that no longer run are removed by the
+next write to the same target.
+
+**Output sets** (:class:`OutputSet`: ``bsdfkit run``, ``bench``, ``simulate``). The files are written into a
+staging folder ``.<folder>.<pid>.staging`` beside the target folder and moved into place at the end: a
+missing or empty target folder is replaced by one rename, a target holding only a previous set of the same
+outputs is swapped (with ``force``), and only a target that also holds other files gets the staged files
+one by one. A kill or a full disk therefore leaves the previous complete set or nothing, and a rerun works
+without ``force``; stale staging folders of dead processes are removed by the next run.
+
+**Checks before computing.** :func:`check_writable` refuses, before any work is done, an existing output
+without ``force``, an output path that is a directory (or whose parent is a file), an output that is one of
+the command's own inputs (even with ``force``) and a destination that cannot be written (a probe file is
+created and removed, which also catches read-only file systems when running as root).
+
+Operating-system faults (permission, read-only file system, no space, ...) become :class:`OutputError`: one
+line naming the path and the fault.
 """
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
-import tempfile
-from collections.abc import Callable, Iterator
+import secrets
+import shutil
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from bsdfkit.core.errors import OutputExistsError
+from bsdfkit.core.errors import BsdfkitError, OutputExistsError
+
+__all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_writable", "describe_os_error",
+           "refuse_inputs", "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
+
+#: Temporary files and staging folders of this process that are not finished yet (removed on SIGTERM).
+_PARTIAL: set[Path] = set()
 
 
-def check_writable(path: str | Path, force: bool) -> Path:
-    """Return ``path`` as a Path, raising :class:`OutputExistsError` if it exists and not ``force``."""
+def remove_partial_outputs() -> None:
+    """Remove this process's unfinished temporary files and staging folders (for a signal handler)."""
+    for path in list(_PARTIAL):
+        with contextlib.suppress(OSError):
+            if path.is_dir():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink()
+        _PARTIAL.discard(path)
+
+PathLike = str | Path
+
+_REASONS = {
+    errno.ENOSPC: "no space left on the device",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.EISDIR: "the path is a directory",
+    errno.ENOTDIR: "a parent of the path is a file, not a folder",
+    errno.EEXIST: "the path exists",
+    errno.ENAMETOOLONG: "file name too long",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EFBIG: "file too large for the file system",
+    errno.EIO: "input/output error",
+    errno.ENOENT: "no such file or folder",
+    errno.ELOOP: "too many levels of symbolic links",
+    errno.EXDEV: "cross-device move",
+}
+
+
+class OutputError(BsdfkitError):
+    """An output cannot be written (permission, read-only file system, no space, path is a folder, ...)."""
+
+
+def describe_os_error(exc: BaseException) -> str:
+    """A short, stable description of an OS error: 'no space left on the device [ENOSPC]'."""
+    code = getattr(exc, "errno", None)
+    if code is None:
+        return str(exc) or type(exc).__name__
+    name = errno.errorcode.get(code, str(code))
+    reason = _REASONS.get(code) or (getattr(exc, "strerror", None) or type(exc).__name__).lower()
+    return f"{reason} [{name}]"
+
+
+def _fault(exc: OSError, path: PathLike) -> OutputError:
+    return OutputError(f"cannot write output: {describe_os_error(exc)}", file=path)
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+def _stale(folder: Path, prefix: str, suffix: str) -> Iterator[Path]:
+    """Entries ``<prefix><pid>.<...><suffix>`` of ``folder`` whose process is gone."""
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        name = entry.name
+        if not (name.startswith(prefix) and name.endswith(suffix)):
+            continue
+        # exactly <pid>.<8 hex digits>[.probe]: not the temporary file of another target sharing the prefix
+        parts = name[len(prefix):len(name) - len(suffix)].split(".")
+        if not (len(parts) in (2, 3) and parts[0].isdigit() and len(parts[1]) == 8
+                and all(c in "0123456789abcdef" for c in parts[1]) and parts[2:] in ([], ["probe"])):
+            continue
+        if not _pid_alive(int(parts[0])):
+            yield entry
+
+
+def _remove_stale_temps(path: Path) -> None:
+    """Remove temporary files for ``path`` left by processes that were killed."""
+    for entry in _stale(path.parent, f".{path.name}.", ".part"):
+        with contextlib.suppress(OSError):
+            entry.unlink()
+
+
+def refuse_inputs(output: PathLike, inputs: Iterable[PathLike | None]) -> None:
+    """Raise if writing ``output`` would replace one of ``inputs`` (a file, or a file inside an input folder).
+
+    Refused even with ``force``: compares resolved paths and, for existing files, ``os.path.samefile``.
+    """
+    out = Path(output)
+    out_resolved = out.resolve()
+    for inp in inputs:
+        if inp is None:
+            continue
+        src = Path(inp)
+        try:
+            src_resolved = src.resolve()
+            same = out_resolved == src_resolved or (out.exists() and src.exists() and os.path.samefile(out, src))
+            inside = (src.is_dir() and out.exists() and not out.is_dir()
+                      and out_resolved.is_relative_to(src_resolved))
+        except OSError:
+            continue
+        if same or inside:
+            raise OutputError("output would overwrite an input of this command (refused even with --force)",
+                              file=out, expected="an output path different from every input", got=str(src))
+
+
+def _nearest_existing(path: Path) -> Path:
+    p = path
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _probe(folder: Path, name: str, target: Path) -> None:
+    """Create and remove a small file in ``folder`` (the nearest existing ancestor of the output)."""
+    probe = folder / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.probe.part"
+    try:
+        fd = os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise OutputError(f"cannot write output: {describe_os_error(exc)}", file=target,
+                          expected=f"a writable folder ({folder})") from None
+
+
+def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None] = ()) -> Path:
+    """Check an output before computing it; return it as a Path.
+
+    Raises :class:`OutputExistsError` if it exists and not ``force``, and :class:`OutputError` if it is a
+    folder, a parent is a file, it is one of ``inputs`` (even with ``force``) or its folder cannot be written.
+    """
     path = Path(path)
-    if path.exists() and not force:
+    if path.is_dir():
+        raise OutputError("output path is a folder", file=path, expected="a file name")
+    refuse_inputs(path, inputs)
+    if (path.exists() or path.is_symlink()) and not force:
         raise OutputExistsError("output exists; pass --force (force=True) to overwrite", file=path)
+    anchor = _nearest_existing(path.parent)
+    if not anchor.is_dir():
+        raise OutputError("a parent of the output path is a file, not a folder", file=path, got=str(anchor))
+    _probe(anchor, path.name, path)
     return path
 
 
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _place(tmp: Path, path: Path, force: bool) -> None:
+    """Move the finished ``tmp`` to ``path``: exclusive without ``force`` (no clobbering, even concurrently)."""
+    if force:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise OutputExistsError("output appeared while writing (another process?); pass --force to overwrite",
+                                file=path) from None
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.EXDEV):
+            raise
+        # no hard links on this file system: reserve the name exclusively, then replace the placeholder
+        try:
+            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        except FileExistsError:
+            raise OutputExistsError("output appeared while writing (another process?); pass --force to "
+                                    "overwrite", file=path) from None
+        os.replace(tmp, path)
+        return
+    os.unlink(tmp)
+
+
 @contextlib.contextmanager
-def atomic_path(path: str | Path, force: bool = False) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; on success it is renamed to ``path``.
+def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike | None] = ()) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success it is moved to ``path``.
 
     Use for writers that insist on a file name (netCDF engines, matplotlib)::
 
         with atomic_path("out.nc", force) as tmp:
             ds.to_netcdf(tmp)
     """
-    path = check_writable(path, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    # mkstemp creates 0600; give the final file the permissions an ordinary open() would.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    path = check_writable(path, force, inputs)
+    tmp: Path | None = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temps(path)
+        tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part"
+        # 0o666 & ~umask: the permissions an ordinary open() would give the final file
+        _PARTIAL.add(tmp)
+        os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
         yield tmp
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        _place(tmp, path, force)
+        _fsync_dir(path.parent)
+    except OSError as exc:
+        raise _fault(exc, path) from None
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            _PARTIAL.discard(tmp)
 
 
-def write_bytes(path: str | Path, data: bytes, force: bool = False) -> Path:
+def write_bytes(path: PathLike, data: bytes, force: bool = False, inputs: Iterable[PathLike | None] = ()) -> Path:
     """Atomically write ``data`` to ``path``."""
-    with atomic_path(path, force) as tmp:
+    with atomic_path(path, force, inputs) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(data)
     return Path(path)
 
 
-def write_text(path: str | Path, text: str, force: bool = False, newline: str | None = "\n") -> Path:
+def write_text(path: PathLike, text: str, force: bool = False, newline: str | None = "\n",
+               inputs: Iterable[PathLike | None] = ()) -> Path:
     """Atomically write ``text`` (UTF-8) to ``path``. ``newline="\\r\\n"`` gives CRLF line ends."""
     data = text if newline in (None, "\n") else text.replace("\n", newline)
-    return write_bytes(path, data.encode("utf-8"), force)
+    return write_bytes(path, data.encode("utf-8"), force, inputs)
 
 
-def write_with(path: str | Path, writer: Callable[[Path], object], force: bool = False) -> Path:
+def write_with(path: PathLike, writer: Callable[[Path], object], force: bool = False,
+               inputs: Iterable[PathLike | None] = ()) -> Path:
     """Atomically create ``path`` by calling ``writer(tmp_path)``."""
-    with atomic_path(path, force) as tmp:
+    with atomic_path(path, force, inputs) as tmp:
         writer(tmp)
     return Path(path)
+
+
+# --------------------------------------------------------------------------------------------------
+# output sets
+# --------------------------------------------------------------------------------------------------
+def _rmtree(path: Path) -> None:
+    shutil.rmtree(path, ignore_errors=True)
+
+
+class OutputSet:
+    """Several outputs under one folder, written into a staging folder and moved into place together.
+
+    ``names`` are paths relative to ``folder`` (``"exports/bibs.zemax.bsdf"``), in the order in which they are
+    moved when the target also holds other files (put a summary last). Everything that can be checked is
+    checked on construction, before any computing: the folder is not a file, no output exists (without
+    ``force``), no output is an input, and the staging folder beside the target can be created::
+
+        with OutputSet("out", ["a.nc", "summary.json"], force) as out:
+            ...compute...
+            netcdf.save(ds, out.path("a.nc"), force=True)
+            write_text(out.path("summary.json"), text, force=True)
+        # committed here; on an exception the staging folder is removed and the target is untouched
+    """
+
+    def __init__(self, folder: PathLike, names: Iterable[str], force: bool = False,
+                 inputs: Iterable[PathLike | None] = (), min_free_bytes: int = 0) -> None:
+        self.folder = Path(folder)
+        self.names = list(dict.fromkeys(names))
+        self.force = force
+        self.inputs = [i for i in inputs if i is not None]
+        self.staging: Path | None = None
+        self._preflight()
+        self._open_staging()
+        if min_free_bytes:
+            self._check_space(min_free_bytes)
+
+    def _check_space(self, needed: int) -> None:
+        """Refuse before computing when the file system clearly cannot hold the outputs (an estimate)."""
+        try:
+            free = shutil.disk_usage(self.staging).free
+        except OSError:
+            return
+        if free < needed:
+            self.abort()
+            raise OutputError("not enough free space for the outputs", file=self.folder,
+                              expected=f"about {needed / 1e6:.3g} MB free", got=f"{free / 1e6:.3g} MB free")
+
+    # -- checks ------------------------------------------------------------------------------------
+    def _preflight(self) -> None:
+        folder = self.folder
+        if folder.exists() and not folder.is_dir():
+            raise OutputError("output folder is a file", file=folder, expected="a folder (or a new name)")
+        anchor = _nearest_existing(folder)
+        if not anchor.is_dir():
+            raise OutputError("a parent of the output folder is a file, not a folder", file=folder, got=str(anchor))
+        for name in self.names:
+            target = folder / name
+            if target.is_dir():
+                raise OutputError("output path is a folder", file=target, expected="a file name")
+            refuse_inputs(target, self.inputs)
+            if (target.exists() or target.is_symlink()) and not self.force:
+                raise OutputExistsError("output exists; pass --force (force=True) to overwrite", file=target)
+
+    def _open_staging(self) -> None:
+        resolved = self.folder.resolve()
+        parent, name = resolved.parent, resolved.name
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+            for entry in _stale(parent, f".{name}.", ".staging"):
+                _rmtree(entry)
+            for entry in _stale(parent, f".{name}.", ".old"):
+                # a swap interrupted between its two renames: restore the previous set if the target is gone
+                if not resolved.exists():
+                    os.rename(entry, resolved)
+                else:
+                    _rmtree(entry)
+            self.staging = parent / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.staging"
+            _PARTIAL.add(self.staging)
+            self.staging.mkdir()
+        except OSError as exc:
+            self._open_staging_inside(resolved, exc)
+
+    def _open_staging_inside(self, resolved: Path, first: OSError) -> None:
+        """The target folder exists but its parent cannot be written: stage inside the target instead."""
+        if self.staging is not None:
+            _PARTIAL.discard(self.staging)
+            self.staging = None
+        if not resolved.is_dir():
+            raise OutputError(f"cannot write output: {describe_os_error(first)}", file=self.folder,
+                              expected=f"a writable folder ({resolved.parent})") from None
+        try:
+            for entry in _stale(resolved, ".bsdfkit.", ".staging"):
+                _rmtree(entry)
+            self.staging = resolved / f".bsdfkit.{os.getpid()}.{secrets.token_hex(4)}.staging"
+            _PARTIAL.add(self.staging)
+            self.staging.mkdir()
+        except OSError as exc:
+            raise OutputError(f"cannot write output: {describe_os_error(exc)}", file=self.folder,
+                              expected=f"a writable folder ({resolved})") from None
+
+    # -- use ---------------------------------------------------------------------------------------
+    def path(self, name: str) -> Path:
+        """Where to write output ``name`` (inside the staging folder; write it with ``force=True``)."""
+        if self.staging is None:
+            raise RuntimeError("output set already committed or aborted")
+        if name not in self.names:
+            self.names.append(name)
+        target = self.staging / name
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _fault(exc, self.folder / name) from None
+        return target
+
+    def abort(self) -> None:
+        if self.staging is not None:
+            _rmtree(self.staging)
+            _PARTIAL.discard(self.staging)
+            self.staging = None
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        stage = self.staging
+        if kind is not None:
+            self.abort()
+            self._rename_in_message(exc, stage)
+            return
+        try:
+            self.commit()
+        except BaseException as fault:
+            self.abort()
+            self._rename_in_message(fault, stage)
+            raise
+
+    def _rename_in_message(self, exc: BaseException | None, stage: Path | None) -> None:
+        """An error naming a file in the staging folder names the final output instead."""
+        if isinstance(exc, BsdfkitError) and stage is not None and str(stage) in str(exc):
+            raise type(exc)(str(exc).replace(str(stage), str(self.folder))) from None
+
+    # -- commit ------------------------------------------------------------------------------------
+    def _only_ours(self, target: Path) -> bool:
+        files = set(self.names)
+        dirs = {str(Path(n).parent) for n in self.names} - {"."}
+        for root, subdirs, filenames in os.walk(target):
+            rel_root = Path(root).relative_to(target)
+            for d in subdirs:
+                if str(rel_root / d) not in dirs:
+                    return False
+            for f in filenames:
+                if str(rel_root / f) not in files:
+                    return False
+        return True
+
+    def commit(self) -> None:
+        """Move the staged outputs into place (see the module docstring)."""
+        if self.staging is None:
+            raise RuntimeError("output set already committed or aborted")
+        stage, target = self.staging, self.folder.resolve()
+        _PARTIAL.discard(stage)
+        try:
+            self._commit(stage, target)
+        except BaseException:
+            if self.staging is not None:
+                _PARTIAL.add(stage)
+            raise
+
+    def _commit(self, stage: Path, target: Path) -> None:
+        missing = [n for n in self.names if not (stage / n).is_file()]
+        if missing:
+            raise RuntimeError(f"output {missing[0]} was announced but not written")
+        try:
+            inside = stage.parent == target
+            if not inside and (not target.exists() or (target.is_dir() and not any(target.iterdir()))):
+                try:
+                    os.rename(stage, target)  # replaces a missing or empty folder in one step
+                    self.staging = None
+                    _fsync_dir(target.parent)
+                    return
+                except OSError as exc:
+                    if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY):
+                        raise
+                    # someone wrote into the target meanwhile: check and merge below
+            clash = [n for n in self.names if (target / n).exists()]
+            if clash and not self.force:
+                raise OutputExistsError("output appeared while computing (another process?); pass --force to "
+                                        "overwrite", file=self.folder / clash[0])
+            if self.force and not inside and self._only_ours(target):
+                old = target.parent / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.old"
+                os.rename(target, old)
+                try:
+                    os.rename(stage, target)
+                except OSError:
+                    os.rename(old, target)
+                    raise
+                self.staging = None
+                _rmtree(old)
+                _fsync_dir(target.parent)
+                return
+            for name in self.names:  # the target holds other files: move ours in one by one
+                dst = target / name
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                _place(stage / name, dst, self.force)
+            _rmtree(stage)
+            self.staging = None
+        except OSError as exc:
+            raise _fault(exc, self.folder) from None

@@ -11,7 +11,7 @@ from pathlib import Path
 import xarray as xr
 
 from bsdfkit.core.errors import FormatError, InputError
-from bsdfkit.io.atomic import write_with
+from bsdfkit.io.atomic import OutputError, write_with
 
 ENGINE = "netcdf4"
 
@@ -27,10 +27,17 @@ def _encodable(ds: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def save(ds: xr.Dataset, path: str | Path, force: bool = False) -> Path:
-    """Write ``ds`` to netCDF atomically; refuse to overwrite without ``force``."""
+def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Path:
+    """Write ``ds`` to netCDF atomically; refuse to overwrite without ``force`` (or an input, ever)."""
     enc = _encodable(ds)
-    return write_with(path, lambda tmp: enc.to_netcdf(tmp, engine=ENGINE), force)
+
+    def writer(tmp: Path) -> None:
+        try:
+            enc.to_netcdf(tmp, engine=ENGINE)
+        except RuntimeError as exc:  # the netCDF/HDF5 library reports a failed write (e.g. a full disk) so
+            raise OutputError(f"cannot write output: the netCDF library failed ({exc})", file=path) from None
+
+    return write_with(path, writer, force, inputs)
 
 
 def load(path: str | Path, quantity: str | tuple[str, ...] | None = None) -> xr.Dataset:
@@ -41,8 +48,9 @@ def load(path: str | Path, quantity: str | tuple[str, ...] | None = None) -> xr.
     try:
         with xr.open_dataset(path, engine=ENGINE) as handle:
             ds = handle.load()
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"not a readable netCDF file ({type(exc).__name__})", file=path) from None
+    except (OSError, ValueError, RuntimeError, KeyError, UnicodeDecodeError) as exc:
+        raise FormatError(f"not a readable netCDF file ({type(exc).__name__})", file=path,
+                          expected="a netCDF file written by bsdfkit") from None
     for name, var in ds.variables.items():
         if var.dtype.kind == "U":  # keep strings as Python objects, as the library creates them
             ds[name] = var.astype(object) if name not in ds.dims else ds[name]

@@ -18,7 +18,10 @@ in 1/(sr·nm); here the detector's relative spectral responsivity R does not can
 manifest. Inside the incident band ⟨q_λ⟩ = f(λ)·p_i(λ) with p_i the normalised incident spectrum.
 
 Negative values after dark subtraction are kept (ISO 11146-3 clause 3.1, [ISO-11146-3]): clipping would bias
-every mean upward. Positions whose aperture reaches within one aperture diameter of the horizon
+every mean upward. Pixels more than ``BELOW_DARK_SIGMA`` standard uncertainties *below* the dark level are not
+noise but a sign of dark frames above the signal (wrong dark file, warmer detector, light leak in the darks):
+they are flagged ``below_dark`` and counted (attributes ``below_dark_pixels``, ``negative_raw_counts``), and
+``bsdfkit info``/``run`` report the counts. Positions whose aperture reaches within one aperture diameter of the horizon
 (θs > 90° − 2·atan(a/d)) are flagged ``grazing`` and their BSDF is masked, never infinite.
 
 Uncertainty ([GUM], uncorrelated): Var(C − D) = max(C − D, 0)/G + σ_D² + σ_D²/n_D with G the conversion gain
@@ -40,6 +43,8 @@ __all__ = ["calibrate", "aperture_solid_angle", "aperture_solid_angle_small", "d
 
 #: Incident spectral power below this fraction of its peak (or below 10 standard uncertainties) is "no light".
 INCIDENT_THRESHOLD = 1e-3
+#: Dark-subtracted counts below −BELOW_DARK_SIGMA standard uncertainties are flagged ``below_dark``.
+BELOW_DARK_SIGMA = 6.0
 
 
 def dark_statistics(raw: xr.Dataset) -> dict[float, tuple[np.ndarray, np.ndarray, int]]:
@@ -127,6 +132,9 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
     counts = raw["counts"].values
     net, var, dark_var = _net(counts, t, darks, gain, source)
     saturated = counts >= full_scale
+    # the dark noise pooled over the pixels (a per-pixel variance from a few frames can be tiny by chance)
+    pooled = np.median(dark_var, axis=1, keepdims=True)
+    below_dark = net < -BELOW_DARK_SIGMA * np.sqrt(np.maximum(dark_var, pooled))
     theta_s = np.radians(raw["theta_s"].values)
     grazing = theta_s > np.pi / 2 - 2 * half
     cos = np.where(grazing, np.nan, np.cos(theta_s))
@@ -157,6 +165,7 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
             "bsdf_bispectral_std": (("record", "wavelength"), np.sqrt(bisp_var)),
             "noise_floor_bispectral": (("record", "wavelength"), floor_b),
             "saturated": (("record", "wavelength"), saturated),
+            "below_dark": (("record", "wavelength"), below_dark),
             "grazing": ("record", grazing),
             "incident_spectrum": (("configuration", "wavelength"), spectrum),
             "incident_relative_std": (("configuration", "wavelength"),
@@ -185,6 +194,8 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         units="1", long_name="relative standard uncertainty of the band-integrated incident power Φ_i",
         note="common to every bi-spectral value of the configuration")
     ds["saturated"].attrs["long_name"] = "raw counts at full scale"
+    ds["below_dark"].attrs.update(long_name=f"signal more than {BELOW_DARK_SIGMA:g} standard uncertainties below "
+                                            "the dark level (dark frames above the signal?)")
     ds["grazing"].attrs["long_name"] = "aperture within one diameter of the horizon; BSDF masked"
     geometry = {k: raw.attrs[k] for k in ("detector_distance_mm", "aperture_diameter_mm", "beam_diameter_mm")}
     ds.attrs.update(
@@ -201,6 +212,8 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         aperture_half_angle_deg=float(np.degrees(half)),
         gain_e_per_count=gain,
         manifest_json=raw.attrs.get("manifest_json", "{}"),
+        below_dark_pixels=int(below_dark.sum()),
+        negative_raw_counts=int((counts < 0).sum()),
         **geometry,
     )
     return ds

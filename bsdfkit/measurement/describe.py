@@ -57,6 +57,10 @@ def describe(ds: xr.Dataset) -> dict:
             "bsdf_above_10x_noise_floor": int(above.sum()),
             "negative_after_dark": int((ds["bsdf_bispectral"].values < 0).sum()),
         }
+        if "below_dark" in ds:  # plausibility: dark frames above the signal, negative raw counts
+            out["calibration"]["below_dark_pixels"] = int(ds["below_dark"].values.sum())
+        if "negative_raw_counts" in ds.attrs:
+            out["calibration"]["negative_raw_counts"] = int(ds.attrs["negative_raw_counts"])
     if "truth" in manifest:
         out["truth_tis_percent"] = manifest["truth"].get("tis_percent")
     return out

@@ -1,9 +1,12 @@
 """``manifest.toml`` of a raw goniometer export: parse and validate (docs/raw-format.md).
 
 Each problem raises :class:`bsdfkit.core.errors.InputError` naming the manifest file and the dotted key.
+Besides types, values are checked for physical plausibility (docs/raw-format.md "Plausibility checks"):
+attenuator transmittance in (0, 1], full scale and gain > 0, wavelengths in nm, and a bounded grid size.
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +17,10 @@ from bsdfkit.measurement.instrument import Instrument
 
 FORMAT_NAME = "bsdfkit-raw-scan"
 SUPPORTED_VERSIONS = (1,)
+#: Largest spectrometer grid accepted (pixels); real spectrometers have a few thousand.
+MAX_WAVELENGTHS = 100_000
+#: Plausible wavelengths in nm (a grid in µm or m falls below, one in Å or pm above).
+WAVELENGTH_RANGE_NM = (100.0, 20_000.0)
 
 
 @dataclass(frozen=True)
@@ -77,8 +84,23 @@ def _kind_name(kind: type | tuple) -> str:
 
 
 def _positive(value: float, path: Path, dotted: str) -> float:
-    if not value > 0:
-        raise ValidationError("must be positive", file=path, field=dotted, expected="a number > 0", got=value)
+    if not (value > 0 and math.isfinite(value)):
+        raise ValidationError("must be positive", file=path, field=dotted, expected="a finite number > 0", got=value)
+    return float(value)
+
+
+def _in_nm(value: float, path: Path, dotted: str) -> float:
+    lo, hi = WAVELENGTH_RANGE_NM
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise ValidationError("wavelength not plausible in nm", file=path, field=dotted,
+                              expected=f"nanometres in [{lo:g}, {hi:g}] (not µm, m or Å)", got=value)
+    return float(value)
+
+
+def _transmittance(value: float, path: Path, dotted: str) -> float:
+    if not (math.isfinite(value) and 0 < value <= 1):
+        raise ValidationError("attenuator transmittance out of range (it scales every BSDF by its inverse)",
+                              file=path, field=dotted, expected="a transmittance T_ND in (0, 1]", got=value)
     return float(value)
 
 
@@ -101,8 +123,11 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
         data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except tomllib.TOMLDecodeError as exc:
         raise FormatError(f"not valid TOML ({exc})", file=path) from None
-    except UnicodeDecodeError:
-        raise FormatError("not UTF-8 text", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})", file=path,
+                          expected="a UTF-8 TOML manifest") from None
+    except OSError as exc:
+        raise InputError(f"cannot read the manifest ({exc.strerror})", file=path) from None
     fmt = _get(data, "format", str, path, "format")
     if fmt != FORMAT_NAME:
         raise FormatError("unknown format", file=path, field="format", expected=repr(FORMAT_NAME), got=fmt)
@@ -125,16 +150,27 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
     except ValidationError as exc:
         raise ValidationError(str(exc), file=path) from None
     spec = _get(data, "spectrometer", dict, path, "spectrometer")
-    wmin = float(_get(spec, "wavelength_min_nm", float, path, "spectrometer.wavelength_min_nm"))
-    wmax = float(_get(spec, "wavelength_max_nm", float, path, "spectrometer.wavelength_max_nm"))
+    wmin = _in_nm(float(_get(spec, "wavelength_min_nm", float, path, "spectrometer.wavelength_min_nm")), path,
+                  "spectrometer.wavelength_min_nm")
+    wmax = _in_nm(float(_get(spec, "wavelength_max_nm", float, path, "spectrometer.wavelength_max_nm")), path,
+                  "spectrometer.wavelength_max_nm")
     step = _positive(_get(spec, "wavelength_step_nm", float, path, "spectrometer.wavelength_step_nm"), path,
                      "spectrometer.wavelength_step_nm")
     if not wmax > wmin:
         raise ValidationError("empty wavelength range", file=path, field="spectrometer.wavelength_max_nm",
                               expected=f"> wavelength_min_nm = {wmin}", got=wmax)
+    n_grid = (wmax - wmin) / step + 1
+    if n_grid > MAX_WAVELENGTHS:  # before anything is allocated
+        raise ValidationError("wavelength grid too fine", file=path, field="spectrometer.wavelength_step_nm",
+                              expected=f"at most {MAX_WAVELENGTHS} wavelengths (limit MAX_WAVELENGTHS), i.e. a step "
+                                       f"≥ {(wmax - wmin) / (MAX_WAVELENGTHS - 1):.3g} nm",
+                              got=f"{step:g} nm ({n_grid:.3g} wavelengths)")
     gain = _positive(_get(spec, "gain_e_per_count", float, path, "spectrometer.gain_e_per_count"), path,
                      "spectrometer.gain_e_per_count")
     full_scale = _get(spec, "full_scale_counts", int, path, "spectrometer.full_scale_counts")
+    if not full_scale > 0:
+        raise ValidationError("full scale must be positive (every pixel would be saturated)", file=path,
+                              field="spectrometer.full_scale_counts", expected="an integer > 0", got=full_scale)
     resp_name = _get(spec, "responsivity_file", str, path, "spectrometer.responsivity_file", required=False)
     folder = path.parent
     resp = _file(folder, resp_name, path, "spectrometer.responsivity_file") if resp_name else None
@@ -164,9 +200,9 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
             scan_file=_file(folder, _get(c, "scan_file", str, path, f"{pre}.scan_file"), path, f"{pre}.scan_file"),
             reference_file=_file(folder, _get(c, "reference_file", str, path, f"{pre}.reference_file"), path,
                                  f"{pre}.reference_file"),
-            reference_attenuation=_positive(_get(c, "reference_attenuation", float, path,
-                                                 f"{pre}.reference_attenuation"),
-                                            path, f"{pre}.reference_attenuation"),
+            reference_attenuation=_transmittance(_get(c, "reference_attenuation", float, path,
+                                                      f"{pre}.reference_attenuation"),
+                                                 path, f"{pre}.reference_attenuation"),
         ))
     return Manifest(path=path, sample_name=name, synthetic=synthetic, instrument=instrument, wavelength_min_nm=wmin,
                     wavelength_max_nm=wmax, wavelength_step_nm=step, gain_e_per_count=gain,

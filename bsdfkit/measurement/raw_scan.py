@@ -10,6 +10,7 @@ import csv
 import gzip
 import io
 import json
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,21 +44,31 @@ def _open_text(path: Path) -> str:
         raw = path.read_bytes()
     except FileNotFoundError:
         raise InputError("file not found", file=path) from None
-    if path.suffix == ".gz":
+    except OSError as exc:
+        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
+    if path.suffix == ".gz" or raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise FormatError(f"not a readable gzip file ({exc})", file=path) from None
+        except (OSError, EOFError, zlib.error) as exc:
+            raise FormatError(f"not a readable gzip file ({exc})", file=path, expected="an intact gzip file") from None
     try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise FormatError("not UTF-8 text", file=path) from None
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})", file=path,
+                          expected="UTF-8 CSV text") from None
+    if "\x00" in text:
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise FormatError("binary data (NUL byte) in a text file", file=path, line=line, expected="UTF-8 CSV text")
+    return text
 
 
 def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
     """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
     text = _open_text(path)
-    rows = [r for r in csv.reader(io.StringIO(text))]
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text))]
+    except csv.Error as exc:
+        raise FormatError(f"not valid CSV ({exc})", file=path) from None
     # Skip blank and '#' comment lines but keep 1-based line numbers for messages.
     numbered = [(k + 1, r) for k, r in enumerate(rows)
                 if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
@@ -169,7 +180,10 @@ def _check_grid(table: SpectraTable, grid: NDArray[np.float64], manifest: Manife
 
 def _read_responsivity(path: Path, grid: NDArray[np.float64]) -> NDArray[np.float64]:
     text = _open_text(path)
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and r[0].strip() and not r[0].lstrip().startswith("#")]
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text)) if r and r[0].strip() and not r[0].lstrip().startswith("#")]
+    except csv.Error as exc:
+        raise FormatError(f"not valid CSV ({exc})", file=path) from None
     if len(rows) < 2:
         raise InputError("empty responsivity file", file=path, expected="header + one row per wavelength")
     values = []

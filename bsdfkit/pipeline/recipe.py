@@ -1,12 +1,18 @@
 """Fit/run recipes: ``bsdfkit run fitting/<name>.toml -o OUT/`` — the main job.
 
 A recipe names a measurement folder and the stages to run on it. Each stage is a function of the recipe and
-the products of earlier stages; it returns its part of the run summary and the files it wants written. All
-outputs are collected first and written atomically at the end, after checking that none exists (unless
-``force``), so a failed or interrupted run never leaves a half-written output set behind.
+the products of earlier stages; it returns its part of the run summary and the files it wants written.
+
+Everything that can be checked is checked before computing: the recipe's options (types and ranges), the trace
+scene, the output folder (no existing output without ``force``, no output that is an input, writable). The
+outputs are then written into a staging folder beside the output folder and moved into place at the end
+(:class:`bsdfkit.io.atomic.OutputSet`), so a failed, killed or out-of-disk run leaves the previous complete set
+or nothing, and a rerun after an interruption needs no ``--force``.
 """
 from __future__ import annotations
 
+import contextlib
+import math
 import time
 import tomllib
 from collections.abc import Callable
@@ -17,16 +23,17 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.errors import FormatError, InputError, NumericalError
+from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
 from bsdfkit.core.records import incidences
 from bsdfkit.fit.least_squares import fit_bsdf
-from bsdfkit.fit.spectrum import fit_spectrum, reconstruct_two_band_spectrum, spectrum_model_values
-from bsdfkit.io import atomic, netcdf
-from bsdfkit.io.atomic import write_text
+from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_band_spectrum, spectrum_model_values
+from bsdfkit.io import netcdf
+from bsdfkit.io.atomic import OutputSet, write_text
 from bsdfkit.io.jsonout import dumps
-from bsdfkit.measurement.calibrate import calibrate, truth_tis
+from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.models.registry import BSDF_MODELS
 from bsdfkit.plotting.figures import (
     bsdf_fits_figure,
     budget_figure,
@@ -52,6 +59,12 @@ KNOWN_SECTIONS = {
     "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
              "fallback_flux_W"},
 }
+
+#: Upper bounds of the recipe's sizes (checked before anything is computed).
+MAX_RAYS = 100_000_000
+MAX_STUDY_POINTS = 50
+MAX_ITERATIONS = 1000
+EXPORT_SUFFIX = {"tracepro": "tracepro.txt", "zemax": "zemax.bsdf", "asap": "asap.txt"}
 
 
 @dataclass(frozen=True)
@@ -151,15 +164,36 @@ def _typed(table: dict, key: str, kind: type | tuple, path: Path, dotted: str, d
     return value
 
 
+def _ranged(value: Any, path: Path, dotted: str, lo: float, hi: float, lo_open: bool = False,
+            hi_open: bool = False) -> Any:
+    """``value`` if finite and inside the interval, else a ValidationError naming the key and the range."""
+    ok = (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+          and (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi))
+    if not ok:
+        rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        raise ValidationError("recipe value out of range", file=path, field=dotted, expected=f"a number in {rng}",
+                              got=value)
+    return value
+
+
+def _read_toml(path: Path, what: str) -> dict:
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"{what} is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
+                          file=path, expected="a UTF-8 TOML file") from None
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} ({exc.strerror})", file=path) from None
+
+
 def load_recipe(path: str | Path) -> Recipe:
-    """Parse and validate a recipe TOML file."""
+    """Parse and validate a recipe TOML file (types and ranges of every option, and its trace scene)."""
     path = Path(path)
     if not path.is_file():
         raise InputError("recipe not found", file=path, expected="a TOML recipe file")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except tomllib.TOMLDecodeError as exc:
-        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+    data = _read_toml(path, "recipe")
     _check_keys(data, path)
     head = data.get("recipe")
     if head is None:
@@ -211,9 +245,69 @@ def load_recipe(path: str | Path) -> Recipe:
         led_fwhm_nm=float(_typed(ft, "led_fwhm_nm", (int, float), path, "fits.led_fwhm_nm", 22.9)),
         fallback_flux_W=(float(fallback[0]), float(fallback[1])),
     )
-    return Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
-                  description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
-                  reductions=reductions, exports=exports, trace=trace, fits=fits, raw=data)
+    recipe = Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
+                    description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
+                    reductions=reductions, exports=exports, trace=trace, fits=fits, raw=data)
+    _check_ranges(recipe)
+    if not measurement.is_dir():
+        raise InputError("measurement folder not found", file=path, field="recipe.measurement",
+                         expected="an existing raw measurement folder", got=str(measurement))
+    if trace.scene is not None:
+        _scene_with_plate(trace.scene, None)  # the scene's own errors now, not after minutes of computing
+    return recipe
+
+
+def _check_ranges(r: Recipe) -> None:
+    """Every numeric option of the recipe in its physical range, and every size bounded."""
+    p = r.path
+    _ranged(r.report.figure_wavelength_nm, p, "report.figure_wavelength_nm", 100.0, 5000.0)
+    red = r.reductions
+    _ranged(red.budget_incidence_deg, p, "reductions.budget_incidence_deg", 0.0, 90.0, hi_open=True)
+    _ranged(red.eta_mc, p, "reductions.eta_mc", 0.0, 1.0, lo_open=True)
+    _ranged(red.iterations, p, "reductions.iterations", 1, MAX_ITERATIONS)
+    _ranged(r.exports.tolerance, p, "exports.tolerance", 0.0, 1.0, lo_open=True)
+    for key in ("interactions", "sides", "formats"):
+        if not getattr(r.exports, key):
+            raise ValidationError("empty list", file=p, field=f"exports.{key}", expected="at least one name", got=[])
+    t = r.trace
+    if t.scene is not None:
+        _ranged(t.rays, p, "trace.rays", 1, MAX_RAYS)
+        _ranged(t.seed, p, "trace.seed", 0, 2**63 - 1)
+        for key, lo, hi, lo_open in (("reflectance", 0.0, 1.0, False), ("specular_fraction", 0.0, 1.0, False),
+                                     ("height_mm", 0.0, 10_000.0, True), ("led_fwhm_deg", 0.0, 180.0, True)):
+            values = getattr(t, key)
+            if len(values) > MAX_STUDY_POINTS:
+                raise ValidationError("too many study points", file=p, field=f"trace.{key}",
+                                      expected=f"at most {MAX_STUDY_POINTS} values", got=len(values))
+            for k, v in enumerate(values):
+                _ranged(v, p, f"trace.{key}[{k}]", lo, hi, lo_open=lo_open)
+    f = r.fits
+    if f.bsdf_model not in BSDF_MODELS:
+        raise ValidationError("unknown BSDF model", file=p, field="fits.bsdf_model",
+                              expected=" | ".join(BSDF_MODELS), got=f.bsdf_model)
+    if f.emission_model not in SPECTRUM_MODELS:
+        raise ValidationError("unknown emission model", file=p, field="fits.emission_model",
+                              expected=" | ".join(SPECTRUM_MODELS), got=f.emission_model)
+    _ranged(f.emission_incidence_deg, p, "fits.emission_incidence_deg", 0.0, 90.0, hi_open=True)
+    _ranged(f.led_peak_nm, p, "fits.led_peak_nm", 380.0, 780.0)
+    _ranged(f.led_fwhm_nm, p, "fits.led_fwhm_nm", 0.0, 400.0, lo_open=True)
+    for k, v in enumerate(f.fallback_flux_W):
+        _ranged(v, p, f"fits.fallback_flux_W[{k}]", 0.0, 1e6)
+    if sum(f.fallback_flux_W) <= 0:
+        raise ValidationError("no light", file=p, field="fits.fallback_flux_W", expected="a positive total flux",
+                              got=list(f.fallback_flux_W))
+
+
+def expected_outputs(recipe: Recipe) -> list[str]:
+    """The files a run of ``recipe`` writes (relative to the output folder), known before computing."""
+    e = recipe.exports
+    names = ["scan.nc", "inplane_bsdf.png", "tis.nc", "interaction_tables.json", "module_budget.png"]
+    names += [f"exports/{i}_{s}.{EXPORT_SUFFIX[f]}" for i in e.interactions for s in e.sides for f in e.formats]
+    names += ["bsdf_fits.json", "bsdf_fits.png"]
+    if recipe.trace.scene is not None:
+        names += ["trace.json", "trace_device.nc", "trace_studies.png"]
+    names += ["module_spectrum.csv", "module_spectrum.png", "module_spectrum.json"]
+    return names + ["summary.json"]
 
 
 def _numbers(table: dict, key: str, path: Path, section: str = "trace") -> list[float]:
@@ -254,6 +348,12 @@ def stage_ingest(state: RunState) -> None:
     state.scan = calibrate(read_scan(state.recipe.measurement))
     scan = state.scan
     state.summary["scan"] = describe(scan)
+    below, negative = int(scan.attrs.get("below_dark_pixels", 0)), int(scan.attrs.get("negative_raw_counts", 0))
+    if below or negative:  # plausibility: counted in the dataset and the summary, and said out loud
+        state.summary.setdefault("report_lines", []).append(
+            f"WARNING: {below} of {scan['bsdf'].size} pixels lie more than {BELOW_DARK_SIGMA:g} standard "
+            f"uncertainties below the dark level (dark frames above the signal?) and {negative} raw counts are "
+            "negative; see the below_dark flag in scan.nc")
     state.outputs["scan.nc"] = lambda p, force: netcdf.save(scan, p, force)
 
 
@@ -318,7 +418,7 @@ def stage_exports(state: RunState) -> None:
     scan = state.scan
     checks: list[dict] = []
     state.summary["export_checks"] = checks
-    suffix = {"tracepro": "tracepro.txt", "zemax": "zemax.bsdf", "asap": "asap.txt"}
+    suffix = EXPORT_SUFFIX
 
     def writer(inter: str, side: str, fmt: str):
         def write(path: Path, force: bool) -> None:
@@ -400,12 +500,14 @@ def stage_trace(state: RunState) -> None:
 
 
 def _scene_with_plate(path: Path, plate):
-    """The scene at ``path`` with its phosphor plate given (instead of recomputing it from ``from = ...``)."""
-    import tomllib as _toml
+    """The scene at ``path`` with its phosphor plate given (instead of recomputing it from ``from = ...``).
 
-
-    data = _toml.loads(path.read_text(encoding="utf-8"))
+    With ``plate=None`` this only validates the scene (before a run computes anything).
+    """
+    data = _read_toml(path, "trace scene")
     top = data.get("top", {})
+    if not isinstance(top, dict):
+        top = {}
     key = "from" if "from" in top else "plate" if "plate" in top else None
     if top.get("kind") != "phosphor" or key is None:
         raise InputError("trace scene must have a phosphor top taken from a recipe or plate file", file=path,
@@ -554,6 +656,22 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary."""
     recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
     out_dir = Path(out_dir)
+    inputs = (recipe.path, recipe.measurement, recipe.trace.scene)
+    # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
+    with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe)) as out:
+        return _run_stages(recipe, out, log)
+
+
+def _output_estimate(recipe: Recipe) -> int:
+    """A conservative estimate of a run's output size (outputs are ~17x the raw measurement; 10x is asked)."""
+    size = 0
+    for path in recipe.measurement.rglob("*"):
+        with contextlib.suppress(OSError):
+            size += path.stat().st_size if path.is_file() else 0
+    return 10 * size
+
+
+def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None]) -> dict:
     state = RunState(recipe=recipe, log=log)
     timings = {}
     for name, stage in STAGES:
@@ -562,10 +680,8 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         stage(state)
         timings[name] = round(time.perf_counter() - start, 3)
     names = list(state.outputs) + ["summary.json"]
-    for name in names:
-        atomic.check_writable(out_dir / name, force)
     for name, writer in state.outputs.items():
-        writer(out_dir / name, force)
+        writer(out.path(name), True)  # into the staging folder; moved into place when the set is complete
     checks = state.summary.get("export_checks")
     if checks:
         worst = max(checks, key=lambda c: c["relative_difference"])
@@ -576,5 +692,5 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     summary = {"recipe": recipe.name, "recipe_file": str(recipe.path), "measurement": str(recipe.measurement),
                "outputs": names, "stage_seconds": timings, **state.summary}
 
-    atomic.write_text(out_dir / "summary.json", dumps(summary), force)
+    write_text(out.path("summary.json"), dumps(summary), True)
     return summary

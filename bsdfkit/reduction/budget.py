@@ -126,6 +126,10 @@ def _matrices(table: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
     return back, forward
 
 
+#: Most plate interactions of an iterative budget (the series has converged long before).
+MAX_ITERATIONS = 10_000
+
+
 def module_budget(table: dict[str, float], eta_mc: float, iterations: int = 7) -> ModuleBudget:
     """The iterative module budget (§5, Figs. 9-10 of the power-budget paper) for an interaction table in percent.
 
@@ -134,8 +138,9 @@ def module_budget(table: dict[str, float], eta_mc: float, iterations: int = 7) -
     """
     if not (0.0 <= eta_mc <= 1.0):
         raise InputError("mixing-chamber efficiency out of range", field="eta_mc", expected="0 ≤ η_MC ≤ 1", got=eta_mc)
-    if iterations < 1:
-        raise InputError("need at least one iteration", field="iterations", expected="an integer ≥ 1", got=iterations)
+    if not 1 <= iterations <= MAX_ITERATIONS:
+        raise InputError("number of plate interactions out of range", field="iterations",
+                         expected=f"an integer in [1, {MAX_ITERATIONS}] (limit MAX_ITERATIONS)", got=iterations)
     table = complete_table(table)
     for k in TIS_KEYS:
         if table[k] < 0:
@@ -192,5 +197,8 @@ def table_from_json(data: dict, source: str = "<table>") -> dict[str, dict[str, 
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                 raise InputError("interaction table value not a finite number", file=source, field=f"{part}.{k}",
                                  expected="a number in percent", got=v)
+            if not 0.0 <= v <= 100.0:
+                raise InputError("interaction table value out of range (percent of the incident light)",
+                                 file=source, field=f"{part}.{k}", expected="a percentage in [0, 100]", got=v)
         out[part] = {k: float(table[k]) for k in TIS_KEYS}
     return out

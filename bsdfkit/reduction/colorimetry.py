@@ -76,7 +76,43 @@ def _checked(sd):
                          got=float(values[bad][0]))
     if not np.any(values > 0):
         raise NumericalError(f"{sd.name}: spectrum has no positive value; colorimetry is undefined")
+    _plausible(sd.name, wl, values)
     return wl, values
+
+
+#: Plausible wavelengths of a spectrum in nm; a grid in µm or m falls below, one in Å above.
+WAVELENGTH_RANGE_NM: tuple[float, float] = (100.0, 20000.0)
+#: Fewest samples inside the CMF range (360-830 nm) for a colorimetric result.
+MIN_VISIBLE_SAMPLES = 5
+#: Negative spectral power beyond this fraction of the peak (or of the positive integral) is not noise.
+NEGATIVE_TOLERANCE = 0.05
+
+
+def _plausible(name, wl: np.ndarray, values: np.ndarray) -> None:
+    """A spectral *power*: wavelengths in nm, enough visible samples, no negative power beyond the noise."""
+    lo, hi = WAVELENGTH_RANGE_NM
+    if wl.min() < lo or wl.max() > hi:
+        unit = "µm or m" if wl.max() < lo else "Å or pm" if wl.min() > hi else "another unit"
+        raise ValidationError(f"wavelengths are not in nm (they look like {unit})", field=name,
+                              expected=f"wavelengths in nm within [{lo:g}, {hi:g}]",
+                              got=f"{wl.min():g}..{wl.max():g}")
+    visible = int(np.count_nonzero((wl >= 360.0) & (wl <= 830.0)))
+    if visible < MIN_VISIBLE_SAMPLES:
+        raise ValidationError("too few samples in the visible range for colorimetry", field=name,
+                              expected=f"at least {MIN_VISIBLE_SAMPLES} wavelengths in 360-830 nm",
+                              got=f"{visible} (spectrum {wl.min():g}..{wl.max():g} nm, {wl.size} samples)")
+    peak = float(values.max())
+    negative = values < 0
+    if negative.any():
+        weights = np.gradient(wl) if wl.size > 1 else np.ones(1)
+        neg_area = float(-(values[negative] * weights[negative]).sum())
+        pos_area = float((values[~negative] * weights[~negative]).sum())
+        if float(-values.min()) > NEGATIVE_TOLERANCE * peak or neg_area > NEGATIVE_TOLERANCE * pos_area:
+            k = int(np.argmin(values))
+            raise ValidationError("negative spectral power beyond the noise (a power spectrum is required)",
+                                  field=f"{name} at {wl[k]:g} nm",
+                                  expected=f"values ≥ −{NEGATIVE_TOLERANCE:g} × peak ({peak:.3g})",
+                                  got=float(values[k]))
 
 
 def _uniform_sd(sd):

@@ -33,8 +33,11 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.toml_write import dumps as toml_dumps
 from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
+from bsdfkit.measurement.manifest import MAX_WAVELENGTHS
 from bsdfkit.simulation import truth as synthetic
 
+#: Most detector positions per incidence and side of a simulated scan plan.
+MAX_POSITIONS_PER_ARC = 100_000
 EXPOSURE_LADDER_S: tuple[float, ...] = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0)
 
 
@@ -50,6 +53,20 @@ class Spectrometer:
     bias_counts: float = 1000.0
     dark_rate_counts_per_s: float = 20.0
     full_scale_counts: int = 65535
+
+    def __post_init__(self) -> None:
+        lo, hi, step = self.wavelength_min_nm, self.wavelength_max_nm, self.wavelength_step_nm
+        if not (np.isfinite([lo, hi, step]).all() and step > 0 and hi > lo):
+            raise ValidationError("spectrometer grid must be finite and increasing", field="wavelength_step_nm",
+                                  expected="min < max and step > 0", got=(lo, hi, step))
+        n = (hi - lo) / step + 1
+        if n > MAX_WAVELENGTHS:  # bounded before anything is allocated
+            raise ValidationError("spectrometer grid too fine", field="wavelength_step_nm",
+                                  expected=f"at most {MAX_WAVELENGTHS} wavelengths (limit MAX_WAVELENGTHS)",
+                                  got=f"{step:g} nm ({n:.3g} wavelengths)")
+        if not (self.gain_e_per_count > 0 and self.full_scale_counts > 0):
+            raise ValidationError("gain and full scale must be positive", field="gain_e_per_count/full_scale_counts",
+                                  got=(self.gain_e_per_count, self.full_scale_counts))
 
     @property
     def wavelength(self) -> NDArray[np.float64]:
@@ -101,6 +118,17 @@ class ScanPlan:
     retro_block_deg: float = 3.0
     fine_step_deg: float = 1.0
     fine_halfwidth_deg: float = 10.0
+
+    def __post_init__(self) -> None:
+        if self.fine_halfwidth_deg > 0 and not (np.isfinite(self.fine_step_deg) and self.fine_step_deg > 0):
+            raise ValidationError("fine scan step must be positive", field="fine_step_deg", expected="> 0 deg",
+                                  got=self.fine_step_deg)
+        n = (2 * self.fine_halfwidth_deg / self.fine_step_deg if self.fine_halfwidth_deg > 0 else 0) + len(
+            self.in_plane_deg) + len(self.perpendicular_deg)
+        if not n <= MAX_POSITIONS_PER_ARC:  # bounded before anything is allocated
+            raise ValidationError("too many detector positions per incidence", field="fine_step_deg",
+                                  expected=f"at most {MAX_POSITIONS_PER_ARC} (limit MAX_POSITIONS_PER_ARC)",
+                                  got=f"{n:.3g}")
 
     def positions(self, theta_i_deg: float, side: str) -> list[tuple[float, float, str]]:
         """(θs, φs, arc) in degrees in the sample frame for one incidence and side."""
@@ -324,32 +352,38 @@ def _wl_header(lam: NDArray[np.float64]) -> list[str]:
     return [f"{x:.1f}" if abs(x * 10 - round(x * 10)) < 1e-9 else repr(float(x)) for x in lam]
 
 
+def raw_export_names(export: RawExport) -> list[str]:
+    """The files of a raw export folder, manifest last."""
+    return ([f"scans/{n}.csv.gz" for n in export.scans] + [f"reference/{n}.csv.gz" for n in export.references]
+            + ["dark.csv.gz", "responsivity.csv", "manifest.toml"])
+
+
 def write_raw_export(export: RawExport, folder: str | Path, force: bool = False) -> Path:
-    """Write ``export`` as manifest.toml + gzip CSV files (docs/raw-format.md); atomic per file."""
+    """Write ``export`` as manifest.toml + gzip CSV files (docs/raw-format.md) as one atomic output set."""
 
     folder = Path(folder)
-    atomic.check_writable(folder / "manifest.toml", force)
     wl = _wl_header(export.wavelength)
-    for name, scan in export.scans.items():
-        c = scan["columns"]
-        rows = [[f"{c['theta_i_deg'][k]:.6g}", f"{c['phi_i_deg'][k]:.6g}", f"{c['theta_s_deg'][k]:.6f}",
-                 f"{c['phi_s_deg'][k]:.6f}", c["side"][k], c["arc"][k], f"{c['exposure_s'][k]:g}"]
-                + scan["counts"][k].tolist() for k in range(len(c["side"]))]
-        atomic.write_bytes(folder / "scans" / f"{name}.csv.gz",
-                           _csv_gz(["theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc",
-                                    "exposure_s"] + wl, rows),
-                           force)
-    for name, ref in export.references.items():
-        rows = [[k, f"{ref['exposure_s']:g}"] + ref["counts"][k].tolist() for k in range(ref["counts"].shape[0])]
-        atomic.write_bytes(folder / "reference" / f"{name}.csv.gz", _csv_gz(["frame", "exposure_s"] + wl, rows), force)
-    d = export.dark
-    rows = [[int(d["frame"][k]), f"{d['exposure_s'][k]:g}"] + d["counts"][k].tolist()
-            for k in range(d["counts"].shape[0])]
-    atomic.write_bytes(folder / "dark.csv.gz", _csv_gz(["frame", "exposure_s"] + wl, rows), force)
-    resp_rows = "wavelength_nm,relative_responsivity\n" + "".join(
-        f"{x:.1f},{r:.8f}\n" for x, r in zip(export.wavelength, export.responsivity))
-    atomic.write_text(folder / "responsivity.csv", resp_rows, force)
-    atomic.write_text(folder / "manifest.toml", toml_dumps(export.manifest), force)
+    with atomic.OutputSet(folder, raw_export_names(export), force) as out:
+        for name, scan in export.scans.items():
+            c = scan["columns"]
+            rows = [[f"{c['theta_i_deg'][k]:.6g}", f"{c['phi_i_deg'][k]:.6g}", f"{c['theta_s_deg'][k]:.6f}",
+                     f"{c['phi_s_deg'][k]:.6f}", c["side"][k], c["arc"][k], f"{c['exposure_s'][k]:g}"]
+                    + scan["counts"][k].tolist() for k in range(len(c["side"]))]
+            atomic.write_bytes(out.path(f"scans/{name}.csv.gz"),
+                               _csv_gz(["theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "arc",
+                                        "exposure_s"] + wl, rows), True)
+        for name, ref in export.references.items():
+            rows = [[k, f"{ref['exposure_s']:g}"] + ref["counts"][k].tolist() for k in range(ref["counts"].shape[0])]
+            atomic.write_bytes(out.path(f"reference/{name}.csv.gz"), _csv_gz(["frame", "exposure_s"] + wl, rows),
+                               True)
+        d = export.dark
+        rows = [[int(d["frame"][k]), f"{d['exposure_s'][k]:g}"] + d["counts"][k].tolist()
+                for k in range(d["counts"].shape[0])]
+        atomic.write_bytes(out.path("dark.csv.gz"), _csv_gz(["frame", "exposure_s"] + wl, rows), True)
+        resp_rows = "wavelength_nm,relative_responsivity\n" + "".join(
+            f"{x:.1f},{r:.8f}\n" for x, r in zip(export.wavelength, export.responsivity))
+        atomic.write_text(out.path("responsivity.csv"), resp_rows, True)
+        atomic.write_text(out.path("manifest.toml"), toml_dumps(export.manifest), True)
     return folder
 
 

@@ -600,7 +600,7 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         raise ValidationError("unknown target format", field="--to", expected=" | ".join(FORMATS), got=to)
     if side is not None and side not in ("reflection", "transmission", "both"):
         raise ValidationError("unknown side", field="--side", expected="reflection | transmission | both", got=side)
-    atomic.check_writable(path, force)
+    atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
     settings = settings or ExportSettings()
     notes: list[str] = []
     tis_original: dict[str, list[float]] = {}

@@ -109,6 +109,9 @@ class TraceProOptions:
         if not (np.isfinite(self.wavelength_um) and self.wavelength_um > 0):
             raise ValidationError("wavelength must be positive", field="wavelength_um",
                                   expected="> 0 micrometres", got=self.wavelength_um)
+        if not (np.isfinite(self.zero_azimuth_deg) and -360.0 <= self.zero_azimuth_deg <= 360.0):
+            raise ValidationError("azimuth of TracePro's ScatterAzimuth 0 out of range", field="zero_azimuth_deg",
+                                  expected="a finite angle in [-360, 360] deg", got=self.zero_azimuth_deg)
 
 
 @dataclass(frozen=True, eq=False)
