@@ -5,6 +5,7 @@ import argparse
 import sys
 
 from bsdfkit.cli._common import emit_json
+from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM
 from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.io.spectrum_file import read_spectrum
 from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
@@ -33,6 +34,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json({"file": str(args.file), "x": c.x, "y": c.y, "cct_K": c.cct_K, "duv": c.duv,
                    "luminous_efficacy_lm_per_W": c.luminous_efficacy_lm_per_W, "ybr": c.ybr,
+                   "ybr_bands_nm": {"yellow": list(COLORIMETRY_YELLOW_BAND_NM), "blue": list(COLORIMETRY_BLUE_BAND_NM)},
                    "cct_meaningful": c.cct_meaningful})
         return 0
     print(f"{args.file}:")

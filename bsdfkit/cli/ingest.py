@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    atomic.check_writable(args.output, args.force)
+    atomic.check_writable(args.output, args.force, inputs=[args.path])
     ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
                 wavelength=args.wavelength, incidence=args.incidence, phi_i=args.phi_i, zeros=args.zeros,
                 sample=args.sample)

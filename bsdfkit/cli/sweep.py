@@ -40,7 +40,9 @@ def run(args: argparse.Namespace) -> int:
     if not params:
         raise InputError("nothing to sweep", file=args.scene, field="sweep.params",
                          expected="--param KEYS=VALUES or a [sweep] params list in the scene")
-    rays = args.rays or (defaults.rays if defaults and defaults.rays else 200_000)
+    rays = args.rays if args.rays is not None else (defaults.rays if defaults and defaults.rays else 200_000)
+    if rays < 1:
+        raise InputError("rays per point out of range", field="--rays", expected=">= 1", got=rays)
     seed = args.seed if args.seed is not None else (defaults.seed if defaults and defaults.seed is not None else 0)
     if args.workers is not None and args.scheduler:
         raise InputError("--workers and --scheduler exclude each other", field="--workers",

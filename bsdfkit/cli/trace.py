@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
     if args.output:
-        check_writable(args.output, args.force)
+        check_writable(args.output, args.force, inputs=[args.scene])
     bar = Progress(args.rays, label="trace")
     try:
         result = trace(scene, args.rays, args.seed, chunk=args.chunk, lanes=args.lanes,

@@ -23,6 +23,12 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.conventions import (
+    COLORIMETRY_BLUE_BAND_NM,
+    COLORIMETRY_YELLOW_BAND_NM,
+    RAY_YBR_DEFINITION,
+    band_label,
+)
 from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
 from bsdfkit.core.records import incidences
 from bsdfkit.fit.least_squares import fit_bsdf
@@ -34,6 +40,7 @@ from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
+from bsdfkit.pipeline.report import write_report
 from bsdfkit.plotting.figures import (
     bsdf_fits_figure,
     budget_figure,
@@ -307,7 +314,7 @@ def expected_outputs(recipe: Recipe) -> list[str]:
     if recipe.trace.scene is not None:
         names += ["trace.json", "trace_device.nc", "trace_studies.png"]
     names += ["module_spectrum.csv", "module_spectrum.png", "module_spectrum.json"]
-    return names + ["summary.json"]
+    return names + ["summary.json", "report.html"]
 
 
 def _numbers(table: dict, key: str, path: Path, section: str = "trace") -> list[float]:
@@ -484,6 +491,7 @@ def stage_trace(state: RunState) -> None:
                                                                          "ledger_error", "rays", "elapsed_s",
                                                                          "interactions_per_s")},
                               "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
+                              "YBR_definition": RAY_YBR_DEFINITION,
                               "trends": results["trends"]}
     state.outputs["trace.json"] = lambda p, force: write_text(p, dumps(results), force)
     device_ds = device.to_dataset()
@@ -492,7 +500,8 @@ def stage_trace(state: RunState) -> None:
     state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
     lines = [f"module trace ({opts.rays} rays, plate from this run): "
              f"LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
-             f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f}, non-uniformity {device.non_uniformity:.3f}, "
+             f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f} (yellow / blue extracted ray power), "
+             f"non-uniformity {device.non_uniformity:.3f}, "
              f"ledger error {device.ledger_error:.1e}"]
     lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({t['detail']})"
               for name, t in results["trends"].items()]
@@ -626,7 +635,9 @@ def stage_spectrum(state: RunState) -> None:
     result = {"flux_W": {"blue": flux[0], "yellow": flux[1]}, "flux_source": source,
               "led_spectrum": {"peak_nm": opts.led_peak_nm, "fwhm_nm": opts.led_fwhm_nm},
               "colour": {"x": colour_.x, "y": colour_.y, "cct_K": colour_.cct_K, "duv": colour_.duv,
-                         "luminous_efficacy_lm_per_W": colour_.luminous_efficacy_lm_per_W, "ybr": colour_.ybr}}
+                         "luminous_efficacy_lm_per_W": colour_.luminous_efficacy_lm_per_W, "ybr": colour_.ybr,
+                                     "ybr_bands_nm": {"yellow": list(COLORIMETRY_YELLOW_BAND_NM),
+                                                      "blue": list(COLORIMETRY_BLUE_BAND_NM)}}}
     state.summary["module_spectrum"] = result
     csv = "wavelength_nm,spectral_flux_W_per_nm\n" + "".join(f"{w:.1f},{v:.8e}\n"
                                                              for w, v in zip(sd.wavelengths, sd.values))
@@ -637,7 +648,8 @@ def stage_spectrum(state: RunState) -> None:
     c = result["colour"]
     state.summary.setdefault("report_lines", []).append(
         f"module spectrum from {source}: x {c['x']:.4f}, y {c['y']:.4f}, CCT {c['cct_K']:.0f} K, Duv {c['duv']:.4f}, "
-        f"{c['luminous_efficacy_lm_per_W']:.0f} lm/W, YBR {c['ybr']:.2f}")
+        f"{c['luminous_efficacy_lm_per_W']:.0f} lm/W, spectrum YBR {c['ybr']:.2f} "
+        f"({band_label(COLORIMETRY_YELLOW_BAND_NM)} / {band_label(COLORIMETRY_BLUE_BAND_NM)})")
 
 
 STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
@@ -679,7 +691,7 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None]) -> d
         log(f"stage {name} ...")
         stage(state)
         timings[name] = round(time.perf_counter() - start, 3)
-    names = list(state.outputs) + ["summary.json"]
+    names = list(state.outputs) + ["summary.json", "report.html"]
     for name, writer in state.outputs.items():
         writer(out.path(name), True)  # into the staging folder; moved into place when the set is complete
     checks = state.summary.get("export_checks")
@@ -693,4 +705,6 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None]) -> d
                "outputs": names, "stage_seconds": timings, **state.summary}
 
     write_text(out.path("summary.json"), dumps(summary), True)
+    log("stage html report ...")
+    write_report(out.path("summary.json").parent, force=True)  # reads the staged outputs; part of the same set
     return summary

@@ -446,7 +446,32 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
             raise InputError("wrong type", file=file, field="sweep.params",
                              expected="a list of strings like 'wall.reflectance=0.80:0.98:5'", got=params)
         sweep = SweepDefaults(tuple(params), r.integer("rays", None, lo=1), r.integer("seed", None, lo=0))
+    _check_sizes(cavity, leds, trace, tallies, file)
     return Scene(cavity, wall, base, leds, top, trace, tallies, sweep, Path(file) if file is not None else None)
+
+
+#: Largest irradiance-map side (bins): the map is an int64 array of side², and bin indices must stay in int32.
+MAX_MAP_BINS = 2048
+#: float32 positions keep ~7 digits: the cavity must stay below this size [mm] and its smallest feature (the LED
+#: emitter) above this fraction of it, or hits near the rim and the emitters are misplaced.
+FLOAT32_MAX_EXTENT_MM = 1e5
+FLOAT32_MIN_FEATURE_RATIO = 1e-4
+
+
+def _check_sizes(cavity: Cavity, leds: Leds, trace: TraceOptions, tallies: Tallies, file) -> None:
+    """Bounds that protect memory and accuracy, checked before anything is allocated or traced."""
+    if tallies.map_bins > MAX_MAP_BINS:
+        raise InputError("irradiance map too fine", file=file, field="tallies.map_bins",
+                         expected=f"<= {MAX_MAP_BINS}", got=tallies.map_bins)
+    if trace.precision == "float32":
+        extent = max(cavity.radius_mm, cavity.height_mm, abs(leds.pitch_mm) * max(leds.grid, 1))
+        feature = leds.emitter_radius_mm if leds.ray_file is None else extent
+        if extent > FLOAT32_MAX_EXTENT_MM or feature < FLOAT32_MIN_FEATURE_RATIO * extent:
+            raise InputError("float32 geometry would lose accuracy at this scene's size", file=file,
+                             field="trace.precision",
+                             expected=f'"float64" for cavities above {FLOAT32_MAX_EXTENT_MM:g} mm or emitters '
+                                      f"below {FLOAT32_MIN_FEATURE_RATIO:g} of the cavity size",
+                             got=f"float32 with extent {extent:g} mm, emitter {feature:g} mm")
 
 
 def plate_from_recipe(recipe: Path, scene_file: str | Path | None) -> PhosphorPlate:
@@ -470,6 +495,9 @@ def load_scene(path: str | Path) -> Scene:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError("scene file not found", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise InputError("scene file is not UTF-8 text", file=path, expected="a TOML text file",
+                         got=f"byte 0x{exc.object[exc.start]:02x} at offset {exc.start}") from None
     except OSError as exc:
         raise InputError(f"cannot read scene file ({exc.strerror})", file=path) from None
     return loads_scene(text, path)

@@ -43,8 +43,9 @@ def trace(
                               got=rays)
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2 ** 63:
         raise ValidationError("seed out of range", field="seed", expected="an integer in [0, 2**63)", got=seed)
-    chunk = int(chunk or scene.trace.chunk)
-    lanes = int(lanes or scene.trace.lanes)
+    # None means the scene's value; 0 or a negative number is an error, never silently the default
+    chunk = int(scene.trace.chunk if chunk is None else chunk)
+    lanes = int(scene.trace.lanes if lanes is None else lanes)
     if chunk < 1 or lanes < 1:
         raise ValidationError("chunk and lanes must be positive", field="chunk", expected=">= 1",
                               got=(chunk, lanes))
