@@ -20,6 +20,7 @@ def test_every_api_name_is_at_the_top_level():
         bsdfkit.no_such_name  # noqa: B018
 
 
+@pytest.mark.slow
 def test_the_readme_one_liner_works_as_written():
     code = ("import bsdfkit, xarray as xr; ds = bsdfkit.ingest('measurements/cl830-synthetic'); "
             "print(ds.bsdf.tis())")
@@ -28,6 +29,7 @@ def test_the_readme_one_liner_works_as_written():
     assert "tis" in done.stdout and "interaction" in done.stdout
 
 
+@pytest.mark.slow
 def test_scan_to_table_through_the_api(tmp_path, bundled_scan):
     ds = bsdfkit.ingest(BUNDLED)
     assert float(np.nanmax(np.abs(ds["bsdf"].values - bundled_scan["bsdf"].values))) == 0.0

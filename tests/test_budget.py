@@ -90,6 +90,7 @@ def _cli(*args):
                           timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_tis_and_budget_json(tmp_path):
     proc = _cli("tis", BUNDLED, "--incidence", 45, "--json")
     assert proc.returncode == 0, proc.stderr

@@ -67,6 +67,7 @@ def test_reflectance_standard_to_zemax_at_a_wavelength(tmp_path):
     assert refused.returncode == 2 and "percent" in refused.stderr and "Traceback" not in refused.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("verb", [["tis"], ["info"]])
 def test_other_verbs_read_measured_tables(scan, verb):
     done = cli(*verb, scan)

@@ -12,6 +12,7 @@ def _bsdfkit(*args, **kw):
                           timeout=300, **kw)
 
 
+@pytest.mark.slow
 def test_ingest_then_info_json(tmp_path):
     out = tmp_path / "scan.nc"
     proc = _bsdfkit("ingest", BUNDLED, "-o", out)

@@ -70,6 +70,7 @@ def test_cli_convert_radiant_and_force(tmp_path, capsys):
     assert err.count("\n") == 1 and "--force" in err
 
 
+@pytest.mark.slow
 def test_tracepro_round_trip_reads_back_as_data(tmp_path):
     tp = tmp_path / "r.tracepro.txt"
     convert(RADIANT, "tracepro", tp)

@@ -160,6 +160,7 @@ def test_read_errors_are_one_line(tmp_path, capsys):
     assert code == 2 and "cannot read file" in err
 
 
+@pytest.mark.slow
 def test_cli_subprocess_has_no_traceback(tmp_path):
     bad = tmp_path / "bad.bsdf"
     bad.write_text(REAL.read_text().replace("TIS 0.1321704", "TIS zero"))

@@ -280,6 +280,7 @@ def test_killed_output_set_leaves_nothing_and_rerun_needs_no_force(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_sigterm_runs_cleanup(tmp_path):
     """`bsdfkit simulate` terminated while simulating: exit 130, no output folder, no staging folder."""
     out = tmp_path / "sim"

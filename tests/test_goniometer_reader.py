@@ -143,6 +143,7 @@ def test_valid_export_reads(tiny_export):
 
 @pytest.mark.parametrize("case", [_missing_file, _unknown_side, _manifest_wrong_type, _nan_counts],
                          ids=["missing_file", "unknown_side", "manifest_wrong_type", "nan_counts"])
+@pytest.mark.slow
 def test_cli_ingest_reports_one_line(tiny_export, tmp_path, case):
     case(tiny_export)
     out = tmp_path / "scan.nc"

@@ -46,6 +46,7 @@ def test_killed_writer_leaves_old_file_or_none(tmp_path, existing):
         assert not target.exists()
 
 
+@pytest.mark.slow
 def test_killed_cli_export_leaves_nothing_behind(tmp_path):
     """A real verb: `bsdfkit ingest` killed while writing its netCDF."""
     out = tmp_path / "scan.nc"

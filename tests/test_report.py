@@ -235,6 +235,7 @@ def test_irradiance_maps_grid_of_a_sweep_shares_one_colour_bar():
     assert len([ax for ax in grid.axes if "W/m²" in ax.get_ylabel()]) == 3  # one colour bar per panel
 
 
+@pytest.mark.slow
 def test_report_renders_in_headless_chromium(built, tmp_path):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:

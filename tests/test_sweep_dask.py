@@ -23,6 +23,7 @@ def shared_jax_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
 
 
+@pytest.mark.slow
 def test_two_worker_sweep_equals_the_serial_sweep_bit_for_bit(tmp_path, shared_jax_cache):
     assert main(["sweep", str(EXAMPLE), *ARGS, "-o", str(tmp_path / "serial.nc")]) == 0
     assert main(["sweep", str(EXAMPLE), *ARGS, "--workers", "2", "-o", str(tmp_path / "dask.nc")]) == 0
@@ -33,6 +34,7 @@ def test_two_worker_sweep_equals_the_serial_sweep_bit_for_bit(tmp_path, shared_j
         assert a.attrs == b.attrs
 
 
+@pytest.mark.slow
 def test_a_failed_point_is_reported_not_dropped(tmp_path, shared_jax_cache):
     scene = load_scene(EXAMPLE)
     out = tmp_path / "partial.nc"

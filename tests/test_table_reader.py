@@ -302,6 +302,7 @@ def test_cli_errors_exit_2_one_line(tmp_path, capsys, name):
     assert not (tmp_path / "out.nc").exists()
 
 
+@pytest.mark.slow
 def test_cli_error_in_a_subprocess_has_no_traceback(tmp_path):
     path = write(tmp_path / "bad.csv", [GOOD_HEADER, "10,5,0.1,0.2", "10,10,abc,0.2"])
     done = subprocess.run([sys.executable, "-m", "bsdfkit", "ingest", str(path), "--quantity", "brdf", "-o",

@@ -11,6 +11,7 @@ from dataclasses import replace
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from conftest import ROOT
 from jax.extend.random import threefry_2x32
 from test_trace_kernel import TABLE2, scene
@@ -58,6 +59,7 @@ def test_materialise_is_the_identity():
     assert np.signbit(np.asarray(out[1])[0])  # bit patterns are kept (−0.0 stays −0.0)
 
 
+@pytest.mark.slow
 def test_lanes_and_chunks_do_not_change_a_single_bit(tmp_path):
     s = plate_scene(tmp_path, spec=0.2)
     ref = full(trace(s, 12_000, seed=11, chunk=12_000, lanes=16384))
@@ -66,6 +68,7 @@ def test_lanes_and_chunks_do_not_change_a_single_bit(tmp_path):
     assert ref["ledger_error"] <= 1e-9
 
 
+@pytest.mark.slow
 def test_substeps_and_tail_levels_do_not_change_the_sums(tmp_path, monkeypatch):
     s = plate_scene(tmp_path)
     eff = scene_effects(s)
@@ -122,6 +125,7 @@ def test_compacted_lobe_sampler_equals_plain_rejection():
             assert np.array_equal(np.asarray(a), np.asarray(b)), share
 
 
+@pytest.mark.slow
 def test_specular_fraction_is_a_number_for_plate_scenes(tmp_path):
     diffuse, mirror = plate_scene(tmp_path, spec=0.0), plate_scene(tmp_path, spec=0.5)
     assert scene_effects(diffuse) == scene_effects(mirror)  # one compiled kernel for both
@@ -149,6 +153,7 @@ def _numbers(stdout: str) -> dict:
     return {k: d[k] for k in ("LER", "extracted", "absorbed", "ledger_error", "interactions")}
 
 
+@pytest.mark.slow
 def test_compile_cache_is_on_by_default_and_can_be_switched_off(tmp_path):
     args = ["trace", str(ROOT / "fitting" / "scenes" / "example.toml"), "--rays", "3000", "--json"]
     runs = {
@@ -164,6 +169,7 @@ def test_compile_cache_is_on_by_default_and_can_be_switched_off(tmp_path):
     assert _numbers(outs["default"][0]) == _numbers(outs["flag"][0]) == _numbers(outs["env"][0])
 
 
+@pytest.mark.slow
 def test_concurrent_processes_share_the_cache_without_corrupting_it(tmp_path):
     args = ["trace", str(ROOT / "fitting" / "scenes" / "example.toml"), "--rays", "3000", "--json"]
     env = {"XDG_CACHE_HOME": str(tmp_path / "x")}

@@ -73,6 +73,7 @@ def test_same_seed_same_result_for_chunks_1e4_and_1e5():
     assert c.LER != d.LER  # the seed matters
 
 
+@pytest.mark.slow
 def test_chunk_invariance_with_plate_map_and_budget(tmp_path):
     PhosphorPlate.constant(TABLE2).save(tmp_path / "p.json")
     s = scene(f'kind = "phosphor"\nplate = "{tmp_path / "p.json"}"', spec=0.3)
@@ -125,6 +126,7 @@ def test_effects_follow_the_scene(tmp_path):
     assert not (eff.plate_lobe or eff.plate_table or eff.plate_clamp)
 
 
+@pytest.mark.slow
 def test_forcing_the_full_kernel_changes_nothing_but_speed():
     s = scene()
     a = trace(s, 20_000, seed=5, chunk=20_000, lanes=512)
@@ -153,6 +155,7 @@ def test_table_sampler_matches_its_pdf():
     np.testing.assert_allclose(exact_cdf(s), u, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_lobe_sampler_is_a_gaussian_truncated_to_the_unit_disk():
     n = 40_000
     ray = jnp.arange(n, dtype=jnp.uint32)
