@@ -67,3 +67,22 @@ def test_spectrum_models_are_registered_once_with_the_fits_parameters():
         assert model.parameter_names == tuple(p.name for p in fitted), name
         assert tuple(u for _, u in model.parameters) == tuple(p.unit for p in fitted), name
         assert spectrum._FUNCTIONS[name] is model.function
+
+
+@pytest.mark.parametrize("b", [0.0, 0.1, 0.7, 0.99, 0.9998])
+@pytest.mark.parametrize("sigma", [0.002, 0.03, 0.6])
+def test_the_tracers_lobe_integral_is_the_registry_formula(b, sigma):
+    """Oracle: the same integral about the origin, ∫_0^1 2πr exp(−(r−b)²/2σ²) I0e(rb/σ²) dr, by adaptive quad."""
+    import scipy.integrate
+    import scipy.special
+
+    from bsdfkit.raytrace.plate import lobe_disk_integral
+
+    s2 = sigma * sigma
+
+    def integrand(r):
+        return 2 * math.pi * r * math.exp(-(r - b) ** 2 / (2 * s2)) * float(scipy.special.i0e(r * b / s2))
+
+    ref = scipy.integrate.quad(integrand, 0.0, 1.0, points=[min(max(b, 1e-12), 1 - 1e-12)], limit=200,
+                               epsabs=0.0, epsrel=1e-12)[0]
+    assert lobe_disk_integral(b, sigma) == pytest.approx(ref, rel=1e-11)

@@ -41,7 +41,9 @@ import numpy as np
 
 from bsdfkit.core.conventions import INTERACTIONS, SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.jaxconfig import x64
 from bsdfkit.io.atomic import write_text
+from bsdfkit.models.functions import tis_gaussian_lobe
 
 FORMAT = "bsdfkit-phosphor-plate"
 VERSION = 1
@@ -378,20 +380,11 @@ def _parse_plate(data: Mapping[str, Any], file, prefix: str) -> PhosphorPlate:
 def lobe_disk_integral(beta0: float, sigma: float) -> float:
     """∫_{|β|<1} exp(−|β−β0|²/(2σ²)) dβ, the lobe's scatter per unit A (truncated to the unit disk).
 
-    In polar coordinates about the origin, with r = |β| and b = |β0|,
-    ``L = ∫_0^1 2π r exp(−(r−b)²/(2σ²)) I0e(r b/σ²) dr`` (I0e = exponentially scaled Bessel I0).
+    The registry's clipped-lobe TIS (:func:`bsdfkit.models.functions.tis_gaussian_lobe`) at A = 1 and
+    sin θi = |β0|, with 4096 azimuth nodes so that lobes of σ ≳ 1e-3 stay exact up to grazing incidence.
     """
-    from scipy import integrate, special
-
-    b = abs(beta0)
-    s2 = sigma * sigma
-
-    def integrand(r: float) -> float:
-        return 2.0 * math.pi * r * math.exp(-(r - b) ** 2 / (2 * s2)) * float(special.i0e(r * b / s2))
-
-    pts = [min(max(b, 1e-12), 1.0 - 1e-12)]
-    value, _ = integrate.quad(integrand, 0.0, 1.0, points=pts, limit=200, epsabs=0.0, epsrel=1e-12)
-    return value
+    with x64():
+        return float(tis_gaussian_lobe(math.asin(min(abs(beta0), 1.0)), 1.0, sigma, n_psi=4096))
 
 
 def lobe_share(dist: AngularDistribution, theta_i_deg: float) -> float:
