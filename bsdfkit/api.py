@@ -120,8 +120,7 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
     ``ds`` may also be a profile (a dataset on ``record`` with ``bsdf``, ``bsdf_std`` and one side), which is
     fitted as it is. Models and parameters: :mod:`bsdfkit.models.registry`.
     """
-    prof = ds if "config" not in ds.dims and "configuration" not in ds.dims and "wavelength" not in ds.dims \
-        else interaction_profile(ds, interaction, side)
+    prof = ds if "wavelength" not in ds.dims else interaction_profile(ds, interaction, side)
     prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
     return _fit_bsdf_profile(prof, model, options=options, incidence_deg=incidence_deg)
 
@@ -155,6 +154,3 @@ def trace(scene: Scene | str | Path, rays: int, seed: int = 0, **options: Any) -
         scene = load_scene(scene)
     return _trace(scene, rays, seed, **options)
 
-
-# re-exported under their own names: fit_spectrum, describe, load_scene, run
-_REEXPORTED = (fit_spectrum, describe, load_scene, run)

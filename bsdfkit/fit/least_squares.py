@@ -741,11 +741,6 @@ def bsdf_model_values(model: str, params: dict[str, float], theta_i_deg, theta_s
     return bsdf_model(model).values(params, theta_i_deg, theta_s_deg, phi_s_deg)
 
 
-def _model_tis(model: str, theta_i_rad: np.ndarray, p: dict[str, np.ndarray]) -> np.ndarray:
-    """TIS of the fitted models, all incidences in one call (θi in radians)."""
-    return bsdf_model(model).total_integrated_scatter(p, np.degrees(theta_i_rad))
-
-
 def _initial_bsdf_parameters(model: str, d: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Start values from the data of one incidence: d = |β − β0| and f = BSDF on the usable points."""
     far = d > max(0.3, np.quantile(d, 0.5))
@@ -907,8 +902,8 @@ def fit_bsdf(
                        batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
                        model_name=model)
     ds = ds.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
-    tis = _model_tis(model, np.radians(incidences.astype(float)),
-                     {p.name: np.atleast_1d(ds[p.name].values) for p in spec.parameters})
+    tis = spec.total_integrated_scatter({p.name: np.atleast_1d(ds[p.name].values) for p in spec.parameters},
+                                        incidences.astype(float))
     ds["tis"] = ("theta_i", tis, {"long_name": "total integrated scatter of the fitted model "
                                                             "(hemisphere, lobe clipped by the unit disk)"})
     ds.attrs["side"] = str(sides[0])

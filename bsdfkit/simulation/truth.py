@@ -82,12 +82,6 @@ def emission_shape(wavelength: ArrayLike, peak: float = 596.7, fwhm: float = 154
     return split_gaussian(lam, peak, fwhm, alpha) * onset
 
 
-def band_integral(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: tuple[float, float]) -> float:
-    """Σ_band values Δλ: the band sum of the reductions (:func:`bsdfkit.reduction.spectral.band_sum`), so that the
-    truth and the measurement's reductions integrate the same way."""
-    return band_sum(wavelength, values, band)
-
-
 # ------------------------------------------------------------------------------------------ the truth
 @dataclass(frozen=True)
 class LobeParams:
@@ -150,7 +144,7 @@ class PhosphorPlateTruth:
         fine = np.linspace(*CONVERSION_BAND_NM, 27001)
         shape = lambda lam: emission_shape(lam, em["peak"], em["fwhm"], em["alpha"],  # noqa: E731
                                            (em["onset_start"], em["onset_end"]))
-        norm = band_integral(fine, shape(fine), CONVERSION_BAND_NM)
+        norm = band_sum(fine, shape(fine), CONVERSION_BAND_NM)
         return shape(wavelength) / norm
 
     def excitation(self, wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -256,7 +250,8 @@ def clipped_gaussian_lobe_tis(A: float, sigma: float, theta_i: float, n_psi: int
 def weighted_mean(wavelength: NDArray[np.float64], values: NDArray[np.float64], weight: NDArray[np.float64],
                   band: tuple[float, float]) -> float:
     """⟨values⟩ weighted by ``weight`` over ``band`` (eq. (5) of the power-budget paper, trapezoid rule)."""
-    return band_integral(wavelength, values * weight, band) / band_integral(wavelength, weight, band)
+    # the band sum of the reductions, so that the truth and the measurement integrate the same way
+    return band_sum(wavelength, values * weight, band) / band_sum(wavelength, weight, band)
 
 
 def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: NDArray[np.float64],
