@@ -118,11 +118,12 @@ def built(tmp_path_factory):
 def test_report_is_one_self_contained_file(built):
     folder, path, text = built
     assert path == folder / REPORT_NAME
-    # every image is an embedded PNG: the run's figures, the two maps and the comparison figures drawn
+    # every image is an embedded PNG: the run's figures, the drawn Table 2 and budget comparisons, and the map
+    # grids of Fig. 10 (the wall-finish sweep file) and Fig. 12 (h = 43 mm: the device's map)
     images = re.findall(r"<img\b", text)
     assert len(images) == text.count(DATA_URI)
     pngs = sorted(folder.glob("*.png"))
-    assert text.count(DATA_URI) >= len(pngs) + 2 + 3
+    assert text.count(DATA_URI) == len(pngs) + 2 + 2
     for png in pngs:
         assert base64.b64encode(png.read_bytes()).decode("ascii") in text, png.name
     for uri in re.findall(r'src="data:image/png;base64,([^"]+)"', text):
