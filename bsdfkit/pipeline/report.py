@@ -61,8 +61,8 @@ FIGURE_CAPTIONS = {
                         "standard uncertainties (cf. Fig. 6 of [Power-budget]).",
     "module_budget.png": "Cumulative extracted power and losses per plate interaction (cf. Fig. 10 of "
                          "[Power-budget]).",
-    "bsdf_fits.png": "Aperture-averaged BSDF fits per interaction and side: measured points and fitted model "
-                     "curves.",
+    "bsdf_fits.png": "Aperture-averaged BSDF fits per interaction and side: measured points (± 1σ) and fitted "
+                     "model curves (cf. Figs. 6-8 of [Power-budget], Fig. 4 of [Cylindrical-module]).",
     "trace_studies.png": "LER, YBR (± 1σ) and irradiance non-uniformity of the module studies, one quantity per "
                          "row, with the values [Cylindrical-module] prints (open squares; Figs. 8-14 and their "
                          "text); the dotted line is the traced device.",
@@ -584,6 +584,12 @@ class _Report:
                                                        f"{_f(ef.get('incidence_deg'), 0)}°)",
                            "[Cylindrical-module] Table 2", "comparison"], e_rows,
                           "Emission fit (eq. (3) of [Cylindrical-module]), ± 1σ")
+            if self.scan().get("synthetic"):
+                etab += ("<p class=\"note\">Synthetic data: the generator's emission truth is Table 2 of "
+                         f"[Cylindrical-module] ({_f(t2['yellow_peak_nm'], 1)} nm, {_f(t2['yellow_fwhm_nm'], 1)} nm, "
+                         f"α {_f(t2['yellow_alpha'], 2)}) times a smooth onset from 470 to 500 nm, so the fitted "
+                         "split Gaussian differs from it by that onset and the measurement's noise, not by chance."
+                         "</p>")
         else:
             etab = _missing("No emission fit in summary.json.")
         body = _pair(self.run_png("bsdf_fits.png"), note + etab) + f'<div class="wide">{tab}</div>'
