@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import io
+import re
 
 import pytest
 
@@ -34,13 +35,14 @@ def test_on_a_terminal_progress_bars_go_to_stderr_never_to_stdout(monkeypatch, c
     monkeypatch.setattr("sys.stderr", tty)
     with run_verb.run_feedback(quiet=False) as (log, progress):
         assert progress is not None
-        log("stage trace ...")
+        log("stage trace ... [Cylindrical-module]")
         for done in range(4):
             progress("trace", done, 3)
     out, _ = capsys.readouterr()
     assert out == ""
-    shown = tty.getvalue()
-    assert "module traces" in shown and "3/3" in shown and "stage trace ..." in shown
+    shown = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", tty.getvalue())  # without the terminal's control sequences
+    assert "module traces" in shown and "3/3" in shown
+    assert "stage trace ... [Cylindrical-module]\n" in shown  # the line as written, brackets kept
 
 
 @pytest.mark.parametrize("flag", ["--quiet", "--json"])

@@ -53,7 +53,8 @@ def run_feedback(quiet: bool) -> Iterator[tuple[Callable[[str], None], Callable[
                 tasks[task] = bars.add_task(TASKS.get(task, task), total=total)
             bars.update(tasks[task], completed=done, total=total)
 
-        yield bars.console.print, progress
+        # plain text: a stage line may hold brackets ("[Power-budget]") that rich would take for markup
+        yield (lambda message: bars.console.print(message, markup=False, highlight=False)), progress
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -268,7 +268,7 @@ def _budget_figure(power: dict, paper: dict) -> Figure:
     """Cumulative extracted total per plate interaction with the paper's Table 3 values at the last iteration."""
     its = power.get("iterations", [])
     k = np.arange(1, len(its) + 1)
-    fig = Figure(figsize=(6.4, 3.8))
+    fig = Figure(figsize=(8.4, 3.8))
     ax = fig.subplots()
     for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^")):
         ax.plot(k, [r.get(key, np.nan) for r in its], style, ms=4, label=f"this run: extracted {key}")
@@ -282,7 +282,7 @@ def _budget_figure(power: dict, paper: dict) -> Figure:
     ax.set_ylabel("cumulative extracted power (% of LED output)")
     ax.set_title(f"module budget, η_MC = {power.get('eta_mc', float('nan')):g}", fontsize=10)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7.5, loc="center right")
+    ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside: no curve hidden
     fig.tight_layout()
     return fig
 

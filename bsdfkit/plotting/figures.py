@@ -49,20 +49,23 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
 
 
 def budget_figure(power, photons=None) -> Figure:
-    """Cumulative extracted power and losses per plate interaction (Fig. 10 of the power-budget paper)."""
-    fig = Figure(figsize=(8.5, 4))
-    ax = fig.subplots()
+    """Cumulative extracted power and losses per plate interaction (Fig. 10 of the power-budget paper).
+
+    With ``photons`` a second panel gives the same in photons (% of the LEDs' photons): one quantity per axis.
+    """
+    budgets = [("power", power)] + ([("photons", photons)] if photons is not None else [])
+    fig = Figure(figsize=(6.0 * len(budgets) + 2.0, 4))
+    axes = fig.subplots(1, len(budgets), squeeze=False)[0]
     k = np.arange(1, len(power.iterations) + 1)
-    for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^"), ("losses", "--x")):
-        ax.plot(k, [row[key] for row in power.iterations], style, label=f"{key} (power)")
-    if photons is not None:
-        ax.plot(k, [row["total"] for row in photons.iterations], ":o", label="total (photons)")
-    ax.axhline(power.converged["total"], color="grey", lw=0.8, ls=":", label="total, converged (power)")
-    ax.set_xlabel("plate interaction k (1 = direct pass from the LEDs)")
-    ax.set_ylabel("cumulative share of LED output (%)")
-    ax.set_title(f"iterative module budget, η_MC = {power.eta_mc:g}")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside: no curve hidden
+    for ax, (unit, budget) in zip(axes, budgets):
+        for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^"), ("losses", "--x")):
+            ax.plot(k, [row[key] for row in budget.iterations], style, label=f"{key}, iterative model")
+        ax.axhline(budget.converged["total"], color="grey", lw=0.8, ls=":", label="total, converged (closed form)")
+        ax.set_xlabel("plate interaction k (1 = direct pass from the LEDs)")
+        ax.set_ylabel(f"cumulative share of the LEDs' {unit} (%)")
+        ax.set_title(f"module budget in {unit}, η_MC = {budget.eta_mc:g}", fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes[-1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside: no curve hidden
     fig.tight_layout()
     return fig
 
