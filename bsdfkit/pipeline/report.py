@@ -5,7 +5,8 @@ figures, ``trace.json``, ``trace_*.nc``) into ``OUT/report.html``: one file, eve
 PNG data URI, inline CSS, no script and no reference to anything outside the file. It opens with what was
 measured and what was found, lists where the run disagrees with the papers, then gives one section per stage
 with this run's figure and numbers beside the published numbers of [Power-budget] and [Cylindrical-module]
-(``paper_values.json``, shipped with the package).
+(``paper_values.json``, shipped with the package). Each section is one ``_Report.sec_*`` method; ``build()``
+numbers them in order, so a new stage adds a method and one entry there.
 
 Agreement rule (stated in the report): a run value agrees with a printed paper value when
 |run − paper| ≤ half a unit of the paper's last printed digit + 2 × the run's standard uncertainty (0 when the
