@@ -265,7 +265,7 @@ def alias_table(pdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return prob, alias
 
 
-def _on_bins(model: SpectralPlateModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def model_on_bins(model: SpectralPlateModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """elastic, converted (2, I, K) and pdf (K, K) at the emission bins (linear in excitation, clamped)."""
     lam = model.emission_nm
     x = model.excitation_nm
@@ -369,7 +369,7 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     tis = prob = index = tabs = grid = None
     extrapolated: tuple[float, ...] = ()
     if model is not None:
-        elastic, converted, pdf = _on_bins(model)
+        elastic, converted, pdf = model_on_bins(model)
         ph = _photon_tis(elastic, converted, pdf[None, None], lam, lam, model.step_nm)  # (2, I, K, 2)
         # rows (g, k) → [elastic R, elastic T, converted R, converted T]
         tis = np.stack([ph[0, :, :, 0], ph[1, :, :, 0], ph[0, :, :, 1], ph[1, :, :, 1]], axis=-1).reshape(-1, 4)
