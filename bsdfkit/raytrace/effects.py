@@ -70,7 +70,8 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
     spectral = scene.trace.mode == "spectral"
     surface_spectra = any(s.spectrum is not None for s in (scene.wall, scene.base, scene.led_surface))
     if full:
-        return Effects(specular=True, top="plate", conversion=not spectral, plate_lobe=True, plate_table=True,
+        top = "exit" if spectral and scene.top.spectral_model is None else "plate"
+        return Effects(specular=True, top=top, conversion=not spectral, plate_lobe=True, plate_table=True,
                        plate_clamp=True, irradiance_map=True, incidence_histogram=True, interaction_budget=True,
                        spectral=spectral, surface_spectra=True, **common)
     if spectral:
