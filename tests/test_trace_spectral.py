@@ -15,8 +15,7 @@ import pytest
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_reflectance
-from bsdfkit.raytrace import PhosphorPlate, loads_scene, trace
-from bsdfkit.raytrace import kernel
+from bsdfkit.raytrace import PhosphorPlate, kernel, loads_scene, trace
 from bsdfkit.raytrace.effects import kernel_params, scene_effects
 from bsdfkit.raytrace.oracles.spectral_budget import spectral_module_budget
 from bsdfkit.raytrace.scene import band_reflectances, surface_reflectance_table
@@ -192,7 +191,8 @@ def test_scene_errors_name_the_key(tmp_path):
     with pytest.raises(InputError, match="wall.reflectance"):
         loads_scene(scene_text('kind = "exit"', wall=f'reflectance = 0.9\nreflectance_spectrum = "{SPECTRALON}"'))
     with pytest.raises(InputError, match="top.spectral"):
-        loads_scene(scene_text(f'kind = "phosphor"\nplate = "{PhosphorPlate.constant(TABLE2).save(tmp_path / "p.json")}"'))
+        plate = PhosphorPlate.constant(TABLE2).save(tmp_path / "p.json")
+        loads_scene(scene_text(f'kind = "phosphor"\nplate = "{plate}"'))
     with pytest.raises(ValidationError, match="trace.mode"):
         loads_scene(scene_text('kind = "exit"', mode="rainbow"))
 

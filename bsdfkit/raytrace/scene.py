@@ -97,7 +97,11 @@ class Leds:
     ``fwhm`` (radians) is None for a Lambertian source; otherwise I(θ) ∝ cos^m θ with
     m = ln ½ / ln cos(FWHM/2) (m = 1 at FWHM = 120°, the Lambertian case). ``led_reflectance`` and
     ``led_specular_fraction`` default to the base's. ``ray_file`` replaces the emission model by rays
-    read from a file (the disks still reflect); ``rays`` holds them once loaded.
+    read from a file (the disks still reflect); ``rays`` holds them once loaded. The LED spectrum (needed by the
+    spectral mode; it also weights spectral surfaces for blue rays) is ``spectrum_file`` (``spectrum`` in TOML,
+    read by :func:`bsdfkit.io.spectrum_file.read_spectrum_table`, first value column, any scale) or a Gaussian of
+    ``spectrum_peak_nm`` and ``spectrum_fwhm_nm`` (eq. (2) of [Cylindrical-module]); ``spectrum`` holds
+    (wavelength [nm], values) once read.
     """
 
     count: int = 4
@@ -140,7 +144,10 @@ class Top:
     ``exit``: all light reaching it leaves the module. ``lambertian``: a non-converting diffuser with
     ``reflectance`` and ``transmittance`` (both Lambertian). ``phosphor``: the plate of
     :mod:`bsdfkit.raytrace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe resolved
-    by :func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`) or given inline.
+    by :func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`) or given inline. In the spectral mode
+    ``spectral_model`` is the plate spectral model (:mod:`bsdfkit.raytrace.spectral`), from ``spectral_file``
+    (netCDF; the plate is then optional and gives only the angular distributions, Lambertian without it) or built
+    from the plate with a Gaussian emission spectrum ``spectral_emission`` = (peak, FWHM, start, stop, step) [nm].
     """
 
     kind: str = "exit"
@@ -165,7 +172,10 @@ class TraceOptions:
     ledger line). ``max_events`` caps surface interactions per ray (the rest is tallied as truncated).
     ``precision`` is the float type of positions and directions; weights and tallies are float64.
     ``lanes`` rays are in flight at once; ``chunk`` rays are emitted and traced per call of the compiled
-    kernel (memory ∝ lanes + chunk; progress granularity). Neither changes results.
+    kernel (memory ∝ lanes + chunk; progress granularity). Neither changes results. ``mode``:
+    ``"two-wavelength"`` (blue and yellow rays, the papers' approach) or ``"spectral"`` (rays carry a wavelength
+    bin, :mod:`bsdfkit.raytrace.spectral`); ``spectral_grid_nm`` = (start, stop, step) is the bin grid of a
+    spectral scene without a plate model (with one, its emission grid).
     """
 
     termination: str = "roulette"
@@ -434,6 +444,8 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                                  expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]",
                                  got=r.table[key])
         given = [k for k in ("plate", "from") if r.has(k)]
+        if not given and isinstance(r.table.get("spectral"), str):  # a spectral model alone: Lambertian shapes
+            given = ["spectral"]
         if len(given) != 1:
             raise InputError("a phosphor top needs exactly one plate source", file=file, field="top.plate",
                              expected="one of plate = 'file.json' | from = 'fitting/<recipe>.toml' | [top.plate]",
@@ -441,7 +453,9 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
         key = given[0]
         value = r.table[key]
         pre = preloaded.get("plate")
-        if isinstance(value, Mapping):
+        if key == "spectral":
+            top = Top("phosphor")
+        elif isinstance(value, Mapping):
             if key != "plate":
                 raise InputError("wrong type", file=file, field="top.from", expected="a recipe path", got=value)
             plate = PhosphorPlate.from_mapping(value, file, prefix="top.plate.")
@@ -576,6 +590,9 @@ def _spectral_top(top: Top, r: _Reader, base_dir: Path | None, preloaded: Mappin
 
 def _check_spectral(trace: TraceOptions, leds: Leds, top: Top, file) -> None:
     if trace.mode != "spectral":
+        if top.kind == "phosphor" and top.plate is None:
+            raise InputError("the two-wavelength mode needs the plate", file=file, field="top.plate",
+                             expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]")
         return
     if leds.spectrum is None:
         raise InputError("the spectral mode needs the LED spectrum", file=file, field="leds.spectrum",

@@ -359,7 +359,6 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
                     yellow_band_nm: tuple[float, float] = MODULE_YELLOW_BAND_NM) -> SpectralTables:
     """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top)."""
     lam = np.asarray(lam, dtype=np.float64)
-    K = lam.size
     band = np.where((lam >= blue_band_nm[0]) & (lam <= blue_band_nm[1]), 0,
                     np.where((lam >= yellow_band_nm[0]) & (lam <= yellow_band_nm[1]), 1, 2)).astype(np.int32)
     shape = np.where((lam >= pump_band_nm[0]) & (lam <= pump_band_nm[1]), 0, 2).astype(np.int32)

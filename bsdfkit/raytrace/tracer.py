@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import functools
 import time
-from fractions import Fraction
 from collections.abc import Callable
 from dataclasses import replace
+from fractions import Fraction
 
 import jax
 import numpy as np
@@ -14,8 +14,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
-from bsdfkit.raytrace.scene import Scene
-from bsdfkit.raytrace.scene import scene_spectral_tables
+from bsdfkit.raytrace.scene import Scene, scene_spectral_tables
 from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,

@@ -80,7 +80,9 @@ def spectral_module_budget(scene: Scene, n_base: int = 48, n_wall: int = 96, n_t
         rho = np.where(top, eR[k], np.where(p.kind == WALL, rho_table[0, k], rho_table[1, k]))
         lus.append(lu_factor(np.eye(n) - F.T * rho[None, :]))
     G = np.zeros((K, n))
-    for sweep in range(1, max_sweeps + 1):
+    sweeps = 0
+    while sweeps < max_sweeps:
+        sweeps += 1
         change = 0.0
         for k in range(K):
             src = np.where(top, (cR * share[:, k]) @ G, 0.0)
@@ -89,10 +91,10 @@ def spectral_module_budget(scene: Scene, n_base: int = 48, n_wall: int = 96, n_t
             G[k] = new
         if change <= tol:
             break
-    else:
+    if change > tol:
         raise NumericalError(f"spectral budget did not converge in {max_sweeps} sweeps (change {change:.2e})")
     on_top = G[:, top].sum(axis=1)
     extracted = eT * on_top + (cT * on_top) @ share
     # power the plate takes out of the light (absorbed + Stokes loss of the conversions)
     plate_loss = float(((1.0 - eR - eT - cR - cT) * on_top).sum())
-    return SpectralBudget(wavelength_nm=lam, extracted=extracted, plate_loss=plate_loss, sweeps=sweep)
+    return SpectralBudget(wavelength_nm=lam, extracted=extracted, plate_loss=plate_loss, sweeps=sweeps)
