@@ -30,6 +30,16 @@ TIS share A·L/(ρ + A·L) at the grid incidence (L the lobe's integral over the
 β0 = (dx, dy) (the specular direction's tangential part, |β0| = sin θi); lobe samples outside the unit
 disk are redrawn. Forward channels end the ray outside the module, so their directions are not sampled.
 
+Spectral mode (``effects.spectral``, :mod:`bsdfkit.raytrace.spectral`). ``colour`` is a wavelength bin k of the
+plate spectral model's grid, drawn at emission from the LED's bin powers. At the plate the channel (elastic R/T,
+converted R/T) is drawn with probabilities ∝ the photons each gives out per incident photon (interpolated
+linearly in θi like the TIS above), the weight becomes wS (S their sum ≤ 1) and a conversion draws the new bin from
+the alias table of the emission row of k and scales the weight by λ_k/λ_new: the photon keeps its number, and
+wS − w_out is tallied as the Stokes loss. Every loss is also tallied in photons (weight × λ/λ_max of the bin the
+ray has at that moment); a ray's extracted weight is deposited into its bin's spectrum sums when it retires.
+Per ray 1 = extracted + absorbed + stokes + roulette + discarded + truncated in power, and the same without the
+Stokes term in photons.
+
 Sums. When a ray retires, its per-ray tallies x (float64, in ray weights; only the columns the effects can
 fill) are rounded to integers X = rint(x·2⁴⁰) (its squares/products for the standard errors to rint(x²·2³²)),
 split exactly into 31-bit limbs X = hi·2³¹ + lo (both integer-valued doubles, |hi|, lo < 2³¹), summed over
