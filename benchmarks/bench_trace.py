@@ -8,6 +8,7 @@
     .venv/bin/python benchmarks/bench_trace.py --threshold      # bias of the flux threshold Th
     .venv/bin/python benchmarks/bench_trace.py --trends         # non-uniformity / LER trends of §5
     .venv/bin/python benchmarks/bench_trace.py --spectral       # spectral vs two-wavelength mode, same scene
+    .venv/bin/python benchmarks/bench_trace.py --ab REV         # kernel vs the kernel at REV, interleaved runs
     .venv/bin/python benchmarks/bench_trace.py --all
 
 Speed is measured after compilation, in one process for every implementation, as the median of
@@ -330,6 +331,28 @@ def spectral(rays: int, repeats: int) -> None:
           f"luminous efficacy {sp.luminous_efficacy_lm_per_W():.1f} lm/W")
 
 
+def ab(rev: str, repeats: int) -> None:
+    """Today's kernel vs the kernel at git revision ``rev`` on the phosphor device and the exit-top example,
+    runs alternating (new, old, new, old, …) so that a change of the machine's load hits both alike."""
+    old = baseline_trace(rev)
+    print(f"# interleaved A/B against {rev}, {repeats} pairs; {os.cpu_count()} CPUs (shared)")
+    for path, rays in ((DEVICE, 200_000), (EXAMPLE, 1_000_000)):
+        s = load_scene(path)
+        trace(s, rays, seed=1)
+        old(s, rays, seed=1)
+        t_new, t_old = [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            a = trace(s, rays, seed=1)
+            t_new.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            b = old(s, rays, seed=1)
+            t_old.append(time.perf_counter() - t)
+        same = a.LER == b.LER and a.interactions == b.interactions
+        print(f"{path.name}: {rays} rays, new/old time {statistics.median(t_new) / statistics.median(t_old):.3f} "
+              f"(pairs " + " ".join(f"{x / y:.2f}" for x, y in zip(t_new, t_old)) + f"); same result: {same}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rays", type=int, default=2 ** 21)
@@ -342,12 +365,13 @@ def main() -> None:
     p.add_argument("--threshold", action="store_true")
     p.add_argument("--trends", action="store_true")
     p.add_argument("--spectral", action="store_true")
+    p.add_argument("--ab", default=None, metavar="REV", help="interleaved timing against the kernel of REV")
     p.add_argument("--all", action="store_true")
     p.add_argument("--tmp", default="/tmp/bsdfkit_bench")
     a = p.parse_args()
     tmp = Path(a.tmp)
     tmp.mkdir(parents=True, exist_ok=True)
-    only = a.phosphor or a.backend or a.oracle or a.threshold or a.trends or a.spectral
+    only = a.phosphor or a.backend or a.oracle or a.threshold or a.trends or a.spectral or a.ab
     if a.all or not only:
         speed(a.rays, a.repeats, a.baseline, not a.no_mitsuba)
     if a.all or a.phosphor:
@@ -362,6 +386,8 @@ def main() -> None:
         trends(min(a.rays, 400_000), tmp)
     if a.all or a.spectral:
         spectral(min(a.rays, 1_000_000), a.repeats)
+    if a.ab:
+        ab(a.ab, a.repeats)
 
 
 if __name__ == "__main__":

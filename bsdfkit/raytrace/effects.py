@@ -74,24 +74,15 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
         return Effects(specular=True, top=top, conversion=not spectral, plate_lobe=True, plate_table=True,
                        plate_clamp=True, irradiance_map=True, incidence_histogram=True, interaction_budget=True,
                        spectral=spectral, surface_spectra=True, **common)
-    if spectral:
-        sp = scene_spectral_tables(scene)
-        tables = sp.plate
-        return Effects(
-            specular=True, top="exit" if tables is None else "plate", conversion=False,
-            plate_lobe=bool(tables is not None and tables.has_lobe),
-            plate_table=bool(tables is not None and tables.has_table),
-            plate_clamp=bool(tables is not None and not tables.covers_hemisphere),
-            irradiance_map=scene.tally_enabled("irradiance_map"),
-            incidence_histogram=scene.tally_enabled("incidence_histogram"),
-            interaction_budget=scene.tally_enabled("interaction_budget"),
-            spectral=True, surface_spectra=surface_spectra, **common)
     specular = any(s.specular_fraction > 0 and s.reflectance > 0
                    for s in (scene.wall, scene.base, scene.led_surface))
-    if scene.top.kind == "exit":
+    if spectral:  # the plate's angular tables on the spectral model's incidence grid (None: exit top)
+        tables = scene_spectral_tables(scene).plate
+    elif scene.top.kind == "exit":
         tables = None
     else:
         tables = plate_tables(top_plate(scene))
+    if tables is not None:
         # with a plate the mirror branch costs a few per cent of an interaction: compile it in always, so
         # scenes (and sweeps) that differ only in their specular fractions share one kernel; a specular
         # fraction of 0 then never draws a mirror reflection (same random numbers, same result)
@@ -99,13 +90,14 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
     return Effects(
         specular=specular,
         top="exit" if tables is None else "plate",
-        conversion=bool(tables is not None and tables.conversion),
+        conversion=bool(not spectral and tables is not None and tables.conversion),
         plate_lobe=bool(tables is not None and tables.has_lobe),
         plate_table=bool(tables is not None and tables.has_table),
         plate_clamp=bool(tables is not None and not tables.covers_hemisphere),
         irradiance_map=scene.tally_enabled("irradiance_map"),
         incidence_histogram=scene.tally_enabled("incidence_histogram"),
         interaction_budget=scene.tally_enabled("interaction_budget"),
+        spectral=spectral,
         surface_spectra=surface_spectra,
         **common,
     )
