@@ -15,7 +15,7 @@ import pytest
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_reflectance
-from bsdfkit.raytrace import PhosphorPlate, kernel, loads_scene, trace
+from bsdfkit.raytrace import PhosphorPlate, dumps_scene, kernel, loads_scene, trace
 from bsdfkit.raytrace.effects import kernel_params, scene_effects
 from bsdfkit.raytrace.oracles.spectral_budget import spectral_module_budget
 from bsdfkit.raytrace.scene import band_reflectances, surface_reflectance_table
@@ -259,3 +259,30 @@ def test_example_spectral_scene_runs_from_the_command_line(tmp_path, capsys):
     assert len(sp["wavelength_nm"]) == len(sp["spectrum_W_per_nm"]) == len(sp["spectrum_std_err_W_per_nm"])
     assert 150 < sp["luminous_efficacy_lm_per_W"] < 500
     assert sp["bands"]["blue"]["label"] == "380-500 nm"
+
+
+def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel(tmp_path):
+    """Exact fixed-point sums: chunking and compiling every optional branch change nothing, bit for bit."""
+    s = loads_scene(scene_text(PLATE_TOP + "[top.spectral]\nemission_peak_nm = 540.0\nemission_fwhm_nm = 130.0\n",
+                               wall=f'reflectance_spectrum = "{SPECTRALON}"'))
+    a = trace(s, 12_000, 9, chunk=3_000, lanes=512)
+    b = trace(s, 12_000, 9, chunk=12_000, lanes=256)
+    c = trace(s, 12_000, 9, chunk=12_000, lanes=512, full_kernel=True)
+    for r in (b, c):
+        assert r.extracted == a.extracted and r.absorbed == a.absorbed
+        np.testing.assert_array_equal(r.spectral.spectrum_W_per_nm, a.spectral.spectrum_W_per_nm)
+        np.testing.assert_array_equal(r.spectral.spectrum_std_err, a.spectral.spectrum_std_err)
+        assert r.spectral.ledger == a.spectral.ledger
+
+
+def test_spectral_scene_round_trips_through_toml(tmp_path):
+    path = model_file(tmp_path, no_overlap_model())
+    s = loads_scene(scene_text(f'kind = "phosphor"\nspectral = "{path}"',
+                               wall=f'reflectance_spectrum = "{SPECTRALON}"'))
+    assert s.top.plate is None  # a model file alone: Lambertian angular distributions
+    again = loads_scene(dumps_scene(s))
+    assert again.trace.mode == "spectral" and again.top.spectral_file == str(path)
+    assert again.wall.spectrum_file == str(SPECTRALON) and again.wall.reflectance == s.wall.reflectance
+    assert (again.leds.spectrum_peak_nm, again.leds.spectrum_fwhm_nm) == (455.0, 20.0)
+    with pytest.raises(InputError, match="top.plate"):  # the two-wavelength mode needs the plate itself
+        loads_scene(dumps_scene(s).replace('mode = "spectral"', 'mode = "two-wavelength"'))

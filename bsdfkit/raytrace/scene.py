@@ -737,7 +737,7 @@ def scene_to_mapping(scene: Scene) -> dict[str, Any]:
             top_map["plate"] = top.plate_file
         elif top.plate_recipe is not None:
             top_map["from"] = top.plate_recipe
-        else:
+        elif top.plate is not None:
             top_map["plate"] = top.plate.to_mapping()
         if top.spectral_file is not None:
             top_map["spectral"] = top.spectral_file
