@@ -185,6 +185,29 @@ def test_unphysical_and_malformed_models_are_refused(tmp_path):
         spectral_model_from_dataset(m.drop_vars("emission_pdf"), source="bad.nc")
 
 
+def test_measured_model_within_its_noise_is_capped_and_listed():
+    """A measured model a little above one photon out per photon in, within 3 standard uncertainties, is scaled
+    down to exactly one (and listed); the sides may come in any order."""
+    wl = np.arange(380.0, 781.0, 5.0)
+    plate = PhosphorPlate.constant({"bibs_reflection": 0.10, "bibs_transmission": 0.05, "biys_reflection": 0.12,
+                                    "biys_transmission": 0.08, "yiys_reflection": 0.5, "yiys_transmission": 0.5})
+    ds = spectral_plate_from_two_colour(plate, wl, np.where(wl > 505, 1.0, 0.0)).to_dataset()
+    ds["converted_tis"] = ds["converted_tis"] * 2.75  # biys 0.33 / 0.22: too many photons at short pump wavelengths
+    harmonic = 1.0 / (photon_pdf_from_power(wl, np.where(wl > 505, 1.0, 0.0)) * 5.0 / wl).sum()
+    kept = 0.15 + 0.55 * harmonic / wl  # photons out per photon in at each pump wavelength
+    assert kept[wl <= 500].max() > 1.0
+    noisy = ds.isel(side=[1, 0]).assign(converted_tis_std=ds["converted_tis"].isel(side=[1, 0]) * 0.2,
+                                        elastic_tis_std=ds["elastic_tis"].isel(side=[1, 0]) * 0.0)
+    m = spectral_model_from_dataset(noisy, source="measured.nc")
+    assert m.capped and all(v > 1 for *_, v in m.capped)
+    ph = (m.elastic_tis + m.converted_tis * (harmonic / wl)).sum(axis=0)
+    assert ph.max() == pytest.approx(1.0, abs=1e-12)
+    assert m.elastic_tis[0, 0, -1] == 0.5 and m.converted_tis[1, 0, -1] == 0.0  # reflection first again
+    assert m.converted_tis[0, 0, 20] == pytest.approx(0.33) and m.converted_tis[1, 0, 20] == pytest.approx(0.22)
+    with pytest.raises(ValidationError, match="more photons"):
+        spectral_model_from_dataset(ds, source="measured.nc")  # the same excess without uncertainties
+
+
 def test_scene_errors_name_the_key(tmp_path):
     with pytest.raises(InputError, match="leds.spectrum"):
         loads_scene(scene_text('kind = "exit"').replace("spectrum_peak_nm = 455.0\nspectrum_fwhm_nm = 20.0\n", ""))

@@ -119,6 +119,17 @@ def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.nda
     return {"power_W": power, "photons_per_s": photons}
 
 
+def _ranges(values, step: float) -> list[list[float]]:
+    """Consecutive grid values as [first, last] ranges (e.g. the bins below and above an excitation grid)."""
+    out: list[list[float]] = []
+    for v in values:
+        if out and abs(v - out[-1][1] - step) <= 1e-9 * step:
+            out[-1][1] = v
+        else:
+            out.append([v, v])
+    return out
+
+
 @dataclass(frozen=True)
 class SpectralResult:
     """The spectral mode's tallies: extracted spectrum on the bin grid with standard errors, the LED spectrum as
@@ -126,7 +137,9 @@ class SpectralResult:
 
     ``spectrum_W_per_nm`` = extracted power per bin / bin width; its standard error from the per-ray variance
     (each ray is extracted in one bin at most). ``extrapolated_nm``: bins outside the plate model's excitation
-    grid (their TIS and emission rows are the nearest excitation's).
+    grid (their TIS and emission rows are the nearest excitation's). ``capped``: cells (incidence [deg],
+    excitation [nm], photons out per photon in) of a measured model above one photon out per photon in within its
+    uncertainty, scaled down to one (:data:`bsdfkit.raytrace.spectral.NOISE_SIGMA`).
     """
 
     wavelength_nm: np.ndarray
@@ -135,6 +148,7 @@ class SpectralResult:
     emitted_W_per_nm: np.ndarray
     ledger: dict[str, dict[str, float]]
     extrapolated_nm: tuple[float, ...] = ()
+    capped: tuple[tuple[float, float, float], ...] = ()
 
     @property
     def step_nm(self) -> float:
@@ -176,7 +190,9 @@ class SpectralResult:
             "YBR_definition": SPECTRAL_YBR_DEFINITION,
             "luminous_efficacy_lm_per_W": self.luminous_efficacy_lm_per_W() if self.spectrum_W_per_nm.any() else None,
             "ledger": self.ledger,
-            "extrapolated_bins_nm": list(self.extrapolated_nm),
+            "extrapolated_bins_nm": _ranges(self.extrapolated_nm, self.step_nm),
+            "photon_capped_cells": [{"incidence_deg": i, "excitation_nm": x, "photons_out_per_in": v}
+                                    for i, x, v in self.capped],
         }
 
 
