@@ -296,6 +296,9 @@ def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel(tmp_path):
         np.testing.assert_array_equal(r.spectral.spectrum_W_per_nm, a.spectral.spectrum_W_per_nm)
         np.testing.assert_array_equal(r.spectral.spectrum_std_err, a.spectral.spectrum_std_err)
         assert r.spectral.ledger == a.spectral.ledger
+    # the interaction budget books the Stokes loss with the plate: nothing is left in flight
+    assert a.cumulative_budget()["in_flight"][-1] == pytest.approx(0.0, abs=1e-9)
+    assert a.cumulative_budget()["extracted"][-1] == pytest.approx(a.extracted["total"], abs=1e-9)
 
 
 def test_spectral_scene_round_trips_through_toml(tmp_path):
