@@ -228,7 +228,8 @@ def spectral_result(scene: Scene, n: int, col: dict, arrays: dict) -> SpectralRe
     return SpectralResult(wavelength_nm=lam, spectrum_W_per_nm=spectrum, spectrum_std_err=spectrum_se,
                           emitted_W_per_nm=np.array([float(Fraction(int(c), n)) for c in emitted_bins]) * power / step,
                           ledger=spectral_ledger(col, emitted_bins, tab.photon_scale, lam, n, power),
-                          extrapolated_nm=tab.extrapolated_nm, capped=tab.capped)
+                          extrapolated_nm=tab.extrapolated_nm, capped=tab.capped,
+                          yiys_nm=tab.yiys_nm)
 
 
 def threshold_bias(scene: Scene, rays: int, seed: int, thresholds, **kwargs) -> list[dict]:
