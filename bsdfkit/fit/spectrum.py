@@ -8,8 +8,11 @@
   measured peak, FWHM and asymmetry) and those lines with a split-Gaussian side band (``pseudo-voigt-shoulder``,
   ``pearson7-shoulder``: the shoulder of InGaN LEDs; three start points solved in one batch); and the pump +
   phosphor sums ``two-band`` (pump Gaussian + phosphor split Gaussian, the paper's §4.2 components) and
-  ``two-band-led`` (pump Gaussian line + side band, phosphor split Gaussian), whose split between pump and
-  phosphor is found from the data (:func:`find_two_band_split`).
+  ``two-band-led`` (pump Gaussian line + side band, phosphor split Gaussian) and ``two-band-wide`` (that pump,
+  phosphor split Gaussian + Gaussian: a second phosphor such as a red nitride band, or the long tail of one;
+  three start points from the measured phosphor band, :func:`_phosphor_pair_starts`), whose split between pump
+  and phosphor is found from the data (:func:`find_two_band_split`). Every reported component peak is the
+  maximum of the fitted component curve, not a parameter.
 * :func:`analyse_spectra` is the batch front-end of ``bsdfkit fit spectrum``: it fits many spectra (different
   grids allowed: padded and masked), optionally every single-band model with the best chosen by AICc or BIC
   (``model="best"``), and returns one record per spectrum with the measured metrics
@@ -101,7 +104,9 @@ SHOULDER_ALPHA_MAX: float = 0.9
 #: the data cannot separate (a singular fit).
 SIDE_FWHM_MAX_NM: float = 120.0
 #: Pump + phosphor sums, fitted jointly with a data-derived split (:func:`find_two_band_split`).
-TWO_BAND_MODELS = ("two-band", "two-band-led")
+TWO_BAND_MODELS = ("two-band", "two-band-led", "two-band-wide")
+#: Two-band models whose pump is a line with a side band.
+PUMP_SIDE_MODELS = ("two-band-led", "two-band-wide")
 SPECTRUM_MODELS = SINGLE_BAND_MODELS + TWO_BAND_MODELS
 #: Information criteria for ``model="best"``.
 CRITERIA = ("aicc", "bic")
@@ -133,6 +138,10 @@ PUMP_MIN_FWHM_NM: float = 2.0
 #: ``two-band-led``: the pump's side band (the InGaN shoulder, cf. the ``*-shoulder`` models) lies up to this far
 #: [nm] above the pump line; further out it would take over the phosphor's rising edge.
 PUMP_SIDE_OFFSET_MAX_NM: float = 20.0
+#: ``two-band-wide``: the phosphor's second band (a Gaussian) lies within this distance [nm] of the first (a split
+#: Gaussian) and has an FWHM [nm] in this range (narrower would be a spike, wider a flat offset).
+PHOSPHOR2_OFFSET_MAX_NM: float = 200.0
+PHOSPHOR2_FWHM_NM: tuple[float, float] = (10.0, 200.0)
 
 #: Warning of :func:`analyse_spectra` below this R² (R² < 0 always gets its own warning).
 WARN_R2: float = 0.9
@@ -150,6 +159,7 @@ _gaussian = _FUNCTIONS["gaussian"]
 _split_gaussian = _FUNCTIONS["split-gaussian"]
 _two_band = _FUNCTIONS["two-band"]
 _two_band_led = _FUNCTIONS["two-band-led"]
+_two_band_wide = _FUNCTIONS["two-band-wide"]
 
 
 # Two-band fits in relative coordinates: x = {"wl": λ, "pump": measured pump peak, "valley": split} (per point,
@@ -163,12 +173,17 @@ def _two_band_led_rel(theta, x):
     return _two_band_led(_absolute(theta, x, 6), x["wl"])
 
 
+def _two_band_wide_rel(theta, x):
+    return _two_band_wide(_absolute(theta, x, 6), x["wl"])
+
+
 def _absolute(theta, x, k_phosphor):
     shift = jnp.zeros_like(theta).at[0].set(x["pump"][0]).at[k_phosphor].set(x["valley"][0])
     return theta + shift
 
 
-_RELATIVE = {"two-band": (_two_band_rel, 3), "two-band-led": (_two_band_led_rel, 6)}
+_RELATIVE = {"two-band": (_two_band_rel, 3), "two-band-led": (_two_band_led_rel, 6),
+             "two-band-wide": (_two_band_wide_rel, 6)}
 
 
 def _parameters(model: str, lo: float, hi: float, split_nm: float = DEFAULT_SPLIT_NM) -> tuple[Parameter, ...]:
@@ -182,13 +197,18 @@ def _parameters(model: str, lo: float, hi: float, split_nm: float = DEFAULT_SPLI
     if model.startswith("two-band"):
         blue = [Parameter("blue_peak_nm", lo, split_nm, "nm"), Parameter("blue_fwhm_nm", 0.0, split_nm - lo, "nm")]
         blue.append(Parameter("blue_amplitude", **amp))
-        if model.startswith("two-band-led"):
+        if model in PUMP_SIDE_MODELS:
             blue += [Parameter("blue_side_offset_nm", 0.0, PUMP_SIDE_OFFSET_MAX_NM, "nm"),
                      Parameter("blue_side_fwhm_nm", PUMP_MIN_FWHM_NM, PUMP_MAX_FWHM_NM, "nm"),
                      Parameter("blue_side_amplitude", **amp)]
         yellow = [Parameter("yellow_peak_nm", split_nm, hi + span, "nm"), Parameter("yellow_fwhm_nm", **width),
                   Parameter("yellow_alpha", **alpha)]
-        return tuple(blue + yellow + [Parameter("yellow_amplitude", **amp)])
+        yellow.append(Parameter("yellow_amplitude", **amp))
+        if model == "two-band-wide":
+            yellow += [Parameter("phosphor2_offset_nm", -PHOSPHOR2_OFFSET_MAX_NM, PHOSPHOR2_OFFSET_MAX_NM, "nm"),
+                       Parameter("phosphor2_fwhm_nm", PHOSPHOR2_FWHM_NM[0], PHOSPHOR2_FWHM_NM[1], "nm"),
+                       Parameter("phosphor2_amplitude", **amp)]
+        return tuple(blue + yellow)
     head = (Parameter("peak_nm", **peak), Parameter("fwhm_nm", **width))
     tail = (Parameter("amplitude", **amp),)
     if model in ("gaussian", "ohno2005"):
@@ -220,7 +240,7 @@ def _relative_parameters(model: str) -> tuple[Parameter, ...]:
         if p.name == "blue_peak_nm":
             out.append(Parameter("blue_peak_nm", -PUMP_PEAK_WINDOW_NM, PUMP_PEAK_WINDOW_NM, "nm"))
         elif p.name == "blue_fwhm_nm":
-            low = PUMP_MIN_FWHM_NM if model == "two-band-led" else 0.0
+            low = PUMP_MIN_FWHM_NM if model in PUMP_SIDE_MODELS else 0.0
             out.append(Parameter("blue_fwhm_nm", low, PUMP_MAX_FWHM_NM, "nm"))
         elif p.name == "yellow_peak_nm":
             out.append(Parameter("yellow_peak_nm", 0.0, math.inf, "nm"))
@@ -709,9 +729,16 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
                               **sub)
     else:
         # Pump line + side band (offset, FWHM, height fraction) from three starts; the lowest cost is kept.
-        starts = np.array([[pump[:2] + [(1.0 - f) * pump[2], off, wid, f * pump[2]] + phosphor
-                            for pump, phosphor in rows]
-                           for off, wid, f in ((5.0, 15.0, 0.3), (10.0, 25.0, 0.3), (15.0, 30.0, 0.2))])
+        pump_starts = ((5.0, 15.0, 0.3), (10.0, 25.0, 0.3), (15.0, 30.0, 0.2))
+        if model == "two-band-wide":
+            extra = [_phosphor_pair_starts(wl2[b], y_n[b], m[b], splits[int(b)]) for b in alive]
+            starts = np.array([[pump[:2] + [(1.0 - f) * pump[2], off, wid, f * pump[2]] + ph
+                                for (pump, _), ex in zip(rows, extra) for ph in [ex[k]]]
+                               for k, (off, wid, f) in enumerate(pump_starts)])
+        else:
+            starts = np.array([[pump[:2] + [(1.0 - f) * pump[2], off, wid, f * pump[2]] + phosphor
+                                for pump, phosphor in rows]
+                               for off, wid, f in pump_starts])
         result, more = _solve_multistart(function, x, y_n[alive], m[alive], starts, _relative_parameters(model),
                                          sub, model)
     errors.update({int(alive[k]): v for k, v in more.items()})
@@ -729,6 +756,42 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
         result[name].attrs = attrs
     result["split_nm"] = (("spectrum",), valley, {"units": "nm", "long_name": "valley between pump and phosphor"})
     return _expand(result, alive, n_batch), errors, splits
+
+
+def _phosphor_pair_starts(wl: np.ndarray, y: np.ndarray, mask: np.ndarray, split: TwoBandSplit) -> list[list[float]]:
+    """Three start points of the ``two-band-wide`` phosphor (split Gaussian: peak − valley, FWHM, α, amplitude;
+    Gaussian: offset, FWHM, amplitude) from the measured phosphor band beyond the valley.
+
+    (1) The split Gaussian on the band's maximum with its measured half widths, the Gaussian on the centroid and
+    spread of what that leaves (a second phosphor: green plateau + red band); (2) the two at the band's centroid
+    ∓ a quarter of its spread; (3) as (1) with the roles swapped."""
+    region = mask & (wl > split.valley_nm)
+    w, v = wl[region], np.clip(y[region], 0.0, None)
+    peak, fwhm, amp, alpha = _peak_and_fwhm(wl, y, region, with_alpha=True)
+    with x64():
+        first = amp * np.asarray(_split_gaussian(jnp.array([peak, fwhm, alpha, 1.0]), jnp.asarray(w)))
+    rest = np.clip(v - first, 0.0, None)
+
+    def centre_spread(weights):
+        area = np.trapezoid(weights, w)
+        if not area > 0:
+            return peak, fwhm
+        c = np.trapezoid(w * weights, w) / area
+        sd = math.sqrt(max(np.trapezoid((w - c) ** 2 * weights, w) / area, 1.0))
+        return float(c), float(np.clip(2.3548 * sd, *PHOSPHOR2_FWHM_NM))
+
+    c_rest, f_rest = centre_spread(rest)
+    c_all, f_all = centre_spread(v)
+    lo_fwhm = PHOSPHOR2_FWHM_NM[0]
+    v_at = lambda x: float(np.interp(x, w, v))  # noqa: E731
+    q = 0.25 * f_all
+    return [
+        [peak - split.valley_nm, fwhm, alpha, 0.9 * amp, c_rest - peak, f_rest, max(float(rest.max()), 0.05 * amp)],
+        [c_all - q - split.valley_nm, max(f_all / 2, lo_fwhm), 0.0, 0.6 * v_at(c_all - q), 2 * q,
+         max(f_all / 2, lo_fwhm), 0.6 * v_at(c_all + q)],
+        [c_rest - split.valley_nm, f_rest, 0.0, max(float(rest.max()), 0.05 * amp), peak - c_rest,
+         max(fwhm, lo_fwhm), 0.9 * amp],
+    ]
 
 
 def fit_spectra(
@@ -759,7 +822,9 @@ def fit_spectra(
         side_fwhm_nm, side_amplitude, side_alpha; fitted from three starts); 'two-band' (pump eq. 2 + phosphor
         eq. 3 jointly: blue_peak_nm, blue_fwhm_nm, blue_amplitude, yellow_peak_nm, yellow_fwhm_nm, yellow_alpha,
         yellow_amplitude) or 'two-band-led' (pump = Gaussian line + Gaussian side band: adds
-        blue_side_offset_nm, blue_side_fwhm_nm, blue_side_amplitude after blue_amplitude). Every ``fwhm_nm`` is
+        blue_side_offset_nm, blue_side_fwhm_nm, blue_side_amplitude after blue_amplitude) or 'two-band-wide'
+        (that pump; phosphor split Gaussian + Gaussian: adds phosphor2_offset_nm from yellow_peak_nm,
+        phosphor2_fwhm_nm, phosphor2_amplitude after yellow_amplitude). Every ``fwhm_nm`` is
         the true FWHM of that shape [nm] (of the main line for the models with a side band).
     sigma
         Standard uncertainties of ``values`` (same units), broadcast to ``values``; None = unweighted.
@@ -880,7 +945,7 @@ def _evaluate(theta, x, function):
     return jax.vmap(function)(theta, x)
 
 
-_PUMPS = {"two-band": pump_two_band, "two-band-led": pump_two_band_led}
+_PUMPS = {"two-band": pump_two_band, "two-band-led": pump_two_band_led, "two-band-wide": pump_two_band_led}
 
 
 def _curves(model: str, ds: xr.Dataset, wl2: np.ndarray, m2: np.ndarray) -> dict[str, np.ndarray]:
