@@ -209,8 +209,8 @@ def _synthetic_pc_white(cct_K, pump_nm, green_nm, red_nm):
     shape, fine = colour.SpectralShape(380, 780, 1), colour.SpectralShape(380, 780, 0.01)
 
     def bands(s):
-        return (sd_single_led_Ohno2005(pump_nm, 12, shape=s).values, sd_single_led_Ohno2005(green_nm, 65, shape=s).values,
-                sd_single_led_Ohno2005(red_nm, 50, shape=s).values)
+        return tuple(sd_single_led_Ohno2005(peak, w, shape=s).values
+                     for peak, w in ((pump_nm, 12), (green_nm, 65), (red_nm, 50)))
 
     p, g, r = bands(shape)
     target = np.array(chromaticity_xy(colour.sd_blackbody(cct_K, shape)))
