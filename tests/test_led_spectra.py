@@ -18,13 +18,14 @@ from colour.colorimetry import sd_single_led_Ohno2005
 from scipy.optimize import brentq, least_squares
 
 from bsdfkit.cli.main import main
-from bsdfkit.core.errors import FitError, NumericalError
+from bsdfkit.core.errors import FitError, NumericalError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import spectrum as spectra
 from bsdfkit.io.spectrum_file import read_spectrum_arrays, read_spectrum_table, select_columns
 from bsdfkit.models import functions, led
 from bsdfkit.reduction import spectrum_metrics as metrics
-from bsdfkit.reduction.colorimetry import cct_duv, chromaticity_xy
+from bsdfkit.reduction import colorimetry
+from bsdfkit.reduction.colorimetry import cct_duv, check_power_spectrum, chromaticity_xy, colorimetric_summary
 
 DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
 BLUE = ("blue_010mA", "blue_100mA", "blue_3")
@@ -290,3 +291,59 @@ def test_cli_fits_columns_of_a_table_and_several_files_in_one_call(tmp_path, cap
     assert main(["fit", "spectrum", str(table), "--column", "red", "--model", "two-band"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no pump band" in err
+
+
+# ---------------------------------------------------------------------------------------------- implausible spectra
+CIE_NIST = Path(__file__).resolve().parent / "data" / "colour-cie-nist-led-spd" / \
+    "cie_led_illuminants_and_nist_cqs_led_spd_5nm.csv"
+
+
+def _faulty_spectra():
+    """Issue #13's classes: a sign error (mixed-sign pc-white), zero-mean noise, wavelengths in µm and in m, and
+    too few samples (4). Returns {name: (λ, values, words of the expected message)}."""
+    wl = np.arange(380.0, 781.0)
+    white = np.exp(-((wl - 450) / 10) ** 2) + 0.6 * np.exp(-((wl - 560) / 50) ** 2)
+    noise = np.random.default_rng(13).normal(0.0, 1.0, wl.size)
+    return {"mixed": (wl, white * np.sign(np.sin(wl / 7.0)), "negative spectral power"),
+            "noise": (wl, noise, "negative spectral power"),
+            "micrometre": (wl / 1000.0, white, "not in nm"),
+            "metre": (wl * 1e-9, white, "not in nm"),
+            "few": (np.array([440.0, 450.0, 460.0, 560.0]), np.array([0.5, 1.0, 0.5, 0.6]), "too few samples")}
+
+
+@pytest.mark.parametrize("name", ["mixed", "noise", "micrometre", "metre", "few"])
+def test_implausible_spectra_are_one_line_exit_2_from_fit_and_color(tmp_path, capsys, name):
+    wl, values, words = _faulty_spectra()[name]
+    path = tmp_path / f"{name}.txt"
+    path.write_text("".join(f"{w!r}\t{v!r}\n" for w, v in zip(wl, values)))
+    for argv in (["fit", "spectrum", str(path)], ["fit", "spectrum", str(path), "--model", "best", "--json"],
+                 ["color", str(path)], ["color", str(path), "--json"]):
+        assert main(argv) == 2, argv
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1 and words in err and path.name in err, (argv, err)
+    # the Python API: colorimetry and the fits refuse the same spectra
+    sd = colour.SpectralDistribution(values, wl, name=name)
+    with pytest.raises(ValidationError, match=words):
+        colorimetric_summary(sd)
+    record = spectra.analyse_spectra([(wl, values)], "best")[0]
+    assert words in record["error"]
+    if name in ("micrometre", "metre"):
+        with pytest.raises(ValidationError, match="not in nm"):
+            spectra.fit_spectrum(wl, values, "gaussian")
+
+
+def test_real_spectra_pass_the_plausibility_rule():
+    """Every vendored Benkner LED (dark-subtracted, with negative noise samples) and every CIE 015 / NIST CQS LED
+    spectrum passes; the margin to the rule is ≥ 40×."""
+    tables = [read_spectrum_table(p) for p in sorted(DATA.glob("*.ISD"))] + [read_spectrum_table(CIE_NIST)]
+    n = 0
+    for wl, columns, _ in tables:
+        for values in columns.values():
+            check_power_spectrum(wl, values, "spectrum")
+            negative = values < 0
+            assert -values.min() <= colorimetry.NEGATIVE_TOLERANCE / 40 * values.max()
+            weights = np.gradient(wl)
+            assert (-(values[negative] * weights[negative]).sum()
+                    <= colorimetry.NEGATIVE_TOLERANCE / 40 * (values[~negative] * weights[~negative]).sum())
+            n += 1
+    assert n == 10 + 24 and any((columns[c] < 0).any() for _, columns, _ in tables[:-1] for c in columns)

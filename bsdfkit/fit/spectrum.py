@@ -53,6 +53,7 @@ from bsdfkit.fit import lm
 from bsdfkit.fit.least_squares import FitOptions, Parameter, least_squares
 from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODELS
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
+from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
 from bsdfkit.reduction.spectral import band_sum
 from bsdfkit.reduction.spectrum_metrics import spectrum_metrics
 
@@ -432,16 +433,23 @@ def _validated_grid(wavelength: np.ndarray) -> np.ndarray:
     return wl
 
 
+def _nm_grid(wavelength: np.ndarray) -> np.ndarray:
+    """:func:`_validated_grid` of a grid that must be in nm (µm or m values are refused)."""
+    wl = _validated_grid(wavelength)
+    check_wavelengths_nm(wl, "wavelength")
+    return wl
+
+
 def _validated_grids(wavelength: np.ndarray, n_batch: int) -> np.ndarray:
-    """(batch, n) grids: one grid broadcast, or one strictly increasing grid per spectrum."""
+    """(batch, n) grids in nm: one grid broadcast, or one strictly increasing grid per spectrum."""
     wl = np.asarray(wavelength, dtype=float)
     if wl.ndim == 1:
-        return np.broadcast_to(_validated_grid(wl), (n_batch, wl.size))
+        return np.broadcast_to(_nm_grid(wl), (n_batch, wl.size))
     if wl.ndim != 2 or wl.shape[0] != n_batch:
         raise InputError("wavelength must be (n,) or (batch, n)", field="wavelength",
                          expected=f"(n,) or ({n_batch}, n)", got=wl.shape)
     for row in wl:
-        _validated_grid(row)
+        _nm_grid(row)
     return wl
 
 
@@ -1111,24 +1119,36 @@ def analyse_spectra(
     wl2, y2, m2 = _pad_spectra(spectra, ranges)
 
     records: list[dict[str, Any]] = []
-    grids = []
+    models_to_fit = list(candidates) if model == "best" else [model]
+    n_parameters = {name: len(_parameters(name, 380.0, 780.0)) for name in models_to_fit}
+    fewest = min(n_parameters.values()) + 2  # AICc needs n > p + 2 (p counting the variance)
     for b in range(n_batch):
         w, v = wl2[b][m2[b]], y2[b][m2[b]]
-        grids.append((w, v))
         rec: dict[str, Any] = {"range_nm": None if ranges[b] is None else [float(r) for r in ranges[b]]}
         try:
+            # a spectral power in nm (one line per implausible spectrum: sign errors, noise, µm or m values)
+            check_wavelengths_nm(spectra[b][0], "wavelength")
+            check_power_spectrum(spectra[b][0], spectra[b][1], "values", colorimetry=False)
+            if w.size < fewest:
+                raise ValidationError("too few samples in the fit range", field="values",
+                                      expected=f"at least {fewest} for a {min(n_parameters, key=n_parameters.get)} "
+                                               "fit (its parameters + 2)", got=w.size)
             measured = spectrum_metrics(w, v).as_dict()
             rec["measured"] = {k: _finite_or_none(measured[k]) for k in _METRIC_KEYS}
         except BsdfkitError as exc:
             rec["error"] = f"{labels[b]}: {exc}"
         records.append(rec)
-    alive = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
-    models_to_fit = list(candidates) if model == "best" else [model]
+    alive_all = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
     per_model: dict[str, dict[int, dict[str, Any]]] = {}
     for name in models_to_fit:
         per_model[name] = {}
+        too_few = [b for b in alive_all if np.count_nonzero(m2[b]) < n_parameters[name] + 2]
+        for b in too_few:
+            per_model[name][int(b)] = {"error": f"{labels[b]}: too few samples in the fit range for a {name} fit "
+                                                f"(at least {n_parameters[name] + 2}, got {np.count_nonzero(m2[b])})"}
+        alive = np.array([b for b in alive_all if b not in too_few], dtype=int)
         if alive.size == 0:
-            break
+            continue
         ds, errors, splits = _fit_batch(wl2[alive], y2[alive], m2[alive], name, sigma=None, options=options,
                                         split_nm=split_nm, labels=[labels[b] for b in alive], collect=True)
         if ds is None:
@@ -1150,7 +1170,7 @@ def analyse_spectra(
                     "phosphor_peak_nm": splits[k].phosphor_peak_nm}
         per_model[name]["_ds"], per_model[name]["_curves"] = ds, curves
 
-    for b in alive:
+    for b in alive_all:
         b = int(b)
         rec = records[b]
         results = {name: per_model[name][b] for name in models_to_fit}
@@ -1190,7 +1210,7 @@ def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[flo
     λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.reduction.spectral.band_sum` on a
     validated grid. Result in value-unit·nm (W for W/nm).
     """
-    wl = _validated_grid(wavelength)
+    wl = _nm_grid(wavelength)
     lo, hi = band_nm
     if not lo < hi:
         raise ValidationError("empty band", field="band_nm", expected="lower < upper", got=band_nm)
@@ -1241,7 +1261,7 @@ def two_band_gains(
         Near-singular system (condition number above ``max_condition``) or a negative gain (a negative
         spectral flux is unphysical: the spectra do not fit the band fluxes).
     """
-    wl = _validated_grid(wavelength)
+    wl = _nm_grid(wavelength)
     sb = np.asarray(s_blue, dtype=float)
     sy = np.asarray(s_yellow, dtype=float)
     for name, arr in (("s_blue", sb), ("s_yellow", sy)):
