@@ -23,8 +23,8 @@ from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import spectrum as spectra
 from bsdfkit.io.spectrum_file import read_spectrum_arrays, read_spectrum_table, select_columns
 from bsdfkit.models import functions, led
-from bsdfkit.reduction import spectrum_metrics as metrics
 from bsdfkit.reduction import colorimetry
+from bsdfkit.reduction import spectrum_metrics as metrics
 from bsdfkit.reduction.colorimetry import cct_duv, check_power_spectrum, chromaticity_xy, colorimetric_summary
 
 DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
