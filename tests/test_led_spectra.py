@@ -18,6 +18,7 @@ from colour.colorimetry import sd_single_led_Ohno2005
 from scipy.optimize import brentq, least_squares
 
 from bsdfkit.cli.main import main
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
 from bsdfkit.core.errors import FitError, NumericalError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import spectrum as spectra
@@ -26,6 +27,7 @@ from bsdfkit.models import functions, led
 from bsdfkit.reduction import colorimetry
 from bsdfkit.reduction import spectrum_metrics as metrics
 from bsdfkit.reduction.colorimetry import cct_duv, check_power_spectrum, chromaticity_xy, colorimetric_summary
+from bsdfkit.reduction.spectral import band_sum
 
 DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
 BLUE = ("blue_010mA", "blue_100mA", "blue_3")
@@ -347,3 +349,23 @@ def test_real_spectra_pass_the_plausibility_rule():
                     <= colorimetry.NEGATIVE_TOLERANCE / 40 * (values[~negative] * weights[~negative]).sum())
             n += 1
     assert n == 10 + 24 and any((columns[c] < 0).any() for _, columns, _ in tables[:-1] for c in columns)
+
+
+def test_every_ybr_carries_its_band_edges(capsys):
+    """Issue #15 Build 5: a YBR is printed and saved with its bands; the §4.2 module bands give another ratio."""
+    wl, values = load("white_2")
+    sd = colour.SpectralDistribution(values, wl, name="white_2")
+    default = colorimetric_summary(sd)
+    module = colorimetric_summary(sd, MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM)
+    assert default.ybr_label == "YBR (471-780 nm / 380-470 nm)"
+    assert module.ybr_label == "YBR (501-780 nm / 380-500 nm)"
+    # the ratio is the band sums' quotient, so the two conventions differ (here by a factor ~1.7)
+    assert default.ybr == pytest.approx(band_sum(wl, values, (471, 780)) / band_sum(wl, values, (380, 470)), rel=1e-12)
+    assert module.ybr == pytest.approx(band_sum(wl, values, (501, 780)) / band_sum(wl, values, (380, 500)), rel=1e-12)
+    assert module.ybr < 0.8 * default.ybr
+    assert main(["color", str(DATA / "white_2.ISD")]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if "YBR" in ln]
+    assert lines == [f"  {default.ybr_label} = {default.ybr:.3f}"]
+    assert main(["color", str(DATA / "white_2.ISD"), "--json"]) == 0
+    saved = json.loads(capsys.readouterr().out)
+    assert saved["ybr_bands_nm"] == {"yellow": [471.0, 780.0], "blue": [380.0, 470.0]}

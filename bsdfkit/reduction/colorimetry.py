@@ -32,7 +32,7 @@ import colour
 import numpy as np
 from colour import SpectralDistribution
 
-from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM
+from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM, band_label
 from bsdfkit.core.errors import InputError, NumericalError, ValidationError
 from bsdfkit.reduction.spectral import band_sum
 
@@ -48,6 +48,7 @@ __all__ = [
     "luminous_flux_lm",
     "luminous_efficacy_of_radiation",
     "yellow_blue_ratio",
+    "ybr_label",
     "check_power_spectrum",
     "check_wavelengths_nm",
     "WAVELENGTH_RANGE_NM",
@@ -253,7 +254,8 @@ def yellow_blue_ratio(
 
 @dataclass(frozen=True)
 class ColorimetricSummary:
-    """Chromaticity, CCT/Duv (Ohno 2013), luminous efficacy of radiation and YBR of one spectrum."""
+    """Chromaticity, CCT/Duv (Ohno 2013), luminous efficacy of radiation and YBR of one spectrum; the YBR's band
+    edges [nm] travel with it (:attr:`ybr_label` is how every printout names it)."""
 
     x: float
     y: float
@@ -261,18 +263,37 @@ class ColorimetricSummary:
     duv: float
     luminous_efficacy_lm_per_W: float
     ybr: float | None
+    ybr_yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM
+    ybr_blue_band_nm: tuple[float, float] = COLORIMETRY_BLUE_BAND_NM
 
     @property
     def cct_meaningful(self) -> bool:
         return cct_is_meaningful(self.duv, self.cct_K)
 
+    @property
+    def ybr_label(self) -> str:
+        """``"YBR (471-780 nm / 380-470 nm)"``: the ratio's name with its yellow and blue band edges."""
+        return ybr_label(self.ybr_yellow_band_nm, self.ybr_blue_band_nm)
 
-def colorimetric_summary(sd: SpectralDistribution) -> ColorimetricSummary:
-    """All colour quantities of :class:`ColorimetricSummary`; YBR is None if the blue band is empty."""
+
+def ybr_label(yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM,
+              blue_band_nm: tuple[float, float] = COLORIMETRY_BLUE_BAND_NM) -> str:
+    """A yellow-to-blue ratio's name with its band edges, e.g. ``"YBR (471-780 nm / 380-470 nm)"``."""
+    return f"YBR ({band_label(yellow_band_nm)} / {band_label(blue_band_nm)})"
+
+
+def colorimetric_summary(
+    sd: SpectralDistribution,
+    blue_band_nm: tuple[float, float] = COLORIMETRY_BLUE_BAND_NM,
+    yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM,
+) -> ColorimetricSummary:
+    """All colour quantities of :class:`ColorimetricSummary`; YBR over the given bands [nm] (default
+    380–470 and 471–780 nm), None if the blue band is empty."""
     x, y = chromaticity_xy(sd)
     cct, duv = cct_duv(sd)
     try:
-        ybr: float | None = yellow_blue_ratio(sd)
+        ybr: float | None = yellow_blue_ratio(sd, blue_band_nm, yellow_band_nm)
     except NumericalError:
         ybr = None
-    return ColorimetricSummary(x, y, cct, duv, luminous_efficacy_of_radiation(sd), ybr)
+    return ColorimetricSummary(x, y, cct, duv, luminous_efficacy_of_radiation(sd), ybr,
+                               tuple(yellow_band_nm), tuple(blue_band_nm))
