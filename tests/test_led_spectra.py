@@ -359,7 +359,7 @@ def test_every_ybr_carries_its_band_edges(capsys):
     module = colorimetric_summary(sd, MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM)
     assert default.ybr_label == "YBR (471-780 nm / 380-470 nm)"
     assert module.ybr_label == "YBR (501-780 nm / 380-500 nm)"
-    # the ratio is the band sums' quotient, so the two conventions differ (here by a factor ~1.7)
+    # the ratio is the band sums' quotient, so the two conventions differ (here 5.75 and 4.15)
     assert default.ybr == pytest.approx(band_sum(wl, values, (471, 780)) / band_sum(wl, values, (380, 470)), rel=1e-12)
     assert module.ybr == pytest.approx(band_sum(wl, values, (501, 780)) / band_sum(wl, values, (380, 500)), rel=1e-12)
     assert module.ybr < 0.8 * default.ybr

@@ -51,6 +51,7 @@ from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalErr
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import lm
 from bsdfkit.fit.least_squares import FitOptions, Parameter, least_squares
+from bsdfkit.models.functions import C_FWHM
 from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODELS
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
 from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
@@ -776,8 +777,8 @@ def _phosphor_pair_starts(wl: np.ndarray, y: np.ndarray, mask: np.ndarray, split
     region = mask & (wl > split.valley_nm)
     w, v = wl[region], np.clip(y[region], 0.0, None)
     peak, fwhm, amp, alpha = _peak_and_fwhm(wl, y, region, with_alpha=True)
-    with x64():
-        first = amp * np.asarray(_split_gaussian(jnp.array([peak, fwhm, alpha, 1.0]), jnp.asarray(w)))
+    # eq. (3) in NumPy: a JAX call here would compile its operations once per spectrum length
+    first = amp * np.exp(-C_FWHM * ((w - peak) / (fwhm * (1.0 + np.sign(w - peak) * alpha))) ** 2)
     rest = np.clip(v - first, 0.0, None)
 
     def centre_spread(weights):
