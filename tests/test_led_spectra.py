@@ -33,6 +33,8 @@ DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
 BLUE = ("blue_010mA", "blue_100mA", "blue_3")
 WHITES = ("white_1", "white_2", "white_2700K", "white_3000K", "white_4000K", "white_6500K")
 VISIBLE = (380.0, 780.0)
+CIE_NIST = Path(__file__).resolve().parent / "data" / "colour-cie-nist-led-spd" / \
+    "cie_led_illuminants_and_nist_cqs_led_spd_5nm.csv"
 
 
 def load(name):
@@ -247,6 +249,24 @@ def test_two_band_on_synthetic_pc_whites_from_2700_to_6500_K():
         assert rec["r2"] > 0.99
 
 
+def test_two_band_on_the_cie_015_led_illuminants_and_a_nist_yag_white():
+    """Other pc-whites (5 nm grid): CIE 015 LED-B1..B5 (2733-6598 K), LED-BH1 and NIST CQS "Phosphor LED YAG".
+    On a 5 nm grid the measured pump maximum is the local quadratic through the largest sample and its
+    neighbours (the sample alone can be 2.5 nm off)."""
+    wl, columns, _ = read_spectrum_table(CIE_NIST)
+    names = [n for n in columns if n.startswith("CIE_LED-B")] + ["NIST_CQS_Phosphor LED YAG"]
+    assert len(names) == 7
+    records = spectra.analyse_spectra([(wl, columns[n]) for n in names], "two-band-wide", labels=names)
+    for name, rec in zip(names, records):
+        assert "error" not in rec, rec.get("error")
+        pump, phosphor, split = rec["components"]["pump"], rec["components"]["phosphor"], rec["measured_split"]
+        region = (wl > split["pump_peak_nm"] - 10) & (wl < split["pump_peak_nm"] + 10)
+        assert split["pump_peak_nm"] == pytest.approx(metrics.peak_wavelength(wl[region], columns[name][region])[0])
+        assert abs(pump["peak_nm"] - split["pump_peak_nm"]) <= 1.0, name
+        assert 520.0 <= phosphor["peak_nm"] <= 660.0, name
+        assert rec["r2"] > 0.98, name
+
+
 def test_two_band_refuses_single_colour_leds(two_band_led):
     assert "no pump band" in two_band_led["red_2"]["error"]
     assert "no phosphor band" in two_band_led["blue_3"]["error"]
@@ -296,10 +316,6 @@ def test_cli_fits_columns_of_a_table_and_several_files_in_one_call(tmp_path, cap
 
 
 # ---------------------------------------------------------------------------------------------- implausible spectra
-CIE_NIST = Path(__file__).resolve().parent / "data" / "colour-cie-nist-led-spd" / \
-    "cie_led_illuminants_and_nist_cqs_led_spd_5nm.csv"
-
-
 def _faulty_spectra():
     """Issue #13's classes: a sign error (mixed-sign pc-white), zero-mean noise, wavelengths in µm and in m, and
     too few samples (4). Returns {name: (λ, values, words of the expected message)}."""

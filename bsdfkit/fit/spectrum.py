@@ -56,7 +56,7 @@ from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODE
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
 from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
 from bsdfkit.reduction.spectral import band_sum
-from bsdfkit.reduction.spectrum_metrics import spectrum_metrics
+from bsdfkit.reduction.spectrum_metrics import peak_wavelength, spectrum_metrics
 
 if TYPE_CHECKING:
     from colour import SpectralDistribution
@@ -348,7 +348,8 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
     :data:`PUMP_MIN_FRACTION` of the spectrum's maximum and that the spectrum falls from by ≥ 10 % before
     560 nm; the valley is the first local minimum after it (or the smallest value up to 560 nm); the phosphor
     maximum is the largest sample above the valley. Values are smoothed over ±2 samples for the search
-    (noise); the reported positions are samples of the data (the largest within ±2 samples).
+    (noise); the reported maxima are those of the data: the largest sample within ±2 samples refined by the
+    local quadratic through it and its neighbours (:func:`bsdfkit.reduction.spectrum_metrics.peak_wavelength`).
 
     Raises
     ------
@@ -412,9 +413,17 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
         lo, hi = max(i - 2, 0), min(i + 3, y_raw.size)
         return lo + int(np.argmax(y_raw[lo:hi]))
 
-    i_pump, i_ph = local_max(i_pump), local_max(i_ph)
-    return TwoBandSplit(float(wl[i_pump]), float(y_raw[i_pump]), float(wl[i_valley]), float(y_raw[i_valley]),
-                        float(wl[i_ph]), float(y_raw[i_ph]))
+    def vertex(i: int) -> tuple[float, float]:
+        # the local quadratic through the maximum sample and its neighbours (as the measured peak of
+        # spectrum_metrics): on a 5 nm grid the maximum sample alone can be 2.5 nm off the peak
+        j = local_max(i)
+        if 0 < j < y_raw.size - 1:
+            return peak_wavelength(wl[j - 1:j + 2], y_raw[j - 1:j + 2])
+        return float(wl[j]), float(y_raw[j])
+
+    (pump_nm, pump_value), (phosphor_nm, phosphor_value) = vertex(i_pump), vertex(i_ph)
+    return TwoBandSplit(pump_nm, pump_value, float(wl[i_valley]), float(y_raw[i_valley]), phosphor_nm,
+                        phosphor_value)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -663,9 +672,39 @@ def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, commo
     if result is None:
         return None, {b: errors2.get(b, errors.get(b, "fit failed")) for b in range(n_batch)}
     chosen = result.isel(spectrum=np.arange(n_batch))
+    # A spectrum whose best start ends degenerate (a side band gone to zero height: its position and width no
+    # longer matter) continues from its next-best start instead, in a batch of the same shape (same kernel).
+    order = np.argsort(cost, axis=0)
+    rank = np.zeros(n_batch, dtype=int)
+    round1 = np.stack([first[n].values for n in names], axis=1)
+    for _ in range(k_starts - 1):
+        retry = [b for b in range(n_batch) if b in errors2 and not dead[b] and rank[b] + 1 < k_starts
+                 and math.isfinite(cost[order[rank[b] + 1, b], b])]
+        if not retry:
+            break
+        for b in retry:
+            rank[b] += 1
+            pick[b] = order[rank[b], b]
+        src = np.array([b if b in retry else donor for b in range(n_batch)] + [donor] * ((k_starts - 1) * n_batch))
+        start = round1[pick * n_batch + np.arange(n_batch)]
+        x_r = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
+        sub_r = {**sub, "labels": [common["labels"][i] for i in src],
+                 "sigma": None if common["sigma"] is None else common["sigma"][src]}
+        again, errors3 = _solve(function, x_r, y_n[src], m[src], start[src], parameters, model_name=model_name,
+                                options=options, **sub_r)
+        if again is None:
+            break
+        fixed = [b for b in retry if b not in errors3]
+        chosen = xr.concat([again.isel(spectrum=b) if b in fixed else chosen.isel(spectrum=b) for b in range(n_batch)],
+                           dim="spectrum", data_vars="all", coords="minimal", compat="override")
+        for b in retry:
+            if b in fixed:
+                errors2.pop(b)
+            else:
+                errors2[b] = errors3[b]
     chosen["iterations"] = chosen["iterations"] + first.iterations.values[pick * n_batch + np.arange(n_batch)]
     chosen.attrs["starts"] = (f"{k_starts} start points per spectrum, {short.maxiter} iterations each; the lowest "
-                              "cost continued to convergence")
+                              "cost continued to convergence (the next lowest if that ended degenerate)")
     out_errors = {b: errors[b] for b in range(n_batch) if dead[b]}
     out_errors.update({b: errors2[b] for b in range(n_batch) if b in errors2 and b not in out_errors})
     return chosen, out_errors
