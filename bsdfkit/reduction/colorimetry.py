@@ -157,7 +157,10 @@ def _uniform_sd(sd):
     shape = colour.SpectralShape(math.ceil(wl[0]), math.floor(wl[-1]), 1.0)
     if shape.end - shape.start < 2:
         raise InputError("spectrum spans less than 2 nm", field=sd.name, got=(wl[0], wl[-1]))
-    return sd.copy().interpolate(shape)
+    with warnings.catch_warnings():
+        # colour notes that an irregular grid "is not uniform": resampling it onto 1 nm is this function's job
+        warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
+        return sd.copy().interpolate(shape)
 
 
 def _colorimetric_sd(sd):
