@@ -663,12 +663,17 @@ def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, commo
     # a degenerate spectrum then fails once in this round, not k times.
     healthy = np.flatnonzero(~dead)
     donor = int(healthy[np.argmin(np.min(cost, axis=0)[healthy])]) if healthy.size else 0
-    src = np.concatenate([np.arange(n_batch), np.full((k_starts - 1) * n_batch, donor)])
-    x_2 = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
-    sub2 = {**sub, "labels": [common["labels"][i] for i in src],
-            "sigma": None if common["sigma"] is None else common["sigma"][src]}
-    result, errors2 = _solve(function, x_2, y_n[src], m[src], best[src], parameters, model_name=model_name,
-                             options=options, **sub2)
+
+    def continue_from(src: np.ndarray, start: np.ndarray):
+        """The rows ``src`` of the batch from ``start[src]`` with the full iteration limit."""
+        x_s = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
+        sub_s = {**sub, "labels": [common["labels"][i] for i in src],
+                 "sigma": None if common["sigma"] is None else common["sigma"][src]}
+        return _solve(function, x_s, y_n[src], m[src], start[src], parameters, model_name=model_name,
+                      options=options, **sub_s)
+
+    result, errors2 = continue_from(np.concatenate([np.arange(n_batch), np.full((k_starts - 1) * n_batch, donor)]),
+                                    best)
     if result is None:
         return None, {b: errors2.get(b, errors.get(b, "fit failed")) for b in range(n_batch)}
     chosen = result.isel(spectrum=np.arange(n_batch))
@@ -686,12 +691,7 @@ def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, commo
             rank[b] += 1
             pick[b] = order[rank[b], b]
         src = np.array([b if b in retry else donor for b in range(n_batch)] + [donor] * ((k_starts - 1) * n_batch))
-        start = round1[pick * n_batch + np.arange(n_batch)]
-        x_r = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
-        sub_r = {**sub, "labels": [common["labels"][i] for i in src],
-                 "sigma": None if common["sigma"] is None else common["sigma"][src]}
-        again, errors3 = _solve(function, x_r, y_n[src], m[src], start[src], parameters, model_name=model_name,
-                                options=options, **sub_r)
+        again, errors3 = continue_from(src, round1[pick * n_batch + np.arange(n_batch)])
         if again is None:
             break
         fixed = [b for b in retry if b not in errors3]
@@ -894,6 +894,8 @@ def fit_spectra(
     ------
     FitError
         A degenerate fit of any member, or (two-band) a spectrum without pump or phosphor band.
+    ValidationError
+        Wavelengths not in nm (:func:`bsdfkit.reduction.colorimetry.check_wavelengths_nm`).
     """
     if model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model", expected=" | ".join(SPECTRUM_MODELS),
@@ -1084,7 +1086,7 @@ def _warnings(record: dict[str, Any], measured: dict[str, Any]) -> list[str]:
         if abs(d_pump) > WARN_PEAK_NM:
             out.append(f"fitted pump peak {record['components']['pump']['peak_nm']:.2f} nm is {d_pump:+.2f} nm from "
                        f"the measured pump maximum {split['pump_peak_nm']:.2f} nm (the pump shape does not match"
-                       + ("; try two-band-led)" if record["model"] == "two-band" else ")"))
+                       + ("; try two-band-led or two-band-wide)" if record["model"] == "two-band" else ")"))
     if record["model"] in SINGLE_BAND_MODELS:
         d_peak, d_fwhm = record["difference"]["peak_nm"], record["difference"]["fwhm_nm"]
         if d_peak is not None and abs(d_peak) > WARN_PEAK_NM:
@@ -1138,7 +1140,10 @@ def analyse_spectra(
     (aicc, bic), ``fitted`` (the same metrics of the fitted curve), ``difference`` (fitted − measured),
     ``warnings`` (list of one-line strings, empty when nothing is suspicious) and, for two-band models,
     ``components`` (pump and phosphor peak_nm, fwhm_nm, power [input units·nm], power_fraction) and
-    ``split_nm``. A spectrum whose fit failed or was refused has ``error`` (one line) instead of the fit keys.
+    ``split_nm``. A spectrum whose fit failed or was refused has ``error`` (one line) instead of the fit keys,
+    among them implausible spectra (:func:`bsdfkit.reduction.colorimetry.check_power_spectrum` without the
+    colorimetric sample count: wavelengths not in nm, negative power beyond the noise) and fewer samples in the
+    fit range than a model's parameters + 2.
     """
     if model != "best" and model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model",
