@@ -5,7 +5,6 @@ import argparse
 import sys
 
 from bsdfkit.cli._common import emit_json
-from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM
 from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.io.spectrum_file import read_spectrum
 from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
@@ -34,12 +33,12 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json({"file": str(args.file), "x": c.x, "y": c.y, "cct_K": c.cct_K, "duv": c.duv,
                    "luminous_efficacy_lm_per_W": c.luminous_efficacy_lm_per_W, "ybr": c.ybr,
-                   "ybr_bands_nm": {"yellow": list(COLORIMETRY_YELLOW_BAND_NM), "blue": list(COLORIMETRY_BLUE_BAND_NM)},
+                   "ybr_bands_nm": {"yellow": list(c.ybr_yellow_band_nm), "blue": list(c.ybr_blue_band_nm)},
                    "cct_meaningful": c.cct_meaningful})
         return 0
     print(f"{args.file}:")
     print(f"  CIE 1931 2°: x = {c.x:.4f}, y = {c.y:.4f}")
     print(f"  CCT = {c.cct_K:.0f} K, Duv = {c.duv:+.4f} (Ohno 2013){'' if c.cct_meaningful else ' — not meaningful'}")
     print(f"  luminous efficacy of radiation = {c.luminous_efficacy_lm_per_W:.1f} lm/W")
-    print("  YBR (471-780 nm / 380-470 nm) = " + ("undefined (no blue flux)" if c.ybr is None else f"{c.ybr:.3f}"))
+    print(f"  {c.ybr_label} = " + ("undefined (no blue flux)" if c.ybr is None else f"{c.ybr:.3f}"))
     return 0

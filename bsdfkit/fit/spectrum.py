@@ -8,8 +8,11 @@
   measured peak, FWHM and asymmetry) and those lines with a split-Gaussian side band (``pseudo-voigt-shoulder``,
   ``pearson7-shoulder``: the shoulder of InGaN LEDs; three start points solved in one batch); and the pump +
   phosphor sums ``two-band`` (pump Gaussian + phosphor split Gaussian, the paper's §4.2 components) and
-  ``two-band-led`` (pump Gaussian line + side band, phosphor split Gaussian), whose split between pump and
-  phosphor is found from the data (:func:`find_two_band_split`).
+  ``two-band-led`` (pump Gaussian line + side band, phosphor split Gaussian) and ``two-band-wide`` (that pump,
+  phosphor split Gaussian + Gaussian: a second phosphor such as a red nitride band, or the long tail of one;
+  three start points from the measured phosphor band, :func:`_phosphor_pair_starts`), whose split between pump
+  and phosphor is found from the data (:func:`find_two_band_split`). Every reported component peak is the
+  maximum of the fitted component curve, not a parameter.
 * :func:`analyse_spectra` is the batch front-end of ``bsdfkit fit spectrum``: it fits many spectra (different
   grids allowed: padded and masked), optionally every single-band model with the best chosen by AICc or BIC
   (``model="best"``), and returns one record per spectrum with the measured metrics
@@ -48,10 +51,12 @@ from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalErr
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import lm
 from bsdfkit.fit.least_squares import FitOptions, Parameter, least_squares
+from bsdfkit.models.functions import C_FWHM
 from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODELS
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
+from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
 from bsdfkit.reduction.spectral import band_sum
-from bsdfkit.reduction.spectrum_metrics import spectrum_metrics
+from bsdfkit.reduction.spectrum_metrics import peak_wavelength, spectrum_metrics
 
 if TYPE_CHECKING:
     from colour import SpectralDistribution
@@ -101,7 +106,9 @@ SHOULDER_ALPHA_MAX: float = 0.9
 #: the data cannot separate (a singular fit).
 SIDE_FWHM_MAX_NM: float = 120.0
 #: Pump + phosphor sums, fitted jointly with a data-derived split (:func:`find_two_band_split`).
-TWO_BAND_MODELS = ("two-band", "two-band-led")
+TWO_BAND_MODELS = ("two-band", "two-band-led", "two-band-wide")
+#: Two-band models whose pump is a line with a side band.
+PUMP_SIDE_MODELS = ("two-band-led", "two-band-wide")
 SPECTRUM_MODELS = SINGLE_BAND_MODELS + TWO_BAND_MODELS
 #: Information criteria for ``model="best"``.
 CRITERIA = ("aicc", "bic")
@@ -133,6 +140,10 @@ PUMP_MIN_FWHM_NM: float = 2.0
 #: ``two-band-led``: the pump's side band (the InGaN shoulder, cf. the ``*-shoulder`` models) lies up to this far
 #: [nm] above the pump line; further out it would take over the phosphor's rising edge.
 PUMP_SIDE_OFFSET_MAX_NM: float = 20.0
+#: ``two-band-wide``: the phosphor's second band (a Gaussian) lies within this distance [nm] of the first (a split
+#: Gaussian) and has an FWHM [nm] in this range (narrower would be a spike, wider a flat offset).
+PHOSPHOR2_OFFSET_MAX_NM: float = 200.0
+PHOSPHOR2_FWHM_NM: tuple[float, float] = (10.0, 200.0)
 
 #: Warning of :func:`analyse_spectra` below this R² (R² < 0 always gets its own warning).
 WARN_R2: float = 0.9
@@ -150,6 +161,7 @@ _gaussian = _FUNCTIONS["gaussian"]
 _split_gaussian = _FUNCTIONS["split-gaussian"]
 _two_band = _FUNCTIONS["two-band"]
 _two_band_led = _FUNCTIONS["two-band-led"]
+_two_band_wide = _FUNCTIONS["two-band-wide"]
 
 
 # Two-band fits in relative coordinates: x = {"wl": λ, "pump": measured pump peak, "valley": split} (per point,
@@ -163,12 +175,17 @@ def _two_band_led_rel(theta, x):
     return _two_band_led(_absolute(theta, x, 6), x["wl"])
 
 
+def _two_band_wide_rel(theta, x):
+    return _two_band_wide(_absolute(theta, x, 6), x["wl"])
+
+
 def _absolute(theta, x, k_phosphor):
     shift = jnp.zeros_like(theta).at[0].set(x["pump"][0]).at[k_phosphor].set(x["valley"][0])
     return theta + shift
 
 
-_RELATIVE = {"two-band": (_two_band_rel, 3), "two-band-led": (_two_band_led_rel, 6)}
+_RELATIVE = {"two-band": (_two_band_rel, 3), "two-band-led": (_two_band_led_rel, 6),
+             "two-band-wide": (_two_band_wide_rel, 6)}
 
 
 def _parameters(model: str, lo: float, hi: float, split_nm: float = DEFAULT_SPLIT_NM) -> tuple[Parameter, ...]:
@@ -182,13 +199,18 @@ def _parameters(model: str, lo: float, hi: float, split_nm: float = DEFAULT_SPLI
     if model.startswith("two-band"):
         blue = [Parameter("blue_peak_nm", lo, split_nm, "nm"), Parameter("blue_fwhm_nm", 0.0, split_nm - lo, "nm")]
         blue.append(Parameter("blue_amplitude", **amp))
-        if model.startswith("two-band-led"):
+        if model in PUMP_SIDE_MODELS:
             blue += [Parameter("blue_side_offset_nm", 0.0, PUMP_SIDE_OFFSET_MAX_NM, "nm"),
                      Parameter("blue_side_fwhm_nm", PUMP_MIN_FWHM_NM, PUMP_MAX_FWHM_NM, "nm"),
                      Parameter("blue_side_amplitude", **amp)]
         yellow = [Parameter("yellow_peak_nm", split_nm, hi + span, "nm"), Parameter("yellow_fwhm_nm", **width),
                   Parameter("yellow_alpha", **alpha)]
-        return tuple(blue + yellow + [Parameter("yellow_amplitude", **amp)])
+        yellow.append(Parameter("yellow_amplitude", **amp))
+        if model == "two-band-wide":
+            yellow += [Parameter("phosphor2_offset_nm", -PHOSPHOR2_OFFSET_MAX_NM, PHOSPHOR2_OFFSET_MAX_NM, "nm"),
+                       Parameter("phosphor2_fwhm_nm", PHOSPHOR2_FWHM_NM[0], PHOSPHOR2_FWHM_NM[1], "nm"),
+                       Parameter("phosphor2_amplitude", **amp)]
+        return tuple(blue + yellow)
     head = (Parameter("peak_nm", **peak), Parameter("fwhm_nm", **width))
     tail = (Parameter("amplitude", **amp),)
     if model in ("gaussian", "ohno2005"):
@@ -220,7 +242,7 @@ def _relative_parameters(model: str) -> tuple[Parameter, ...]:
         if p.name == "blue_peak_nm":
             out.append(Parameter("blue_peak_nm", -PUMP_PEAK_WINDOW_NM, PUMP_PEAK_WINDOW_NM, "nm"))
         elif p.name == "blue_fwhm_nm":
-            low = PUMP_MIN_FWHM_NM if model == "two-band-led" else 0.0
+            low = PUMP_MIN_FWHM_NM if model in PUMP_SIDE_MODELS else 0.0
             out.append(Parameter("blue_fwhm_nm", low, PUMP_MAX_FWHM_NM, "nm"))
         elif p.name == "yellow_peak_nm":
             out.append(Parameter("yellow_peak_nm", 0.0, math.inf, "nm"))
@@ -326,7 +348,8 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
     :data:`PUMP_MIN_FRACTION` of the spectrum's maximum and that the spectrum falls from by ≥ 10 % before
     560 nm; the valley is the first local minimum after it (or the smallest value up to 560 nm); the phosphor
     maximum is the largest sample above the valley. Values are smoothed over ±2 samples for the search
-    (noise); the reported positions are samples of the data (the largest within ±2 samples).
+    (noise); the reported maxima are those of the data: the largest sample within ±2 samples refined by the
+    local quadratic through it and its neighbours (:func:`bsdfkit.reduction.spectrum_metrics.peak_wavelength`).
 
     Raises
     ------
@@ -390,9 +413,17 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
         lo, hi = max(i - 2, 0), min(i + 3, y_raw.size)
         return lo + int(np.argmax(y_raw[lo:hi]))
 
-    i_pump, i_ph = local_max(i_pump), local_max(i_ph)
-    return TwoBandSplit(float(wl[i_pump]), float(y_raw[i_pump]), float(wl[i_valley]), float(y_raw[i_valley]),
-                        float(wl[i_ph]), float(y_raw[i_ph]))
+    def vertex(i: int) -> tuple[float, float]:
+        # the local quadratic through the maximum sample and its neighbours (as the measured peak of
+        # spectrum_metrics): on a 5 nm grid the maximum sample alone can be 2.5 nm off the peak
+        j = local_max(i)
+        if 0 < j < y_raw.size - 1:
+            return peak_wavelength(wl[j - 1:j + 2], y_raw[j - 1:j + 2])
+        return float(wl[j]), float(y_raw[j])
+
+    (pump_nm, pump_value), (phosphor_nm, phosphor_value) = vertex(i_pump), vertex(i_ph)
+    return TwoBandSplit(pump_nm, pump_value, float(wl[i_valley]), float(y_raw[i_valley]), phosphor_nm,
+                        phosphor_value)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -412,16 +443,23 @@ def _validated_grid(wavelength: np.ndarray) -> np.ndarray:
     return wl
 
 
+def _nm_grid(wavelength: np.ndarray) -> np.ndarray:
+    """:func:`_validated_grid` of a grid that must be in nm (µm or m values are refused)."""
+    wl = _validated_grid(wavelength)
+    check_wavelengths_nm(wl, "wavelength")
+    return wl
+
+
 def _validated_grids(wavelength: np.ndarray, n_batch: int) -> np.ndarray:
-    """(batch, n) grids: one grid broadcast, or one strictly increasing grid per spectrum."""
+    """(batch, n) grids in nm: one grid broadcast, or one strictly increasing grid per spectrum."""
     wl = np.asarray(wavelength, dtype=float)
     if wl.ndim == 1:
-        return np.broadcast_to(_validated_grid(wl), (n_batch, wl.size))
+        return np.broadcast_to(_nm_grid(wl), (n_batch, wl.size))
     if wl.ndim != 2 or wl.shape[0] != n_batch:
         raise InputError("wavelength must be (n,) or (batch, n)", field="wavelength",
                          expected=f"(n,) or ({n_batch}, n)", got=wl.shape)
     for row in wl:
-        _validated_grid(row)
+        _nm_grid(row)
     return wl
 
 
@@ -625,18 +663,48 @@ def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, commo
     # a degenerate spectrum then fails once in this round, not k times.
     healthy = np.flatnonzero(~dead)
     donor = int(healthy[np.argmin(np.min(cost, axis=0)[healthy])]) if healthy.size else 0
-    src = np.concatenate([np.arange(n_batch), np.full((k_starts - 1) * n_batch, donor)])
-    x_2 = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
-    sub2 = {**sub, "labels": [common["labels"][i] for i in src],
-            "sigma": None if common["sigma"] is None else common["sigma"][src]}
-    result, errors2 = _solve(function, x_2, y_n[src], m[src], best[src], parameters, model_name=model_name,
-                             options=options, **sub2)
+
+    def continue_from(src: np.ndarray, start: np.ndarray):
+        """The rows ``src`` of the batch from ``start[src]`` with the full iteration limit."""
+        x_s = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
+        sub_s = {**sub, "labels": [common["labels"][i] for i in src],
+                 "sigma": None if common["sigma"] is None else common["sigma"][src]}
+        return _solve(function, x_s, y_n[src], m[src], start[src], parameters, model_name=model_name,
+                      options=options, **sub_s)
+
+    result, errors2 = continue_from(np.concatenate([np.arange(n_batch), np.full((k_starts - 1) * n_batch, donor)]),
+                                    best)
     if result is None:
         return None, {b: errors2.get(b, errors.get(b, "fit failed")) for b in range(n_batch)}
     chosen = result.isel(spectrum=np.arange(n_batch))
+    # A spectrum whose best start ends degenerate (a side band gone to zero height: its position and width no
+    # longer matter) continues from its next-best start instead, in a batch of the same shape (same kernel).
+    order = np.argsort(cost, axis=0)
+    rank = np.zeros(n_batch, dtype=int)
+    round1 = np.stack([first[n].values for n in names], axis=1)
+    for _ in range(k_starts - 1):
+        retry = [b for b in range(n_batch) if b in errors2 and not dead[b] and rank[b] + 1 < k_starts
+                 and math.isfinite(cost[order[rank[b] + 1, b], b])]
+        if not retry:
+            break
+        for b in retry:
+            rank[b] += 1
+            pick[b] = order[rank[b], b]
+        src = np.array([b if b in retry else donor for b in range(n_batch)] + [donor] * ((k_starts - 1) * n_batch))
+        again, errors3 = continue_from(src, round1[pick * n_batch + np.arange(n_batch)])
+        if again is None:
+            break
+        fixed = [b for b in retry if b not in errors3]
+        chosen = xr.concat([again.isel(spectrum=b) if b in fixed else chosen.isel(spectrum=b) for b in range(n_batch)],
+                           dim="spectrum", data_vars="all", coords="minimal", compat="override")
+        for b in retry:
+            if b in fixed:
+                errors2.pop(b)
+            else:
+                errors2[b] = errors3[b]
     chosen["iterations"] = chosen["iterations"] + first.iterations.values[pick * n_batch + np.arange(n_batch)]
     chosen.attrs["starts"] = (f"{k_starts} start points per spectrum, {short.maxiter} iterations each; the lowest "
-                              "cost continued to convergence")
+                              "cost continued to convergence (the next lowest if that ended degenerate)")
     out_errors = {b: errors[b] for b in range(n_batch) if dead[b]}
     out_errors.update({b: errors2[b] for b in range(n_batch) if b in errors2 and b not in out_errors})
     return chosen, out_errors
@@ -709,9 +777,16 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
                               **sub)
     else:
         # Pump line + side band (offset, FWHM, height fraction) from three starts; the lowest cost is kept.
-        starts = np.array([[pump[:2] + [(1.0 - f) * pump[2], off, wid, f * pump[2]] + phosphor
-                            for pump, phosphor in rows]
-                           for off, wid, f in ((5.0, 15.0, 0.3), (10.0, 25.0, 0.3), (15.0, 30.0, 0.2))])
+        pump_starts = ((5.0, 15.0, 0.3), (10.0, 25.0, 0.3), (15.0, 30.0, 0.2))
+        if model == "two-band-wide":
+            extra = [_phosphor_pair_starts(wl2[b], y_n[b], m[b], splits[int(b)]) for b in alive]
+            starts = np.array([[pump[:2] + [(1.0 - f) * pump[2], off, wid, f * pump[2]] + ph
+                                for (pump, _), ex in zip(rows, extra) for ph in [ex[k]]]
+                               for k, (off, wid, f) in enumerate(pump_starts)])
+        else:
+            starts = np.array([[pump[:2] + [(1.0 - f) * pump[2], off, wid, f * pump[2]] + phosphor
+                                for pump, phosphor in rows]
+                               for off, wid, f in pump_starts])
         result, more = _solve_multistart(function, x, y_n[alive], m[alive], starts, _relative_parameters(model),
                                          sub, model)
     errors.update({int(alive[k]): v for k, v in more.items()})
@@ -729,6 +804,42 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
         result[name].attrs = attrs
     result["split_nm"] = (("spectrum",), valley, {"units": "nm", "long_name": "valley between pump and phosphor"})
     return _expand(result, alive, n_batch), errors, splits
+
+
+def _phosphor_pair_starts(wl: np.ndarray, y: np.ndarray, mask: np.ndarray, split: TwoBandSplit) -> list[list[float]]:
+    """Three start points of the ``two-band-wide`` phosphor (split Gaussian: peak − valley, FWHM, α, amplitude;
+    Gaussian: offset, FWHM, amplitude) from the measured phosphor band beyond the valley.
+
+    (1) The split Gaussian on the band's maximum with its measured half widths, the Gaussian on the centroid and
+    spread of what that leaves (a second phosphor: green plateau + red band); (2) the two at the band's centroid
+    ∓ a quarter of its spread; (3) as (1) with the roles swapped."""
+    region = mask & (wl > split.valley_nm)
+    w, v = wl[region], np.clip(y[region], 0.0, None)
+    peak, fwhm, amp, alpha = _peak_and_fwhm(wl, y, region, with_alpha=True)
+    # eq. (3) in NumPy: a JAX call here would compile its operations once per spectrum length
+    first = amp * np.exp(-C_FWHM * ((w - peak) / (fwhm * (1.0 + np.sign(w - peak) * alpha))) ** 2)
+    rest = np.clip(v - first, 0.0, None)
+
+    def centre_spread(weights):
+        area = np.trapezoid(weights, w)
+        if not area > 0:
+            return peak, fwhm
+        c = np.trapezoid(w * weights, w) / area
+        sd = math.sqrt(max(np.trapezoid((w - c) ** 2 * weights, w) / area, 1.0))
+        return float(c), float(np.clip(2.3548 * sd, *PHOSPHOR2_FWHM_NM))
+
+    c_rest, f_rest = centre_spread(rest)
+    c_all, f_all = centre_spread(v)
+    lo_fwhm = PHOSPHOR2_FWHM_NM[0]
+    v_at = lambda x: float(np.interp(x, w, v))  # noqa: E731
+    q = 0.25 * f_all
+    return [
+        [peak - split.valley_nm, fwhm, alpha, 0.9 * amp, c_rest - peak, f_rest, max(float(rest.max()), 0.05 * amp)],
+        [c_all - q - split.valley_nm, max(f_all / 2, lo_fwhm), 0.0, 0.6 * v_at(c_all - q), 2 * q,
+         max(f_all / 2, lo_fwhm), 0.6 * v_at(c_all + q)],
+        [c_rest - split.valley_nm, f_rest, 0.0, max(float(rest.max()), 0.05 * amp), peak - c_rest,
+         max(fwhm, lo_fwhm), 0.9 * amp],
+    ]
 
 
 def fit_spectra(
@@ -759,7 +870,9 @@ def fit_spectra(
         side_fwhm_nm, side_amplitude, side_alpha; fitted from three starts); 'two-band' (pump eq. 2 + phosphor
         eq. 3 jointly: blue_peak_nm, blue_fwhm_nm, blue_amplitude, yellow_peak_nm, yellow_fwhm_nm, yellow_alpha,
         yellow_amplitude) or 'two-band-led' (pump = Gaussian line + Gaussian side band: adds
-        blue_side_offset_nm, blue_side_fwhm_nm, blue_side_amplitude after blue_amplitude). Every ``fwhm_nm`` is
+        blue_side_offset_nm, blue_side_fwhm_nm, blue_side_amplitude after blue_amplitude) or 'two-band-wide'
+        (that pump; phosphor split Gaussian + Gaussian: adds phosphor2_offset_nm from yellow_peak_nm,
+        phosphor2_fwhm_nm, phosphor2_amplitude after yellow_amplitude). Every ``fwhm_nm`` is
         the true FWHM of that shape [nm] (of the main line for the models with a side band).
     sigma
         Standard uncertainties of ``values`` (same units), broadcast to ``values``; None = unweighted.
@@ -781,6 +894,8 @@ def fit_spectra(
     ------
     FitError
         A degenerate fit of any member, or (two-band) a spectrum without pump or phosphor band.
+    ValidationError
+        Wavelengths not in nm (:func:`bsdfkit.reduction.colorimetry.check_wavelengths_nm`).
     """
     if model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model", expected=" | ".join(SPECTRUM_MODELS),
@@ -880,7 +995,7 @@ def _evaluate(theta, x, function):
     return jax.vmap(function)(theta, x)
 
 
-_PUMPS = {"two-band": pump_two_band, "two-band-led": pump_two_band_led}
+_PUMPS = {"two-band": pump_two_band, "two-band-led": pump_two_band_led, "two-band-wide": pump_two_band_led}
 
 
 def _curves(model: str, ds: xr.Dataset, wl2: np.ndarray, m2: np.ndarray) -> dict[str, np.ndarray]:
@@ -971,7 +1086,7 @@ def _warnings(record: dict[str, Any], measured: dict[str, Any]) -> list[str]:
         if abs(d_pump) > WARN_PEAK_NM:
             out.append(f"fitted pump peak {record['components']['pump']['peak_nm']:.2f} nm is {d_pump:+.2f} nm from "
                        f"the measured pump maximum {split['pump_peak_nm']:.2f} nm (the pump shape does not match"
-                       + ("; try two-band-led)" if record["model"] == "two-band" else ")"))
+                       + ("; try two-band-led or two-band-wide)" if record["model"] == "two-band" else ")"))
     if record["model"] in SINGLE_BAND_MODELS:
         d_peak, d_fwhm = record["difference"]["peak_nm"], record["difference"]["fwhm_nm"]
         if d_peak is not None and abs(d_peak) > WARN_PEAK_NM:
@@ -1025,7 +1140,10 @@ def analyse_spectra(
     (aicc, bic), ``fitted`` (the same metrics of the fitted curve), ``difference`` (fitted − measured),
     ``warnings`` (list of one-line strings, empty when nothing is suspicious) and, for two-band models,
     ``components`` (pump and phosphor peak_nm, fwhm_nm, power [input units·nm], power_fraction) and
-    ``split_nm``. A spectrum whose fit failed or was refused has ``error`` (one line) instead of the fit keys.
+    ``split_nm``. A spectrum whose fit failed or was refused has ``error`` (one line) instead of the fit keys,
+    among them implausible spectra (:func:`bsdfkit.reduction.colorimetry.check_power_spectrum` without the
+    colorimetric sample count: wavelengths not in nm, negative power beyond the noise) and fewer samples in the
+    fit range than a model's parameters + 2.
     """
     if model != "best" and model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model",
@@ -1046,24 +1164,36 @@ def analyse_spectra(
     wl2, y2, m2 = _pad_spectra(spectra, ranges)
 
     records: list[dict[str, Any]] = []
-    grids = []
+    models_to_fit = list(candidates) if model == "best" else [model]
+    n_parameters = {name: len(_parameters(name, 380.0, 780.0)) for name in models_to_fit}
+    fewest = min(n_parameters.values()) + 2  # AICc needs n > p + 2 (p counting the variance)
     for b in range(n_batch):
         w, v = wl2[b][m2[b]], y2[b][m2[b]]
-        grids.append((w, v))
         rec: dict[str, Any] = {"range_nm": None if ranges[b] is None else [float(r) for r in ranges[b]]}
         try:
+            # a spectral power in nm (one line per implausible spectrum: sign errors, noise, µm or m values)
+            check_wavelengths_nm(spectra[b][0], "wavelength")
+            check_power_spectrum(spectra[b][0], spectra[b][1], "values", colorimetry=False)
+            if w.size < fewest:
+                raise ValidationError("too few samples in the fit range", field="values",
+                                      expected=f"at least {fewest} for a {min(n_parameters, key=n_parameters.get)} "
+                                               "fit (its parameters + 2)", got=w.size)
             measured = spectrum_metrics(w, v).as_dict()
             rec["measured"] = {k: _finite_or_none(measured[k]) for k in _METRIC_KEYS}
         except BsdfkitError as exc:
             rec["error"] = f"{labels[b]}: {exc}"
         records.append(rec)
-    alive = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
-    models_to_fit = list(candidates) if model == "best" else [model]
+    alive_all = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
     per_model: dict[str, dict[int, dict[str, Any]]] = {}
     for name in models_to_fit:
         per_model[name] = {}
+        too_few = [b for b in alive_all if np.count_nonzero(m2[b]) < n_parameters[name] + 2]
+        for b in too_few:
+            per_model[name][int(b)] = {"error": f"{labels[b]}: too few samples in the fit range for a {name} fit "
+                                                f"(at least {n_parameters[name] + 2}, got {np.count_nonzero(m2[b])})"}
+        alive = np.array([b for b in alive_all if b not in too_few], dtype=int)
         if alive.size == 0:
-            break
+            continue
         ds, errors, splits = _fit_batch(wl2[alive], y2[alive], m2[alive], name, sigma=None, options=options,
                                         split_nm=split_nm, labels=[labels[b] for b in alive], collect=True)
         if ds is None:
@@ -1085,7 +1215,7 @@ def analyse_spectra(
                     "phosphor_peak_nm": splits[k].phosphor_peak_nm}
         per_model[name]["_ds"], per_model[name]["_curves"] = ds, curves
 
-    for b in alive:
+    for b in alive_all:
         b = int(b)
         rec = records[b]
         results = {name: per_model[name][b] for name in models_to_fit}
@@ -1125,7 +1255,7 @@ def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[flo
     λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.reduction.spectral.band_sum` on a
     validated grid. Result in value-unit·nm (W for W/nm).
     """
-    wl = _validated_grid(wavelength)
+    wl = _nm_grid(wavelength)
     lo, hi = band_nm
     if not lo < hi:
         raise ValidationError("empty band", field="band_nm", expected="lower < upper", got=band_nm)
@@ -1176,7 +1306,7 @@ def two_band_gains(
         Near-singular system (condition number above ``max_condition``) or a negative gain (a negative
         spectral flux is unphysical: the spectra do not fit the band fluxes).
     """
-    wl = _validated_grid(wavelength)
+    wl = _nm_grid(wavelength)
     sb = np.asarray(s_blue, dtype=float)
     sy = np.asarray(s_yellow, dtype=float)
     for name, arr in (("s_blue", sb), ("s_yellow", sy)):

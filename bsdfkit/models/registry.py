@@ -253,6 +253,17 @@ def _two_band_led(theta, wavelength):
         wavelength, theta[6], theta[7], theta[8])
 
 
+def phosphor_two_band_wide(theta, wavelength):
+    """The phosphor component of ``two-band-wide``: a split Gaussian plus a Gaussian at an offset from it (a
+    second phosphor, or the long tail of one)."""
+    return theta[9] * f.split_gaussian_spectrum(wavelength, theta[6], theta[7], theta[8]) + theta[12] * (
+        f.gaussian_spectrum(wavelength, theta[6] + theta[10], theta[11]))
+
+
+def _two_band_wide(theta, wavelength):
+    return pump_two_band_led(theta, wavelength) + phosphor_two_band_wide(theta, wavelength)
+
+
 _NM, _ONE, _AMP = "nm", "1", "input units"
 _LINE = (("peak_nm", _NM), ("fwhm_nm", _NM))
 _SIDE = (("side_offset_nm", _NM), ("side_fwhm_nm", _NM), ("side_amplitude", _AMP), ("side_alpha", _ONE))
@@ -280,6 +291,10 @@ SPECTRUM_MODELS: dict[str, SpectrumModel] = {
         SpectrumModel("two-band-led", (*_PUMP, ("blue_side_offset_nm", _NM), ("blue_side_fwhm_nm", _NM),
                                        ("blue_side_amplitude", _AMP), *_PHOSPHOR), _two_band_led,
                       "pump line with side band + split-Gaussian phosphor"),
+        SpectrumModel("two-band-wide", (*_PUMP, ("blue_side_offset_nm", _NM), ("blue_side_fwhm_nm", _NM),
+                                        ("blue_side_amplitude", _AMP), *_PHOSPHOR, ("phosphor2_offset_nm", _NM),
+                                        ("phosphor2_fwhm_nm", _NM), ("phosphor2_amplitude", _AMP)), _two_band_wide,
+                      "pump line with side band + phosphor of a split Gaussian and a Gaussian"),
     )
 }
 
