@@ -338,24 +338,34 @@ def _model_dataset(ds: xr.Dataset, matrix: xr.Dataset, angles: list[float], el: 
 
 
 # ----------------------------------------------------------------------------------- band averages
-def band_averaged_tis(model: xr.Dataset, spectrum: object) -> xr.Dataset:
+def band_averaged_tis(model: xr.Dataset, spectrum: object, emission_band: tuple[float, float] | None = None
+                      ) -> xr.Dataset:
     """The model's TIS for a broadband incident spectrum E (any SpectrumLike of :mod:`.spectral`).
 
-    ⟨T⟩ = Σ E(λ) T(λ) Δλ / Σ E Δλ on the spectrum's own grid, T linear in excitation between band centres.
-    Returns ``elastic_tis`` and ``converted_tis`` (side, incidence) [1]; E must lie inside the excitation range.
+    ⟨T⟩ = Σ E(λ) T(λ) Δλ / Σ E Δλ on a 0.5 nm grid, T linear in excitation between band centres; with
+    ``emission_band`` only the converted power emitted inside it (the biys of eq. (13) of [Power-budget] uses
+    470-740 nm). Returns ``elastic_tis`` and ``converted_tis`` (side, incidence) [1]. E must lie inside the
+    excitation range of the model.
     """
     centres = model["excitation"].values
     lam = np.arange(centres[0], centres[-1] + 1e-9, 0.5)
     weight = spectrum_on(spectrum, lam)
     fine = np.linspace(centres[0] - 200.0, centres[-1] + 200.0, 4001)
     outside = spectrum_on(spectrum, fine) * ((fine < centres[0]) | (fine > centres[-1]))
-    if outside.max() > 1e-3 * max(weight.max(), 1e-300) or not weight.sum() > 0:
+    if not weight.sum() > 0 or outside.max() > 1e-3 * weight.max():
         raise InputError("incident spectrum outside the excitation range of the model", field="spectrum",
                          expected=f"power only within {centres[0]:g}-{centres[-1]:g} nm")
-    w = xr.DataArray(weight * np.gradient(lam) / np.sum(weight * np.gradient(lam)), dims=["excitation"],
-                     coords={"excitation": lam})
-    out = xr.Dataset({name: (model[name].interp(excitation=lam) * w).sum("excitation")
-                      for name in ("elastic_tis", "converted_tis")})
+    step = np.gradient(lam)
+    w = xr.DataArray(weight * step / np.sum(weight * step), dims=["excitation"], coords={"excitation": lam})
+    converted = model["converted_tis"]
+    if emission_band is not None:
+        em = model["emission"].values
+        power = model["emission_pdf"].values / em  # converted power spectrum ∝ photons/λ
+        grid = (float(em[0]), float(em[-1]))
+        share = np.array([band_sum(em, p, emission_band) / band_sum(em, p, grid) if p.any() else 0.0 for p in power])
+        converted = converted * xr.DataArray(share, dims=["excitation"], coords={"excitation": centres})
+    out = xr.Dataset({"elastic_tis": (model["elastic_tis"].interp(excitation=lam) * w).sum("excitation"),
+                      "converted_tis": (converted.interp(excitation=lam) * w).sum("excitation")})
     for name in out:
         out[name].attrs["units"] = "1"
     return out
