@@ -270,38 +270,29 @@ def _manifest_copy(tmp_path, edit):
     return folder
 
 
+#: (text in the [[band_series]] entry, its replacement, the field the error names, words of the message)
 BAD_SERIES = [
-    (lambda b: b.replace("center_step_nm = 10.0", "center_step_nm = 0.0"), "band_series[0].center_step_nm",
-     "must be positive"),
-    (lambda b: b.replace("last_center_nm = 520.0", "last_center_nm = 380.0"), "band_series[0].last_center_nm",
-     "runs backwards"),
-    (lambda b: b.replace("center_step_nm = 10.0", "center_step_nm = 7.0"), "band_series[0].center_step_nm",
-     "whole number of steps"),
-    (lambda b: b.replace("center_step_nm = 10.0", "center_step_nm = 0.01"), "band_series[0].center_step_nm",
-     "too many bands"),
-    (lambda b: b.replace("last_center_nm = 520.0", "last_center_nm = 530.0"), "band_series[0].scan_file",
-     "missing"),
-    (lambda b: b.replace("mono-{center}.csv.gz\"\nreference", "mono.csv.gz\"\nreference"),
-     "band_series[0].scan_file", "without the band centre"),
-    (lambda b: b.replace("bandwidth_nm = 10.0", "bandwidth_nm = -10.0"), "band_series[0].bandwidth_nm",
-     "must be positive"),
-    (lambda b: b.replace("first_center_nm = 390.0", "first_center_nm = \"390\""), "band_series[0].first_center_nm",
-     "wrong type"),
-    (lambda b: b.replace("first_center_nm = 390.0", "first_center_nm = 0.39"), "band_series[0].first_center_nm",
-     "not plausible in nm"),
-    (lambda b: b.replace("reference_attenuation = 0.1", "reference_attenuation = 10.0"),
-     "band_series[0].reference_attenuation", "transmittance"),
-    (lambda b: b.replace("bandwidth_nm = 10.0\n", ""), "band_series[0].bandwidth_nm", "key missing"),
+    ("center_step_nm = 10.0", "center_step_nm = 0.0", "center_step_nm", "must be positive"),
+    ("last_center_nm = 520.0", "last_center_nm = 380.0", "last_center_nm", "runs backwards"),
+    ("center_step_nm = 10.0", "center_step_nm = 7.0", "center_step_nm", "whole number of steps"),
+    ("center_step_nm = 10.0", "center_step_nm = 0.01", "center_step_nm", "too many bands"),
+    ("last_center_nm = 520.0", "last_center_nm = 530.0", "scan_file", "missing"),
+    ('mono-{center}.csv.gz"\nreference', 'mono.csv.gz"\nreference', "scan_file", "without the band centre"),
+    ("bandwidth_nm = 10.0", "bandwidth_nm = -10.0", "bandwidth_nm", "must be positive"),
+    ("first_center_nm = 390.0", 'first_center_nm = "390"', "first_center_nm", "wrong type"),
+    ("first_center_nm = 390.0", "first_center_nm = 0.39", "first_center_nm", "not plausible in nm"),
+    ("reference_attenuation = 0.1", "reference_attenuation = 10.0", "reference_attenuation", "transmittance"),
+    ("bandwidth_nm = 10.0\n", "", "bandwidth_nm", "key missing"),
 ]
 
 
-@pytest.mark.parametrize("edit, field, message", BAD_SERIES)
-def test_bad_band_series_entries_are_one_line_errors(tmp_path, edit, field, message):
-    folder = _manifest_copy(tmp_path, edit)
+@pytest.mark.parametrize("old, new, field, message", BAD_SERIES)
+def test_bad_band_series_entries_are_one_line_errors(tmp_path, old, new, field, message):
+    folder = _manifest_copy(tmp_path, lambda body: body.replace(old, new))
     with pytest.raises(InputError) as err:
         read_manifest(folder)
     text = str(err.value)
-    assert "\n" not in text and field in text and message in text and "manifest.toml" in text
+    assert "\n" not in text and f"band_series[0].{field}" in text and message in text and "manifest.toml" in text
 
 
 def test_band_name_colliding_with_a_configuration_is_refused(tmp_path):

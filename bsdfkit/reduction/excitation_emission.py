@@ -112,11 +112,11 @@ def bispectral_matrix(ds: xr.Dataset, series: str | None = None) -> xr.Dataset:
         index = {key: r for r, key in enumerate(_position_keys(sub))}
         missing = [key for key in keys if key not in index]
         if missing or len(index) != len(keys):
+            gap = (f", missing θi={missing[0][0]:g} θs={missing[0][2]:g} φs={missing[0][3]:g} {missing[0][4]}"
+                   if missing else "")
             raise InputError("bands of a series measured at different detector positions", file=source,
-                             field=f"config '{name}'",
-                             expected=f"the {len(keys)} positions of '{names[0]}'",
-                             got=f"{len(index)} positions" + (f", missing θi={missing[0][0]:g} θs={missing[0][2]:g} "
-                                                              f"φs={missing[0][3]:g} {missing[0][4]}" if missing else ""))
+                             field=f"config '{name}'", expected=f"the {len(keys)} positions of '{names[0]}'",
+                             got=f"{len(index)} positions{gap}")
         order = [index[key] for key in keys]
         q[:, k] = sub["bsdf_bispectral"].values[order]
         s[:, k] = sub["bsdf_bispectral_std"].values[order]
@@ -283,7 +283,8 @@ def _check_budget(el: NDArray, el_s: NDArray, conv: NDArray, conv_s: NDArray, yi
         if total[a] > 1.0 + CHECK_SIGMA * std[a]:
             raise ValidationError("plate scatters more power than it receives", file=source,
                                   field=f"incidence {th:g} deg, excitation {centre:g} nm",
-                                  expected=f"elastic + converted TIS ≤ 1 (+{CHECK_SIGMA:g}σ = {CHECK_SIGMA * std[a]:.2g})",
+                                  expected=f"elastic + converted TIS ≤ 1 (+{CHECK_SIGMA:g}σ = "
+                                           f"{CHECK_SIGMA * std[a]:.2g})",
                                   got=round(float(total[a]), 4))
         y_std = yield_[a] * conv_s[a] / conv[a] if conv[a] > 0 else 0.0
         if yield_[a] > 1.0 + CHECK_SIGMA * y_std:
