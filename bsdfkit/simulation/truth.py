@@ -457,6 +457,30 @@ class ExcitationEmissionTruth:
         return (self.quantum_yield * band_sum(lam, incident * lam * self.absorption(lam), band)
                 / band_sum(lam, incident * lam, band))
 
+    def two_colour_tis_percent(self, theta_i_deg: float, wavelength: NDArray[np.float64], blue: NDArray[np.float64],
+                               yellow: NDArray[np.float64]) -> dict[str, float]:
+        """Exact TIS of the two-wavelength interactions (percent, keys of Table 2 of [Power-budget]) for the
+        blue and yellow incident spectra, as the measurement equation defines them: bibs the blue-weighted mean
+        of P_s/P_i over 450-470 nm (eq. 5); biys the converted power in 470-740 nm (eq. 13); yiys the
+        yellow-weighted mean of P_s/P_i over the pixels of 470-740 nm that carry yellow light (eq. 8), which
+        includes the light the yellow beam's short-wave part converts."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        th = np.radians(theta_i_deg)
+        whole = (float(lam[0]), float(lam[-1]))
+        lit = np.where(yellow > 1e-3 * yellow.max(), 1.0, 0.0)  # calibration's incident_valid threshold
+        yellow_share = band_sum(lam, yellow * lit, CONVERSION_BAND_NM) / band_sum(lam, yellow, whole)
+        out: dict[str, float] = {}
+        for tag, side in (("B", "reflection"), ("F", "transmission")):
+            t0 = self.elastic_tis_at_zero_absorption(side, th)
+            out[f"{tag}_bibs"] = 100 * t0 * weighted_mean(lam, 1.0 - self.absorption(lam), blue, EXCITATION_BAND_NM)
+            out[f"{tag}_biys"] = 100 * self.converted_tis(side, th, lam, blue, CONVERSION_BAND_NM)
+            elastic = band_sum(lam, yellow * lit * (1.0 - self.absorption(lam)), CONVERSION_BAND_NM) * t0
+            converted = band_sum(lam, self.converted_density(side, th, lam, yellow) * lit, CONVERSION_BAND_NM)
+            out[f"{tag}_yiys"] = 100 * (elastic / band_sum(lam, yellow, whole) + converted) / yellow_share
+        out["blue_losses"] = 100 - out["B_bibs"] - out["F_bibs"] - out["B_biys"] - out["F_biys"]
+        out["yellow_losses"] = 100 - out["B_yiys"] - out["F_yiys"]
+        return out
+
     def to_dict(self) -> dict:
         return asdict(self)
 

@@ -564,8 +564,11 @@ def eem_synthetic(seed: int = EEM_SEED) -> RawExport:
     on the sparse :func:`eem_plan`, with a 1 nm spectrometer."""
     gonio = VirtualGoniometer(spectrometer=EEM_SPECTROMETER)
     truth = eem_truth()
+    lam = EEM_SPECTROMETER.wavelength
+    blue, yellow = BLUE.incident_power(lam, 1.0), YELLOW.incident_power(lam, 1.0)
+    tis = {f"{th:g}": truth.two_colour_tis_percent(th, lam, blue, yellow) for th in truth.theta_i_deg}
     extra = {"provenance_command": eem_command(seed),
              "truth": {"model": "bsdfkit.simulation.truth.ExcitationEmissionTruth",
-                       "parameters_json": truth.to_json()}}
+                       "parameters_json": truth.to_json(), "tis_percent": tis}}
     return simulate_scan(truth, eem_plan(), gonio, seed=seed, sample_name="eem-synthetic", extra_manifest=extra,
                          band_series=(EEM_BAND_SERIES,))
