@@ -311,6 +311,22 @@ def test_negative_emission_is_refused(tiny_scan):
         eem.plate_spectral_model(_scaled(tiny_scan, "mono-400", 1.0, offset=0.2 * peak))
 
 
+def test_a_band_that_converts_nothing_gets_an_all_zero_row(tiny_scan, tiny_model):
+    out = tiny_scan.copy(deep=True)
+    sel = out["config"].values == "mono-500"
+    far = ~out["incident_valid"].sel(configuration="mono-500").values  # keep only the elastic light of the band
+    out["bsdf_bispectral"].values[np.ix_(sel, far)] = 0.0
+    model = eem.plate_spectral_model(out)
+    assert np.all(model["emission_pdf"].sel(excitation=500.0) == 0.0)
+    assert np.all(model["converted_tis"].sel(excitation=500.0) == 0.0)
+    assert np.all(model["photon_yield"].sel(excitation=500.0) == 0.0)
+    # the elastic part keeps what was under the band, now without converted light to subtract (about 2 %)
+    ratio = model["elastic_tis"].sel(excitation=500.0) / tiny_model["elastic_tis"].sel(excitation=500.0)
+    assert np.all(ratio > 1.0) and np.all(ratio < 1.03)
+    xr.testing.assert_identical(model["emission_pdf"].sel(excitation=450.0),
+                                tiny_model["emission_pdf"].sel(excitation=450.0))
+
+
 def test_no_band_series_is_a_one_line_error(tiny_scan):
     with pytest.raises(InputError, match="no band series") as err:
         eem.plate_spectral_model(tiny_scan.drop_vars(["band_series", "excitation_wavelength"]))

@@ -38,7 +38,7 @@ from bsdfkit.core.errors import FormatError, InputError, NumericalError, Validat
 from bsdfkit.core.records import incidences
 from bsdfkit.core.version import __version__
 from bsdfkit.io import netcdf
-from bsdfkit.reduction.spectral import band_sum, mean_wavelength, spectrum_on
+from bsdfkit.reduction.spectral import SpectrumLike, band_sum, mean_wavelength, spectrum_on
 from bsdfkit.reduction.tis import Hemisphere, tis_from_profile
 
 #: ``attrs['quantity']`` of the plate model dataset, and its format version (docs/spectral.md).
@@ -249,6 +249,7 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
         if not np.any(total > CHECK_SIGMA * total_std):  # nothing converts: an all-zero row
             cv[:, :, k] = 0.0
             yield_[:, k] = 0.0
+            _check_budget(el[:, :, k], el_s[:, :, k], 0.0 * total, total_std, yield_[:, k], angles, centres[k], source)
             continue
         photons = density * lam
         norm = band_sum(lam, photons, grid)
@@ -339,7 +340,7 @@ def _model_dataset(ds: xr.Dataset, matrix: xr.Dataset, angles: list[float], el: 
 
 
 # ----------------------------------------------------------------------------------- band averages
-def band_averaged_tis(model: xr.Dataset, spectrum: object, emission_band: tuple[float, float] | None = None
+def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band: tuple[float, float] | None = None
                       ) -> xr.Dataset:
     """The model's TIS for a broadband incident spectrum E (any SpectrumLike of :mod:`.spectral`).
 

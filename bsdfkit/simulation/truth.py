@@ -109,6 +109,23 @@ class ConversionParams:
     epsilon: float = 0.0
 
 
+LOBE_FIELDS = ("rho", "A", "sigma", "kappa", "lambda_ref")
+CONVERSION_FIELDS = ("T", "epsilon")
+
+
+def _interp_table(theta_i_deg: tuple[float, ...], table: tuple, theta_i: float, kind: type, names: tuple[str, ...]):
+    """Parameters of ``table`` (one entry per tabulated incidence) linearly interpolated at θi (radians),
+    clamped at the ends."""
+    return kind(**{k: float(np.interp(np.degrees(theta_i), theta_i_deg, [getattr(p, k) for p in table]))
+                   for k in names})
+
+
+def lobe_bsdf(p: LobeParams, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+    """ρ/π + A·exp(−|β − β0|²/(2σ²)) [1/sr] for unit ``directions`` (..., 3), β0 = (sin θi, 0), θi in radians."""
+    dbeta2 = (directions[..., 0] - np.sin(theta_i)) ** 2 + directions[..., 1] ** 2
+    return p.rho / np.pi + p.A * np.exp(-dbeta2 / (2 * p.sigma**2))
+
+
 @dataclass(frozen=True)
 class PhosphorPlateTruth:
     """Truth BSDF of a synthetic phosphor plate, tabulated at incidences ``theta_i_deg``.
@@ -131,18 +148,12 @@ class PhosphorPlateTruth:
         return hash(self.to_json())
 
     # -- parameters --------------------------------------------------------------------------------
-    def _interp(self, table: tuple, theta_i: float, name: str) -> float:
-        values = [getattr(p, name) for p in table]
-        return float(np.interp(np.degrees(theta_i), self.theta_i_deg, values))
-
     def lobe(self, interaction: str, side: str, theta_i: float) -> LobeParams:
         """Elastic parameters of ``interaction`` ("bibs"|"yiys") at incidence θi (radians)."""
-        table = getattr(self, interaction)[side]
-        return LobeParams(**{k: self._interp(table, theta_i, k) for k in ("rho", "A", "sigma", "kappa", "lambda_ref")})
+        return _interp_table(self.theta_i_deg, getattr(self, interaction)[side], theta_i, LobeParams, LOBE_FIELDS)
 
     def conversion(self, side: str, theta_i: float) -> ConversionParams:
-        table = self.biys[side]
-        return ConversionParams(T=self._interp(table, theta_i, "T"), epsilon=self._interp(table, theta_i, "epsilon"))
+        return _interp_table(self.theta_i_deg, self.biys[side], theta_i, ConversionParams, CONVERSION_FIELDS)
 
     # -- spectral factors --------------------------------------------------------------------------
     def emission_density(self, wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -161,15 +172,10 @@ class PhosphorPlateTruth:
         return ((lam >= lo) & (lam <= hi)).astype(np.float64)
 
     # -- angular parts -----------------------------------------------------------------------------
-    @staticmethod
-    def _dbeta2(theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        return (directions[..., 0] - np.sin(theta_i)) ** 2 + directions[..., 1] ** 2
-
     def elastic_angular(self, interaction: str, side: str, theta_i: float,
                         directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """Wavelength-independent part of the elastic BSDF (1/sr) for unit ``directions`` (..., 3), z ≥ 0."""
-        p = self.lobe(interaction, side, theta_i)
-        return p.rho / np.pi + p.A * np.exp(-self._dbeta2(theta_i, directions) / (2 * p.sigma**2))
+        return lobe_bsdf(self.lobe(interaction, side, theta_i), theta_i, directions)
 
     def elastic_spectral(self, interaction: str, side: str, theta_i: float,
                          wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -305,12 +311,6 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
 
 
 # ------------------------------------------------------------------- excitation-emission (spectral) truth
-def _interp_table(theta_i_deg: tuple[float, ...], table: tuple, theta_i: float, kind: type, names: tuple[str, ...]):
-    """Parameters of ``table`` (one entry per tabulated incidence) linearly interpolated at θi (radians)."""
-    return kind(**{k: float(np.interp(np.degrees(theta_i), theta_i_deg, [getattr(p, k) for p in table]))
-                   for k in names})
-
-
 @dataclass(frozen=True)
 class ExcitationEmissionTruth:
     """Truth of a synthetic phosphor plate whose response depends on the excitation wavelength.
@@ -387,18 +387,15 @@ class ExcitationEmissionTruth:
     # -- angular parts -----------------------------------------------------------------------------
     def lobe(self, side: str, theta_i: float) -> LobeParams:
         """Elastic parameters at zero absorption, at incidence θi (radians)."""
-        return _interp_table(self.theta_i_deg, self.elastic[side], theta_i, LobeParams,
-                             ("rho", "A", "sigma", "kappa", "lambda_ref"))
+        return _interp_table(self.theta_i_deg, self.elastic[side], theta_i, LobeParams, LOBE_FIELDS)
 
     def share(self, side: str, theta_i: float) -> ConversionParams:
         """Share T of the converted photons leaving into ``side`` and its shape factor ε, at θi (radians)."""
-        return _interp_table(self.theta_i_deg, self.conversion[side], theta_i, ConversionParams, ("T", "epsilon"))
+        return _interp_table(self.theta_i_deg, self.conversion[side], theta_i, ConversionParams, CONVERSION_FIELDS)
 
     def elastic_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """f_0 [1/sr]: the elastic BSDF at zero absorption for unit ``directions`` (..., 3)."""
-        p = self.lobe(side, theta_i)
-        dbeta2 = (directions[..., 0] - np.sin(theta_i)) ** 2 + directions[..., 1] ** 2
-        return p.rho / np.pi + p.A * np.exp(-dbeta2 / (2 * p.sigma**2))
+        return lobe_bsdf(self.lobe(side, theta_i), theta_i, directions)
 
     def conversion_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """T/π·(1 + ε(cos θs − 2/3)) [1/sr]: angular density of the converted photons (integrates to T)."""
