@@ -2,8 +2,9 @@
 
 Users plan measurements with it (how fine a scan, how long an exposure, what uncertainty to expect); the test
 suite uses it as ground truth. It models the set-up of §2 of the power-budget paper ([Power-budget]): a
-collimated Xe beam through an interference or cut-on filter, a circular detector aperture at distance d feeding a CCD
-spectrometer, and a reference (direct-beam) spectrum taken by the same detector through an ND filter.
+collimated Xe beam through an interference or cut-on filter (or a monochromator stepped through a series of narrow
+bands, :class:`BandSeries`), a circular detector aperture at distance d feeding a CCD spectrometer, and a reference
+(direct-beam) spectrum taken by the same detector through an ND filter.
 
 Signal chain per spectral pixel (counts):
     raw = clip(round(N_e/G + bias + N(0, σ_read)), 0, full scale),  N_e ~ Poisson(G·t·(rate + dark_rate))
