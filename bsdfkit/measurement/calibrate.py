@@ -178,6 +178,9 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         coords={**coords, "wavelength": raw["wavelength"], "configuration": raw["configuration"],
                 "band_edge": raw["band_edge"]},
     )
+    for name in ("band_series", "excitation_wavelength"):  # present for a monochromator scan only
+        if name in raw:
+            ds[name] = raw[name]
     ds["bsdf"].attrs.update(units="1/sr", long_name="BSDF", note="NaN where incident_valid is false or grazing is true")
     ds["bsdf_std"].attrs.update(units="1/sr", long_name="standard uncertainty of bsdf (counting and dark noise)")
     ds["noise_floor"].attrs.update(units="1/sr", long_name="noise-equivalent BSDF (dark noise)")

@@ -3,6 +3,7 @@
 Each problem raises :class:`bsdfkit.core.errors.InputError` naming the manifest file and the dotted key.
 Besides types, values are checked for physical plausibility (docs/raw-format.md "Plausibility checks"):
 attenuator transmittance in (0, 1], full scale and gain > 0, wavelengths in nm, and a bounded grid size.
+A ``[[band_series]]`` entry (a monochromator scan) expands into one configuration per band.
 """
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.measurement.instrument import Instrument
@@ -21,6 +24,10 @@ SUPPORTED_VERSIONS = (1,)
 MAX_WAVELENGTHS = 100_000
 #: Plausible wavelengths in nm (a grid in µm or m falls below, one in Å or pm above).
 WAVELENGTH_RANGE_NM = (100.0, 20_000.0)
+#: Most bands of one ``[[band_series]]`` (a monochromator scan in 0.5 nm steps over 380-780 nm has 801).
+MAX_BAND_SERIES = 1000
+#: The placeholder for the band centre in a band series' file names.
+CENTER_PLACEHOLDER = "{center}"
 
 
 @dataclass(frozen=True)
@@ -31,6 +38,8 @@ class ConfigurationEntry:
     scan_file: Path
     reference_file: Path
     reference_attenuation: float
+    series: str = ""
+    excitation_nm: float = math.nan  # nominal band centre of a band-series configuration
 
 
 @dataclass(frozen=True)
@@ -176,12 +185,13 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
     resp = _file(folder, resp_name, path, "spectrometer.responsivity_file") if resp_name else None
     dark = _get(data, "dark", dict, path, "dark")
     dark_file = _file(folder, _get(dark, "file", str, path, "dark.file"), path, "dark.file")
-    configs_raw = _get(data, "configuration", list, path, "configuration")
-    if not configs_raw:
+    series_raw = _get(data, "band_series", list, path, "band_series", required=False) or []
+    configs_raw = _get(data, "configuration", list, path, "configuration", required=not series_raw) or []
+    if not configs_raw and not series_raw:
         raise InputError("no incident configuration", file=path, field="configuration",
-                         expected="at least one [[configuration]]")
+                         expected="at least one [[configuration]] or [[band_series]]")
     configs = []
-    seen = set()
+    seen: set[str] = set()
     for k, c in enumerate(configs_raw):
         pre = f"configuration[{k}]"
         cname = _get(c, "name", str, path, f"{pre}.name")
@@ -204,7 +214,61 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
                                                       f"{pre}.reference_attenuation"),
                                                  path, f"{pre}.reference_attenuation"),
         ))
+    for k, entry in enumerate(series_raw):
+        configs.extend(_band_series(entry, k, folder, path, seen))
     return Manifest(path=path, sample_name=name, synthetic=synthetic, instrument=instrument, wavelength_min_nm=wmin,
                     wavelength_max_nm=wmax, wavelength_step_nm=step, gain_e_per_count=gain,
                     full_scale_counts=int(full_scale), responsivity_file=resp, dark_file=dark_file,
                     configurations=tuple(configs), raw=data)
+
+
+def _band_series(entry: Any, k: int, folder: Path, path: Path, seen: set[str]) -> list[ConfigurationEntry]:
+    """The configurations of one ``[[band_series]]``: bands centred first, first + step, …, last (nm), each
+    centre ± bandwidth/2, files named by replacing ``{center}`` with the centre (``%g``, e.g. 450)."""
+    pre = f"band_series[{k}]"
+    name = _get(entry, "name", str, path, f"{pre}.name")
+    first = _in_nm(float(_get(entry, "first_center_nm", float, path, f"{pre}.first_center_nm")), path,
+                   f"{pre}.first_center_nm")
+    last = _in_nm(float(_get(entry, "last_center_nm", float, path, f"{pre}.last_center_nm")), path,
+                  f"{pre}.last_center_nm")
+    step = _positive(_get(entry, "center_step_nm", float, path, f"{pre}.center_step_nm"), path,
+                     f"{pre}.center_step_nm")
+    width = _positive(_get(entry, "bandwidth_nm", float, path, f"{pre}.bandwidth_nm"), path, f"{pre}.bandwidth_nm")
+    if not last >= first:
+        raise ValidationError("band series runs backwards", file=path, field=f"{pre}.last_center_nm",
+                              expected=f"≥ first_center_nm = {first:g}", got=last)
+    n = (last - first) / step
+    if n + 1 > MAX_BAND_SERIES:  # before anything is allocated
+        raise ValidationError("too many bands in a series", file=path, field=f"{pre}.center_step_nm",
+                              expected=f"at most {MAX_BAND_SERIES} bands (limit MAX_BAND_SERIES)",
+                              got=f"{step:g} nm ({n + 1:.3g} bands)")
+    if abs(n - round(n)) > 1e-6:
+        raise ValidationError("band series is not a whole number of steps", file=path, field=f"{pre}.center_step_nm",
+                              expected=f"(last − first)/step integral ({first:g}..{last:g} nm)", got=step)
+    templates = {}
+    for key in ("scan_file", "reference_file"):
+        template = _get(entry, key, str, path, f"{pre}.{key}")
+        if CENTER_PLACEHOLDER not in template:
+            raise ValidationError("file name of a band series without the band centre", file=path,
+                                  field=f"{pre}.{key}", expected=f"a name containing {CENTER_PLACEHOLDER}",
+                                  got=template)
+        templates[key] = template
+    description = _get(entry, "description", str, path, f"{pre}.description", required=False) or ""
+    attenuation = _transmittance(_get(entry, "reference_attenuation", float, path, f"{pre}.reference_attenuation"),
+                                 path, f"{pre}.reference_attenuation")
+    out = []
+    for c in first + step * np.arange(int(round(n)) + 1):
+        label = f"{c:g}"
+        cname = f"{name}-{label}"
+        if cname in seen:
+            raise ValidationError("duplicate configuration name", file=path, field=f"{pre}.name",
+                                  expected="names unique across [[configuration]] and [[band_series]] bands",
+                                  got=cname)
+        seen.add(cname)
+        files = {key: _file(folder, t.replace(CENTER_PLACEHOLDER, label), path, f"{pre}.{key}")
+                 for key, t in templates.items()}
+        out.append(ConfigurationEntry(name=cname, description=f"{description}, centre {label} nm".lstrip(", "),
+                                      incident_band_nm=(float(c) - width / 2, float(c) + width / 2),
+                                      scan_file=files["scan_file"], reference_file=files["reference_file"],
+                                      reference_attenuation=attenuation, series=name, excitation_nm=float(c)))
+    return out

@@ -210,7 +210,8 @@ def read_scan(folder: str | Path) -> xr.Dataset:
 
     Dims: ``record`` (one detector position and configuration), ``wavelength`` (nm), ``reference_record``,
     ``dark_record``, ``configuration``. Record coordinates: ``config``, ``theta_i``, ``phi_i``, ``theta_s``,
-    ``phi_s`` (degrees), ``side``, ``arc``, ``exposure`` (s), ``source_line``.
+    ``phi_s`` (degrees), ``side``, ``arc``, ``exposure`` (s), ``source_line``. A manifest with a
+    ``[[band_series]]`` adds ``band_series`` and ``excitation_wavelength`` (nm) per configuration.
     """
     manifest = read_manifest(folder)
     n = int(round((manifest.wavelength_max_nm - manifest.wavelength_min_nm) / manifest.wavelength_step_nm)) + 1
@@ -299,6 +300,12 @@ def read_scan(folder: str | Path) -> xr.Dataset:
     ds = ds.assign_coords(band_edge=["low", "high"])
     ds["configuration_description"] = ("configuration",
                                        np.array([c.description for c in manifest.configurations], dtype=object))
+    if any(c.series for c in manifest.configurations):  # a monochromator scan: which band is which
+        ds["band_series"] = ("configuration", np.array([c.series for c in manifest.configurations], dtype=object))
+        ds["excitation_wavelength"] = ("configuration", [c.excitation_nm for c in manifest.configurations])
+        ds["band_series"].attrs["long_name"] = "[[band_series]] of the configuration ('' for a [[configuration]])"
+        ds["excitation_wavelength"].attrs.update(units="nm", long_name="nominal centre of a band-series band",
+                                                 note="NaN for configurations outside a band series")
     for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
         ds[name].attrs["units"] = "deg"
     ds["wavelength"].attrs.update(units="nm", long_name="scattered (detected) wavelength")

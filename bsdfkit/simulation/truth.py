@@ -74,6 +74,13 @@ def longpass_filter(wavelength: ArrayLike, cut_on: float, edge: float = 5.0) -> 
     return 0.92 * smoothstep((lam - cut_on) / edge)
 
 
+def monochromator_slit(wavelength: ArrayLike, center: float, fwhm: float, peak: float = 0.5) -> NDArray[np.float64]:
+    """Slit function of a grating monochromator with equal entrance and exit slits: a triangle of full width
+    at half maximum ``fwhm`` nm about ``center``, exactly 0 beyond ±fwhm; ``peak`` is its throughput."""
+    lam = np.asarray(wavelength, dtype=np.float64)
+    return peak * np.clip(1.0 - np.abs(lam - center) / fwhm, 0.0, None)
+
+
 def emission_shape(wavelength: ArrayLike, peak: float = 596.7, fwhm: float = 154.3, alpha: float = -0.12,
                    onset_nm: tuple[float, float] = (470.0, 500.0)) -> NDArray[np.float64]:
     """Unnormalised phosphor emission: eq. (3) split Gaussian × smooth onset (0 below onset_nm[0])."""
@@ -102,6 +109,23 @@ class ConversionParams:
     epsilon: float = 0.0
 
 
+LOBE_FIELDS = ("rho", "A", "sigma", "kappa", "lambda_ref")
+CONVERSION_FIELDS = ("T", "epsilon")
+
+
+def _interp_table(theta_i_deg: tuple[float, ...], table: tuple, theta_i: float, kind: type, names: tuple[str, ...]):
+    """Parameters of ``table`` (one entry per tabulated incidence) linearly interpolated at θi (radians),
+    clamped at the ends."""
+    return kind(**{k: float(np.interp(np.degrees(theta_i), theta_i_deg, [getattr(p, k) for p in table]))
+                   for k in names})
+
+
+def lobe_bsdf(p: LobeParams, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+    """ρ/π + A·exp(−|β − β0|²/(2σ²)) [1/sr] for unit ``directions`` (..., 3), β0 = (sin θi, 0), θi in radians."""
+    dbeta2 = (directions[..., 0] - np.sin(theta_i)) ** 2 + directions[..., 1] ** 2
+    return p.rho / np.pi + p.A * np.exp(-dbeta2 / (2 * p.sigma**2))
+
+
 @dataclass(frozen=True)
 class PhosphorPlateTruth:
     """Truth BSDF of a synthetic phosphor plate, tabulated at incidences ``theta_i_deg``.
@@ -124,18 +148,12 @@ class PhosphorPlateTruth:
         return hash(self.to_json())
 
     # -- parameters --------------------------------------------------------------------------------
-    def _interp(self, table: tuple, theta_i: float, name: str) -> float:
-        values = [getattr(p, name) for p in table]
-        return float(np.interp(np.degrees(theta_i), self.theta_i_deg, values))
-
     def lobe(self, interaction: str, side: str, theta_i: float) -> LobeParams:
         """Elastic parameters of ``interaction`` ("bibs"|"yiys") at incidence θi (radians)."""
-        table = getattr(self, interaction)[side]
-        return LobeParams(**{k: self._interp(table, theta_i, k) for k in ("rho", "A", "sigma", "kappa", "lambda_ref")})
+        return _interp_table(self.theta_i_deg, getattr(self, interaction)[side], theta_i, LobeParams, LOBE_FIELDS)
 
     def conversion(self, side: str, theta_i: float) -> ConversionParams:
-        table = self.biys[side]
-        return ConversionParams(T=self._interp(table, theta_i, "T"), epsilon=self._interp(table, theta_i, "epsilon"))
+        return _interp_table(self.theta_i_deg, self.biys[side], theta_i, ConversionParams, CONVERSION_FIELDS)
 
     # -- spectral factors --------------------------------------------------------------------------
     def emission_density(self, wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -154,15 +172,10 @@ class PhosphorPlateTruth:
         return ((lam >= lo) & (lam <= hi)).astype(np.float64)
 
     # -- angular parts -----------------------------------------------------------------------------
-    @staticmethod
-    def _dbeta2(theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        return (directions[..., 0] - np.sin(theta_i)) ** 2 + directions[..., 1] ** 2
-
     def elastic_angular(self, interaction: str, side: str, theta_i: float,
                         directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """Wavelength-independent part of the elastic BSDF (1/sr) for unit ``directions`` (..., 3), z ≥ 0."""
-        p = self.lobe(interaction, side, theta_i)
-        return p.rho / np.pi + p.A * np.exp(-self._dbeta2(theta_i, directions) / (2 * p.sigma**2))
+        return lobe_bsdf(self.lobe(interaction, side, theta_i), theta_i, directions)
 
     def elastic_spectral(self, interaction: str, side: str, theta_i: float,
                          wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -195,6 +208,25 @@ class PhosphorPlateTruth:
             idx = np.arange(lam.size)
             out[..., idx, idx] += diag
         return out
+
+    def scattered_power(self, side: str, theta_i: float, directions: NDArray[np.float64], weights: NDArray[np.float64],
+                        wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Spectral power through the apertures (n_pos, n_λ) for the incident spectral power ``incident``.
+
+        ``directions``/``weights`` are the aperture quadrature (weights include cos θs), θi in radians: the
+        elastic part P_i(λ)·m(λ)·∫f, the converted part Φ_exc·e(λ)·∫f_conv with Φ_exc the excited power.
+        """
+        lam = wavelength
+        s_b = (self.elastic_angular("bibs", side, theta_i, directions) * weights).sum(-1)
+        s_y = (self.elastic_angular("yiys", side, theta_i, directions) * weights).sum(-1)
+        s_c = (self.conversion_angular(side, theta_i, directions) * weights).sum(-1)
+        elastic_b = self.elastic_spectral("bibs", side, theta_i, lam)
+        elastic_y = self.elastic_spectral("yiys", side, theta_i, lam)
+        blue = lam < self.elastic_split_nm
+        elastic = incident * np.where(blue, elastic_b * s_b[:, None], elastic_y * s_y[:, None])
+        phi_exc = np.trapezoid(incident * self.excitation(lam), lam)
+        converted = phi_exc * self.emission_density(lam) * s_c[:, None]
+        return elastic + converted
 
     def elastic_interaction(self, wavelength: ArrayLike) -> NDArray[np.str_]:
         """Which elastic parameter set applies at each wavelength: "bibs" below the split, "yiys" above."""
@@ -276,3 +308,198 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
     out["blue_losses"] = 100 - out["B_bibs"] - out["F_bibs"] - out["B_biys"] - out["F_biys"]
     out["yellow_losses"] = 100 - out["B_yiys"] - out["F_yiys"]
     return out
+
+
+# ------------------------------------------------------------------- excitation-emission (spectral) truth
+@dataclass(frozen=True)
+class ExcitationEmissionTruth:
+    """Truth of a synthetic phosphor plate whose response depends on the excitation wavelength.
+
+    A documented synthetic model (not a fit to a measured plate) in the factorised (Kasha–Vavilov) form
+    f_conv(ω; λi → λs) = g(ω)·a(λi)·e(λs) of a bi-spectral BSDF. Per incident photon at λi:
+
+    * it is absorbed by the phosphor with probability a(λi), the excitation (absorption) spectrum
+      a(λ) = a_max / (1 + exp((λ − λ_edge)/w)): strong in the UV-blue, falling through 480-530 nm. Shape
+      after the excitation spectrum of the CL-830 plate (§4, Fig. 5 of [Power-budget]: excitation most
+      efficient near 460 nm, emission starting near 470 nm, "the excitation and emission spectra clearly
+      overlap", with low absorption in the overlap region, §4.2);
+    * an absorbed photon is re-emitted with the quantum yield η (0.80: the photon ratio of §6 of
+      [Power-budget]) at a wavelength drawn from the photon-number emission pdf e(λs) [1/nm], the same for
+      every λi (Kasha's rule). The emitted power spectrum ∝ e(λs)/λs is the split Gaussian of eq. (3) of
+      [Cylindrical-module] (Table 2 there: 596.7 nm, FWHM 154.3 nm, α = −0.12) times a smooth onset that is
+      exactly zero below 470 nm ([Power-budget] §4.2), so the photon pdf is ∝ λs·(that shape);
+      converted photons leave into ``side`` with the share T of :class:`ConversionParams` (T_R + T_T = 1)
+      and the nearly Lambertian shape (1 + ε(cos θs − 2/3))/π;
+    * a photon that is not absorbed is scattered elastically with the ``elastic`` lobes (ρ/π + Gaussian lobe
+      in β, :class:`LobeParams`, κ unused), which hold at zero absorption: f_el(λ) = (1 − a(λ))·f_0.
+
+    Hence per unit incident power at λi: elastic TIS (1 − a)·(ρ + lobe TIS), converted power TIS
+    a·η·T·λi·∫e(λs)/λs dλs, photons per incident photon a·η·T ≤ η < 1. ``emission_range_nm`` is the grid on
+    which e integrates to 1 (the spectrometer's).
+    """
+
+    name: str
+    theta_i_deg: tuple[float, ...]
+    elastic: dict[str, tuple[LobeParams, ...]]
+    conversion: dict[str, tuple[ConversionParams, ...]]
+    quantum_yield: float = 0.80
+    absorption_max: float = 0.85
+    absorption_edge_nm: float = 500.0
+    absorption_width_nm: float = 12.0
+    emission: dict[str, float] = field(default_factory=lambda: {"peak": 596.7, "fwhm": 154.3, "alpha": -0.12,
+                                                               "onset_start": 470.0, "onset_end": 510.0})
+    emission_range_nm: tuple[float, float] = (380.0, 780.0)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.quantum_yield < 1.0:
+            raise ValidationError("quantum yield out of range", field="quantum_yield", expected="0 < η < 1",
+                                  got=self.quantum_yield)
+        if not 0.0 <= self.absorption_max < 1.0:
+            raise ValidationError("absorption out of range", field="absorption_max", expected="0 ≤ a_max < 1",
+                                  got=self.absorption_max)
+        for t in zip(*(self.conversion[s] for s in SIDES)):
+            if abs(sum(p.T for p in t) - 1.0) > 1e-12:
+                raise ValidationError("converted-photon shares must sum to 1 over the sides", field="conversion.T",
+                                      expected="T_reflection + T_transmission = 1", got=[p.T for p in t])
+
+    def __hash__(self) -> int:  # dict fields: hash the JSON form
+        return hash(self.to_json())
+
+    # -- spectral factors --------------------------------------------------------------------------
+    def absorption(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+        """a(λ): probability that an incident photon at λ is absorbed by the phosphor [1]."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        return self.absorption_max / (1.0 + np.exp((lam - self.absorption_edge_nm) / self.absorption_width_nm))
+
+    def _emission_shape(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+        em = self.emission
+        lam = np.asarray(wavelength, dtype=np.float64)
+        lo, hi = self.emission_range_nm
+        inside = (lam >= lo) & (lam <= hi)
+        return np.where(inside, lam * emission_shape(lam, em["peak"], em["fwhm"], em["alpha"],
+                                                     (em["onset_start"], em["onset_end"])), 0.0)
+
+    def emission_pdf(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+        """e(λ) [1/nm]: photon-number pdf of the converted light, ∫ e dλ = 1 over ``emission_range_nm``."""
+        fine = np.linspace(*self.emission_range_nm, 40001)
+        return self._emission_shape(wavelength) / band_sum(fine, self._emission_shape(fine), self.emission_range_nm)
+
+    # -- angular parts -----------------------------------------------------------------------------
+    def lobe(self, side: str, theta_i: float) -> LobeParams:
+        """Elastic parameters at zero absorption, at incidence θi (radians)."""
+        return _interp_table(self.theta_i_deg, self.elastic[side], theta_i, LobeParams, LOBE_FIELDS)
+
+    def share(self, side: str, theta_i: float) -> ConversionParams:
+        """Share T of the converted photons leaving into ``side`` and its shape factor ε, at θi (radians)."""
+        return _interp_table(self.theta_i_deg, self.conversion[side], theta_i, ConversionParams, CONVERSION_FIELDS)
+
+    def elastic_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        """f_0 [1/sr]: the elastic BSDF at zero absorption for unit ``directions`` (..., 3)."""
+        return lobe_bsdf(self.lobe(side, theta_i), theta_i, directions)
+
+    def conversion_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        """T/π·(1 + ε(cos θs − 2/3)) [1/sr]: angular density of the converted photons (integrates to T)."""
+        p = self.share(side, theta_i)
+        return p.T / np.pi * (1.0 + p.epsilon * (directions[..., 2] - 2.0 / 3.0))
+
+    def elastic_tis_at_zero_absorption(self, side: str, theta_i: float) -> float:
+        """ρ + clipped lobe TIS of f_0 [1]."""
+        p = self.lobe(side, theta_i)
+        return p.rho + clipped_gaussian_lobe_tis(p.A, p.sigma, theta_i)
+
+    # -- the goniometer signal ---------------------------------------------------------------------
+    def scattered_power(self, side: str, theta_i: float, directions: NDArray[np.float64], weights: NDArray[np.float64],
+                        wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Spectral power through the apertures (n_pos, n_λ) for the incident spectral power ``incident``.
+
+        ``directions``/``weights`` are the aperture quadrature (weights include cos θs), θi in radians.
+        Elastic: P_i(λ)(1 − a(λ))·∫f_0; converted: η Σ_λi P_i a λi Δλi · e(λs)/λs · ∫g, in the same units.
+        """
+        lam = np.asarray(wavelength, dtype=np.float64)
+        s_el = (self.elastic_angular(side, theta_i, directions) * weights).sum(-1)
+        s_c = (self.conversion_angular(side, theta_i, directions) * weights).sum(-1)
+        elastic = incident * (1.0 - self.absorption(lam)) * s_el[:, None]
+        photons_absorbed = np.trapezoid(incident * self.absorption(lam) * lam, lam)  # × 1/(hc), cancels below
+        converted = self.quantum_yield * photons_absorbed * (self.emission_pdf(lam) / lam) * s_c[:, None]
+        return elastic + converted
+
+    # -- exact values for an incident spectrum -----------------------------------------------------
+    def elastic_tis(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
+                    incident: NDArray[np.float64]) -> float:
+        """Elastic TIS [1] for the incident spectrum (any scale): ⟨1 − a⟩·(ρ + lobe TIS)."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        band = (float(lam[0]), float(lam[-1]))
+        mean = band_sum(lam, incident * (1.0 - self.absorption(lam)), band) / band_sum(lam, incident, band)
+        return mean * self.elastic_tis_at_zero_absorption(side, theta_i)
+
+    def converted_density(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
+                          incident: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Converted spectral power leaving into ``side`` per unit incident power [1/nm], on ``wavelength``."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        band = (float(lam[0]), float(lam[-1]))
+        absorbed = band_sum(lam, incident * self.absorption(lam) * lam, band) / band_sum(lam, incident, band)
+        return self.quantum_yield * absorbed * self.share(side, theta_i).T * self.emission_pdf(lam) / lam
+
+    def converted_tis(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
+                      incident: NDArray[np.float64], band: tuple[float, float] | None = None) -> float:
+        """Converted power leaving into ``side`` per incident power [1] (within ``band``, default all)."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        band = band or (float(lam[0]), float(lam[-1]))
+        return band_sum(lam, self.converted_density(side, theta_i, lam, incident), band)
+
+    def photon_yield(self, wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> float:
+        """Converted photons (both sides) per incident photon [1]: η⟨a⟩ with photon weights, ≤ η."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        band = (float(lam[0]), float(lam[-1]))
+        return (self.quantum_yield * band_sum(lam, incident * lam * self.absorption(lam), band)
+                / band_sum(lam, incident * lam, band))
+
+    def two_colour_tis_percent(self, theta_i_deg: float, wavelength: NDArray[np.float64], blue: NDArray[np.float64],
+                               yellow: NDArray[np.float64]) -> dict[str, float]:
+        """Exact TIS of the two-wavelength interactions (percent, keys of Table 2 of [Power-budget]) for the
+        blue and yellow incident spectra, as the measurement equation defines them: bibs the blue-weighted mean
+        of P_s/P_i over 450-470 nm (eq. 5); biys the converted power in 470-740 nm (eq. 13); yiys the
+        yellow-weighted mean of P_s/P_i over the pixels of 470-740 nm that carry yellow light (eq. 8), which
+        includes the light the yellow beam's short-wave part converts."""
+        lam = np.asarray(wavelength, dtype=np.float64)
+        th = np.radians(theta_i_deg)
+        whole = (float(lam[0]), float(lam[-1]))
+        lit = np.where(yellow > 1e-3 * yellow.max(), 1.0, 0.0)  # calibration's incident_valid threshold
+        yellow_share = band_sum(lam, yellow * lit, CONVERSION_BAND_NM) / band_sum(lam, yellow, whole)
+        out: dict[str, float] = {}
+        for tag, side in (("B", "reflection"), ("F", "transmission")):
+            t0 = self.elastic_tis_at_zero_absorption(side, th)
+            out[f"{tag}_bibs"] = 100 * t0 * weighted_mean(lam, 1.0 - self.absorption(lam), blue, EXCITATION_BAND_NM)
+            out[f"{tag}_biys"] = 100 * self.converted_tis(side, th, lam, blue, CONVERSION_BAND_NM)
+            elastic = band_sum(lam, yellow * lit * (1.0 - self.absorption(lam)), CONVERSION_BAND_NM) * t0
+            converted = band_sum(lam, self.converted_density(side, th, lam, yellow) * lit, CONVERSION_BAND_NM)
+            out[f"{tag}_yiys"] = 100 * (elastic / band_sum(lam, yellow, whole) + converted) / yellow_share
+        out["blue_losses"] = 100 - out["B_bibs"] - out["F_bibs"] - out["B_biys"] - out["F_biys"]
+        out["yellow_losses"] = 100 - out["B_yiys"] - out["F_yiys"]
+        return out
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "ExcitationEmissionTruth":
+        try:
+            return cls(
+                name=data["name"], theta_i_deg=tuple(float(t) for t in data["theta_i_deg"]),
+                elastic={s: tuple(LobeParams(**p) for p in data["elastic"][s]) for s in SIDES},
+                conversion={s: tuple(ConversionParams(**p) for p in data["conversion"][s]) for s in SIDES},
+                quantum_yield=float(data["quantum_yield"]), absorption_max=float(data["absorption_max"]),
+                absorption_edge_nm=float(data["absorption_edge_nm"]),
+                absorption_width_nm=float(data["absorption_width_nm"]), emission=dict(data["emission"]),
+                emission_range_nm=tuple(data["emission_range_nm"]),
+            )
+        except (KeyError, TypeError) as exc:
+            raise ValidationError("truth description incomplete", field="truth",
+                                  expected="an ExcitationEmissionTruth", got=str(exc)) from None
+
+
+#: Either truth model: both give the goniometer signal through ``scattered_power``.
+TruthModel = PhosphorPlateTruth | ExcitationEmissionTruth

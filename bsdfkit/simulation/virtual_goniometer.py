@@ -2,8 +2,9 @@
 
 Users plan measurements with it (how fine a scan, how long an exposure, what uncertainty to expect); the test
 suite uses it as ground truth. It models the set-up of §2 of the power-budget paper ([Power-budget]): a
-collimated Xe beam through an interference or cut-on filter, a circular detector aperture at distance d feeding a CCD
-spectrometer, and a reference (direct-beam) spectrum taken by the same detector through an ND filter.
+collimated Xe beam through an interference or cut-on filter (or a monochromator stepped through a series of narrow
+bands, :class:`BandSeries`), a circular detector aperture at distance d feeding a CCD spectrometer, and a reference
+(direct-beam) spectrum taken by the same detector through an ND filter.
 
 Signal chain per spectral pixel (counts):
     raw = clip(round(N_e/G + bias + N(0, σ_read)), 0, full scale),  N_e ~ Poisson(G·t·(rate + dark_rate))
@@ -33,7 +34,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.toml_write import dumps as toml_dumps
 from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
-from bsdfkit.measurement.manifest import MAX_WAVELENGTHS
+from bsdfkit.measurement.manifest import MAX_BAND_SERIES, MAX_WAVELENGTHS
 from bsdfkit.simulation import truth as synthetic
 
 #: Most detector positions per incidence and side of a simulated scan plan.
@@ -81,8 +82,8 @@ class Spectrometer:
 
 @dataclass(frozen=True)
 class Configuration:
-    """An incident configuration: the lamp through a filter. ``filter`` is ("bandpass", lo, hi) or
-    ("longpass", cut_on)."""
+    """An incident configuration: the lamp through a filter. ``filter`` is ("bandpass", lo, hi),
+    ("longpass", cut_on) or ("monochromator", centre, fwhm) (:func:`~bsdfkit.simulation.truth.monochromator_slit`)."""
 
     name: str
     description: str
@@ -97,13 +98,58 @@ class Configuration:
             filt = synthetic.bandpass_filter(wavelength, self.filter[1], self.filter[2])
         elif kind == "longpass":
             filt = synthetic.longpass_filter(wavelength, self.filter[1])
+        elif kind == "monochromator":
+            filt = synthetic.monochromator_slit(wavelength, self.filter[1], self.filter[2])
         else:
-            raise ValidationError("unknown filter kind", field="filter", expected="bandpass or longpass", got=kind)
+            raise ValidationError("unknown filter kind", field="filter", expected="bandpass, longpass or monochromator",
+                                  got=kind)
         return beam_scale * synthetic.xenon_lamp(wavelength) * filt
 
 
 BLUE = Configuration("blue", "blue interference filter 450-470 nm", ("bandpass", 450.0, 470.0), (450.0, 470.0))
 YELLOW = Configuration("yellow", "yellow cut-on filter 475 nm", ("longpass", 475.0), (475.0, 780.0))
+
+
+@dataclass(frozen=True)
+class BandSeries:
+    """A monochromator scan: narrow incident bands centred at first, first + step, …, last (nm), each a
+    triangular slit of FWHM ``bandwidth_nm`` (nominal band centre ± bandwidth/2). Written to the manifest
+    as one ``[[band_series]]`` entry (docs/raw-format.md); its configurations are named ``{name}-{centre:g}``."""
+
+    name: str = "mono"
+    description: str = "grating monochromator, triangular slit 10 nm FWHM"
+    first_nm: float = 390.0
+    last_nm: float = 520.0
+    step_nm: float = 10.0
+    bandwidth_nm: float = 10.0
+    reference_attenuation: float = 0.1
+
+    def __post_init__(self) -> None:
+        n = (self.last_nm - self.first_nm) / self.step_nm if self.step_nm > 0 else np.nan
+        if not (np.isfinite(n) and n >= 0 and abs(n - round(n)) < 1e-9 and self.bandwidth_nm > 0
+                and round(n) + 1 <= MAX_BAND_SERIES):
+            raise ValidationError("bad band series", field="band_series",
+                                  expected=f"first ≤ last, a whole number of steps > 0, at most {MAX_BAND_SERIES} "
+                                           "bands and bandwidth > 0",
+                                  got=(self.first_nm, self.last_nm, self.step_nm, self.bandwidth_nm))
+
+    @property
+    def centers_nm(self) -> NDArray[np.float64]:
+        n = int(round((self.last_nm - self.first_nm) / self.step_nm)) + 1
+        return self.first_nm + self.step_nm * np.arange(n)
+
+    def configurations(self) -> tuple[Configuration, ...]:
+        half = self.bandwidth_nm / 2
+        return tuple(Configuration(f"{self.name}-{c:g}", f"{self.description}, centre {c:g} nm",
+                                   ("monochromator", float(c), self.bandwidth_nm), (float(c) - half, float(c) + half),
+                                   self.reference_attenuation) for c in self.centers_nm)
+
+    def manifest_entry(self) -> dict:
+        return {"name": self.name, "description": self.description, "first_center_nm": self.first_nm,
+                "last_center_nm": self.last_nm, "center_step_nm": self.step_nm, "bandwidth_nm": self.bandwidth_nm,
+                "scan_file": f"scans/{self.name}-{{center}}.csv.gz",
+                "reference_file": f"reference/{self.name}-{{center}}.csv.gz",
+                "reference_attenuation": self.reference_attenuation}
 
 
 @dataclass(frozen=True)
@@ -175,7 +221,7 @@ class VirtualGoniometer:
     exposure_ladder_s: tuple[float, ...] = EXPOSURE_LADDER_S
 
     # -- signal model ------------------------------------------------------------------------------
-    def scattered_rate(self, truth: synthetic.PhosphorPlateTruth, config: Configuration, theta_i_deg: float,
+    def scattered_rate(self, truth: synthetic.TruthModel, config: Configuration, theta_i_deg: float,
                        side: str, theta_s_deg: NDArray, phi_s_deg: NDArray) -> NDArray[np.float64]:
         """Mean signal (counts/s per pixel, no dark) for detector centres (θs, φs); shape (n_pos, n_wavelength)."""
         lam = self.spectrometer.wavelength
@@ -185,18 +231,9 @@ class VirtualGoniometer:
         quad = aperture_quadrature(np.radians(theta_s_deg), np.radians(phi_s_deg), self.instrument)
         cos = np.clip(quad.directions[..., 2], 0.0, None)  # nodes past the horizon see nothing
         w = quad.weights * cos
-        s_b = (truth.elastic_angular("bibs", side, th, quad.directions) * w).sum(-1)
-        s_y = (truth.elastic_angular("yiys", side, th, quad.directions) * w).sum(-1)
-        s_c = (truth.conversion_angular(side, th, quad.directions) * w).sum(-1)
-        elastic_b = truth.elastic_spectral("bibs", side, th, lam)
-        elastic_y = truth.elastic_spectral("yiys", side, th, lam)
-        blue = lam < truth.elastic_split_nm
-        elastic = p_i * np.where(blue, elastic_b * s_b[:, None], elastic_y * s_y[:, None])
-        phi_exc = np.trapezoid(p_i * truth.excitation(lam), lam)
-        converted = phi_exc * truth.emission_density(lam) * s_c[:, None]
-        return resp * (elastic + converted)
+        return resp * truth.scattered_power(side, th, quad.directions, w, lam, p_i)
 
-    def expected_bsdf(self, truth: synthetic.PhosphorPlateTruth, config: Configuration, theta_i_deg: float,
+    def expected_bsdf(self, truth: synthetic.TruthModel, config: Configuration, theta_i_deg: float,
                       side: str, theta_s_deg: NDArray, phi_s_deg: NDArray) -> dict[str, NDArray[np.float64]]:
         """What an ideal (noise-free) instrument reports: aperture-averaged BSDF and bi-spectral BSDF.
 
@@ -254,11 +291,13 @@ def _stream(seed: int, *words: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(key))
 
 
-def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = None,
+def simulate_scan(truth: synthetic.TruthModel, plan: ScanPlan | None = None,
                   goniometer: VirtualGoniometer | None = None,
                   configurations: tuple[Configuration, ...] = (BLUE, YELLOW), seed: int = 0,
-                  sample_name: str | None = None, extra_manifest: dict | None = None) -> RawExport:
-    """Simulate a complete raw export (scans, reference beams, darks) of ``truth`` measured with ``plan``."""
+                  sample_name: str | None = None, extra_manifest: dict | None = None,
+                  band_series: tuple[BandSeries, ...] = ()) -> RawExport:
+    """Simulate a complete raw export (scans, reference beams, darks) of ``truth`` measured with ``plan``:
+    the ``configurations`` and then every band of each ``band_series`` (a monochromator scan)."""
     plan = plan or default_plan()
     gonio = goniometer or VirtualGoniometer()
     sp = gonio.spectrometer
@@ -266,7 +305,7 @@ def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = N
     used_exposures: set[float] = set()
     scans: dict[str, dict] = {}
     references: dict[str, dict] = {}
-    for config in configurations:
+    for config in configurations + tuple(c for series in band_series for c in series.configurations()):
         cols: dict[str, list] = {k: [] for k in ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side",
                                                  "arc", "exposure_s")}
         blocks = []
@@ -322,6 +361,7 @@ def simulate_scan(truth: synthetic.PhosphorPlateTruth, plan: ScanPlan | None = N
              "reference_attenuation": c.reference_attenuation}
             for c in configurations
         ],
+        **({"band_series": [series.manifest_entry() for series in band_series]} if band_series else {}),
         "provenance": {"generator": "bsdfkit.simulation.virtual_goniometer.simulate_scan", "seed": int(seed),
                        "versions": generator_versions(),
                        "plan": asdict(plan), "goniometer": json.loads(json.dumps(asdict(gonio)))},
@@ -463,3 +503,76 @@ def cl830_synthetic(seed: int = 830, plan: ScanPlan | None = None,
     extra["provenance_command"] = (f"bsdfkit simulate --preset cl830-synthetic --seed {seed} "
                                    "-o measurements/cl830-synthetic")
     return simulate_scan(truth, plan, gonio, seed=seed, sample_name="cl830-synthetic", extra_manifest=extra)
+
+
+# ------------------------------------------------------------------ the excitation-emission stand-in
+#: The monochromator scan of ``measurements/eem-synthetic``: 390-520 nm every 10 nm, 10 nm FWHM (a band at
+#: 380 nm would reach below the 380 nm spectrometer grid), over the absorption edge and the emission onset.
+EEM_BAND_SERIES = BandSeries()
+#: Its continuation through the converted light's wavelengths every 20 nm (the same series name: one scan), so
+#: that the plate model holds the elastic scattering, and the vanishing absorption, of every emitted wavelength.
+EEM_LONG_SERIES = BandSeries(first_nm=540.0, last_nm=760.0, step_nm=20.0)
+#: Its spectrometer: the power-budget paper's range at 1 nm (the 0.5 nm pixels of the bundled set would double
+#: the files and add nothing to 10 nm bands and a 150 nm wide emission).
+EEM_SPECTROMETER = Spectrometer(wavelength_step_nm=1.0)
+EEM_SEED = 17
+
+
+def eem_plan() -> ScanPlan:
+    """A sparse plan that keeps the set small: in-plane −84…84° every 6° plus 1° steps within ±6° of specular;
+    the perpendicular arc −60…60° every 10° plus 1° steps within ±5°; 5°, 45°, 56° incidence."""
+    coarse = tuple(float(x) for x in np.arange(-84.0, 84.0 + 1e-9, 6.0))
+    perp = sorted(set(np.round(np.arange(-60.0, 60.0 + 1e-9, 10.0), 6))
+                  | set(np.round(np.arange(-5.0, 5.0 + 1e-9, 1.0), 6)))
+    return ScanPlan(in_plane_deg=coarse, perpendicular_deg=tuple(float(x) for x in perp), fine_halfwidth_deg=6.0)
+
+
+def eem_truth() -> synthetic.ExcitationEmissionTruth:
+    """Truth of the eem-synthetic plate (:class:`~bsdfkit.simulation.truth.ExcitationEmissionTruth`).
+
+    At zero absorption the elastic lobes are the cl830 stand-in's yellow (yiys) lobes with ρ solved so that
+    their exact TIS is the yiys targets (Table 2 of the power-budget paper at 45°); the converted photons split
+    between the sides as the cl830 biys targets do, with the same shape factors ε. Absorption, quantum yield
+    and emission are the class defaults (documented there).
+    """
+    angles = tuple(sorted(CL830_TIS_TARGETS))
+    elastic, conversion = {}, {}
+    for side, tag in (("reflection", "B"), ("transmission", "F")):
+        rows = []
+        for th in angles:
+            a, sigma = _CL830_LOBES[("yiys", side)][th]
+            rho = CL830_TIS_TARGETS[th][f"{tag}_yiys"] / 100.0 - synthetic.clipped_gaussian_lobe_tis(
+                a, sigma, np.radians(th))
+            rows.append(synthetic.LobeParams(rho=rho, A=a, sigma=sigma))
+        elastic[side] = tuple(rows)
+    for th in angles:
+        t = CL830_TIS_TARGETS[th]
+        share = t["B_biys"] / (t["B_biys"] + t["F_biys"])
+        for side, value in (("reflection", share), ("transmission", 1.0 - share)):
+            conversion.setdefault(side, []).append(synthetic.ConversionParams(T=value, epsilon=_CL830_EPSILON[side]))
+    return synthetic.ExcitationEmissionTruth(
+        name="eem-synthetic", theta_i_deg=angles, elastic=elastic,
+        conversion={s: tuple(v) for s, v in conversion.items()},
+        emission_range_nm=(EEM_SPECTROMETER.wavelength_min_nm, EEM_SPECTROMETER.wavelength_max_nm))
+
+
+def eem_command(seed: int = EEM_SEED, folder: str = "measurements/eem-synthetic") -> str:
+    """The command that regenerates the eem-synthetic set bit for bit."""
+    return (f"python -c \"from bsdfkit.simulation.virtual_goniometer import eem_synthetic, write_raw_export; "
+            f"write_raw_export(eem_synthetic(seed={seed}), '{folder}')\"")
+
+
+def eem_synthetic(seed: int = EEM_SEED) -> RawExport:
+    """The bundled excitation-emission set (``measurements/eem-synthetic``): the eem truth measured with the
+    blue and yellow filters of the two-wavelength approach and the monochromator scan :data:`EEM_BAND_SERIES` +
+    :data:`EEM_LONG_SERIES`, on the sparse :func:`eem_plan`, with a 1 nm spectrometer."""
+    gonio = VirtualGoniometer(spectrometer=EEM_SPECTROMETER)
+    truth = eem_truth()
+    lam = EEM_SPECTROMETER.wavelength
+    blue, yellow = BLUE.incident_power(lam, 1.0), YELLOW.incident_power(lam, 1.0)
+    tis = {f"{th:g}": truth.two_colour_tis_percent(th, lam, blue, yellow) for th in truth.theta_i_deg}
+    extra = {"provenance_command": eem_command(seed),
+             "truth": {"model": "bsdfkit.simulation.truth.ExcitationEmissionTruth",
+                       "parameters_json": truth.to_json(), "tis_percent": tis}}
+    return simulate_scan(truth, eem_plan(), gonio, seed=seed, sample_name="eem-synthetic", extra_manifest=extra,
+                         band_series=(EEM_BAND_SERIES, EEM_LONG_SERIES))
