@@ -33,7 +33,7 @@ import shutil
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from bsdfkit.core.errors import BsdfkitError, OutputExistsError
+from bsdfkit.core.errors import BsdfkitError, OutputError, OutputExistsError
 
 __all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_writable", "describe_os_error",
            "refuse_inputs", "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
@@ -70,10 +70,6 @@ _REASONS = {
     errno.ELOOP: "too many levels of symbolic links",
     errno.EXDEV: "cross-device move",
 }
-
-
-class OutputError(BsdfkitError):
-    """An output cannot be written (permission, read-only file system, no space, path is a folder, ...)."""
 
 
 def describe_os_error(exc: BaseException) -> str:
