@@ -435,7 +435,7 @@ def kill_cases(work: Path, f: dict[str, Path]) -> list[Case]:
     }
     for verb, build in long_jobs.items():
         for sig, name in ((signal.SIGINT, "SIGINT"), (signal.SIGTERM, "SIGTERM"), (signal.SIGKILL, "SIGKILL")):
-            for delay in (4.0, 9.0):
+            for delay in (5.0, 20.0):
                 out = k / f"{verb}_{name}_{int(delay)}.out"
                 cases.append(Case(f"kill {verb} {name} at {delay:g}s", build(str(out)), "ok", outputs=[out],
                                   kill=(sig, delay), timeout=900))
