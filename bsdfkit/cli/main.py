@@ -5,7 +5,9 @@ verbs are discovered here, so adding one touches no shared file. Every verb is a
 that a notebook user can make too.
 
 User errors (:class:`bsdfkit.core.errors.BsdfkitError`) are printed as one line on stderr with exit status 2;
-no traceback is shown for them.
+no traceback is shown for them. Ctrl-C (SIGINT) and SIGTERM end the process within a second, even inside a
+long compiled call, with this process's unfinished outputs removed and status 128 + signal (130, 143);
+:func:`main` called from Python exits the same way.
 
 Compiled kernels persist between runs: the entry point switches on JAX's persistent compilation cache in a
 per-user folder (:func:`compile_cache_dir`, ``$XDG_CACHE_HOME/bsdfkit/jax`` or ``~/.cache/bsdfkit/jax``)
@@ -142,12 +144,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     no_cache = NO_CACHE_FLAG in argv  # accepted before or after the verb
     argv = [a for a in argv if a != NO_CACHE_FLAG]
     # before the verb's modules (and so JAX) are imported: JAX reads its cache settings when imported
+    # Ctrl-C and SIGTERM end the process at once, unfinished outputs removed (exit_now), from the first moment:
+    # a KeyboardInterrupt can be swallowed by a library callback (JAX's gc hook) and the run would go on
+    previous = {signum: _on_signal(signum, _terminated) for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
         with compile_cache(compile_cache_wanted(no_cache)), cpu_devices():
             return _run(argv)
-    except KeyboardInterrupt:  # Ctrl-C while the verb's libraries are still being imported
+    except KeyboardInterrupt:  # a Ctrl-C that came before the handler above
         print("bsdfkit: interrupted", file=sys.stderr)
         return 130
+    finally:
+        for signum, handler in previous.items():
+            _on_signal(signum, handler)
 
 
 def _run(argv: list[str]) -> int:
@@ -156,7 +164,6 @@ def _run(argv: list[str]) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    previous = _on_sigterm(_terminated)  # a kill (SIGTERM) removes unfinished outputs
     try:
         with prompt_signals():
             return int(args.func(args) or 0)
@@ -170,8 +177,6 @@ def _run(argv: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"bsdfkit {args.verb}: interrupted", file=sys.stderr)
         return 130
-    finally:
-        _on_sigterm(previous)
 
 
 def _terminated(signum, frame) -> None:
@@ -251,9 +256,11 @@ def prompt_signals(grace_s: float = SIGNAL_GRACE_S) -> Iterator[None]:
         os.close(read_fd)
 
 
-def _on_sigterm(handler):
+def _on_signal(signum: int, handler):
+    if handler is None or (signum == signal.SIGINT and signal.getsignal(signum) == signal.SIG_IGN):
+        return None  # nothing to restore; an ignored Ctrl-C (nohup, background job) stays ignored
     try:
-        return signal.signal(signal.SIGTERM, handler)
+        return signal.signal(signum, handler)
     except (ValueError, TypeError):  # not the main thread, or no previous Python handler to restore
         return None
 
