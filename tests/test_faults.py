@@ -406,6 +406,11 @@ def test_implausible_spectra():
     (["export", "S", "--to", "zemax", "--interaction", "bibs", "-o", "O", "--symmetry-tolerance", "-1"],
      "symmetry_tolerance"),
     (["bench", "--only", "nonsense", "-o", "X"], "--only"),
+    (["ingest", "S", "--incidence", "nan", "-o", "O"], "--incidence"),
+    (["ingest", "S", "--phi-i", "inf", "-o", "O"], "--phi-i"),
+    (["ingest", "S", "--wavelength", "-1", "-o", "O"], "--wavelength"),
+    (["convert", "S", "--to", "zemax", "--relative-std", "1e308", "-o", "O"], "--relative-std"),
+    (["convert", "S", "--to", "zemax", "--tis-tolerance", "nan", "-o", "O"], "--tis-tolerance"),
 ])
 def test_options_out_of_range_are_errors_not_defaults(tmp_path, capsys, argv, needle):
     argv = [str(tmp_path / a) if a in ("T", "X", "S", "O") else a for a in argv]
