@@ -417,6 +417,13 @@ def test_options_out_of_range_are_errors_not_defaults(tmp_path, capsys, argv, ne
     _one_line_error(*_cli(capsys, *argv), needle)
 
 
+def test_usage_errors_are_one_line(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["fit", "bsdf", "x", "--interaction", "bibs", "--side", "reflection", "--incidence", "abc"])
+    assert info.value.code == 2
+    _one_line_error(2, capsys.readouterr().err, "--incidence", "invalid float")
+
+
 def test_budget_table_out_of_range_and_iteration_bound(tmp_path):
     good = {"B_bibs": 10.9, "F_bibs": 6.5, "B_biys": 26.3, "F_biys": 26.9, "B_yiys": 45.0, "F_yiys": 48.0}
     with pytest.raises(InputError, match="percentage"):

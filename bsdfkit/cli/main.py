@@ -121,9 +121,16 @@ def cpu_devices() -> Iterator[int | None]:
             os.environ["XLA_FLAGS"] = flags
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (exit status 2), like every other bsdfkit error."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
     """The parser with the given verbs registered (all by default; `main` registers only the one it runs)."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="bsdfkit",
         description="Goniometer scans to calibrated BSDFs, fits, ray-tracer tables and module budgets.",
     )
