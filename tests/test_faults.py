@@ -411,6 +411,7 @@ def test_implausible_spectra():
     (["ingest", "S", "--wavelength", "-1", "-o", "O"], "--wavelength"),
     (["convert", "S", "--to", "zemax", "--relative-std", "1e308", "-o", "O"], "--relative-std"),
     (["convert", "S", "--to", "zemax", "--tis-tolerance", "nan", "-o", "O"], "--tis-tolerance"),
+    (["tis", str(BUNDLED), "--incidence", "45", "--band", "nan", "500"], "--band"),
 ])
 def test_options_out_of_range_are_errors_not_defaults(tmp_path, capsys, argv, needle):
     argv = [str(tmp_path / a) if a in ("T", "X", "S", "O") else a for a in argv]
