@@ -406,10 +406,23 @@ def test_implausible_spectra():
     (["export", "S", "--to", "zemax", "--interaction", "bibs", "-o", "O", "--symmetry-tolerance", "-1"],
      "symmetry_tolerance"),
     (["bench", "--only", "nonsense", "-o", "X"], "--only"),
+    (["ingest", "S", "--incidence", "nan", "-o", "O"], "--incidence"),
+    (["ingest", "S", "--phi-i", "inf", "-o", "O"], "--phi-i"),
+    (["ingest", "S", "--wavelength", "-1", "-o", "O"], "--wavelength"),
+    (["convert", "S", "--to", "zemax", "--relative-std", "1e308", "-o", "O"], "--relative-std"),
+    (["convert", "S", "--to", "zemax", "--tis-tolerance", "nan", "-o", "O"], "--tis-tolerance"),
+    (["tis", str(BUNDLED), "--incidence", "45", "--band", "nan", "500"], "--band"),
 ])
 def test_options_out_of_range_are_errors_not_defaults(tmp_path, capsys, argv, needle):
     argv = [str(tmp_path / a) if a in ("T", "X", "S", "O") else a for a in argv]
     _one_line_error(*_cli(capsys, *argv), needle)
+
+
+def test_usage_errors_are_one_line(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["fit", "bsdf", "x", "--interaction", "bibs", "--side", "reflection", "--incidence", "abc"])
+    assert info.value.code == 2
+    _one_line_error(2, capsys.readouterr().err, "--incidence", "invalid float")
 
 
 def test_budget_table_out_of_range_and_iteration_bound(tmp_path):

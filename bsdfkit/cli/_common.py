@@ -1,10 +1,24 @@
-"""Helpers shared by the CLI verbs: JSON output and progress reporting."""
+"""Helpers shared by the CLI verbs: JSON output, option ranges and progress reporting."""
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any
 
+from bsdfkit.core.errors import InputError
 from bsdfkit.io.jsonout import dumps
+
+
+def check_options(args: Any, ranges: dict[str, tuple[float, float, str]]) -> None:
+    """Refuse a numeric option that is not finite or outside its range (never ignored or replaced).
+
+    ``ranges`` maps an attribute of ``args`` to (lo, hi, text of the expected range); None values are skipped.
+    """
+    for name, (lo, hi, expected) in ranges.items():
+        value = getattr(args, name, None)
+        if value is not None and not (math.isfinite(value) and lo <= value <= hi):
+            raise InputError("option out of range", field="--" + name.replace("_", "-"), expected=expected,
+                             got=value)
 
 
 def emit_json(obj: Any) -> None:

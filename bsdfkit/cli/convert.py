@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bsdfkit.cli._common import emit_json
+from bsdfkit.cli._common import check_options, emit_json
+from bsdfkit.cli.ingest import OPTION_RANGES
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.measurement.table import QUANTITIES, ZERO_POLICIES
 from bsdfkit.tables.export import FORMATS, ExportSettings
@@ -60,6 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance)
     result = convert(
         args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,

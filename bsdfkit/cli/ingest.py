@@ -10,9 +10,19 @@ from __future__ import annotations
 import argparse
 
 from bsdfkit import api
-from bsdfkit.cli._common import emit_json
+from bsdfkit.cli._common import check_options, emit_json
 from bsdfkit.io import atomic
 from bsdfkit.measurement.table import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
+
+#: numeric options: finite and in these ranges
+OPTION_RANGES = {
+    "incidence": (0.0, 90.0, "an incidence angle in [0, 90] deg"),
+    "phi_i": (-360.0, 360.0, "an azimuth in [-360, 360] deg"),
+    "wavelength": (1e-3, 1e6, "a wavelength in nm, > 0"),
+    "relative_std": (0.0, 10.0, "a relative standard deviation in [0, 10]"),
+    "tis_tolerance": (0.0, 1.0, "a relative tolerance in [0, 1]"),
+    "symmetry_tolerance": (0.0, 1.0, "a relative tolerance in [0, 1]"),
+}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,6 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    check_options(args, OPTION_RANGES)
     atomic.check_writable(args.output, args.force, inputs=[args.path])
     ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
                 wavelength=args.wavelength, incidence=args.incidence, phi_i=args.phi_i, zeros=args.zeros,

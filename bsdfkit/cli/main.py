@@ -5,7 +5,9 @@ verbs are discovered here, so adding one touches no shared file. Every verb is a
 that a notebook user can make too.
 
 User errors (:class:`bsdfkit.core.errors.BsdfkitError`) are printed as one line on stderr with exit status 2;
-no traceback is shown for them.
+no traceback is shown for them. Ctrl-C (SIGINT) and SIGTERM end the process within a second, even inside a
+long compiled call, with this process's unfinished outputs removed and status 128 + signal (130, 143);
+:func:`main` called from Python exits the same way.
 
 Compiled kernels persist between runs: the entry point switches on JAX's persistent compilation cache in a
 per-user folder (:func:`compile_cache_dir`, ``$XDG_CACHE_HOME/bsdfkit/jax`` or ``~/.cache/bsdfkit/jax``)
@@ -23,6 +25,7 @@ import importlib
 import os
 import signal
 import sys
+import threading
 import zlib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -118,9 +121,16 @@ def cpu_devices() -> Iterator[int | None]:
             os.environ["XLA_FLAGS"] = flags
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (exit status 2), like every other bsdfkit error."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
     """The parser with the given verbs registered (all by default; `main` registers only the one it runs)."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="bsdfkit",
         description="Goniometer scans to calibrated BSDFs, fits, ray-tracer tables and module budgets.",
     )
@@ -141,8 +151,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     no_cache = NO_CACHE_FLAG in argv  # accepted before or after the verb
     argv = [a for a in argv if a != NO_CACHE_FLAG]
     # before the verb's modules (and so JAX) are imported: JAX reads its cache settings when imported
-    with compile_cache(compile_cache_wanted(no_cache)), cpu_devices():
-        return _run(argv)
+    # Ctrl-C and SIGTERM end the process at once, unfinished outputs removed (exit_now), from the first moment:
+    # a KeyboardInterrupt can be swallowed by a library callback (JAX's gc hook) and the run would go on
+    previous = {signum: _on_signal(signum, _terminated) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with compile_cache(compile_cache_wanted(no_cache)), cpu_devices():
+            return _run(argv)
+    except KeyboardInterrupt:  # a Ctrl-C that came before the handler above
+        print("bsdfkit: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        for signum, handler in previous.items():
+            _on_signal(signum, handler)
 
 
 def _run(argv: list[str]) -> int:
@@ -151,9 +171,9 @@ def _run(argv: list[str]) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    previous = _on_sigterm(_terminated)  # a kill (SIGTERM) removes unfinished outputs
     try:
-        return int(args.func(args) or 0)
+        with prompt_signals():
+            return int(args.func(args) or 0)
     except BsdfkitError as exc:
         print(f"bsdfkit {args.verb}: error: {exc}", file=sys.stderr)
         return 2
@@ -164,21 +184,90 @@ def _run(argv: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"bsdfkit {args.verb}: interrupted", file=sys.stderr)
         return 130
-    finally:
-        _on_sigterm(previous)
 
 
 def _terminated(signum, frame) -> None:
     # exit at once, whatever is running (an exception raised here could be swallowed by a library callback)
+    exit_now(signum)
+
+
+def exit_now(signum: int) -> None:
+    """Remove this process's unfinished outputs and end it with status 128 + ``signum``, skipping shutdown.
+
+    Interpreter shutdown would wait for (or crash on) a compiled call still running in XLA's threads.
+    """
     remove_partial_outputs()
-    sys.stderr.write("bsdfkit: terminated; unfinished outputs removed\n")
-    sys.stderr.flush()
+    with contextlib.suppress(OSError, ValueError):
+        sys.stdout.flush()
+    name = "interrupted" if signum == signal.SIGINT else "terminated"
+    with contextlib.suppress(OSError):
+        os.write(2, f"bsdfkit: {name}; unfinished outputs removed\n".encode())
     os._exit(128 + signum)
 
 
-def _on_sigterm(handler):
+#: after Ctrl-C or SIGTERM, the main thread gets this long [s] to stop by itself before the process is ended
+SIGNAL_GRACE_S = 1.0
+
+
+@contextlib.contextmanager
+def prompt_signals(grace_s: float = SIGNAL_GRACE_S) -> Iterator[None]:
+    """Ctrl-C (SIGINT) and SIGTERM end the process within ``grace_s`` even while a compiled kernel runs.
+
+    Python runs its signal handlers in the main thread between bytecodes, so a long call into XLA (one chunk
+    of the tracer, a compilation) would delay them until it returns. The C-level handler still writes the
+    signal number to :func:`signal.set_wakeup_fd` at once; a watcher thread reads it and, if the main thread
+    has not finished ``grace_s`` later (its own KeyboardInterrupt cleanup runs first), removes this process's
+    unfinished outputs and exits with status 128 + signal (:func:`exit_now`). A KeyboardInterrupt leaving the
+    block ends the process too, so ``main`` called from Python exits on Ctrl-C like the command does. Outside
+    the main thread nothing is installed.
+    """
     try:
-        return signal.signal(signal.SIGTERM, handler)
+        read_fd, write_fd = os.pipe()
+    except OSError:
+        yield
+        return
+    os.set_blocking(write_fd, False)
+    try:
+        old_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    except ValueError:  # not the main thread
+        os.close(read_fd)
+        os.close(write_fd)
+        yield
+        return
+    finished = threading.Event()
+
+    def watch() -> None:
+        while True:
+            try:
+                data = os.read(read_fd, 1)
+            except OSError:
+                return
+            if not data or finished.is_set():
+                return
+            if data[0] not in (signal.SIGINT, signal.SIGTERM) or finished.wait(grace_s):
+                continue
+            exit_now(data[0])
+
+    watcher = threading.Thread(target=watch, name="bsdfkit-signals", daemon=True)
+    watcher.start()
+    try:
+        yield
+    except KeyboardInterrupt:
+        # the verb's own cleanup (its context managers) has run; end the process here (see exit_now)
+        exit_now(signal.SIGINT)
+    finally:
+        finished.set()
+        signal.set_wakeup_fd(old_fd)
+        os.close(write_fd)  # the watcher reads end-of-file and returns
+        watcher.join(timeout=grace_s + 1.0)
+        os.close(read_fd)
+
+
+def _on_signal(signum: int, handler):
+    if handler is None or (signum == signal.SIGINT and signal.getsignal(signum) == signal.SIG_IGN):
+        return None  # nothing to restore; an ignored Ctrl-C (nohup, background job) stays ignored
+    try:
+        return signal.signal(signum, handler)
     except (ValueError, TypeError):  # not the main thread, or no previous Python handler to restore
         return None
 

@@ -14,6 +14,7 @@ Which reduction runs is decided by what the dataset holds (:func:`bsdfkit.reduct
 from __future__ import annotations
 
 import argparse
+import math
 
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import InputError
@@ -46,6 +47,10 @@ def load_scan(path: str, quantity: str | None = None):
 
 def _run(args: argparse.Namespace) -> int:
     ds = load_scan(args.scan, getattr(args, "quantity", None))
+    band = tuple(args.band) if args.band else None
+    if band is not None and not (all(math.isfinite(b) and 0 < b <= 1e6 for b in band) and band[0] < band[1]):
+        raise InputError("option out of range", field="--band", expected="LO < HI, finite wavelengths in nm > 0",
+                         got=band)
     kind = reduction_kind(ds) if args.mode == "auto" else args.mode
     if kind == "interactions":
         return _interactions(ds, args)

@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+from pathlib import Path
 
 from bsdfkit.cli._common import Progress, emit_json
-from bsdfkit.io.atomic import check_writable, write_with
+from bsdfkit.io.atomic import OutputSet, write_with
 from bsdfkit.raytrace import load_scene, trace
 
 # the tracer's own entry points (what bsdfkit.api.trace calls), not bsdfkit.api: importing the whole API (fits,
@@ -29,17 +31,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
-    if args.output:
-        check_writable(args.output, args.force, inputs=[args.scene])
-    bar = Progress(args.rays, label="trace")
-    try:
-        result = trace(scene, args.rays, args.seed, chunk=args.chunk, lanes=args.lanes,
-                       full_kernel=args.full_kernel, progress=bar.update)
-    finally:
-        bar.close()
-    if args.output:
-        ds = result.to_dataset()
-        write_with(args.output, lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), args.force)
+    out = Path(args.output) if args.output else None
+    # every file this verb writes is one output set, checked (existing, an input, writable) before tracing
+    with (OutputSet(out.parent, [out.name], args.force, inputs=[args.scene]) if out
+          else contextlib.nullcontext()) as outputs:
+        bar = Progress(args.rays, label="trace")
+        try:
+            result = trace(scene, args.rays, args.seed, chunk=args.chunk, lanes=args.lanes,
+                           full_kernel=args.full_kernel, progress=bar.update)
+        finally:
+            bar.close()
+        if out:
+            ds = result.to_dataset()
+            write_with(outputs.path(out.name), lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), True)
     report = result.to_dict()
     if args.json:
         emit_json(report)

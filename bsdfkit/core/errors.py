@@ -72,3 +72,7 @@ class FitError(NumericalError):
 
 class OutputExistsError(BsdfkitError):
     """An output exists and ``force`` was not given."""
+
+
+class OutputError(BsdfkitError):
+    """An output cannot be written (permission, read-only file system, no space, path is a folder, ...)."""

@@ -30,20 +30,29 @@ import errno
 import os
 import secrets
 import shutil
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from bsdfkit.core.errors import BsdfkitError, OutputExistsError
+from bsdfkit.core.errors import BsdfkitError, OutputError, OutputExistsError
 
 __all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_writable", "describe_os_error",
            "refuse_inputs", "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
 
 #: Temporary files and staging folders of this process that are not finished yet (removed on SIGTERM).
 _PARTIAL: set[Path] = set()
+#: Held while partial outputs are removed and while an output set is moved into place, so that a signal watcher
+#: thread (bsdfkit.cli.main) never empties a staging folder that the main thread is committing; reentrant for a
+#: signal handler that interrupts the main thread inside a commit.
+_COMMIT_LOCK = threading.RLock()
 
 
 def remove_partial_outputs() -> None:
-    """Remove this process's unfinished temporary files and staging folders (for a signal handler)."""
+    """Remove this process's unfinished temporary files and staging folders (for a signal handler).
+
+    The lock is not released: the caller is about to end the process, and no commit may start meanwhile.
+    """
+    _COMMIT_LOCK.acquire()
     for path in list(_PARTIAL):
         with contextlib.suppress(OSError):
             if path.is_dir():
@@ -70,10 +79,6 @@ _REASONS = {
     errno.ELOOP: "too many levels of symbolic links",
     errno.EXDEV: "cross-device move",
 }
-
-
-class OutputError(BsdfkitError):
-    """An output cannot be written (permission, read-only file system, no space, path is a folder, ...)."""
 
 
 def describe_os_error(exc: BaseException) -> str:
@@ -435,13 +440,14 @@ class OutputSet:
         if self.staging is None:
             raise RuntimeError("output set already committed or aborted")
         stage, target = self.staging, self.folder.resolve()
-        _PARTIAL.discard(stage)
-        try:
-            self._commit(stage, target)
-        except BaseException:
-            if self.staging is not None:
-                _PARTIAL.add(stage)
-            raise
+        with _COMMIT_LOCK:
+            _PARTIAL.discard(stage)
+            try:
+                self._commit(stage, target)
+            except BaseException:
+                if self.staging is not None:
+                    _PARTIAL.add(stage)
+                raise
 
     def _commit(self, stage: Path, target: Path) -> None:
         missing = [n for n in self.names if not (stage / n).is_file()]

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import xarray as xr
 
-from bsdfkit.core.errors import FormatError, InputError
-from bsdfkit.io.atomic import OutputError, write_with
+from bsdfkit.core.errors import FormatError, InputError, OutputError
+from bsdfkit.io.atomic import write_with
 
 ENGINE = "netcdf4"
 

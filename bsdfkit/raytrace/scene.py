@@ -515,6 +515,7 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
     _check_sizes(cavity, leds, trace, tallies, file)
     _check_spectral(trace, leds, top, file)
     wall, base = (_with_blue_reflectance(sf, leds) for sf in (wall, base))
+    check_termination(wall, base, leds, top, trace, file)
     return Scene(cavity, wall, base, leds, top, trace, tallies, sweep, Path(file) if file is not None else None)
 
 
@@ -660,6 +661,11 @@ def surface_reflectance_table(scene: Scene) -> np.ndarray:
 
 #: Largest irradiance-map side (bins): the map is an int64 array of side², and bin indices must stay in int32.
 MAX_MAP_BINS = 2048
+#: Largest incidence histogram (bins over 0-90 deg: 0.01 deg) and interaction budget (plate visits per ray).
+MAX_HISTOGRAM_BINS = 9000
+MAX_BUDGET_BINS = 10_000
+#: Most events per ray in a closed lossless cavity, where every ray runs to ``max_events`` (see check_termination).
+LOSSLESS_MAX_EVENTS = 1000
 #: float32 positions keep ~7 digits: the cavity must stay below this size [mm] and its smallest feature (the LED
 #: emitter) above this fraction of it, or hits near the rim and the emitters are misplaced.
 FLOAT32_MAX_EXTENT_MM = 1e5
@@ -670,7 +676,13 @@ def _check_sizes(cavity: Cavity, leds: Leds, trace: TraceOptions, tallies: Talli
     """Bounds that protect memory and accuracy, checked before anything is allocated or traced."""
     if tallies.map_bins > MAX_MAP_BINS:
         raise InputError("irradiance map too fine", file=file, field="tallies.map_bins",
-                         expected=f"<= {MAX_MAP_BINS}", got=tallies.map_bins)
+                         expected=f"<= MAX_MAP_BINS ({MAX_MAP_BINS})", got=tallies.map_bins)
+    for name, value, limit, limit_name in (
+            ("histogram_bins", tallies.histogram_bins, MAX_HISTOGRAM_BINS, "MAX_HISTOGRAM_BINS"),
+            ("budget_bins", tallies.budget_bins, MAX_BUDGET_BINS, "MAX_BUDGET_BINS")):
+        if value > limit:
+            raise InputError("tally too fine", file=file, field=f"tallies.{name}",
+                             expected=f"<= {limit_name} ({limit})", got=value)
     if trace.precision == "float32":
         extent = max(cavity.radius_mm, cavity.height_mm, abs(leds.pitch_mm) * max(leds.grid, 1))
         feature = leds.emitter_radius_mm if leds.ray_file is None else extent
@@ -813,3 +825,22 @@ def _drop_none(node: Any) -> Any:
     if isinstance(node, dict):
         return {k: _drop_none(v) for k, v in node.items() if v is not None}
     return node
+
+
+def check_termination(wall: Surface, base: Surface, leds: Leds, top: Top, trace: TraceOptions, file) -> None:
+    """Refuse a closed lossless cavity with many events per ray, which would trace for ever.
+
+    A ray ends when it leaves through the top, when a surface absorbs it (its weight drops by the
+    reflectance at every bounce until the roulette or the flux threshold ends it) or after ``max_events``.
+    With wall, base and LEDs of reflectance 1 and a top that neither transmits nor absorbs (a Lambertian top
+    of reflectance 1), nothing can leave or absorb: every ray runs to ``max_events`` whatever the
+    termination, all its power is "truncated", and the run costs rays x max_events events. Such a scene is
+    accepted only as a test of the truncation ledger, with ``max_events`` <= :data:`LOSSLESS_MAX_EVENTS`.
+    """
+    rho_led = base.reflectance if leds.led_reflectance is None else leds.led_reflectance
+    closed = top.kind == "lambertian" and top.reflectance >= 1.0
+    if closed and min(wall.reflectance, base.reflectance, rho_led) >= 1.0 and trace.max_events > LOSSLESS_MAX_EVENTS:
+        raise ValidationError("no ray can ever leave or be absorbed (reflectance 1 everywhere, closed top): every "
+                              "ray would run to max_events", file=file, field="trace.max_events",
+                              expected=f"an exit, a transmitting top or a reflectance < 1, or max_events <= "
+                                       f"LOSSLESS_MAX_EVENTS ({LOSSLESS_MAX_EVENTS})", got=trace.max_events)

@@ -36,11 +36,13 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import BsdfkitError, InputError, ValidationError
-from bsdfkit.io.atomic import check_writable, write_with
+from bsdfkit.io.atomic import OutputSet, write_with
 from bsdfkit.raytrace.scene import Scene, dumps_scene, with_values
 from bsdfkit.raytrace.tracer import trace
 
 _INT = re.compile(r"^[+-]?\d+$")
+#: Most grid points of one sweep (each is a full trace): checked before any value array is allocated.
+MAX_SWEEP_POINTS = 10_000
 
 
 @dataclass(frozen=True)
@@ -82,9 +84,12 @@ def parse_parameter(spec: str, source: str = "--param") -> SweepParameter:
         except (ValueError, IndexError):
             raise InputError("a range is start:stop:count", field=source, expected="e.g. 0.80:0.98:5",
                              got=rhs) from None
-        if len(parts) != 3 or count < 1:
-            raise InputError("a range is start:stop:count with count >= 1", field=source,
+        if len(parts) != 3 or count < 1 or not (np.isfinite(start) and np.isfinite(stop)):
+            raise InputError("a range is start:stop:count with finite ends and count >= 1", field=source,
                              expected="e.g. 0.80:0.98:5", got=rhs)
+        if count > MAX_SWEEP_POINTS:
+            raise InputError("too many sweep values", field=source, expected=f"count <= MAX_SWEEP_POINTS "
+                             f"({MAX_SWEEP_POINTS})", got=count)
         values = tuple(float(v) for v in np.linspace(start, stop, count))
     else:
         values = tuple(_token(v) for v in rhs.split(",") if v.strip())
@@ -196,7 +201,7 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
         raise ValidationError("two sweep parameters start with the same key", field="--param",
                               expected="distinct first keys", got=names)
     shape = tuple(len(p.values) for p in spec.parameters)
-    total = int(np.prod(shape)) if shape else 1
+    total = check_point_count(spec.parameters)
     points = []
     for index in itertools.product(*[range(s) for s in shape]):
         values = {}
@@ -266,6 +271,18 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
     return ds
 
 
+def check_point_count(parameters: Sequence[SweepParameter]) -> int:
+    """The number of grid points, refused above :data:`MAX_SWEEP_POINTS` (before anything is traced)."""
+    total = 1
+    for p in parameters:
+        total *= len(p.values)  # Python integers: no overflow
+    if total > MAX_SWEEP_POINTS:
+        raise InputError("too many sweep points", field="--param",
+                         expected=f"a grid of at most MAX_SWEEP_POINTS ({MAX_SWEEP_POINTS}) points",
+                         got=" x ".join(str(len(p.values)) for p in parameters) + f" = {total}")
+    return total
+
+
 def plot_paths(out: Path) -> list[Path]:
     """PNG files written next to the netCDF output ``out``."""
     return [out.with_name(out.stem + "_LER_YBR.png")]
@@ -277,21 +294,22 @@ def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays:
     """Sweep ``scene`` over ``parameters`` (specs), write ``out`` (netCDF) and, with ``figure``, a PNG beside it.
 
     ``figure(ds)`` returns a matplotlib figure (e.g. :func:`bsdfkit.plotting.figures.sweep_figure`); the tracer
-    itself draws nothing. Existing outputs are kept unless ``force``; this is checked before any tracing.
+    itself draws nothing. Existing outputs are kept unless ``force`` and the scene file is never replaced; this
+    is checked before any tracing. The files are one :class:`~bsdfkit.io.atomic.OutputSet`: an interrupted
+    sweep leaves the previous files or none, and a rerun needs no ``force``.
     ``cluster`` runs the points on dask.distributed (module docstring). Returns the dataset.
     """
-    plots = figure is not None
     out = Path(out)
-    check_writable(out, force)
-    if plots:
-        for p in plot_paths(out):
-            check_writable(p, force)
+    names = [out.name] + ([p.name for p in plot_paths(out)] if figure is not None else [])
     params = tuple(parse_parameter(p) for p in parameters)
-    ds = sweep_dataset(scene, SweepSpec(params, rays, seed, chunk), progress, cluster)
-    write_with(out, lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), force)
-    if figure is not None:
-        fig = figure(ds)
-        write_with(plot_paths(out)[0], lambda tmp: fig.savefig(tmp, dpi=110, format="png"), force)
+    check_point_count(params)
+    # the netCDF file and its plots are one output set: a kill or a fault leaves all of them or none
+    with OutputSet(out.parent, names, force, inputs=[scene.path]) as outputs:
+        ds = sweep_dataset(scene, SweepSpec(params, rays, seed, chunk), progress, cluster)
+        write_with(outputs.path(out.name), lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), True)
+        if figure is not None:
+            fig = figure(ds)
+            write_with(outputs.path(names[1]), lambda tmp: fig.savefig(tmp, dpi=110, format="png"), True)
     if "failed_points" in ds.attrs:
         failed = ds.attrs["failed_points"].splitlines()
         raise SweepPointsFailed(f"{len(failed)} sweep point(s) failed, written as NaN: " + " | ".join(failed), file=out)

@@ -14,7 +14,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
-from bsdfkit.raytrace.scene import Scene, scene_spectral_tables, spectral_grid
+from bsdfkit.raytrace.scene import Scene, check_termination, scene_spectral_tables, spectral_grid
 from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,
@@ -55,13 +55,17 @@ def trace(
     # None means the scene's value; 0 or a negative number is an error, never silently the default
     chunk = int(scene.trace.chunk if chunk is None else chunk)
     lanes = int(scene.trace.lanes if lanes is None else lanes)
-    if chunk < 1 or lanes < 1:
-        raise ValidationError("chunk and lanes must be positive", field="chunk", expected=">= 1",
-                              got=(chunk, lanes))
+    for name, value in (("chunk", chunk), ("lanes", lanes)):
+        if value < 1:
+            raise ValidationError(f"{name} must be positive", field=name, expected=">= 1", got=value)
+    if chunk > kernel.MAX_CHUNK:
+        raise ValidationError("chunk too large for the kernel's counters", field="chunk",
+                              expected=f"<= MAX_CHUNK ({kernel.MAX_CHUNK})", got=chunk)
     n_dev = len(jax.local_devices())  # chunks run in parallel on every local device (CPU devices: see below)
     chunk = min(chunk, -(-rays // n_dev), kernel.MAX_CHUNK)
     width = emission_width(chunk)  # emissions per kernel call (static): a power of two, ≥ chunk
     lanes = min(lanes, width)
+    check_termination(scene.wall, scene.base, scene.leds, scene.top, scene.trace, scene.path)  # replace()d scenes
     eff = effects or scene_effects(scene, full=full_kernel)
     if eff.plate_lobe and scene.trace.max_events >= 2 ** 22:
         raise ValidationError("lobe sampling needs fewer events per ray for its random-number counter",

@@ -1,0 +1,660 @@
+"""Adversarial audit of the command line (issue #13): every verb, damaged inputs, bad options, output faults,
+kills, concurrency. Not part of the test suite (it runs a few hundred CLI processes, ~10-20 min on 2 cores).
+
+    .venv/bin/python tests/audit/run_audit.py [--jobs 2] [--only SUBSTRING] [--keep]
+
+Every case runs ``python -m bsdfkit.cli.main …`` in a subprocess and is classified:
+
+* ``ok`` — exit 0 and every announced output present (when the case expects success);
+* ``error`` — exit 2 with exactly one line on stderr and no traceback (when the case expects an error);
+* ``traceback`` — "Traceback" on stderr; ``hang`` — no exit within the time limit;
+* ``partial`` — a temporary (``.part``/``.staging``/``.old``/``.probe``) left behind, an output of a failed
+  run present, or an input changed;
+* ``silent`` — exit 0 where an error was expected (bad input accepted);
+* ``refused`` — an error where success was expected; ``cryptic`` — a failure that is not one line / exit 2.
+
+Full disks are a 256 KiB tmpfs and read-only folders a read-only bind mount when ``mount`` works (root);
+otherwise those cases are skipped. Prints one line per non-ok/error case and a table per class.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import gzip
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+LEFTOVER = (".part", ".staging", ".old", ".probe")
+CLI = [sys.executable, "-m", "bsdfkit.cli.main"]
+
+
+@dataclass
+class Case:
+    name: str
+    argv: list[str]
+    expect: str = "error"  # "ok", "error" or "either" (a clean success or a clean one-line error)
+    outputs: list[Path] = field(default_factory=list)  # must exist on success, must not on failure
+    inputs: list[Path] = field(default_factory=list)  # must be unchanged afterwards
+    timeout: float = 120.0
+    kill: tuple[int, float] | None = None  # (signal, seconds after start), then a rerun without --force
+    concurrent: bool = False  # run argv twice at once: exactly one must succeed
+    cwd: Path | None = None
+
+
+# ---------------------------------------------------------------------------------------------- fixtures
+SCENE = """[cavity]
+radius_mm = 35.0
+height_mm = 43.0
+[wall]
+reflectance = 0.90
+[base]
+reflectance = 0.90
+[leds]
+count = 4
+pitch_mm = 20.0
+emitter_radius_mm = 1.0
+distribution = "lambertian"
+power_W = 1.0
+{extra_leds}
+[top]
+kind = "exit"
+[trace]
+lanes = 512
+"""
+
+RECIPE = """[recipe]
+name = "audit"
+measurement = "{measurement}"
+[reductions]
+budget_incidence_deg = 45.0
+eta_mc = 0.94
+iterations = 7
+[exports]
+interactions = ["bibs"]
+sides = ["reflection"]
+formats = ["zemax"]
+tolerance = 0.05
+[fits]
+bsdf_model = "lambert+gaussian"
+emission_model = "split-gaussian"
+emission_incidence_deg = 45.0
+led_peak_nm = 450.1
+led_fwhm_nm = 22.9
+fallback_flux_W = [0.058, 0.472]
+"""
+
+
+#: with --fork, cases run in children forked from this process after the verbs are imported (a cold start of
+#: the command costs seconds on a loaded machine); kill and concurrency cases always start fresh processes
+FORK = False
+
+
+def _run_forked(argv: list[str], timeout: float, cwd: Path | None) -> tuple[int | None, str, str]:
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        pid = os.fork()
+        if pid == 0:  # the child: the command line's main() with its own stdout/stderr
+            code = 70
+            try:
+                os.dup2(out.fileno(), 1)
+                os.dup2(err.fileno(), 2)
+                sys.stdout = open(1, "w", closefd=False)
+                sys.stderr = open(2, "w", closefd=False)
+                if cwd is not None:
+                    os.chdir(cwd)
+                from bsdfkit.cli.main import main as cli_main
+                try:
+                    code = cli_main(argv)
+                except SystemExit as exc:  # argparse
+                    code = exc.code if isinstance(exc.code, int) else 2
+                except BaseException:
+                    import traceback
+                    traceback.print_exc()
+                    code = 1
+                sys.stdout.flush()
+                sys.stderr.flush()
+            finally:
+                os._exit(code)
+        deadline = time.monotonic() + timeout
+        status = None
+        while time.monotonic() < deadline:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                break
+            time.sleep(0.05)
+        else:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            status = None
+        out.seek(0)
+        err.seek(0)
+        text_out, text_err = out.read().decode(errors="replace"), err.read().decode(errors="replace")
+    code = None if status is None else os.waitstatus_to_exitcode(status)
+    return code, text_out, text_err
+
+
+def run_cli(argv: list[str], timeout: float, cwd: Path | None = None) -> tuple[int | None, str, str]:
+    if FORK:
+        return _run_forked(argv, timeout, cwd)
+    try:
+        p = subprocess.run(CLI + argv, capture_output=True, text=True, timeout=timeout, cwd=cwd,
+                           errors="replace")
+        return p.returncode, p.stdout, p.stderr
+    except subprocess.TimeoutExpired as exc:
+        return None, "", (exc.stderr or b"").decode(errors="replace") if isinstance(exc.stderr, bytes) else ""
+
+
+def make_fixtures(work: Path) -> dict[str, Path]:
+    """Valid inputs of every kind, made with the toolkit itself and the repository's test data."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from conftest import tiny_gonio, tiny_plan  # the suite's small raw export
+
+    from bsdfkit.simulation import virtual_goniometer as virtual
+    f: dict[str, Path] = {}
+    gonio = tiny_gonio()
+    export = virtual.simulate_scan(virtual.cl830_truth(gonio), tiny_plan(), gonio, seed=1)
+    f["raw"] = work / "fx" / "raw"
+    virtual.write_raw_export(export, f["raw"])
+    f["nc"] = work / "fx" / "scan.nc"
+    code, _, err = run_cli(["ingest", str(f["raw"]), "-o", str(f["nc"])], 300)
+    assert code == 0, err
+    f["scene"] = work / "fx" / "scene.toml"
+    f["scene"].write_text(SCENE.format(extra_leds=""))
+    f["rays"] = work / "fx" / "rays.txt"
+    f["rays"].write_text("\n".join(f"{x} 0 0 0 0 1 0.25" for x in (-10, -5, 5, 10)) + "\n")
+    f["scene_rays"] = work / "fx" / "scene_rays.toml"
+    f["scene_rays"].write_text(SCENE.format(extra_leds=f'ray_file = "{f["rays"]}"').replace("count = 4\n", "")
+                               .replace("pitch_mm = 20.0\n", "").replace("emitter_radius_mm = 1.0\n", "")
+                               .replace('distribution = "lambertian"\n', ""))
+    f["recipe"] = work / "fx" / "recipe.toml"
+    f["recipe"].write_text(RECIPE.format(measurement=f["raw"]))
+    f["table"] = work / "fx" / "budget.json"
+    f["table"].write_text(json.dumps({"power": {"B_bibs": 10.9, "F_bibs": 6.5, "B_biys": 26.3, "F_biys": 26.9,
+                                                 "B_yiys": 45.0, "F_yiys": 48.0}}))
+    f["zemax"] = ROOT / "tests" / "data" / "golden" / "zemax_lambert_brdf.bsdf"
+    f["tracepro"] = ROOT / "tests" / "data" / "golden" / "tracepro_lambert_table.txt"
+    f["asap"] = ROOT / "tests" / "data" / "golden" / "asap_lambert.txt"
+    radiant = ROOT / "tests" / "data" / "ansys-radiant-zemax-bsdf"
+    f["radiant"] = radiant / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+    f["spectrum"] = ROOT / "tests" / "data" / "benkner-led-spectra" / "white_3000K.ISD"
+    f["csv_table"] = work / "fx" / "table.csv"
+    f["csv_table"].write_text("theta_i,theta_s,phi_s,brdf\n" + "".join(
+        f"0,{t},0,{0.3183:.4f}\n" for t in range(0, 90, 5)))
+    # the plate of a phosphor top: written by the toolkit from the Table-2 constants
+    from bsdfkit.raytrace.plate import PhosphorPlate
+    table2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
+              "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
+    f["plate"] = work / "fx" / "plate.json"
+    PhosphorPlate.constant(table2, name="audit").save(f["plate"])
+    f["scene_plate"] = work / "fx" / "scene_plate.toml"
+    phosphor = f'kind = "phosphor"\nplate = "{f["plate"]}"'
+    f["scene_plate"].write_text(SCENE.format(extra_leds="").replace('kind = "exit"', phosphor))
+    return f
+
+
+# ----------------------------------------------------------------------------------------- damaged inputs
+def damaged_variants(path: Path) -> dict[str, bytes]:
+    data = path.read_bytes()
+    text_like = not data[:2] == b"\x1f\x8b"
+    out = {
+        "empty": b"",
+        "binary": bytes(range(256)) * 8,
+        "nul": data[: len(data) // 2] + b"\x00" * 64 + data[len(data) // 2:],
+        "truncated": data[: max(1, len(data) // 3)],
+        "latin1": data.replace(b"e", b"\xe9", 3) if text_like else gzip.compress(
+            gzip.decompress(data).replace(b"0", b"\xe9", 3)),
+        "utf16": data.decode("utf-8", "replace").encode("utf-16") if text_like else data[:10],
+    }
+    if not text_like:
+        out["gzip_corrupt"] = data[:20] + bytes(b ^ 0x5A for b in data[20:60]) + data[60:]
+        out["gzip_truncated"] = data[: len(data) // 2]
+    return out
+
+
+def input_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    cases: list[Case] = []
+    dmg = work / "damaged"
+    dmg.mkdir()
+
+    def variants(kind: str, src: Path, suffix: str):
+        for label, data in damaged_variants(src).items():
+            p = dmg / f"{kind}_{label}{suffix}"
+            p.write_bytes(data)
+            yield label, p
+
+    out = dmg / "o"
+    for label, p in variants("scene", f["scene"], ".toml"):
+        cases.append(Case(f"trace scene {label}", ["trace", str(p), "--rays", "1000", "-o", str(out / f"t_{label}.nc")],
+                          outputs=[out / f"t_{label}.nc"], inputs=[p]))
+        cases.append(Case(f"sweep scene {label}", ["sweep", str(p), "--param", "wall.reflectance=0.8", "--rays", "1000",
+                                                    "-o", str(out / f"s_{label}.nc")], outputs=[out / f"s_{label}.nc"]))
+    for label, p in variants("rays", f["rays"], ".txt"):
+        s = dmg / f"scene_rays_{label}.toml"
+        s.write_text(f["scene_rays"].read_text().replace(str(f["rays"]), str(p)))
+        cases.append(Case(f"trace ray file {label}", ["trace", str(s), "--rays", "1000"]))
+    for label, p in variants("plate", f["plate"], ".json"):
+        s = dmg / f"scene_plate_{label}.toml"
+        s.write_text(f["scene_plate"].read_text().replace(str(f["plate"]), str(p)))
+        cases.append(Case(f"trace plate {label}", ["trace", str(s), "--rays", "1000"]))
+    for label, p in variants("recipe", f["recipe"], ".toml"):
+        cases.append(Case(f"run recipe {label}", ["run", str(p), "-o", str(out / f"run_{label}")],
+                          outputs=[out / f"run_{label}"], timeout=300))
+    for label, p in variants("table", f["table"], ".json"):
+        cases.append(Case(f"budget table {label}", ["budget", "--table", str(p), "--eta-mc", "0.9"]))
+    for kind in ("zemax", "tracepro", "asap", "radiant", "csv_table"):
+        suffix = f[kind].suffix
+        for label, p in variants(kind, f[kind], suffix):
+            cases.append(Case(f"read {kind} {label}", ["read", str(p)]))
+            o = out / f"ing_{kind}_{label}.nc"
+            cases.append(Case(f"ingest {kind} {label}", ["ingest", str(p), "-o", str(o)], outputs=[o]))
+            o2 = out / f"conv_{kind}_{label}.bsdf"
+            cases.append(Case(f"convert {kind} {label}", ["convert", str(p), "--to", "zemax", "-o", str(o2)],
+                              outputs=[o2]))
+    for label, p in variants("nc", f["nc"], ".nc"):
+        cases.append(Case(f"info nc {label}", ["info", str(p)]))
+        cases.append(Case(f"tis nc {label}", ["tis", str(p), "--incidence", "45"]))
+        o = out / f"exp_{label}.bsdf"
+        cases.append(Case(f"export nc {label}", ["export", str(p), "--to", "zemax", "--interaction", "bibs",
+                                                  "-o", str(o)], outputs=[o]))
+    # raw exports: the manifest and a scan file damaged
+    for member in ("manifest.toml", "dark.csv.gz"):
+        src = f["raw"] / member
+        if not src.exists():
+            continue
+        for label, data in damaged_variants(src).items():
+            folder = dmg / f"raw_{member.split('.')[0]}_{label}"
+            shutil.copytree(f["raw"], folder)
+            (folder / member).write_bytes(data)
+            o = out / f"raw_{member.split('.')[0]}_{label}.nc"
+            cases.append(Case(f"ingest raw {member} {label}", ["ingest", str(folder), "-o", str(o)], outputs=[o]))
+    scans = sorted((f["raw"] / "scans").glob("*")) if (f["raw"] / "scans").is_dir() else []
+    if scans:
+        first = scans[0]
+        for label, data in damaged_variants(first).items():
+            folder = dmg / f"raw_scan_{label}"
+            shutil.copytree(f["raw"], folder)
+            (folder / "scans" / first.name).write_bytes(data)
+            o = out / f"raw_scan_{label}.nc"
+            cases.append(Case(f"ingest raw scan {label}", ["ingest", str(folder), "-o", str(o)], outputs=[o]))
+    for label, p in variants("spectrum", f["spectrum"], ".ISD"):
+        cases.append(Case(f"color spectrum {label}", ["color", str(p)]))
+    for case in cases:
+        if case.name.endswith(" latin1"):
+            case.expect = "either"  # vendor files in Latin-1 may be read as such
+    return cases
+
+
+# ----------------------------------------------------------------------------------------------- options
+BAD_NUMBERS = ("0", "-1", "nan", "inf", "-inf", "1e308", "abc", "1e12")
+
+
+def option_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    o = work / "opts"
+    o.mkdir()
+    scene, nc, raw, table, csv = (str(f[k]) for k in ("scene", "nc", "raw", "table", "csv_table"))
+    # (verb argv with {} for the value, values that are valid)
+    specs = {
+        "trace --rays": (["trace", scene, "--rays", "{}"], {"1e12"} - {"1e12"}),
+        "trace --seed": (["trace", scene, "--rays", "1000", "--seed", "{}"], {"0"}),
+        "trace --chunk": (["trace", scene, "--rays", "1000", "--chunk", "{}"], set()),
+        "trace --lanes": (["trace", scene, "--rays", "1000", "--lanes", "{}"], set()),
+        "sweep --rays": (["sweep", scene, "--param", "wall.reflectance=0.8", "--rays", "{}", "--no-plots", "-o",
+                          str(o / "sw{}.nc")], set()),
+        "sweep --seed": (["sweep", scene, "--param", "wall.reflectance=0.8", "--rays", "1000", "--seed", "{}",
+                          "--no-plots", "-o", str(o / "sws{}.nc")], {"0"}),
+        "sweep --chunk": (["sweep", scene, "--param", "wall.reflectance=0.8", "--rays", "1000", "--chunk", "{}",
+                           "--no-plots", "-o", str(o / "swc{}.nc")], set()),
+        "sweep --workers": (["sweep", scene, "--param", "wall.reflectance=0.8", "--rays", "1000", "--workers", "{}",
+                             "--no-plots", "-o", str(o / "sww{}.nc")], set()),
+        "sweep --param count": (["sweep", scene, "--param", "wall.reflectance=0.8:0.9:{}", "--rays", "1000",
+                                 "--no-plots", "-o", str(o / "swp{}.nc")], set()),
+        "sweep --param value": (["sweep", scene, "--param", "wall.reflectance={}", "--rays", "1000",
+                                 "--no-plots", "-o", str(o / "swv{}.nc")], {"0"}),
+        "budget --eta-mc": (["budget", "--table", table, "--eta-mc", "{}"], set()),
+        "budget --iterations": (["budget", "--table", table, "--eta-mc", "0.9", "--iterations", "{}"], set()),
+        "budget --incidence": (["budget", nc, "--incidence", "{}", "--eta-mc", "0.9"], set()),
+        "tis --incidence": (["tis", nc, "--incidence", "{}"], set()),
+        "tis --band": (["tis", nc, "--incidence", "45", "--band", "{}", "500"], set()),
+        "simulate --seed": (["simulate", "--seed", "{}", "-o", str(o / "sim{}")], set()),
+        "export --symmetry-tolerance": (["export", nc, "--to", "zemax", "--interaction", "bibs",
+                                         "--symmetry-tolerance", "{}", "-o", str(o / "e{}.bsdf")], {"0"}),
+        "export --zero-azimuth": (["export", nc, "--to", "tracepro", "--interaction", "bibs", "--zero-azimuth",
+                                   "{}", "-o", str(o / "z{}.txt")], {"0", "-1"}),
+        "export --wavelength-nm": (["export", nc, "--to", "tracepro", "--interaction", "bibs", "--wavelength-nm",
+                                    "{}", "-o", str(o / "w{}.txt")], set()),
+        "export --wavelength-um": (["export", nc, "--to", "tracepro", "--interaction", "bibs", "--wavelength-um",
+                                    "{}", "-o", str(o / "wu{}.txt")], set()),
+        "export --temperature-k": (["export", nc, "--to", "tracepro", "--interaction", "bibs", "--temperature-k",
+                                    "{}", "-o", str(o / "tk{}.txt")], set()),
+        "export --incidences": (["export", nc, "--to", "zemax", "--interaction", "bibs", "--incidences", "{}",
+                                 "-o", str(o / "inc{}.bsdf")], set()),
+        "convert --wavelength": (["convert", nc, "--to", "zemax", "--interaction", "bibs", "--wavelength", "{}",
+                                  "-o", str(o / "cw{}.bsdf")], set()),
+        "convert --tis-tolerance": (["convert", nc, "--to", "zemax", "--interaction", "bibs", "--tis-tolerance",
+                                     "{}", "-o", str(o / "ct{}.bsdf")], {"0"}),
+        "convert --relative-std": (["convert", csv, "--to", "zemax", "--relative-std", "{}", "-o",
+                                    str(o / "cr{}.bsdf")], {"0"}),
+        "ingest --relative-std": (["ingest", csv, "--relative-std", "{}", "-o", str(o / "ir{}.nc")], {"0"}),
+        "ingest --wavelength": (["ingest", csv, "--wavelength", "{}", "-o", str(o / "iw{}.nc")], set()),
+        "ingest --incidence": (["ingest", csv, "--incidence", "{}", "-o", str(o / "ii{}.nc")], {"0"}),
+        "ingest --phi-i": (["ingest", csv, "--phi-i", "{}", "-o", str(o / "ip{}.nc")], {"0", "-1"}),
+        "fit bsdf --incidence": (["fit", "bsdf", nc, "--interaction", "bibs", "--side", "reflection", "--incidence",
+                                  "{}"], set()),
+        "fit spectrum --maxiter": (["fit", "spectrum", str(f["spectrum"]), "--maxiter", "{}"], set()),
+        "fit spectrum --split-nm": (["fit", "spectrum", str(f["spectrum"]), "--split-nm", "{}"], set()),
+    }
+    cases = []
+    for name, (argv, valid) in specs.items():
+        for value in BAD_NUMBERS:
+            tag = value.replace("-", "m").replace(".", "p")
+            args = [a.replace("{}", value) if a == "{}" or "={}" in a or ":{}" in a else a.replace("{}", tag)
+                    for a in argv]
+            outs = [Path(a) for a in args if a.startswith(str(o))]
+            cases.append(Case(f"option {name} {value}", args, "ok" if value in valid else "error", outputs=outs))
+    return cases
+
+
+# -------------------------------------------------------------------------------------------- output faults
+def output_cases(work: Path, f: dict[str, Path], mounts: dict[str, Path]) -> list[Case]:
+    o = work / "outf"
+    o.mkdir()
+    afile = o / "a_file"
+    afile.write_text("x")
+    adir = o / "a_dir"
+    adir.mkdir()
+    scene, nc, raw = str(f["scene"]), str(f["nc"]), str(f["raw"])
+    writers = {
+        "ingest": lambda out: ["ingest", raw, "-o", out],
+        "export": lambda out: ["export", nc, "--to", "zemax", "--interaction", "bibs", "-o", out],
+        "convert": lambda out: ["convert", str(f["zemax"]), "--to", "tracepro", "-o", out],
+        "trace": lambda out: ["trace", scene, "--rays", "2000", "-o", out],
+        "sweep": lambda out: ["sweep", scene, "--param", "wall.reflectance=0.8,0.9", "--rays", "2000", "-o", out],
+        "simulate": lambda out: ["simulate", "-o", out],
+        "run": lambda out: ["run", str(f["recipe"]), "-o", out],
+    }
+    cases = []
+    for verb, build in writers.items():
+        t = 600 if verb in ("run", "simulate") else 180
+        cases.append(Case(f"{verb} -o is a folder", build(str(adir)) if verb not in ("run", "simulate")
+                          else build(str(afile)), timeout=t))
+        cases.append(Case(f"{verb} -o under a file", build(str(afile / "x.out")), timeout=t))
+        for label, root in mounts.items():
+            target = root / f"{verb}.out"
+            cases.append(Case(f"{verb} -o on {label}", build(str(target)), outputs=[target], timeout=t))
+        # --force onto an input
+        inp = {"ingest": raw, "export": nc, "convert": str(f["zemax"]), "trace": scene, "sweep": scene,
+               "run": str(f["recipe"].parent)}.get(verb)
+        if inp:
+            copy_dir = o / f"self_{verb}"
+            copy_dir.mkdir()
+            src = Path(inp)
+            local = copy_dir / src.name
+            (shutil.copytree if src.is_dir() else shutil.copy)(src, local)
+            args = build(str(local if verb != "ingest" else local / "manifest.toml"))
+            args = [str(local) if a == inp else a for a in args]
+            if verb == "run":
+                args = ["run", str(local / "recipe.toml"), "-o", str(local)]
+            cases.append(Case(f"{verb} --force onto its input", args + ["--force"],
+                              inputs=[p for p in ([local] if local.is_file() else local.rglob("*")) if p.is_file()],
+                              timeout=t))
+        # existing output without --force
+        exists = o / f"exists_{verb}.out"
+        exists.write_text("previous")
+        if verb in ("run", "simulate"):
+            exists.unlink()
+            exists.mkdir()
+            (exists / "summary.json").write_text("{}")
+            (exists / "README.md").write_text("previous")
+        cases.append(Case(f"{verb} output exists, no --force", build(str(exists)),
+                          inputs=[exists] if exists.is_file() else [exists / "summary.json"], timeout=t))
+    return cases
+
+
+def kill_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    k = work / "kills"
+    k.mkdir()
+    scene = str(f["scene"])
+    cases = []
+    long_jobs = {
+        "trace": lambda out: ["trace", scene, "--rays", "300000000", "-o", out],
+        "sweep": lambda out: ["sweep", scene, "--param", "wall.reflectance=0.5:0.9:40", "--rays", "3000000",
+                              "-o", out],
+        "simulate": lambda out: ["simulate", "-o", out],
+        "run": lambda out: ["run", str(f["recipe"]), "-o", out],
+        "ingest": lambda out: ["ingest", str(ROOT / "measurements" / "cl830-synthetic"), "-o", out],
+    }
+    for verb, build in long_jobs.items():
+        for sig, name in ((signal.SIGINT, "SIGINT"), (signal.SIGTERM, "SIGTERM"), (signal.SIGKILL, "SIGKILL")):
+            for delay in (5.0, 20.0):
+                out = k / f"{verb}_{name}_{int(delay)}.out"
+                cases.append(Case(f"kill {verb} {name} at {delay:g}s", build(str(out)), "ok", outputs=[out],
+                                  kill=(sig, delay), timeout=900))
+    return cases
+
+
+def concurrency_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    c = work / "conc"
+    c.mkdir()
+    return [
+        Case("two ingest writers", ["ingest", str(f["raw"]), "-o", str(c / "a.nc")], "ok", outputs=[c / "a.nc"],
+             concurrent=True),
+        Case("two export writers", ["export", str(f["nc"]), "--to", "zemax", "--interaction", "bibs", "-o",
+                                    str(c / "b.bsdf")], "ok", outputs=[c / "b.bsdf"], concurrent=True),
+        Case("two trace writers", ["trace", str(f["scene"]), "--rays", "2000", "-o", str(c / "t.nc")], "ok",
+             outputs=[c / "t.nc"], concurrent=True),
+        Case("two sweep writers", ["sweep", str(f["scene"]), "--param", "wall.reflectance=0.8", "--rays", "2000",
+                                   "-o", str(c / "s.nc")], "ok", outputs=[c / "s.nc"], concurrent=True),
+        Case("two simulate writers", ["simulate", "-o", str(c / "sim")], "ok", outputs=[c / "sim"],
+             concurrent=True, timeout=600),
+    ]
+
+
+def verb_smoke_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    s = work / "smoke"
+    s.mkdir()
+    return [
+        Case("help", ["--help"], "ok"),
+        Case("no verb", [], "error"),
+        Case("unknown verb", ["frobnicate"], "error"),
+        Case("info raw", ["info", str(f["raw"])], "ok"),
+        Case("info missing", ["info", str(s / "missing.nc")]),
+        Case("tis nc", ["tis", str(f["nc"]), "--incidence", "45"], "ok"),
+        Case("read zemax", ["read", str(f["zemax"])], "ok"),
+        Case("read tracepro", ["read", str(f["tracepro"])], "ok"),
+        Case("read asap", ["read", str(f["asap"])], "ok"),
+        Case("read a folder", ["read", str(s)]),
+        Case("budget table", ["budget", "--table", str(f["table"]), "--eta-mc", "0.9"], "ok"),
+        Case("budget nothing", ["budget", "--eta-mc", "0.9"]),
+        Case("trace ok", ["trace", str(f["scene"]), "--rays", "2000", "-o", str(s / "t.nc")], "ok",
+             outputs=[s / "t.nc"]),
+        Case("trace ray file ok", ["trace", str(f["scene_rays"]), "--rays", "2000"], "ok"),
+        Case("color ok", ["color", str(f["spectrum"])], "ok"),
+        Case("bench bad only", ["bench", "--only", "nope", "-o", str(s / "bench")]),
+        Case("fit bsdf ok", ["fit", "bsdf", str(f["nc"]), "--interaction", "bibs", "--side", "reflection"], "ok",
+             timeout=300),
+        Case("scene missing", ["trace", str(s / "missing.toml")]),
+        Case("scene is a folder", ["trace", str(s)]),
+        Case("recipe missing", ["run", str(s / "missing.toml"), "-o", str(s / "r")]),
+    ]
+
+
+# --------------------------------------------------------------------------------------------- classify
+def leftovers(paths: list[Path]) -> list[str]:
+    found = []
+    for p in paths:
+        for folder in {p.parent, p} if p.is_dir() else {p.parent}:
+            with contextlib.suppress(OSError):
+                found += [str(e) for e in folder.rglob("*") if e.name.endswith(LEFTOVER)]
+    return sorted(set(found))
+
+
+def snapshot(paths: list[Path]) -> dict[Path, bytes | None]:
+    return {p: p.read_bytes() if p.is_file() else None for p in paths}
+
+
+def classify(case: Case, code: int | None, err: str) -> str:
+    if code is None:
+        return "hang"
+    if "Traceback" in err:
+        return "traceback"
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    if code == 0:
+        if case.expect == "error":
+            return "silent"
+        missing = [p for p in case.outputs if not p.exists()]
+        return "partial" if missing else "ok"
+    if code == 2 and len(lines) == 1 and ": error: " in lines[0]:
+        if any(p.exists() for p in case.outputs) and case.expect == "error":
+            return "partial"
+        return "error" if case.expect in ("error", "either") else "refused"
+    return "cryptic"
+
+
+def run_case(case: Case) -> tuple[str, str]:
+    before = snapshot(case.inputs)
+    if case.concurrent:
+        procs = [subprocess.Popen(CLI + case.argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                 for _ in range(2)]
+        results = []
+        for p in procs:
+            try:
+                _, e = p.communicate(timeout=case.timeout)
+                results.append((p.returncode, e))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                results.append((None, ""))
+        codes = sorted(r[0] for r in results if r[0] is not None)
+        errs = " | ".join(r[1].strip() for r in results if r[1].strip())
+        if len(codes) < 2:
+            return "hang", errs
+        if "Traceback" in errs:
+            return "traceback", errs
+        if codes != [0, 2]:
+            return ("silent" if codes == [0, 0] else "cryptic"), f"exit codes {codes}: {errs}"
+        verdict = "partial" if leftovers(case.outputs) else "ok"
+        return verdict, errs
+    if case.kill is not None:
+        sig, delay = case.kill
+        p = subprocess.Popen(CLI + case.argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        time.sleep(delay)
+        finished_early = p.poll() is not None
+        sent = time.perf_counter()
+        if not finished_early:
+            p.send_signal(sig)
+        try:
+            _, err = p.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            return "hang", f"no exit 30 s after {sig!r}"
+        waited = time.perf_counter() - sent
+        if "Traceback" in err:
+            return "traceback", err[-400:]
+        if not finished_early and waited > 2.0 and sig != signal.SIGKILL:
+            return "hang", f"exit {waited:.1f} s after the signal"
+        left = leftovers(case.outputs) if sig != signal.SIGKILL else []
+        out = case.outputs[0]
+        if not finished_early and out.exists():
+            return "partial", f"output present after the kill: {out}"
+        if left:
+            return "partial", f"left behind: {left}"
+        code, _, err2 = run_cli(case.argv, case.timeout)  # rerun without --force
+        if code != 0:
+            return ("traceback" if "Traceback" in err2 else "refused"), f"rerun: exit {code}: {err2.strip()[-300:]}"
+        left = leftovers(case.outputs)
+        return ("partial", f"after rerun: {left}") if left else ("ok", f"signal after {delay:g}s, "
+                                                                        f"exit in {waited:.2f}s")
+    code, _, err = run_cli(case.argv, case.timeout, case.cwd)
+    verdict = classify(case, code, err)
+    changed = [str(p) for p, data in before.items() if (p.read_bytes() if p.is_file() else None) != data]
+    if changed:
+        return "partial", f"input changed: {changed}"
+    left = leftovers(case.outputs)
+    if left and verdict in ("ok", "error", "refused"):
+        return "partial", f"left behind: {left}"
+    return verdict, err.strip()[-400:]
+
+
+# -------------------------------------------------------------------------------------------------- main
+@contextlib.contextmanager
+def fault_mounts(work: Path):
+    """A full disk (256 KiB tmpfs, filled) and a read-only folder (read-only bind mount), when mounting works."""
+    mounts: dict[str, Path] = {}
+    full, ro = work / "full", work / "ro"
+    full.mkdir()
+    ro.mkdir()
+    try:
+        if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(full)],
+                          capture_output=True).returncode == 0:
+            mounts["a full disk"] = full
+            with contextlib.suppress(OSError), open(full / "filler", "wb") as fh:
+                fh.write(b"\0" * 250_000)
+        if subprocess.run(["mount", "--bind", "-o", "ro", str(ro), str(ro)], capture_output=True).returncode == 0:
+            mounts["a read-only folder"] = ro
+        yield mounts
+    finally:
+        for p in (full, ro):
+            subprocess.run(["umount", str(p)], capture_output=True)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--only", default=None, help="run only cases whose name contains this")
+    ap.add_argument("--keep", action="store_true", help="keep the work folder")
+    ap.add_argument("--no-kills", action="store_true", help="skip the kill cases (the slowest)")
+    ap.add_argument("--fork", action="store_true",
+                    help="run the single-process cases in children forked after the imports (much faster)")
+    args = ap.parse_args()
+    if args.fork:
+        global FORK
+        FORK = True
+        import importlib
+
+        from bsdfkit.cli.main import VERBS
+        for verb in VERBS:
+            importlib.import_module(f"bsdfkit.cli.{verb}")
+        import jax  # noqa: F401  (imported, not initialised: forking stays safe)
+    work = Path(tempfile.mkdtemp(prefix="bsdfkit-audit-"))
+    started = time.time()
+    try:
+        f = make_fixtures(work)
+        with fault_mounts(work) as mounts:
+            cases = (verb_smoke_cases(work, f) + input_cases(work, f) + option_cases(work, f)
+                     + output_cases(work, f, mounts) + concurrency_cases(work, f)
+                     + ([] if args.no_kills else kill_cases(work, f)))
+            if args.only:
+                cases = [c for c in cases if args.only in c.name]
+            serial = [c for c in cases if c.kill or c.concurrent]
+            parallel = [c for c in cases if not (c.kill or c.concurrent)]
+            with ThreadPoolExecutor(max(1, args.jobs)) as pool:
+                results = list(pool.map(run_case, parallel))
+            results += [run_case(c) for c in serial]
+            cases = parallel + serial
+        tally = Counter(v for v, _ in results)
+        for case, (verdict, detail) in zip(cases, results):
+            if verdict not in ("ok", "error"):
+                print(f"[{verdict}] {case.name}: {' '.join(detail.split())[:300]}")
+        print(f"\n{len(cases)} cases in {time.time() - started:.0f} s; mounts: {sorted(mounts) or 'none'}")
+        for verdict in ("ok", "error", "traceback", "hang", "partial", "silent", "refused", "cryptic"):
+            print(f"  {verdict:10s} {tally.get(verdict, 0)}")
+        return 0 if set(tally) <= {"ok", "error"} else 1
+    finally:
+        if args.keep:
+            print(f"work folder kept: {work}")
+        else:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
