@@ -8,6 +8,7 @@ files as one atomic output set (a failure half-way leaves the previous files or 
 """
 from __future__ import annotations
 
+import math
 import signal
 import subprocess
 import sys
@@ -87,6 +88,27 @@ def test_closed_lossless_cavity_with_many_events_is_refused(termination):
     endless = replace(ok, trace=replace(ok.trace, max_events=10**6))
     with pytest.raises(ValidationError, match="LOSSLESS_MAX_EVENTS"):
         trace(endless, 10)
+
+
+@pytest.mark.parametrize("termination", ["threshold", "roulette"])
+def test_slowly_absorbing_closed_cavity_is_bounded_by_its_work(termination):
+    """A closed cavity that absorbs 1e-6 per bounce: ln(Th)/ln(ρ) ≈ 4.6e6 events per ray (threshold), or ≈ 1e6 more
+    on average (roulette); 1e6 rays would cost ~1e12 events, over MAX_TRACE_EVENTS: refused before compiling."""
+    from bsdfkit.raytrace.scene import MAX_TRACE_EVENTS, events_per_ray
+
+    closed = 'kind = "lambertian"\nreflectance = 0.999999\ntransmittance = 0.0'
+    scene = loads_scene(_scene_text(0.999999, closed, f'termination = "{termination}"\nmax_events = 100000000'))
+    n = events_per_ray(scene.wall, scene.base, scene.leds, scene.top, scene.trace)
+    level = scene.trace.threshold if termination == "threshold" else scene.trace.roulette_threshold
+    assert n >= math.log(level) / math.log(0.999999)
+    start = time.perf_counter()
+    with pytest.raises(ValidationError, match="MAX_TRACE_EVENTS"):
+        trace(scene, 10**6)
+    assert time.perf_counter() - start < 1.0  # refused before anything is compiled
+    assert 10**6 * n > MAX_TRACE_EVENTS
+    # the same cavity with a loss of 10 % per bounce costs a few dozen events per ray: accepted
+    lossy = loads_scene(_scene_text(0.9, 'kind = "lambertian"\nreflectance = 0.9\ntransmittance = 0.0'))
+    assert events_per_ray(lossy.wall, lossy.base, lossy.leds, lossy.top, lossy.trace) < 100
 
 
 def test_chunk_above_the_kernel_limit_is_an_error_not_a_silent_cap():

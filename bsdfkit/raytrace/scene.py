@@ -827,6 +827,45 @@ def _drop_none(node: Any) -> Any:
     return node
 
 
+#: Most surface events one trace may cost (about three hours at 1e7 events/s on a CPU): bounds, before anything
+#: is compiled, the work of a cavity that absorbs so slowly that its rays bounce for a very long time.
+MAX_TRACE_EVENTS = 10 ** 11
+
+
+def events_per_ray(wall: Surface, base: Surface, leds: Leds, top: Top, trace: TraceOptions) -> float | None:
+    """Events one ray costs at most (on average, with the roulette) in a cavity closed by a Lambertian top.
+
+    Every event multiplies a ray's weight by at most ρ_max (the largest reflectance of wall, base, LEDs and top;
+    light the top transmits leaves), so the flux threshold Th ends it after ln Th / ln ρ_max events and the
+    roulette, once the weight is at its threshold, after 1/(1 − ρ_max) more on average; ``max_events`` caps
+    both. None for an exit or phosphor top, through which rays leave at a rate the geometry sets.
+    """
+    if top.kind != "lambertian":
+        return None
+    rho_led = base.reflectance if leds.led_reflectance is None else leds.led_reflectance
+    rho = max(wall.reflectance, base.reflectance, rho_led, top.reflectance)
+    if rho >= 1.0:
+        return float(trace.max_events)
+    if rho <= 0.0:
+        return 1.0
+    level = trace.threshold if trace.termination == "threshold" else trace.roulette_threshold
+    n = math.log(level) / math.log(rho) + 1.0
+    if trace.termination != "threshold":
+        n += 1.0 / (1.0 - rho)
+    return float(min(n, trace.max_events))
+
+
+def check_work(scene: "Scene", rays: int) -> None:
+    """Refuse a trace whose surface events would exceed :data:`MAX_TRACE_EVENTS` (see :func:`events_per_ray`)."""
+    n = events_per_ray(scene.wall, scene.base, scene.leds, scene.top, scene.trace)
+    if n is not None and rays * n > MAX_TRACE_EVENTS:
+        raise ValidationError("the trace would cost too many surface events (a closed cavity that absorbs very "
+                              "little)", file=scene.path, field="rays",
+                              expected=f"rays x events per ray <= MAX_TRACE_EVENTS ({MAX_TRACE_EVENTS:.0e}): fewer "
+                                       "rays, a lower reflectance, a smaller max_events or a higher threshold",
+                              got=f"{rays} x {n:.3g}")
+
+
 def check_termination(wall: Surface, base: Surface, leds: Leds, top: Top, trace: TraceOptions, file) -> None:
     """Refuse a closed lossless cavity with many events per ray, which would trace for ever.
 

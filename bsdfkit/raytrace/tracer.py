@@ -14,7 +14,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
-from bsdfkit.raytrace.scene import Scene, check_termination, scene_spectral_tables, spectral_grid
+from bsdfkit.raytrace.scene import Scene, check_termination, check_work, scene_spectral_tables, spectral_grid
 from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,
@@ -66,6 +66,7 @@ def trace(
     width = emission_width(chunk)  # emissions per kernel call (static): a power of two, ≥ chunk
     lanes = min(lanes, width)
     check_termination(scene.wall, scene.base, scene.leds, scene.top, scene.trace, scene.path)  # replace()d scenes
+    check_work(scene, rays)
     eff = effects or scene_effects(scene, full=full_kernel)
     if eff.plate_lobe and scene.trace.max_events >= 2 ** 22:
         raise ValidationError("lobe sampling needs fewer events per ray for its random-number counter",
