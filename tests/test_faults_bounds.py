@@ -209,3 +209,13 @@ def test_bad_options_are_checked_before_the_output_set_is_opened(tmp_path, capsy
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
     with pytest.raises(BsdfkitError):
         trace(loads_scene(_scene_text()), 10, chunk=-1)
+
+
+@pytest.mark.parametrize("field, value", [("wavelength_um", 1e12), ("wavelength_um", 0.0), ("temperature_K", 1e12),
+                                          ("temperature_K", -1.0), ("wavelength_um", float("nan"))])
+def test_tracepro_header_numbers_are_range_checked(field, value):
+    from bsdfkit.tables.formats.tracepro import TraceProOptions
+
+    with pytest.raises(ValidationError, match=field):
+        TraceProOptions(**{field: value})
+    TraceProOptions(wavelength_um=0.55, temperature_K=300.0)

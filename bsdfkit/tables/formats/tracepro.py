@@ -103,12 +103,13 @@ class TraceProOptions:
             if "\n" in text or "\r" in text or "\t" in text or (key != "description" and not text.strip()):
                 raise ValidationError("TracePro header text must be one non-empty line without tabs",
                                       field=key, expected="one line of text without tabs", got=text)
-        if not (np.isfinite(self.temperature_K) and self.temperature_K > 0):
-            raise ValidationError("temperature must be positive", field="temperature_K", expected="> 0 K",
+        # ranges of a physical sample: a temperature up to a flame's, a wavelength from the deep UV to the far IR
+        if not (np.isfinite(self.temperature_K) and 0 < self.temperature_K <= 1e4):
+            raise ValidationError("temperature out of range", field="temperature_K", expected="0 < T <= 10000 K",
                                   got=self.temperature_K)
-        if not (np.isfinite(self.wavelength_um) and self.wavelength_um > 0):
-            raise ValidationError("wavelength must be positive", field="wavelength_um",
-                                  expected="> 0 micrometres", got=self.wavelength_um)
+        if not (np.isfinite(self.wavelength_um) and 0.1 <= self.wavelength_um <= 100.0):
+            raise ValidationError("wavelength out of range", field="wavelength_um",
+                                  expected="0.1-100 micrometres", got=self.wavelength_um)
         if not (np.isfinite(self.zero_azimuth_deg) and -360.0 <= self.zero_azimuth_deg <= 360.0):
             raise ValidationError("azimuth of TracePro's ScatterAzimuth 0 out of range", field="zero_azimuth_deg",
                                   expected="a finite angle in [-360, 360] deg", got=self.zero_azimuth_deg)
