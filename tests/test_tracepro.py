@@ -276,7 +276,7 @@ def test_invalid_header_values_name_the_line(tmp_path):
     expect_error(broken(tmp_path, lines), k + 2, "Temperature/Wavelength", "several Temperature/Wavelength")
     lines = [line.replace("\t0.55\t", "\t-0.55\t") for line in golden_lines()]
     expect_error(broken(tmp_path, lines), line_no(lines, "300\t-0.55\t0\t0\t0.85") + 1, "wavelength_um",
-                 "expected > 0 micrometres, got -0.55")
+                 "expected 0.1-100 micrometres, got -0.55")
 
 
 def test_invalid_abg_parameters_name_the_line(tmp_path):
