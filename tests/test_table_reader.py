@@ -93,6 +93,9 @@ def test_wide_in_plane_comma_reflection_exact(tmp_path):
     neg = ds.isel(record=int(np.flatnonzero(ds["source_line"].values == 4)[0]))
     assert float(neg["theta_s"]) == 85.0 and float(neg["phi_s"]) == 180.0
     np.testing.assert_allclose(ds["bsdf_std"].values, DEFAULT_RELATIVE_STD * np.abs(ds["bsdf"].values))
+    # a table with its own incidences refuses --incidence instead of ignoring it silently
+    with pytest.raises(InputError, match="--incidence"):
+        read_table(tmp_path / "wide.csv", incidence=45.0)
 
 
 def test_long_two_arcs_semicolon_decimal_comma_transmission_exact(tmp_path):

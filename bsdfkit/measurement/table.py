@@ -665,6 +665,9 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
         bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
         raise FormatError("wavelength columns not increasing", file=path, line=header_line, field=bad.header,
                           expected="increasing wavelengths", got=bad.wavelength)
+    if incidence is not None and ("theta_i" in roles or wide_inc):
+        raise InputError("the table states its incidences; --incidence is for tables without them", file=path,
+                         line=header_line, field="--incidence", got=incidence)
     _resolve_quantity(columns, meta, quantity, path, header_line)
     _pair_std(columns, path, header_line)
     meta_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
