@@ -350,6 +350,23 @@ def test_implausible_spectra_are_one_line_exit_2_from_fit_and_color(tmp_path, ca
             spectra.fit_spectrum(wl, values, "gaussian")
 
 
+def test_truncated_spectrum_is_refused_by_colorimetry(tmp_path, capsys):
+    """A pc-white cut at 520 nm (a truncated file) still bright at its end: its colour would be the cut's, so
+    ``color`` refuses it in one line (exit 2); the same white over 380-780 nm and a blue LED that has fallen to
+    its baseline by 520 nm pass."""
+    wl = np.arange(380.0, 781.0)
+    white = np.exp(-((wl - 450) / 10) ** 2) + 0.6 * np.exp(-((wl - 560) / 50) ** 2)
+    cut = wl <= 520
+    path = tmp_path / "cut.txt"
+    path.write_text("".join(f"{w!r}\t{v!r}\n" for w, v in zip(wl[cut], white[cut])))
+    assert main(["color", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "cut off" in err and "520 nm" in err
+    colorimetric_summary(colour.SpectralDistribution(white, wl, name="whole"))
+    blue = np.exp(-((wl - 450) / 10) ** 2)
+    colorimetric_summary(colour.SpectralDistribution(blue[cut], wl[cut], name="blue"))
+
+
 def test_real_spectra_pass_the_plausibility_rule():
     """Every vendored Benkner LED (dark-subtracted, with negative noise samples) and every CIE 015 / NIST CQS LED
     spectrum passes; the margin to the rule is ≥ 40×."""

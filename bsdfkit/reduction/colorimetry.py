@@ -92,6 +92,10 @@ MIN_VISIBLE_SAMPLES = 5
 #: Benkner LED spectra (dark-subtracted spectroradiometer data) reach −0.1 % of the peak and −0.11 % of the
 #: positive integral, 50× inside this limit; a sign error or a noise-only file reaches tens of per cent.
 NEGATIVE_TOLERANCE = 0.05
+#: Where the CIE 1931 colour-matching functions weigh (x̄ + ȳ + z̄ ≥ 1 % of its maximum) [nm], and the largest
+#: share of its peak a spectrum may still have at an end inside that range (else it is cut off).
+CMF_SIGNIFICANT_NM: tuple[float, float] = (390.0, 694.0)
+END_FRACTION = 0.05
 
 
 def check_wavelengths_nm(wavelength, name: str) -> None:
@@ -132,6 +136,17 @@ def check_power_spectrum(wavelength, values, name: str, *, colorimetry: bool = T
                               expected=f"at least {MIN_VISIBLE_SAMPLES} wavelengths in 360-830 nm",
                               got=f"{visible} (spectrum {wl.min():g}..{wl.max():g} nm, {wl.size} samples)")
     peak = float(values.max())
+    if colorimetry and peak > 0:
+        # A spectrum cut off where the colour-matching functions still weigh (x̄ + ȳ + z̄ above 1 % of its
+        # maximum in 390-694 nm) while it is still bright gives a colour of the cut, not of the source.
+        lo, hi = CMF_SIGNIFICANT_NM
+        for end, k, inside in (("short", 0, wl[0] > lo), ("long", -1, wl[-1] < hi)):
+            if inside and values[k] > END_FRACTION * peak:
+                raise ValidationError(f"spectrum cut off at its {end}-wavelength end (truncated?)",
+                                      field=f"{name} at {wl[k]:g} nm",
+                                      expected=f"samples over {lo:g}-{hi:g} nm "
+                                               f"or values ≤ {END_FRACTION:g} × peak at the ends",
+                                      got=f"{values[k] / peak:.3g} × peak")
     negative = values < 0
     if negative.any():
         weights = np.gradient(wl) if wl.size > 1 else np.ones(1)
