@@ -197,6 +197,13 @@ def exit_now(signum: int) -> None:
     Interpreter shutdown would wait for (or crash on) a compiled call still running in XLA's threads.
     """
     remove_partial_outputs()
+    # worker processes this process started (a sweep's dask LocalCluster) must not outlive it; os._exit below
+    # skips the cluster's own shutdown. Their nannies stop their workers on SIGTERM.
+    mp = sys.modules.get("multiprocessing")
+    if mp is not None:
+        for child in mp.active_children():
+            with contextlib.suppress(OSError, ValueError, AttributeError):
+                child.terminate()
     with contextlib.suppress(OSError, ValueError):
         sys.stdout.flush()
     name = "interrupted" if signum == signal.SIGINT else "terminated"
