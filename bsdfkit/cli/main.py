@@ -44,7 +44,7 @@ NO_CACHE_FLAG = "--no-compile-cache"
 #: lock around every read and write of the cache (package ``filelock``), so concurrent processes (parallel
 #: runs, dask workers) never read an entry another process is still writing.
 CACHE_SETTINGS = {
-    "jax_persistent_cache_min_compile_time_secs": 0.5,
+    "jax_persistent_cache_min_compile_time_secs": 0.1,
     "jax_persistent_cache_min_entry_size_bytes": 0,
     "jax_compilation_cache_max_size": 4 * 1024 ** 3,
 }
