@@ -61,10 +61,12 @@ def run(args: argparse.Namespace) -> int:
         bar.close()
     summary = {"output": args.output, "dims": {d: int(n) for d, n in ds["LER"].sizes.items()},
                "LER": ds["LER"].values, "YBR": ds["YBR"].values, "non_uniformity": ds["non_uniformity"].values,
+               "YBR_definition": ds["YBR"].attrs.get("definition", ""),
                "max_ledger_error": float(ds["ledger_error"].max()), "rays_per_point": rays, "seed": seed}
     if args.json:
         emit_json(summary)
     else:
         print(ds[["LER", "std_err_LER", "YBR", "non_uniformity", "ledger_error"]].to_dataframe().to_string())
+        print(f"YBR = {summary['YBR_definition']}")
         print(f"wrote {args.output}")
     return 0

@@ -233,7 +233,8 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
     dims = tuple(names)
     data = {
         "LER": (dims, grid(lambda r: r.LER), {"units": "1", "long_name": "light extraction ratio"}),
-        "YBR": (dims, grid(lambda r: r.YBR), {"units": "1", "long_name": "yellow-to-blue ratio"}),
+        "YBR": (dims, grid(lambda r: r.YBR), {"units": "1", "long_name": "yellow-to-blue ratio",
+                                              "definition": first.to_dict()["YBR_definition"]}),
         "std_err_LER": (dims, grid(lambda r: r.std_err["LER"]), {"units": "1"}),
         "std_err_YBR": (dims, grid(lambda r: r.std_err["YBR"]), {"units": "1"}),
         "ledger_error": (dims, grid(lambda r: r.ledger_error), {"units": "1"}),
