@@ -7,6 +7,8 @@
     .venv/bin/python benchmarks/bench_trace.py --oracle         # 9-case LER grid vs radiosity at 1e6 rays
     .venv/bin/python benchmarks/bench_trace.py --threshold      # bias of the flux threshold Th
     .venv/bin/python benchmarks/bench_trace.py --trends         # non-uniformity / LER trends of §5
+    .venv/bin/python benchmarks/bench_trace.py --spectral       # spectral vs two-wavelength mode, same scene
+    .venv/bin/python benchmarks/bench_trace.py --ab REV         # kernel vs the kernel at REV, interleaved runs
     .venv/bin/python benchmarks/bench_trace.py --all
 
 Speed is measured after compilation, in one process for every implementation, as the median of
@@ -56,6 +58,7 @@ from bsdfkit.raytrace.oracles.radiosity import module_radiosity  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "fitting" / "scenes" / "example.toml"
 DEVICE = ROOT / "fitting" / "scenes" / "cl830_device.toml"
+SPECTRAL = ROOT / "fitting" / "scenes" / "spectral_example.toml"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
           "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
 
@@ -305,6 +308,51 @@ def trends(rays: int, tmp: Path) -> None:
         print(f"{label:38s} {r.LER:8.4f} {r.std_err['LER']:7.4f} {r.YBR:6.2f} {r.non_uniformity:6.3f}")
 
 
+def spectral(rays: int, repeats: int) -> None:
+    """Time per ray of the spectral mode vs the two-wavelength mode on the same scene (spectral_example.toml: the
+    Table-2 plate, 81 bins of 5 nm), both timed in this process after compilation; and the two modes' powers."""
+    s = load_scene(SPECTRAL)
+    two = replace(s, trace=replace(s.trace, mode="two-wavelength"))
+    print(f"# spectral mode: {SPECTRAL.name}, {rays} rays, median of {repeats}; {os.cpu_count()} CPUs (shared), "
+          f"{len(jax.local_devices())} JAX devices")
+    rows = []
+    for label, sc in (("two-wavelength", two), ("spectral", s)):
+        trace(sc, rays, seed=1)  # compile
+        r, dt = median_of(lambda sc=sc: trace(sc, rays, seed=1), repeats)
+        rows.append((label, r, dt))
+    print(f"{'mode':16s} {'s/ray':>10s} {'interactions/ray':>16s} {'LER':>9s} {'± se':>8s} {'blue W':>9s} "
+          f"{'yellow W':>9s} {'ledger':>8s}")
+    for label, r, dt in rows:
+        print(f"{label:16s} {dt / rays:10.3e} {r.interactions / rays:16.2f} {r.LER:9.5f} {r.std_err['LER']:8.5f} "
+              f"{r.extracted['blue']:9.5f} {r.extracted['yellow']:9.5f} {r.ledger_error:8.1e}")
+    sp = rows[1][1].spectral
+    print(f"time per ray spectral / two-wavelength: {rows[1][2] / rows[0][2]:.2f}; photon ledger error "
+          f"{sp.ledger['photons_per_s']['error']:.1e}; Stokes loss {sp.ledger['power_W']['stokes']:.4f} W; "
+          f"luminous efficacy {sp.luminous_efficacy_lm_per_W():.1f} lm/W")
+
+
+def ab(rev: str, repeats: int) -> None:
+    """Today's kernel vs the kernel at git revision ``rev`` on the phosphor device and the exit-top example,
+    runs alternating (new, old, new, old, …) so that a change of the machine's load hits both alike."""
+    old = baseline_trace(rev)
+    print(f"# interleaved A/B against {rev}, {repeats} pairs; {os.cpu_count()} CPUs (shared)")
+    for path, rays in ((DEVICE, 200_000), (EXAMPLE, 1_000_000)):
+        s = load_scene(path)
+        trace(s, rays, seed=1)
+        old(s, rays, seed=1)
+        t_new, t_old = [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            a = trace(s, rays, seed=1)
+            t_new.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            b = old(s, rays, seed=1)
+            t_old.append(time.perf_counter() - t)
+        same = a.LER == b.LER and a.interactions == b.interactions
+        print(f"{path.name}: {rays} rays, new/old time {statistics.median(t_new) / statistics.median(t_old):.3f} "
+              f"(pairs " + " ".join(f"{x / y:.2f}" for x, y in zip(t_new, t_old)) + f"); same result: {same}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rays", type=int, default=2 ** 21)
@@ -316,12 +364,14 @@ def main() -> None:
     p.add_argument("--oracle", action="store_true")
     p.add_argument("--threshold", action="store_true")
     p.add_argument("--trends", action="store_true")
+    p.add_argument("--spectral", action="store_true")
+    p.add_argument("--ab", default=None, metavar="REV", help="interleaved timing against the kernel of REV")
     p.add_argument("--all", action="store_true")
     p.add_argument("--tmp", default="/tmp/bsdfkit_bench")
     a = p.parse_args()
     tmp = Path(a.tmp)
     tmp.mkdir(parents=True, exist_ok=True)
-    only = a.phosphor or a.backend or a.oracle or a.threshold or a.trends
+    only = a.phosphor or a.backend or a.oracle or a.threshold or a.trends or a.spectral or a.ab
     if a.all or not only:
         speed(a.rays, a.repeats, a.baseline, not a.no_mitsuba)
     if a.all or a.phosphor:
@@ -334,6 +384,10 @@ def main() -> None:
         threshold(min(a.rays, 1_000_000), tmp)
     if a.all or a.trends:
         trends(min(a.rays, 400_000), tmp)
+    if a.all or a.spectral:
+        spectral(min(a.rays, 1_000_000), a.repeats)
+    if a.ab:
+        ab(a.ab, a.repeats)
 
 
 if __name__ == "__main__":

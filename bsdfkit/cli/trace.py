@@ -55,6 +55,19 @@ def run(args: argparse.Namespace) -> int:
         f"ledger       roulette {result.roulette:.3g} W, threshold {result.discarded:.3g} W, truncated "
         f"{result.truncated:.3g} W; relative error {result.ledger_error:.2e}",
     ]
+    if result.spectral is not None:
+        sp = report["spectral"]
+        b, y, led = sp["bands"]["blue"], sp["bands"]["yellow"], sp["ledger"]
+        lines[2] = (f"YBR          {result.YBR:.4f} ± {se['YBR']:.4f}  (extracted {y['label']} / {b['label']})"
+                    if e["blue"] > 0 else "YBR          n/a (nothing extracted in the blue band)")
+        efficacy = sp["luminous_efficacy_lm_per_W"]
+        lines += [
+            f"spectrum     {len(sp['wavelength_nm'])} bins {sp['wavelength_nm'][0]:g}-{sp['wavelength_nm'][-1]:g} nm; "
+            + (f"luminous efficacy {efficacy:.1f} lm/W" if efficacy is not None else "nothing extracted"),
+            f"Stokes loss  {led['power_W']['stokes']:.6g} W",
+            f"photons      emitted {led['photons_per_s']['emitted']:.6g} /s, extracted "
+            f"{led['photons_per_s']['extracted']:.6g} /s; photon ledger error {led['photons_per_s']['error']:.2e}",
+        ]
     if result.non_uniformity is not None:
         lines.append(f"non-uniform. {result.non_uniformity:.4f}")
     if result.clamped_interactions:

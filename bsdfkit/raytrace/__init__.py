@@ -24,12 +24,19 @@ from bsdfkit.raytrace.scene import (
                                  save_scene,
                                  with_values,
 )
-from bsdfkit.raytrace.tallies import TraceResult
+from bsdfkit.raytrace.spectral import (
+                                    SpectralPlateModel,
+                                    load_spectral_model,
+                                    spectral_model_from_dataset,
+                                    spectral_plate_from_two_colour,
+)
+from bsdfkit.raytrace.tallies import SpectralResult, TraceResult
 from bsdfkit.raytrace.tracer import threshold_bias, trace
 
 __all__ = [
     "Cavity", "Effects", "LambertGaussian", "Lambertian", "Leds", "PhosphorPlate", "PlateChannel", "RaySet",
-    "Scene", "Surface", "Tabulated", "Tallies", "Top", "TraceOptions", "TraceResult", "dumps_scene",
-    "load_plate", "load_scene", "loads_scene", "read_ray_file", "save_scene", "scene_effects",
+    "Scene", "SpectralPlateModel", "SpectralResult", "Surface", "Tabulated", "Tallies", "Top", "TraceOptions",
+    "TraceResult", "dumps_scene", "load_plate", "load_scene", "load_spectral_model", "loads_scene", "read_ray_file",
+    "save_scene", "scene_effects", "spectral_model_from_dataset", "spectral_plate_from_two_colour",
     "threshold_bias", "trace", "with_values",
 ]

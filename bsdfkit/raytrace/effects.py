@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bsdfkit.raytrace.plate import PhosphorPlate, PlateTables, plate_tables
-from bsdfkit.raytrace.scene import Scene
+from bsdfkit.raytrace.scene import Scene, scene_spectral_tables, surface_reflectance_table
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,8 @@ class Effects:
     histogram_bins: int = 90
     interaction_budget: bool = False
     budget_bins: int = 16
+    spectral: bool = False  # [trace] mode = "spectral": rays carry a wavelength bin (bsdfkit.raytrace.spectral)
+    surface_spectra: bool = False  # a cavity surface's reflectance depends on the ray's colour or bin
 
     @property
     def dtype(self):
@@ -65,16 +67,22 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
     common = dict(precision=scene.trace.precision, source="rayfile" if scene.leds.ray_file else "leds",
                   termination=scene.trace.termination, map_bins=t.map_bins, histogram_bins=t.histogram_bins,
                   budget_bins=t.budget_bins)
+    spectral = scene.trace.mode == "spectral"
+    surface_spectra = any(s.spectrum is not None for s in (scene.wall, scene.base, scene.led_surface))
     if full:
-        return Effects(specular=True, top="plate", conversion=True, plate_lobe=True, plate_table=True,
+        top = "exit" if spectral and scene.top.spectral_model is None else "plate"
+        return Effects(specular=True, top=top, conversion=not spectral, plate_lobe=True, plate_table=True,
                        plate_clamp=True, irradiance_map=True, incidence_histogram=True, interaction_budget=True,
-                       **common)
+                       spectral=spectral, surface_spectra=True, **common)
     specular = any(s.specular_fraction > 0 and s.reflectance > 0
                    for s in (scene.wall, scene.base, scene.led_surface))
-    if scene.top.kind == "exit":
+    if spectral:  # the plate's angular tables on the spectral model's incidence grid (None: exit top)
+        tables = scene_spectral_tables(scene).plate
+    elif scene.top.kind == "exit":
         tables = None
     else:
         tables = plate_tables(top_plate(scene))
+    if tables is not None:
         # with a plate the mirror branch costs a few per cent of an interaction: compile it in always, so
         # scenes (and sweeps) that differ only in their specular fractions share one kernel; a specular
         # fraction of 0 then never draws a mirror reflection (same random numbers, same result)
@@ -82,13 +90,15 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
     return Effects(
         specular=specular,
         top="exit" if tables is None else "plate",
-        conversion=bool(tables is not None and tables.conversion),
+        conversion=bool(not spectral and tables is not None and tables.conversion),
         plate_lobe=bool(tables is not None and tables.has_lobe),
         plate_table=bool(tables is not None and tables.has_table),
         plate_clamp=bool(tables is not None and not tables.covers_hemisphere),
         irradiance_map=scene.tally_enabled("irradiance_map"),
         incidence_histogram=scene.tally_enabled("incidence_histogram"),
         interaction_budget=scene.tally_enabled("interaction_budget"),
+        spectral=spectral,
+        surface_spectra=surface_spectra,
         **common,
     )
 
@@ -118,8 +128,16 @@ def kernel_params(scene: Scene, effects: Effects) -> dict:
         p["ray_origin"] = rays.origin.astype(dt)
         p["ray_direction"] = rays.direction.astype(dt)
         p["ray_cdf"] = cdf
+    if effects.surface_spectra:
+        p["rho_table"] = surface_reflectance_table(scene)
+    if effects.spectral:
+        sp = scene_spectral_tables(scene)
+        p["spectral"] = {"lam": sp.lam, "photon_scale": sp.photon_scale, "band": sp.band,
+                         "elastic_shape": sp.elastic_shape, "led_cdf": sp.led_cdf}
+        if sp.plate is not None:
+            p["spectral"].update(tis=sp.tis, alias_prob=sp.alias_prob, alias_index=sp.alias_index)
     if effects.top == "plate":
-        tab: PlateTables = plate_tables(top_plate(scene))
+        tab: PlateTables = sp.plate if effects.spectral else plate_tables(top_plate(scene))
         p["plate"] = {
             "grid": tab.grid.astype(dt),
             "range": np.asarray(tab.theta_range, dt),

@@ -30,6 +30,16 @@ TIS share A·L/(ρ + A·L) at the grid incidence (L the lobe's integral over the
 β0 = (dx, dy) (the specular direction's tangential part, |β0| = sin θi); lobe samples outside the unit
 disk are redrawn. Forward channels end the ray outside the module, so their directions are not sampled.
 
+Spectral mode (``effects.spectral``, :mod:`bsdfkit.raytrace.spectral`). ``colour`` is a wavelength bin k of the
+plate spectral model's grid, drawn at emission from the LED's bin powers. At the plate the channel (elastic R/T,
+converted R/T) is drawn with probabilities ∝ the photons each gives out per incident photon (interpolated
+linearly in θi like the TIS above), the weight becomes wS (S their sum ≤ 1) and a conversion draws the new bin from
+the alias table of the emission row of k and scales the weight by λ_k/λ_new: the photon keeps its number, and
+wS − w_out is tallied as the Stokes loss. Every loss is also tallied in photons (weight × λ/λ_max of the bin the
+ray has at that moment); a ray's extracted weight is deposited into its bin's spectrum sums when it retires.
+Per ray 1 = extracted + absorbed + stokes + roulette + discarded + truncated in power, and the same without the
+Stokes term in photons.
+
 Sums. When a ray retires, its per-ray tallies x (float64, in ray weights; only the columns the effects can
 fill) are rounded to integers X = rint(x·2⁴⁰) (its squares/products for the standard errors to rint(x²·2³²)),
 split exactly into 31-bit limbs X = hi·2³¹ + lo (both integer-valued doubles, |hi|, lo < 2³¹), summed over
@@ -55,8 +65,15 @@ from bsdfkit.raytrace.effects import Effects
 
 # per-ray float64 tallies, accumulated in lanes and summed when the ray retires
 COLUMNS = ("extracted_blue", "extracted_yellow", "absorbed_wall", "absorbed_base", "absorbed_leds",
-           "absorbed_plate", "roulette", "discarded", "truncated")
-EXT_B, EXT_Y, ABS_WALL, ABS_BASE, ABS_LED, ABS_PLATE, ROULETTE, DISCARDED, TRUNCATED = range(len(COLUMNS))
+           "absorbed_plate", "roulette", "discarded", "truncated",
+           # spectral mode only: power extracted outside both bands, Stokes loss, and the ledger in photons
+           "extracted_other", "stokes", "photons_extracted", "photons_wall", "photons_base", "photons_leds",
+           "photons_plate", "photons_roulette", "photons_discarded", "photons_truncated")
+EXT_B, EXT_Y, ABS_WALL, ABS_BASE, ABS_LED, ABS_PLATE, ROULETTE, DISCARDED, TRUNCATED = range(9)
+(EXT_O, STOKES, PH_EXT, PH_WALL, PH_BASE, PH_LED, PH_PLATE, PH_ROULETTE, PH_DISCARDED,
+ PH_TRUNCATED) = range(9, len(COLUMNS))
+#: the power ledger's columns (the photon columns close their own ledger)
+POWER_COLUMNS = COLUMNS[:11]
 # per-ray integer counters
 COUNTERS = ("interactions", "plate_interactions", "clamped")
 CNT_EVENTS, CNT_PLATE, CNT_CLAMP = range(len(COUNTERS))
@@ -87,9 +104,20 @@ def _fixed(w):
 
 
 def emission(params, key_words, ray, effects: Effects):
-    """Start points and directions of rays ``ray`` (global indices, uint32), event 0."""
+    """Start points and directions of rays ``ray`` (global indices, uint32), event 0; in spectral mode also
+    their wavelength bins."""
     dt = effects.dtype
-    u = sampling.event_uniforms(key_words, ray, jnp.zeros_like(ray), dt, 5)
+    u = sampling.event_uniforms(key_words, ray, jnp.zeros_like(ray), dt, 6 if effects.spectral else 5)
+    if effects.spectral:  # the ray's wavelength bin, drawn from the LED's bin powers (word 5)
+        cdf = params["spectral"]["led_cdf"]
+        k = jnp.clip(jnp.searchsorted(cdf, u[5].astype(jnp.float64), side="right"), 0, cdf.shape[0] - 1)
+        return emission_geometry(params, u, effects) + (k.astype(jnp.int32),)
+    return emission_geometry(params, u, effects)
+
+
+def emission_geometry(params, u, effects: Effects):
+    """Start points and directions from the emission uniforms ``u`` (words 0-4)."""
+    dt = effects.dtype
     if effects.source == "rayfile":
         idx = jnp.clip(jnp.searchsorted(params["ray_cdf"], u[0].astype(jnp.float64), side="right"), 0,
                        params["ray_cdf"].shape[0] - 1)
@@ -127,8 +155,8 @@ def _pick(table, idx):
 
 
 def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, colour, live, effects: Effects):
-    """Plate interaction of rays hitting the top: returns weights, colours, directions and tallies."""
-    dt = effects.dtype
+    """Plate interaction of rays hitting the top: returns weights, colours, directions, clamping and the Stokes
+    loss (spectral mode; None otherwise)."""
     P = params["plate"]
     grid = P["grid"]
     G = grid.shape[0]
@@ -142,6 +170,12 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
             j = j + (th >= grid[g]).astype(jnp.int32)
         g0, g1 = _pick(grid, j), _pick(grid, j + 1)
         t, j = sampling.materialise(key_words, [((th - g0) / (g1 - g0)).astype(jnp.float64), j])
+        if effects.spectral:
+            w_out, absorbed, stokes, forward, new_colour, channel, g = _spectral_channel(params, key_words, u, w,
+                                                                                          colour, t, j)
+            nx, ny, nz = _backward_direction(P, key_words, ray, event, u, dx, dy, live & ~forward, channel, g,
+                                             effects)
+            return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped, stokes
         T0 = [_pick(P["tis"][:, c], j) for c in range(6)]
         T1 = [_pick(P["tis"][:, c], j + 1) for c in range(6)]
         tis = [(1.0 - t) * a + t * b for a, b in zip(T0, T1)]
@@ -180,7 +214,16 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
         w_out, forward, new_colour, channel, g = sampling.materialise(
             key_words, [w_out, forward, new_colour.astype(jnp.int32), channel.astype(jnp.int32), g])
         absorbed = w - w_out
+        nx, ny, nz = _backward_direction(P, key_words, ray, event, u, dx, dy, live & ~forward, channel, g,
+                                         effects)
+    return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped, None
 
+
+def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, g, effects: Effects):
+    """Direction of a backward-scattered ray: the distribution of backward channel ``channel`` (0 bibs, 1 biys,
+    2 yiys) at grid point ``g`` (Lambertian, tabulated or Lambert + lobe; uniforms 1, 2 and 5)."""
+    dt = effects.dtype
+    with jax.named_scope("plate"):
         def per_channel(table):  # table (G, 3, ...) → value at (g, channel) per lane
             rows = _pick(table, g)  # (L, 3, ...)
             shape = channel.shape + (1,) * (rows.ndim - 2)
@@ -191,7 +234,6 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
         nx = sin_t * jnp.cos(phi)
         ny = sin_t * jnp.sin(phi)
         nz = -cos_t
-        backward = live & ~forward
         if effects.plate_table:
             with jax.named_scope("table_sampling"):
                 is_table = per_channel(P["kind"]) == 2
@@ -209,7 +251,46 @@ def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, co
                 nx = jnp.where(ok, bx, nx)
                 ny = jnp.where(ok, by, ny)
                 nz = jnp.where(ok, bz, nz)
-    return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped
+        return nx, ny, nz
+
+
+def _spectral_channel(params, key_words, u, w, k, t, j):
+    """Spectral plate: channel, new bin and weight of rays in bin ``k`` at grid interval j (weight t).
+
+    Channels elastic R/T and converted R/T are chosen with probabilities ∝ their photon TIS (interpolated
+    linearly in θi), the weight becomes wS (S their sum: photons kept per incident photon, ≤ 1); a conversion
+    draws the new bin from the alias table of row k (uniforms 6 and 7) and scales the weight by λ_k/λ_new
+    (same photon, new energy). Returns (w_out, absorbed, stokes, forward, new bin, backward channel, grid point).
+    """
+    sp = params["spectral"]
+    K = sp["lam"].shape[0]
+    with jax.named_scope("spectral_conversion"):
+        T0 = sp["tis"][j * K + k]  # (L, 4): elastic R, elastic T, converted R, converted T
+        T1 = sp["tis"][(j + 1) * K + k]
+        probs = [(1.0 - t) * T0[:, c] + t * T1[:, c] for c in range(4)]
+        S = sum(probs)
+        v = u[0].astype(jnp.float64) * S
+        edges = [probs[0], probs[0] + probs[1], probs[0] + probs[1] + probs[2]]
+        outcome = sum((v >= e).astype(jnp.int32) for e in edges)
+        forward = (outcome % 2) == 1
+        converted = outcome >= 2
+        i = jnp.minimum(jnp.floor(u[6].astype(jnp.float64) * K).astype(jnp.int32), K - 1)
+        cell = k * K + i
+        drawn = jnp.where(u[7].astype(jnp.float64) < sp["alias_prob"][cell], i, sp["alias_index"][cell])
+        new_k = jnp.where(converted, drawn, k).astype(jnp.int32)
+        w_kept = w * S
+        w_out = jnp.where(converted, w_kept * (sp["lam"][k] / sp["lam"][new_k]), w_kept)
+        channel = jnp.where(converted, 1, sp["elastic_shape"][k]).astype(jnp.int32)
+        q0 = jnp.where(outcome == 0, T0[:, 0], jnp.where(outcome == 1, T0[:, 1],
+                                                         jnp.where(outcome == 2, T0[:, 2], T0[:, 3])))
+        q1 = jnp.where(outcome == 0, T1[:, 0], jnp.where(outcome == 1, T1[:, 1],
+                                                         jnp.where(outcome == 2, T1[:, 2], T1[:, 3])))
+        q0 = (1.0 - t) * q0
+        q1 = t * q1
+        g = jnp.where(u[4].astype(jnp.float64) * (q0 + q1) < q0, j, j + 1)
+        w_kept, w_out, forward, new_k, channel, g = sampling.materialise(
+            key_words, [w_kept, w_out, forward, new_k, channel, g])
+    return w_out, w - w_kept, w_kept - w_out, forward, new_k, channel, g
 
 
 def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
@@ -232,7 +313,8 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
 
     ray = start_u + jnp.where(live, ids, 0).astype(jnp.uint32)
     event = cnt[CNT_EVENTS] + 1
-    u = sampling.event_uniforms(key_words, ray, event, dt, 6 if effects.top == "plate" else 4)
+    n_u = (8 if effects.spectral else 6) if effects.top == "plate" else 4
+    u = sampling.event_uniforms(key_words, ray, event, dt, n_u)
     surf, x, y, z = sampling.materialise(key_words, geometry.next_hit(px, py, pz, dx, dy, dz, R, H))
     top = live & (surf == geometry.TOP)
     wall = live & (surf == geometry.WALL)
@@ -243,7 +325,13 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     cav = wall | base_any
 
     # cavity surfaces
-    rho = jnp.where(wall, params["rho"][0], jnp.where(led, params["rho"][2], params["rho"][1]))
+    if effects.surface_spectra:  # reflectance per colour (two-wavelength) or per bin (spectral): row s·C + colour
+        with jax.named_scope("surface_spectra"):
+            C = params["rho_table"].shape[0] // 3
+            s_idx = jnp.where(wall, 0, jnp.where(led, 2, 1))
+            rho = params["rho_table"][s_idx * C + colour]
+    else:
+        rho = jnp.where(wall, params["rho"][0], jnp.where(led, params["rho"][2], params["rho"][1]))
     w_ref = w * rho
     absorbed = w - w_ref
     inv_r = 1.0 / R
@@ -266,6 +354,11 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     add(ABS_WALL, jnp.where(wall, absorbed, zero))
     add(ABS_BASE, jnp.where(base, absorbed, zero))
     add(ABS_LED, jnp.where(led, absorbed, zero))
+    if effects.spectral:  # photons of the bin the ray had when it arrived
+        ph_in = params["spectral"]["photon_scale"][colour]
+        add(PH_WALL, jnp.where(wall, absorbed * ph_in, zero))
+        add(PH_BASE, jnp.where(base, absorbed * ph_in, zero))
+        add(PH_LED, jnp.where(led, absorbed * ph_in, zero))
     budget_cav = jnp.where(cav, absorbed, zero)
 
     # top
@@ -278,11 +371,16 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         new_colour = colour
         ndx, ndy, ndz = cdx, cdy, cdz
         plate_abs = zero
+        stokes = None
     else:
-        w_out, p_abs, forward, p_colour, pdx, pdy, pdz, clamped = _plate_interaction(
+        w_out, p_abs, forward, p_colour, pdx, pdy, pdz, clamped, stokes = _plate_interaction(
             params, key_words, ray, event, u, x, y, dx, dy, dz, w, colour, top, effects)
         plate_abs = jnp.where(top, p_abs, zero)
         add(ABS_PLATE, plate_abs)
+        if effects.spectral:
+            stokes = jnp.where(top, stokes, zero)
+            add(STOKES, stokes)
+            add(PH_PLATE, plate_abs * ph_in)
         ext_w = jnp.where(top & forward, w_out, zero)
         ext_colour = p_colour
         back = top & ~forward & (w_out > 0)
@@ -295,7 +393,15 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         cnt[CNT_PLATE] = cnt[CNT_PLATE] + top.astype(jnp.int32)
         if effects.plate_clamp:
             cnt[CNT_CLAMP] = cnt[CNT_CLAMP] + clamped.astype(jnp.int32)
-    if effects.conversion:
+    if effects.spectral:  # bands of the bin extracted in; photons of the ray's (new) bin from here on
+        band = params["spectral"]["band"][ext_colour]
+        ph_out = params["spectral"]["photon_scale"][new_colour]
+        ext_b = jnp.where(band == 0, ext_w, zero)
+        ext_y = jnp.where(band == 1, ext_w, zero)
+        ext_o = jnp.where(band == 2, ext_w, zero)
+        add(EXT_O, ext_o)
+        add(PH_EXT, ext_w * params["spectral"]["photon_scale"][ext_colour])
+    elif effects.conversion:
         ext_b = jnp.where(ext_colour == 0, ext_w, zero)
         ext_y = jnp.where(ext_colour == 0, zero, ext_w)
     else:
@@ -313,6 +419,8 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         killed = low & ~survive
         rr = jnp.where(killed, new_w, jnp.where(low, new_w - tau, zero))
         add(ROULETTE, rr)
+        if effects.spectral:
+            add(PH_ROULETTE, rr * ph_out)
         other = other + rr
         new_w = jnp.where(low, jnp.where(survive, tau, zero), new_w)
         alive = alive & ~killed
@@ -320,6 +428,8 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         low = alive & (new_w < params["threshold"])
         dropped = jnp.where(low, new_w, zero)
         add(DISCARDED, dropped)
+        if effects.spectral:
+            add(PH_DISCARDED, dropped * ph_out)
         other = other + dropped
         new_w = jnp.where(low, zero, new_w)
         alive = alive & ~low
@@ -327,6 +437,8 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     capped = alive & (cnt[CNT_EVENTS] >= params["max_events"])
     trunc = jnp.where(capped, new_w, zero)
     add(TRUNCATED, trunc)
+    if effects.spectral:
+        add(PH_TRUNCATED, trunc * ph_out)
     other = other + trunc
     alive = alive & ~capped
 
@@ -338,12 +450,16 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         with jax.named_scope("incidence_histogram"):
             theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
             hb = effects.histogram_bins
-            b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + colour * hb
+            hue = jnp.minimum(params["spectral"]["band"][colour], 1) if effects.spectral else colour
+            b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + hue * hb
             new_hist = new_hist.at[jnp.where(top, b, nhist)].add(_fixed(w), mode="drop")
     if effects.interaction_budget:
         with jax.named_scope("interaction_budget"):
             k = jnp.minimum(n_plate, effects.budget_bins - 1) * len(BUDGET_COLUMNS)
             sink = jnp.where(live, 0, nbud)
+            if effects.spectral:  # light outside both bands with yellow, the Stokes loss with the plate's
+                ext_y = ext_y + ext_o
+                plate_abs = plate_abs if stokes is None else plate_abs + stokes
             for c, val in enumerate((ext_b, ext_y, budget_cav, plate_abs, other)):
                 new_budget = new_budget.at[k + c + sink].add(_fixed(val), mode="drop")
     lane = dict(ids=ids, live=alive, px=x, py=y, pz=z, dx=ndx.astype(dt), dy=ndy.astype(dt), dz=ndz.astype(dt),
@@ -353,10 +469,13 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
 
 def active_columns(effects: Effects) -> tuple[bool, ...]:
     """Which per-ray tallies of :data:`COLUMNS` the compiled kernel carries (the others are always zero)."""
-    on = {"extracted_blue": True, "extracted_yellow": effects.conversion, "absorbed_wall": True,
-          "absorbed_base": True, "absorbed_leds": True, "absorbed_plate": effects.top == "plate",
-          "roulette": effects.termination == "roulette", "discarded": effects.termination != "roulette",
-          "truncated": True}
+    plate, roulette, sp = effects.top == "plate", effects.termination == "roulette", effects.spectral
+    on = {"extracted_blue": True, "extracted_yellow": effects.conversion or sp, "absorbed_wall": True,
+          "absorbed_base": True, "absorbed_leds": True, "absorbed_plate": plate,
+          "roulette": roulette, "discarded": not roulette, "truncated": True,
+          "extracted_other": sp, "stokes": sp and plate, "photons_extracted": sp, "photons_wall": sp,
+          "photons_base": sp, "photons_leds": sp, "photons_plate": sp and plate, "photons_roulette": sp and roulette,
+          "photons_discarded": sp and not roulette, "photons_truncated": sp}
     return tuple(on[c] for c in COLUMNS)
 
 
@@ -375,7 +494,10 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
 
     Returns a dict of int64 arrays: ``hi``, ``lo`` limbs of the fixed-point sums of :data:`COLUMNS` then
     :data:`SQUARES`; ``counts`` (sums of :data:`COUNTERS`); ``map`` (bins²,), ``histogram`` (2·bins,),
-    ``budget`` (bins·5,) fixed point (empty when not compiled in); and ``iterations`` of the loop.
+    ``budget`` (bins·5,) fixed point (empty when not compiled in); in spectral mode ``spectrum`` (2K,): the
+    extracted weight per bin and its square, fixed point, deposited when the ray retires (a ray is extracted at
+    most once, in one bin, so the per-bin sums of squares give exact per-ray variances), and ``emitted`` (K,)
+    rays emitted per bin (counts); and ``iterations`` of the loop.
     """
     dt = effects.dtype
     W = lanes
@@ -390,6 +512,13 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
     # every emission of the chunk, computed once (vectorised) before the loop
     with jax.named_scope("emission"):
         emitted = emission(params, key_words, start_u + jnp.arange(C, dtype=jnp.uint32), effects)
+    if effects.spectral:
+        K = params["spectral"]["lam"].shape[0]
+        valid = jnp.arange(C) < n_valid
+        emitted_bins = jnp.zeros(K, jnp.int64).at[jnp.where(valid, emitted[6], K)].add(1, mode="drop")
+    else:
+        K = 0
+        emitted_bins = jnp.zeros(0, jnp.int64)
 
     zf = jnp.zeros(W, dt)
     state = dict(
@@ -401,6 +530,7 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
         hi=jnp.zeros(ncol + nsq, jnp.int64), lo=jnp.zeros(ncol + nsq, jnp.int64),
         counts=jnp.zeros(ncnt, jnp.int64),
         map=jnp.zeros(nmap, jnp.int64), hist=jnp.zeros(nhist, jnp.int64), budget=jnp.zeros(nbud, jnp.int64),
+        spectrum=jnp.zeros(2 * K, jnp.int64),
     )
 
     def step(lane, arrays):
@@ -414,6 +544,8 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
         """Exact sums over the retiring lanes: integer-valued float64 limbs (all partial sums < 2⁵³)."""
         zero = None
         total = acc[EXT_B] if acc[EXT_Y] is None else acc[EXT_B] + acc[EXT_Y]
+        if acc[EXT_O] is not None:
+            total = total + acc[EXT_O]
         sq = {"total": total, "blue": acc[EXT_B] if acc[EXT_Y] is not None else None,
               "yellow": acc[EXT_Y], "blue_yellow": None if acc[EXT_Y] is None else acc[EXT_B] * acc[EXT_Y],
               "absorbed_wall": acc[ABS_WALL], "absorbed_base": acc[ABS_BASE], "absorbed_leds": acc[ABS_LED],
@@ -457,7 +589,7 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
         px, py, pz, dx, dy, dz = (jnp.where(take, e[src], ln[k]) for e, k in zip(emitted, ("px", "py", "pz", "dx",
                                                                                             "dy", "dz")))
         w = jnp.where(take, 1.0, ln["w"])
-        colour = jnp.where(take, 0, ln["colour"])
+        colour = jnp.where(take, emitted[6][src] if effects.spectral else 0, ln["colour"])
         acc = [None if a is None else jnp.where(take, 0.0, a) for a in ln["acc"]]
         cnt = [jnp.where(take, 0, c) for c in ln["cnt"]]
         nxt = jnp.minimum(s["next"] + jnp.sum(empty, dtype=jnp.int32), n_valid)
@@ -473,13 +605,21 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
         alive, acc, cnt = lane["live"], lane["acc"], lane["cnt"]
         # (3) retire finished rays
         with jax.named_scope("retire"):
-            hi, lo, counts = retire_sums(acc, cnt, live & ~alive)
+            retire = live & ~alive
+            hi, lo, counts = retire_sums(acc, cnt, retire)
+            spectrum = s["spectrum"]
+            if effects.spectral:
+                with jax.named_scope("extracted_spectrum"):
+                    ext = acc[EXT_B] + acc[EXT_Y] + acc[EXT_O]
+                    b = jnp.where(retire & (ext != 0), lane["colour"], 2 * K)
+                    spectrum = spectrum.at[b].add(_fixed(ext), mode="drop").at[b + K].add(_fixed(ext * ext),
+                                                                                          mode="drop")
         return dict(
             next=nxt, it=s["it"] + 1,
             lanes=dict(ray=jnp.where(alive, ids, -1), px=lane["px"], py=lane["py"], pz=lane["pz"], dx=lane["dx"],
                        dy=lane["dy"], dz=lane["dz"], w=lane["w"], colour=lane["colour"], acc=acc, cnt=cnt),
             hi=s["hi"] + hi, lo=s["lo"] + lo, counts=s["counts"] + counts, map=new_map, hist=new_hist,
-            budget=new_budget,
+            budget=new_budget, spectrum=spectrum,
         )
 
     def compact(s, L):
@@ -508,7 +648,8 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
 
         final = lax.while_loop(cond, body, final)
     return {"hi": final["hi"], "lo": final["lo"], "counts": final["counts"], "map": final["map"],
-            "histogram": final["hist"], "budget": final["budget"], "iterations": final["it"]}
+            "histogram": final["hist"], "budget": final["budget"], "spectrum": final["spectrum"],
+            "emitted": emitted_bins, "iterations": final["it"]}
 
 
 trace_chunk_jit = partial(jax.jit, static_argnames=("effects", "lanes", "chunk", "substeps"))(trace_chunk)

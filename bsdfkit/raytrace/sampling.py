@@ -2,9 +2,9 @@
 
 Random numbers. Every random word is Threefry-2x32 ([Salmon-2011]; ``jax.extend.random``) of the
 key derived from the seed and the counter pair ``(ray, event·4 + h)``: ``ray`` is the global ray index
-(< 2³¹), ``event`` the ray's interaction number (0 = emission), ``h`` ∈ {0, 1, 2} gives 6 words per event.
-Lobe-rejection attempts use ``(ray + 2³¹, event·1024 + attempt)``. A ray's random numbers therefore depend
-only on (seed, ray, event), never on the chunk or lane it is traced in.
+(< 2³¹), ``event`` the ray's interaction number (0 = emission), ``h`` ∈ {0, 1, 2} gives 6 words per event
+(the spectral mode also draws h = 3: 8 words). Lobe-rejection attempts use ``(ray + 2³¹, event·1024 + attempt)``.
+A ray's random numbers therefore depend only on (seed, ray, event), never on the chunk or lane it is traced in.
 
 Directions (θ from the surface normal n, φ azimuth, u uniform in [0, 1)):
 
@@ -71,9 +71,10 @@ def random_words(key_words, ray, counters):
 
 
 def event_uniforms(key_words, ray, event, dtype, count: int = 6):
-    """``count`` (≤ 6) uniforms in [0, 1) for (ray, event): counters event·4 + h, h = 0, 1, 2.
+    """``count`` (≤ 8) uniforms in [0, 1) for (ray, event): counters event·4 + h, h = 0 … 3.
 
-    Word i comes from counter h = i // 2, so the first words do not change when fewer are drawn.
+    Word i comes from counter h = i // 2, so the first words do not change when fewer are drawn (the
+    spectral mode's conversion draws words 6 and 7, h = 3, which no other mode uses).
     """
     base = event.astype(jnp.uint32) * jnp.uint32(4)
     blocks = [base + jnp.uint32(h) for h in range((count + 1) // 2)]

@@ -37,14 +37,29 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 import bsdfkit.raytrace.plate_from_scan as plate_source
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_reflectance
 from bsdfkit.io import toml_write
 from bsdfkit.io.atomic import write_text
+from bsdfkit.io.spectrum_file import read_spectrum_table
 from bsdfkit.raytrace.plate import PhosphorPlate, load_plate
 from bsdfkit.raytrace.rayfile import RaySet, read_ray_file
+from bsdfkit.raytrace.spectral import (
+    SpectralPlateModel,
+    SpectralTables,
+    gaussian_led_spectrum,
+    load_spectral_model,
+    spectral_plate_from_two_colour,
+    spectral_tables,
+    surface_reflectance_on_bins,
+)
 
 TOP_KINDS = ("exit", "lambertian", "phosphor")
+MODES = ("two-wavelength", "spectral")
 TERMINATIONS = ("roulette", "threshold")
 PRECISIONS = ("float32", "float64")
 
@@ -59,10 +74,20 @@ class Cavity:
 
 @dataclass(frozen=True)
 class Surface:
-    """A reflector: total ``reflectance``; ``specular_fraction`` of it is mirror-like, the rest Lambertian."""
+    """A reflector: total ``reflectance``; ``specular_fraction`` of it is mirror-like, the rest Lambertian.
+
+    With ``spectrum_file`` (``reflectance_spectrum`` in TOML: wavelength [nm] and reflectance [1] columns, e.g. a
+    reflectance standard's calibration) the surface is Lambertian per wavelength
+    (:func:`bsdfkit.fit.lambertian.lambertian_from_reflectance`): the spectral mode uses ρ(λ) at each bin; the
+    two-wavelength mode gives blue rays ρ weighted by the LED spectrum over the module blue band and yellow rays
+    ρ averaged over the module yellow band (:func:`band_weighted_reflectance`). ``reflectance`` is then the blue
+    value. ``spectrum`` holds (wavelength, reflectance) once read.
+    """
 
     reflectance: float
     specular_fraction: float = 0.0
+    spectrum_file: str | None = None
+    spectrum: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -72,7 +97,11 @@ class Leds:
     ``fwhm`` (radians) is None for a Lambertian source; otherwise I(θ) ∝ cos^m θ with
     m = ln ½ / ln cos(FWHM/2) (m = 1 at FWHM = 120°, the Lambertian case). ``led_reflectance`` and
     ``led_specular_fraction`` default to the base's. ``ray_file`` replaces the emission model by rays
-    read from a file (the disks still reflect); ``rays`` holds them once loaded.
+    read from a file (the disks still reflect); ``rays`` holds them once loaded. The LED spectrum (needed by the
+    spectral mode; it also weights spectral surfaces for blue rays) is ``spectrum_file`` (``spectrum`` in TOML,
+    read by :func:`bsdfkit.io.spectrum_file.read_spectrum_table`, first value column, any scale) or a Gaussian of
+    ``spectrum_peak_nm`` and ``spectrum_fwhm_nm`` (eq. (2) of [Cylindrical-module]); ``spectrum`` holds
+    (wavelength [nm], values) once read.
     """
 
     count: int = 4
@@ -84,6 +113,10 @@ class Leds:
     led_specular_fraction: float | None = None
     ray_file: str | None = None
     rays: RaySet | None = field(default=None, compare=False, repr=False)
+    spectrum_file: str | None = None
+    spectrum_peak_nm: float | None = None
+    spectrum_fwhm_nm: float | None = None
+    spectrum: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     @property
     def grid(self) -> int:
@@ -111,7 +144,10 @@ class Top:
     ``exit``: all light reaching it leaves the module. ``lambertian``: a non-converting diffuser with
     ``reflectance`` and ``transmittance`` (both Lambertian). ``phosphor``: the plate of
     :mod:`bsdfkit.raytrace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe resolved
-    by :func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`) or given inline.
+    by :func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`) or given inline. In the spectral mode
+    ``spectral_model`` is the plate spectral model (:mod:`bsdfkit.raytrace.spectral`), from ``spectral_file``
+    (netCDF; the plate is then optional and gives only the angular distributions, Lambertian without it) or built
+    from the plate with a Gaussian emission spectrum ``spectral_emission`` = (peak, FWHM, start, stop, step) [nm].
     """
 
     kind: str = "exit"
@@ -120,6 +156,9 @@ class Top:
     plate: PhosphorPlate | None = None
     plate_file: str | None = None
     plate_recipe: str | None = None
+    spectral_file: str | None = None
+    spectral_emission: tuple[float, float, float, float, float] | None = None
+    spectral_model: SpectralPlateModel | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -133,7 +172,10 @@ class TraceOptions:
     ledger line). ``max_events`` caps surface interactions per ray (the rest is tallied as truncated).
     ``precision`` is the float type of positions and directions; weights and tallies are float64.
     ``lanes`` rays are in flight at once; ``chunk`` rays are emitted and traced per call of the compiled
-    kernel (memory ∝ lanes + chunk; progress granularity). Neither changes results.
+    kernel (memory ∝ lanes + chunk; progress granularity). Neither changes results. ``mode``:
+    ``"two-wavelength"`` (blue and yellow rays, the papers' approach) or ``"spectral"`` (rays carry a wavelength
+    bin, :mod:`bsdfkit.raytrace.spectral`); ``spectral_grid_nm`` = (start, stop, step) is the bin grid of a
+    spectral scene without a plate model (with one, its emission grid).
     """
 
     termination: str = "roulette"
@@ -143,6 +185,8 @@ class TraceOptions:
     precision: str = "float32"
     lanes: int = 16384
     chunk: int = 1048576
+    mode: str = "two-wavelength"
+    spectral_grid_nm: tuple[float, float, float] = (380.0, 780.0, 5.0)
 
 
 @dataclass(frozen=True)
@@ -183,10 +227,11 @@ class Scene:
     @property
     def led_surface(self) -> Surface:
         """Optical properties of the LED disks (the base's unless set)."""
-        rho = self.base.reflectance if self.leds.led_reflectance is None else self.leds.led_reflectance
         spec = (self.base.specular_fraction if self.leds.led_specular_fraction is None
                 else self.leds.led_specular_fraction)
-        return Surface(rho, spec)
+        if self.leds.led_reflectance is None:
+            return replace(self.base, specular_fraction=spec)
+        return Surface(self.leds.led_reflectance, spec)
 
     def tally_enabled(self, name: str) -> bool:
         value = getattr(self.tallies, name)
@@ -309,14 +354,23 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                     r.number("height_mm", lo=0, lo_open=True, required=True))
 
     def surface(name: str) -> Surface:
-        s = _Reader(data[name], name, file, {"reflectance", "specular_fraction"})
-        return Surface(s.number("reflectance", lo=0, hi=1, required=True),
-                       s.number("specular_fraction", 0.0, lo=0, hi=1))
+        s = _Reader(data[name], name, file, {"reflectance", "specular_fraction", "reflectance_spectrum"})
+        spec = s.string("reflectance_spectrum", None)
+        if spec is None:
+            return Surface(s.number("reflectance", lo=0, hi=1, required=True),
+                           s.number("specular_fraction", 0.0, lo=0, hi=1))
+        if s.has("reflectance"):
+            raise InputError("conflicting keys: a reflectance spectrum sets the reflectance", file=file,
+                             field=f"{name}.reflectance", expected="reflectance or reflectance_spectrum, not both",
+                             got=s.table["reflectance"])
+        return Surface(math.nan, s.number("specular_fraction", 0.0, lo=0, hi=1), spectrum_file=spec,
+                       spectrum=read_reflectance_spectrum(_resolve(spec, base_dir), f"{name}.reflectance_spectrum"))
 
     wall, base = surface("wall"), surface("base")
 
     r = _Reader(data["leds"], "leds", file, {"count", "pitch_mm", "emitter_radius_mm", "distribution", "fwhm_deg",
-                                             "power_W", "led_reflectance", "led_specular_fraction", "ray_file"})
+                                             "power_W", "led_reflectance", "led_specular_fraction", "ray_file",
+                                             "spectrum", "spectrum_peak_nm", "spectrum_fwhm_nm"})
     count = r.integer("count", 4, lo=1)
     if math.isqrt(count) ** 2 != count:
         raise ValidationError("LEDs sit on a k x k grid", file=file, field="leds.count",
@@ -347,6 +401,7 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
         led_specular_fraction=r.number("led_specular_fraction", None, lo=0, hi=1),
         ray_file=ray_file,
         rays=rays,
+        **_led_spectrum(r, base_dir),
     )
     R = cavity.radius_mm
     reach = max(math.hypot(x, y) for x, y in leds.centres()) + leds.emitter_radius_mm
@@ -360,7 +415,10 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
     if rays is not None:
         rays.check_inside(R, cavity.height_mm, file=file, field="leds.ray_file")
 
-    r = _Reader(data["top"], "top", file, {"kind", "reflectance", "transmittance", "plate", "from"})
+    r = _Reader(data["top"], "top", file, {"kind", "reflectance", "transmittance", "plate", "from", "spectral"})
+    if r.has("spectral") and r.table["kind"] != "phosphor":
+        raise InputError("a spectral plate model belongs to a phosphor top", file=file, field="top.spectral",
+                         expected="kind = 'phosphor'", got=r.table["kind"])
     kind = r.string("kind", required=True, choices=TOP_KINDS)
     if kind == "exit":
         for key in ("reflectance", "transmittance", "plate", "from"):
@@ -386,6 +444,8 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                                  expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]",
                                  got=r.table[key])
         given = [k for k in ("plate", "from") if r.has(k)]
+        if not given and isinstance(r.table.get("spectral"), str):  # a spectral model alone: Lambertian shapes
+            given = ["spectral"]
         if len(given) != 1:
             raise InputError("a phosphor top needs exactly one plate source", file=file, field="top.plate",
                              expected="one of plate = 'file.json' | from = 'fitting/<recipe>.toml' | [top.plate]",
@@ -393,7 +453,9 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
         key = given[0]
         value = r.table[key]
         pre = preloaded.get("plate")
-        if isinstance(value, Mapping):
+        if key == "spectral":
+            top = Top("phosphor")
+        elif isinstance(value, Mapping):
             if key != "plate":
                 raise InputError("wrong type", file=file, field="top.from", expected="a recipe path", got=value)
             plate = PhosphorPlate.from_mapping(value, file, prefix="top.plate.")
@@ -409,11 +471,13 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
             top = Top("phosphor", plate=load_plate(_resolve(value, base_dir)), plate_file=value)
         else:
             top = Top("phosphor", plate=plate_from_recipe(_resolve(value, base_dir), file), plate_recipe=value)
+        if r.has("spectral"):
+            top = _spectral_top(top, r, base_dir, preloaded)
 
     trace = TraceOptions()
     if "trace" in data:
         r = _Reader(data["trace"], "trace", file, {"termination", "roulette_threshold", "threshold", "max_events",
-                                                   "precision", "lanes", "chunk"})
+                                                   "precision", "lanes", "chunk", "mode", "spectral_grid_nm"})
         trace = TraceOptions(
             termination=r.string("termination", trace.termination, choices=TERMINATIONS),
             roulette_threshold=r.number("roulette_threshold", trace.roulette_threshold, lo=0, hi=1, lo_open=True),
@@ -422,6 +486,8 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
             precision=r.string("precision", trace.precision, choices=PRECISIONS),
             lanes=r.integer("lanes", trace.lanes, lo=1),
             chunk=r.integer("chunk", trace.chunk, lo=1),
+            mode=r.string("mode", trace.mode, choices=MODES),
+            spectral_grid_nm=_grid(r, trace.spectral_grid_nm),
         )
         if trace.max_events >= 2 ** 29:
             raise ValidationError("too many events per ray for the random-number counter", file=file,
@@ -447,7 +513,148 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                              expected="a list of strings like 'wall.reflectance=0.80:0.98:5'", got=params)
         sweep = SweepDefaults(tuple(params), r.integer("rays", None, lo=1), r.integer("seed", None, lo=0))
     _check_sizes(cavity, leds, trace, tallies, file)
+    _check_spectral(trace, leds, top, file)
+    wall, base = (_with_blue_reflectance(sf, leds) for sf in (wall, base))
     return Scene(cavity, wall, base, leds, top, trace, tallies, sweep, Path(file) if file is not None else None)
+
+
+def read_reflectance_spectrum(path: Path, field_name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelength [nm], reflectance [1]) of a reflectance spectrum file: the first value column of a table read
+    by :func:`bsdfkit.io.spectrum_file.read_spectrum_table`, checked by
+    :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance` (fractions in [0, 1], wavelengths in nm)."""
+    wl, columns, _ = read_spectrum_table(path)
+    rho = next(iter(columns.values()))
+    model = lambertian_from_reflectance(wl, rho, source=str(path))
+    return wl, model["rho"].isel(interaction=0, side=0, theta_i=0).values
+
+
+def _led_spectrum(r: _Reader, base_dir: Path | None) -> dict[str, Any]:
+    """The LED spectrum keys: a spectrum file, or a Gaussian (peak and FWHM in nm), or none."""
+    path = r.string("spectrum", None)
+    peak = r.number("spectrum_peak_nm", None, lo=100, hi=20000)
+    fwhm = r.number("spectrum_fwhm_nm", None, lo=0, lo_open=True)
+    if path is not None and (peak is not None or fwhm is not None):
+        raise InputError("conflicting keys: a spectrum file or a Gaussian spectrum", file=r.file,
+                         field="leds.spectrum_peak_nm", expected="spectrum = 'file' or spectrum_peak_nm + "
+                         "spectrum_fwhm_nm", got=peak if peak is not None else fwhm)
+    if (peak is None) != (fwhm is None):
+        raise InputError("missing key", file=r.file, field="leds.spectrum_fwhm_nm" if fwhm is None
+                         else "leds.spectrum_peak_nm", expected="both spectrum_peak_nm and spectrum_fwhm_nm [nm]")
+    if path is not None:
+        wl, columns, _ = read_spectrum_table(_resolve(path, base_dir))
+        return {"spectrum_file": path, "spectrum": (wl, next(iter(columns.values())))}
+    if peak is not None:
+        return {"spectrum_peak_nm": peak, "spectrum_fwhm_nm": fwhm, "spectrum": gaussian_led_spectrum(peak, fwhm)}
+    return {}
+
+
+def _grid(r: _Reader, default: tuple[float, float, float]) -> tuple[float, float, float]:
+    if not r.has("spectral_grid_nm"):
+        return default
+    value = r.table["spectral_grid_nm"]
+    ok = isinstance(value, list) and len(value) == 3 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    if not ok or not (100 <= value[0] < value[1] <= 20000 and value[2] > 0) \
+            or not 2 <= round((value[1] - value[0]) / value[2]) + 1 <= 1024:
+        raise ValidationError("bad spectral grid", file=r.file, field="trace.spectral_grid_nm",
+                              expected="[start, stop, step] in nm with 2-1024 bins", got=value)
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _spectral_top(top: Top, r: _Reader, base_dir: Path | None, preloaded: Mapping[str, Any]) -> Top:
+    """The phosphor top with its plate spectral model: a netCDF file, or the two-colour plate with a Gaussian
+    emission spectrum ({emission_peak_nm, emission_fwhm_nm, start_nm, stop_nm, step_nm})."""
+    value = r.table["spectral"]
+    pre = preloaded.get("spectral")
+    if isinstance(value, str):
+        if pre is not None and pre[0] == value:
+            return replace(top, spectral_file=value, spectral_model=pre[1])
+        return replace(top, spectral_file=value, spectral_model=load_spectral_model(_resolve(value, base_dir)))
+    g = _Reader(value, "top.spectral", r.file, {"emission_peak_nm", "emission_fwhm_nm", "start_nm", "stop_nm",
+                                                "step_nm"})
+    peak = g.number("emission_peak_nm", lo=100, hi=20000, required=True)
+    fwhm = g.number("emission_fwhm_nm", lo=0, lo_open=True, required=True)
+    start = g.number("start_nm", 380.0, lo=100, hi=20000)
+    stop = g.number("stop_nm", 780.0, lo=100, hi=20000)
+    step = g.number("step_nm", 5.0, lo=0, lo_open=True)
+    n = round((stop - start) / step) + 1
+    if not (stop > start and 2 <= n <= 1024):
+        raise ValidationError("bad spectral grid", file=r.file, field="top.spectral.step_nm",
+                              expected="start_nm < stop_nm with 2-1024 steps", got=(start, stop, step))
+    wl = start + step * np.arange(n)
+    emission = np.exp(-4.0 * math.log(2.0) * ((wl - peak) / fwhm) ** 2)
+    model = spectral_plate_from_two_colour(top.plate, wl, emission,
+                                           name=f"{top.plate.name} with a Gaussian emission ({peak:g}, {fwhm:g} nm)")
+    return replace(top, spectral_emission=(peak, fwhm, start, stop, step), spectral_model=model)
+
+
+def _check_spectral(trace: TraceOptions, leds: Leds, top: Top, file) -> None:
+    if trace.mode != "spectral":
+        if top.kind == "phosphor" and top.plate is None:
+            raise InputError("the two-wavelength mode needs the plate", file=file, field="top.plate",
+                             expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]")
+        return
+    if leds.spectrum is None:
+        raise InputError("the spectral mode needs the LED spectrum", file=file, field="leds.spectrum",
+                         expected="spectrum = 'file' or spectrum_peak_nm and spectrum_fwhm_nm")
+    if top.kind == "lambertian" or (top.kind == "phosphor" and top.spectral_model is None):
+        raise InputError("the spectral mode needs an exit top or a phosphor top with a spectral model", file=file,
+                         field="top.spectral", expected="spectral = 'model.nc' or a [top.spectral] table",
+                         got=top.kind)
+
+
+def _with_blue_reflectance(surface: Surface, leds: Leds) -> Surface:
+    if surface.spectrum is None:
+        return surface
+    return replace(surface, reflectance=band_reflectances(surface, leds)[0])
+
+
+def band_reflectances(surface: Surface, leds: Leds) -> tuple[float, float]:
+    """(blue, yellow) reflectance of a spectral surface for the two-wavelength mode: ρ weighted by the LED spectrum
+    (flat without one) over the module blue band and flat over the module yellow band."""
+    wl, rho = surface.spectrum
+    model = lambertian_from_reflectance(wl, rho, source=surface.spectrum_file or "")
+    out = []
+    for band, weighting in ((MODULE_BLUE_BAND_NM, leds.spectrum), (MODULE_YELLOW_BAND_NM, None)):
+        if weighting is None:
+            lam = np.arange(band[0], band[1] + 0.5)
+            weight = np.ones_like(lam)
+        else:
+            lam, weight = weighting
+        out.append(band_weighted_reflectance(model, lam, weight, band))
+    return out[0], out[1]
+
+
+def spectral_grid(scene: Scene) -> np.ndarray:
+    """Bin centres [nm] of a spectral scene: the plate model's emission grid, else ``[trace] spectral_grid_nm``."""
+    if scene.top.spectral_model is not None:
+        return scene.top.spectral_model.emission_nm
+    start, stop, step = scene.trace.spectral_grid_nm
+    return start + step * np.arange(round((stop - start) / step) + 1)
+
+
+def scene_spectral_tables(scene: Scene) -> SpectralTables:
+    """The spectral kernel's tables of ``scene`` (:func:`bsdfkit.raytrace.spectral.spectral_tables`)."""
+    source = None if scene.path is None else str(scene.path)
+    return spectral_tables(scene.top.spectral_model, scene.top.plate, spectral_grid(scene), scene.leds.spectrum,
+                           source=source)
+
+
+def surface_reflectance_table(scene: Scene) -> np.ndarray:
+    """Reflectance of wall, base and LED disks per colour (two-wavelength: blue, yellow) or per bin (spectral),
+    flattened row-major (surface, colour) for the kernel."""
+    rows = []
+    spectral = scene.trace.mode == "spectral"
+    lam = spectral_grid(scene) if spectral else None
+    for name, sf in (("wall", scene.wall), ("base", scene.base), ("leds", scene.led_surface)):
+        if sf.spectrum is None:
+            rows.append(np.full(lam.size if spectral else 2, sf.reflectance))
+        elif spectral:
+            rows.append(surface_reflectance_on_bins(sf.spectrum, lam, f"{name}.reflectance_spectrum",
+                                                    sf.spectrum_file))
+        else:
+            rows.append(np.asarray(band_reflectances(sf, scene.leds)))
+    return np.concatenate(rows).astype(np.float64)
 
 
 #: Largest irradiance-map side (bins): the map is an int64 array of side², and bin indices must stay in int32.
@@ -518,6 +725,9 @@ def scene_to_mapping(scene: Scene) -> dict[str, Any]:
     led_map["led_reflectance"] = leds.led_reflectance
     led_map["led_specular_fraction"] = leds.led_specular_fraction
     led_map["ray_file"] = leds.ray_file
+    led_map["spectrum"] = leds.spectrum_file
+    led_map["spectrum_peak_nm"] = leds.spectrum_peak_nm
+    led_map["spectrum_fwhm_nm"] = leds.spectrum_fwhm_nm
     top = scene.top
     top_map: dict[str, Any] = {"kind": top.kind}
     if top.kind == "lambertian":
@@ -527,24 +737,35 @@ def scene_to_mapping(scene: Scene) -> dict[str, Any]:
             top_map["plate"] = top.plate_file
         elif top.plate_recipe is not None:
             top_map["from"] = top.plate_recipe
-        else:
+        elif top.plate is not None:
             top_map["plate"] = top.plate.to_mapping()
+        if top.spectral_file is not None:
+            top_map["spectral"] = top.spectral_file
+        elif top.spectral_emission is not None:
+            top_map["spectral"] = dict(zip(("emission_peak_nm", "emission_fwhm_nm", "start_nm", "stop_nm", "step_nm"),
+                                           top.spectral_emission))
     t = scene.trace
     doc: dict[str, Any] = {
         "cavity": {"radius_mm": scene.cavity.radius_mm, "height_mm": scene.cavity.height_mm},
-        "wall": {"reflectance": scene.wall.reflectance, "specular_fraction": scene.wall.specular_fraction},
-        "base": {"reflectance": scene.base.reflectance, "specular_fraction": scene.base.specular_fraction},
+        "wall": _surface_mapping(scene.wall),
+        "base": _surface_mapping(scene.base),
         "leds": led_map,
         "top": top_map,
         "trace": {"termination": t.termination, "roulette_threshold": t.roulette_threshold,
                   "threshold": t.threshold, "max_events": t.max_events, "precision": t.precision,
-                  "lanes": t.lanes, "chunk": t.chunk},
+                  "lanes": t.lanes, "chunk": t.chunk, "mode": t.mode, "spectral_grid_nm": list(t.spectral_grid_nm)},
         "tallies": {k: getattr(scene.tallies, k) for k in ("irradiance_map", "map_bins", "incidence_histogram",
                                                            "histogram_bins", "interaction_budget", "budget_bins")},
     }
     if scene.sweep is not None:
         doc["sweep"] = {"params": list(scene.sweep.params), "rays": scene.sweep.rays, "seed": scene.sweep.seed}
     return doc
+
+
+def _surface_mapping(surface: Surface) -> dict[str, Any]:
+    if surface.spectrum_file is not None:
+        return {"reflectance_spectrum": surface.spectrum_file, "specular_fraction": surface.specular_fraction}
+    return {"reflectance": surface.reflectance, "specular_fraction": surface.specular_fraction}
 
 
 def dumps_scene(scene: Scene) -> str:
@@ -582,6 +803,8 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
         preloaded["plate"] = (("plate", scene.top.plate_file), scene.top.plate)
     elif scene.top.plate_recipe is not None:
         preloaded["plate"] = (("from", scene.top.plate_recipe), scene.top.plate)
+    if scene.top.spectral_file is not None:
+        preloaded["spectral"] = (scene.top.spectral_file, scene.top.spectral_model)
     return replace(parse_scene(doc, scene.path, preloaded=preloaded), path=scene.path)
 
 

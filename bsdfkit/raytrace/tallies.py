@@ -22,7 +22,12 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.conventions import RAY_YBR_DEFINITION
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, RAY_YBR_DEFINITION, band_label
+from bsdfkit.reduction.spectral import LIGHT_C, PLANCK_H
+
+#: The spectral mode's YBR: extracted power per band of the traced spectrum.
+SPECTRAL_YBR_DEFINITION = (f"extracted power in {band_label(MODULE_YELLOW_BAND_NM)} / extracted power in "
+                           f"{band_label(MODULE_BLUE_BAND_NM)} (spectral mode; bins by their centre wavelength)")
 
 
 class FixedSum:
@@ -83,6 +88,114 @@ def non_uniformity(irradiance: np.ndarray) -> float:
     return (hi - lo) / (hi + lo) if hi + lo > 0 else float("nan")
 
 
+POWER_LINES = ("extracted", "absorbed_wall", "absorbed_base", "absorbed_leds", "absorbed_plate", "stokes",
+               "roulette", "discarded", "truncated")
+
+
+def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.ndarray, lam: np.ndarray, n: int,
+                    power_W: float) -> dict[str, dict[str, float]]:
+    """The spectral mode's ledger in power [W] and in photons [1/s], each with its relative closing error.
+
+    Power: emitted = extracted + absorbed (wall, base, LEDs, plate) + Stokes loss + roulette balance + threshold
+    discarded + truncated. Photons: the same lines without the Stokes loss (a conversion keeps the photon, the
+    plate's absorption line holds the photons it does not re-emit). Photon tallies are in units of photons of a
+    unit-weight ray at the longest bin λ_max: N [1/s] = tally · (P/N_rays) · λ_max / (hc).
+    """
+    scale = power_W / n
+    to_photons = scale * float(lam[-1]) * 1e-9 / (PLANCK_H * LIGHT_C)
+    ext = col["extracted_blue"] + col["extracted_yellow"] + col["extracted_other"]
+    p_lines = {"extracted": ext, **{k: col[k] for k in ("absorbed_wall", "absorbed_base", "absorbed_leds",
+                                                       "absorbed_plate", "stokes", "roulette", "discarded",
+                                                       "truncated")}}
+    ph_emitted = sum(Fraction(int(c)) * Fraction(float(f)) for c, f in zip(emitted_bins, photon_scale))
+    ph_lines = {"extracted": col["photons_extracted"], "absorbed_wall": col["photons_wall"],
+                "absorbed_base": col["photons_base"], "absorbed_leds": col["photons_leds"],
+                "absorbed_plate": col["photons_plate"], "roulette": col["photons_roulette"],
+                "discarded": col["photons_discarded"], "truncated": col["photons_truncated"]}
+    power = {"emitted": power_W, **{k: float(v) * scale for k, v in p_lines.items()},
+             "error": float(abs(n - sum(p_lines.values())) / n)}
+    photons = {"emitted": float(ph_emitted) * to_photons, **{k: float(v) * to_photons for k, v in ph_lines.items()},
+               "error": float(abs(ph_emitted - sum(ph_lines.values())) / ph_emitted)}
+    return {"power_W": power, "photons_per_s": photons}
+
+
+def _ranges(values, step: float) -> list[list[float]]:
+    """Consecutive grid values as [first, last] ranges (e.g. the bins below and above an excitation grid)."""
+    out: list[list[float]] = []
+    for v in values:
+        if out and abs(v - out[-1][1] - step) <= 1e-9 * step:
+            out[-1][1] = v
+        else:
+            out.append([v, v])
+    return out
+
+
+@dataclass(frozen=True)
+class SpectralResult:
+    """The spectral mode's tallies: extracted spectrum on the bin grid with standard errors, the LED spectrum as
+    sampled, and the ledger in power and photons (:func:`spectral_ledger`).
+
+    ``spectrum_W_per_nm`` = extracted power per bin / bin width; its standard error from the per-ray variance
+    (each ray is extracted in one bin at most). ``extrapolated_nm``: bins outside the plate model's excitation
+    grid (their TIS and emission rows are the nearest excitation's). ``capped``: cells (incidence [deg],
+    excitation [nm], photons out per photon in) of a measured model above one photon out per photon in within its
+    uncertainty, scaled down to one (:data:`bsdfkit.raytrace.spectral.NOISE_SIGMA`).
+    """
+
+    wavelength_nm: np.ndarray
+    spectrum_W_per_nm: np.ndarray
+    spectrum_std_err: np.ndarray
+    emitted_W_per_nm: np.ndarray
+    ledger: dict[str, dict[str, float]]
+    extrapolated_nm: tuple[float, ...] = ()
+    capped: tuple[tuple[float, float, float], ...] = ()
+
+    @property
+    def step_nm(self) -> float:
+        return float(self.wavelength_nm[1] - self.wavelength_nm[0])
+
+    def band_power(self, band: tuple[float, float]) -> tuple[float, float]:
+        """Extracted power [W] of the bins whose centres lie in ``band`` (inclusive) and its standard error (the
+        bins' errors add in quadrature: a ray is extracted in one bin, so bins are nearly independent; the
+        covariance −x̄_i x̄_j/N is neglected, conservative)."""
+        inside = (self.wavelength_nm >= band[0]) & (self.wavelength_nm <= band[1])
+        p = float(self.spectrum_W_per_nm[inside].sum() * self.step_nm)
+        return p, float(np.sqrt(np.sum(self.spectrum_std_err[inside] ** 2)) * self.step_nm)
+
+    def luminous_efficacy_lm_per_W(self) -> float:
+        """Luminous efficacy of radiation of the extracted spectrum [lm/W] (CIE 1924 V(λ), K_m = 683 lm/W).
+
+        The computation of :func:`bsdfkit.reduction.colorimetry.luminous_efficacy_of_radiation`
+        (``colour.luminous_efficacy`` on the uniform bin grid); colour-science is imported here, on first use,
+        so that tracing does not pay its import time.
+        """
+        import colour  # deferred: see the docstring
+
+        sd = colour.SpectralDistribution(dict(zip(self.wavelength_nm.tolist(), self.spectrum_W_per_nm.tolist())),
+                                         name="extracted spectrum")
+        return float(colour.luminous_efficacy(sd))
+
+    def to_dict(self) -> dict[str, Any]:
+        blue, se_b = self.band_power(MODULE_BLUE_BAND_NM)
+        yellow, se_y = self.band_power(MODULE_YELLOW_BAND_NM)
+        return {
+            "wavelength_nm": self.wavelength_nm.tolist(),
+            "spectrum_W_per_nm": self.spectrum_W_per_nm.tolist(),
+            "spectrum_std_err_W_per_nm": self.spectrum_std_err.tolist(),
+            "emitted_W_per_nm": self.emitted_W_per_nm.tolist(),
+            "bands": {"blue": {"band_nm": list(MODULE_BLUE_BAND_NM), "label": band_label(MODULE_BLUE_BAND_NM),
+                               "power_W": blue, "std_err_W": se_b},
+                      "yellow": {"band_nm": list(MODULE_YELLOW_BAND_NM), "label": band_label(MODULE_YELLOW_BAND_NM),
+                                 "power_W": yellow, "std_err_W": se_y}},
+            "YBR_definition": SPECTRAL_YBR_DEFINITION,
+            "luminous_efficacy_lm_per_W": self.luminous_efficacy_lm_per_W() if self.spectrum_W_per_nm.any() else None,
+            "ledger": self.ledger,
+            "extrapolated_bins_nm": _ranges(self.extrapolated_nm, self.step_nm),
+            "photon_capped_cells": [{"incidence_deg": i, "excitation_nm": x, "photons_out_per_in": v}
+                                    for i, x, v in self.capped],
+        }
+
+
 @dataclass(frozen=True)
 class TraceResult:
     """Everything one trace produced. Powers in W; arrays as NumPy.
@@ -119,6 +232,7 @@ class TraceResult:
     elapsed_s: float = 0.0
     compile_s: float = 0.0
     effects: Any = None
+    spectral: SpectralResult | None = None
 
     @property
     def rays_per_s(self) -> float:
@@ -172,6 +286,13 @@ class TraceResult:
         cb = self.cumulative_budget()
         if cb is not None:
             out["cumulative_budget"] = {k: v.tolist() for k, v in cb.items()}
+        if self.spectral is not None:
+            out["mode"] = "spectral"
+            out["YBR_definition"] = SPECTRAL_YBR_DEFINITION
+            out["spectral"] = self.spectral.to_dict()
+            out["ledger"]["stokes"] = self.spectral.ledger["power_W"]["stokes"]
+        else:
+            out["mode"] = "two-wavelength"
         return out
 
     def to_dataset(self):
@@ -208,6 +329,17 @@ class TraceResult:
             coords["budget_term"] = ("budget_term", ["extracted_blue", "extracted_yellow", "absorbed_cavity",
                                                      "absorbed_plate", "other"])
             data["budget"] = (("interaction", "budget_term"), self.budget, {"units": "W"})
+        if self.spectral is not None:
+            sp = self.spectral
+            data["YBR"][2]["definition"] = SPECTRAL_YBR_DEFINITION
+            coords["wavelength"] = ("wavelength", sp.wavelength_nm, {"units": "nm"})
+            data["spectrum"] = (("wavelength",), sp.spectrum_W_per_nm,
+                                {"units": "W/nm", "long_name": "extracted spectrum"})
+            data["spectrum_std_err"] = (("wavelength",), sp.spectrum_std_err, {"units": "W/nm"})
+            data["emitted_spectrum"] = (("wavelength",), sp.emitted_W_per_nm,
+                                        {"units": "W/nm", "long_name": "LED spectrum as sampled"})
+            data["stokes_loss"] = ((), sp.ledger["power_W"]["stokes"], {"units": "W"})
+            data["photon_ledger_error"] = ((), sp.ledger["photons_per_s"]["error"], {"units": "1"})
         ds = xr.Dataset({k: xr.Variable(*v) for k, v in data.items()},
                         coords={k: xr.Variable(*v) if len(v) == 3 else xr.Variable(*v) for k, v in coords.items()})
         ds.attrs.update(rays=self.rays, seed=self.seed, emitted_W=self.emitted)

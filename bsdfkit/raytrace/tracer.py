@@ -5,6 +5,7 @@ import functools
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from fractions import Fraction
 
 import jax
 import numpy as np
@@ -13,8 +14,16 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
-from bsdfkit.raytrace.scene import Scene
-from bsdfkit.raytrace.tallies import FixedSum, TraceResult, mean_and_se, non_uniformity, ratio_and_se
+from bsdfkit.raytrace.scene import Scene, scene_spectral_tables
+from bsdfkit.raytrace.tallies import (
+    FixedSum,
+    SpectralResult,
+    TraceResult,
+    mean_and_se,
+    non_uniformity,
+    ratio_and_se,
+    spectral_ledger,
+)
 
 MAX_RAYS = 2 ** 31  # ray indices are 31-bit counters of the random-number generator
 
@@ -71,7 +80,7 @@ def trace(
     sums = [FixedSum(kernel.SCALE_SUM, kernel.LIMB) for _ in range(ncol)] + \
         [FixedSum(kernel.SCALE_SQUARE, kernel.LIMB) for _ in range(nsq)]
     counts = [0] * len(kernel.COUNTERS)
-    arrays = {"map": None, "histogram": None, "budget": None}
+    arrays = {"map": None, "histogram": None, "budget": None, "spectrum": None, "emitted": None}
     with x64():
         params = jax.tree_util.tree_map(jax.numpy.asarray, kernel_params(scene, eff))
         key_words = jax.random.key_data(jax.random.key(seed)).astype(jax.numpy.uint32)
@@ -156,10 +165,10 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
     ncol = len(kernel.COLUMNS)
     col = {name: sums[i].fraction for i, name in enumerate(kernel.COLUMNS)}
     sq = {name: sums[ncol + i].fraction for i, name in enumerate(kernel.SQUARES)}
-    balance = sum(col.values())
+    balance = sum(col[c] for c in kernel.POWER_COLUMNS)
     ledger_error = float(abs(n - balance) / n)
     ext_b, ext_y = col["extracted_blue"], col["extracted_yellow"]
-    ler, se_ler = mean_and_se(ext_b + ext_y, sq["total"], n)
+    ler, se_ler = mean_and_se(ext_b + ext_y + col["extracted_other"], sq["total"], n)
     ybr, se_ybr = ratio_and_se(ext_y, ext_b, sq["yellow"], sq["blue"], sq["blue_yellow"], n)
     _, se_b = mean_and_se(ext_b, sq["blue"], n)
     _, se_y = mean_and_se(ext_y, sq["yellow"], n)
@@ -189,7 +198,7 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         rays=rays, seed=seed, chunk=chunk, lanes=lanes,
         emitted=power,
         extracted={"blue": float(ext_b) * scale, "yellow": float(ext_y) * scale,
-                   "total": float(ext_b + ext_y) * scale},
+                   "total": float(ext_b + ext_y + col["extracted_other"]) * scale},
         absorbed={short: float(col[c]) * scale for c, short in absorbed_names.items()},
         roulette=float(col["roulette"]) * scale, discarded=float(col["discarded"]) * scale,
         truncated=float(col["truncated"]) * scale,
@@ -198,7 +207,28 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         clamped_interactions=int(counts[kernel.CNT_CLAMP]),
         irradiance=irradiance, non_uniformity=nu, incidence_histogram=hist, budget=budget, radius_mm=R,
         elapsed_s=elapsed, compile_s=compile_s, effects=eff,
+        spectral=spectral_result(scene, n, col, arrays) if eff.spectral else None,
     )
+
+
+def spectral_result(scene: Scene, n: int, col: dict, arrays: dict) -> SpectralResult:
+    """The spectral tallies of a trace: spectrum (W/nm) with standard errors, bands, ledger in power and photons."""
+    tab = scene_spectral_tables(scene)
+    lam = tab.lam
+    K = lam.size
+    step = float(lam[1] - lam[0])
+    power = scene.leds.power_W
+    fp = kernel.FIXED_POINT
+    spec = np.array([Fraction(int(v), int(fp)) for v in arrays["spectrum"]], dtype=object)
+    s1, s2 = spec[:K], spec[K:]
+    mean_se = [mean_and_se(a, b, n) for a, b in zip(s1, s2)]
+    spectrum = np.array([m for m, _ in mean_se]) * power / step
+    spectrum_se = np.array([e for _, e in mean_se]) * power / step
+    emitted_bins = np.array([int(v) for v in arrays["emitted"]], dtype=object)
+    return SpectralResult(wavelength_nm=lam, spectrum_W_per_nm=spectrum, spectrum_std_err=spectrum_se,
+                          emitted_W_per_nm=np.array([float(Fraction(int(c), n)) for c in emitted_bins]) * power / step,
+                          ledger=spectral_ledger(col, emitted_bins, tab.photon_scale, lam, n, power),
+                          extrapolated_nm=tab.extrapolated_nm, capped=tab.capped)
 
 
 def threshold_bias(scene: Scene, rays: int, seed: int, thresholds, **kwargs) -> list[dict]:

@@ -20,6 +20,7 @@ import numpy as np
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.raytrace.effects import top_plate
+from bsdfkit.raytrace.oracles.radiosity import require_two_colours
 from bsdfkit.raytrace.plate import plate_tables
 from bsdfkit.raytrace.scene import Scene
 
@@ -63,6 +64,7 @@ def _onb(nx, ny, nz):
 
 def trace_numpy(scene: Scene, rays: int, seed: int = 0, batch: int = 100_000) -> ReferenceResult:
     """Trace ``rays`` rays through ``scene`` with NumPy (see module docstring)."""
+    require_two_colours(scene, "the NumPy reference")
     if scene.leds.ray_file is not None:
         raise ValidationError("the NumPy reference does not read ray files", field="leds.ray_file",
                               expected="LED disks", got=scene.leds.ray_file)

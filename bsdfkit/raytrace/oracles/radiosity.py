@@ -239,9 +239,19 @@ def _plate_tis(scene: Scene) -> dict[str, float]:
              "yiys_transmission")}
 
 
+def require_two_colours(scene: Scene, who: str) -> None:
+    """Refuse a spectral scene (spectral mode or a reflectance spectrum) in a two-colour oracle."""
+    if scene.trace.mode != "two-wavelength" or any(x.spectrum is not None for x in (scene.wall, scene.base)):
+        raise ValidationError(f"{who} traces two colours with constant reflectances", file=scene.path,
+                              field="trace.mode", expected="two-wavelength, no reflectance_spectrum "
+                              "(bsdfkit.raytrace.oracles.spectral_budget handles spectral scenes)",
+                              got=scene.trace.mode)
+
+
 def module_radiosity(scene: Scene, n_base: int = 48, n_wall: int = 96, n_top: int = 48) -> RadiosityResult:
     """Two-wavelength radiosity of ``scene`` (diffuse cavity, Lambertian LEDs; see module docstring)."""
     led = scene.led_surface
+    require_two_colours(scene, "the radiosity oracle")
     if any(s.specular_fraction > 0 for s in (scene.wall, scene.base, led)):
         raise ValidationError("the radiosity oracle needs a fully diffuse cavity", file=scene.path,
                               field="wall.specular_fraction", expected="0 on wall, base and LEDs",

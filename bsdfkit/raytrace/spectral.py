@@ -1,0 +1,422 @@
+"""The tracer's spectral mode: the plate spectral model, spectra on the bin grid and the kernel's tables.
+
+The plate spectral model (issue 17, Build 2) is an xarray dataset with dims ``side`` = ("reflection",
+"transmission") (reflection = back into the cavity), ``incidence`` [deg], ``excitation`` [nm] and ``emission``
+[nm] holding
+
+* ``elastic_tis(side, incidence, excitation)`` [1]: power scattered at the incident wavelength per incident
+  power, per hemisphere (bibs at pump wavelengths, yiys at converted ones, eqs. (7) and (13) of [Power-budget]);
+* ``converted_tis(side, incidence, excitation)`` [1]: converted POWER out per incident power, per hemisphere;
+* ``emission_pdf(excitation, emission)`` [1/nm]: photon-number pdf of the converted light, each row summing to 1
+  on the uniform emission grid (Σ p Δλ = 1), zero rows where nothing converts.
+
+The tracer works on the emission grid: a ray carries a bin index k (wavelength λ_k, width Δλ). TIS and pdf rows
+at λ_k are interpolated linearly in excitation wavelength (held at the end values outside the excitation grid),
+and in θi by the kernel like the two-wavelength plate's.
+
+Photon bookkeeping. The photon yield of a conversion at λ_k on one side is
+Y = converted_tis · λ̃_k / λ_k with λ̃_k = 1 / Σ_j p_kj Δλ / λ_j the photon-weighted harmonic mean emission
+wavelength (a power C spread as photons with pdf p carries C·λ̃/λ_k photons per incident photon, eq. (16) of
+[Power-budget]). The kernel chooses elastic back/forward and converted back/forward with probabilities
+∝ (elastic_R, elastic_T, Y_R, Y_T), multiplies the ray weight by their sum S (photons kept per incident photon)
+and, at a conversion, draws the new bin from p_k and scales the weight by λ_k/λ_new (the photon keeps its
+number, its energy changes). The expected converted power is exactly converted_tis, a ray's photon weight never
+grows (S ≤ 1 is required of the model) and the power lost at a conversion, w·S·(1 − λ_k/λ_new), is the Stokes
+loss, booked on its own ledger line.
+
+Angular distributions are those of the scene's two-wavelength plate (Lambertian without one): elastic light in
+the pump band (λ_k within :data:`~bsdfkit.core.conventions.MODULE_BLUE_BAND_NM` by default) scatters back like
+bibs, elastic light elsewhere like yiys, converted light like biys; the model's incidence grid is the kernel's,
+each grid point taking the plate's distribution at the nearest plate incidence.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SIDES
+from bsdfkit.core.errors import InputError, ValidationError
+from bsdfkit.io import netcdf
+from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, PlateChannel, PlateTables, plate_tables
+
+FORMAT = "bsdfkit-plate-spectral-model"
+#: Tolerances: pdf rows sum to 1, photons kept per incident photon ≤ 1, bin widths equal.
+_PDF_TOL = 1e-6
+_PHOTON_TOL = 1e-9
+_GRID_TOL = 1e-6
+#: A measured model may give out more photons than it receives by this many standard uncertainties (noise); such
+#: cells are scaled down to exactly one photon out per photon in (and listed), beyond it the model is refused.
+NOISE_SIGMA = 3.0
+#: Largest bin count (the alias tables hold K² entries per model).
+MAX_BINS = 1024
+
+
+@dataclass(frozen=True, eq=False)
+class SpectralPlateModel:
+    """A validated plate spectral model (see the module docstring); arrays are float64, angles in degrees.
+
+    ``elastic_tis`` and ``converted_tis`` have shape (2, incidences, excitations) in :data:`SIDES` order,
+    ``emission_pdf`` (excitations, emissions) in 1/nm.
+    """
+
+    incidence_deg: np.ndarray
+    excitation_nm: np.ndarray
+    emission_nm: np.ndarray
+    elastic_tis: np.ndarray
+    converted_tis: np.ndarray
+    emission_pdf: np.ndarray
+    name: str = ""
+    source: str | None = field(default=None)
+    capped: tuple[tuple[float, float, float], ...] = ()
+
+    @property
+    def step_nm(self) -> float:
+        return float(self.emission_nm[1] - self.emission_nm[0])
+
+    def to_dataset(self) -> xr.Dataset:
+        """The model as the contract dataset (``side``, ``incidence``, ``excitation``, ``emission``)."""
+        dims = ("side", "incidence", "excitation")
+        return xr.Dataset(
+            {"elastic_tis": (dims, self.elastic_tis, {"units": "1"}),
+             "converted_tis": (dims, self.converted_tis, {"units": "1", "long_name": "converted power / incident"}),
+             "emission_pdf": (("excitation", "emission"), self.emission_pdf,
+                              {"units": "1/nm", "long_name": "photon-number pdf of the converted light"})},
+            coords={"side": list(SIDES), "incidence": ("incidence", self.incidence_deg, {"units": "degree"}),
+                    "excitation": ("excitation", self.excitation_nm, {"units": "nm"}),
+                    "emission": ("emission", self.emission_nm, {"units": "nm"})},
+            attrs={"format": FORMAT, "name": self.name},
+        )
+
+    def save(self, path: str | Path, force: bool = False) -> Path:
+        """Write the model as netCDF, atomically (an existing file is kept unless ``force``)."""
+        return netcdf.save(self.to_dataset(), path, force)
+
+
+def spectral_model_from_dataset(ds: xr.Dataset, source: str | Path | None = None) -> SpectralPlateModel:
+    """Validate a plate spectral model dataset (module docstring); errors name ``source`` and the variable."""
+    where = None if source is None else str(source)
+    for name in ("elastic_tis", "converted_tis", "emission_pdf"):
+        if name not in ds:
+            raise InputError("missing variable of the plate spectral model", file=where, field=name,
+                             expected="elastic_tis, converted_tis and emission_pdf", got=sorted(ds.data_vars))
+    for name in ("side", "incidence", "excitation", "emission"):
+        if name not in ds.coords:
+            raise InputError("missing coordinate of the plate spectral model", file=where, field=name,
+                             expected="side, incidence [deg], excitation [nm], emission [nm]")
+    if sorted(str(s) for s in ds["side"].values) != sorted(SIDES):
+        raise ValidationError("wrong sides", file=where, field="side", expected=list(SIDES),
+                              got=[str(s) for s in ds["side"].values])
+    ds = ds.sel(side=list(SIDES))
+    try:
+        tis = {n: ds[n].transpose("side", "incidence", "excitation").values.astype(np.float64)
+               for n in ("elastic_tis", "converted_tis")}
+        pdf = ds["emission_pdf"].transpose("excitation", "emission").values.astype(np.float64)
+    except ValueError as exc:
+        raise ValidationError("wrong dimensions", file=where, field="elastic_tis",
+                              expected="elastic/converted_tis(side, incidence, excitation), "
+                                       "emission_pdf(excitation, emission)", got=str(exc)) from None
+    inc = ds["incidence"].values.astype(np.float64)
+    exc_nm = ds["excitation"].values.astype(np.float64)
+    em = ds["emission"].values.astype(np.float64)
+    for name, grid, lo, hi in (("incidence", inc, 0.0, 90.0), ("excitation", exc_nm, 100.0, 20000.0),
+                               ("emission", em, 100.0, 20000.0)):
+        if grid.size < 1 or not np.all(np.isfinite(grid)) or np.any(np.diff(grid) <= 0) or grid[0] < lo \
+                or grid[-1] > hi:
+            raise ValidationError("coordinate must increase strictly within its range", file=where, field=name,
+                                  expected=f"values in [{lo:g}, {hi:g}]", got=grid.tolist())
+    if em.size < 2 or em.size > MAX_BINS or np.ptp(np.diff(em)) > _GRID_TOL * (em[1] - em[0]):
+        raise ValidationError("the emission grid must be uniform", file=where, field="emission",
+                              expected=f"2 to {MAX_BINS} equally spaced wavelengths", got=em.tolist())
+    for name, values in (*tis.items(), ("emission_pdf", pdf)):
+        if not np.all(np.isfinite(values)) or values.min() < 0:
+            raise ValidationError("values must be finite and >= 0", file=where, field=name,
+                                  got=float(np.nanmin(values)) if np.isfinite(values).any() else "NaN")
+    step = em[1] - em[0]
+    rows = pdf.sum(axis=1) * step
+    converting = tis["converted_tis"].sum(axis=(0, 1)) > 0
+    bad = (np.abs(rows - 1.0) > _PDF_TOL) & (converting | (rows > 0))
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValidationError("emission pdf row does not integrate to 1 (Σ p Δλ)", file=where,
+                              field=f"emission_pdf[excitation={exc_nm[k]:g} nm]",
+                              expected="1 (or a zero row where nothing converts)", got=float(rows[k]))
+    std = {n: (ds[f"{n}_std"].transpose("side", "incidence", "excitation").values.astype(np.float64)
+               if f"{n}_std" in ds else np.zeros_like(tis[n])) for n in ("elastic_tis", "converted_tis")}
+    model = SpectralPlateModel(inc, exc_nm, em, tis["elastic_tis"], tis["converted_tis"], pdf,
+                               name=str(ds.attrs.get("name", "")), source=where)
+    return _checked_photons(model, std["elastic_tis"], std["converted_tis"], where)
+
+
+def _harmonic_emission_nm(pdf: np.ndarray, emission_nm: np.ndarray, step: float) -> np.ndarray:
+    """λ̃ = 1 / Σ_j p_j Δλ / λ_j per row (nan for zero rows): photons per converted power, times hc."""
+    inv = (pdf * step / emission_nm).sum(axis=-1)
+    with np.errstate(divide="ignore"):
+        return np.where(inv > 0, 1.0 / np.where(inv > 0, inv, 1.0), np.nan)
+
+
+def _photon_tis(elastic: np.ndarray, converted: np.ndarray, pdf: np.ndarray, emission_nm: np.ndarray,
+                excitation_nm: np.ndarray, step: float) -> np.ndarray:
+    """(2 sides, …, 2 kinds) photons out per incident photon: elastic and converted (Y) on each side."""
+    ratio = np.nan_to_num(_harmonic_emission_nm(pdf, emission_nm, step) / excitation_nm)
+    return np.stack([elastic, converted * ratio], axis=-1)
+
+
+def _checked_photons(model: SpectralPlateModel, elastic_std: np.ndarray, converted_std: np.ndarray,
+                     where) -> SpectralPlateModel:
+    """The model with photons out per photon in ≤ 1 everywhere: cells above 1 within :data:`NOISE_SIGMA` standard
+    uncertainties (``*_std`` variables of a measured model) are scaled down to 1 and listed in ``capped`` as
+    (incidence, excitation, photons out per photon in); beyond that the model is refused."""
+    ratio = np.nan_to_num(_harmonic_emission_nm(model.emission_pdf, model.emission_nm, model.step_nm)
+                          / model.excitation_nm)
+    kept = (model.elastic_tis + model.converted_tis * ratio).sum(axis=0)  # (incidence, excitation)
+    sigma = np.sqrt((elastic_std ** 2 + (converted_std * ratio) ** 2).sum(axis=0))
+    over = kept > 1.0 + _PHOTON_TOL
+    bad = over & (kept - 1.0 > NOISE_SIGMA * sigma)
+    if bad.any():
+        i, k = np.unravel_index(int(np.argmax(np.where(bad, kept, 0.0))), kept.shape)
+        raise ValidationError("the plate gives out more photons than it receives", file=where,
+                              field=f"converted_tis[incidence={model.incidence_deg[i]:g}, "
+                                    f"excitation={model.excitation_nm[k]:g}]",
+                              expected=f"elastic + converted photons per incident photon <= 1 (within "
+                                       f"{NOISE_SIGMA:g} standard uncertainties)", got=float(kept[i, k]))
+    if not over.any():
+        return model
+    scale = np.where(over, 1.0 / kept, 1.0)[None]
+    capped = tuple((float(model.incidence_deg[i]), float(model.excitation_nm[k]), float(kept[i, k]))
+                   for i, k in zip(*np.nonzero(over)))
+    return replace(model, elastic_tis=model.elastic_tis * scale, converted_tis=model.converted_tis * scale,
+                   capped=capped)
+
+
+def load_spectral_model(path: str | Path) -> SpectralPlateModel:
+    """Read a plate spectral model written by :meth:`SpectralPlateModel.save` (or any dataset of the contract)."""
+    return spectral_model_from_dataset(netcdf.load(path), source=path)
+
+
+def photon_pdf_from_power(wavelength_nm: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """Photon-number pdf [1/nm] of a power spectrum on a uniform grid: p ∝ S(λ)·λ, Σ p Δλ = 1."""
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    photons = np.asarray(power, dtype=np.float64) * wl
+    total = photons.sum() * (wl[1] - wl[0])
+    if not total > 0:
+        raise ValidationError("emission spectrum has no power", field="emission_spectrum", expected="some S > 0")
+    return photons / total
+
+
+def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence[float], emission_spectrum,
+                                   pump_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
+                                   name: str = "") -> SpectralPlateModel:
+    """The spectral model of a two-wavelength plate: one emission spectrum times one absorption per incidence.
+
+    At pump wavelengths (inside ``pump_band_nm``) the elastic TIS is bibs and the converted TIS biys (power);
+    elsewhere the elastic TIS is yiys and nothing converts. ``emission_spectrum`` is the converted light's POWER
+    spectrum on ``wavelength_nm`` (uniform grid, any scale), which is also the model's excitation and emission
+    grid. With no emission inside the pump band this model and the two-wavelength plate trace the same blue and
+    yellow powers (the equivalence of issue 17).
+    """
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    pump = (wl >= pump_band_nm[0]) & (wl <= pump_band_nm[1])
+    inc = np.asarray(plate.theta_i_deg, dtype=np.float64)
+
+    def tis(channel: str) -> np.ndarray:  # (incidence,)
+        return np.asarray(plate.channel(channel).tis, dtype=np.float64)
+
+    elastic = np.stack([np.where(pump[None, :], tis(f"bibs_{s}")[:, None], tis(f"yiys_{s}")[:, None])
+                        for s in SIDES])
+    converted = np.stack([np.where(pump[None, :], tis(f"biys_{s}")[:, None], 0.0) for s in SIDES])
+    row = photon_pdf_from_power(wl, emission_spectrum)
+    pdf = np.where(pump[:, None], row[None, :], 0.0)
+    ds = SpectralPlateModel(inc, wl, wl, elastic, converted, pdf, name=name or plate.name).to_dataset()
+    return spectral_model_from_dataset(ds)
+
+
+# ---- spectra on the bin grid ------------------------------------------------------------------------------------
+def bin_edges(centres_nm: np.ndarray) -> np.ndarray:
+    step = centres_nm[1] - centres_nm[0]
+    return np.concatenate([centres_nm - step / 2.0, [centres_nm[-1] + step / 2.0]])
+
+
+def bin_powers(wavelength_nm: np.ndarray, values: np.ndarray, centres_nm: np.ndarray) -> np.ndarray:
+    """∫ S dλ over each bin of the grid (S piecewise linear between its samples, 0 outside them)."""
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    s = np.asarray(values, dtype=np.float64)
+    edges = np.clip(bin_edges(centres_nm), wl[0], wl[-1])
+    # trapezoids on the union of the samples and the bin edges: exact for a piecewise-linear S
+    fine = np.union1d(wl, edges)
+    s_fine = np.interp(fine, wl, s)
+    cum_fine = np.concatenate([[0.0], np.cumsum(0.5 * (s_fine[1:] + s_fine[:-1]) * np.diff(fine))])
+    return np.diff(np.interp(edges, fine, cum_fine))
+
+
+def gaussian_led_spectrum(peak_nm: float, fwhm_nm: float) -> tuple[np.ndarray, np.ndarray]:
+    """A Gaussian LED spectrum (eq. (2) of [Cylindrical-module]) sampled every FWHM/200 over ±4 FWHM."""
+    wl = np.linspace(peak_nm - 4.0 * fwhm_nm, peak_nm + 4.0 * fwhm_nm, 1601)
+    return wl, np.exp(-4.0 * math.log(2.0) * ((wl - peak_nm) / fwhm_nm) ** 2)
+
+
+# ---- kernel tables -------------------------------------------------------------------------------------------------
+def alias_table(pdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Walker's alias tables (Vose's construction) of each row of ``pdf`` (rows of K weights, any scale).
+
+    Sampling: i = ⌊u₁K⌋, then i if u₂ < prob[i] else alias[i]. A zero row gets the uniform table (unused).
+    """
+    rows, K = pdf.shape
+    prob = np.ones((rows, K))
+    alias = np.tile(np.arange(K, dtype=np.int32), (rows, 1))
+    for r in range(rows):
+        total = pdf[r].sum()
+        if not total > 0:
+            continue
+        q = pdf[r] * K / total
+        small = [i for i in range(K) if q[i] < 1.0]
+        large = [i for i in range(K) if q[i] >= 1.0]
+        while small and large:
+            s, g = small.pop(), large.pop()
+            prob[r, s] = q[s]
+            alias[r, s] = g
+            q[g] = q[g] + q[s] - 1.0
+            (small if q[g] < 1.0 else large).append(g)
+        for i in small + large:  # rounding leftovers
+            prob[r, i] = 1.0
+    return prob, alias
+
+
+def model_on_bins(model: SpectralPlateModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """elastic, converted (2, I, K) and pdf (K, K) at the emission bins (linear in excitation, clamped)."""
+    lam = model.emission_nm
+    x = model.excitation_nm
+    if x.size == 1:
+        idx0 = np.zeros(lam.size, int)
+        t = np.zeros(lam.size)
+    else:
+        idx0 = np.clip(np.searchsorted(x, lam, side="right") - 1, 0, x.size - 2)
+        t = np.clip((lam - x[idx0]) / (x[idx0 + 1] - x[idx0]), 0.0, 1.0)
+    idx1 = np.minimum(idx0 + 1, x.size - 1)
+
+    def interp(a):  # along the last axis (excitation)
+        return (1.0 - t) * a[..., idx0] + t * a[..., idx1]
+
+    elastic, converted = interp(model.elastic_tis), interp(model.converted_tis)
+    pdf = (1.0 - t)[:, None] * model.emission_pdf[idx0] + t[:, None] * model.emission_pdf[idx1]
+    norm = pdf.sum(axis=1) * model.step_nm
+    converting = converted.sum(axis=(0, 1)) > 0
+    if np.any(converting & ~(norm > 0)):
+        k = int(np.argmax(converting & ~(norm > 0)))
+        raise ValidationError("light converts at a wavelength whose emission pdf is zero", file=model.source,
+                              field=f"emission_pdf[{lam[k]:g} nm]", expected="a pdf row where converted_tis > 0")
+    pdf = np.where(norm[:, None] > 0, pdf / np.where(norm > 0, norm, 1.0)[:, None], 0.0)
+    return elastic, converted, pdf
+
+
+def shape_plate_on_grid(plate: PhosphorPlate | None, incidence_deg: np.ndarray) -> PhosphorPlate:
+    """The plate whose angular distributions the spectral kernel samples, on the model's incidence grid.
+
+    Each grid point takes the distributions of the nearest incidence of ``plate`` (Lambertian without a plate);
+    the TIS are the plate's, interpolated linearly in θi (only the shapes are used in spectral mode).
+    """
+    base = plate if plate is not None else PhosphorPlate.constant({c: 0.0 for c in CHANNELS})
+    src = np.asarray(base.theta_i_deg, dtype=float)
+    grid = tuple(float(v) for v in incidence_deg)
+    near = [int(np.argmin(np.abs(src - g))) for g in grid]
+    channels = {}
+    for c in CHANNELS:
+        ch = base.channel(c)
+        tis = tuple(float(v) for v in np.interp(grid, src, np.asarray(ch.tis, dtype=float)))
+        channels[c] = PlateChannel(tis, tuple(ch.distributions[n] for n in near))
+    return PhosphorPlate(theta_i_deg=grid, name=base.name, notes=base.notes, **channels)
+
+
+@dataclass(frozen=True, eq=False)
+class SpectralTables:
+    """Numeric tables of the spectral kernel (NumPy).
+
+    ``lam`` (K,) bin centres [nm]; ``photon_scale`` λ_k / λ_K−1 (photon tallies are in units of photons of a
+    unit-weight ray at the longest bin); ``band`` (K,) 0 blue, 1 yellow, 2 neither; ``elastic_shape`` (K,) the
+    backward channel whose distribution elastic light takes (0 bibs, 2 yiys); ``tis`` (G·K, 4) photons per
+    incident photon: elastic R, elastic T, converted R, converted T at (incidence g, bin k) → row g·K + k;
+    ``alias_prob``, ``alias_index`` (K·K,) the emission rows' alias tables; ``led_cdf`` (K,) cumulative LED
+    bin powers; ``plate`` the angular tables on the model's incidence grid (None for an exit top).
+    """
+
+    lam: np.ndarray
+    photon_scale: np.ndarray
+    band: np.ndarray
+    elastic_shape: np.ndarray
+    tis: np.ndarray | None
+    alias_prob: np.ndarray | None
+    alias_index: np.ndarray | None
+    led_power: np.ndarray
+    led_cdf: np.ndarray
+    plate: PlateTables | None
+    grid_deg: np.ndarray | None
+    extrapolated_nm: tuple[float, ...] = ()
+    capped: tuple[tuple[float, float, float], ...] = ()
+
+
+def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, source: str | None = None) -> np.ndarray:
+    """Fractions of the LED power in each bin; refuses a spectrum with more than 0.1 % outside the grid."""
+    wl, values = spectrum
+    if np.any(np.asarray(values) < 0):
+        raise ValidationError("LED spectrum has negative power", file=source, field="leds.spectrum",
+                              expected="values >= 0", got=float(np.min(values)))
+    p = bin_powers(wl, values, lam)
+    total = float(np.sum(0.5 * (values[1:] + values[:-1]) * np.diff(wl)))
+    if not total > 0 or p.sum() < (1.0 - 1e-3) * total:
+        edges = bin_edges(lam)
+        raise ValidationError("LED spectrum reaches outside the spectral grid", file=source, field="leds.spectrum",
+                              expected=f"its power within {edges[0]:g}-{edges[-1]:g} nm",
+                              got=f"{100 * (1 - p.sum() / total) if total > 0 else 100:.2g} % outside")
+    return p / p.sum()
+
+
+def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | None, lam: np.ndarray,
+                    led_spectrum: tuple[np.ndarray, np.ndarray], *, source: str | None = None,
+                    pump_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
+                    blue_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
+                    yellow_band_nm: tuple[float, float] = MODULE_YELLOW_BAND_NM) -> SpectralTables:
+    """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top)."""
+    lam = np.asarray(lam, dtype=np.float64)
+    band = np.where((lam >= blue_band_nm[0]) & (lam <= blue_band_nm[1]), 0,
+                    np.where((lam >= yellow_band_nm[0]) & (lam <= yellow_band_nm[1]), 1, 2)).astype(np.int32)
+    shape = np.where((lam >= pump_band_nm[0]) & (lam <= pump_band_nm[1]), 0, 2).astype(np.int32)
+    led = led_bin_power(led_spectrum, lam, source)
+    cdf = np.cumsum(led)
+    cdf[-1] = 1.0
+    tis = prob = index = tabs = grid = None
+    extrapolated: tuple[float, ...] = ()
+    if model is not None:
+        elastic, converted, pdf = model_on_bins(model)
+        ph = _photon_tis(elastic, converted, pdf[None, None], lam, lam, model.step_nm)  # (2, I, K, 2)
+        # rows (g, k) → [elastic R, elastic T, converted R, converted T]
+        tis = np.stack([ph[0, :, :, 0], ph[1, :, :, 0], ph[0, :, :, 1], ph[1, :, :, 1]], axis=-1).reshape(-1, 4)
+        # the model has ≤ 1 photon out per photon in at its excitations; interpolation between two excitations
+        # can exceed it by rounding-level amounts (the harmonic mean of a mixed pdf row is not linear): cap
+        total = tis.sum(axis=1)
+        tis = tis / np.maximum(total, 1.0)[:, None]
+        p, a = alias_table(pdf * model.step_nm)
+        prob, index = p.reshape(-1), a.reshape(-1).astype(np.int32)
+        grid = model.incidence_deg
+        if grid.size == 1:  # one incidence: constant in θi (as plate_tables does)
+            grid = np.array([grid[0], grid[0] + 1.0])
+            tis = np.concatenate([tis, tis])
+        tabs = plate_tables(shape_plate_on_grid(plate, grid))
+        x = model.excitation_nm
+        extrapolated = tuple(float(v) for v in lam[(lam < x[0]) | (lam > x[-1])])
+    return SpectralTables(lam=lam, photon_scale=lam / lam[-1], band=band, elastic_shape=shape, tis=tis,
+                          alias_prob=prob, alias_index=index, led_power=led, led_cdf=cdf, plate=tabs, grid_deg=grid,
+                          extrapolated_nm=extrapolated, capped=() if model is None else model.capped)
+
+
+def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, field_name: str,
+                                source: str | None = None) -> np.ndarray:
+    """A surface's reflectance ρ(λ) at the bin centres (linear interpolation; the bins must be inside)."""
+    wl, rho = spectrum
+    if lam[0] < wl[0] or lam[-1] > wl[-1]:
+        raise ValidationError("the reflectance spectrum does not cover the spectral grid", file=source,
+                              field=field_name, expected=f"{lam[0]:g}-{lam[-1]:g} nm", got=f"{wl[0]:g}-{wl[-1]:g} nm")
+    return np.interp(lam, wl, rho)
