@@ -930,8 +930,11 @@ class _Report:
                                                  f'<div class="cards">{"".join(cards)}</div>'))
 
     def build(self) -> str:
+        from bsdfkit.pipeline.report_spectral import spectral_comparison_section  # imports this module
+
         sections = [self.sec_measurement(), self.sec_table2(), self.sec_budget(), self.sec_exports(), self.sec_fits(),
-                    self.sec_trace(), self.sec_maps(), self.sec_spectrum(), self.sec_other_figures(),
+                    self.sec_trace(), self.sec_maps(), self.sec_spectrum(), spectral_comparison_section(self),
+                    self.sec_other_figures(),
                     self.sec_details(), self.sec_sources()]
         if self.v.disagreements:
             dis = ('<div class="disagree"><b>Where this run disagrees with the papers</b> (|run − paper| larger than '
