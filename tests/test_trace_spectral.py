@@ -21,6 +21,7 @@ from bsdfkit.raytrace.oracles.spectral_budget import spectral_module_budget
 from bsdfkit.raytrace.scene import band_reflectances, surface_reflectance_table
 from bsdfkit.raytrace.spectral import (
     SpectralPlateModel,
+    model_on_bins,
     photon_pdf_from_power,
     spectral_model_from_dataset,
     spectral_plate_from_two_colour,
@@ -296,6 +297,9 @@ def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel(tmp_path):
         np.testing.assert_array_equal(r.spectral.spectrum_W_per_nm, a.spectral.spectrum_W_per_nm)
         np.testing.assert_array_equal(r.spectral.spectrum_std_err, a.spectral.spectrum_std_err)
         assert r.spectral.ledger == a.spectral.ledger
+    # the interaction budget books the Stokes loss with the plate: nothing is left in flight
+    assert a.cumulative_budget()["in_flight"][-1] == pytest.approx(0.0, abs=1e-9)
+    assert a.cumulative_budget()["extracted"][-1] == pytest.approx(a.extracted["total"], abs=1e-9)
 
 
 def test_spectral_scene_round_trips_through_toml(tmp_path):
@@ -309,3 +313,21 @@ def test_spectral_scene_round_trips_through_toml(tmp_path):
     assert (again.leds.spectrum_peak_nm, again.leds.spectrum_fwhm_nm) == (455.0, 20.0)
     with pytest.raises(InputError, match="top.plate"):  # the two-wavelength mode needs the plate itself
         loads_scene(dumps_scene(s).replace('mode = "spectral"', 'mode = "two-wavelength"'))
+
+
+def test_bins_above_an_excitation_scan_take_the_plates_yiys():
+    """A monochromator-style model (excitation 400-500 nm only) traced on a 380-780 nm grid: above 500 nm the
+    plate's yiys, no conversion; below 400 nm the first excitation's values."""
+    wl = np.arange(380.0, 781.0, 10.0)
+    full = spectral_plate_from_two_colour(PhosphorPlate.constant(TABLE2), wl,
+                                          np.exp(-4 * math.log(2) * ((wl - 560.0) / 100.0) ** 2)).to_dataset()
+    scan = spectral_model_from_dataset(full.sel(excitation=slice(400.0, 500.0)))
+    plate = PhosphorPlate.constant(TABLE2)
+    elastic, converted, pdf = model_on_bins(scan, plate)
+    above, below = wl > 500, wl < 400
+    assert np.all(elastic[0][:, above] == 0.457) and np.all(elastic[1][:, above] == 0.471)
+    assert np.all(converted[:, :, above] == 0.0)
+    assert np.all(elastic[0][:, below] == 0.109) and np.all(converted[1][:, below] == 0.257)
+    np.testing.assert_allclose(pdf[below].sum(axis=1) * 10.0, 1.0, rtol=1e-12)
+    clamped, _, _ = model_on_bins(scan)  # no plate: the last excitation's values
+    assert np.all(clamped[0][:, above] == 0.109)

@@ -286,8 +286,12 @@ def alias_table(pdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return prob, alias
 
 
-def model_on_bins(model: SpectralPlateModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """elastic, converted (2, I, K) and pdf (K, K) at the emission bins (linear in excitation, clamped)."""
+def model_on_bins(model: SpectralPlateModel, plate: PhosphorPlate | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """elastic, converted (2, I, K) and pdf (K, K) at the emission bins: linear in excitation wavelength; below the
+    excitation grid the first excitation's values; above it, with a two-wavelength ``plate``, its yiys TIS (at the
+    model's incidences, linear in θi) and no conversion — the light the plate emits, not measured by an excitation
+    scan — else the last excitation's values."""
     lam = model.emission_nm
     x = model.excitation_nm
     if x.size == 1:
@@ -302,6 +306,13 @@ def model_on_bins(model: SpectralPlateModel) -> tuple[np.ndarray, np.ndarray, np
         return (1.0 - t) * a[..., idx0] + t * a[..., idx1]
 
     elastic, converted = interp(model.elastic_tis), interp(model.converted_tis)
+    above = lam > x[-1]
+    if plate is not None and above.any():
+        src = np.asarray(plate.theta_i_deg, dtype=np.float64)
+        for b, side in enumerate(SIDES):
+            yiys = np.interp(model.incidence_deg, src, np.asarray(plate.channel(f"yiys_{side}").tis, dtype=float))
+            elastic[b][:, above] = yiys[:, None]
+        converted[:, :, above] = 0.0
     pdf = (1.0 - t)[:, None] * model.emission_pdf[idx0] + t[:, None] * model.emission_pdf[idx1]
     norm = pdf.sum(axis=1) * model.step_nm
     converting = converted.sum(axis=(0, 1)) > 0
@@ -356,6 +367,7 @@ class SpectralTables:
     grid_deg: np.ndarray | None
     extrapolated_nm: tuple[float, ...] = ()
     capped: tuple[tuple[float, float, float], ...] = ()
+    yiys_nm: tuple[float, ...] = ()
 
 
 def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, source: str | None = None) -> np.ndarray:
@@ -389,8 +401,9 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     cdf[-1] = 1.0
     tis = prob = index = tabs = grid = None
     extrapolated: tuple[float, ...] = ()
+    from_plate: tuple[float, ...] = ()
     if model is not None:
-        elastic, converted, pdf = model_on_bins(model)
+        elastic, converted, pdf = model_on_bins(model, plate)
         ph = _photon_tis(elastic, converted, pdf[None, None], lam, lam, model.step_nm)  # (2, I, K, 2)
         # rows (g, k) → [elastic R, elastic T, converted R, converted T]
         tis = np.stack([ph[0, :, :, 0], ph[1, :, :, 0], ph[0, :, :, 1], ph[1, :, :, 1]], axis=-1).reshape(-1, 4)
@@ -406,10 +419,12 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
             tis = np.concatenate([tis, tis])
         tabs = plate_tables(shape_plate_on_grid(plate, grid))
         x = model.excitation_nm
-        extrapolated = tuple(float(v) for v in lam[(lam < x[0]) | (lam > x[-1])])
+        extrapolated = tuple(float(v) for v in lam[(lam < x[0]) | ((lam > x[-1]) & (plate is None))])
+        from_plate = tuple(float(v) for v in lam[(lam > x[-1]) & (plate is not None)])
     return SpectralTables(lam=lam, photon_scale=lam / lam[-1], band=band, elastic_shape=shape, tis=tis,
                           alias_prob=prob, alias_index=index, led_power=led, led_cdf=cdf, plate=tabs, grid_deg=grid,
-                          extrapolated_nm=extrapolated, capped=() if model is None else model.capped)
+                          extrapolated_nm=extrapolated, capped=() if model is None else model.capped,
+                          yiys_nm=from_plate)
 
 
 def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, field_name: str,

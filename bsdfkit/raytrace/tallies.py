@@ -137,7 +137,8 @@ class SpectralResult:
 
     ``spectrum_W_per_nm`` = extracted power per bin / bin width; its standard error from the per-ray variance
     (each ray is extracted in one bin at most). ``extrapolated_nm``: bins outside the plate model's excitation
-    grid (their TIS and emission rows are the nearest excitation's). ``capped``: cells (incidence [deg],
+    grid whose TIS and emission rows are the nearest excitation's; ``yiys_nm``: bins above it that take the
+    two-wavelength plate's yiys TIS and do not convert. ``capped``: cells (incidence [deg],
     excitation [nm], photons out per photon in) of a measured model above one photon out per photon in within its
     uncertainty, scaled down to one (:data:`bsdfkit.raytrace.spectral.NOISE_SIGMA`).
     """
@@ -149,6 +150,7 @@ class SpectralResult:
     ledger: dict[str, dict[str, float]]
     extrapolated_nm: tuple[float, ...] = ()
     capped: tuple[tuple[float, float, float], ...] = ()
+    yiys_nm: tuple[float, ...] = ()
 
     @property
     def step_nm(self) -> float:
@@ -191,6 +193,7 @@ class SpectralResult:
             "luminous_efficacy_lm_per_W": self.luminous_efficacy_lm_per_W() if self.spectrum_W_per_nm.any() else None,
             "ledger": self.ledger,
             "extrapolated_bins_nm": _ranges(self.extrapolated_nm, self.step_nm),
+            "yiys_bins_nm": _ranges(self.yiys_nm, self.step_nm),
             "photon_capped_cells": [{"incidence_deg": i, "excitation_nm": x, "photons_out_per_in": v}
                                     for i, x, v in self.capped],
         }

@@ -14,7 +14,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
-from bsdfkit.raytrace.scene import Scene, scene_spectral_tables
+from bsdfkit.raytrace.scene import Scene, scene_spectral_tables, spectral_grid
 from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,
@@ -68,7 +68,10 @@ def trace(
                               file=scene.path, field="trace.max_events", expected="< 2**22",
                               got=scene.trace.max_events)
 
-    if eff.termination == "roulette" and 1.0 + scene.trace.roulette_threshold * scene.trace.max_events \
+    # a spectral ray's power weight can grow by λ_max/λ_min at anti-Stokes conversions (its photons cannot)
+    lam = spectral_grid(scene) if eff.spectral else None
+    growth = float(lam[-1] / lam[0]) if eff.spectral else 1.0
+    if eff.termination == "roulette" and growth * (1.0 + scene.trace.roulette_threshold * scene.trace.max_events) \
             >= kernel.MAX_RAY_TALLY:
         raise ValidationError("roulette threshold x max_events too large for the exact tallies",
                               file=scene.path, field="trace.max_events",
@@ -228,7 +231,8 @@ def spectral_result(scene: Scene, n: int, col: dict, arrays: dict) -> SpectralRe
     return SpectralResult(wavelength_nm=lam, spectrum_W_per_nm=spectrum, spectrum_std_err=spectrum_se,
                           emitted_W_per_nm=np.array([float(Fraction(int(c), n)) for c in emitted_bins]) * power / step,
                           ledger=spectral_ledger(col, emitted_bins, tab.photon_scale, lam, n, power),
-                          extrapolated_nm=tab.extrapolated_nm, capped=tab.capped)
+                          extrapolated_nm=tab.extrapolated_nm, capped=tab.capped,
+                          yiys_nm=tab.yiys_nm)
 
 
 def threshold_bias(scene: Scene, rays: int, seed: int, thresholds, **kwargs) -> list[dict]:

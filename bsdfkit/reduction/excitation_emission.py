@@ -204,10 +204,11 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
     Σ pdf·Δλ = 1 with Δλ = numpy.gradient(emission); ``photon_yield`` (incidence, excitation) [1], converted
     photons per incident photon.
 
-    Raises :class:`ValidationError` (one line) when elastic + converted TIS exceeds 1, the photon yield
-    exceeds 1 or the emission spectrum is negative, each beyond :data:`CHECK_SIGMA` standard uncertainties.
-    A band whose converted TIS is not above CHECK_SIGMA·σ at any incidence converts nothing: its pdf row and
-    converted TIS are 0.
+    Raises :class:`ValidationError` (one line) when elastic + converted TIS or the photon yield exceeds 1 by
+    more than :data:`CHECK_SIGMA` standard uncertainties, or when the negative part of an emission spectrum
+    holds more than :data:`MAX_NEGATIVE_SHARE` of its photons (smaller negative noise is removed and its share
+    kept in ``emission_pdf_clipped_mass``). A band whose converted TIS is not above CHECK_SIGMA·σ at any
+    incidence converts nothing: its pdf row, converted TIS and photon yield are 0.
     """
     source = ds.attrs.get("source", "")
     matrix = bispectral_matrix(ds, series)

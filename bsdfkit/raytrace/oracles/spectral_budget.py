@@ -60,7 +60,7 @@ def spectral_module_budget(scene: Scene, n_base: int = 48, n_wall: int = 96, n_t
                 or np.ptp(model.converted_tis, axis=1).max() > 0:
             raise ValidationError("the spectral budget needs an angle-independent, Lambertian plate",
                                   file=scene.path, field="top.spectral", expected="TIS constant over incidence")
-        elastic, converted, pdf = model_on_bins(model)
+        elastic, converted, pdf = model_on_bins(model, plate)
         eR, eT = elastic[0, 0], elastic[1, 0]
         cR, cT = converted[0, 0], converted[1, 0]
         w = pdf / lam[None, :]
