@@ -71,7 +71,7 @@ KNOWN_SECTIONS = {
     "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
     "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
              "fallback_flux_W"},
-    "spectral": {"measurement", "scene", "rays", "seed"},
+    "spectral": {"measurement", "scene", "rays", "seed", "incidence_deg"},
 }
 
 #: Upper bounds of the recipe's sizes (checked before anything is computed).
@@ -287,13 +287,17 @@ def _spectral_options(table: dict | None, path: Path, trace: TraceStudyOptions,
         _typed(table, "scene", str, path, "spectral.scene")
     if scene is None or not scene.is_file():
         raise InputError("spectral comparison scene not found", file=path, field="spectral.scene",
-                         expected="an existing scene TOML (or a [trace] scene)", got=None if scene is None else str(scene))
+                         expected="an existing scene TOML (or a [trace] scene)",
+                         got=None if scene is None else str(scene))
     rays = _ranged(_typed(table, "rays", int, path, "spectral.rays", 200_000), path, "spectral.rays", 1, MAX_RAYS)
     seed = _ranged(_typed(table, "seed", int, path, "spectral.seed", trace.seed), path, "spectral.seed", 0,
                    2**63 - 2)
+    incidence = tuple(float(_ranged(v, path, f"spectral.incidence_deg[{k}]", 0.0, 90.0, hi_open=True))
+                      for k, v in enumerate(_numbers(table, "incidence_deg", path, section="spectral")))
     if "scene" in table:
         _scene_with_plate(scene, None)
     return SpectralComparisonOptions(measurement=measurement, scene=scene, rays=rays, seed=seed,
+                                     incidence_deg=incidence,
                                      led_peak_nm=fits.led_peak_nm, led_fwhm_nm=fits.led_fwhm_nm,
                                      emission_incidence_deg=fits.emission_incidence_deg)
 

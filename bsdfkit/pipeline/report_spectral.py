@@ -27,10 +27,11 @@ def spectral_comparison_section(rep: Any) -> str:
     b, chk = sc.get("bands") or {}, sc.get("direction_check") or {}
     tw, sp = sc.get("two_wavelength") or {}, sc.get("spectral") or {}
     holds = chk.get("holds")
+    below = "below" if chk.get("yellow_underestimated") else "NOT below"
     verdict = (f'<span class="{"agree" if holds else "differs"}">'
                f'{"the direction holds" if holds else "the direction does NOT hold"}</span>: near 470 nm '
                f'the two-wavelength spectrum is {"above" if chk.get("near_pump_overestimated") else "NOT above"} the '
-               f'spectral one, in the yellow band it is {"below" if chk.get("yellow_underestimated") else "NOT below"}.')
+               f'spectral one, in the yellow band it is {below}.')
     if not holds:
         rep.v.disagreements.append("spectral vs two-wavelength mode: the direction of §4.2 of [Cylindrical-module] "
                                    "does not hold on this plate (see its section)")

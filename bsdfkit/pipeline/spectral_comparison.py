@@ -43,6 +43,7 @@ from bsdfkit.core.conventions import (
     SIDES,
     band_label,
 )
+from bsdfkit.core.errors import InputError
 from bsdfkit.io.atomic import write_text
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
@@ -75,6 +76,8 @@ class SpectralComparisonOptions:
     by this measurement's); ``rays`` per mode; ``seed`` of the two-wavelength trace (the spectral trace uses
     seed + 1). The LED spectrum is the scene's, else the Gaussian ``led_peak_nm``/``led_fwhm_nm`` [nm] (the
     recipe's ``[fits]``); ``emission_incidence_deg`` [deg] is where the emission shape is measured.
+    ``incidence_deg`` [deg]: the measured incidences both plates are built from (all when empty); fewer make the
+    reduction cheaper (its cost is proportional to the incidences), and one makes both plates angle-independent.
     """
 
     measurement: Path
@@ -84,6 +87,7 @@ class SpectralComparisonOptions:
     led_peak_nm: float = 450.1
     led_fwhm_nm: float = 22.9
     emission_incidence_deg: float = 45.0
+    incidence_deg: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,18 @@ def emission_shape(scan: xr.Dataset, wavelength_nm: np.ndarray, incidence_deg: f
     return shape / (shape.sum() * (wavelength_nm[1] - wavelength_nm[0]))
 
 
+def _at_incidences(scan: xr.Dataset, incidence_deg: tuple[float, ...], source: Path) -> xr.Dataset:
+    """The records of ``scan`` at the given incidences [deg]; each must have been measured."""
+    theta = scan["theta_i"].values
+    measured = sorted({float(t) for t in np.round(theta, 6)})
+    for t in incidence_deg:
+        if not np.any(np.isclose(theta, t, atol=1e-6)):
+            raise InputError("incidence not measured", file=source, field="spectral.incidence_deg",
+                             expected="one of " + ", ".join(f"{m:g}" for m in measured), got=t)
+    keep = np.any(np.isclose(theta[:, None], np.asarray(incidence_deg)[None, :], atol=1e-6), axis=1)
+    return scan.isel(record=np.flatnonzero(keep))
+
+
 def _in_band(wavelength_nm: np.ndarray, band: tuple[float, float]) -> np.ndarray:
     return (wavelength_nm >= band[0]) & (wavelength_nm <= band[1])
 
@@ -152,7 +168,8 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
         seconds[name] = round(now - clock, 3)
         clock = now
 
-    scan = calibrate(read_scan(options.measurement))
+    measured = calibrate(read_scan(options.measurement))
+    scan = _at_incidences(measured, options.incidence_deg, options.measurement) if options.incidence_deg else measured
     lap("ingest")
     plate = plate_from_scan(scan, name=f"{scan.attrs.get('sample_name', '')} (two-wavelength)")
     lap("two_wavelength_plate")
@@ -175,7 +192,7 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
     sr = spec.spectral
     lam, step = sr.wavelength_nm, sr.step_nm
     led_shape = led_bin_power(leds.spectrum, lam, leds.spectrum_file) / step
-    yellow_shape = emission_shape(scan, lam, options.emission_incidence_deg)
+    yellow_shape = emission_shape(measured, lam, options.emission_incidence_deg)
     blue_W, yellow_W = two.extracted["blue"], two.extracted["yellow"]
     blue_se, yellow_se = two.std_err["blue"], two.std_err["yellow"]
     recon = blue_W * led_shape + yellow_W * yellow_shape
@@ -214,6 +231,7 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
         "emission_shape": (f"measured converted light of the blue configuration at {options.emission_incidence_deg:g}"
                            f" deg, both hemispheres, above {EXCITATION_BAND_NM[1]:g} nm, unit integral"),
         "bins_nm": [float(lam[0]), float(lam[-1]), step],
+        "plate_incidences_deg": list(plate.theta_i_deg),
         "bands": bands,
         "direction_check": {"observation": PAPER_OBSERVATION, "near_pump_overestimated": bool(over),
                             "yellow_underestimated": bool(under), "holds": bool(over and under)},
@@ -253,9 +271,10 @@ def comparison_lines(summary: dict) -> list[str]:
     b, chk = summary["bands"], summary["direction_check"]
     sp, tw = summary["spectral"], summary["two_wavelength"]
     led = sp["ledger"]["power_W"]
+    source = Path(summary["measurement"]).name
     return [
-        f"spectral vs two-wavelength mode ({summary['rays']} rays each, one plate from {Path(summary['measurement']).name}"
-        f"): {b['near_pump']['label']} {100 * b['near_pump']['relative_difference']:+.1f} ± "
+        f"spectral vs two-wavelength mode ({summary['rays']} rays each, one plate from {source}): "
+        f"{b['near_pump']['label']} {100 * b['near_pump']['relative_difference']:+.1f} ± "
         f"{100 * b['near_pump']['relative_difference_std']:.1f} %, yellow {b['yellow']['label']} "
         f"{100 * b['yellow']['relative_difference']:+.1f} ± {100 * b['yellow']['relative_difference_std']:.1f} % "
         f"(two-wavelength relative to spectral); paper direction {'holds' if chk['holds'] else 'DOES NOT HOLD'}",
