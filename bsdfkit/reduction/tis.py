@@ -200,17 +200,19 @@ class Hemisphere:
                    axis=(float(u_dir[0]), float(u_dir[1])))
 
     # -- evaluation ------------------------------------------------------------------------------------------
-    def coefficients(self, r: NDArray, psi: NDArray, p: float = 2.0, borrow: bool = True) -> NDArray[np.float64]:
+    def coefficients(self, r: NDArray, psi: NDArray, p: float = 2.0, borrow: bool = True,
+                     repeats: int = 1) -> NDArray[np.float64]:
         """Blend coefficients (n, 4) of the half-axes at polar nodes (r, ψ); rows sum to 1.
 
         Base weights |cos ψ|^p, |sin ψ|^p (normalised; p = 2 is the cos²/sin² blend) on the half-axes the
         node's quadrant faces. With ``borrow``, a half-axis asked for outside the radii it actually sampled
         hands its weight to the half-axes sampled at that radius (an isotropy assumption used only where data
         are missing); where none is, the half-axis sampled farthest out takes all the weight and its last value
-        is held.
+        is held. ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the nodes of
+        :func:`polar_grid`, ψ repeated over the radii): the blend is then computed once per block (same numbers).
         """
         r = np.asarray(r, dtype=np.float64).ravel()
-        psi = np.asarray(psi, dtype=np.float64).ravel()
+        psi = np.asarray(psi, dtype=np.float64).ravel()[::repeats]
         ca, sb = np.abs(np.cos(psi)) ** p, np.abs(np.sin(psi)) ** p
         norm = ca + sb
         ca, sb = ca / norm, sb / norm
@@ -218,6 +220,8 @@ class Hemisphere:
         sn = np.sin(psi)
         coef = np.stack([np.where(c > 0, ca, 0.0), np.where(c <= 0, ca, 0.0),
                          np.where(sn > 0, sb, 0.0), np.where(sn <= 0, sb, 0.0)], axis=1)
+        if repeats > 1:
+            coef = np.repeat(coef, repeats, axis=0)
         if borrow:
             lo = np.array([self.measured_range[h][0] for h in HALVES])
             hi = np.array([self.measured_range[h][1] for h in HALVES])
@@ -232,13 +236,14 @@ class Hemisphere:
         return coef
 
     def evaluate_polar(self, r: NDArray, psi: NDArray, mode: str = "linear", p: float = 2.0,
-                       borrow: bool = True) -> NDArray[np.float64]:
-        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame)."""
+                       borrow: bool = True, repeats: int = 1) -> NDArray[np.float64]:
+        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame; ``repeats``: see
+        :meth:`coefficients`)."""
         if mode not in ("linear", "log"):
             raise InputError("unknown interpolation mode", field="mode", expected="linear or log", got=mode)
         shape = np.broadcast(r, psi).shape
         r_flat = np.broadcast_to(r, shape).ravel()
-        coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow)
+        coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow, repeats)
         out = np.zeros(r_flat.size)
         for k, name in enumerate(HALVES):
             for h, share in self.halves[name]:
@@ -258,7 +263,7 @@ class Hemisphere:
     def weights(self, n_psi: int = 256, n_r: int = 400) -> NDArray[np.float64]:
         """w such that TIS = Σ_records w_k f_k (the reconstruction and quadrature are linear in the data)."""
         grid = polar_grid((float(np.hypot(*self.beta0)), 0.0), n_psi, n_r)
-        coef = self.coefficients(grid.r, grid.psi)
+        coef = self.coefficients(grid.r, grid.psi, repeats=n_r)
         w = np.zeros(self.n_records)
         for k, name in enumerate(HALVES):
             for h, share in self.halves[name]:
@@ -270,7 +275,7 @@ class Hemisphere:
 
     def tis(self, mode: str = "linear", n_psi: int = 256, n_r: int = 400, p: float = 2.0, borrow: bool = True) -> float:
         grid = polar_grid((float(np.hypot(*self.beta0)), 0.0), n_psi, n_r)
-        return float(np.sum(self.evaluate_polar(grid.r, grid.psi, mode, p, borrow) * grid.w))
+        return float(np.sum(self.evaluate_polar(grid.r, grid.psi, mode, p, borrow, repeats=n_r) * grid.w))
 
 
 def _interp(h: HalfProfile, r: NDArray, mode: str) -> NDArray[np.float64]:
