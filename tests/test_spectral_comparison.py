@@ -13,6 +13,7 @@ from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.pipeline.recipe import RunState, expected_outputs, load_recipe, stage_spectral_comparison
 from bsdfkit.pipeline.report import write_report
 from bsdfkit.pipeline.spectral_comparison import NEAR_PUMP_BAND_NM
+from bsdfkit.plotting.spectra import mode_spectra_figure
 
 RECIPE = ROOT / "fitting" / "cl830.toml"
 EEM = ROOT / "measurements" / "eem-synthetic"
@@ -119,3 +120,14 @@ def test_summary_keys_files_and_report_section(stage, tmp_path):
     assert 'id="spectral-modes"' in text and "460-500 nm" in text and "501-780 nm" in text
     assert ("the direction holds" in text) == sc["direction_check"]["holds"]
     assert "(75 %)" in text  # the stage's share of the run
+
+
+def test_figure_labels_both_spectra_and_the_difference_with_units():
+    lam = np.arange(380.0, 781.0, 1.0)
+    s = np.exp(-0.5 * ((lam - 560.0) / 50.0) ** 2) * 1e-3
+    fig = mode_spectra_figure(lam, s, 0.01 * s, 1.05 * s, 0.01 * s, {"near 470 nm": NEAR_PUMP_BAND_NM})
+    top, bottom = fig.axes
+    assert "(mW/nm)" in top.get_ylabel() and "(mW/nm)" in bottom.get_ylabel() and "(nm)" in bottom.get_xlabel()
+    labels = [t.get_text() for t in top.get_legend().get_texts()]
+    assert any("two-wavelength" in t for t in labels) and any("spectral mode" in t for t in labels)
+    np.testing.assert_allclose(bottom.lines[0].get_ydata(), 1e3 * 0.05 * s, rtol=1e-12)
