@@ -41,8 +41,8 @@ def spectral_comparison_section(rep: Any) -> str:
         rows.append([f"{_esc(what)}, {_esc(row.get('label', '?'))} (W)",
                      _pm_sig(row.get("two_wavelength_W"), row.get("two_wavelength_std_W")),
                      _pm_sig(row.get("spectral_W"), row.get("spectral_std_W")), _rel(row)])
-    rows += [["LER: extracted / emitted power (1)", _f(tw.get("LER"), 4), _pm_sig(sp.get("LER"), sp.get("LER_std")),
-              "—"],
+    rows += [["LER: extracted / emitted power (1)", _pm_sig(tw.get("LER"), tw.get("LER_std")),
+              _pm_sig(sp.get("LER"), sp.get("LER_std")), "—"],
              ["YBR (1), " + _esc(sp.get("YBR_definition", "")), _pm_sig(tw.get("YBR_spectrum"),
                                                                      tw.get("YBR_spectrum_std")),
               _pm_sig(sp.get("YBR"), sp.get("YBR_std")), "—"],
