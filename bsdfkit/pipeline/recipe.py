@@ -282,9 +282,7 @@ def _spectral_options(table: dict | None, path: Path, trace: TraceStudyOptions,
     if not measurement.is_dir():
         raise InputError("measurement folder not found", file=path, field="spectral.measurement",
                          expected="an existing excitation-emission raw export", got=str(measurement))
-    scene = path.parent / table["scene"] if "scene" in table else trace.scene
-    if "scene" in table:
-        _typed(table, "scene", str, path, "spectral.scene")
+    scene = path.parent / _typed(table, "scene", str, path, "spectral.scene") if "scene" in table else trace.scene
     if scene is None or not scene.is_file():
         raise InputError("spectral comparison scene not found", file=path, field="spectral.scene",
                          expected="an existing scene TOML (or a [trace] scene)",
