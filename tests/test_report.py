@@ -118,11 +118,12 @@ def built(tmp_path_factory):
 def test_report_is_one_self_contained_file(built):
     folder, path, text = built
     assert path == folder / REPORT_NAME
-    # every image is an embedded PNG: the run's figures, the two maps and the comparison figures drawn
+    # every image is an embedded PNG: the run's figures, the drawn Table 2 and budget comparisons, and the map
+    # grids of Fig. 10 (the wall-finish sweep file) and Fig. 12 (h = 43 mm: the device's map)
     images = re.findall(r"<img\b", text)
     assert len(images) == text.count(DATA_URI)
     pngs = sorted(folder.glob("*.png"))
-    assert text.count(DATA_URI) >= len(pngs) + 2 + 3
+    assert text.count(DATA_URI) == len(pngs) + 2 + 2
     for png in pngs:
         assert base64.b64encode(png.read_bytes()).decode("ascii") in text, png.name
     for uri in re.findall(r'src="data:image/png;base64,([^"]+)"', text):
@@ -256,3 +257,169 @@ def test_report_renders_in_headless_chromium(built, tmp_path):
     colours = np.unique((pixels[..., :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)
     assert len(colours) > 100  # text, tables and embedded figures, not one blank colour
     assert float(pixels[..., :3].std()) > 0.05
+
+
+# ---- the main job's studies on the paper's values (issue #16) ---------------------------------------------------
+PAPER_PANELS = {"wall.specular_fraction": (1.0, 0.6, 0.0), "cavity.height_mm": (10.0, 43.0, 80.0),
+                "leds.fwhm_deg": (30.0, 70.0, 120.0)}
+STUDY_OF = {"wall.specular_fraction": "specular_fraction", "cavity.height_mm": "height_mm",
+            "leds.fwhm_deg": "led_fwhm_deg"}
+
+
+def _full_run(folder):
+    """A run folder with the three map studies of the paper (one file per study) and a failed YBR-height trend."""
+    folder = _make_run(folder)
+    (folder / "trace_specular_fraction.nc").unlink()
+    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    device_ler = summary["trace"]["device"]["LER"]
+    studies = {}
+    for dim, values in PAPER_PANELS.items():
+        rows = []
+        maps = []
+        for k, value in enumerate(values):
+            e = _map(1.0 + 0.05 * k, tilt=0.1 * k)
+            maps.append(e)
+            is_device = (dim, value) in (("cavity.height_mm", 43.0), ("leds.fwhm_deg", 120.0))
+            rows.append({"values": {dim: value}, "LER": device_ler if is_device else 0.5 + 0.01 * k,
+                         "LER_std": 4e-4, "YBR": 8.8 - 0.2 * k if dim == "cavity.height_mm" else 8.0, "YBR_std": 0.05,
+                         "non_uniformity": non_uniformity(e), "ledger_error": 1e-14, "clamped_share": 0.0,
+                         "plate_incidence": {"measured": 0.7, "extrapolated": 0.3,
+                                             "mean_blue_incidence_deg": 43.0 - 2 * k},
+                         "same_trace_as_device": is_device})
+        studies[STUDY_OF[dim]] = rows
+        ds = xr.Dataset({"irradiance": ((dim, "y_mm", "x_mm"), np.stack(maps), {"units": "W/mm^2"})},
+                        coords=_coords() | {dim: (dim, list(values))})
+        ds.attrs.update(emitted_W=1.0)
+        netcdf.save(ds, folder / f"trace_{STUDY_OF[dim]}.nc")
+    from bsdfkit.pipeline.recipe import _trends
+
+    class Device:
+        LER = device_ler
+
+    trends = _trends(Device, studies)
+    plate = {"measured_incidences_deg": [5.0, 45.0, 56.0], "extrapolated_incidences_deg": [0.0, 60.0, 90.0],
+             "grid_deg": [0.0, 5.0, 45.0, 56.0, 60.0, 90.0], "clamped_share_max": 0.0,
+             "device_extrapolated_power_share": 0.256, "extrapolated_power_share_max": 0.43,
+             "tis": {"bibs_transmission": [0.064, 0.064, 0.054, 0.047, 0.046, 0.045]}}
+    trace = {"device": {"LER": device_ler, "plate_incidence": {"measured": 0.74, "extrapolated": 0.26,
+                                                                "mean_blue_incidence_deg": 39.0}},
+             "studies": studies, "trends": trends, "plate": plate}
+    (folder / "trace.json").write_text(json.dumps(trace), encoding="utf-8")
+    summary["trace"]["trends"] = trends
+    summary["trace"]["plate"] = {k: plate[k] for k in ("measured_incidences_deg", "extrapolated_incidences_deg",
+                                                       "clamped_share_max", "device_extrapolated_power_share",
+                                                       "extrapolated_power_share_max")}
+    (folder / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    return folder, trends
+
+
+def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_uniformity(tmp_path):
+    folder, _ = _full_run(tmp_path / "run")
+    text = write_report(folder).read_text(encoding="utf-8")
+    maps = text[text.index('<section id="maps">'):text.index('<section id="spectrum">')]
+    assert re.search(r"Maps of the paper not in this run: none\.", maps)
+    # one grid of three maps per paper figure, plus the lone device map
+    for fig_no in ("Fig. 10", "Fig. 12", "Fig. 14"):
+        assert f'alt="{fig_no} maps"' in maps
+    for label, paper in (("specular reflector", "56"), ("perfect diffuser", "36"), ("h = 10 mm", "91"),
+                         ("h = 43 mm", "36"), ("FWHM 30°", "76"), ("FWHM 120° (Lambertian)", "36")):
+        row = re.search(rf"<td class=\"l\">{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">"
+                        rf"([\d.]+)</td><td class=\"\">{paper}</td>", maps)
+        assert row is not None, label
+    for label in ("diffuse-to-specular 40 %", "h = 80 mm", "FWHM 70°"):
+        assert re.search(rf"{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">[\d.]+</td>"
+                         r"<td class=\"\">—</td>", maps), label
+    # this run's value in the table is the map's own (E_max − E_min)/(E_max + E_min)
+    nu = 100 * map_non_uniformity(xr.DataArray(_map(1.05, tilt=0.1), dims=("y_mm", "x_mm"), coords=_coords()))
+    assert f"<td class=\"\">{nu:.1f}</td><td class=\"\">—</td>" in maps  # the 40 % diffuse panel (k = 1)
+
+
+def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(tmp_path):
+    folder, trends = _full_run(tmp_path / "run")
+    name = "YBR slightly lower for short cavities (Fig. 11)"
+    assert trends[name]["holds"] is False and "Fig. 11" in name
+    assert "lower for small heights" in trends[name]["paper"]
+    text = write_report(folder).read_text(encoding="utf-8")
+    opening = text[:text.index('<section id="measurement">')]
+    assert f"trend of [Cylindrical-module] not reproduced: {name}" in opening
+    plate = text[text.index('<section id="plate">'):text.index('<section id="maps">')]
+    assert "This run <b>disagrees</b> with the paper here" in plate
+    assert "43.0° at 10 mm" in plate and "41.0° at 43 mm" in plate  # the mean blue incidences that explain it
+    assert "0.0 %" in plate and "25.6 %" in plate and "model-extrapolated" in plate
+
+
+def test_trends_follow_the_papers_direction():
+    from bsdfkit.pipeline.recipe import _trends
+
+    def rows(key, values, **series):
+        return [{"values": {key: v}, **{q: s[k] for q, s in series.items()},
+                 "plate_incidence": {"mean_blue_incidence_deg": 40.0}} for k, v in enumerate(values)]
+
+    class Device:
+        LER = 0.56
+
+    studies = {"reflectance": rows("wall.reflectance", [0.8, 0.98], LER=[0.30, 0.55], YBR=[6.2, 8.4],
+                                   non_uniformity=[0.2, 0.16]),
+               "height_mm": rows("cavity.height_mm", [10.0, 43.0, 80.0], LER=[0.59, 0.56, 0.52],
+                                 YBR=[8.2, 8.4, 8.5], non_uniformity=[0.9, 0.36, 0.3]),
+               "led_fwhm_deg": rows("leds.fwhm_deg", [30.0, 120.0], LER=[0.57, 0.56], YBR=[7.6, 8.4],
+                                    non_uniformity=[0.76, 0.36])}
+    t = _trends(Device, studies)
+    assert all(x["holds"] for x in t.values()), {k: v for k, v in t.items() if not v["holds"]}
+    studies["height_mm"] = rows("cavity.height_mm", [10.0, 43.0, 80.0], LER=[0.52, 0.56, 0.59],
+                                YBR=[8.8, 8.4, 8.3], non_uniformity=[0.3, 0.36, 0.9])
+    t = _trends(Device, studies)
+    assert not t["LER falls with cavity height (Fig. 11)"]["holds"]
+    assert not t["YBR slightly lower for short cavities (Fig. 11)"]["holds"]
+    assert not t["non-uniformity larger for short cavities (Fig. 12)"]["holds"]
+
+
+def test_plate_incidence_shares_from_the_histogram():
+    from bsdfkit.pipeline.recipe import incidence_shares
+
+    class Result:
+        incidence_histogram = np.vstack([np.ones(90), 3 * np.ones(90)])  # 1° bins, blue and yellow
+
+    shares = incidence_shares(Result, (5.0, 56.0))
+    # bin centres 5.5 … 55.5 lie in [5, 56]: 51 of 90 bins
+    assert shares["measured"] == pytest.approx(51 / 90, rel=1e-12)
+    assert shares["measured"] + shares["extrapolated"] == pytest.approx(1.0, rel=1e-12)
+    assert shares["mean_blue_incidence_deg"] == pytest.approx(45.0, rel=1e-12)
+
+
+def _axes_read_like_engineering_figures(fig) -> None:
+    for ax in fig.axes:
+        if not ax.get_visible() or ax.get_label() == "<colorbar>":
+            continue
+        assert re.search(r"\(.+\)", ax.get_xlabel()), ax.get_xlabel()
+        assert re.search(r"\(.+\)", ax.get_ylabel()), ax.get_ylabel()
+        assert ax.get_legend() is not None and ax.get_legend().get_texts(), ax.get_title()
+
+
+def test_study_and_incidence_figures_label_every_axis_with_units_and_name_data_and_model():
+    from bsdfkit.plotting.figures import plate_incidence_figure, trace_studies_figure
+
+    class Device:
+        LER, YBR, non_uniformity = 0.56, 8.5, 0.16
+
+    def row(key, v, k):
+        return {"values": {key: v}, "LER": 0.5 + 0.01 * k, "LER_std": 2e-4, "YBR": 8 + 0.1 * k, "YBR_std": 0.05,
+                "non_uniformity": 0.2 - 0.01 * k}
+
+    studies = {"reflectance": [row("wall.reflectance", v, k) for k, v in enumerate((0.8, 0.9, 0.98))],
+               "height_mm": [row("cavity.height_mm", v, k) for k, v in enumerate((10.0, 43.0, 80.0))]}
+    fig = trace_studies_figure(Device, studies, {("reflectance", "LER"): [(0.8, 28.0), (0.98, 58.0)]})
+    assert len(fig.axes) == 6
+    _axes_read_like_engineering_figures(fig)
+    # LER and YBR carry error bars (± 1σ), one quantity per axis: each row's label names one quantity
+    ler_ax = fig.axes[0]
+    assert ler_ax.containers and "LER" in ler_ax.get_ylabel() and "YBR" not in ler_ax.get_ylabel()
+    assert "[Cylindrical-module]" in [t.get_text() for t in ler_ax.get_legend().get_texts()]
+    grid = [0.0, 5.0, 45.0, 56.0, 90.0]
+    tis = {k: [0.1, 0.1, 0.11, 0.12, 0.09] for k in ("bibs_transmission", "bibs_reflection", "biys_transmission",
+                                                      "biys_reflection")}
+    fig = plate_incidence_figure({"h = 10 mm": np.ones(90)}, (5.0, 56.0), grid, tis,
+                                 {"bibs_transmission": ([5.0, 45.0, 56.0], [0.1, 0.11, 0.12], [0.01] * 3)})
+    _axes_read_like_engineering_figures(fig)
+    labels = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert any("measured ± 1σ" in x for x in labels) and "plate, model-extrapolated" in labels

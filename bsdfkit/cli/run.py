@@ -1,11 +1,24 @@
-"""``bsdfkit run RECIPE.toml -o OUT/``: the main job."""
+"""``bsdfkit run RECIPE.toml -o OUT/``: the main job.
+
+While it runs, the stages and the traces of the trace stage show a progress bar (``rich``) on stderr when
+stderr is a terminal; ``--quiet`` turns it and the stage lines off. Nothing of it goes to stdout, so ``--json``
+output stays one JSON document.
+"""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+from collections.abc import Callable, Iterator
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
+
+#: What the progress bars say for the run's progress tasks.
+TASKS = {"stages": "stages of the run", "trace": "module traces (device + studies)"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -14,12 +27,39 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="output folder")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="no stage lines and no progress bars on stderr")
     p.set_defaults(func=_run)
 
 
-def _run(args: argparse.Namespace) -> int:
+@contextlib.contextmanager
+def run_feedback(quiet: bool) -> Iterator[tuple[Callable[[str], None], Callable[[str, int, int], None] | None]]:
+    """``(log, progress)`` callbacks for :func:`bsdfkit.api.run`: stage lines and rich progress bars on stderr.
 
-    summary = api.run(args.recipe, args.output, args.force, log=lambda m: print(m, file=sys.stderr))
+    Bars only when stderr is a terminal (a log file or a pipe gets the stage lines alone); nothing at all with
+    ``quiet``.
+    """
+    if quiet:
+        yield (lambda message: None), None
+        return
+    if not sys.stderr.isatty():
+        yield (lambda message: print(message, file=sys.stderr)), None
+        return
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=Console(stderr=True)) as bars:
+        tasks: dict[str, int] = {}
+
+        def progress(task: str, done: int, total: int) -> None:
+            if task not in tasks:
+                tasks[task] = bars.add_task(TASKS.get(task, task), total=total)
+            bars.update(tasks[task], completed=done, total=total)
+
+        # plain text: a stage line may hold brackets ("[Power-budget]") that rich would take for markup
+        yield (lambda message: bars.console.print(message, markup=False, highlight=False)), progress
+
+
+def _run(args: argparse.Namespace) -> int:
+    with run_feedback(args.quiet) as (log, progress):
+        summary = api.run(args.recipe, args.output, args.force, log=log, progress=progress)
     if args.json:
         emit_json(summary)
     else:

@@ -40,7 +40,7 @@ from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
-from bsdfkit.pipeline.report import write_report
+from bsdfkit.pipeline.report import paper_values, write_report
 from bsdfkit.pipeline.spectral_comparison import (
     SpectralComparisonOptions,
     compare_tracer_modes,
@@ -52,10 +52,12 @@ from bsdfkit.plotting.figures import (
     budget_figure,
     in_plane_bsdf_figure,
     module_spectrum_figure,
+    plate_incidence_figure,
     save_figure,
     trace_studies_figure,
 )
 from bsdfkit.raytrace import trace, with_values
+from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.reduction import budget, spectral
@@ -348,7 +350,8 @@ def expected_outputs(recipe: Recipe) -> list[str]:
     names += [f"exports/{i}_{s}.{EXPORT_SUFFIX[f]}" for i in e.interactions for s in e.sides for f in e.formats]
     names += ["bsdf_fits.json", "bsdf_fits.png"]
     if recipe.trace.scene is not None:
-        names += ["trace.json", "trace_device.nc", "trace_studies.png"]
+        names += ["trace.json", "trace_device.nc", "trace_studies.png", "trace_incidence.png"]
+        names += [f"trace_{study}.nc" for study in STUDIES if getattr(recipe.trace, study)]
     names += ["module_spectrum.csv", "module_spectrum.png", "module_spectrum.json"]
     if recipe.spectral is not None:
         names += ["spectral_comparison.png", "spectral_comparison.csv"]
@@ -385,6 +388,8 @@ class RunState:
     summary: dict = field(default_factory=dict)
     outputs: dict[str, Callable[[Path, bool], object]] = field(default_factory=dict)
     log: Callable[[str], None] = lambda message: None
+    #: progress of a long stage: (task, done, total), e.g. ("trace", 3, 14) after the third of 14 traces
+    progress: Callable[[str, int, int], None] = lambda task, done, total: None
 
 
 def stage_ingest(state: RunState) -> None:
@@ -488,62 +493,160 @@ def stage_exports(state: RunState) -> None:
                 state.outputs[f"exports/{inter}_{side}.{suffix[fmt]}"] = writer(inter, side, fmt)
 
 
+#: The §5 studies of [Cylindrical-module]: recipe key → (the scene keys a study value sets, the dimension of its
+#: saved maps). Wall finish sets walls and base alike, as reflectance does.
+STUDIES = {
+    "reflectance": (("wall.reflectance", "base.reflectance"), "wall.reflectance"),
+    "height_mm": (("cavity.height_mm",), "cavity.height_mm"),
+    "led_fwhm_deg": (("leds.fwhm_deg",), "leds.fwhm_deg"),
+    "specular_fraction": (("wall.specular_fraction", "base.specular_fraction"), "wall.specular_fraction"),
+}
+#: FWHM of a Lambertian emitter, I ∝ cos θ: half the peak at θ = 60° [deg]
+LAMBERTIAN_FWHM_DEG = 120.0
+
+
+def _is_device_value(scene, study: str, value: float) -> bool:
+    """Whether the study point ``value`` is the device itself (then its trace is the device's, not repeated)."""
+    if study == "reflectance":
+        return scene.wall.reflectance == value == scene.base.reflectance
+    if study == "height_mm":
+        return scene.cavity.height_mm == value
+    if study == "led_fwhm_deg":
+        fwhm = LAMBERTIAN_FWHM_DEG if scene.leds.fwhm is None else math.degrees(scene.leds.fwhm)
+        return abs(fwhm - value) < 1e-9
+    return scene.wall.specular_fraction == value == scene.base.specular_fraction
+
+
+def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:
+    """How the power reaching the plate splits between measured and model-extrapolated incidences.
+
+    From the tracer's incidence histogram (power per 90/bins-degree bin, blue and yellow): a bin counts as
+    measured when its centre lies in ``measured_deg`` (inclusive). Returns the shares [1] of the total power
+    on the plate and the power-weighted mean incidence [deg] of the blue light reaching it.
+    """
+    hist = np.asarray(result.incidence_histogram, dtype=float)
+    centres = (np.arange(hist.shape[1]) + 0.5) * 90.0 / hist.shape[1]
+    inside = (centres >= measured_deg[0]) & (centres <= measured_deg[1])
+    total = float(hist.sum())
+    blue = hist[0]
+    return {"measured": float(hist[:, inside].sum()) / total if total else float("nan"),
+            "extrapolated": float(hist[:, ~inside].sum()) / total if total else float("nan"),
+            "mean_blue_incidence_deg": float((blue * centres).sum() / blue.sum()) if blue.sum() else float("nan")}
+
+
 def stage_trace(state: RunState) -> None:
     """Trace the module with the plate built from this run's own results, and the §5 studies around it.
 
-    Trends of the cylindrical-module paper are checked and reported (not assumed): LER falls with lower wall
-    reflectance (Fig. 8) and with height (Fig. 11), barely moves with LED FWHM (Fig. 13); non-uniformity is
-    larger for mirror walls than diffuse ones (Fig. 10) and for short cavities (Fig. 12).
+    The plate covers 0–90° (measured TIS at the measured incidences, model-extrapolated elsewhere,
+    :func:`bsdfkit.raytrace.plate_from_scan.plate_from_scan`); the shares of the plate's incident power on
+    measured and extrapolated incidences are reported per trace. A study point equal to the device (h = 43 mm,
+    a Lambertian LED = FWHM 120°) reuses the device's trace. Each study's maps and incidence histograms are
+    saved (``trace_<study>.nc``). Trends of the cylindrical-module paper are checked and reported, not assumed
+    (:func:`_trends`).
     """
-
-
     opts = state.recipe.trace
     if opts.scene is None:
         return
     plate = plate_from_scan(state.scan, state.tis, name=state.recipe.name,
                             fits={k: v[0] for k, v in state.fits.items()})
-    scene = _scene_with_plate(opts.scene, plate)
+    measured = (float(state.tis["theta_i"].values[0]), float(state.tis["theta_i"].values[-1]))
+    # the report needs every trace's irradiance map and incidence histogram, whatever the scene file says
+    scene = with_values(_scene_with_plate(opts.scene, plate),
+                        {"tallies.irradiance_map": True, "tallies.incidence_histogram": True})
+    points = [(study, v) for study in STUDIES for v in getattr(opts, study) if not _is_device_value(scene, study, v)]
+    total = 1 + len(points)
+    state.progress("trace", 0, total)
     device = trace(scene, opts.rays, opts.seed)
+    done = 1
+    state.progress("trace", done, total)
     state.device = device
-    results = {"device": device.to_dict()}
+    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured)}}
     studies: dict[str, list[dict]] = {}
-
-    def run(label: str, values: dict) -> dict:
-        r = trace(with_values(scene, values), opts.rays, opts.seed)
-        row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR, "YBR_std": r.std_err["YBR"],
-               "non_uniformity": r.non_uniformity, "ledger_error": r.ledger_error}
-        studies.setdefault(label, []).append(row)
-        return row
-
-    for rho in opts.reflectance:
-        run("reflectance", {"wall.reflectance": rho, "base.reflectance": rho})
-    for h in opts.height_mm:
-        run("height_mm", {"cavity.height_mm": h})
-    for fwhm in opts.led_fwhm_deg:
-        run("led_fwhm_deg", {"leds.fwhm_deg": fwhm})
-    for spec in opts.specular_fraction:
-        run("specular_fraction", {"wall.specular_fraction": spec, "base.specular_fraction": spec})
+    datasets: dict[str, list[xr.Dataset]] = {}
+    blue_on_plate: dict[str, np.ndarray] = {}
+    for study in STUDIES:
+        keys, dim = STUDIES[study]
+        for value in getattr(opts, study):
+            values = dict.fromkeys(keys, value)
+            if _is_device_value(scene, study, value):
+                r, same = device, True
+            else:
+                r, same = trace(with_values(scene, values), opts.rays, opts.seed), False
+                done += 1
+                state.progress("trace", done, total)
+            row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
+                   "YBR_std": r.std_err["YBR"], "non_uniformity": r.non_uniformity, "ledger_error": r.ledger_error,
+                   "clamped_share": r.clamped_interactions / r.plate_interactions if r.plate_interactions else 0.0,
+                   "plate_incidence": incidence_shares(r, measured), "same_trace_as_device": same}
+            studies.setdefault(study, []).append(row)
+            datasets.setdefault(study, []).append(r.to_dataset().expand_dims({dim: [value]}))
+            if study == "height_mm" and r.incidence_histogram is not None:
+                blue_on_plate[f"h = {value:g} mm" + (" (device)" if same else "")] = r.incidence_histogram[0]
     results["studies"] = studies
     results["trends"] = _trends(device, studies)
+    rows = [results["device"]] + [r for rs in studies.values() for r in rs]
+    worst_clamped = max(r["clamped_share"] if "clamped_share" in r else
+                        r["clamped_incidences"]["fraction_of_plate_interactions"] for r in rows)
+    worst_extra = max(rows, key=lambda r: r["plate_incidence"]["extrapolated"])
+    results["plate"] = {
+        "measured_incidences_deg": [float(t) for t in state.tis["theta_i"].values],
+        "grid_deg": list(plate.theta_i_deg), "notes": plate.notes,
+        "extrapolated_incidences_deg": [t for t in plate.theta_i_deg if not measured[0] <= t <= measured[1]],
+        "clamped_share_max": worst_clamped,
+        "device_extrapolated_power_share": results["device"]["plate_incidence"]["extrapolated"],
+        "extrapolated_power_share_max": worst_extra["plate_incidence"]["extrapolated"],
+        "extrapolated_power_share_max_at": worst_extra.get("values", "device"),
+        "tis": {c: list(plate.channel(c).tis) for c in CHANNELS}}
     state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity",
                                                                          "ledger_error", "rays", "elapsed_s",
                                                                          "interactions_per_s")},
                               "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
                               "YBR_definition": RAY_YBR_DEFINITION,
+                              "plate": {k: results["plate"][k] for k in (
+                                  "measured_incidences_deg", "extrapolated_incidences_deg", "clamped_share_max",
+                                  "device_extrapolated_power_share", "extrapolated_power_share_max")},
                               "trends": results["trends"]}
     state.outputs["trace.json"] = lambda p, force: write_text(p, dumps(results), force)
     device_ds = device.to_dataset()
     state.outputs["trace_device.nc"] = lambda p, force: netcdf.save(device_ds, p, force)
-    fig = trace_studies_figure(device, studies)
+    for study, parts in datasets.items():
+        ds = xr.concat(parts, dim=STUDIES[study][1], combine_attrs="override")
+        state.outputs[f"trace_{study}.nc"] = lambda p, force, ds=ds: netcdf.save(ds, p, force)
+    fig = trace_studies_figure(device, studies, _paper_study_points())
     state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
+    tis = state.tis
+    meas = {f"{i}_{side}": (tis["theta_i"].values, tis["tis"].sel(interaction=i, side=side).values,
+                            tis["tis_std"].sel(interaction=i, side=side).values)
+            for i in ("bibs", "biys") for side in ("reflection", "transmission")}
+    inc_fig = plate_incidence_figure(blue_on_plate or {"device": device.incidence_histogram[0]}, measured,
+                                     plate.theta_i_deg, results["plate"]["tis"], meas,
+                                     title=f"plate {plate.name}: incidences of the traces and the plate's TIS")
+    state.outputs["trace_incidence.png"] = lambda p, force: save_figure(inc_fig, p, force)
     lines = [f"module trace ({opts.rays} rays, plate from this run): "
              f"LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
              f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f} (yellow / blue extracted ray power), "
              f"non-uniformity {device.non_uniformity:.3f}, "
-             f"ledger error {device.ledger_error:.1e}"]
+             f"ledger error {device.ledger_error:.1e}",
+             f"  plate incidences: measured {measured[0]:g}-{measured[1]:g} deg, model-extrapolated elsewhere; "
+             f"clamped {100 * worst_clamped:.1f} % of plate interactions (largest of all traces); power on "
+             f"extrapolated incidences {100 * results['plate']['device_extrapolated_power_share']:.1f} % (device), "
+             f"at most {100 * results['plate']['extrapolated_power_share_max']:.1f} %"]
     lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({t['detail']})"
               for name, t in results["trends"].items()]
     state.summary.setdefault("report_lines", []).extend(lines)
+
+
+def _paper_study_points() -> dict[tuple[str, str], list[tuple[float, float]]]:
+    """The numbers [Cylindrical-module] prints for the studies, in the units of :func:`trace_studies_figure`."""
+    cm = paper_values()["cylindrical_module"]
+    fig8, h, fw, f10 = (cm["fig8_reflectance"], cm["fig11_fig12_height"], cm["fig13_fig14_led_fwhm"],
+                        cm["fig10_non_uniformity_percent"])
+    return {("reflectance", "LER"): list(zip(fig8["reflectance"], fig8["LER_percent"])),
+            ("reflectance", "YBR"): list(zip(fig8["reflectance"], fig8["YBR"])),
+            ("height_mm", "LER"): [(h["best_LER_height_mm"], h["best_LER_percent"])],
+            ("height_mm", "non_uniformity"): [(float(k), v) for k, v in h["non_uniformity_percent"].items()],
+            ("led_fwhm_deg", "non_uniformity"): [(float(k), v) for k, v in fw["non_uniformity_percent"].items()],
+            ("specular_fraction", "non_uniformity"): [(1.0, f10["mirror"]), (0.0, f10["perfect_diffuser"])]}
 
 
 def _scene_with_plate(path: Path, plate):
@@ -562,41 +665,80 @@ def _scene_with_plate(path: Path, plate):
     return parse_scene(data, path, preloaded={"plate": ((key, top[key]), plate)})
 
 
+def _sorted_rows(studies: dict[str, list[dict]], study: str) -> list[dict]:
+    key = STUDIES[study][1]
+    return sorted(studies.get(study, []), key=lambda r: r["values"][key])
+
+
+def _trend(holds: bool, paper: str, rows: list[dict], study: str, quantity: str, fmt: str, extra: str = "") -> dict:
+    key = STUDIES[study][1]
+    unit = {"height_mm": " mm", "led_fwhm_deg": "°"}.get(study, "")
+    scale = 100.0 if quantity in ("LER", "non_uniformity") else 1.0
+    pct = " %" if scale == 100.0 else ""
+    numbers = ", ".join(f"{r['values'][key]:g}{unit}: {scale * r[quantity]:{fmt}}{pct}" for r in rows)
+    return {"holds": bool(holds), "paper": paper, "quantity": quantity, "study": study,
+            "detail": numbers + (f"; {extra}" if extra else "")}
+
+
 def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
-    out = {}
-    if len(studies.get("reflectance", [])) >= 2:
-        rows = sorted(studies["reflectance"], key=lambda r: r["values"]["wall.reflectance"])
-        ler = [r["LER"] for r in rows]
-        out["LER falls with reflectance (Fig. 8)"] = {
-            "holds": bool(np.all(np.diff(ler) > 0)),
-            "detail": ", ".join(f"ρ {r['values']['wall.reflectance']:g}: {r['LER']:.3f}" for r in rows)}
-    if len(studies.get("height_mm", [])) >= 2:
-        rows = sorted(studies["height_mm"], key=lambda r: r["values"]["cavity.height_mm"])
-        ler = [r["LER"] for r in rows]
-        out["LER falls with height (Fig. 11)"] = {
-            "holds": bool(np.all(np.diff(ler) < 0)),
-            "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['LER']:.3f}" for r in rows)}
-        nu = [r["non_uniformity"] for r in rows]
-        out["non-uniformity larger for short cavities (Fig. 12)"] = {
-            "holds": bool(nu[0] > nu[-1]),
-            "detail": ", ".join(f"h {r['values']['cavity.height_mm']:g} mm: {r['non_uniformity']:.3f}" for r in rows)}
-    if studies.get("led_fwhm_deg") and studies.get("reflectance") and studies.get("height_mm"):
-        # "Barely moves" as the paper ranks it: the FWHM effect is the smallest of the studied LER effects.
+    """The §5 trends of [Cylindrical-module], each checked on this run's studies in the paper's direction.
+
+    Each entry: ``holds`` (bool), ``paper`` (what the paper finds, with its figure), ``quantity``, ``study``
+    and ``detail`` (this run's numbers). A trend needs at least two points of its study.
+    """
+    out: dict[str, dict] = {}
+    refl = _sorted_rows(studies, "reflectance")
+    if len(refl) >= 2:
+        out["LER rises with wall reflectance (Fig. 8)"] = _trend(
+            all(np.diff([r["LER"] for r in refl]) > 0), "LER 28 % at ρ = 0.80 to 58 % at ρ = 0.98", refl,
+            "reflectance", "LER", ".1f")
+        out["YBR rises with wall reflectance (Fig. 8)"] = _trend(
+            refl[-1]["YBR"] > refl[0]["YBR"], "YBR 6 at ρ = 0.80 to 9 at ρ = 0.98", refl, "reflectance", "YBR",
+            ".2f")
+    height = _sorted_rows(studies, "height_mm")
+    if len(height) >= 2:
+        out["LER falls with cavity height (Fig. 11)"] = _trend(
+            all(np.diff([r["LER"] for r in height]) < 0), "LER decreases with height; best 63 % at 10 mm", height,
+            "height_mm", "LER", ".1f")
+        shortest, rest = height[0], height[1:]
+        out["YBR slightly lower for short cavities (Fig. 11)"] = _trend(
+            all(shortest["YBR"] < r["YBR"] for r in rest),
+            "YBR slightly lower for small heights: blue light meets the plate at smaller incidences, where more "
+            "blue is transmitted (bibs, Fig. 4)", height, "height_mm", "YBR", ".2f",
+            "mean incidence of the blue power on the plate: " + ", ".join(
+                f"{r['values']['cavity.height_mm']:g} mm: {r['plate_incidence']['mean_blue_incidence_deg']:.1f}°"
+                for r in height))
+        out["non-uniformity larger for short cavities (Fig. 12)"] = _trend(
+            height[0]["non_uniformity"] > height[-1]["non_uniformity"], "91 % at 10 mm vs 36 % at 42 mm", height,
+            "height_mm", "non_uniformity", ".1f")
+    fwhm = _sorted_rows(studies, "led_fwhm_deg")
+    if len(fwhm) >= 2:
         spans = {k: max(r["LER"] for r in studies[k]) - min(r["LER"] for r in studies[k])
-                 for k in ("reflectance", "height_mm")}
-        moves = max(abs(r["LER"] - device.LER) for r in studies["led_fwhm_deg"])
-        out["LER barely moves with LED FWHM (Fig. 13)"] = {
-            "holds": bool(moves < min(spans.values())),
-            "detail": f"largest change {moves:.3f} vs the Lambertian device; LER spans {spans['reflectance']:.3f} over "
-                      f"reflectance and {spans['height_mm']:.3f} over height (criterion: smallest effect); "
-                      + ", ".join(f"FWHM {r['values']['leds.fwhm_deg']:g}°: {r['LER']:.3f}"
-                                  for r in studies["led_fwhm_deg"])}
-    if studies.get("specular_fraction"):
-        rows = sorted(studies["specular_fraction"], key=lambda r: r["values"]["wall.specular_fraction"])
-        out["non-uniformity larger for mirror walls (Fig. 10)"] = {
-            "holds": bool(rows[-1]["non_uniformity"] > rows[0]["non_uniformity"]),
-            "detail": ", ".join(f"specular {r['values']['wall.specular_fraction']:g}: {r['non_uniformity']:.3f}"
-                                for r in rows)}
+                 for k in ("reflectance", "height_mm") if len(studies.get(k, [])) >= 2}
+        moves = max(r["LER"] for r in fwhm) - min(r["LER"] for r in fwhm)
+        out["LER barely moves with LED FWHM (Fig. 13)"] = _trend(
+            moves < min(spans.values(), default=math.inf), "negligible influence of the FWHM on the LER", fwhm,
+            "led_fwhm_deg", "LER", ".1f",
+            f"LER span {100 * moves:.1f} pp vs " + ", ".join(f"{100 * v:.1f} pp over {k}" for k, v in spans.items())
+            + " (criterion: the smallest LER effect)")
+        out["YBR lower for narrow LED beams (Fig. 13)"] = _trend(
+            fwhm[0]["YBR"] < fwhm[-1]["YBR"],
+            "bibs transmits more blue at small incidences, which lowers the YBR of collimated LEDs", fwhm,
+            "led_fwhm_deg", "YBR", ".2f")
+        out["non-uniformity larger for narrow LED beams (Fig. 14)"] = _trend(
+            all(np.diff([r["non_uniformity"] for r in fwhm]) < 0), "76 % at FWHM 30° (Lambertian: 36 %)", fwhm,
+            "led_fwhm_deg", "non_uniformity", ".1f")
+    spec = _sorted_rows(studies, "specular_fraction")
+    if len(spec) >= 2:
+        out["non-uniformity larger for more specular walls (Fig. 10)"] = _trend(
+            all(np.diff([r["non_uniformity"] for r in spec]) > 0), "56 % for a mirror, 36 % for a perfect diffuser",
+            spec, "specular_fraction", "non_uniformity", ".1f")
+        span = max(r["LER"] for r in spec) - min(r["LER"] for r in spec)
+        refl_span = max((r["LER"] for r in refl), default=0.0) - min((r["LER"] for r in refl), default=0.0)
+        out["LER slightly higher with more specular walls (Fig. 9)"] = _trend(
+            spec[-1]["LER"] >= spec[0]["LER"] and (not refl or span < refl_span),
+            "the wall finish has no relevant effect on LER and YBR; a more specular reflector performs slightly "
+            "better", spec, "specular_fraction", "LER", ".1f")
     return out
 
 
@@ -715,15 +857,20 @@ STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
 
 
 def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
-        log: Callable[[str], None] = lambda message: None) -> dict:
-    """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary."""
+        log: Callable[[str], None] = lambda message: None,
+        progress: Callable[[str, int, int], None] | None = None) -> dict:
+    """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary.
+
+    ``log(message)`` receives one line per stage; ``progress(task, done, total)`` is called as the stages
+    (task ``"stages"``) and the traces of the trace stage (task ``"trace"``) complete.
+    """
     recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
     out_dir = Path(out_dir)
     inputs = (recipe.path, recipe.measurement, recipe.trace.scene,
               *((recipe.spectral.measurement, recipe.spectral.scene) if recipe.spectral else ()))
     # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
     with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe)) as out:
-        return _run_stages(recipe, out, log)
+        return _run_stages(recipe, out, log, progress)
 
 
 def _output_estimate(recipe: Recipe) -> int:
@@ -735,14 +882,19 @@ def _output_estimate(recipe: Recipe) -> int:
     return 10 * size
 
 
-def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None]) -> dict:
+def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
+                progress: Callable[[str, int, int], None] | None = None) -> dict:
     state = RunState(recipe=recipe, log=log)
+    if progress is not None:
+        state.progress = progress
     timings = {}
-    for name, stage in STAGES:
+    for k, (name, stage) in enumerate(STAGES):
         start = time.perf_counter()
         log(f"stage {name} ...")
+        state.progress("stages", k, len(STAGES))
         stage(state)
         timings[name] = round(time.perf_counter() - start, 3)
+    state.progress("stages", len(STAGES), len(STAGES))
     names = list(state.outputs) + ["summary.json", "report.html"]
     for name, writer in state.outputs.items():
         writer(out.path(name), True)  # into the staging folder; moved into place when the set is complete

@@ -8,7 +8,7 @@ from typing import Any
 from bsdfkit.pipeline.report import _esc, _f, _num, _pair, _pm_sig, _section, _table
 
 ANCHOR = "spectral-modes"
-TITLE = "8b. Spectral mode vs two-wavelength mode (§4.2 of [Cylindrical-module])"
+TITLE = "Spectral mode vs two-wavelength mode (§4.2 of [Cylindrical-module])"
 
 
 def _rel(row: dict) -> str:

@@ -36,7 +36,7 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
             e = sub["bsdf_std"].sel(wavelength=wavelength_nm, method="nearest").values[order]
             keep = np.isfinite(y) & (y > 0)
             ax.errorbar(x[order][keep], y[keep], yerr=e[keep], marker=".", ms=3, lw=1, capsize=0,
-                        label=f"{tag}, θi = {th:g}°")
+                        label=f"data, {tag}, θi = {th:g}° (± 1σ)")
         ax.set_yscale("log")
         ax.set_xlabel("in-plane θs (deg, + = specular side)")
         ax.set_title(f"{side} at {wavelength_nm:g} nm ({config})")
@@ -49,46 +49,131 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
 
 
 def budget_figure(power, photons=None) -> Figure:
-    """Cumulative extracted power and losses per plate interaction (Fig. 10 of the power-budget paper)."""
-    fig = Figure(figsize=(6.5, 4))
-    ax = fig.subplots()
+    """Cumulative extracted power and losses per plate interaction (Fig. 10 of the power-budget paper).
+
+    With ``photons`` a second panel gives the same in photons (% of the LEDs' photons): one quantity per axis.
+    """
+    budgets = [("power", power)] + ([("photons", photons)] if photons is not None else [])
+    fig = Figure(figsize=(6.0 * len(budgets) + 2.0, 4))
+    axes = fig.subplots(1, len(budgets), squeeze=False)[0]
     k = np.arange(1, len(power.iterations) + 1)
-    for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^"), ("losses", "--x")):
-        ax.plot(k, [row[key] for row in power.iterations], style, label=f"{key} (power)")
-    if photons is not None:
-        ax.plot(k, [row["total"] for row in photons.iterations], ":o", label="total (photons)")
-    ax.axhline(power.converged["total"], color="grey", lw=0.8, ls=":")
-    ax.set_xlabel("plate interaction (1 = direct pass from the LEDs)")
-    ax.set_ylabel("cumulative % of LED output")
-    ax.set_title(f"iterative module budget, η_MC = {power.eta_mc:g}")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    for ax, (unit, budget) in zip(axes, budgets):
+        for key, style in (("total", "-o"), ("yellow", "-s"), ("blue", "-^"), ("losses", "--x")):
+            ax.plot(k, [row[key] for row in budget.iterations], style, label=f"{key}, iterative model")
+        ax.axhline(budget.converged["total"], color="grey", lw=0.8, ls=":", label="total, converged (closed form)")
+        ax.set_xlabel("plate interaction k (1 = direct pass from the LEDs)")
+        ax.set_ylabel(f"cumulative share of the LEDs' {unit} (%)")
+        ax.set_title(f"module budget in {unit}, η_MC = {budget.eta_mc:g}", fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes[-1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside: no curve hidden
     fig.tight_layout()
     return fig
 
 
-def trace_studies_figure(device, studies: dict[str, list[dict]]) -> Figure:
-    """LER, YBR and non-uniformity of the module studies (cf. Figs. 8, 11, 13 of the cylindrical-module paper)."""
-    panels = [k for k in ("reflectance", "height_mm", "led_fwhm_deg", "specular_fraction") if studies.get(k)]
-    fig = Figure(figsize=(3.2 * max(len(panels), 1), 6))
-    axes = fig.subplots(2, max(len(panels), 1), squeeze=False)
-    keys = {"reflectance": "wall.reflectance", "height_mm": "cavity.height_mm", "led_fwhm_deg": "leds.fwhm_deg",
-            "specular_fraction": "wall.specular_fraction"}
+#: The studies' x axes: recipe key → (scene key of the x value, axis label).
+STUDY_AXES = {
+    "reflectance": ("wall.reflectance", "wall and base reflectance ρ (1)"),
+    "height_mm": ("cavity.height_mm", "cavity height h (mm)"),
+    "led_fwhm_deg": ("leds.fwhm_deg", "LED beam FWHM (deg; 120° = Lambertian)"),
+    "specular_fraction": ("wall.specular_fraction", "specular fraction of the wall reflectance (1)"),
+}
+#: Column titles: the study and the figures of the cylindrical-module paper it stands beside.
+STUDY_TITLES = {"reflectance": "wall reflectance (Fig. 8)", "height_mm": "cavity height (Figs. 11-12)",
+                "led_fwhm_deg": "LED beam width (Figs. 13-14)", "specular_fraction": "wall finish (Figs. 9-10)"}
+#: The figure's rows: quantity → (axis label, scale from the trace's value to the axis unit, error key).
+STUDY_QUANTITIES = {
+    "LER": ("LER (% of LED power)", 100.0, "LER_std"),
+    "YBR": ("YBR, yellow / blue ray power (1)", 1.0, "YBR_std"),
+    "non_uniformity": ("irradiance non-uniformity (%)", 100.0, None),
+}
+
+
+def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | None = None) -> Figure:
+    """LER, YBR and irradiance non-uniformity of the module studies, one quantity per row and one study per
+    column (cf. Figs. 8-14 of the cylindrical-module paper).
+
+    ``studies`` maps a study (keys of :data:`STUDY_AXES`) to rows with ``values``, ``LER``, ``LER_std``, ``YBR``,
+    ``YBR_std`` and ``non_uniformity`` (fractions); LER and YBR carry ± 1σ error bars (the non-uniformity of a
+    map has none). The grey dotted line is the traced device. ``paper`` maps (study, quantity) to a list of
+    (x, y) values printed by the paper, in the axis units, drawn as open squares.
+    """
+    panels = [k for k in STUDY_AXES if studies.get(k)]
+    ncol = max(len(panels), 1)
+    fig = Figure(figsize=(3.5 * ncol, 8.8))
+    axes = fig.subplots(len(STUDY_QUANTITIES), ncol, squeeze=False)
     for c, name in enumerate(panels):
-        rows = sorted(studies[name], key=lambda r: r["values"][keys[name]])
-        x = [r["values"][keys[name]] for r in rows]
-        ax = axes[0][c]
-        ax.errorbar(x, [r["LER"] for r in rows], yerr=[r["LER_std"] for r in rows], marker="o", label="LER")
-        ax.axhline(device.LER, color="grey", ls=":", lw=0.8, label="test device")
-        ax.set_title(name, fontsize=9)
-        ax.set_ylabel("LER")
+        key, xlabel = STUDY_AXES[name]
+        rows = sorted(studies[name], key=lambda r: r["values"][key])
+        x = [r["values"][key] for r in rows]
+        for r_i, (q, (label, scale, err)) in enumerate(STUDY_QUANTITIES.items()):
+            ax = axes[r_i][c]
+            y = [scale * r[q] for r in rows]
+            yerr = [scale * r[err] for r in rows] if err else None
+            ax.errorbar(x, y, yerr=yerr, marker="o", ms=4, capsize=3,
+                        label="this run (± 1σ)" if err else "this run")
+            dev = getattr(device, q, None)
+            if dev is not None and np.isfinite(dev):
+                ax.axhline(scale * dev, color="grey", ls=":", lw=0.9, label="traced device")
+            pts = (paper or {}).get((name, q)) or []
+            if pts:
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], "s", ms=8, mfc="none", mew=1.5, color="#c0392b",
+                        label="[Cylindrical-module]")
+            ax.set_ylabel(label, fontsize=8)
+            ax.set_xlabel(xlabel, fontsize=8)
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7)
+            if r_i == 0:
+                ax.set_title(STUDY_TITLES[name], fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def plate_incidence_figure(histograms: dict[str, np.ndarray], measured_deg: tuple[float, float],
+                           plate_grid_deg, plate_tis: dict[str, list[float]], measured_tis: dict | None = None,
+                           title: str = "") -> Figure:
+    """Where the plate is lit, and what it does there: why YBR moves with the cavity (cf. §5.3 of the
+    cylindrical-module paper).
+
+    Left: the blue power reaching the plate per degree of incidence (% of all blue power on the plate per deg),
+    one curve per trace in ``histograms`` (label → (90/bins-degree) histogram of the blue power). Right: the
+    plate's TIS (%) vs incidence for the blue channels, the tracer's grid (line; dashed where model-extrapolated)
+    with the measured values ± 1σ (``measured_tis``: channel → (incidences, TIS, σ)). The measured range is
+    shaded on both panels.
+    """
+    fig = Figure(figsize=(13.5, 4.2))
+    left, right = fig.subplots(1, 2)
+    for label, hist in histograms.items():
+        h = np.asarray(hist, dtype=float)
+        width = 90.0 / h.size
+        centres = (np.arange(h.size) + 0.5) * width
+        left.plot(centres, 100.0 * h / h.sum() / width, lw=1.4, label=label)
+    grid = np.asarray(plate_grid_deg, dtype=float)
+    inside = (grid >= measured_deg[0]) & (grid <= measured_deg[1])
+    names = {"bibs_transmission": "F bibs (blue out)", "bibs_reflection": "B bibs (blue back)",
+             "biys_transmission": "F biys (converted out)", "biys_reflection": "B biys (converted back)"}
+    for key, label in names.items():
+        tis = 100.0 * np.asarray(plate_tis[key], dtype=float)
+        line = right.plot(grid, tis, "--", lw=1.0)[0]
+        lo, hi = np.flatnonzero(inside)[[0, -1]]
+        right.plot(grid[lo:hi + 1], tis[lo:hi + 1], "-", lw=1.6, color=line.get_color(), label=f"{label}, plate")
+        if measured_tis and key in measured_tis:
+            th, val, std = (np.asarray(v, dtype=float) for v in measured_tis[key])
+            right.errorbar(th, 100.0 * val, yerr=100.0 * std, fmt="o", ms=4, capsize=3, color=line.get_color(),
+                           label=f"{label}, measured ± 1σ")
+    right.plot([], [], "k--", lw=1.0, label="plate, model-extrapolated")
+    for ax in (left, right):
+        ax.axvspan(*measured_deg, color="0.85", alpha=0.5, lw=0, label="measured incidences")
+        ax.set_xlabel("incidence on the plate θi (deg)")
+        ax.set_xlim(0, 90)
         ax.grid(True, alpha=0.3)
-        ax2 = axes[1][c]
-        ax2.plot(x, [r["YBR"] for r in rows], "s-", label="YBR")
-        ax2.plot(x, [10 * r["non_uniformity"] for r in rows], "^--", label="10 × non-uniformity")
-        ax2.set_xlabel(keys[name])
-        ax2.grid(True, alpha=0.3)
-        ax2.legend(fontsize=7)
+    left.set_ylabel("blue power reaching the plate (% per deg)")
+    left.set_title("where the blue light meets the plate (all passes)", fontsize=9)
+    left.legend(fontsize=7)
+    right.set_ylabel("TIS of the plate (% of incident power)")
+    right.set_title("the plate's TIS for blue light vs incidence", fontsize=9)
+    right.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))  # outside: no curve hidden
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return fig
 
@@ -108,17 +193,19 @@ def bsdf_fits_figure(fits: dict) -> Figure:
             sub = prof.isel(record=np.flatnonzero(sel))
             x = signed_in_plane_theta(sub)
             order = np.argsort(x)
-            line = ax.plot(x[order], sub["bsdf"].values[order], ".", ms=4, label=f"θi = {th:g}° data")[0]
+            err = sub["bsdf_std"].values[order] if "bsdf_std" in sub else None
+            line = ax.errorbar(x[order], sub["bsdf"].values[order], yerr=err, fmt=".", ms=4, capsize=0, lw=0.8,
+                               label=f"data, θi = {th:g}° (± 1σ)")[0]
             grid = np.linspace(-88, 88, 353)
             params = {p: float(fit[p].sel(theta_i=th)) for p in ("rho", "A", "sigma", "B", "g") if p in fit}
             y = bsdf_model_values(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
-            ax.plot(grid, y, "-", color=line.get_color(), lw=1)
+            ax.plot(grid, y, "-", color=line.get_color(), lw=1, label=f"{model} model, θi = {th:g}°")
         ax.set_yscale("log")
         ax.set_title(f"{key[0]} {key[1]} ({model}, aperture-averaged fit)", fontsize=9)
-        ax.set_xlabel("in-plane θs (deg)")
+        ax.set_xlabel("in-plane θs (deg, + = specular side)")
         ax.set_ylabel("BSDF (1/sr)")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6, ncol=2)
     for ax in axes[len(keys):]:
         ax.set_visible(False)
     fig.tight_layout()
@@ -136,10 +223,11 @@ def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> 
     left.plot(np.asarray(emission["wavelength"])[conv], np.asarray(emission["measured"])[conv], ":", lw=1.5,
               label="measured converted light (hemisphere)")
     left.set_xlabel("wavelength (nm)")
-    left.set_ylabel("normalised")
+    left.set_ylabel("relative spectral power (1, peak = 1)")
     left.legend(fontsize=8)
     left.grid(True, alpha=0.3)
-    right.plot(sd.wavelengths, 1e3 * sd.values)
+    right.plot(sd.wavelengths, 1e3 * sd.values, label="rebuilt module spectrum (two-band model)")
+    right.legend(fontsize=8)
     right.set_xlabel("wavelength (nm)")
     right.set_ylabel("spectral flux (mW/nm)")
     right.set_title(sd.name, fontsize=9)
