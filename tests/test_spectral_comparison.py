@@ -131,3 +131,24 @@ def test_figure_labels_both_spectra_and_the_difference_with_units():
     labels = [t.get_text() for t in top.get_legend().get_texts()]
     assert any("two-wavelength" in t for t in labels) and any("spectral mode" in t for t in labels)
     np.testing.assert_allclose(bottom.lines[0].get_ydata(), 1e3 * 0.05 * s, rtol=1e-12)
+
+
+def test_report_section_states_the_direction_check_and_lists_a_failure(tmp_path):
+    """Fast lane: the section from a summary alone (no trace); a failed direction is listed among the
+    disagreements with the papers, and the stage's share of the run is stated."""
+    summary = json.loads((ROOT / "tests" / "data" / "run_summary_small.json").read_text(encoding="utf-8"))
+    band = {"relative_difference": -0.02, "relative_difference_std": 0.005, "two_wavelength_W": 0.44,
+            "two_wavelength_std_W": 0.001, "spectral_W": 0.449, "spectral_std_W": 0.001}
+    summary["spectral_comparison"] = {
+        "measurement": "eem", "rays": 1000, "emission_shape": "measured",
+        "bands": {"near_pump": {**band, "label": "460-500 nm", "relative_difference": 0.08},
+                  "yellow": {**band, "label": "501-780 nm"}},
+        "direction_check": {"near_pump_overestimated": True, "yellow_underestimated": False, "holds": False},
+        "two_wavelength": {"LER": 0.55, "LER_std": 0.001}, "spectral": {"LER": 0.54, "LER_std": 0.001},
+        "stage_seconds": {"plate_spectral_model": 2.0}}
+    summary["stage_seconds"] = {"trace": 6.0, "spectral comparison": 2.0}
+    (tmp_path / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    text = write_report(tmp_path).read_text(encoding="utf-8")
+    assert 'id="spectral-modes"' in text and "the direction does NOT hold" in text
+    assert "+8.00 ± 0.50 % (z +16.0)" in text and "−2.00" not in text and "-2.00 ± 0.50 %" in text
+    assert "spectral vs two-wavelength mode: the direction of §4.2" in text and "(25 %)" in text
