@@ -331,3 +331,17 @@ def test_bins_above_an_excitation_scan_take_the_plates_yiys():
     np.testing.assert_allclose(pdf[below].sum(axis=1) * 10.0, 1.0, rtol=1e-12)
     clamped, _, _ = model_on_bins(scan)  # no plate: the last excitation's values
     assert np.all(clamped[0][:, above] == 0.109)
+
+
+def test_unphysical_model_file_is_one_line_error_exit_2(tmp_path, capsys):
+    from bsdfkit.cli.main import main
+
+    ds = no_overlap_model().to_dataset()
+    ds["converted_tis"] = ds["converted_tis"] * 1.9
+    bad = tmp_path / "bad.nc"
+    ds.to_netcdf(bad)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(scene_text(f'kind = "phosphor"\nspectral = "{bad}"'))
+    assert main(["trace", str(scene), "--rays", "10"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "bad.nc" in err and "more photons" in err and "excitation=" in err

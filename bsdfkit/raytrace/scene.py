@@ -590,7 +590,7 @@ def _spectral_top(top: Top, r: _Reader, base_dir: Path | None, preloaded: Mappin
 
 def _check_spectral(trace: TraceOptions, leds: Leds, top: Top, file) -> None:
     if trace.mode != "spectral":
-        # a named plate source preloaded as None is a validation-only parse (bsdfkit run checks its scene first)
+        # (a recipe validates its scene before the plate exists: a plate source given is enough here)
         if top.kind == "phosphor" and top.plate is None and top.plate_file is None and top.plate_recipe is None:
             raise InputError("the two-wavelength mode needs the plate", file=file, field="top.plate",
                              expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]")
