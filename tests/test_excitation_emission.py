@@ -72,8 +72,12 @@ def truth(scan):
     return synthetic.ExcitationEmissionTruth.from_dict(json.loads(manifest["truth"]["parameters_json"]))
 
 
+#: Band centres of the bundled scan: 10 nm steps over the absorption edge, 20 nm steps beyond.
+CENTRES = [float(c) for c in (*range(390, 521, 10), *range(540, 761, 20))]
+
+
 def _bands():
-    return virtual.EEM_BAND_SERIES.configurations()
+    return virtual.EEM_BAND_SERIES.configurations() + virtual.EEM_LONG_SERIES.configurations()
 
 
 def _incident(config):
@@ -88,7 +92,7 @@ def test_set_is_labelled_small_and_complete():
     size = sum(p.stat().st_size for p in EEM.rglob("*") if p.is_file())
     assert size <= 10 * 1000**2
     names = [c.name for c in read_manifest(EEM).configurations]
-    assert names == ["blue", "yellow"] + [f"mono-{c}" for c in range(390, 521, 10)]
+    assert names == ["blue", "yellow"] + [f"mono-{c:g}" for c in CENTRES]
     assert set(manifest["truth"]["tis_percent"]) == {"5", "45", "56"}
     recorded = json.loads(manifest["truth"]["parameters_json"])
     assert synthetic.ExcitationEmissionTruth.from_dict(recorded) == virtual.eem_truth()
@@ -126,11 +130,11 @@ def test_truth_is_physical(truth):
 # ------------------------------------------------------------------------------------------ reader
 @pytest.mark.slow
 def test_reader_gives_the_bispectral_matrix(scan):
-    assert list(scan["excitation_wavelength"].values[2:]) == list(range(390, 521, 10))
+    assert list(scan["excitation_wavelength"].values[2:]) == CENTRES
     m = eem.bispectral_matrix(scan)
     assert m["bsdf_donaldson"].dims == ("record", "wavelength_i", "wavelength")
     assert m["bsdf_donaldson"].attrs["units"] == "1/(sr nm)"
-    assert m["wavelength_i"].values.tolist() == list(range(390, 521, 10)) and m["wavelength_i"].dtype == np.float64
+    assert m["wavelength_i"].values.tolist() == CENTRES and m["wavelength_i"].dtype == np.float64
     assert set(m["theta_i"].values) == {5.0, 45.0, 56.0} and set(m["side"].values) == set(SIDES)
     # Linearity: the matrix averaged over the blue filter's spectrum (eq. (10) of the power-budget paper) is the
     # converted light the blue configuration measures directly, 480-740 nm summed over all positions.
@@ -145,18 +149,30 @@ def test_reader_gives_the_bispectral_matrix(scan):
 # ----------------------------------------------------------------------------------- truth recovery
 @pytest.mark.slow
 def test_elastic_and_converted_tis_recover_the_truth_at_every_excitation(model, truth):
+    """Elastic TIS within 2 % everywhere; converted TIS within 2 % where the band converts ≥ 3 % of its power,
+    within 3σ below; a band reported as converting nothing has a true converted TIS below 3σ at some incidence."""
     lam = virtual.EEM_SPECTROMETER.wavelength
-    assert model["excitation"].values.tolist() == list(range(390, 521, 10))
+    assert model["excitation"].values.tolist() == CENTRES
     for k, config in enumerate(_bands()):
         p = _incident(config)
+        zero_row = not model["emission_pdf"].values[k].any()
+        below = []
         for side in SIDES:
             for th in model["incidence"].values:
                 at = {"side": side, "incidence": th}
                 el = truth.elastic_tis(side, np.radians(th), lam, p)
                 cv = truth.converted_tis(side, np.radians(th), lam, p)
+                got, std = float(model["converted_tis"].sel(at)[k]), float(model["converted_tis_std"].sel(at)[k])
                 assert float(model["elastic_tis"].sel(at)[k]) == pytest.approx(el, rel=ELASTIC_RTOL), (config.name, at)
-                assert float(model["converted_tis"].sel(at)[k]) == pytest.approx(cv, rel=CONVERTED_RTOL), (
-                    config.name, at)
+                below.append(cv < eem.CHECK_SIGMA * std)
+                if zero_row:
+                    assert got == 0.0
+                elif cv >= 0.03:
+                    assert got == pytest.approx(cv, rel=CONVERTED_RTOL), (config.name, at)
+                else:
+                    assert abs(got - cv) < eem.CHECK_SIGMA * std, (config.name, at)
+        assert not zero_row or any(below), config.name
+    assert model["emission_pdf"].sel(excitation=520.0).any() and not model["emission_pdf"].sel(excitation=600.0).any()
     assert np.all(model["elastic_tis_std"] > 0) and np.all(model["converted_tis_std"] > 0)
 
 
@@ -166,10 +182,14 @@ def test_emission_pdf_is_a_photon_pdf_matching_the_truth(model, truth):
     step = np.gradient(em)
     assert np.allclose(step, 1.0)
     expected = truth.emission_pdf(em)
-    for k in range(model.sizes["excitation"]):
+    for k, centre in enumerate(CENTRES):
         pdf = model["emission_pdf"].values[k]
         assert np.all(pdf >= 0.0)
+        if not pdf.any():
+            continue  # converts nothing measurable
         assert np.sum(pdf * step) == pytest.approx(1.0, abs=1e-12)
+        if centre > 520.0:
+            continue  # ≤ 2 % absorbed: the spectrum is mostly noise (its negative part is recorded)
         # Measured at 390-460 nm: L1 distance to the truth ≤ 0.005, largest CDF difference ≤ 0.0005, mean
         # wavelength within 0.11 nm; at 470-490 nm the spectrum interpolated under the band across the
         # emission onset (CDF 0.006, mean −0.85 nm); at 520 nm noise (10 % absorption; L1 0.030).
@@ -184,8 +204,11 @@ def test_photon_yield_is_below_one_and_matches_the_truth(model, truth, scan):
     lam = virtual.EEM_SPECTROMETER.wavelength
     assert np.all(model["photon_yield"] <= 1.0)
     for k, config in enumerate(_bands()):
-        assert model["photon_yield"].values[:, k] == pytest.approx(truth.photon_yield(lam, _incident(config)),
-                                                                   rel=0.01)
+        exact = truth.photon_yield(lam, _incident(config))
+        if CENTRES[k] <= 520.0:
+            assert model["photon_yield"].values[:, k] == pytest.approx(exact, rel=0.01)
+        else:  # weak or no conversion: within 0.002 photons per photon
+            assert np.all(np.abs(model["photon_yield"].values[:, k] - exact) < 0.002)
     # eq. (16) of the power-budget paper: photons per incident photon = converted power per incident power ×
     # (mean photon wavelength of the emission) / (power-weighted mean wavelength of the band)
     matrix = eem.bispectral_matrix(scan)
@@ -193,6 +216,8 @@ def test_photon_yield_is_below_one_and_matches_the_truth(model, truth, scan):
     for k in range(model.sizes["excitation"]):
         lam_i = mean_wavelength(matrix["incident_spectrum"].isel(wavelength_i=k), (380.0, 780.0))
         assert abs(lam_i - model["excitation"].values[k]) < 1.0
+        if not model["emission_pdf"].values[k].any():
+            continue
         photon_wavelength = 1.0 / np.sum(model["emission_pdf"].values[k] / em * np.gradient(em))
         power = model["converted_tis"].sum("side").values[:, k]
         assert model["photon_yield"].values[:, k] == pytest.approx(power * photon_wavelength / lam_i, rel=1e-12)

@@ -2,8 +2,9 @@
 
 Users plan measurements with it (how fine a scan, how long an exposure, what uncertainty to expect); the test
 suite uses it as ground truth. It models the set-up of §2 of the power-budget paper ([Power-budget]): a
-collimated Xe beam through an interference or cut-on filter, a circular detector aperture at distance d feeding a CCD
-spectrometer, and a reference (direct-beam) spectrum taken by the same detector through an ND filter.
+collimated Xe beam through an interference or cut-on filter (or a monochromator stepped through a series of narrow
+bands, :class:`BandSeries`), a circular detector aperture at distance d feeding a CCD spectrometer, and a reference
+(direct-beam) spectrum taken by the same detector through an ND filter.
 
 Signal chain per spectral pixel (counts):
     raw = clip(round(N_e/G + bias + N(0, σ_read)), 0, full scale),  N_e ~ Poisson(G·t·(rate + dark_rate))
@@ -506,8 +507,11 @@ def cl830_synthetic(seed: int = 830, plan: ScanPlan | None = None,
 
 # ------------------------------------------------------------------ the excitation-emission stand-in
 #: The monochromator scan of ``measurements/eem-synthetic``: 390-520 nm every 10 nm, 10 nm FWHM (a band at
-#: 380 nm would reach below the 380 nm spectrometer grid).
+#: 380 nm would reach below the 380 nm spectrometer grid), over the absorption edge and the emission onset.
 EEM_BAND_SERIES = BandSeries()
+#: Its continuation through the converted light's wavelengths every 20 nm (the same series name: one scan), so
+#: that the plate model holds the elastic scattering, and the vanishing absorption, of every emitted wavelength.
+EEM_LONG_SERIES = BandSeries(first_nm=540.0, last_nm=760.0, step_nm=20.0)
 #: Its spectrometer: the power-budget paper's range at 1 nm (the 0.5 nm pixels of the bundled set would double
 #: the files and add nothing to 10 nm bands and a 150 nm wide emission).
 EEM_SPECTROMETER = Spectrometer(wavelength_step_nm=1.0)
@@ -560,8 +564,8 @@ def eem_command(seed: int = EEM_SEED, folder: str = "measurements/eem-synthetic"
 
 def eem_synthetic(seed: int = EEM_SEED) -> RawExport:
     """The bundled excitation-emission set (``measurements/eem-synthetic``): the eem truth measured with the
-    blue and yellow filters of the two-wavelength approach and the monochromator scan :data:`EEM_BAND_SERIES`,
-    on the sparse :func:`eem_plan`, with a 1 nm spectrometer."""
+    blue and yellow filters of the two-wavelength approach and the monochromator scan :data:`EEM_BAND_SERIES` +
+    :data:`EEM_LONG_SERIES`, on the sparse :func:`eem_plan`, with a 1 nm spectrometer."""
     gonio = VirtualGoniometer(spectrometer=EEM_SPECTROMETER)
     truth = eem_truth()
     lam = EEM_SPECTROMETER.wavelength
@@ -571,4 +575,4 @@ def eem_synthetic(seed: int = EEM_SEED) -> RawExport:
              "truth": {"model": "bsdfkit.simulation.truth.ExcitationEmissionTruth",
                        "parameters_json": truth.to_json(), "tis_percent": tis}}
     return simulate_scan(truth, eem_plan(), gonio, seed=seed, sample_name="eem-synthetic", extra_manifest=extra,
-                         band_series=(EEM_BAND_SERIES,))
+                         band_series=(EEM_BAND_SERIES, EEM_LONG_SERIES))
