@@ -226,8 +226,11 @@ class Hemisphere:
             lo = np.array([self.measured_range[h][0] for h in HALVES])
             hi = np.array([self.measured_range[h][1] for h in HALVES])
             measured = (r[:, None] >= lo[None, :] - 1e-12) & (r[:, None] <= hi[None, :] + 1e-12)
-            n_measured = measured.sum(axis=1)
-            lost = np.where(measured, 0.0, coef).sum(axis=1)
+            # the four columns summed in numpy's order for .sum(axis=1), without its strided row reduction
+            m = measured.T
+            n_measured = ((m[0].astype(np.int64) + m[1]) + m[2]) + m[3]
+            kept = np.where(measured, 0.0, coef).T
+            lost = ((kept[0] + kept[1]) + kept[2]) + kept[3]
             share = np.where(n_measured > 0, lost / np.maximum(n_measured, 1), 0.0)
             # Beyond every sampled radius: the half-axis sampled farthest out holds its last value.
             farthest = np.zeros(len(HALVES))
