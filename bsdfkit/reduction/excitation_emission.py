@@ -224,7 +224,9 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
     pdf = np.zeros((centres.size, lam.size))
     yield_ = np.full((len(angles), centres.size), np.nan)
     clipped = np.zeros(centres.size)
-    for k, name in enumerate(matrix["configuration"].values):
+    names = matrix["configuration"].values
+    parts = []  # per band: elastic and converted profiles, converted spectrum per record
+    for k, name in enumerate(names):
         row = matrix["bsdf_donaldson"].values[:, k]
         row_s = matrix["bsdf_donaldson_std"].values[:, k]
         conv_map, c_el, c_cv = _split_maps(lam, matrix["incident_valid"].values[k], source, str(name))
@@ -234,15 +236,20 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
         var = np.where(finite[:, None], row_s, 0.0) ** 2
         elastic = _profile(matrix, np.where(finite, values @ c_el, np.nan), np.sqrt(var @ c_el**2), rel)
         converted = _profile(matrix, np.where(finite, values @ c_cv, np.nan), np.sqrt(var @ c_cv**2), rel)
-        spectrum = values @ conv_map.T
-        density = np.zeros(lam.size)
-        for b, side in enumerate(SIDES):
-            for a, th in enumerate(angles):
-                sel = (sides == side) & np.isclose(matrix["theta_i"].values, th, atol=1e-6)
+        parts.append((elastic, converted, values @ conv_map.T))
+    densities = np.zeros((centres.size, lam.size))
+    # geometry-major: every band of a side and incidence shares one scan plan, so the reconstruction's grid
+    # coefficients (cached in reduction.tis) are computed once per geometry instead of once per band
+    for b, side in enumerate(SIDES):
+        for a, th in enumerate(angles):
+            sel = (sides == side) & np.isclose(matrix["theta_i"].values, th, atol=1e-6)
+            for k, (elastic, converted, spectrum) in enumerate(parts):
                 el[b, a, k], el_s[b, a, k] = _tis(elastic, sel, "specular")
                 cv[b, a, k], cv_s[b, a, k] = _tis(converted, sel, "normal")
                 w = Hemisphere.from_profile(converted.isel(record=np.flatnonzero(sel)), center="normal").weights()
-                density += spectrum[sel].T @ w
+                densities[k] += spectrum[sel].T @ w
+    for k, name in enumerate(names):
+        density = densities[k]
         total = cv[:, :, k].sum(axis=0)
         total_std = np.hypot(*cv_s[:, :, k])
         if not np.all(total > CHECK_SIGMA * total_std):  # nothing (measurable) converts: an all-zero row

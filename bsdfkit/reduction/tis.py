@@ -46,6 +46,7 @@ The paper's own rectangle sum, eq. (7) of [Power-budget], is :func:`tis_rectangl
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -239,19 +240,32 @@ class Hemisphere:
         return coef
 
     def evaluate_polar(self, r: NDArray, psi: NDArray, mode: str = "linear", p: float = 2.0,
-                       borrow: bool = True, repeats: int = 1) -> NDArray[np.float64]:
-        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame; ``repeats``: see
-        :meth:`coefficients`)."""
-        if mode not in ("linear", "log"):
-            raise InputError("unknown interpolation mode", field="mode", expected="linear or log", got=mode)
+                       borrow: bool = True) -> NDArray[np.float64]:
+        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame)."""
         shape = np.broadcast(r, psi).shape
         r_flat = np.broadcast_to(r, shape).ravel()
-        coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow, repeats)
-        out = np.zeros(r_flat.size)
+        coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow)
+        return self._evaluate(r_flat, coef, mode).reshape(shape)
+
+    def _evaluate(self, r: NDArray, coef: NDArray, mode: str,
+                  rows: tuple[NDArray, ...] | None = None) -> NDArray[np.float64]:
+        """Σ_halves coef·interpolant at radii ``r``; ``rows[k]``: the nodes where coef[:, k] ≠ 0 (the others are
+        skipped: a node blends only the half-axes its quadrant faces)."""
+        if mode not in ("linear", "log"):
+            raise InputError("unknown interpolation mode", field="mode", expected="linear or log", got=mode)
+        out = np.zeros(r.size)
         for k, name in enumerate(HALVES):
+            idx = np.flatnonzero(coef[:, k]) if rows is None else rows[k]
             for h, share in self.halves[name]:
-                out += coef[:, k] * share * _interp(h, r_flat, mode)
-        return out.reshape(shape)
+                out[idx] += coef[idx, k] * share * _interp(h, r[idx], mode)
+        return out
+
+    def _grid_coefficients(self, n_psi: int, n_r: int, p: float = 2.0,
+                           borrow: bool = True) -> tuple[QuadratureGrid, NDArray, tuple[NDArray, ...]]:
+        """The quadrature grid, its blend coefficients and their non-zero rows, shared by every reconstruction
+        with the same geometry (a band series repeats one scan plan for dozens of bands)."""
+        ranges = tuple(self.measured_range[h] for h in HALVES)
+        return _grid_coefficients(self.beta0, ranges, n_psi, n_r, float(p), bool(borrow))
 
     def bsdf(self, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """f (1/sr) for unit vectors (..., 3) in the scattering hemisphere's sample frame (source at φi = 180°
@@ -265,20 +279,33 @@ class Hemisphere:
 
     def weights(self, n_psi: int = 256, n_r: int = 400) -> NDArray[np.float64]:
         """w such that TIS = Σ_records w_k f_k (the reconstruction and quadrature are linear in the data)."""
-        grid = polar_grid((float(np.hypot(*self.beta0)), 0.0), n_psi, n_r)
-        coef = self.coefficients(grid.r, grid.psi, repeats=n_r)
+        grid, coef, rows = self._grid_coefficients(n_psi, n_r)
         w = np.zeros(self.n_records)
         for k, name in enumerate(HALVES):
+            idx = rows[k]
             for h, share in self.halves[name]:
-                a = coef[:, k] * share * grid.w
-                lo, hi, wl, wh = _interp_weights(h.radius, grid.r)
+                a = coef[idx, k] * share * grid.w[idx]
+                lo, hi, wl, wh = _interp_weights(h.radius, grid.r[idx])
                 w += np.bincount(h.record[lo], weights=a * wl, minlength=self.n_records)
                 w += np.bincount(h.record[hi], weights=a * wh, minlength=self.n_records)
         return w
 
     def tis(self, mode: str = "linear", n_psi: int = 256, n_r: int = 400, p: float = 2.0, borrow: bool = True) -> float:
-        grid = polar_grid((float(np.hypot(*self.beta0)), 0.0), n_psi, n_r)
-        return float(np.sum(self.evaluate_polar(grid.r, grid.psi, mode, p, borrow, repeats=n_r) * grid.w))
+        grid, coef, rows = self._grid_coefficients(n_psi, n_r, p, borrow)
+        return float(np.sum(self._evaluate(grid.r, coef, mode, rows) * grid.w))
+
+
+@functools.lru_cache(maxsize=16)
+def _grid_coefficients(beta0: tuple[float, float], ranges: tuple[tuple[float, float], ...], n_psi: int, n_r: int,
+                       p: float, borrow: bool) -> tuple[QuadratureGrid, NDArray, tuple[NDArray, ...]]:
+    # Depends only on the geometry (β0, the sampled radii per half-axis), not on the data: cached (read-only).
+    hemi = Hemisphere(beta0=beta0, halves={}, n_records=0, measured_range=dict(zip(HALVES, ranges)))
+    grid = polar_grid((float(np.hypot(*beta0)), 0.0), n_psi, n_r)
+    coef = hemi.coefficients(grid.r, grid.psi, p, borrow, repeats=n_r)
+    rows = tuple(np.flatnonzero(coef[:, k]) for k in range(len(HALVES)))
+    for a in (grid.r, grid.psi, grid.w, coef, *rows):
+        a.setflags(write=False)
+    return grid, coef, rows
 
 
 def _interp(h: HalfProfile, r: NDArray, mode: str) -> NDArray[np.float64]:
