@@ -50,6 +50,7 @@ def _small_recipe(tmp_path):
     data["exports"].update(interactions=["bibs"], sides=["reflection"])
     data["trace"].update(scene=str(ROOT / "fitting" / "scenes" / "cl830_device.toml"), rays=20000,
                          reflectance=[0.8, 0.98], height_mm=[10.0, 80.0], led_fwhm_deg=[30.0], specular_fraction=[1.0])
+    data["spectral"].update(measurement=str(ROOT / "measurements" / "eem-synthetic"), rays=20000)
     path = tmp_path / "small.toml"
     path.write_text(dumps(data))
     return path
@@ -74,5 +75,8 @@ def test_run_writes_outputs_and_refuses_to_clobber(tmp_path):
     assert summary["trace"]["device"]["ledger_error"] < 1e-9
     assert 0.3 < summary["trace"]["device"]["LER"] < 0.8
     assert set(summary["module_spectrum"]["colour"]) >= {"x", "y", "cct_K", "duv", "luminous_efficacy_lm_per_W"}
+    assert summary["spectral_comparison"]["spectral"]["ledger"]["power_W"]["error"] < 1e-9
+    assert (out / "spectral_comparison.png").stat().st_size > 0
+    assert 'id="spectral-modes"' in (out / "report.html").read_text()
     proc = _bsdfkit("run", recipe, "-o", out)
     assert proc.returncode != 0 and "--force" in proc.stderr

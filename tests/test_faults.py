@@ -303,6 +303,8 @@ def test_sigterm_runs_cleanup(tmp_path):
 def _recipe(tmp_path: Path, **sections) -> Path:
     text = ROOT.joinpath("fitting", "cl830.toml").read_text()
     text = text.replace('measurement = "../measurements/cl830-synthetic"', f'measurement = "{BUNDLED}"')
+    text = text.replace('measurement = "../measurements/eem-synthetic"',
+                        f'measurement = "{ROOT / "measurements" / "eem-synthetic"}"')
     text = text.replace('scene = "scenes/cl830_device.toml"', f'scene = "{ROOT / "fitting/scenes/cl830_device.toml"}"')
     for old, new in sections.items():
         text = text.replace(old, new)

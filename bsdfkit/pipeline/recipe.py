@@ -41,6 +41,12 @@ from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
 from bsdfkit.pipeline.report import paper_values, write_report
+from bsdfkit.pipeline.spectral_comparison import (
+    SpectralComparisonOptions,
+    compare_tracer_modes,
+    comparison_lines,
+    comparison_outputs,
+)
 from bsdfkit.plotting.figures import (
     bsdf_fits_figure,
     budget_figure,
@@ -67,6 +73,7 @@ KNOWN_SECTIONS = {
     "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
     "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
              "fallback_flux_W"},
+    "spectral": {"measurement", "scene", "rays", "seed", "incidence_deg"},
 }
 
 #: Upper bounds of the recipe's sizes (checked before anything is computed).
@@ -144,6 +151,7 @@ class Recipe:
     exports: ExportOptions = ExportOptions()
     trace: TraceStudyOptions = TraceStudyOptions()
     fits: FitStageOptions = FitStageOptions()
+    spectral: SpectralComparisonOptions | None = None
     raw: dict = field(default_factory=dict, compare=False, hash=False)
 
 
@@ -256,7 +264,8 @@ def load_recipe(path: str | Path) -> Recipe:
     )
     recipe = Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
                     description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
-                    reductions=reductions, exports=exports, trace=trace, fits=fits, raw=data)
+                    reductions=reductions, exports=exports, trace=trace, fits=fits,
+                    spectral=_spectral_options(data.get("spectral"), path, trace, fits), raw=data)
     _check_ranges(recipe)
     if not measurement.is_dir():
         raise InputError("measurement folder not found", file=path, field="recipe.measurement",
@@ -264,6 +273,33 @@ def load_recipe(path: str | Path) -> Recipe:
     if trace.scene is not None:
         _scene_with_plate(trace.scene, None)  # the scene's own errors now, not after minutes of computing
     return recipe
+
+
+def _spectral_options(table: dict | None, path: Path, trace: TraceStudyOptions,
+                      fits: FitStageOptions) -> SpectralComparisonOptions | None:
+    """The ``[spectral]`` table: the spectral comparison stage (one excitation-emission measurement, both modes)."""
+    if table is None:
+        return None
+    measurement = (path.parent / _typed(table, "measurement", str, path, "spectral.measurement")).resolve()
+    if not measurement.is_dir():
+        raise InputError("measurement folder not found", file=path, field="spectral.measurement",
+                         expected="an existing excitation-emission raw export", got=str(measurement))
+    scene = path.parent / _typed(table, "scene", str, path, "spectral.scene") if "scene" in table else trace.scene
+    if scene is None or not scene.is_file():
+        raise InputError("spectral comparison scene not found", file=path, field="spectral.scene",
+                         expected="an existing scene TOML (or a [trace] scene)",
+                         got=None if scene is None else str(scene))
+    rays = _ranged(_typed(table, "rays", int, path, "spectral.rays", 200_000), path, "spectral.rays", 1, MAX_RAYS)
+    seed = _ranged(_typed(table, "seed", int, path, "spectral.seed", trace.seed), path, "spectral.seed", 0,
+                   2**63 - 2)
+    incidence = tuple(float(_ranged(v, path, f"spectral.incidence_deg[{k}]", 0.0, 90.0, hi_open=True))
+                      for k, v in enumerate(_numbers(table, "incidence_deg", path, section="spectral")))
+    if "scene" in table:
+        _scene_with_plate(scene, None)
+    return SpectralComparisonOptions(measurement=measurement, scene=scene, rays=rays, seed=seed,
+                                     incidence_deg=incidence,
+                                     led_peak_nm=fits.led_peak_nm, led_fwhm_nm=fits.led_fwhm_nm,
+                                     emission_incidence_deg=fits.emission_incidence_deg)
 
 
 def _check_ranges(r: Recipe) -> None:
@@ -317,6 +353,8 @@ def expected_outputs(recipe: Recipe) -> list[str]:
         names += ["trace.json", "trace_device.nc", "trace_studies.png", "trace_incidence.png"]
         names += [f"trace_{study}.nc" for study in STUDIES if getattr(recipe.trace, study)]
     names += ["module_spectrum.csv", "module_spectrum.png", "module_spectrum.json"]
+    if recipe.spectral is not None:
+        names += ["spectral_comparison.png", "spectral_comparison.csv"]
     return names + ["summary.json", "report.html"]
 
 
@@ -794,6 +832,18 @@ def stage_spectrum(state: RunState) -> None:
         f"({band_label(COLORIMETRY_YELLOW_BAND_NM)} / {band_label(COLORIMETRY_BLUE_BAND_NM)})")
 
 
+def stage_spectral_comparison(state: RunState) -> None:
+    """Both tracer modes on one plate from the ``[spectral]`` measurement (issue 17; module
+    :mod:`bsdfkit.pipeline.spectral_comparison`)."""
+    opts = state.recipe.spectral
+    if opts is None:
+        return
+    result = compare_tracer_modes(opts, _scene_with_plate)
+    state.summary["spectral_comparison"] = result.summary
+    state.outputs.update(comparison_outputs(result))
+    state.summary.setdefault("report_lines", []).extend(comparison_lines(result.summary))
+
+
 STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
     ("ingest", stage_ingest),
     ("report", stage_report),
@@ -802,6 +852,7 @@ STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
     ("fits", stage_fits),
     ("trace", stage_trace),
     ("spectrum", stage_spectrum),
+    ("spectral comparison", stage_spectral_comparison),
 )
 
 
@@ -815,7 +866,8 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     """
     recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
     out_dir = Path(out_dir)
-    inputs = (recipe.path, recipe.measurement, recipe.trace.scene)
+    inputs = (recipe.path, recipe.measurement, recipe.trace.scene,
+              *((recipe.spectral.measurement, recipe.spectral.scene) if recipe.spectral else ()))
     # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
     with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe)) as out:
         return _run_stages(recipe, out, log, progress)

@@ -201,17 +201,19 @@ class Hemisphere:
                    axis=(float(u_dir[0]), float(u_dir[1])))
 
     # -- evaluation ------------------------------------------------------------------------------------------
-    def coefficients(self, r: NDArray, psi: NDArray, p: float = 2.0, borrow: bool = True) -> NDArray[np.float64]:
+    def coefficients(self, r: NDArray, psi: NDArray, p: float = 2.0, borrow: bool = True,
+                     repeats: int = 1) -> NDArray[np.float64]:
         """Blend coefficients (n, 4) of the half-axes at polar nodes (r, ψ); rows sum to 1.
 
         Base weights |cos ψ|^p, |sin ψ|^p (normalised; p = 2 is the cos²/sin² blend) on the half-axes the
         node's quadrant faces. With ``borrow``, a half-axis asked for outside the radii it actually sampled
         hands its weight to the half-axes sampled at that radius (an isotropy assumption used only where data
         are missing); where none is, the half-axis sampled farthest out takes all the weight and its last value
-        is held.
+        is held. ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the nodes of
+        :func:`polar_grid`, ψ repeated over the radii): the blend is then computed once per block (same numbers).
         """
         r = np.asarray(r, dtype=np.float64).ravel()
-        psi = np.asarray(psi, dtype=np.float64).ravel()
+        psi = np.asarray(psi, dtype=np.float64).ravel()[::repeats]
         ca, sb = np.abs(np.cos(psi)) ** p, np.abs(np.sin(psi)) ** p
         norm = ca + sb
         ca, sb = ca / norm, sb / norm
@@ -219,12 +221,17 @@ class Hemisphere:
         sn = np.sin(psi)
         coef = np.stack([np.where(c > 0, ca, 0.0), np.where(c <= 0, ca, 0.0),
                          np.where(sn > 0, sb, 0.0), np.where(sn <= 0, sb, 0.0)], axis=1)
+        if repeats > 1:
+            coef = np.repeat(coef, repeats, axis=0)
         if borrow:
             lo = np.array([self.measured_range[h][0] for h in HALVES])
             hi = np.array([self.measured_range[h][1] for h in HALVES])
             measured = (r[:, None] >= lo[None, :] - 1e-12) & (r[:, None] <= hi[None, :] + 1e-12)
-            n_measured = measured.sum(axis=1)
-            lost = np.where(measured, 0.0, coef).sum(axis=1)
+            # the four columns summed in numpy's order for .sum(axis=1), without its strided row reduction
+            m = measured.T
+            n_measured = ((m[0].astype(np.int64) + m[1]) + m[2]) + m[3]
+            kept = np.where(measured, 0.0, coef).T
+            lost = ((kept[0] + kept[1]) + kept[2]) + kept[3]
             share = np.where(n_measured > 0, lost / np.maximum(n_measured, 1), 0.0)
             # Beyond every sampled radius: the half-axis sampled farthest out holds its last value.
             farthest = np.zeros(len(HALVES))
@@ -294,7 +301,7 @@ def _grid_coefficients(beta0: tuple[float, float], ranges: tuple[tuple[float, fl
     # Depends only on the geometry (β0, the sampled radii per half-axis), not on the data: cached (read-only).
     hemi = Hemisphere(beta0=beta0, halves={}, n_records=0, measured_range=dict(zip(HALVES, ranges)))
     grid = polar_grid((float(np.hypot(*beta0)), 0.0), n_psi, n_r)
-    coef = hemi.coefficients(grid.r, grid.psi, p, borrow)
+    coef = hemi.coefficients(grid.r, grid.psi, p, borrow, repeats=n_r)
     rows = tuple(np.flatnonzero(coef[:, k]) for k in range(len(HALVES)))
     for a in (grid.r, grid.psi, grid.w, coef, *rows):
         a.setflags(write=False)
