@@ -32,6 +32,7 @@ import xarray as xr
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM, band_label
 from bsdfkit.core.errors import InputError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import netcdf
@@ -881,7 +882,8 @@ class _Report:
         rows = [["x (1)", _f(col.get("x"), 4)], ["y (1)", _f(col.get("y"), 4)], ["CCT (K)", _f(col.get("cct_K"), 0)],
                 ["Duv (1)", _f(col.get("duv"), 4)],
                 ["luminous efficacy of radiation (lm/W)", _f(col.get("luminous_efficacy_lm_per_W"), 1)],
-                ["YBR of the spectrum (1)", _f(col.get("ybr"), 2)]]
+                [f"YBR of the spectrum ({band_label(COLORIMETRY_YELLOW_BAND_NM)} / "
+                 f"{band_label(COLORIMETRY_BLUE_BAND_NM)})", _f(col.get("ybr"), 2)]]
         tab = _table(["colour of the rebuilt spectrum", "this run"], rows, "CIE 1931 2°, CCT and Duv (Ohno 2013)")
         v = self.v
         led_rows = [["LED peak (nm)", _f(led.get("peak_nm"), 1), _f(t2["blue_peak_nm"], 1),
@@ -1043,7 +1045,7 @@ class _Report:
         if dev:
             card("LER: extracted / emitted LED power", f"{_pm(dev.get('LER'), se.get('LER'), 2, 100.0)} %",
                  "Monte Carlo of the device with this run's plate")
-            card("YBR (1)", _pm(dev.get("YBR"), se.get("YBR"), 2),
+            card("YBR, yellow / blue ray power", _pm(dev.get("YBR"), se.get("YBR"), 2),
                  "yellow / blue extracted ray power of the two-wavelength trace")
             card("irradiance non-uniformity", f"{_f(dev.get('non_uniformity'), 1, 100.0)} %",
                  "(E_max − E_min)/(E_max + E_min) on the plate")
