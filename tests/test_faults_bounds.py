@@ -219,3 +219,17 @@ def test_tracepro_header_numbers_are_range_checked(field, value):
     with pytest.raises(ValidationError, match=field):
         TraceProOptions(**{field: value})
     TraceProOptions(wavelength_um=0.55, temperature_K=300.0)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--split-nm", "0", "--model", "two-band"], "out of range"),
+    (["--split-nm", "nan", "--model", "two-band-wide"], "out of range"),
+    (["--split-nm", "1e12", "--model", "two-band-led"], "out of range"),
+    (["--split-nm", "500"], "two-band model"),
+])
+def test_fit_spectrum_split_is_checked_not_ignored(tmp_path, capsys, argv, needle):
+    path = tmp_path / "s.txt"
+    path.write_text("".join(f"{w}\t{math.exp(-((w - 450) / 10) ** 2)}\n" for w in range(380, 781)))
+    assert main(["fit", "spectrum", str(path), *argv]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "--split-nm" in err and needle in err

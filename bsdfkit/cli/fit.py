@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.fit.lambertian import lambertian_from_reflectance
 from bsdfkit.fit.least_squares import FitOptions, fit_bsdf
-from bsdfkit.fit.spectrum import CRITERIA, SPECTRUM_MODELS, analyse_spectra
+from bsdfkit.fit.spectrum import CRITERIA, SPECTRUM_MODELS, TWO_BAND_MODELS, analyse_spectra
 from bsdfkit.io import atomic, netcdf
 from bsdfkit.io.jsonout import to_jsonable
 from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
@@ -96,6 +97,13 @@ def _fmt(value, spec: str = ".2f") -> str:
 def _run_spectrum(args: argparse.Namespace) -> int:
     if args.maxiter < 1:
         raise ValidationError("iteration limit must be ≥ 1", field="--maxiter", got=args.maxiter)
+    if args.split_nm is not None:
+        if args.model not in TWO_BAND_MODELS:
+            raise ValidationError("--split-nm is the pump/phosphor split of a two-band model", field="--split-nm",
+                                  expected=f"--model {' | '.join(TWO_BAND_MODELS)}", got=args.model)
+        if not (math.isfinite(args.split_nm) and 100.0 <= args.split_nm <= 20000.0):
+            raise ValidationError("option out of range", field="--split-nm", expected="a wavelength in nm "
+                                  "(100-20000)", got=args.split_nm)
     if args.range is not None and not args.range[0] < args.range[1]:
         raise ValidationError("empty fit range", field="--range", expected="LO < HI", got=tuple(args.range))
     spectra, sources = [], []
