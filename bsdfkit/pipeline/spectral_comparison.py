@@ -168,7 +168,11 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
         seconds[name] = round(now - clock, 3)
         clock = now
 
-    measured = calibrate(read_scan(options.measurement))
+    raw = read_scan(options.measurement)
+    if options.incidence_deg:  # calibrate only the records used (the plates' and the emission shape's incidences)
+        raw = _at_incidences(raw, tuple(sorted({*options.incidence_deg, options.emission_incidence_deg})),
+                             options.measurement)
+    measured = calibrate(raw)
     scan = _at_incidences(measured, options.incidence_deg, options.measurement) if options.incidence_deg else measured
     lap("ingest")
     plate = plate_from_scan(scan, name=f"{scan.attrs.get('sample_name', '')} (two-wavelength)")
