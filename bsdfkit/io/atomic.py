@@ -347,6 +347,13 @@ class OutputSet:
         resolved = self.folder.resolve()
         parent, name = resolved.parent, resolved.name
         try:
+            if resolved.is_dir() and resolved.stat().st_dev != parent.stat().st_dev:
+                # the target is a mount point: staged files beside it could not be renamed into it (EXDEV)
+                self._open_staging_inside(resolved, None)
+                return
+        except OSError:
+            pass
+        try:
             parent.mkdir(parents=True, exist_ok=True)
             for entry in _stale(parent, f".{name}.", ".staging"):
                 _rmtree(entry)
@@ -362,8 +369,9 @@ class OutputSet:
         except OSError as exc:
             self._open_staging_inside(resolved, exc)
 
-    def _open_staging_inside(self, resolved: Path, first: OSError) -> None:
-        """The target folder exists but its parent cannot be written: stage inside the target instead."""
+    def _open_staging_inside(self, resolved: Path, first: OSError | None) -> None:
+        """The target folder exists but its parent cannot be written, or it is on another file system than its
+        parent: stage inside the target instead."""
         if self.staging is not None:
             _PARTIAL.discard(self.staging)
             self.staging = None
