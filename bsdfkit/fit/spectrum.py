@@ -56,7 +56,7 @@ from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODE
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
 from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
 from bsdfkit.reduction.spectral import band_sum
-from bsdfkit.reduction.spectrum_metrics import peak_wavelength, spectrum_metrics
+from bsdfkit.reduction.spectrum_metrics import half_maximum_crossings, peak_wavelength, spectrum_metrics
 
 if TYPE_CHECKING:
     from colour import SpectralDistribution
@@ -270,21 +270,6 @@ def spectrum_model_values(model: str, params: dict[str, float], wavelength: np.n
 # ------------------------------------------------------------------------------------------------
 # Initial values
 # ------------------------------------------------------------------------------------------------
-def _half_max_crossings(wl: np.ndarray, y: np.ndarray, i_peak: int) -> tuple[float | None, float | None]:
-    """Wavelengths where y falls to half of y[i_peak] left and right of it (linear interpolation)."""
-    half = 0.5 * y[i_peak]
-    left = right = None
-    below = np.flatnonzero(y[:i_peak] <= half)
-    if below.size:
-        j = below[-1]
-        left = float(np.interp(half, [y[j], y[j + 1]], [wl[j], wl[j + 1]])) if y[j + 1] != y[j] else float(wl[j])
-    below = np.flatnonzero(y[i_peak:] <= half)
-    if below.size:
-        j = i_peak + below[0]
-        right = float(np.interp(half, [y[j], y[j - 1]], [wl[j], wl[j - 1]])) if y[j - 1] != y[j] else float(wl[j])
-    return left, right
-
-
 def _peak_and_fwhm(wl: np.ndarray, y: np.ndarray, region: np.ndarray,
                    with_alpha: bool = False) -> tuple[float, ...]:
     """(peak λ, FWHM, peak value[, α]) of y restricted to ``region`` (boolean), FWHM from half-max crossings,
@@ -296,16 +281,16 @@ def _peak_and_fwhm(wl: np.ndarray, y: np.ndarray, region: np.ndarray,
     i = int(np.argmax(v))
     if not v[i] > 0:
         raise FitError(f"no positive signal between {w[0]:g} and {w[-1]:g} nm")
-    left, right = _half_max_crossings(w, v, i)
+    left, right = half_maximum_crossings(w, v)  # nan for a side without a crossing
     step = float(np.median(np.diff(w)))
     alpha = 0.0
-    if left is not None and right is not None:
+    if math.isfinite(left) and math.isfinite(right):
         fwhm = right - left
         if fwhm > 0:
             alpha = float(np.clip(((right - w[i]) - (w[i] - left)) / fwhm, -0.9, 0.9))
-    elif left is not None or right is not None:
+    elif math.isfinite(left) or math.isfinite(right):
         # Truncated band: mirror the one half width we have.
-        fwhm = 2.0 * abs((left if left is not None else right) - w[i])
+        fwhm = 2.0 * abs((left if math.isfinite(left) else right) - w[i])
     else:
         fwhm = 0.5 * (w[-1] - w[0])
     out = (float(w[i]), max(fwhm, step), float(v[i]))
