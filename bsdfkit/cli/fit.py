@@ -20,7 +20,7 @@ from pathlib import Path
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
-from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES
+from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.fit.lambertian import lambertian_from_reflectance
@@ -101,9 +101,10 @@ def _run_spectrum(args: argparse.Namespace) -> int:
         if args.model not in TWO_BAND_MODELS:
             raise ValidationError("--split-nm is the pump/phosphor split of a two-band model", field="--split-nm",
                                   expected=f"--model {' | '.join(TWO_BAND_MODELS)}", got=args.model)
-        if not (math.isfinite(args.split_nm) and 100.0 <= args.split_nm <= 20000.0):
-            raise ValidationError("option out of range", field="--split-nm", expected="a wavelength in nm "
-                                  "(100-20000)", got=args.split_nm)
+        lo, hi = WAVELENGTH_RANGE_NM
+        if not (math.isfinite(args.split_nm) and lo <= args.split_nm <= hi):
+            raise ValidationError("option out of range", field="--split-nm",
+                                  expected=f"a wavelength in nm ({lo:g}-{hi:g})", got=args.split_nm)
     if args.range is not None and not args.range[0] < args.range[1]:
         raise ValidationError("empty fit range", field="--range", expected="LO < HI", got=tuple(args.range))
     spectra, sources = [], []

@@ -38,6 +38,9 @@ MODULE_YELLOW_BAND_NM: tuple[float, float] = (501.0, 780.0)
 COLORIMETRY_BLUE_BAND_NM: tuple[float, float] = (380.0, 470.0)
 COLORIMETRY_YELLOW_BAND_NM: tuple[float, float] = (471.0, 780.0)
 
+#: Plausible wavelengths in nm, from the deep UV to the far IR: a grid in µm or m falls below, one in Å or pm above.
+WAVELENGTH_RANGE_NM: tuple[float, float] = (100.0, 20000.0)
+
 
 #: What the tracer's YBR is: the two-wavelength model has blue (pump) and yellow (converted) rays, not spectra.
 RAY_YBR_DEFINITION = ("extracted yellow-ray power / extracted blue-ray power (two-wavelength model: blue rays = pump "

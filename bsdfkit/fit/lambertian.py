@@ -21,14 +21,12 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES
+from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.reduction.spectral import band_sum
 
 #: Incidences of the model [deg]: a Lambertian surface is the same at every incidence; exports need a grid.
 DEFAULT_INCIDENCES_DEG: tuple[float, ...] = tuple(float(t) for t in range(0, 90, 5))
-#: Plausible wavelengths of a reflectance spectrum [nm]; a grid outside is taken for another unit.
-WAVELENGTH_RANGE_NM = (100.0, 20000.0)
 
 
 def lambertian_from_reflectance(

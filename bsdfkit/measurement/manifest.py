@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from bsdfkit.core.conventions import WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.measurement.instrument import Instrument
 
@@ -22,8 +23,6 @@ FORMAT_NAME = "bsdfkit-raw-scan"
 SUPPORTED_VERSIONS = (1,)
 #: Largest spectrometer grid accepted (pixels); real spectrometers have a few thousand.
 MAX_WAVELENGTHS = 100_000
-#: Plausible wavelengths in nm (a grid in µm or m falls below, one in Å or pm above).
-WAVELENGTH_RANGE_NM = (100.0, 20_000.0)
 #: Most bands of one ``[[band_series]]`` (a monochromator scan in 0.5 nm steps over 380-780 nm has 801).
 MAX_BAND_SERIES = 1000
 #: The placeholder for the band centre in a band series' file names.

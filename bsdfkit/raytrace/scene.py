@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 import bsdfkit.raytrace.plate_from_scan as plate_source
-from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_reflectance
 from bsdfkit.io import toml_write
@@ -532,7 +532,7 @@ def read_reflectance_spectrum(path: Path, field_name: str) -> tuple[np.ndarray, 
 def _led_spectrum(r: _Reader, base_dir: Path | None) -> dict[str, Any]:
     """The LED spectrum keys: a spectrum file, or a Gaussian (peak and FWHM in nm), or none."""
     path = r.string("spectrum", None)
-    peak = r.number("spectrum_peak_nm", None, lo=100, hi=20000)
+    peak = r.number("spectrum_peak_nm", None, lo=WAVELENGTH_RANGE_NM[0], hi=WAVELENGTH_RANGE_NM[1])
     fwhm = r.number("spectrum_fwhm_nm", None, lo=0, lo_open=True)
     if path is not None and (peak is not None or fwhm is not None):
         raise InputError("conflicting keys: a spectrum file or a Gaussian spectrum", file=r.file,
@@ -555,7 +555,7 @@ def _grid(r: _Reader, default: tuple[float, float, float]) -> tuple[float, float
     value = r.table["spectral_grid_nm"]
     ok = isinstance(value, list) and len(value) == 3 and all(
         isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-    if not ok or not (100 <= value[0] < value[1] <= 20000 and value[2] > 0) \
+    if not ok or not (WAVELENGTH_RANGE_NM[0] <= value[0] < value[1] <= WAVELENGTH_RANGE_NM[1] and value[2] > 0) \
             or not 2 <= round((value[1] - value[0]) / value[2]) + 1 <= 1024:
         raise ValidationError("bad spectral grid", file=r.file, field="trace.spectral_grid_nm",
                               expected="[start, stop, step] in nm with 2-1024 bins", got=value)
@@ -573,10 +573,10 @@ def _spectral_top(top: Top, r: _Reader, base_dir: Path | None, preloaded: Mappin
         return replace(top, spectral_file=value, spectral_model=load_spectral_model(_resolve(value, base_dir)))
     g = _Reader(value, "top.spectral", r.file, {"emission_peak_nm", "emission_fwhm_nm", "start_nm", "stop_nm",
                                                 "step_nm"})
-    peak = g.number("emission_peak_nm", lo=100, hi=20000, required=True)
+    peak = g.number("emission_peak_nm", lo=WAVELENGTH_RANGE_NM[0], hi=WAVELENGTH_RANGE_NM[1], required=True)
     fwhm = g.number("emission_fwhm_nm", lo=0, lo_open=True, required=True)
-    start = g.number("start_nm", 380.0, lo=100, hi=20000)
-    stop = g.number("stop_nm", 780.0, lo=100, hi=20000)
+    start = g.number("start_nm", 380.0, lo=WAVELENGTH_RANGE_NM[0], hi=WAVELENGTH_RANGE_NM[1])
+    stop = g.number("stop_nm", 780.0, lo=WAVELENGTH_RANGE_NM[0], hi=WAVELENGTH_RANGE_NM[1])
     step = g.number("step_nm", 5.0, lo=0, lo_open=True)
     n = round((stop - start) / step) + 1
     if not (stop > start and 2 <= n <= 1024):

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SIDES
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.io import netcdf
 from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, PlateChannel, PlateTables, plate_tables
@@ -123,8 +123,8 @@ def spectral_model_from_dataset(ds: xr.Dataset, source: str | Path | None = None
     inc = ds["incidence"].values.astype(np.float64)
     exc_nm = ds["excitation"].values.astype(np.float64)
     em = ds["emission"].values.astype(np.float64)
-    for name, grid, lo, hi in (("incidence", inc, 0.0, 90.0), ("excitation", exc_nm, 100.0, 20000.0),
-                               ("emission", em, 100.0, 20000.0)):
+    for name, grid, lo, hi in (("incidence", inc, 0.0, 90.0), ("excitation", exc_nm, *WAVELENGTH_RANGE_NM),
+                               ("emission", em, *WAVELENGTH_RANGE_NM)):
         if grid.size < 1 or not np.all(np.isfinite(grid)) or np.any(np.diff(grid) <= 0) or grid[0] < lo \
                 or grid[-1] > hi:
             raise ValidationError("coordinate must increase strictly within its range", file=where, field=name,

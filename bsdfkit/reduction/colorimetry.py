@@ -32,7 +32,12 @@ import colour
 import numpy as np
 from colour import SpectralDistribution
 
-from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM, band_label
+from bsdfkit.core.conventions import (
+    COLORIMETRY_BLUE_BAND_NM,
+    COLORIMETRY_YELLOW_BAND_NM,
+    WAVELENGTH_RANGE_NM,
+    band_label,
+)
 from bsdfkit.core.errors import InputError, NumericalError, ValidationError
 from bsdfkit.reduction.spectral import band_sum
 
@@ -84,8 +89,6 @@ def _checked(sd):
     return wl, values
 
 
-#: Plausible wavelengths of a spectrum in nm; a grid in µm or m falls below, one in Å above.
-WAVELENGTH_RANGE_NM: tuple[float, float] = (100.0, 20000.0)
 #: Fewest samples inside the CMF range (360-830 nm) for a colorimetric result.
 MIN_VISIBLE_SAMPLES = 5
 #: Negative spectral power beyond this fraction of the peak (or of the positive integral) is not noise. The 19
