@@ -328,6 +328,9 @@ OTHER_LAYOUTS = [
      "theta_s,BRDF\n5,0.3\n", "utf-8", {}, None),
     ("blocks_by_lines", "Incidence: 10 deg\nAOV\tBRDF\n5\t0.1\n-20\t0.2\nIncidence: 30 deg\nAOV\tBRDF\n5\t0.3\n",
      "utf-8", {}, None),
+    ("camel_case", "IncidentAngle;ScatterAngle;BRDF\n10;5;0.1\n10;-20;0.2\n", "utf-8", {}, None),
+    ("signed_suffix_per_sr", "aoi_deg,theta_s_signed,brdf_sr-1\n10,5,0.1\n10,-20,0.2\n", "utf-8", {}, None),
+    ("per_sr_words", "theta_i\tsigned scatter angle\tBRDF 1/sr\n10\t5\t0.1\n10\t-20\t0.2\n", "utf-8", {}, None),
 ]
 
 
@@ -350,3 +353,51 @@ def test_brdf_and_btdf_columns_give_both_sides(tmp_path):
     ds = read_table(path, wavelength=550.0)
     assert ds["side"].values.tolist() == ["reflection", "transmission", "reflection"]
     assert ds["bsdf"].values[:, 0].tolist() == [0.1, 0.05, 0.2]
+
+
+def _long_rows(phi_i: float, specular_at: float, lam: float = 550.0, lobe: bool = True) -> list[str]:
+    """LONG rows θi, φi, θs, φs, λ, BRDF of the truth on the in-plane arc, the specular side at φs = specular_at."""
+    rows = ["theta_i,phi_i,theta_s,phi_s,wavelength,BRDF"]
+    for ti in (20.0, 45.0):
+        for a in in_plane(ti):
+            if -ti - 5 < a < -ti + 5:  # the source blocks the detector near retro-reflection
+                continue
+            f = truth(ti, abs(a), 0.0 if a >= 0 else 180.0, lam)
+            if not lobe:
+                f = truth(ti, 80.0, 90.0, lam)  # the body alone (the lobe is negligible there)
+            phi = specular_at if a >= 0 else (specular_at + 180.0) % 360.0
+            rows.append(f"{ti!r},{phi_i!r},{float(abs(a))!r},{phi!r},{lam!r},{float(f)!r}")
+    return rows
+
+
+@pytest.mark.parametrize("phi_i, specular_at, note", [
+    (0.0, 180.0, False),   # the documented sample frame: specular at φi − 180°
+    (0.0, 0.0, True),      # φs from the specular direction although φi = 0: decided by where the peaks are
+    (90.0, 0.0, True),
+    (180.0, 0.0, False),   # both conventions agree
+])
+def test_azimuth_origin_is_decided_by_the_peaks(tmp_path, phi_i, specular_at, note):
+    ds = read_table(write(tmp_path / "long.csv", _long_rows(phi_i, specular_at)))
+    assert ("azimuth_note" in ds.attrs) is note
+    relative = (ds["phi_s"].values - (ds["phi_i"].values - 180.0)) % 360.0  # back to φs = 0 on the specular side
+    expected = truth(ds["theta_i"].values, ds["theta_s"].values, relative, 550.0)
+    np.testing.assert_allclose(ds["bsdf"].values[:, 0], expected, rtol=RTOL)
+    assert set(ds["arc"].values) == {"in_plane"}
+
+
+def test_azimuth_origin_of_a_table_without_peaks_is_the_documented_one(tmp_path):
+    rows = _long_rows(0.0, 0.0, lobe=False)
+    ds = read_table(write(tmp_path / "flat.csv", rows))
+    assert "azimuth_note" not in ds.attrs
+    written = [float(r.split(",")[3]) for r in rows[1:]]
+    assert ds["phi_s"].values.tolist() == written  # kept as written
+
+
+def test_angles_in_radians_with_few_decimals_stay_on_their_arcs(tmp_path):
+    rows = ["theta_i (rad),theta_s (rad),phi_s (rad),BRDF"]
+    for ts, ps in two_arcs(20.0):
+        rows.append(f"{math.radians(20.0):.8f},{math.radians(ts):.8f},{math.radians(ps):.8f},"
+                    f"{truth(20.0, ts, ps, 550.0):.10g}")
+    ds = read_table(write(tmp_path / "rad.csv", rows), wavelength=550.0)
+    arcs = ds["arc"].values.tolist()
+    assert arcs.count("in_plane") == len(in_plane(20.0)) and arcs.count("perpendicular") == 12

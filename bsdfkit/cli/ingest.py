@@ -64,7 +64,8 @@ def _run(args: argparse.Namespace) -> int:
     api.save(ds, args.output, args.force)
     info = api.describe(ds)
     extra = {k: ds.attrs[k] for k in ("source_format", "source_layout", "source_quantity", "bsdf_std_origin",
-                                      "gap_records_dropped", "zero_records_as_gaps", "wavelength_note")
+                                      "gap_records_dropped", "zero_records_as_gaps", "wavelength_note",
+                                      "azimuth_note")
              if k in ds.attrs}
     if args.json:
         emit_json({**info, "output": str(args.output), **extra})
@@ -81,4 +82,6 @@ def _run(args: argparse.Namespace) -> int:
         print(f"  bsdf_std: {extra.get('bsdf_std_origin', '')}")
         if "wavelength_note" in extra:
             print(f"  wavelength: {extra['wavelength_note']}")
+        if "azimuth_note" in extra:
+            print(f"  azimuth: {extra['azimuth_note']}")
     return 0

@@ -83,6 +83,8 @@ ZERO_POLICIES = ("auto", "keep", "missing")
 _MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
             "?", "#n/a", "#value!", "nv", "n.v."}
 _ANGLE_ATOL = 1e-9
+#: Direction-cosine tolerance of the in-plane and perpendicular arcs (:func:`arc_labels`).
+ARC_TOL = 1e-5
 
 
 # ------------------------------------------------------------------------------------------- quantities
@@ -163,8 +165,15 @@ class _Column:
 _UNIT_RE = re.compile(r"[\(\[\{]([^\)\]\}]*)[\)\]\}]")
 
 
+_PER_SR = re.compile(r"(?:[_\s]|^)(?:1/sr|/sr|per sr|per steradian|sr\^?-1|sr⁻¹|sr\*\*-1)(?=[_\s]|$)", re.IGNORECASE)
+
+
 def _clean_header(text: str) -> str:
     t = text.replace("\ufeff", "").strip().strip('"').strip("'").strip()
+    # camelCase instrument headers ("ScatterAngle", "ThetaI") split into words; "BRDF", "AOI" stay whole
+    t = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", t)
+    # a per-steradian unit written without brackets ("brdf_sr-1", "BRDF 1/sr") is the value's unit, not a number
+    t = _PER_SR.sub(" (1/sr) ", t)
     for a, b in (("θ", "theta"), ("ϑ", "theta"), ("φ", "phi"), ("ϕ", "phi"), ("λ", "lambda"), ("°", " deg "),
                  ("µ", "u"), ("μ", "u"), ("σ", "sigma"), ("±", " std ")):
         t = t.replace(a, b)
@@ -252,8 +261,10 @@ def _classify(header: str, index: int, file: str, line: int) -> _Column:
         col.percent = percent
         col.quantity = _quantity_from_words(name)
         return col
+    # "theta_s signed", "signed scatter angle": signedness follows from the layout (no φs column)
+    unsigned = re.sub(r"\s*\bsigned\b\s*", " ", name).strip() or name
     for role, pattern in _ROLE_PATTERNS:
-        if pattern.match(name):
+        if pattern.match(name) or (role == "theta_s" and pattern.match(unsigned)):
             col.role = role
             if role in ("theta_i", "phi_i", "theta_s", "phi_s"):
                 col.scale = _angle_scale(units, col.header, file, line)
@@ -953,11 +964,12 @@ def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArra
     through the specular direction normal to the plane of incidence) or ``other``, per record (degrees)."""
     ti, pi_, ts, ps = (np.radians(np.asarray(a, dtype=np.float64)) for a in (theta_i, phi_i, theta_s, phi_s))
     rel = np.mod(ps - (pi_ - np.pi) + np.pi, 2 * np.pi) - np.pi  # φs relative to the specular azimuth
-    in_plane = (np.abs(np.sin(rel)) * np.sin(ts) < 1e-9) | (ts < 1e-12)
+    # tolerance ARC_TOL (1e-5 rad ≈ 0.0006°): angles written in radians or with few decimals are not exact
+    in_plane = (np.abs(np.sin(rel)) * np.sin(ts) < ARC_TOL) | (ts < 1e-12)
     # d = (sin θs cos rel, sin θs sin rel, cos θs) in a frame with the specular azimuth on +x;
     # the perpendicular great circle through r0 = (sin θi, 0, cos θi) has normal (−cos θi, 0, sin θi)
     dot = -np.cos(ti) * np.sin(ts) * np.cos(rel) + np.sin(ti) * np.cos(ts)
-    perp = (np.abs(dot) < 1e-7) & ~in_plane
+    perp = (np.abs(dot) < ARC_TOL) & ~in_plane
     return np.where(in_plane, "in_plane", np.where(perp, "perpendicular", "other")).astype(object)
 
 
@@ -1054,6 +1066,58 @@ def records_dataset(
     return ds
 
 
+#: A peak counts when it stands this many times above the profile's median and above the mirrored position.
+_PEAK_CONTRAST = 3.0
+#: Window (deg) in θs around θi, and tolerance (deg) in azimuth, of the specular and retro positions.
+_PEAK_WINDOW_DEG, _AZIMUTH_TOL_DEG = 2.0, 1.0
+
+
+def _azimuth_frame(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, values: NDArray) -> str:
+    """Which azimuth origin a table with a φs column uses, decided by its data.
+
+    Tables write φs either in the sample frame (the documented convention: source at φi, specular at φi − 180°)
+    or from the specular direction (φs = 0 on the specular side whatever φi says). Where every record has
+    φi = 180° the two agree. Otherwise each incidence θi > 2° votes by where its peak near θs = θi sits: at
+    φs = φi − 180° (the specular position of the sample frame) or at φs = 0 (that of the other origin; with
+    φi = 0 it is the sample frame's retro position, where a goniometer's own source blocks the detector). A vote
+    needs a peak :data:`_PEAK_CONTRAST` times above the profile's median and above the other position (a gap
+    counts as 0).
+
+    Returns
+    -------
+    str
+        ``"sample"`` (keep), or ``"specular"`` when at least one incidence puts its peak at φs = 0 and none at
+        φi − 180°.
+    """
+    if np.allclose(np.mod(ph_i - 180.0, 360.0), 0.0, atol=1e-9):
+        return "sample"
+    band = np.nanmean(np.where(np.isfinite(values), values, np.nan), axis=1) if values.size else values
+    votes = {"sample": 0, "specular": 0}
+    groups = np.unique(np.stack([np.round(th_i, 9), np.round(np.mod(ph_i, 360.0), 9)], axis=1), axis=0)
+    for ti, pi_ in groups:
+        if ti <= _PEAK_WINDOW_DEG:
+            continue
+        g = (np.abs(th_i - ti) < 1e-9) & (np.abs(np.mod(ph_i, 360.0) - pi_) < 1e-9) & np.isfinite(band)
+        if g.sum() < 5:
+            continue
+        floor = float(np.median(np.abs(band[g])))
+        near = g & (np.abs(th_s - ti) <= _PEAK_WINDOW_DEG)
+
+        def peak(azimuth: float) -> float:
+            d = np.abs((ph_s - azimuth + 180.0) % 360.0 - 180.0)
+            sel = near & (d <= _AZIMUTH_TOL_DEG)
+            return float(np.max(band[sel])) if sel.any() else 0.0
+
+        if abs(pi_ % 360.0 - 180.0) < _AZIMUTH_TOL_DEG:
+            continue  # φi ≈ 180°: both origins put the specular position at φs = 0
+        sample, specular = peak(pi_ - 180.0), peak(0.0)
+        if sample > _PEAK_CONTRAST * max(floor, specular):
+            votes["sample"] += 1
+        elif specular > _PEAK_CONTRAST * max(floor, sample):
+            votes["specular"] += 1
+    return "specular" if votes["specular"] and not votes["sample"] else "sample"
+
+
 def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str, wavelength_known: bool
               ) -> xr.Dataset:
     th_s = np.asarray(rows.theta_s)
@@ -1112,6 +1176,9 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     values[rec_of, lam_idx] = v_all
     stds[rec_of, lam_idx] = s_all
     rec_th_i, rec_ph_i, rec_th_s, rec_ph_s = th_i[first], ph_i[first], th_s[first], phi_norm[first]
+    frame = "sample" if signed else _azimuth_frame(rec_th_i, rec_ph_i, rec_th_s, rec_ph_s, values)
+    if frame == "specular":  # φs measured from the specular direction: into the sample frame
+        rec_ph_s = np.where(rec_th_s < 1e-12, 0.0, np.mod(rec_ph_s + rec_ph_i - 180.0, 360.0))
     # gaps: exact zeros per the policy
     zero_records = 0
     if zeros == "missing":
@@ -1152,6 +1219,9 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
                          lam, f[idx], s[idx], source=path, source_line=[rec_line[i] for i in idx],
                          std_origin=origin, wavelength_note=note,
                          description=f"measured table {Path(path).name}: {', '.join(quantities)}, elastic")
+    if frame == "specular":
+        ds.attrs["azimuth_note"] = ("phi_s read from the specular direction (phi_s = 0 on the specular side): the "
+                                    "table's peaks sit at phi_s = 0 although phi_i is not 180 deg")
     ds.attrs.update(gap_records_dropped=dropped, zero_records_as_gaps=zero_records, zeros_policy=zeros,
                     negative_values=int(np.sum(f[idx] < 0)), relative_std=rel_used)
     if note:
