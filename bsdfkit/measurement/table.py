@@ -1103,7 +1103,7 @@ def _azimuth_frame(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, v
         floor = float(np.median(np.abs(band[g])))
         near = g & (np.abs(th_s - ti) <= _PEAK_WINDOW_DEG)
 
-        def peak(azimuth: float) -> float:
+        def peak(azimuth: float, near: NDArray = near) -> float:
             d = np.abs((ph_s - azimuth + 180.0) % 360.0 - 180.0)
             sel = near & (d <= _AZIMUTH_TOL_DEG)
             return float(np.max(band[sel])) if sel.any() else 0.0
