@@ -39,7 +39,7 @@ from bsdfkit.core.records import incidences
 from bsdfkit.core.version import __version__
 from bsdfkit.io import netcdf
 from bsdfkit.reduction.spectral import SpectrumLike, band_sum, mean_wavelength, spectrum_on
-from bsdfkit.reduction.tis import Hemisphere, tis_from_profile
+from bsdfkit.reduction.tis import TIS, tis_from_profile
 
 #: ``attrs['quantity']`` of the plate model dataset, and its format version (docs/spectral.md).
 QUANTITY = "plate_spectral_model"
@@ -184,9 +184,8 @@ def _profile(matrix: xr.Dataset, value: NDArray, std: NDArray, rel: float) -> xr
     return prof
 
 
-def _tis(prof: xr.Dataset, sel: NDArray[np.bool_], center: str) -> tuple[float, float]:
-    t = tis_from_profile(prof.isel(record=np.flatnonzero(sel)), center=center)
-    return t.value, t.std
+def _tis(prof: xr.Dataset, sel: NDArray[np.bool_], center: str) -> TIS:
+    return tis_from_profile(prof.isel(record=np.flatnonzero(sel)), center=center)
 
 
 # ------------------------------------------------------------------------------------- the model
@@ -244,10 +243,10 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
         for a, th in enumerate(angles):
             sel = (sides == side) & np.isclose(matrix["theta_i"].values, th, atol=1e-6)
             for k, (elastic, converted, spectrum) in enumerate(parts):
-                el[b, a, k], el_s[b, a, k] = _tis(elastic, sel, "specular")
-                cv[b, a, k], cv_s[b, a, k] = _tis(converted, sel, "normal")
-                w = Hemisphere.from_profile(converted.isel(record=np.flatnonzero(sel)), center="normal").weights()
-                densities[k] += spectrum[sel].T @ w
+                t_el, t_cv = _tis(elastic, sel, "specular"), _tis(converted, sel, "normal")
+                el[b, a, k], el_s[b, a, k] = t_el.value, t_el.std
+                cv[b, a, k], cv_s[b, a, k] = t_cv.value, t_cv.std
+                densities[k] += spectrum[sel].T @ t_cv.weights  # the converted profile's linear weights
     for k, name in enumerate(names):
         density = densities[k]
         total = cv[:, :, k].sum(axis=0)

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
@@ -347,6 +347,8 @@ class TIS:
     std_measurement: float
     std_reconstruction: float
     components: dict[str, float]
+    #: linear weights per profile record (Σ w·f is the linear-interpolation TIS) [sr]
+    weights: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
     @property
     def std(self) -> float:
@@ -385,7 +387,8 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
             singles[f"{use}_only"] = Hemisphere.from_profile(profile, use=use, center=center).tis("log", n_psi, n_r)
         except InputError:
             singles[f"{use}_only"] = float("nan")  # that arc was not measured
-    return TIS(value=value, std_measurement=std_meas, std_reconstruction=std_rec, components={**parts, **singles})
+    return TIS(value=value, std_measurement=std_meas, std_reconstruction=std_rec, components={**parts, **singles},
+               weights=w)
 
 
 def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "yiys"),
