@@ -401,3 +401,28 @@ def test_angles_in_radians_with_few_decimals_stay_on_their_arcs(tmp_path):
     ds = read_table(write(tmp_path / "rad.csv", rows), wavelength=550.0)
     arcs = ds["arc"].values.tolist()
     assert arcs.count("in_plane") == len(in_plane(20.0)) and arcs.count("perpendicular") == 12
+
+
+def test_full_sphere_polar_angles_from_the_front_normal(tmp_path):
+    # θs from the front normal up to 180°: beyond 90° a transmitted direction, 180° − θs from the back normal
+    rows = ["theta_i,theta_s,phi_s,BSDF"]
+    for ti in INCIDENCES:
+        for ts, ps in two_arcs(ti):
+            rows.append(f"{ti!r},{ts!r},{ps!r},{truth(ti, ts, ps, 550.0)!r}")
+            rows.append(f"{ti!r},{180.0 - ts!r},{ps!r},{2 * truth(ti, ts, ps, 550.0)!r}")
+    ds = read_table(write(tmp_path / "sphere.csv", rows), wavelength=550.0)
+    refl = ds["side"].values == "reflection"
+    assert refl.sum() == (~refl).sum() > 0
+    check_truth(ds.isel(record=np.flatnonzero(refl)))
+    trans = ds.isel(record=np.flatnonzero(~refl))  # at 180° − θs from the back normal, same azimuth
+    np.testing.assert_allclose(trans["bsdf"].values[:, 0] / 2, truth(trans["theta_i"].values, trans["theta_s"].values,
+                                                                     trans["phi_s"].values, 550.0), rtol=RTOL)
+
+
+@pytest.mark.parametrize("rows, message", [
+    (["theta_i,theta_s,phi_s,BRDF", "10,95,0,0.1"], "out of range for the reflection side"),
+    (["theta_i,theta_s,phi_s,BTDF", "10,20,0,0.1", "10,150,0,0.1"], "transmission scatter angles in two frames"),
+])
+def test_polar_angles_beyond_90_that_contradict(tmp_path, rows, message):
+    with pytest.raises(BsdfkitError, match=message):
+        read_table(write(tmp_path / "bad.csv", rows), wavelength=550.0)

@@ -844,6 +844,9 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
     quantities = [c.quantity for c in values]
     headers = [c.header for c in values]
     out_side: list[str | None] = []
+    front_frame: list[int] = []  # lines with a polar angle beyond 90° (front-normal frame)
+    back_frame: list[int] = []  # lines of transmission angles within 90° (back-normal frame)
+    sideless: list[tuple[int, str]] = []  # (line, column) of values whose side nothing states
     out_value: list[float] = []
     out_std: list[float] = []
     out_rel: list[bool] = []
@@ -871,6 +874,12 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
         th_s = required(cells, "theta_s", line, None)
         ph_s = required(cells, "phi_s", line, 0.0)
         lam = required(cells, "wavelength", line, mono_lambda)
+        # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
+        # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
+        through = 90.0 < abs(th_s) <= 180.0
+        if through:
+            th_s = math.copysign(180.0 - abs(th_s), th_s) if signed else 180.0 - th_s
+            front_frame.append(line)
         row_side = default_side
         if "side" in roles:
             col = roles["side"][0]
@@ -914,10 +923,18 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
                     raise InputError(f"side contradicts the quantity {col.quantity}", file=path, line=line,
                                      field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
                 this_side = q_side
+            if through:
+                if this_side == "reflection":
+                    c = roles["theta_s"][0]
+                    raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
+                                          file=path, line=line, field=f"column {c.index + 1} '{c.header}'",
+                                          expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
+                                                   "transmission)", got=cells[c.index].strip())
+                this_side = "transmission"
+            elif this_side == "transmission" and 0.0 < abs(th_s) < 90.0:
+                back_frame.append(line)
             if this_side is None:
-                raise InputError("the table does not say which side it holds; pass --side", file=path, line=line,
-                                 field=f"column {col.index + 1} '{col.header}'",
-                                 expected="--side reflection|transmission, a side column, or --quantity brdf|btdf")
+                sideless.append((line, f"column {col.index + 1} '{col.header}'"))
             out_side.append(this_side)
             out_value.append(v)
             out_std.append(s)
@@ -931,6 +948,17 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
         rows.quantity.extend(quantities)
         rows.line.extend([line] * n_v)
         rows.column.extend(headers)
+    if front_frame and back_frame:
+        raise ValidationError("transmission scatter angles in two frames", file=path, line=back_frame[0],
+                              field="theta_s", expected="all from the back normal (<= 90 deg) or all from the front "
+                              "normal (> 90 deg)", got=f"line {front_frame[0]} beyond 90 deg")
+    if sideless:
+        if not front_frame:
+            line, where = sideless[0]
+            raise InputError("the table does not say which side it holds; pass --side", file=path, line=line,
+                             field=where, expected="--side reflection|transmission, a side column, "
+                             "--quantity brdf|btdf, or polar angles up to 180 deg from the front normal")
+        out_side = [s if s is not None else "reflection" for s in out_side]  # full sphere: up to 90° reflects
     rows.side, rows.value, rows.std, rows.std_relative = out_side, out_value, out_std, out_rel
     return rows
 
