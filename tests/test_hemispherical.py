@@ -297,3 +297,24 @@ def test_a_broad_lobe_sampled_coarsely_beyond_a_fine_window_stays_out_of_the_bod
         exact = exact_lambert_gaussian(0.8, amp, 0.2, r.theta_i)
         assert abs(r.value[0] - exact) < 0.015 * exact and abs(r.value[0] - exact) <= 2 * r.std[0], (r.theta_i,
                                                                                                     r.value)
+
+
+def test_a_lobe_narrower_than_the_sampling_is_bounded_not_interpolated():
+    # σ 0.01 in β (0.6°) sampled every 5°: one sample on the lobe. Interpolated as a cone it read 2.83 for 0.50.
+    amp = lobe(0.2, 0.01)
+    ds = make_dataset(lambert_gaussian(0.3, amp, 0.01), incidences=(0.0, 10.0), step=5.0, fine=5.0, fine_half=0.0)
+    for r in hemispherical(ds, **GRID):
+        exact = exact_lambert_gaussian(0.3, amp, 0.01, r.theta_i)
+        assert abs(r.value[0] - exact) <= r.std[0], (r.theta_i, r.value, r.std)
+        assert r.value[0] - r.std[0] <= 1.0  # never an impossible reflectance
+        assert any("narrower than the sampling" in a for a in r.assumptions)
+
+
+def test_an_impossible_value_is_flagged(tmp_path, capsys):
+    # a Lambertian table stated as BRDF but holding reflectance factors: ρ = π·0.95 ≈ 3, far above 1
+    ds = make_dataset(lambert_gaussian(0.95 * np.pi, 0.0, 0.05), incidences=(20.0,))
+    r = hemispherical(ds, **GRID)[0]
+    assert r.value[0] > 2.5 and r.warnings and "exceeds 1" in r.warnings[0]
+    assert r.as_dict()["warnings"] == r.warnings
+    ok = hemispherical(make_dataset(lambert_gaussian(0.95, 0.0, 0.05), incidences=(20.0,)), **GRID)[0]
+    assert ok.warnings == []

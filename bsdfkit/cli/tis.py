@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import InputError
@@ -80,11 +81,14 @@ def _hemispherical(ds, args: argparse.Namespace) -> int:
                 "transmission": "directional-hemispherical transmittance"}
     records = [r.as_dict() | {"quantity": quantity[r.side]} for r in results]
     bands = [r.band_average(band) | {"quantity": quantity[r.side]} for r in results]
+    warnings = [w for r in results for w in r.warnings]
     if args.json:
         emit_json({"reduction": "hemispherical", "source": str(args.scan), "units": "1 (fraction of incident power)",
                    "rule": reduction_kind.__doc__.split("\n\n")[1].strip().replace("\n    ", " "),
-                   "hemispherical": records, "band_averaged": bands})
+                   "hemispherical": records, "band_averaged": bands, "warnings": warnings})
         return 0
+    for w in warnings:
+        print(f"bsdfkit tis: warning: {w}", file=sys.stderr)
     for r, b in zip(results, bands):
         span = "monochrome" if b["band_nm"] is None else f"{b['band_nm'][0]:g}-{b['band_nm'][1]:g} nm"
         note = f"; specular lobe {b['lobe']:.4f}" if r.lobe_region_deg is not None else ""

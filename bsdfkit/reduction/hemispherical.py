@@ -342,6 +342,36 @@ def _gaussian_lobe_tis(geom: Geometry, region: NDArray[np.int64], resid: NDArray
     return 2.0 * np.pi * sigma**2 * peak * inside
 
 
+def _unresolved_lobe_bound(geom: Geometry, region: Region, ref: NDArray[np.float64],
+                           std: NDArray[np.float64]) -> float | None:
+    """Upper bound U of ∬ L dβ for a lobe narrower than the sampling (one or two in-plane samples), else None.
+
+    Such a lobe's width is not measured, only bounded: a Gaussian of peak L0 (the peak sample above the mean of
+    its nearest in-plane neighbours outside the region) would have shown at the nearest neighbour, a distance
+    d away, unless σ ≤ d/√(2 ln(L0/t)), t = twice the neighbours' standard uncertainty (at least 1 % of their
+    level). So 0 < ∬ L dβ ≤ U = 2π σ_max² L0; the reconstruction reports U/2 ± U/2."""
+    x, _ = geom.frame()
+    members = region.records[geom.arc[region.records] == "in_plane"]
+    if not 0 < members.size < 3:
+        return None
+    ip = np.flatnonzero(np.isfinite(ref) & (geom.arc == "in_plane"))
+    outside = np.setdiff1d(ip, members)
+    peak = int(members[np.argmax(ref[members])])
+    lower, upper = outside[x[outside] < x[peak]], outside[x[outside] > x[peak]]
+    neighbours = [int(a[np.argmax(x[a])]) for a in (lower,) if a.size] + \
+                 [int(a[np.argmin(x[a])]) for a in (upper,) if a.size]
+    if not neighbours:
+        return None
+    level = float(np.mean(ref[neighbours]))
+    l0 = float(ref[peak]) - level
+    d = float(min(abs(x[k] - x[peak]) for k in neighbours))
+    t = max(2.0 * float(np.max(std[neighbours])), 0.01 * abs(level), 1e-300)
+    if not l0 > 0 or not d > 0:
+        return None
+    sigma_max = d / np.sqrt(2.0 * np.log(l0 / t)) if l0 > t * np.e else d
+    return float(2.0 * np.pi * sigma_max**2 * l0)
+
+
 def _peak_vertex(x: NDArray, g: NDArray, p: int) -> float:
     """In-plane position of a lobe's peak: vertex of the parabola through ln g at the highest sample and its
     neighbours (exact for a Gaussian lobe), kept within one sample step of the highest sample."""
@@ -546,6 +576,8 @@ def _mismatch(geom: Geometry, g: NDArray[np.float64], center: str) -> float:
 
 #: RMS relative asymmetry about the normal above which the body outside a lobe region still holds lobe wings.
 BODY_ASYMMETRY = 0.10
+#: A hemispherical value above 1 by more than this many standard uncertainties is flagged as impossible.
+IMPOSSIBLE_SIGMA = 2.0
 #: At most this many samples are added to each edge of a lobe region to make the body symmetric.
 MAX_GROWTH = 40
 
@@ -600,6 +632,11 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
     body, lobe, ends, (kappa, kappa_alt) = _body_and_lobe(geom, region, finite, ref, "trend", n_psi, n_r,
                                                            with_kappa=True, body_center=body_center)
 
+    bound = _unresolved_lobe_bound(geom, region, ref, s) if region.records.size else None
+    linear_lobe = float(lobe @ np.nan_to_num(ref))
+    if bound is not None and linear_lobe > 0:  # a lobe narrower than the sampling: U/2 ± U/2
+        kappa = 0.5 * bound / linear_lobe
+
     def variant(reg: Region = region, rule: str = "trend", grid: tuple[int, int] = (n_psi, n_r),
                 **kw) -> NDArray[np.float64]:
         kw.setdefault("body_center", body_center)
@@ -623,7 +660,9 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
                 sep[name] = variant(reg=other)
     if sep:
         alt["separation"] = sep
-    if region.records.size:
+    if bound is not None and linear_lobe > 0:
+        alt["unresolved_lobe"] = {"none": body, "upper_bound": body + 2.0 * kappa * lobe}
+    elif region.records.size:
         alt["interpolation"] = {"linear_lobe": body + lobe}
         if kappa_alt != kappa:  # the Gaussian integral was used: the ln-f one is the alternative
             alt["interpolation"]["log_lobe"] = body + kappa_alt * lobe
@@ -660,6 +699,11 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
         assumptions.append(f"no lobe separable from a floor near the specular direction: scatter taken as "
                            f"rotationally symmetric about {what[body_center]}{sym}"
                            + (f" (error bar: about {what[other_center]})" if other_center else ""))
+    if bound is not None and linear_lobe > 0:
+        n_in = int(np.sum(geom.arc[region.records] == "in_plane"))
+        assumptions.append(f"specular lobe narrower than the sampling ({n_in} in-plane sample(s)): its integral "
+                           f"is bounded, 0 to {bound:.3g} on the band mean, and "
+                           "reported as half the bound with half the bound as its error")
     if not two_arcs:
         assumptions.append("in-plane data only: the perpendicular half-profiles are the mean of the two in-plane "
                            "halves (error bar: either half alone)")
@@ -737,12 +781,27 @@ class HemisphericalResult:
                 "extrapolated_beyond_deg": self.extrapolated_beyond_deg, "assumptions": self.assumptions,
                 "components": comps}
 
+    @property
+    def warnings(self) -> list[str]:
+        """Physically impossible values: a reflectance or transmittance above 1 by more than
+        :data:`IMPOSSIBLE_SIGMA` standard uncertainties (a calibration, quantity or reconstruction problem)."""
+        over = np.flatnonzero(self.value - IMPOSSIBLE_SIGMA * self.std > 1.0)
+        if not over.size:
+            return []
+        k = int(over[np.argmax(self.value[over])])
+        where = f"{self.wavelength[k]:g} nm" if np.isfinite(self.wavelength[k]) else "the one wavelength"
+        return [f"{self.side} at {self.theta_i:g} deg exceeds 1 by more than {IMPOSSIBLE_SIGMA:g} standard "
+                f"uncertainties at {over.size} of {self.value.size} wavelengths (largest {self.value[k]:.4g} "
+                f"± {self.std[k]:.2g} at {where}): not a physical result; check the reference-beam calibration, "
+                "the table's quantity (--quantity) or the sampling of the specular lobe"]
+
     def as_dict(self) -> dict:
         return {"incidence_deg": self.theta_i, "side": self.side, "config": self.config,
                 "wavelength_nm": self.wavelength, "value": self.value, "std": self.std,
                 "std_measurement": self.std_measurement, "std_reconstruction": self.std_reconstruction,
                 "lobe": self.lobe, "method": self.method, "lobe_region_deg": self.lobe_region_deg,
-                "extrapolated_beyond_deg": self.extrapolated_beyond_deg, "assumptions": self.assumptions}
+                "extrapolated_beyond_deg": self.extrapolated_beyond_deg, "assumptions": self.assumptions,
+                "warnings": self.warnings}
 
 
 def _scale_std(ds: xr.Dataset, config: str, n_wl: int) -> NDArray[np.float64]:
