@@ -111,8 +111,11 @@ def emission(params, key_words, ray, effects: Effects):
     if effects.spectral:  # the ray's wavelength bin, drawn from the LED's bin powers (word 5)
         cdf = params["spectral"]["led_cdf"]
         k = jnp.clip(jnp.searchsorted(cdf, u[5].astype(jnp.float64), side="right"), 0, cdf.shape[0] - 1)
-        return emission_geometry(params, u, effects) + (k.astype(jnp.int32),)
-    return emission_geometry(params, u, effects)
+        return tuple(sampling.materialise(key_words, list(emission_geometry(params, u, effects)))) + \
+            (k.astype(jnp.int32),)
+    # materialised: the loop's refill gathers from these arrays, and XLA would otherwise fuse (recompute) the
+    # emission there, with a rounding that depends on that fusion (FMA contraction)
+    return tuple(sampling.materialise(key_words, list(emission_geometry(params, u, effects))))
 
 
 def emission_geometry(params, u, effects: Effects):
@@ -131,12 +134,12 @@ def emission_geometry(params, u, effects: Effects):
     cx = ((i // k).astype(dt) - half) * params["pitch"]
     cy = ((i % k).astype(dt) - half) * params["pitch"]
     r = params["emitter_radius"] * jnp.sqrt(u[1])
-    phi = sampling.TWO_PI * u[2]
-    x = cx + r * jnp.cos(phi)
-    y = cy + r * jnp.sin(phi)
-    sin_t, cos_t, psi = sampling.cos_power_angles(u[3], u[4], params["cos_exponent"])
+    c_phi, s_phi = sampling.cos_sin_turn(u[2])
+    x = cx + r * c_phi
+    y = cy + r * s_phi
+    sin_t, cos_t, c_psi, s_psi = sampling.cos_power_angles(u[3], u[4], params["cos_exponent"])
     z = jnp.zeros_like(x)
-    return x, y, z, sin_t * jnp.cos(psi), sin_t * jnp.sin(psi), cos_t
+    return x, y, z, sin_t * c_psi, sin_t * s_psi, cos_t
 
 
 def _pick(table, idx):
@@ -230,9 +233,9 @@ def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, 
             return jnp.where((channel == 0).reshape(shape), rows[:, 0],
                              jnp.where((channel == 1).reshape(shape), rows[:, 1], rows[:, 2]))
 
-        sin_t, cos_t, phi = sampling.lambertian_angles(u[1], u[2])
-        nx = sin_t * jnp.cos(phi)
-        ny = sin_t * jnp.sin(phi)
+        sin_t, cos_t, c_phi, s_phi = sampling.lambertian_angles(u[1], u[2])
+        nx = sin_t * c_phi
+        ny = sin_t * s_phi
         nz = -cos_t
         if effects.plate_table:
             with jax.named_scope("table_sampling"):
@@ -240,8 +243,8 @@ def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, 
                 s = sampling.table_s(u[1].astype(jnp.float64), per_channel(P["s_nodes"]),
                                      per_channel(P["f_nodes"]), per_channel(P["cdf"])).astype(dt)
                 ts, tc = jnp.sqrt(s), jnp.sqrt(1.0 - s)
-                nx = jnp.where(is_table, ts * jnp.cos(phi), nx)
-                ny = jnp.where(is_table, ts * jnp.sin(phi), ny)
+                nx = jnp.where(is_table, ts * c_phi, nx)
+                ny = jnp.where(is_table, ts * s_phi, ny)
                 nz = jnp.where(is_table, -tc, nz)
         if effects.plate_lobe:
             with jax.named_scope("lobe_sampling"):
@@ -338,9 +341,11 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     nx = jnp.where(wall, -x * inv_r, 0.0).astype(dt)
     ny = jnp.where(wall, -y * inv_r, 0.0).astype(dt)
     nz = jnp.where(wall, 0.0, 1.0).astype(dt)
-    sin_t, cos_t, phi = sampling.lambertian_angles(u[1], u[2])
-    sin_t, cos_t, c_phi, s_phi = sampling.materialise(key_words, [sin_t, cos_t, jnp.cos(phi), jnp.sin(phi)])
-    cdx, cdy, cdz = sampling.local_to_world_cs(sin_t, cos_t, c_phi, s_phi, nx, ny, nz)
+    sin_t, cos_t, c_phi, s_phi = sampling.materialise(key_words, list(sampling.lambertian_angles(u[1], u[2])))
+    # materialised: XLA contracts a·b + c into FMAs within a fusion, so the rounding of the direction must not
+    # depend on what else (mirror, plate) is fused with it: every effects set traces the same paths
+    cdx, cdy, cdz = sampling.materialise(key_words, list(sampling.local_to_world_cs(sin_t, cos_t, c_phi, s_phi, nx,
+                                                                                   ny, nz)))
     if effects.specular:
         with jax.named_scope("specular_reflection"):
             spec = jnp.where(wall, params["spec"][0], jnp.where(led, params["spec"][2], params["spec"][1]))
