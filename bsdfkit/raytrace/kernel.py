@@ -115,11 +115,8 @@ def emission(params, key_words, ray, effects: Effects):
     if effects.spectral:  # the ray's wavelength bin, drawn from the LED's bin powers (word 5)
         cdf = params["spectral"]["led_cdf"]
         k = jnp.clip(jnp.searchsorted(cdf, u[5].astype(jnp.float64), side="right"), 0, cdf.shape[0] - 1)
-        return tuple(sampling.materialise(key_words, list(emission_geometry(params, u, effects)))) + \
-            (k.astype(jnp.int32),)
-    # materialised: the loop's refill gathers from these arrays, and XLA would otherwise fuse (recompute) the
-    # emission there, with a rounding that depends on that fusion (FMA contraction)
-    return tuple(sampling.materialise(key_words, list(emission_geometry(params, u, effects))))
+        return emission_geometry(params, u, effects) + (k.astype(jnp.int32),)
+    return emission_geometry(params, u, effects)
 
 
 def emission_geometry(params, u, effects: Effects):

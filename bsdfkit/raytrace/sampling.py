@@ -25,7 +25,8 @@ import jax.numpy as jnp
 from jax import lax
 
 TWO_PI = 2.0 * 3.141592653589793
-# minimax polynomials of sin a / a − 1 and (cos a − 1 + a²/2)/a⁴ in z = a² on |a| ≤ π/4 (Cephes sinf/cosf, sin/cos)
+# minimax polynomials P, Q of z = a² with sin a ≈ a + a³P(z), cos a ≈ 1 − a²/2 + a⁴Q(z) on |a| ≤ π/4 (Cephes
+# sinf/cosf for float32, sin/cos for float64), highest power first
 _SIN32 = (-1.9515295891e-4, 8.3321608736e-3, -1.6666654611e-1)
 _COS32 = (2.443315711809948e-5, -1.388731625493765e-3, 4.166664568298827e-2)
 _SIN64 = (1.58962301576546568060e-10, -2.50507477628578072866e-8, 2.75573136213857245213e-6,
@@ -141,7 +142,8 @@ def cos_sin_turn(u):
     around it from vectorising (measured: 27 % of the minimal kernel's time was in ``cosf``/``sinf``). Here the
     reduction is exact (4u − round(4u) is exact in binary floating point, so a = 2πu − qπ/2 has one rounding,
     |a| ≤ π/4) and sin a, cos a are Cephes' minimax polynomials, followed by a quarter-turn rotation. Max error
-    1.1e−7 in float32 (libm on a float32 2πu: 4e−7) and 3.5e−16 in float64, over every float32 u.
+    1.1e−7 in float32 (libm on a float32 2πu: 4e−7) and 3.5e−16 in float64, over all 2²⁴ uniforms of the float32
+    kernel.
     """
     dt = u.dtype
     f = 4.0 * u
