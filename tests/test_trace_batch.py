@@ -93,8 +93,9 @@ def _lobe_reference(key_words, ray, event, pending, b0x, b0y, sigma, dtype, max_
         w1, w2 = sampling.random_words(key_words, ray_lobe, [base + attempt.astype(jnp.uint32)])
         u1, u2 = sampling.to_unit(w1, dtype), sampling.to_unit(w2, dtype)
         r = jnp.sqrt(-2.0 * jnp.log1p(-u1))
-        gx = b0x + sigma * r * jnp.cos(sampling.TWO_PI * u2)
-        gy = b0y + sigma * r * jnp.sin(sampling.TWO_PI * u2)
+        c, s = sampling.cos_sin_turn(u2)
+        gx = b0x + sigma * r * c
+        gy = b0y + sigma * r * s
         ok = gx * gx + gy * gy < 1.0
         take = todo & ok
         return attempt + 1, todo & ~ok, jnp.where(take, gx, bx), jnp.where(take, gy, by)

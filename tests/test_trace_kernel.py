@@ -155,6 +155,22 @@ def test_table_sampler_matches_its_pdf():
     np.testing.assert_allclose(exact_cdf(s), u, atol=1e-12)
 
 
+def test_azimuth_cos_sin_are_accurate_on_the_float32_uniform_grid():
+    """cos 2πu, sin 2πu by quarter-turn reduction and polynomials: within 1.2e-7 (float32; libm on a float32 2πu
+    is 4e-7 off) and 4e-16 (float64) of the exact values, on to_unit's 24-bit grid of uniforms."""
+    k = np.arange(2 ** 24, step=13)  # spread over the grid, plus every value near the octant switches
+    near = (np.arange(9)[:, None] * 2 ** 21 + np.arange(-2000, 2000)[None, :]).ravel()
+    k = np.unique(np.clip(np.concatenate([k, near]), 0, 2 ** 24 - 1))
+    u = k * 2.0 ** -24
+    exact = 2 * np.pi * u.astype(np.longdouble)
+    for dtype, tol in ((jnp.float32, 1.2e-7), (jnp.float64, 4e-16)):
+        with x64():
+            c, s = map(np.asarray, jax.jit(sampling.cos_sin_turn)(jnp.asarray(u, dtype)))
+        assert c.dtype == s.dtype == np.dtype(dtype)
+        assert np.abs(c.astype(np.longdouble) - np.cos(exact)).max() < tol
+        assert np.abs(s.astype(np.longdouble) - np.sin(exact)).max() < tol
+
+
 @pytest.mark.slow
 def test_lobe_sampler_is_a_gaussian_truncated_to_the_unit_disk():
     n = 40_000

@@ -97,6 +97,10 @@ SUBSTEPS = 2
 TAIL_SHRINK = 16
 TAIL_LEVELS = 2
 MIN_TAIL_LANES = 64
+#: XLA compile options of the kernel. LLVM prefers 256-bit vectors on x86 even where AVX-512 is present; the
+#: kernel is element-wise over wide lanes, so 512-bit vectors cut its CPU time by ~20 % (docs/tracer.md, Speed).
+#: Same results bit for bit; ignored by other backends and by CPUs without AVX-512.
+COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 512}
 
 
 def _fixed(w):
@@ -131,12 +135,12 @@ def emission_geometry(params, u, effects: Effects):
     cx = ((i // k).astype(dt) - half) * params["pitch"]
     cy = ((i % k).astype(dt) - half) * params["pitch"]
     r = params["emitter_radius"] * jnp.sqrt(u[1])
-    phi = sampling.TWO_PI * u[2]
-    x = cx + r * jnp.cos(phi)
-    y = cy + r * jnp.sin(phi)
-    sin_t, cos_t, psi = sampling.cos_power_angles(u[3], u[4], params["cos_exponent"])
+    c_phi, s_phi = sampling.cos_sin_turn(u[2])
+    x = cx + r * c_phi
+    y = cy + r * s_phi
+    sin_t, cos_t, c_psi, s_psi = sampling.cos_power_angles(u[3], u[4], params["cos_exponent"])
     z = jnp.zeros_like(x)
-    return x, y, z, sin_t * jnp.cos(psi), sin_t * jnp.sin(psi), cos_t
+    return x, y, z, sin_t * c_psi, sin_t * s_psi, cos_t
 
 
 def _pick(table, idx):
@@ -230,9 +234,9 @@ def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, 
             return jnp.where((channel == 0).reshape(shape), rows[:, 0],
                              jnp.where((channel == 1).reshape(shape), rows[:, 1], rows[:, 2]))
 
-        sin_t, cos_t, phi = sampling.lambertian_angles(u[1], u[2])
-        nx = sin_t * jnp.cos(phi)
-        ny = sin_t * jnp.sin(phi)
+        sin_t, cos_t, c_phi, s_phi = sampling.lambertian_angles(u[1], u[2])
+        nx = sin_t * c_phi
+        ny = sin_t * s_phi
         nz = -cos_t
         if effects.plate_table:
             with jax.named_scope("table_sampling"):
@@ -240,8 +244,8 @@ def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, 
                 s = sampling.table_s(u[1].astype(jnp.float64), per_channel(P["s_nodes"]),
                                      per_channel(P["f_nodes"]), per_channel(P["cdf"])).astype(dt)
                 ts, tc = jnp.sqrt(s), jnp.sqrt(1.0 - s)
-                nx = jnp.where(is_table, ts * jnp.cos(phi), nx)
-                ny = jnp.where(is_table, ts * jnp.sin(phi), ny)
+                nx = jnp.where(is_table, ts * c_phi, nx)
+                ny = jnp.where(is_table, ts * s_phi, ny)
                 nz = jnp.where(is_table, -tc, nz)
         if effects.plate_lobe:
             with jax.named_scope("lobe_sampling"):
@@ -338,9 +342,11 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     nx = jnp.where(wall, -x * inv_r, 0.0).astype(dt)
     ny = jnp.where(wall, -y * inv_r, 0.0).astype(dt)
     nz = jnp.where(wall, 0.0, 1.0).astype(dt)
-    sin_t, cos_t, phi = sampling.lambertian_angles(u[1], u[2])
-    sin_t, cos_t, c_phi, s_phi = sampling.materialise(key_words, [sin_t, cos_t, jnp.cos(phi), jnp.sin(phi)])
-    cdx, cdy, cdz = sampling.local_to_world_cs(sin_t, cos_t, c_phi, s_phi, nx, ny, nz)
+    sin_t, cos_t, c_phi, s_phi = sampling.materialise(key_words, list(sampling.lambertian_angles(u[1], u[2])))
+    # materialised: XLA contracts a·b + c into FMAs within a fusion, so the rounding of the direction must not
+    # depend on what else (mirror, plate) is fused with it: every effects set traces the same paths
+    cdx, cdy, cdz = sampling.materialise(key_words, list(sampling.local_to_world_cs(sin_t, cos_t, c_phi, s_phi, nx,
+                                                                                   ny, nz)))
     if effects.specular:
         with jax.named_scope("specular_reflection"):
             spec = jnp.where(wall, params["spec"][0], jnp.where(led, params["spec"][2], params["spec"][1]))
@@ -652,4 +658,5 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
             "emitted": emitted_bins, "iterations": final["it"]}
 
 
-trace_chunk_jit = partial(jax.jit, static_argnames=("effects", "lanes", "chunk", "substeps"))(trace_chunk)
+trace_chunk_jit = partial(jax.jit, static_argnames=("effects", "lanes", "chunk", "substeps"),
+                          compiler_options=COMPILER_OPTIONS)(trace_chunk)

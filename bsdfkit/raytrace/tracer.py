@@ -164,7 +164,7 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
                                                       for s, d in shapes])
     return program.lower(abstract, jax.ShapeDtypeStruct((2,), "uint32", sharding=replicated),
                          jax.ShapeDtypeStruct((n_devices,), "uint32", sharding=split),
-                         jax.ShapeDtypeStruct((n_devices,), "int32", sharding=split)).compile()
+                         jax.ShapeDtypeStruct((n_devices,), "int32", sharding=split)).compile(kernel.COMPILER_OPTIONS)
 
 
 def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed, compile_s) -> TraceResult:
