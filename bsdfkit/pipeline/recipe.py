@@ -36,6 +36,7 @@ from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_
 from bsdfkit.io import netcdf
 from bsdfkit.io.atomic import OutputSet, write_text
 from bsdfkit.io.jsonout import dumps
+from bsdfkit.io.text import read_text
 from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
@@ -194,15 +195,11 @@ def _ranged(value: Any, path: Path, dotted: str, lo: float, hi: float, lo_open: 
 
 
 def _read_toml(path: Path, what: str) -> dict:
+    text = read_text(path, expected=f"a {what} TOML file")
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FormatError(f"not valid TOML ({exc})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"{what} is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
-                          file=path, expected="a UTF-8 TOML file") from None
-    except OSError as exc:
-        raise InputError(f"cannot read the {what} ({exc.strerror})", file=path) from None
 
 
 def load_recipe(path: str | Path) -> Recipe:
