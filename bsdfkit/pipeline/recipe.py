@@ -4,8 +4,8 @@ A recipe names a measurement folder and the stages to run on it. Each stage is a
 the products of earlier stages; it returns its part of the run summary and the files it wants written.
 
 Everything that can be checked is checked before computing: the recipe's options (types and ranges), the trace
-scene, the output folder (no existing output without ``force``, no output that is an input, writable). The
-outputs are then written into a staging folder beside the output folder and moved into place at the end
+scene, the output folder (a folder that exists and is not empty is refused without ``force`` and replaced as a
+whole with it, never when it is or holds an input; writable). The outputs are then written into a staging folder beside the output folder and moved into place at the end
 (:class:`bsdfkit.io.atomic.OutputSet`), so a failed, killed or out-of-disk run leaves the previous complete set
 or nothing, and a rerun after an interruption needs no ``--force``.
 """
@@ -866,7 +866,8 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     inputs = (recipe.path, recipe.measurement, recipe.trace.scene,
               *((recipe.spectral.measurement, recipe.spectral.scene) if recipe.spectral else ()))
     # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
-    with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe)) as out:
+    with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe),
+                   whole_folder=True) as out:
         return _run_stages(recipe, out, log, progress)
 
 
