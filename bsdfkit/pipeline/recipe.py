@@ -5,9 +5,10 @@ the products of earlier stages; it returns its part of the run summary and the f
 
 Everything that can be checked is checked before computing: the recipe's options (types and ranges), the trace
 scene, the output folder (a folder that exists and is not empty is refused without ``force`` and replaced as a
-whole with it, never when it is or holds an input; writable). The outputs are then written into a staging folder beside the output folder and moved into place at the end
-(:class:`bsdfkit.io.atomic.OutputSet`), so a failed, killed or out-of-disk run leaves the previous complete set
-or nothing, and a rerun after an interruption needs no ``--force``.
+whole with it, never when it is or holds an input; writable). The outputs are then written into a staging
+folder beside the output folder and moved into place at the end (:class:`bsdfkit.io.atomic.OutputSet`), so a
+failed, killed or out-of-disk run leaves the previous complete set or nothing, and a rerun after an
+interruption needs no ``--force``.
 """
 from __future__ import annotations
 
