@@ -90,3 +90,30 @@ def test_console_command_is_the_early_signal_launcher():
 
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     assert scripts["bsdfkit"] == "bsdfkit_console:main"
+
+
+SEMAPHORES = """import multiprocessing, signal, sys, time
+from bsdfkit.cli.main import exit_now
+signal.signal(signal.SIGTERM, lambda signum, frame: exit_now(signum))
+ctx = multiprocessing.get_context("spawn")
+held = [ctx.Lock() for _ in range(3)] + [ctx.Queue()]  # what a dask LocalCluster holds: named semaphores
+held[-1].put(1)
+child = ctx.Process(target=time.sleep, args=(60,), daemon=True)
+child.start()
+print("ready", flush=True)
+time.sleep(60)
+"""
+
+
+def test_signal_exit_releases_semaphores_so_stderr_is_one_line(tmp_path):
+    # after a signal exit of `sweep --workers 2` multiprocessing's resource tracker warned of leaked semaphores
+    proc = subprocess.Popen([sys.executable, "-c", SEMAPHORES], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    proc.send_signal(signal.SIGTERM)
+    try:
+        _, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines() == ["bsdfkit: terminated; unfinished outputs removed"], err
