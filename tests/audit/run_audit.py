@@ -9,7 +9,7 @@ Every case runs ``python -m bsdfkit.cli.main …`` in a subprocess and is classi
 * ``error`` — exit 2 with exactly one line on stderr and no traceback (when the case expects an error);
 * ``traceback`` — "Traceback" on stderr; ``hang`` — no exit within the time limit;
 * ``partial`` — a temporary (``.part``/``.staging``/``.old``/``.probe``) left behind, an output of a failed
-  run present, or an input changed;
+  run present, an input changed, or a file that a replaced output folder held still there (a mixed set);
 * ``silent`` — exit 0 where an error was expected (bad input accepted);
 * ``refused`` — an error where success was expected; ``cryptic`` — a failure that is not one line / exit 2.
 
@@ -19,6 +19,7 @@ otherwise those cases are skipped. Prints one line per non-ok/error case and a t
 from __future__ import annotations
 
 import argparse
+import codecs
 import contextlib
 import gzip
 import json
@@ -36,7 +37,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 LEFTOVER = (".part", ".staging", ".old", ".probe")
-CLI = [sys.executable, "-m", "bsdfkit.cli.main"]
+#: the console command itself (bsdfkit_console: answers Ctrl-C from its first moment)
+CLI = [sys.executable, "-m", "bsdfkit_console"]
 
 
 @dataclass
@@ -50,6 +52,7 @@ class Case:
     kill: tuple[int, float] | None = None  # (signal, seconds after start), then a rerun without --force
     concurrent: bool = False  # run argv twice at once: exactly one must succeed
     cwd: Path | None = None
+    absent: list[Path] = field(default_factory=list)  # must not exist afterwards (a replaced folder's old files)
 
 
 # ---------------------------------------------------------------------------------------------- fixtures
@@ -190,6 +193,10 @@ def make_fixtures(work: Path) -> dict[str, Path]:
     f["csv_table"] = work / "fx" / "table.csv"
     f["csv_table"].write_text("theta_i,theta_s,phi_s,brdf\n" + "".join(
         f"0,{t},0,{0.3183:.4f}\n" for t in range(0, 90, 5)))
+    # Excel's "Unicode text" export of the same table: UTF-16LE with a byte-order mark, tabs, CRLF
+    f["excel_table"] = work / "fx" / "table_excel.txt"
+    f["excel_table"].write_bytes(codecs.BOM_UTF16_LE + f["csv_table"].read_text().replace(",", "\t")
+                                 .replace("\n", "\r\n").encode("utf-16-le"))
     # the plate of a phosphor top: written by the toolkit from the Table-2 constants
     from bsdfkit.raytrace.plate import PhosphorPlate
     table2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
@@ -205,19 +212,35 @@ def make_fixtures(work: Path) -> dict[str, Path]:
 # ----------------------------------------------------------------------------------------- damaged inputs
 def damaged_variants(path: Path) -> dict[str, bytes]:
     data = path.read_bytes()
-    text_like = not data[:2] == b"\x1f\x8b"
+    gz = data[:2] == b"\x1f\x8b"
+    text_like = not gz and b"\x00" not in data[:4096]
     out = {
         "empty": b"",
         "binary": bytes(range(256)) * 8,
         "nul": data[: len(data) // 2] + b"\x00" * 64 + data[len(data) // 2:],
         "truncated": data[: max(1, len(data) // 3)],
-        "latin1": data.replace(b"e", b"\xe9", 3) if text_like else gzip.compress(
-            gzip.decompress(data).replace(b"0", b"\xe9", 3)),
-        "utf16": data.decode("utf-8", "replace").encode("utf-16") if text_like else data[:10],
+        "latin1": gzip.compress(gzip.decompress(data).replace(b"0", b"\xe9", 3)) if gz
+        else data.replace(b"e", b"\xe9", 3),
     }
-    if not text_like:
+    if gz:
         out["gzip_corrupt"] = data[:20] + bytes(b ^ 0x5A for b in data[20:60]) + data[60:]
         out["gzip_truncated"] = data[: len(data) // 2]
+    if not text_like:
+        out["first_bytes"] = data[:10]
+        return out
+    text = data.decode("utf-8-sig", "replace")
+    # encodings a careful user expects to be read like UTF-8 (Excel's "Unicode text" is UTF-16LE + BOM)
+    out["utf16"] = text.encode("utf-16")
+    out["utf16le_bom"] = codecs.BOM_UTF16_LE + text.encode("utf-16-le")
+    out["utf16be_bom"] = codecs.BOM_UTF16_BE + text.encode("utf-16-be")
+    out["utf16le_nobom"] = text.encode("utf-16-le")
+    out["utf32"] = text.encode("utf-32")
+    out["utf8_bom"] = codecs.BOM_UTF8 + text.encode("utf-8")
+    out["crlf"] = text.replace("\r\n", "\n").replace("\n", "\r\n").encode()
+    # truncations: the last line cut inside its last number, the last line lost
+    body = data.rstrip(b"\r\n")
+    out["cut_number"] = body[:-1]
+    out["last_line_lost"] = body[: body.rfind(b"\n") + 1]
     return out
 
 
@@ -289,9 +312,23 @@ def input_cases(work: Path, f: dict[str, Path]) -> list[Case]:
     for label, p in variants("spectrum", f["spectrum"], ".ISD"):
         cases.append(Case(f"color spectrum {label}", ["color", str(p)]))
     for case in cases:
-        if case.name.endswith(" latin1"):
+        label = case.name.rsplit(" ", 1)[-1]
+        if label == "latin1":
             case.expect = "either"  # vendor files in Latin-1 may be read as such
+        elif label in ENCODED_ALIKE:
+            case.expect = "ok"  # the same text in another encoding: read like UTF-8
+        elif label == "last_line_lost" or (label == "cut_number" and not case.name.startswith(CUT_DETECTABLE)):
+            case.expect = "either"  # a whole line lost is detectable only where the layout says so
     return cases
+
+
+#: variants that hold the original text in another encoding or line-end convention
+ENCODED_ALIKE = ("utf16", "utf16le_bom", "utf16be_bom", "utf16le_nobom", "utf32", "utf8_bom", "crlf")
+#: inputs whose layout makes a number cut at the end of the file detectable (numeric tables, fixed formats)
+CUT_DETECTABLE = ("read tracepro", "ingest tracepro", "convert tracepro", "read zemax", "ingest zemax",
+                  "convert zemax", "read asap", "ingest asap", "convert asap", "read radiant", "ingest radiant",
+                  "convert radiant", "read csv_table", "ingest csv_table", "convert csv_table", "trace ray file",
+                  "color spectrum", "trace plate", "budget table")
 
 
 # ----------------------------------------------------------------------------------------------- options
@@ -417,6 +454,20 @@ def output_cases(work: Path, f: dict[str, Path], mounts: dict[str, Path]) -> lis
             (exists / "README.md").write_text("previous")
         cases.append(Case(f"{verb} output exists, no --force", build(str(exists)),
                           inputs=[exists] if exists.is_file() else [exists / "summary.json"], timeout=t))
+    # a folder that is the output as a whole: never mixed with other files
+    for verb in ("simulate", "run"):
+        t = 600
+        crowded = o / f"crowded_{verb}"
+        crowded.mkdir()
+        (crowded / "notes.txt").write_text("someone else's")
+        cases.append(Case(f"{verb} into a non-empty folder, no --force", writers[verb](str(crowded)),
+                          inputs=[crowded / "notes.txt"], timeout=t))
+        replaced = o / f"replaced_{verb}"
+        replaced.mkdir()
+        (replaced / "notes.txt").write_text("someone else's")
+        first = "manifest.toml" if verb == "simulate" else "summary.json"
+        cases.append(Case(f"{verb} --force into a non-empty folder", writers[verb](str(replaced)) + ["--force"],
+                          "ok", outputs=[replaced / first], absent=[replaced / "notes.txt"], timeout=t))
     return cases
 
 
@@ -439,6 +490,19 @@ def kill_cases(work: Path, f: dict[str, Path]) -> list[Case]:
                 out = k / f"{verb}_{name}_{int(delay)}.out"
                 cases.append(Case(f"kill {verb} {name} at {delay:g}s", build(str(out)), "ok", outputs=[out],
                                   kill=(sig, delay), timeout=900))
+    # a signal while the command still imports its libraries (the first second)
+    for verb in ("trace", "ingest", "simulate"):
+        for sig, name in ((signal.SIGINT, "SIGINT"), (signal.SIGTERM, "SIGTERM")):
+            for delay in (0.3, 1.0):
+                out = k / f"{verb}_{name}_early_{delay:g}.out"
+                cases.append(Case(f"kill {verb} {name} at {delay:g}s", long_jobs[verb](str(out)), "ok",
+                                  outputs=[out], kill=(sig, delay), timeout=900))
+    # a sweep on a local dask cluster: workers and their semaphores must go with the command, silently
+    for sig, name in ((signal.SIGINT, "SIGINT"), (signal.SIGTERM, "SIGTERM")):
+        out = k / f"sweep_workers_{name}.out"
+        cases.append(Case(f"kill sweep --workers 2 {name} at 30s",
+                          long_jobs["sweep"](str(out)) + ["--workers", "2"], "ok", outputs=[out],
+                          kill=(sig, 30.0), timeout=900))
     return cases
 
 
@@ -473,6 +537,10 @@ def verb_smoke_cases(work: Path, f: dict[str, Path]) -> list[Case]:
         Case("read tracepro", ["read", str(f["tracepro"])], "ok"),
         Case("read asap", ["read", str(f["asap"])], "ok"),
         Case("read a folder", ["read", str(s)]),
+        Case("ingest Excel unicode-text table", ["ingest", str(f["excel_table"]), "-o", str(s / "excel.nc")], "ok",
+             outputs=[s / "excel.nc"]),
+        Case("convert Excel unicode-text table", ["convert", str(f["excel_table"]), "--to", "zemax", "-o",
+                                                  str(s / "excel.bsdf")], "ok", outputs=[s / "excel.bsdf"]),
         Case("budget table", ["budget", "--table", str(f["table"]), "--eta-mc", "0.9"], "ok"),
         Case("budget nothing", ["budget", "--eta-mc", "0.9"]),
         Case("trace ok", ["trace", str(f["scene"]), "--rays", "2000", "-o", str(s / "t.nc")], "ok",
@@ -560,6 +628,9 @@ def run_case(case: Case) -> tuple[str, str]:
         waited = time.perf_counter() - sent
         if "Traceback" in err:
             return "traceback", err[-400:]
+        if not finished_early and sig != signal.SIGKILL and (
+                p.returncode != 128 + sig or len(err.strip().splitlines()) != 1):
+            return "cryptic", f"exit {p.returncode}, stderr not one line: {err.strip()[-300:]}"
         if not finished_early and waited > 2.0 and sig != signal.SIGKILL:
             return "hang", f"exit {waited:.1f} s after the signal"
         left = leftovers(case.outputs) if sig != signal.SIGKILL else []
@@ -582,6 +653,9 @@ def run_case(case: Case) -> tuple[str, str]:
     left = leftovers(case.outputs)
     if left and verdict in ("ok", "error", "refused"):
         return "partial", f"left behind: {left}"
+    mixed = [str(p) for p in case.absent if p.exists()]
+    if mixed and verdict == "ok":
+        return "partial", f"a replaced output folder still holds {mixed}"
     return verdict, err.strip()[-400:]
 
 
