@@ -29,14 +29,16 @@ _BOMS = ((codecs.BOM_UTF32_LE, "utf-32-le"), (codecs.BOM_UTF32_BE, "utf-32-be"),
 
 
 def _unmarked_utf16(raw: bytes) -> str | None:
-    """'utf-16-le'/'utf-16-be' when the bytes look like ASCII text in UTF-16 without a byte-order mark."""
+    """'utf-16-le'/'utf-16-be' when the bytes look like mostly-ASCII text in UTF-16 without a byte-order mark:
+    (nearly) every second byte NUL, the others not."""
     head = raw[:4096]
     if len(head) < 4 or len(head) % 2:
         return None
-    even, odd = head[0::2], head[1::2]
-    if not odd.strip(b"\x00") and b"\x00" not in even:
+    n = len(head) // 2
+    even, odd = head[0::2].count(0), head[1::2].count(0)
+    if odd >= 0.75 * n and even <= 0.05 * n:
         return "utf-16-le"
-    if not even.strip(b"\x00") and b"\x00" not in odd:
+    if even >= 0.75 * n and odd <= 0.05 * n:
         return "utf-16-be"
     return None
 
