@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
-from bsdfkit.io.text import decode_text
+from bsdfkit.io.text import decode_text, refuse_cut_last_line
 from bsdfkit.measurement.manifest import Manifest, read_manifest
 
 SCAN_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "exposure_s")
@@ -58,6 +58,7 @@ def _open_text(path: Path) -> str:
 def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
     """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
     text = _open_text(path)
+    refuse_cut_last_line(text, path, ",", expected="a row of counts")
     try:
         rows = [r for r in csv.reader(io.StringIO(text))]
     except csv.Error as exc:
