@@ -54,6 +54,18 @@ def test_folder_holding_an_input_is_refused_even_with_force(tmp_path):
     assert recipe.read_text() == "[recipe]\n"
 
 
+def test_folder_holding_the_current_folder_is_refused_even_with_force(tmp_path, monkeypatch):
+    folder = tmp_path / "project"
+    (folder / "src").mkdir(parents=True)
+    monkeypatch.chdir(folder / "src")
+    _write_set(Path("."), force=False)  # the empty current folder: filled in place, not replaced by a rename
+    assert Path.cwd().samefile(folder / "src") and (folder / "src" / "summary.json").read_text() == "new"
+    for target in (Path(".."), folder):
+        with pytest.raises(OutputError, match="holds the current folder"):
+            _write_set(target, force=True)
+    assert _tree(folder)[:2] == ["src", "src/a.txt"]
+
+
 def test_whole_folder_staged_inside_a_mount_point_replaces_its_content(tmp_path, monkeypatch):
     # the target's parent cannot take the staging folder (a read-only parent, or the target is a mount point)
     folder = tmp_path / "out"

@@ -215,8 +215,8 @@ def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike
     """Check a folder that is one command's output as a whole, before computing; return it as a Path.
 
     Raises :class:`OutputError` if it is a file, a parent is a file, it cannot be created or written, or (with
-    ``force``) it is or holds one of ``inputs``; :class:`OutputExistsError` if it exists, is not empty and
-    ``force`` is not given.
+    ``force``) it is or holds one of ``inputs`` or the current folder; :class:`OutputExistsError` if it exists,
+    is not empty and ``force`` is not given.
     """
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
@@ -230,6 +230,10 @@ def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike
                                 "as a whole", file=folder, got=f"{len(others)} entries, e.g. {others[0].name}")
     if others:
         resolved = folder.resolve()
+        with contextlib.suppress(OSError):
+            if Path.cwd().resolve().is_relative_to(resolved):
+                raise OutputError("the output folder holds the current folder (refused even with --force)",
+                                  file=folder, expected="an output folder apart from the current folder")
         for inp in inputs:
             if inp is not None and Path(inp).resolve().is_relative_to(resolved):
                 raise OutputError("the output folder is or holds an input of this command (refused even with "
@@ -395,8 +399,10 @@ class OutputSet:
         resolved = self.folder.resolve()
         parent, name = resolved.parent, resolved.name
         try:
-            if resolved.is_dir() and resolved.stat().st_dev != parent.stat().st_dev:
-                # the target is a mount point: staged files beside it could not be renamed into it (EXDEV)
+            if resolved.is_dir() and (resolved.stat().st_dev != parent.stat().st_dev
+                                      or Path.cwd().resolve().is_relative_to(resolved)):
+                # the target is a mount point (staged files beside it could not be renamed into it, EXDEV) or
+                # holds the current folder (a rename would leave this process in a deleted folder)
                 self._open_staging_inside(resolved, None)
                 return
         except OSError:
