@@ -53,6 +53,7 @@ class Case:
     concurrent: bool = False  # run argv twice at once: exactly one must succeed
     cwd: Path | None = None
     absent: list[Path] = field(default_factory=list)  # must not exist afterwards (a replaced folder's old files)
+    group: str = ""  # the class of the case in the summary table
 
 
 # ---------------------------------------------------------------------------------------------- fixtures
@@ -704,24 +705,37 @@ def main() -> int:
     try:
         f = make_fixtures(work)
         with fault_mounts(work) as mounts:
-            cases = (verb_smoke_cases(work, f) + input_cases(work, f) + option_cases(work, f)
-                     + output_cases(work, f, mounts) + concurrency_cases(work, f)
-                     + ([] if args.no_kills else kill_cases(work, f)))
+            cases = []
+            for group, made in (("smoke", verb_smoke_cases(work, f)), ("inputs", input_cases(work, f)),
+                                ("options", option_cases(work, f)), ("output faults", output_cases(work, f, mounts)),
+                                ("concurrency", concurrency_cases(work, f)),
+                                ("kills", [] if args.no_kills else kill_cases(work, f))):
+                for case in made:
+                    case.group = f"input {case.name.rsplit(' ', 1)[-1]}" if group == "inputs" else group
+                cases += made
             if args.only:
                 cases = [c for c in cases if args.only in c.name]
             serial = [c for c in cases if c.kill or c.concurrent]
             parallel = [c for c in cases if not (c.kill or c.concurrent)]
+
+            def run_logged(case: Case) -> tuple[str, str]:
+                verdict, detail = run_case(case)
+                if verdict not in ("ok", "error"):  # as they come: a long audit's findings survive a stop
+                    print(f"[{verdict}] {case.name}: {' '.join(detail.split())[:300]}", flush=True)
+                return verdict, detail
+
             with ThreadPoolExecutor(max(1, args.jobs)) as pool:
-                results = list(pool.map(run_case, parallel))
-            results += [run_case(c) for c in serial]
+                results = list(pool.map(run_logged, parallel))
+            results += [run_logged(c) for c in serial]
             cases = parallel + serial
         tally = Counter(v for v, _ in results)
-        for case, (verdict, detail) in zip(cases, results):
-            if verdict not in ("ok", "error"):
-                print(f"[{verdict}] {case.name}: {' '.join(detail.split())[:300]}")
+        verdicts = ("ok", "error", "traceback", "hang", "partial", "silent", "refused", "cryptic")
         print(f"\n{len(cases)} cases in {time.time() - started:.0f} s; mounts: {sorted(mounts) or 'none'}")
-        for verdict in ("ok", "error", "traceback", "hang", "partial", "silent", "refused", "cryptic"):
-            print(f"  {verdict:10s} {tally.get(verdict, 0)}")
+        print(f"  {'class':26s}" + "".join(f"{v:>10s}" for v in verdicts))
+        by_group = Counter((c.group, v) for c, (v, _) in zip(cases, results))
+        for group in dict.fromkeys(c.group for c in cases):
+            print(f"  {group:26s}" + "".join(f"{by_group.get((group, v), 0):10d}" for v in verdicts))
+        print(f"  {'all':26s}" + "".join(f"{tally.get(v, 0):10d}" for v in verdicts))
         return 0 if set(tally) <= {"ok", "error"} else 1
     finally:
         if args.keep:
