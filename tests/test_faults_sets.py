@@ -5,10 +5,10 @@ whole with it, never mixed with other files, and never when it is or holds an in
 """
 from __future__ import annotations
 
-import errno
 from pathlib import Path
 
 import pytest
+from conftest import no_staging_in
 
 from bsdfkit.cli.main import main
 from bsdfkit.io.atomic import OutputError, OutputExistsError, OutputSet, write_text
@@ -72,14 +72,7 @@ def test_whole_folder_staged_inside_a_mount_point_replaces_its_content(tmp_path,
     folder.mkdir()
     (folder / "old.txt").write_text("old")
     (folder / "olddir").mkdir()
-    real_mkdir = Path.mkdir
-
-    def guarded(self, *args, **kw):
-        if self.name.endswith(".staging") and self.parent == tmp_path:
-            raise OSError(errno.EROFS, "Read-only file system", str(self))
-        return real_mkdir(self, *args, **kw)
-
-    monkeypatch.setattr(Path, "mkdir", guarded)
+    no_staging_in(monkeypatch, tmp_path)
     _write_set(folder, force=True)
     assert _tree(folder) == ["a.txt", "sub", "sub/b.txt", "summary.json"]
 
