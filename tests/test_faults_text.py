@@ -163,3 +163,20 @@ def test_text_and_encoding_names_what_it_read():
     assert text_and_encoding(codecs.BOM_UTF8 + b"a", "f") == ("a", "utf-8-sig")
     assert text_and_encoding("a".encode("utf-16"), "f")[1] == "utf-16-le"
     assert text_and_encoding(b"caf\xe9", "f", legacy="cp1252") == ("café", "cp1252")
+
+
+BLOCKS = ["theta_i,theta_s,phi_s,brdf"] + [f"{ti},{t},0,0.3183" for ti in (0, 20, 40) for t in range(0, 90, 5)]
+
+
+@pytest.mark.parametrize("kept, found", [(len(BLOCKS) - 1, 17), (len(BLOCKS) - 9, 9), (len(BLOCKS) - 17, 1)])
+def test_table_whose_last_incidence_block_stops_early_is_refused(tmp_path, kept, found):
+    path = _write(tmp_path, "t.csv", ("\n".join(BLOCKS[:kept]) + "\n").encode())
+    with pytest.raises(FormatError, match=rf"t\.csv:{kept}: field 'theta_i=40': the last block stops early.*"
+                                          rf"expected 18 scatter angles like every other block, got {found}"):
+        read_table(path)
+
+
+def test_blocks_of_their_own_sizes_are_read(tmp_path):
+    # a shorter last block that is not the beginning of the others (or others that differ) is a measurement
+    rows = BLOCKS[:-18] + [f"40,{t},0,0.3183" for t in range(0, 90, 10)]
+    assert read_table(_write(tmp_path, "t.csv", ("\n".join(rows) + "\n").encode())).sizes["record"] == 36 + 9

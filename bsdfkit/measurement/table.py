@@ -693,6 +693,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
     rows = _parse_rows(path, data, delim, columns, roles, decimal_comma, theta_i_default, phi_i_default,
                        default_side, mono_lambda, block_comments, _fields(text.lines[k_header][1], delim))
+    _refuse_cut_last_block(path, rows)
     signed = "phi_s" not in roles
     ds = _assemble(path, rows, signed, rel, zeros,
                    wavelength_known=bool(np.isfinite(np.asarray(rows.wavelength, dtype=np.float64)).any()))
@@ -765,6 +766,34 @@ def _uses_decimal_comma(data: list[tuple[int, str]], delim: str | None) -> bool:
             if re.match(r"^[+-]?\d*\.\d+", c):
                 return False
     return False
+
+
+def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
+    """Refuse a table whose last block (one incidence, wavelength, side and value column) stops early: its
+    scatter angles are a strict beginning of those of every other block, and those all agree (a file cut
+    after a whole row)."""
+
+    def exact(v: float) -> float | None:
+        return None if math.isnan(v) else round(v, 9)  # NaN (no wavelength) as one key
+
+    blocks: dict[tuple, list[tuple]] = {}
+    last_line = max(rows.line, default=0)
+    at_end = set()
+    for th_i, ph_i, lam, side, col, th_s, ph_s, line in zip(rows.theta_i, rows.phi_i, rows.wavelength, rows.side,
+                                                            rows.column, rows.theta_s, rows.phi_s, rows.line):
+        key = (exact(th_i), exact(ph_i), exact(lam), side, col)
+        blocks.setdefault(key, []).append((exact(th_s), exact(ph_s)))
+        if line == last_line:
+            at_end.add(key)
+    whole = [b for k, b in blocks.items() if k not in at_end]
+    if len(whole) < 2 or any(b != whole[0] for b in whole[1:]):
+        return  # blocks of their own sizes: nothing tells a shorter last block from a cut one
+    for key in at_end:
+        cut = blocks[key]
+        if len(cut) < len(whole[0]) and cut == whole[0][:len(cut)]:
+            raise FormatError("the last block stops early (truncated?)", file=path, line=last_line,
+                              field=f"theta_i={key[0]:g}" if key[0] is not None else "last block",
+                              expected=f"{len(whole[0])} scatter angles like every other block", got=len(cut))
 
 
 def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, columns: list[_Column],
