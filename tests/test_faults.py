@@ -425,6 +425,12 @@ def test_usage_errors_are_one_line(capsys):
         main(["fit", "bsdf", "x", "--interaction", "bibs", "--side", "reflection", "--incidence", "abc"])
     assert info.value.code == 2
     _one_line_error(2, capsys.readouterr().err, "--incidence", "invalid float")
+    for argv in ([], ["--no-compile-cache"]):  # no verb at all: one line too, not the help on stdout
+        with pytest.raises(SystemExit) as info:
+            main(argv)
+        captured = capsys.readouterr()
+        assert captured.out == ""
+        _one_line_error(info.value.code, captured.err, "no verb given", "trace")
 
 
 def test_budget_table_out_of_range_and_iteration_bound(tmp_path):

@@ -169,8 +169,7 @@ def _run(argv: list[str]) -> int:
     parser = build_parser((argv[0],) if argv and argv[0] in VERBS else VERBS)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
+        parser.error(f"no verb given; expected one of {', '.join(VERBS)}")
     try:
         with prompt_signals():
             return int(args.func(args) or 0)
