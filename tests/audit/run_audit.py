@@ -636,7 +636,15 @@ def run_case(case: Case) -> tuple[str, str]:
             return "hang", f"exit {waited:.1f} s after the signal"
         left = leftovers(case.outputs) if sig != signal.SIGKILL else []
         out = case.outputs[0]
-        if not finished_early and out.exists():
+        if finished_early:  # done before the signal: a complete output, and a rerun without --force is refused
+            if p.returncode != 0 or not out.exists() or left:
+                return "partial", f"finished before the signal: exit {p.returncode}, output {out.exists()}, {left}"
+            code, _, err2 = run_cli(case.argv, case.timeout)
+            lines = err2.strip().splitlines()
+            if code == 2 and len(lines) == 1 and "exists" in lines[0]:
+                return "ok", "finished before the signal; the rerun without --force is refused"
+            return ("traceback" if "Traceback" in err2 else "cryptic"), f"rerun: exit {code}: {err2.strip()[-300:]}"
+        if out.exists():
             return "partial", f"output present after the kill: {out}"
         if left:
             return "partial", f"left behind: {left}"
