@@ -693,7 +693,8 @@ def fault_mounts(work: Path):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--only", default=None, help="run only cases whose name contains this")
+    ap.add_argument("--only", action="append", default=None,
+                    help="run only cases whose name contains this (repeatable: any of them)")
     ap.add_argument("--keep", action="store_true", help="keep the work folder")
     ap.add_argument("--no-kills", action="store_true", help="skip the kill cases (the slowest)")
     ap.add_argument("--fork", action="store_true",
@@ -722,7 +723,7 @@ def main() -> int:
                     case.group = f"input {case.name.rsplit(' ', 1)[-1]}" if group == "inputs" else group
                 cases += made
             if args.only:
-                cases = [c for c in cases if args.only in c.name]
+                cases = [c for c in cases if any(o in c.name for o in args.only)]
             serial = [c for c in cases if c.kill or c.concurrent]
             parallel = [c for c in cases if not (c.kill or c.concurrent)]
 
