@@ -700,6 +700,8 @@ def main() -> int:
     ap.add_argument("--fork", action="store_true",
                     help="run the single-process cases in children forked after the imports (much faster)")
     args = ap.parse_args()
+    # a stopped audit still unmounts its fault mounts and removes its work folder (the finally blocks below)
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     if args.fork:
         global FORK
         FORK = True
