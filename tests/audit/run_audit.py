@@ -282,7 +282,8 @@ def input_cases(work: Path, f: dict[str, Path]) -> list[Case]:
             o = out / f"ing_{kind}_{label}.nc"
             cases.append(Case(f"ingest {kind} {label}", ["ingest", str(p), "-o", str(o)], outputs=[o]))
             o2 = out / f"conv_{kind}_{label}.bsdf"
-            cases.append(Case(f"convert {kind} {label}", ["convert", str(p), "--to", "zemax", "-o", str(o2)],
+            side = ["--side", "reflection"] if kind in ("tracepro", "asap") else []  # a Zemax file holds one side
+            cases.append(Case(f"convert {kind} {label}", ["convert", str(p), "--to", "zemax", *side, "-o", str(o2)],
                               outputs=[o2]))
     for label, p in variants("nc", f["nc"], ".nc"):
         cases.append(Case(f"info nc {label}", ["info", str(p)]))
