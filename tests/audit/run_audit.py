@@ -559,12 +559,26 @@ def verb_smoke_cases(work: Path, f: dict[str, Path]) -> list[Case]:
 
 
 # --------------------------------------------------------------------------------------------- classify
+def _alive(entry: Path) -> bool:
+    """A temporary named after a process that still runs (another case running at the same time)."""
+    for part in entry.name.split("."):
+        if part.isdigit():
+            try:
+                os.kill(int(part), 0)
+            except (ProcessLookupError, ValueError, OverflowError):
+                return False
+            except PermissionError:
+                return True
+            return True
+    return False
+
+
 def leftovers(paths: list[Path]) -> list[str]:
     found = []
     for p in paths:
         for folder in {p.parent, p} if p.is_dir() else {p.parent}:
             with contextlib.suppress(OSError):
-                found += [str(e) for e in folder.rglob("*") if e.name.endswith(LEFTOVER)]
+                found += [str(e) for e in folder.rglob("*") if e.name.endswith(LEFTOVER) and not _alive(e)]
     return sorted(set(found))
 
 
