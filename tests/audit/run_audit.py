@@ -716,6 +716,7 @@ def main() -> int:
                     help="run only cases whose name contains this (repeatable: any of them)")
     ap.add_argument("--keep", action="store_true", help="keep the work folder")
     ap.add_argument("--no-kills", action="store_true", help="skip the kill cases (the slowest)")
+    ap.add_argument("--list", action="store_true", help="print how many cases each class holds, run none")
     ap.add_argument("--fork", action="store_true",
                     help="run the single-process cases in children forked after the imports (much faster)")
     args = ap.parse_args()
@@ -745,6 +746,11 @@ def main() -> int:
                 cases += made
             if args.only:
                 cases = [c for c in cases if any(o in c.name for o in args.only)]
+            if args.list:
+                for group, n in Counter(c.group for c in cases).items():
+                    print(f"  {group:26s}{n:6d}")
+                print(f"  {'all':26s}{len(cases):6d}")
+                return 0
             serial = [c for c in cases if c.kill or c.concurrent]
             parallel = [c for c in cases if not (c.kill or c.concurrent)]
 
