@@ -86,3 +86,22 @@ def test_simulate_into_a_non_empty_folder_is_one_line_before_simulating(tmp_path
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert "not empty" in err and "--force" in err and str(folder) in err
     assert _tree(folder) == ["keep.txt"]
+
+
+def test_netcdf_write_failing_on_a_full_device_is_no_space_not_a_traceback(tmp_path, monkeypatch):
+    # netCDF4/HDF5 raise RuntimeError("NetCDF: HDF error") when the device fills up (found by the audit's tmpfs)
+    from collections import namedtuple
+
+    from bsdfkit.io import atomic
+
+    def hdf_error(tmp):
+        raise RuntimeError("NetCDF: HDF error")
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(atomic.shutil, "disk_usage", lambda folder: usage(1 << 30, (1 << 30) - 4096, 4096))
+    with pytest.raises(OutputError, match=r"out\.nc: cannot write output: no space left on the device \[ENOSPC\]"):
+        atomic.write_with(tmp_path / "out.nc", hdf_error)
+    assert _tree(tmp_path) == []
+    monkeypatch.setattr(atomic.shutil, "disk_usage", lambda folder: usage(1 << 30, 0, 1 << 30))
+    with pytest.raises(RuntimeError, match="HDF error"):  # with space left it is not a disk fault: unchanged
+        atomic.write_with(tmp_path / "out.nc", hdf_error)

@@ -243,6 +243,17 @@ def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike
     return folder
 
 
+#: a file system with less free space than this [bytes] is taken to be full when a writer fails without errno
+FULL_DEVICE_BYTES = 1 << 20
+
+
+def _device_full(folder: Path) -> bool:
+    try:
+        return shutil.disk_usage(folder).free < FULL_DEVICE_BYTES
+    except OSError:
+        return False
+
+
 def _fsync_dir(folder: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(folder, os.O_RDONLY)
@@ -301,6 +312,11 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
         _fsync_dir(path.parent)
     except OSError as exc:
         raise _fault(exc, path) from None
+    except RuntimeError:
+        # netCDF4/HDF5 report a write that failed for want of space as "NetCDF: HDF error", without an errno
+        if tmp is not None and _device_full(tmp.parent):
+            raise _fault(OSError(errno.ENOSPC, "No space left on device"), path) from None
+        raise
     finally:
         if tmp is not None:
             with contextlib.suppress(OSError):
