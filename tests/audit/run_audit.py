@@ -317,8 +317,8 @@ def input_cases(work: Path, f: dict[str, Path]) -> list[Case]:
         label = case.name.rsplit(" ", 1)[-1]
         if label == "latin1":
             case.expect = "either"  # vendor files in Latin-1 may be read as such
-        elif label in ENCODED_ALIKE:
-            case.expect = "ok"  # the same text in another encoding: read like UTF-8
+        elif label in ENCODED_ALIKE and not case.name.startswith("read csv_table"):
+            case.expect = "ok"  # the same text in another encoding: read like UTF-8 (`read` takes vendor files)
         elif label == "last_line_lost" or (label == "cut_number" and not case.name.startswith(CUT_DETECTABLE)):
             case.expect = "either"  # a whole line lost is detectable only where the layout says so
     return cases
