@@ -1,6 +1,7 @@
 """Shared fixtures: the bundled measurement (calibrated once per session) and a tiny raw export to mutate."""
 from __future__ import annotations
 
+import errno
 import gzip
 from pathlib import Path
 
@@ -22,6 +23,18 @@ def bundled_raw():
 @pytest.fixture(scope="session")
 def bundled_scan(bundled_raw):
     return calibrate(bundled_raw)
+
+
+def no_staging_in(monkeypatch, parent: Path) -> None:
+    """Make ``parent`` refuse the staging folders of output sets (a read-only parent; as root, chmod cannot)."""
+    real_mkdir = Path.mkdir
+
+    def guarded(self, *args, **kw):
+        if self.name.endswith(".staging") and self.parent == parent:
+            raise OSError(errno.EROFS, "Read-only file system", str(self))
+        return real_mkdir(self, *args, **kw)
+
+    monkeypatch.setattr(Path, "mkdir", guarded)
 
 
 def tiny_gonio() -> virtual.VirtualGoniometer:

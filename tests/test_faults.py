@@ -21,7 +21,7 @@ from pathlib import Path
 import colour
 import numpy as np
 import pytest
-from conftest import BUNDLED, ROOT
+from conftest import BUNDLED, ROOT, no_staging_in
 
 from bsdfkit.cli.main import main
 from bsdfkit.core.errors import BsdfkitError, InputError, OutputExistsError, ValidationError
@@ -425,6 +425,12 @@ def test_usage_errors_are_one_line(capsys):
         main(["fit", "bsdf", "x", "--interaction", "bibs", "--side", "reflection", "--incidence", "abc"])
     assert info.value.code == 2
     _one_line_error(2, capsys.readouterr().err, "--incidence", "invalid float")
+    for argv in ([], ["--no-compile-cache"]):  # no verb at all: one line too, not the help on stdout
+        with pytest.raises(SystemExit) as info:
+            main(argv)
+        captured = capsys.readouterr()
+        assert captured.out == ""
+        _one_line_error(info.value.code, captured.err, "no verb given", "trace")
 
 
 def test_budget_table_out_of_range_and_iteration_bound(tmp_path):
@@ -448,14 +454,7 @@ def test_bounds_before_allocation():
 def test_output_set_stages_inside_an_existing_folder_whose_parent_is_read_only(tmp_path, monkeypatch):
     folder = tmp_path / "out"
     folder.mkdir()
-    real_mkdir = Path.mkdir
-
-    def guarded(self, *args, **kw):
-        if self.name.endswith(".staging") and self.parent == tmp_path:
-            raise OSError(errno.EROFS, "Read-only file system", str(self))
-        return real_mkdir(self, *args, **kw)
-
-    monkeypatch.setattr(Path, "mkdir", guarded)
+    no_staging_in(monkeypatch, tmp_path)
     with OutputSet(folder, ["a.txt", "sub/b.txt"]) as out:
         assert out.staging.parent == folder
         write_text(out.path("a.txt"), "A", True)

@@ -56,3 +56,64 @@ def test_long_trace_answers_signal_within_two_seconds(tmp_path, signum):
     assert proc.returncode == 128 + signum, err
     assert "Traceback" not in err
     assert _leftovers(tmp_path) == []
+
+
+EARLY_DELAYS_S = (0.1, 0.2, 0.3)
+
+
+@pytest.mark.parametrize("delay", EARLY_DELAYS_S)
+def test_ctrl_c_while_importing_is_one_line_and_status_130(tmp_path, delay):
+    # the console command (bsdfkit_console:main) answers Ctrl-C before `import bsdfkit` (xarray, ~1 s) is done
+    out = tmp_path / "out.nc"
+    argv = [sys.executable, "-m", "bsdfkit_console", "trace", str(SCENE), "--rays", "2000000000", "-o", str(out)]
+    for wait in (delay, delay + 0.2, delay + 0.4):
+        proc = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                preexec_fn=_default_sigint)
+        time.sleep(wait)
+        proc.send_signal(signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=20)
+        finally:
+            proc.kill()
+        if "init_import_site" not in err:
+            break
+        # the signal came while the interpreter itself was starting (its site module), before any bsdfkit
+        # code ran: nothing a package can answer; a loaded machine starts slower, so wait a little longer
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("bsdfkit: interrupted"), err
+    assert _leftovers(tmp_path) == []
+
+
+def test_console_command_is_the_early_signal_launcher():
+    import tomllib
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["bsdfkit"] == "bsdfkit_console:main"
+
+
+SEMAPHORES = """import multiprocessing, signal, sys, time
+from bsdfkit.cli.main import exit_now
+signal.signal(signal.SIGTERM, lambda signum, frame: exit_now(signum))
+ctx = multiprocessing.get_context("spawn")
+held = [ctx.Lock() for _ in range(3)] + [ctx.Queue()]  # what a dask LocalCluster holds: named semaphores
+held[-1].put(1)
+child = ctx.Process(target=time.sleep, args=(60,), daemon=True)
+child.start()
+print("ready", flush=True)
+time.sleep(60)
+"""
+
+
+def test_signal_exit_releases_semaphores_so_stderr_is_one_line(tmp_path):
+    # after a signal exit of `sweep --workers 2` multiprocessing's resource tracker warned of leaked semaphores
+    proc = subprocess.Popen([sys.executable, "-c", SEMAPHORES], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    proc.send_signal(signal.SIGTERM)
+    try:
+        _, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines() == ["bsdfkit: terminated; unfinished outputs removed"], err

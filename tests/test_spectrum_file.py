@@ -46,7 +46,8 @@ def test_separators_headers_bom_crlf_decimal_comma(tmp_path, text):
 
 
 @pytest.mark.parametrize("text, error, parts", [
-    ("", FormatError, ["no data rows", "empty file"]),
+    ("", FormatError, ["the file is empty", "expected a spectrum table"]),
+    ("450,1.25\n451,2.25\n452,3.2", FormatError, [":3:", "ends inside a number", "452,3.2"]),
     ("wavelength,value\n", FormatError, ["no data rows", "header"]),
     ("450,1\n451,2\n", FormatError, ["too few data rows", "at least 3", "got 2"]),
     ("450,1\n451,2,3\n452,3\n", FormatError, [":2:", "wrong number of columns", "got 3"]),

@@ -9,6 +9,7 @@ from pathlib import Path
 from bsdfkit.cli._common import emit_json
 from bsdfkit.cli.tis import load_scan
 from bsdfkit.core.errors import FormatError, InputError
+from bsdfkit.io.text import read_text
 from bsdfkit.reduction.budget import MAX_ITERATIONS, interaction_table, module_budget, table_from_json
 
 
@@ -41,14 +42,12 @@ def _run(args: argparse.Namespace) -> int:
         if not path.is_file():
             raise InputError("a folder, not a table file" if path.is_dir() else "file not found", file=path,
                              expected="a JSON interaction table")
+        text = read_text(path, expected="a JSON interaction table")
         try:
-            data = json.loads(path.read_text(encoding="utf-8-sig"))
+            data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise FormatError(f"not valid JSON ({exc.msg})", file=path, line=exc.lineno) from None
-        except UnicodeDecodeError as exc:
-            raise FormatError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
-                              file=path, expected="a UTF-8 JSON file") from None
-        except (OSError, RecursionError) as exc:
+        except RecursionError as exc:
             raise InputError(f"cannot read the table ({getattr(exc, 'strerror', None) or type(exc).__name__})",
                              file=path) from None
         tables = table_from_json(data, str(path))

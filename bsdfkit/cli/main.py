@@ -169,8 +169,7 @@ def _run(argv: list[str]) -> int:
     parser = build_parser((argv[0],) if argv and argv[0] in VERBS else VERBS)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
+        parser.error(f"no verb given; expected one of {', '.join(VERBS)}")
     try:
         with prompt_signals():
             return int(args.func(args) or 0)
@@ -204,6 +203,11 @@ def exit_now(signum: int) -> None:
         for child in mp.active_children():
             with contextlib.suppress(OSError, ValueError, AttributeError):
                 child.terminate()
+        # release this process's semaphores and queues (the cluster's) as a normal exit does first
+        # (multiprocessing.util._exit_function), else the resource tracker warns of "leaked semaphore objects"
+        # on stderr; priority >= 0 leaves out the joins of feeder threads, which could wait
+        with contextlib.suppress(Exception):
+            sys.modules["multiprocessing.util"]._run_finalizers(0)
     with contextlib.suppress(OSError, ValueError):
         sys.stdout.flush()
     name = "interrupted" if signum == signal.SIGINT else "terminated"

@@ -25,7 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a fit/run recipe (fitting/*.toml) and write its outputs")
     p.add_argument("recipe")
     p.add_argument("-o", "--output", required=True, help="output folder")
-    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing, non-empty output folder as a whole (never one holding an input)")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no stage lines and no progress bars on stderr")
     p.set_defaults(func=_run)

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.io import atomic
@@ -16,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", choices=PRESETS, default="cl830-synthetic")
     p.add_argument("--seed", type=int, default=830)
     p.add_argument("-o", "--output", required=True, help="folder to write (manifest.toml + spectra)")
-    p.add_argument("--force", action="store_true")
+    p.add_argument("--force", action="store_true", help="replace an existing, non-empty output folder as a whole")
     p.set_defaults(func=_run)
 
 
@@ -24,7 +23,7 @@ def _run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.seed < 2**63:
         raise InputError("option out of range", field="--seed", expected="an integer in [0, 2**63)", got=args.seed)
-    atomic.check_writable(Path(args.output) / "manifest.toml", args.force)  # before simulating
+    atomic.check_output_folder(args.output, args.force)  # before simulating
     export = virtual.cl830_synthetic(seed=args.seed)
     virtual.write_raw_export(export, args.output, args.force)
     n = sum(len(s["columns"]["side"]) for s in export.scans.values())

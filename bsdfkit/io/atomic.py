@@ -8,12 +8,16 @@ concurrent writers exactly one succeeds and the other gets :class:`OutputExistsE
 even if the process is killed mid-write. Temporary files of processes that no longer run are removed by the
 next write to the same target.
 
-**Output sets** (:class:`OutputSet`: ``bsdfkit run``, ``bench``, ``simulate``). The files are written into a
-staging folder ``.<folder>.<pid>.staging`` beside the target folder and moved into place at the end: a
-missing or empty target folder is replaced by one rename, a target holding only a previous set of the same
-outputs is swapped (with ``force``), and only a target that also holds other files gets the staged files
-one by one. A kill or a full disk therefore leaves the previous complete set or nothing, and a rerun works
-without ``force``; stale staging folders of dead processes are removed by the next run.
+**Output sets** (:class:`OutputSet`: ``bsdfkit run``, ``simulate``, ``bench``, ``trace``, ``sweep``). The files
+are written into a staging folder ``.<folder>.<pid>.staging`` beside the target folder and moved into place at
+the end: a missing or empty target folder is replaced by one rename, a target holding only a previous set of
+the same outputs is swapped (with ``force``), and only a target that also holds other files gets the staged
+files one by one. A kill or a full disk therefore leaves the previous complete set or nothing, and a rerun
+works without ``force``; stale staging folders of dead processes are removed by the next run.
+
+A folder that *is* the output (``whole_folder``: ``run``, ``simulate``; :func:`check_output_folder`) is never
+mixed with other files: when it exists and is not empty it is refused without ``force`` and replaced as a
+whole with it (swapped in by two renames), never when it is or holds an input of the command.
 
 **Checks before computing.** :func:`check_writable` refuses, before any work is done, an existing output
 without ``force``, an output path that is a directory (or whose parent is a file), an output that is one of
@@ -36,8 +40,8 @@ from pathlib import Path
 
 from bsdfkit.core.errors import BsdfkitError, OutputError, OutputExistsError
 
-__all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_writable", "describe_os_error",
-           "refuse_inputs", "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
+__all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_output_folder", "check_writable",
+           "describe_os_error", "refuse_inputs", "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
 
 #: Temporary files and staging folders of this process that are not finished yet (removed on SIGTERM).
 _PARTIAL: set[Path] = set()
@@ -194,6 +198,62 @@ def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None
     return path
 
 
+def _staging_inside(entry: Path) -> bool:
+    """A staging folder of an output set staged inside its target (a mount point, an unwritable parent)."""
+    return entry.name.startswith(".bsdfkit.") and entry.name.endswith(".staging")
+
+
+def _other_entries(folder: Path) -> list[Path]:
+    """What ``folder`` holds besides staging folders of output sets (empty for a missing folder)."""
+    try:
+        return sorted(e for e in folder.iterdir() if not _staging_inside(e))
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+
+
+def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike | None] = ()) -> Path:
+    """Check a folder that is one command's output as a whole, before computing; return it as a Path.
+
+    Raises :class:`OutputError` if it is a file, a parent is a file, it cannot be created or written, or (with
+    ``force``) it is or holds one of ``inputs`` or the current folder; :class:`OutputExistsError` if it exists,
+    is not empty and ``force`` is not given.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputError("output folder is a file", file=folder, expected="a folder (or a new name)")
+    anchor = _nearest_existing(folder)
+    if not anchor.is_dir():
+        raise OutputError("a parent of the output folder is a file, not a folder", file=folder, got=str(anchor))
+    others = _other_entries(folder)
+    if others and not force:
+        raise OutputExistsError("output folder exists and is not empty; pass --force (force=True) to replace it "
+                                "as a whole", file=folder, got=f"{len(others)} entries, e.g. {others[0].name}")
+    if others:
+        resolved = folder.resolve()
+        with contextlib.suppress(OSError):
+            if Path.cwd().resolve().is_relative_to(resolved):
+                raise OutputError("the output folder holds the current folder (refused even with --force)",
+                                  file=folder, expected="an output folder apart from the current folder")
+        for inp in inputs:
+            if inp is not None and Path(inp).resolve().is_relative_to(resolved):
+                raise OutputError("the output folder is or holds an input of this command (refused even with "
+                                  "--force)", file=folder, expected="an output folder apart from every input",
+                                  got=str(inp))
+    _probe(anchor, folder.name, folder)
+    return folder
+
+
+#: a file system with less free space than this [bytes] is taken to be full when a writer fails without errno
+FULL_DEVICE_BYTES = 1 << 20
+
+
+def _device_full(folder: Path) -> bool:
+    try:
+        return shutil.disk_usage(folder).free < FULL_DEVICE_BYTES
+    except OSError:
+        return False
+
+
 def _fsync_dir(folder: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(folder, os.O_RDONLY)
@@ -252,6 +312,11 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
         _fsync_dir(path.parent)
     except OSError as exc:
         raise _fault(exc, path) from None
+    except RuntimeError:
+        # netCDF4/HDF5 report a write that failed for want of space as "NetCDF: HDF error", without an errno
+        if tmp is not None and _device_full(tmp.parent):
+            raise _fault(OSError(errno.ENOSPC, "No space left on device"), path) from None
+        raise
     finally:
         if tmp is not None:
             with contextlib.suppress(OSError):
@@ -305,11 +370,12 @@ class OutputSet:
     """
 
     def __init__(self, folder: PathLike, names: Iterable[str], force: bool = False,
-                 inputs: Iterable[PathLike | None] = (), min_free_bytes: int = 0) -> None:
+                 inputs: Iterable[PathLike | None] = (), min_free_bytes: int = 0, whole_folder: bool = False) -> None:
         self.folder = Path(folder)
         self.names = list(dict.fromkeys(names))
         self.force = force
         self.inputs = [i for i in inputs if i is not None]
+        self.whole_folder = whole_folder
         self.staging: Path | None = None
         self._preflight()
         self._open_staging()
@@ -330,6 +396,8 @@ class OutputSet:
     # -- checks ------------------------------------------------------------------------------------
     def _preflight(self) -> None:
         folder = self.folder
+        if self.whole_folder:
+            check_output_folder(folder, self.force, self.inputs)
         if folder.exists() and not folder.is_dir():
             raise OutputError("output folder is a file", file=folder, expected="a folder (or a new name)")
         anchor = _nearest_existing(folder)
@@ -347,8 +415,10 @@ class OutputSet:
         resolved = self.folder.resolve()
         parent, name = resolved.parent, resolved.name
         try:
-            if resolved.is_dir() and resolved.stat().st_dev != parent.stat().st_dev:
-                # the target is a mount point: staged files beside it could not be renamed into it (EXDEV)
+            if resolved.is_dir() and (resolved.stat().st_dev != parent.stat().st_dev
+                                      or Path.cwd().resolve().is_relative_to(resolved)):
+                # the target is a mount point (staged files beside it could not be renamed into it, EXDEV) or
+                # holds the current folder (a rename would leave this process in a deleted folder)
                 self._open_staging_inside(resolved, None)
                 return
         except OSError:
@@ -473,11 +543,12 @@ class OutputSet:
                     if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY):
                         raise
                     # someone wrote into the target meanwhile: check and merge below
-            clash = [n for n in self.names if (target / n).exists()]
+            clash = ([e.name for e in _other_entries(target) if e != stage] if self.whole_folder
+                     else [n for n in self.names if (target / n).exists()])
             if clash and not self.force:
                 raise OutputExistsError("output appeared while computing (another process?); pass --force to "
                                         "overwrite", file=self.folder / clash[0])
-            if self.force and not inside and self._only_ours(target):
+            if self.force and not inside and (self.whole_folder or self._only_ours(target)):
                 old = target.parent / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.old"
                 os.rename(target, old)
                 try:
@@ -489,6 +560,12 @@ class OutputSet:
                 _rmtree(old)
                 _fsync_dir(target.parent)
                 return
+            if self.whole_folder:  # staged inside the target: the previous content goes first
+                for entry in _other_entries(target):
+                    if entry.is_dir() and not entry.is_symlink():
+                        _rmtree(entry)
+                    else:
+                        entry.unlink()
             for name in self.names:  # the target holds other files: move ours in one by one
                 dst = target / name
                 dst.parent.mkdir(parents=True, exist_ok=True)

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, ValidationError
+from bsdfkit.io.text import read_text, refuse_cut_last_line
 
 if TYPE_CHECKING:
     from colour import SpectralDistribution
@@ -63,19 +64,7 @@ def _parse(path: str | Path, columns: int | None) -> tuple[np.ndarray, np.ndarra
     the exact number of columns required (2 for a plain spectrum), or None for any number ≥ 2, the same on
     every row."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("spectrum file not found", file=path) from None
-    except IsADirectoryError:
-        raise InputError("expected a file, got a directory", file=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read spectrum file ({exc.strerror or exc})", file=path) from None
-    try:
-        text = raw.decode("utf-8-sig")  # strips a BOM if present
-    except UnicodeDecodeError as exc:
-        raise FormatError("file is not UTF-8 text", file=path, expected="UTF-8",
-                          got=f"byte 0x{raw[exc.start]:02x} at offset {exc.start}") from None
+    text = read_text(path, expected="a spectrum table")
 
     header: str | None = None
     header_line = ""
@@ -121,6 +110,7 @@ def _parse(path: str | Path, columns: int | None) -> tuple[np.ndarray, np.ndarra
                                   field="wavelength", expected=f"> {rows[-1][0]:g}", got=w)
         rows.append(numbers)
 
+    refuse_cut_last_line(text, path, sep, expected="a row of numbers")
     if not rows:
         raise FormatError("no data rows", file=path,
                           expected="two numeric columns (wavelength nm, value)",

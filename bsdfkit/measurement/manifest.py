@@ -17,6 +17,7 @@ import numpy as np
 
 from bsdfkit.core.conventions import WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.io.text import read_text
 from bsdfkit.measurement.instrument import Instrument
 
 FORMAT_NAME = "bsdfkit-raw-scan"
@@ -127,15 +128,11 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
         path = path / "manifest.toml"
     if not path.is_file():
         raise InputError("no manifest", file=path, expected="a manifest.toml in the measurement folder")
+    text = read_text(path, expected="a TOML manifest")
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FormatError(f"not valid TOML ({exc})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})", file=path,
-                          expected="a UTF-8 TOML manifest") from None
-    except OSError as exc:
-        raise InputError(f"cannot read the manifest ({exc.strerror})", file=path) from None
     fmt = _get(data, "format", str, path, "format")
     if fmt != FORMAT_NAME:
         raise FormatError("unknown format", file=path, field="format", expected=repr(FORMAT_NAME), got=fmt)

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.io.text import decode_text, refuse_cut_last_line
 from bsdfkit.measurement.manifest import Manifest, read_manifest
 
 SCAN_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "exposure_s")
@@ -51,20 +52,13 @@ def _open_text(path: Path) -> str:
             raw = gzip.decompress(raw)
         except (OSError, EOFError, zlib.error) as exc:
             raise FormatError(f"not a readable gzip file ({exc})", file=path, expected="an intact gzip file") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})", file=path,
-                          expected="UTF-8 CSV text") from None
-    if "\x00" in text:
-        line = text.count("\n", 0, text.index("\x00")) + 1
-        raise FormatError("binary data (NUL byte) in a text file", file=path, line=line, expected="UTF-8 CSV text")
-    return text
+    return decode_text(raw, path, expected="a CSV scan table")
 
 
 def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
     """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
     text = _open_text(path)
+    refuse_cut_last_line(text, path, ",", expected="a row of counts")
     try:
         rows = [r for r in csv.reader(io.StringIO(text))]
     except csv.Error as exc:

@@ -64,10 +64,13 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.version import __version__
+from bsdfkit.io.text import refuse_cut_last_line, text_and_encoding
 
 __all__ = ["QUANTITIES", "DEFAULT_RELATIVE_STD", "CONFIG_NAME", "read_table", "guess_can_open", "records_dataset",
            "to_bsdf", "side_of_quantity", "normalise_quantity", "arc_labels"]
 
+#: prefixes of comment lines
+_COMMENTS = ("#", "//", "%", "!")
 #: Quantities a table may hold, and what the reader does with them.
 QUANTITIES: tuple[str, ...] = ("brdf", "btdf", "ccbrdf", "ccbtdf", "reflectance-factor", "transmittance-factor",
                                "bsdf")
@@ -320,22 +323,12 @@ class _Text:
     comments: list[tuple[int, str]]
     encoding: str
     last_line: int
+    text: str = ""
 
 
 def _decode(raw: bytes, path: str) -> tuple[str, str]:
-    if raw.startswith(b"\xef\xbb\xbf"):
-        return raw[3:].decode("utf-8", errors="strict"), "utf-8-sig"
-    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
-        try:
-            return raw.decode("utf-16"), "utf-16"
-        except UnicodeDecodeError:
-            raise FormatError("undecodable UTF-16 text", file=path, line=1, expected="text") from None
-    if b"\x00" in raw[:4096]:
-        raise FormatError("binary file, not a text table", file=path, line=1, expected="a text table")
-    try:
-        return raw.decode("utf-8"), "utf-8"
-    except UnicodeDecodeError:
-        return raw.decode("cp1252", errors="replace"), "cp1252"
+    # Windows instrument software writes cp1252 when it does not write UTF-8 or UTF-16
+    return text_and_encoding(raw, path, expected="a text table", legacy="cp1252")
 
 
 def _load_text(path: str) -> _Text:
@@ -355,11 +348,11 @@ def _load_text(path: str) -> _Text:
         body = line.strip().lstrip("\ufeff").strip()
         if not body or not body.strip(",;\t "):
             continue
-        if body.startswith(("#", "//", "%", "!")):
+        if body.startswith(_COMMENTS):
             comments.append((number, body.lstrip("#/%! ").strip()))
             continue
         lines.append((number, line.lstrip("\ufeff")))
-    return _Text(path, lines, comments, encoding, len(all_lines))
+    return _Text(path, lines, comments, encoding, len(all_lines), text)
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:
@@ -636,6 +629,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
         raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
     text = _load_text(path)
     k_header, delim, columns, preamble = _find_header(text)
+    refuse_cut_last_line(text.text, path, delim, expected="a row of numbers", comments=_COMMENTS)
     header_line = text.lines[k_header][0]
     meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
     data = text.lines[k_header + 1:]
@@ -710,6 +704,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
     rows = _parse_rows(path, data, delim, columns, roles, decimal_comma, theta_i_default, phi_i_default,
                        default_side, mono_lambda, block_comments, _fields(text.lines[k_header][1], delim))
+    _refuse_cut_last_block(path, rows)
     signed = "phi_s" not in roles
     ds = _assemble(path, rows, signed, rel, zeros,
                    wavelength_known=bool(np.isfinite(np.asarray(rows.wavelength, dtype=np.float64)).any()))
@@ -782,6 +777,34 @@ def _uses_decimal_comma(data: list[tuple[int, str]], delim: str | None) -> bool:
             if re.match(r"^[+-]?\d*\.\d+", c):
                 return False
     return False
+
+
+def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
+    """Refuse a table whose last block (one incidence, wavelength, side and value column) stops early: its
+    scatter angles are a strict beginning of those of every other block, and those all agree (a file cut
+    after a whole row)."""
+
+    def exact(v: float) -> float | None:
+        return None if math.isnan(v) else round(v, 9)  # NaN (no wavelength) as one key
+
+    blocks: dict[tuple, list[tuple]] = {}
+    last_line = max(rows.line, default=0)
+    at_end = set()
+    for th_i, ph_i, lam, side, col, th_s, ph_s, line in zip(rows.theta_i, rows.phi_i, rows.wavelength, rows.side,
+                                                            rows.column, rows.theta_s, rows.phi_s, rows.line):
+        key = (exact(th_i), exact(ph_i), exact(lam), side, col)
+        blocks.setdefault(key, []).append((exact(th_s), exact(ph_s)))
+        if line == last_line:
+            at_end.add(key)
+    whole = [b for k, b in blocks.items() if k not in at_end]
+    if len(whole) < 2 or any(b != whole[0] for b in whole[1:]):
+        return  # blocks of their own sizes: nothing tells a shorter last block from a cut one
+    for key in at_end:
+        cut = blocks[key]
+        if len(cut) < len(whole[0]) and cut == whole[0][:len(cut)]:
+            raise FormatError("the last block stops early (truncated?)", file=path, line=last_line,
+                              field=f"theta_i={key[0]:g}" if key[0] is not None else "last block",
+                              expected=f"{len(whole[0])} scatter angles like every other block", got=len(cut))
 
 
 def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, columns: list[_Column],
@@ -1270,7 +1293,7 @@ def guess_can_open(path: str | Path) -> bool:
             return False
         text, _ = _decode(head, str(p))
         lines = [(n, ln) for n, ln in enumerate(text.splitlines()[:-1] or text.splitlines(), 1)
-                 if ln.strip() and not ln.strip().startswith(("#", "//", "%", "!"))]
+                 if ln.strip() and not ln.strip().startswith(_COMMENTS)]
         if not lines:
             return False
         _find_header(_Text(str(p), lines[:220], [], "", len(lines)))

@@ -4,10 +4,11 @@ A recipe names a measurement folder and the stages to run on it. Each stage is a
 the products of earlier stages; it returns its part of the run summary and the files it wants written.
 
 Everything that can be checked is checked before computing: the recipe's options (types and ranges), the trace
-scene, the output folder (no existing output without ``force``, no output that is an input, writable). The
-outputs are then written into a staging folder beside the output folder and moved into place at the end
-(:class:`bsdfkit.io.atomic.OutputSet`), so a failed, killed or out-of-disk run leaves the previous complete set
-or nothing, and a rerun after an interruption needs no ``--force``.
+scene, the output folder (a folder that exists and is not empty is refused without ``force`` and replaced as a
+whole with it, never when it is or holds an input; writable). The outputs are then written into a staging
+folder beside the output folder and moved into place at the end (:class:`bsdfkit.io.atomic.OutputSet`), so a
+failed, killed or out-of-disk run leaves the previous complete set or nothing, and a rerun after an
+interruption needs no ``--force``.
 """
 from __future__ import annotations
 
@@ -36,6 +37,7 @@ from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_
 from bsdfkit.io import netcdf
 from bsdfkit.io.atomic import OutputSet, write_text
 from bsdfkit.io.jsonout import dumps
+from bsdfkit.io.text import read_text
 from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
@@ -194,15 +196,11 @@ def _ranged(value: Any, path: Path, dotted: str, lo: float, hi: float, lo_open: 
 
 
 def _read_toml(path: Path, what: str) -> dict:
+    text = read_text(path, expected=f"a {what} TOML file")
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FormatError(f"not valid TOML ({exc})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"{what} is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
-                          file=path, expected="a UTF-8 TOML file") from None
-    except OSError as exc:
-        raise InputError(f"cannot read the {what} ({exc.strerror})", file=path) from None
 
 
 def load_recipe(path: str | Path) -> Recipe:
@@ -869,7 +867,8 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     inputs = (recipe.path, recipe.measurement, recipe.trace.scene,
               *((recipe.spectral.measurement, recipe.spectral.scene) if recipe.spectral else ()))
     # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
-    with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe)) as out:
+    with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe),
+                   whole_folder=True) as out:
         return _run_stages(recipe, out, log, progress)
 
 

@@ -45,6 +45,7 @@ from bsdfkit.core.conventions import INTERACTIONS, SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.io.atomic import write_text
+from bsdfkit.io.text import read_text
 from bsdfkit.models.functions import tis_gaussian_lobe
 
 FORMAT = "bsdfkit-phosphor-plate"
@@ -235,13 +236,7 @@ class PhosphorPlate:
 def load_plate(path: str | Path) -> PhosphorPlate:
     """Read a plate JSON file written by :meth:`PhosphorPlate.save` (or by hand, same layout)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("phosphor plate file not found", file=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read phosphor plate file ({exc.strerror})", file=path) from None
-    return PhosphorPlate.from_json(text, path)
+    return PhosphorPlate.from_json(read_text(path, expected="a phosphor plate JSON file"), path)
 
 
 # ---- parsing --------------------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ import xarray as xr
 
 from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.fit.least_squares import fit_bsdf
+from bsdfkit.io.text import read_text
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
@@ -130,9 +131,10 @@ def recipe_measurement(recipe: str | Path) -> tuple[Path, str]:
     recipe = Path(recipe)
     if not recipe.is_file():
         raise InputError("recipe not found", file=recipe, expected="a TOML recipe file")
+    text = read_text(recipe, expected="a TOML recipe file")
     try:
-        head = tomllib.loads(recipe.read_text(encoding="utf-8-sig")).get("recipe")
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        head = tomllib.loads(text).get("recipe")
+    except tomllib.TOMLDecodeError as exc:
         raise FormatError(f"not valid TOML ({exc})", file=recipe) from None
     if not isinstance(head, dict) or not isinstance(head.get("measurement"), str):
         raise InputError("recipe names no measurement", file=recipe, field="recipe.measurement",

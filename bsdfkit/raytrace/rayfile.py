@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, ValidationError
+from bsdfkit.io.text import read_text, refuse_cut_last_line
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,12 +53,7 @@ class RaySet:
 def read_ray_file(path: str | Path) -> RaySet:
     """Read a ray file (see module docstring); errors name the file and line."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("ray file not found", file=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read ray file ({exc.strerror})", file=path) from None
+    text = read_text(path, expected="a ray file (lines of x y z dx dy dz power)")
     rows = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
@@ -82,6 +78,7 @@ def read_ray_file(path: str | Path) -> RaySet:
             raise ValidationError("zero direction", file=path, line=lineno, expected="a non-zero (dx, dy, dz)",
                                   got=s)
         rows.append(vals)
+    refuse_cut_last_line(text.replace(",", " "), path, None, expected="x y z dx dy dz power")
     if not rows:
         raise FormatError("no rays in file", file=path, expected="lines of x y z dx dy dz power")
     a = np.asarray(rows, dtype=float)

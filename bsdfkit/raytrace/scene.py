@@ -46,6 +46,7 @@ from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_re
 from bsdfkit.io import toml_write
 from bsdfkit.io.atomic import write_text
 from bsdfkit.io.spectrum_file import read_spectrum_table
+from bsdfkit.io.text import read_text
 from bsdfkit.raytrace.plate import PhosphorPlate, load_plate
 from bsdfkit.raytrace.rayfile import RaySet, read_ray_file
 from bsdfkit.raytrace.spectral import (
@@ -711,16 +712,7 @@ def loads_scene(text: str, file: str | Path | None = None) -> Scene:
 def load_scene(path: str | Path) -> Scene:
     """Read a scene TOML file."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("scene file not found", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise InputError("scene file is not UTF-8 text", file=path, expected="a TOML text file",
-                         got=f"byte 0x{exc.object[exc.start]:02x} at offset {exc.start}") from None
-    except OSError as exc:
-        raise InputError(f"cannot read scene file ({exc.strerror})", file=path) from None
-    return loads_scene(text, path)
+    return loads_scene(read_text(path, expected="a scene TOML file"), path)
 
 
 # ---- writing ----------------------------------------------------------------------------------------------

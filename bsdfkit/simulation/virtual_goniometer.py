@@ -399,11 +399,14 @@ def raw_export_names(export: RawExport) -> list[str]:
 
 
 def write_raw_export(export: RawExport, folder: str | Path, force: bool = False) -> Path:
-    """Write ``export`` as manifest.toml + gzip CSV files (docs/raw-format.md) as one atomic output set."""
+    """Write ``export`` as manifest.toml + gzip CSV files (docs/raw-format.md) as one atomic output set.
 
+    ``folder`` is the export as a whole: an existing folder that is not empty is refused without ``force`` and
+    replaced with it (:class:`bsdfkit.io.atomic.OutputSet`, ``whole_folder``).
+    """
     folder = Path(folder)
     wl = _wl_header(export.wavelength)
-    with atomic.OutputSet(folder, raw_export_names(export), force) as out:
+    with atomic.OutputSet(folder, raw_export_names(export), force, whole_folder=True) as out:
         for name, scan in export.scans.items():
             c = scan["columns"]
             rows = [[f"{c['theta_i_deg'][k]:.6g}", f"{c['phi_i_deg'][k]:.6g}", f"{c['theta_s_deg'][k]:.6f}",

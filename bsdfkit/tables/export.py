@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic
+from bsdfkit.io.text import decode_text
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import grids
@@ -448,7 +449,7 @@ def sniff_format(path: str | Path) -> str:
     path = Path(path)
     try:
         with open(path, "rb") as fh:
-            head = fh.read(4096).decode("utf-8", errors="replace")
+            head = decode_text(fh.read(4096), path, expected="a table", legacy="latin-1")
     except OSError as exc:
         raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
     lines = head.splitlines()

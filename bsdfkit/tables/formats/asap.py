@@ -35,10 +35,11 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.frames import SIDES
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
+from bsdfkit.io.text import read_text
 from bsdfkit.tables import grids
 
 __all__ = ["MAGIC", "AbgParameters", "AsapTable", "HarveyParameters", "asap_table", "asap_text", "read_asap",
@@ -212,12 +213,7 @@ def _side(token: str, path: str, line: int) -> str:
 def read_asap(path: str | Path) -> AsapTable:
     """Read a table written by :func:`write_asap`; errors name file, line and field."""
     path = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
-    except UnicodeDecodeError:
-        raise FormatError("not UTF-8 text", file=path, line=1, field="magic", expected=repr(MAGIC)) from None
+    text = read_text(path, expected="a bsdfkit ASAP-style table")
     lines = text.splitlines()
     if not lines or lines[0].strip() != MAGIC:
         raise FormatError("not a bsdfkit ASAP-style table", file=path, line=1, field="magic", expected=repr(MAGIC),

@@ -43,9 +43,10 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.frames import SIDES
 from bsdfkit.io import atomic
+from bsdfkit.io.text import read_text
 from bsdfkit.models.registry import bsdf_model
 from bsdfkit.tables import grids
 
@@ -421,14 +422,7 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
     field.
     """
     path = str(path)
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
+    text = read_text(path, expected="a TracePro surface property file", legacy="latin-1")
     lines = text.splitlines()
     if not lines or lines[0].strip() != MAGIC:
         raise FormatError("not a TracePro surface property file", file=path, line=1, field="magic",
@@ -532,14 +526,17 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
                           got=lines[index].strip() if index < len(lines) else "end of file")
     while index < len(lines) and not lines[index].strip():
         index += 1
-    if index < len(lines):
-        if lines[index].strip() != "SAVE-DATA":
-            raise FormatError("unexpected line", file=path, line=index + 1, field="SAVE-DATA",
-                              expected="'SAVE-DATA' or end of file", got=lines[index].strip())
-        for extra in range(index + 1, len(lines)):
-            if lines[extra].strip():
-                raise FormatError("several properties in one file are not supported", file=path, line=extra + 1,
-                                  field="SAVE-DATA", expected="end of file after SAVE-DATA", got=lines[extra].strip())
+    # TracePro ends every property with SAVE-DATA: a file that stops before it is cut (its last rows may be lost)
+    if index >= len(lines):
+        raise FormatError("the file ends before 'SAVE-DATA' (truncated?)", file=path, line=len(lines),
+                          field="SAVE-DATA", expected="a complete TracePro file ending with 'SAVE-DATA'")
+    if lines[index].strip() != "SAVE-DATA":
+        raise FormatError("unexpected line", file=path, line=index + 1, field="SAVE-DATA",
+                          expected="'SAVE-DATA'", got=lines[index].strip())
+    for extra in range(index + 1, len(lines)):
+        if lines[extra].strip():
+            raise FormatError("several properties in one file are not supported", file=path, line=extra + 1,
+                              field="SAVE-DATA", expected="end of file after SAVE-DATA", got=lines[extra].strip())
     return TraceProProperty(
         options=options, scatter=scatter, theta_i_deg=theta, absorptance=absorptance,
         specular_reflectance=refl, specular_transmittance=tran, table=table, abg=abg, coating=coating,

@@ -35,9 +35,10 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
+from bsdfkit.io.text import read_text
 from bsdfkit.tables import grids
 
 __all__ = ["SYMMETRIES", "ZemaxBsdf", "read_zemax", "write_zemax", "zemax_bsdf", "zemax_text"]
@@ -227,14 +228,7 @@ def _check_axis(values: NDArray, name: str, lo: float, hi: float, hi_open: bool,
 def read_zemax(path: str | Path) -> ZemaxBsdf:
     """Read a Monochrome Zemax tabular BSDF file (any of the three symmetries)."""
     path = str(path)
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
+    text = read_text(path, expected="a Zemax tabular BSDF file", legacy="latin-1")
     comments = tuple(line.strip()[1:].strip() for line in text.splitlines() if line.strip().startswith("#"))
     entries = _entries(text)
     last_line = text.count("\n") + (0 if text.endswith("\n") else 1)

@@ -1,0 +1,35 @@
+"""The ``bsdfkit`` console command: answers Ctrl-C (and SIGTERM) from its first moment.
+
+This module lies outside the :mod:`bsdfkit` package on purpose. ``import bsdfkit`` imports xarray (to register
+the ``ds.bsdf`` accessor) and the command then imports its verb's libraries: a second or more in all, during
+which a Ctrl-C would end the command with Python's ``KeyboardInterrupt`` traceback. Here a signal that comes
+before :func:`bsdfkit.cli.main.main` takes over ends the process at once with one line on stderr and status
+128 + signal (130 for Ctrl-C, 143 for SIGTERM), as :func:`bsdfkit.cli.main.exit_now` does later; nothing has
+been written yet, so there is nothing to remove. A Ctrl-C that is ignored (``nohup``, a background job) stays
+ignored.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+
+def _early_signal(signum: int, frame: object) -> None:
+    name = "interrupted" if signum == signal.SIGINT else "terminated"
+    os.write(2, f"bsdfkit: {name}\n".encode())
+    os._exit(128 + signum)
+
+
+def main() -> int:
+    """Install the early signal handlers, then run :func:`bsdfkit.cli.main.main` (which installs its own)."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(signum) != signal.SIG_IGN:
+            signal.signal(signum, _early_signal)
+    from bsdfkit.cli.main import main as cli_main
+
+    return cli_main()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
