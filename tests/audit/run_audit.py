@@ -715,7 +715,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--only", action="append", default=None,
-                    help="run only cases whose name contains this (repeatable: any of them)")
+                    help="run only cases whose name contains this, or of this class (repeatable: any of them)")
     ap.add_argument("--keep", action="store_true", help="keep the work folder")
     ap.add_argument("--no-kills", action="store_true", help="skip the kill cases (the slowest)")
     ap.add_argument("--list", action="store_true", help="print how many cases each class holds, run none")
@@ -747,7 +747,7 @@ def main() -> int:
                     case.group = f"input {case.name.rsplit(' ', 1)[-1]}" if group == "inputs" else group
                 cases += made
             if args.only:
-                cases = [c for c in cases if any(o in c.name for o in args.only)]
+                cases = [c for c in cases if any(o in c.name or o == c.group for o in args.only)]
             if args.list:
                 for group, n in Counter(c.group for c in cases).items():
                     print(f"  {group:26s}{n:6d}")
