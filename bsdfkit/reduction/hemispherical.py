@@ -327,11 +327,10 @@ def _gaussian_lobe_tis(geom: Geometry, region: NDArray[np.int64], resid: NDArray
     o = ip[np.argsort(x[region[ip]], kind="stable")]
     xs, ls = x[region[o]], resid[o]
     p = int(np.argmax(ls))
-    if p == 0 or p == xs.size - 1 or not np.all(ls[p - 1:p + 2] > 0):
+    fit = _log_parabola(xs, ls, p)
+    if fit is None:
         return None
-    a, b, c = np.polyfit(xs[p - 1:p + 2], np.log(ls[p - 1:p + 2]), 2)
-    if not a < 0:
-        return None
+    a, b, c = fit
     sigma = float(np.sqrt(-1.0 / (2.0 * a)))
     step = float(np.max(np.diff(xs[p - 1:p + 2])))
     if step <= UNDER_SAMPLED_STEP * sigma:
@@ -372,14 +371,22 @@ def _unresolved_lobe_bound(geom: Geometry, region: Region, ref: NDArray[np.float
     return float(2.0 * np.pi * sigma_max**2 * l0)
 
 
+def _log_parabola(x: NDArray, g: NDArray, p: int) -> tuple[float, float, float] | None:
+    """(a, b, c) of ln g = a x² + b x + c through sample p and its two neighbours (a Gaussian exactly), or None
+    when p is an end sample, a value is not positive or the parabola does not open downward."""
+    if p == 0 or p == x.size - 1 or not np.all(g[p - 1:p + 2] > 0):
+        return None
+    a, b, c = np.polyfit(x[p - 1:p + 2], np.log(g[p - 1:p + 2]), 2)
+    return (float(a), float(b), float(c)) if a < 0 else None
+
+
 def _peak_vertex(x: NDArray, g: NDArray, p: int) -> float:
     """In-plane position of a lobe's peak: vertex of the parabola through ln g at the highest sample and its
     neighbours (exact for a Gaussian lobe), kept within one sample step of the highest sample."""
-    if p == 0 or p == x.size - 1 or not np.all(g[p - 1:p + 2] > 0):
+    fit = _log_parabola(x, g, p)
+    if fit is None:
         return float(x[p])
-    a, b, _ = np.polyfit(x[p - 1:p + 2], np.log(g[p - 1:p + 2]), 2)
-    if not a < 0:
-        return float(x[p])
+    a, b, _ = fit
     return float(np.clip(-b / (2 * a), x[p - 1], x[p + 1]))
 
 
@@ -593,18 +600,18 @@ def _grown_until_symmetric(geom: Geometry, ref: NDArray[np.float64], region: Reg
     :data:`MAX_GROWTH` times (the last region is kept)."""
     if not region.records.size:
         return region
-    best = region
+    previous = None
     for k in range(MAX_GROWTH + 1):
         grown = region.grown(geom, k) if k else region
+        if previous is not None and np.array_equal(grown.records, previous.records):
+            return previous  # nothing left to grow into
         body = ref.copy()
         body[grown.records] = np.nan
         m = _mismatch(geom, body, "normal")
         if not np.isfinite(m) or m <= BODY_ASYMMETRY:
             return grown
-        best = grown
-        if k and np.array_equal(grown.records, region.grown(geom, k - 1).records):
-            break  # nothing left to grow into
-    return best
+        previous = grown
+    return previous
 
 
 def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
