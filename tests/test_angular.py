@@ -168,3 +168,22 @@ def test_grazing_incidence_85_is_finite_and_bounded(tmp_path):
     assert (table.tis.values <= 1.0).all() and (table.tis.values >= -1e-3).all()
     blue = table.tis.sel(interaction=["bibs", "biys"]).sum(["interaction", "side"]).values
     assert (blue <= 1.0).all()
+
+
+@pytest.mark.parametrize("zero_tail", [False, True])
+def test_tis_variants_equal_separate_blends_bit_for_bit(zero_tail):
+    # tis_from_profile's error budget evaluates four blends on one grid through tis_variants; each must be the
+    # number tis() gives alone, also when a half-profile has a zero sample (the ln-f interpolant's fallback)
+    radii = np.linspace(0.0, 0.9, 19)
+    ts, ps, arc = _dense_arcs(30.0, radii)
+    d = sample_direction(np.radians(ts), np.radians(ps))
+    values = 0.25 / np.pi + 3.0 * np.exp(-((d[:, 0] - 0.5) ** 2 + d[:, 1] ** 2) / 0.02)
+    if zero_tail:
+        values[np.argmax(ts)] = 0.0
+    hemi = angular.Hemisphere.from_profile(_profile(30.0, ts, ps, arc, values))
+    variants = [(2.0, True), (1.0, True), (4.0, True), (2.0, False)]
+    for mode in ("log", "linear"):
+        together = hemi.tis_variants(mode, 128, 200, variants)
+        alone = [hemi.tis(mode, 128, 200, p=p, borrow=b) for p, b in variants]
+        assert together == alone
+    assert 0.2 < together[0] < 0.5  # a real integral: the Lambertian 0.25 plus the lobe

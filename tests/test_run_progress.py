@@ -1,4 +1,5 @@
-"""``bsdfkit run`` feedback: stage lines and rich progress bars on stderr only, off with --quiet or without a TTY."""
+"""``bsdfkit run`` feedback: stage lines and rich progress bars on stderr only, off with --quiet or without a TTY
+(the stage lines on with --verbose)."""
 from __future__ import annotations
 
 import io
@@ -22,10 +23,18 @@ def test_quiet_run_says_nothing(monkeypatch, capsys):
     assert out == "" and err == ""
 
 
-def test_without_a_terminal_only_the_stage_lines_go_to_stderr(monkeypatch, capsys):
+def test_without_a_terminal_stderr_stays_for_errors(monkeypatch, capsys):
     with run_verb.run_feedback(quiet=False) as (log, progress):
         log("stage ingest ...")
         assert progress is None  # a log file or a pipe gets no bars
+    out, err = capsys.readouterr()
+    assert out == "" and err == ""  # a failed run's stderr is its one error line
+
+
+def test_without_a_terminal_verbose_writes_the_stage_lines(monkeypatch, capsys):
+    with run_verb.run_feedback(quiet=False, verbose=True) as (log, progress):
+        log("stage ingest ...")
+        assert progress is None
     out, err = capsys.readouterr()
     assert out == "" and err == "stage ingest ...\n"
 

@@ -1,8 +1,9 @@
 """``bsdfkit run RECIPE.toml -o OUT/``: the main job.
 
-While it runs, the stages and the traces of the trace stage show a progress bar (``rich``) on stderr when
-stderr is a terminal; ``--quiet`` turns it and the stage lines off. Nothing of it goes to stdout, so ``--json``
-output stays one JSON document.
+While it runs, the stages and the traces of the trace stage show a progress bar (``rich``) and a line per stage
+on stderr when stderr is a terminal; ``--quiet`` turns them off. A log file or a pipe gets no progress (the
+stage lines with ``--verbose``), so the stderr of a failed run is its one error line. Nothing of it goes to
+stdout, so ``--json`` output stays one JSON document.
 """
 from __future__ import annotations
 
@@ -29,17 +30,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="replace an existing, non-empty output folder as a whole (never one holding an input)")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no stage lines and no progress bars on stderr")
+    p.add_argument("--verbose", action="store_true",
+                   help="the stage lines on stderr also when it is not a terminal (a log file, a pipe)")
     p.set_defaults(func=_run)
 
 
 @contextlib.contextmanager
-def run_feedback(quiet: bool) -> Iterator[tuple[Callable[[str], None], Callable[[str, int, int], None] | None]]:
+def run_feedback(quiet: bool, verbose: bool = False) -> Iterator[tuple[Callable[[str], None],
+                                                                     Callable[[str, int, int], None] | None]]:
     """``(log, progress)`` callbacks for :func:`bsdfkit.api.run`: stage lines and rich progress bars on stderr.
 
-    Bars only when stderr is a terminal (a log file or a pipe gets the stage lines alone); nothing at all with
-    ``quiet``.
+    Both only when stderr is a terminal; a log file or a pipe gets the stage lines with ``verbose`` and nothing
+    otherwise (a failed run's stderr is then its one error line); nothing at all with ``quiet``.
     """
-    if quiet:
+    if quiet or (not sys.stderr.isatty() and not verbose):
         yield (lambda message: None), None
         return
     if not sys.stderr.isatty():
@@ -59,7 +63,7 @@ def run_feedback(quiet: bool) -> Iterator[tuple[Callable[[str], None], Callable[
 
 
 def _run(args: argparse.Namespace) -> int:
-    with run_feedback(args.quiet) as (log, progress):
+    with run_feedback(args.quiet, args.verbose) as (log, progress):
         summary = api.run(args.recipe, args.output, args.force, log=log, progress=progress)
     if args.json:
         emit_json(summary)

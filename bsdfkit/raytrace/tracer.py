@@ -14,6 +14,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
+from bsdfkit.raytrace.programs import cached_program
 from bsdfkit.raytrace.scene import Scene, check_termination, check_work, scene_spectral_tables, spectral_grid
 from bsdfkit.raytrace.tallies import (
     FixedSum,
@@ -145,7 +146,8 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
     chunks independently (no communication), so a second CPU device (``--xla_force_host_platform_device_count``,
     set by the command line) or a second GPU doubles the throughput with a single compilation.
     Must be called inside :func:`bsdfkit.core.jaxconfig.x64`. Sweeping numbers (reflectance, height, plate TIS)
-    keeps the signature, so a sweep compiles once per distinct :class:`Effects`.
+    keeps the signature, so a sweep compiles once per distinct :class:`Effects`. With JAX's persistent
+    compilation cache on, the traced program is kept on disk too (:mod:`bsdfkit.raytrace.programs`).
     """
     treedef, shapes = signature
     mesh = jax.sharding.Mesh(np.asarray(jax.local_devices()[:n_devices]), ("chunks",))
@@ -162,9 +164,11 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
                                     out_specs=spec("chunks"), check_vma=False))
     abstract = jax.tree_util.tree_unflatten(treedef, [jax.ShapeDtypeStruct(s, d, sharding=replicated)
                                                       for s, d in shapes])
-    return program.lower(abstract, jax.ShapeDtypeStruct((2,), "uint32", sharding=replicated),
-                         jax.ShapeDtypeStruct((n_devices,), "uint32", sharding=split),
-                         jax.ShapeDtypeStruct((n_devices,), "int32", sharding=split)).compile(kernel.COMPILER_OPTIONS)
+    args = (abstract, jax.ShapeDtypeStruct((2,), "uint32", sharding=replicated),
+            jax.ShapeDtypeStruct((n_devices,), "uint32", sharding=split),
+            jax.ShapeDtypeStruct((n_devices,), "int32", sharding=split))
+    program = cached_program(program, args, ("trace_chunk", effects, lanes, width, signature, n_devices))
+    return program.lower(*args).compile(kernel.COMPILER_OPTIONS)
 
 
 def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed, compile_s) -> TraceResult:

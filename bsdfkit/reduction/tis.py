@@ -47,7 +47,7 @@ The paper's own rectangle sum, eq. (7) of [Power-budget], is :func:`tis_rectangl
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -247,14 +247,19 @@ class Hemisphere:
         coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow)
         return self._evaluate(r_flat, coef, mode).reshape(shape)
 
-    def _evaluate(self, r: NDArray, coef: NDArray, mode: str,
-                  rows: tuple[NDArray, ...] | None = None) -> NDArray[np.float64]:
+    def _evaluate(self, r: NDArray, coef: NDArray, mode: str, rows: tuple[NDArray, ...] | None = None,
+                  at_nodes: dict[int, NDArray] | None = None) -> NDArray[np.float64]:
         """Σ_halves coef·interpolant at radii ``r``; ``rows[k]``: the nodes where coef[:, k] ≠ 0 (the others are
-        skipped: a node blends only the half-axes its quadrant faces)."""
+        skipped: a node blends only the half-axes its quadrant faces). ``at_nodes`` maps ``id(half profile)`` to
+        its interpolant at every radius of ``r``, computed beforehand (:meth:`tis_variants`)."""
         if mode not in ("linear", "log"):
             raise InputError("unknown interpolation mode", field="mode", expected="linear or log", got=mode)
         out = np.zeros(r.size)
         for k, name in enumerate(HALVES):
+            if at_nodes is not None:  # finite everywhere: a node with coef 0 adds exactly 0, no gather needed
+                for h, share in self.halves[name]:
+                    out += coef[:, k] * share * at_nodes[id(h)]
+                continue
             idx = np.flatnonzero(coef[:, k]) if rows is None else rows[k]
             for h, share in self.halves[name]:
                 out[idx] += coef[idx, k] * share * _interp(h, r[idx], mode)
@@ -294,6 +299,24 @@ class Hemisphere:
         grid, coef, rows = self._grid_coefficients(n_psi, n_r, p, borrow)
         return float(np.sum(self._evaluate(grid.r, coef, mode, rows) * grid.w))
 
+    def tis_variants(self, mode: str, n_psi: int, n_r: int,
+                     variants: Sequence[tuple[float, bool]]) -> list[float]:
+        """:meth:`tis` for several (p, borrow) blends on one quadrature grid, the same numbers bit for bit.
+
+        The grid's radii do not depend on the blend, so every half-profile is interpolated at all of them
+        once and each blend only gathers (the error budget of :func:`tis_from_profile` needs four blends).
+        """
+        grid = self._grid_coefficients(n_psi, n_r)[0]
+        at_nodes: dict[int, NDArray] | None = {id(h): _interp(h, grid.r, mode)
+                                               for entries in self.halves.values() for h, _ in entries}
+        if not all(np.isfinite(v).all() for v in at_nodes.values()):
+            at_nodes = None  # a non-finite interpolant would turn 0·v into NaN: interpolate per blend instead
+        out = []
+        for p, borrow in variants:
+            grid, coef, rows = self._grid_coefficients(n_psi, n_r, p, borrow)
+            out.append(float(np.sum(self._evaluate(grid.r, coef, mode, rows, at_nodes) * grid.w)))
+        return out
+
 
 @functools.lru_cache(maxsize=16)
 def _grid_coefficients(beta0: tuple[float, float], ranges: tuple[tuple[float, float], ...], n_psi: int, n_r: int,
@@ -310,11 +333,13 @@ def _grid_coefficients(beta0: tuple[float, float], ranges: tuple[tuple[float, fl
 
 def _interp(h: HalfProfile, r: NDArray, mode: str) -> NDArray[np.float64]:
     """Linear interpolation in f (or in ln f between positive neighbours), constant beyond the ends."""
-    lin = np.interp(r, h.radius, h.value)
     if mode == "linear":
-        return lin
+        return np.interp(r, h.radius, h.value)
     positive = h.value > 0
     logv = np.interp(r, h.radius, np.log(np.where(positive, h.value, 1.0)))
+    if positive.all():  # the usual case: every node lies between positive neighbours
+        return np.exp(logv)
+    lin = np.interp(r, h.radius, h.value)
     good = np.interp(r, h.radius, positive.astype(float)) > 1 - 1e-12
     return np.where(good, np.exp(logv), lin)
 
@@ -372,12 +397,11 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
     linear = float(w @ f)
     # ln-f interpolation follows convex lobe tails between sparse samples (docs/reductions.md); the linear
     # form (exactly w·f) gives the first-order propagation of the measurement uncertainty.
-    value = hemi.tis("log", n_psi, n_r)
+    # the value, two other blends and no borrowing (hold), on one grid
+    value, *blends, hold = hemi.tis_variants("log", n_psi, n_r, [(2.0, True), (1.0, True), (4.0, True), (2.0, False)])
     # per-record noise through the linear weights, plus the scale common to all records (reference beam)
     std_meas = float(np.hypot(np.sqrt(np.sum((w * s) ** 2)), profile.attrs.get("common_relative_std", 0.0) * value))
     coarse = hemi.tis("log", n_psi // 2, n_r // 2)
-    blends = [hemi.tis("log", n_psi, n_r, p=p) for p in (1.0, 4.0)]
-    hold = hemi.tis("log", n_psi, n_r, borrow=False)
     parts = {"quadrature": abs(value - coarse), "interpolation": abs(value - linear),
              "blend": max(abs(b - value) for b in blends), "extrapolation": abs(hold - value)}
     std_rec = float(np.sqrt(sum(v * v for v in parts.values())))

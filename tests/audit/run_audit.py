@@ -584,6 +584,24 @@ def leftovers(paths: list[Path]) -> list[str]:
     return sorted(set(found))
 
 
+def complete(out: Path) -> bool:
+    """Whether an output that exists after a signal is whole: a run folder has its summary and every file the
+    summary lists, a simulated measurement its manifest, a netCDF file opens and loads."""
+    try:
+        if out.is_dir():
+            if (out / "summary.json").is_file():
+                listed = json.loads((out / "summary.json").read_text(encoding="utf-8")).get("outputs", [])
+                return all((out / name).is_file() for name in listed)
+            return (out / "manifest.toml").is_file()
+        import xarray as xr
+
+        with xr.open_dataset(out) as ds:
+            ds.load()
+        return True
+    except Exception:  # noqa: BLE001 - anything unreadable is not a complete output
+        return False
+
+
 def snapshot(paths: list[Path]) -> dict[Path, bytes | None]:
     return {p: p.read_bytes() if p.is_file() else None for p in paths}
 
@@ -650,13 +668,20 @@ def run_case(case: Case) -> tuple[str, str]:
         waited = time.perf_counter() - sent
         if "Traceback" in err:
             return "traceback", err[-400:]
+        out = case.outputs[0]
+        if not finished_early and p.returncode in (0, -sig, 128 + sig) and out.exists():
+            # the signal came as the command finished (its handlers already gone, or the kill after the
+            # final rename): nothing may be lost, so the output must be whole and nothing left behind
+            left = leftovers(case.outputs)
+            if not complete(out) or left:
+                return "partial", f"exit {p.returncode} after the signal, output incomplete or {left}"
+            return "ok", f"finished as the signal came (exit {p.returncode}); the output is complete"
         if not finished_early and sig != signal.SIGKILL and (
                 p.returncode != 128 + sig or len(err.strip().splitlines()) != 1):
             return "cryptic", f"exit {p.returncode}, stderr not one line: {err.strip()[-300:]}"
         if not finished_early and waited > 2.0 and sig != signal.SIGKILL:
             return "hang", f"exit {waited:.1f} s after the signal"
         left = leftovers(case.outputs) if sig != signal.SIGKILL else []
-        out = case.outputs[0]
         if finished_early:  # done before the signal: a complete output, and a rerun without --force is refused
             if p.returncode != 0 or not out.exists() or left:
                 return "partial", f"finished before the signal: exit {p.returncode}, output {out.exists()}, {left}"

@@ -1,0 +1,77 @@
+"""Traced kernel programs kept on disk (bsdfkit.raytrace.programs): the exported program computes bit for bit
+what the traced one does, is read back instead of traced, and a damaged or unwritable cache costs nothing."""
+from __future__ import annotations
+
+import jax
+import pytest
+from test_trace_batch import full, plate_scene
+
+from bsdfkit.raytrace import programs, trace
+from bsdfkit.raytrace.tracer import compiled_kernel
+
+RAYS = 3000
+
+
+@pytest.fixture
+def program_cache(monkeypatch, tmp_path):
+    """The program folder in tmp_path, with the per-process kernel cache emptied before and after."""
+    folder = tmp_path / "programs"
+    monkeypatch.setattr(programs, "program_folder", lambda: folder)
+    compiled_kernel.cache_clear()
+    yield folder
+    compiled_kernel.cache_clear()
+
+
+def test_without_a_compilation_cache_no_program_is_kept():
+    assert jax.config.jax_compilation_cache_dir is None  # the suite runs without JAX's persistent cache
+    assert programs.program_folder() is None
+
+
+def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path, monkeypatch):
+    sc = plate_scene(tmp_path)
+    compiled_kernel.cache_clear()
+    with monkeypatch.context() as m:
+        m.setattr(programs, "program_folder", lambda: None)
+        traced = full(trace(sc, RAYS, seed=3))
+    compiled_kernel.cache_clear()
+    first = full(trace(sc, RAYS, seed=3))  # traces, exports, writes
+    files = list(program_cache.glob("*" + programs.SUFFIX))
+    assert len(files) == 1 and not list(program_cache.glob("*.part"))
+    compiled_kernel.cache_clear()
+
+    def no_tracing(*args, **kwargs):
+        raise AssertionError("the program was traced again instead of read back")
+
+    monkeypatch.setattr(jax.export, "export", no_tracing)
+    again = full(trace(sc, RAYS, seed=3))
+    assert traced == first == again
+
+
+def test_damaged_program_file_is_traced_again_and_replaced(program_cache, tmp_path):
+    sc = plate_scene(tmp_path)
+    reference = full(trace(sc, RAYS, seed=5))
+    (path,) = program_cache.glob("*" + programs.SUFFIX)
+    path.write_bytes(path.read_bytes()[:100])  # a cut file
+    compiled_kernel.cache_clear()
+    assert full(trace(sc, RAYS, seed=5)) == reference
+    jax.export.deserialize(bytearray(path.read_bytes()))  # replaced by a whole program
+
+
+def test_unwritable_program_folder_still_traces(monkeypatch, tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setattr(programs, "program_folder", lambda: blocker / "programs")
+    compiled_kernel.cache_clear()
+    try:
+        result = trace(plate_scene(tmp_path), RAYS, seed=1)
+    finally:
+        compiled_kernel.cache_clear()
+    assert result.ledger_error < 1e-12 and not (blocker / "programs").exists()
+
+
+def test_program_names_separate_what_the_program_is_made_from():
+    a = programs.program_name(("trace_chunk", "effects A", 256))
+    assert a == programs.program_name(("trace_chunk", "effects A", 256))
+    assert a != programs.program_name(("trace_chunk", "effects B", 256))
+    assert a != programs.program_name(("trace_chunk", "effects A", 512))
+    assert a.endswith(programs.SUFFIX)
