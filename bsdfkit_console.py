@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from typing import NoReturn
 
 
 def _early_signal(signum: int, frame: object) -> None:
@@ -21,14 +22,16 @@ def _early_signal(signum: int, frame: object) -> None:
     os._exit(128 + signum)
 
 
-def main() -> int:
-    """Install the early signal handlers, then run :func:`bsdfkit.cli.main.main` (which installs its own)."""
+def main() -> NoReturn:
+    """Install the early signal handlers, run :func:`bsdfkit.cli.main.main` (which installs its own), and end
+    the process with its status without the interpreter's shutdown (:func:`bsdfkit.cli.main.exit_process`)."""
     for signum in (signal.SIGINT, signal.SIGTERM):
         if signal.getsignal(signum) != signal.SIG_IGN:
             signal.signal(signum, _early_signal)
+    from bsdfkit.cli.main import exit_process
     from bsdfkit.cli.main import main as cli_main
 
-    return cli_main()
+    exit_process(cli_main())
 
 
 if __name__ == "__main__":  # pragma: no cover

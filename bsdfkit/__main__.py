@@ -1,5 +1,3 @@
-import sys
+from bsdfkit.cli.main import exit_process, main
 
-from bsdfkit.cli.main import main
-
-sys.exit(main())
+exit_process(main())

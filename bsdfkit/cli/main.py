@@ -20,6 +20,7 @@ tracer runs chunks of rays in parallel.
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
 import importlib
 import os
@@ -29,6 +30,7 @@ import threading
 import zlib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.core.version import __version__
@@ -183,6 +185,26 @@ def _run(argv: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"bsdfkit {args.verb}: interrupted", file=sys.stderr)
         return 130
+
+
+def exit_process(code: int) -> NoReturn:
+    """End the command-line process with status ``code`` once :func:`main` has returned, without the
+    interpreter's shutdown.
+
+    Everything the command writes is complete by then (outputs are renamed into place, the dask cluster of a
+    sweep is closed). What shutdown would still do is tear down the modules and JAX's runtime, which took
+    0.3-0.6 s of a 1.7-2.3 s ``bsdfkit trace`` (measured: 0.34-0.64 s from main's return to the process's
+    end, 0.04 s with this). The ``atexit`` handlers still run (logging, multiprocessing), and stdout and
+    stderr are flushed; a stdout that cannot be flushed (a closed pipe) turns status 0 into 1, as Python's
+    own shutdown does. Only for the console command and ``python -m bsdfkit``, never on import.
+    """
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            code = code or 1
+    os._exit(code)
 
 
 def _terminated(signum, frame) -> None:
