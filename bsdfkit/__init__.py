@@ -12,9 +12,17 @@ registers the ``ds.bsdf`` accessor on xarray datasets (:mod:`bsdfkit.accessor`).
 """
 from __future__ import annotations
 
+import sys as _sys
 from typing import Any
 
-from bsdfkit.core.version import __version__
+import bsdfkit_console as _console
+
+if _console.is_bsdfkit_command(getattr(_sys, "orig_argv", [])):
+    # this process is the `python -m bsdfkit` command, importing its package before its __main__: answer
+    # Ctrl-C from here on with one line (the imports below take a second); never for any other program
+    _console.install_early_handlers()
+
+from bsdfkit.core.version import __version__  # noqa: E402
 
 API = ("ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
        "load_scene", "trace", "run")

@@ -61,11 +61,13 @@ def test_long_trace_answers_signal_within_two_seconds(tmp_path, signum):
 EARLY_DELAYS_S = (0.1, 0.2, 0.3)
 
 
+@pytest.mark.parametrize("module", ["bsdfkit_console", "bsdfkit"])
 @pytest.mark.parametrize("delay", EARLY_DELAYS_S)
-def test_ctrl_c_while_importing_is_one_line_and_status_130(tmp_path, delay):
-    # the console command (bsdfkit_console:main) answers Ctrl-C before `import bsdfkit` (xarray, ~1 s) is done
+def test_ctrl_c_while_importing_is_one_line_and_status_130(tmp_path, delay, module):
+    # the console command (bsdfkit_console:main) answers Ctrl-C before `import bsdfkit` (xarray, ~1 s) is done,
+    # and so does `python -m bsdfkit`, whose package is imported before its __main__
     out = tmp_path / "out.nc"
-    argv = [sys.executable, "-m", "bsdfkit_console", "trace", str(SCENE), "--rays", "2000000000", "-o", str(out)]
+    argv = [sys.executable, "-m", module, "trace", str(SCENE), "--rays", "2000000000", "-o", str(out)]
     for wait in (delay, delay + 0.2, delay + 0.4):
         proc = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 preexec_fn=_default_sigint)
@@ -83,6 +85,18 @@ def test_ctrl_c_while_importing_is_one_line_and_status_130(tmp_path, delay):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert err.startswith("bsdfkit: interrupted"), err
     assert _leftovers(tmp_path) == []
+
+
+def test_early_handlers_only_for_the_bsdfkit_command():
+    # importing bsdfkit changes no signal handler in any other program (here: pytest)
+    code = ("import signal, sys; before = signal.getsignal(signal.SIGINT); import bsdfkit; "
+            "sys.exit(0 if signal.getsignal(signal.SIGINT) is before else 1)")
+    assert subprocess.run([sys.executable, "-c", code], cwd=ROOT).returncode == 0
+    import bsdfkit_console
+
+    assert bsdfkit_console.is_bsdfkit_command(["python", "-X", "importtime", "-m", "bsdfkit", "trace"])
+    assert not bsdfkit_console.is_bsdfkit_command(["python", "-m", "pytest", "-m", "bsdfkit"])
+    assert not bsdfkit_console.is_bsdfkit_command(["python", "tool.py", "-m", "bsdfkit"])
 
 
 def test_console_command_is_the_early_signal_launcher():
