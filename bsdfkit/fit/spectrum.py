@@ -35,7 +35,6 @@ Wavelengths in nm throughout. Spectra cross the API as NumPy arrays (fitting) or
 """
 from __future__ import annotations
 
-import functools
 import math
 import re
 from collections.abc import Sequence
@@ -49,7 +48,7 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalError, ValidationError
-from bsdfkit.core.jaxconfig import x64
+from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.fit import lm
 from bsdfkit.fit.least_squares import FitOptions, Parameter, least_squares
 from bsdfkit.models.functions import C_FWHM
@@ -265,14 +264,7 @@ def spectrum_model_values(model: str, params: dict[str, float], wavelength: np.n
         raise ValidationError("missing model parameters", field="params", expected=", ".join(names), got=missing)
     theta = np.array([params[n] for n in names], dtype=float)
     with x64():
-        return np.asarray(_compiled_model(model)(jnp.asarray(theta), jnp.asarray(wl)))
-
-
-@functools.cache
-def _compiled_model(model: str):
-    # one compiled program per model (and grid size) instead of compiling each of its operations one by one
-    # in every new process: 2 calls of the main job took 2.2 s op by op
-    return jax.jit(_FUNCTIONS[model])
+        return np.asarray(jitted(_FUNCTIONS[model])(jnp.asarray(theta), jnp.asarray(wl)))
 
 
 # ------------------------------------------------------------------------------------------------

@@ -17,18 +17,16 @@ References
 """
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from bsdfkit.core.errors import ValidationError
-from bsdfkit.core.jaxconfig import x64
+from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.models import functions as f
 from bsdfkit.models import led
 
@@ -123,14 +121,7 @@ class BsdfModel:
         """TIS [1] over the unit disk at incidences [deg]; parameters may be arrays over the incidences."""
         with x64():
             args = [jnp.asarray(params[n], dtype=jnp.float64) for n in self.parameter_names]
-            return np.asarray(_compiled(self.tis)(jnp.radians(jnp.asarray(theta_i_deg, dtype=jnp.float64)), *args))
-
-
-@functools.cache
-def _compiled(fn: Callable) -> Callable:
-    """One compiled program per TIS function (and argument shapes): op-by-op dispatch compiled every primitive
-    for every new shape, ~25 ms per call in the main job."""
-    return jax.jit(fn)
+            return np.asarray(jitted(self.tis)(jnp.radians(jnp.asarray(theta_i_deg, dtype=jnp.float64)), *args))
 
 
 def _lambert(p, d):
