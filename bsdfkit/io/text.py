@@ -16,12 +16,13 @@ from __future__ import annotations
 import codecs
 import csv
 import re
+import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 
 from bsdfkit.core.errors import FormatError, InputError
 
-__all__ = ["decode_text", "read_text", "refuse_cut_last_line", "text_and_encoding"]
+__all__ = ["decode_text", "loads_toml", "read_text", "read_toml", "refuse_cut_last_line", "text_and_encoding"]
 
 #: byte-order marks, longest first (the UTF-32 LE mark starts with the UTF-16 LE one)
 _BOMS = ((codecs.BOM_UTF32_LE, "utf-32-le"), (codecs.BOM_UTF32_BE, "utf-32-be"), (codecs.BOM_UTF8, "utf-8"),
@@ -116,6 +117,19 @@ def read_text(path: str | Path, *, expected: str = "a text file", legacy: str | 
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror or type(exc).__name__})", file=path) from None
     return decode_text(raw, path, expected=expected, legacy=legacy, allow_empty=allow_empty)
+
+
+def loads_toml(text: str, path: str | Path | None) -> dict:
+    """Parse TOML text; invalid TOML is a :class:`FormatError` naming ``path`` and the parser's line."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+
+
+def read_toml(path: str | Path, *, expected: str = "a TOML file") -> dict:
+    """Read, decode (:func:`read_text`) and parse a TOML file (:func:`loads_toml`)."""
+    return loads_toml(read_text(path, expected=expected), path)
 
 
 # ------------------------------------------------------------------------------------------ cut files

@@ -8,7 +8,6 @@ A ``[[band_series]]`` entry (a monochromator scan) expands into one configuratio
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +16,7 @@ import numpy as np
 
 from bsdfkit.core.conventions import WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import read_toml
 from bsdfkit.measurement.instrument import Instrument
 
 FORMAT_NAME = "bsdfkit-raw-scan"
@@ -128,11 +127,7 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
         path = path / "manifest.toml"
     if not path.is_file():
         raise InputError("no manifest", file=path, expected="a manifest.toml in the measurement folder")
-    text = read_text(path, expected="a TOML manifest")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FormatError(f"not valid TOML ({exc})", file=path) from None
+    data = read_toml(path, expected="a TOML manifest")
     fmt = _get(data, "format", str, path, "format")
     if fmt != FORMAT_NAME:
         raise FormatError("unknown format", file=path, field="format", expected=repr(FORMAT_NAME), got=fmt)

@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +36,7 @@ from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_
 from bsdfkit.io import netcdf
 from bsdfkit.io.atomic import OutputSet, write_text
 from bsdfkit.io.jsonout import dumps
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import read_toml
 from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
@@ -195,20 +194,12 @@ def _ranged(value: Any, path: Path, dotted: str, lo: float, hi: float, lo_open: 
     return value
 
 
-def _read_toml(path: Path, what: str) -> dict:
-    text = read_text(path, expected=f"a {what} TOML file")
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FormatError(f"not valid TOML ({exc})", file=path) from None
-
-
 def load_recipe(path: str | Path) -> Recipe:
     """Parse and validate a recipe TOML file (types and ranges of every option, and its trace scene)."""
     path = Path(path)
     if not path.is_file():
         raise InputError("recipe not found", file=path, expected="a TOML recipe file")
-    data = _read_toml(path, "recipe")
+    data = read_toml(path, expected="a recipe TOML file")
     _check_keys(data, path)
     head = data.get("recipe")
     if head is None:
@@ -652,7 +643,7 @@ def _scene_with_plate(path: Path, plate):
 
     With ``plate=None`` this only validates the scene (before a run computes anything).
     """
-    data = _read_toml(path, "trace scene")
+    data = read_toml(path, expected="a trace scene TOML file")
     top = data.get("top", {})
     if not isinstance(top, dict):
         top = {}

@@ -15,15 +15,14 @@ histogram) and is reported by the main job.
 """
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.errors import FormatError, InputError
+from bsdfkit.core.errors import InputError
 from bsdfkit.fit.least_squares import fit_bsdf
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import read_toml
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
@@ -131,11 +130,7 @@ def recipe_measurement(recipe: str | Path) -> tuple[Path, str]:
     recipe = Path(recipe)
     if not recipe.is_file():
         raise InputError("recipe not found", file=recipe, expected="a TOML recipe file")
-    text = read_text(recipe, expected="a TOML recipe file")
-    try:
-        head = tomllib.loads(text).get("recipe")
-    except tomllib.TOMLDecodeError as exc:
-        raise FormatError(f"not valid TOML ({exc})", file=recipe) from None
+    head = read_toml(recipe, expected="a TOML recipe file").get("recipe")
     if not isinstance(head, dict) or not isinstance(head.get("measurement"), str):
         raise InputError("recipe names no measurement", file=recipe, field="recipe.measurement",
                          expected="a path to a measurement folder", got=None if not isinstance(head, dict)

@@ -31,7 +31,6 @@ what was found; unknown keys are errors.
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -41,12 +40,12 @@ import numpy as np
 
 import bsdfkit.raytrace.plate_from_scan as plate_source
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, WAVELENGTH_RANGE_NM
-from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_reflectance
 from bsdfkit.io import toml_write
 from bsdfkit.io.atomic import write_text
 from bsdfkit.io.spectrum_file import read_spectrum_table
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import loads_toml, read_text
 from bsdfkit.raytrace.plate import PhosphorPlate, load_plate
 from bsdfkit.raytrace.rayfile import RaySet, read_ray_file
 from bsdfkit.raytrace.spectral import (
@@ -702,11 +701,7 @@ def plate_from_recipe(recipe: Path, scene_file: str | Path | None) -> PhosphorPl
 
 def loads_scene(text: str, file: str | Path | None = None) -> Scene:
     """Parse scene TOML text (``file`` is used for messages and relative paths)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FormatError(f"not valid TOML ({exc})", file=file) from None
-    return parse_scene(data, file)
+    return parse_scene(loads_toml(text, file), file)
 
 
 def load_scene(path: str | Path) -> Scene:
