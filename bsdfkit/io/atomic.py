@@ -198,6 +198,17 @@ def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None
     return path
 
 
+def _folder_anchor(folder: Path) -> Path:
+    """The nearest existing folder of an output folder; an output folder (or a parent) that is a file is an
+    :class:`OutputError`."""
+    if folder.exists() and not folder.is_dir():
+        raise OutputError("output folder is a file", file=folder, expected="a folder (or a new name)")
+    anchor = _nearest_existing(folder)
+    if not anchor.is_dir():
+        raise OutputError("a parent of the output folder is a file, not a folder", file=folder, got=str(anchor))
+    return anchor
+
+
 def _staging_inside(entry: Path) -> bool:
     """A staging folder of an output set staged inside its target (a mount point, an unwritable parent)."""
     return entry.name.startswith(".bsdfkit.") and entry.name.endswith(".staging")
@@ -219,11 +230,7 @@ def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike
     is not empty and ``force`` is not given.
     """
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise OutputError("output folder is a file", file=folder, expected="a folder (or a new name)")
-    anchor = _nearest_existing(folder)
-    if not anchor.is_dir():
-        raise OutputError("a parent of the output folder is a file, not a folder", file=folder, got=str(anchor))
+    anchor = _folder_anchor(folder)
     others = _other_entries(folder)
     if others and not force:
         raise OutputExistsError("output folder exists and is not empty; pass --force (force=True) to replace it "
@@ -398,11 +405,8 @@ class OutputSet:
         folder = self.folder
         if self.whole_folder:
             check_output_folder(folder, self.force, self.inputs)
-        if folder.exists() and not folder.is_dir():
-            raise OutputError("output folder is a file", file=folder, expected="a folder (or a new name)")
-        anchor = _nearest_existing(folder)
-        if not anchor.is_dir():
-            raise OutputError("a parent of the output folder is a file, not a folder", file=folder, got=str(anchor))
+        else:
+            _folder_anchor(folder)  # the folder and its parents are folders (or do not exist yet)
         for name in self.names:
             target = folder / name
             if target.is_dir():
