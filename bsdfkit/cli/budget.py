@@ -47,9 +47,8 @@ def _run(args: argparse.Namespace) -> int:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise FormatError(f"not valid JSON ({exc.msg})", file=path, line=exc.lineno) from None
-        except RecursionError as exc:
-            raise InputError(f"cannot read the table ({getattr(exc, 'strerror', None) or type(exc).__name__})",
-                             file=path) from None
+        except RecursionError:
+            raise InputError("cannot read the table (RecursionError)", file=path) from None
         tables = table_from_json(data, str(path))
     else:
         if args.incidence is None:

@@ -70,12 +70,9 @@ def cached_program(program: Callable, abstract_args: Sequence, key: tuple) -> Ca
     if folder is None:
         return program
     path = folder / program_name(key)
-    exported = None
     try:
         exported = jax.export.deserialize(bytearray(path.read_bytes()))
-    except FileNotFoundError:
-        pass
-    except Exception:  # noqa: BLE001 - a cut or foreign file in our own cache: trace again and replace it
+    except Exception:  # noqa: BLE001 - missing, or a cut or foreign file in our own cache: trace (again)
         exported = None
     if exported is None:
         exported = jax.export.export(program)(*abstract_args)
