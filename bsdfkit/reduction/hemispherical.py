@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,6 +79,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.core.records import incidences
+from bsdfkit.reduction import disk
 from bsdfkit.reduction.tis import HALVES, Hemisphere, polar_grid
 
 #: Half-width (in direction cosines) of the window around β0 in which the lobe's peak is looked for.
@@ -159,6 +161,9 @@ class Reconstruction:
     extrapolated_beyond_deg: float | None
     assumptions: list[str]
     method: str
+    #: f at directions from record values: ``evaluate(values (n,), directions (m, 3)) -> (m,)`` [1/sr]; the
+    #: pointwise reconstruction whose integral is ``central @ values`` (what an exported table samples)
+    evaluate: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None = None
 
 
 # ------------------------------------------------------------------------------------------- lobe region
@@ -530,6 +535,7 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
     c_body += wb[outside.size:] @ t
     c_lobe = np.zeros(n)
     kappa = kappa_alt = 1.0
+    lobe_parts: tuple | None = None
     if region.size:
         # body at the region's records, as a linear map of the profile records
         r, psi = _polar(body, geom, region)
@@ -549,13 +555,27 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
             lobe = _with_perpendicular(lobe, azimuth)
         wl = _weights(lobe, n_psi, n_r, p)
         c_lobe = wl[pos] @ resid
+        lobe_parts = (lobe_keep, pos, resid, center)
         linear = float(wl @ lobe_values)
         if with_kappa and linear > 0:
             kappa = float(np.clip(lobe.tis("log", n_psi, n_r) / linear, 0.5, 1.5))
             gauss = _gaussian_lobe_tis(geom, region, lobe_values[pos])
             if gauss is not None:  # an under-sampled lobe: its Gaussian integral, the ln-f one in the error bar
                 kappa_alt, kappa = kappa, float(np.clip(gauss / linear, 0.5, 2.0))
-    return c_body, c_lobe, ends, (kappa, kappa_alt)
+
+    def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64], k: float = 1.0) -> NDArray:
+        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        d = geom.dataset(outside, np.concatenate([v[outside], t @ v]), extra=extra)
+        out = Hemisphere.from_profile(d, center=body_center).bsdf(directions)
+        if lobe_parts is not None and k != 0.0:
+            keep, at, res, centre = lobe_parts
+            lv = np.zeros(keep.size)
+            lv[at] = res @ v
+            out = out + k * Hemisphere.from_profile(geom.dataset(keep, lv, theta_i=centre),
+                                                    center="specular").bsdf(directions)
+        return out
+
+    return c_body, c_lobe, ends, (kappa, kappa_alt), evaluate
 
 
 def _mismatch(geom: Geometry, g: NDArray[np.float64], center: str) -> float:
@@ -614,10 +634,31 @@ def _grown_until_symmetric(geom: Geometry, ref: NDArray[np.float64], region: Reg
     return previous
 
 
+def sampling_method(geom: Geometry, finite: NDArray[np.bool_]) -> str:
+    """``arcs`` when every finite record lies on the in-plane arc or the perpendicular arc through the specular
+    direction (half-profiles about the normal and the specular point), else ``disk`` (polar interpolation of
+    every record over the projected disk, :mod:`bsdfkit.reduction.disk`): grids, C-planes, other planes,
+    scattered records."""
+    on_arcs = np.isin(geom.arc[finite], ("in_plane", "perpendicular"))
+    return "arcs" if bool(on_arcs.all()) else "disk"
+
+
 def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
                 n_psi: int = 256, n_r: int = 400) -> Reconstruction:
     """Central weights and alternatives for one profile (module docstring); ``ref`` is the band-mean profile
-    (NaN = record without data), ``ref_std`` its standard uncertainty."""
+    (NaN = record without data), ``ref_std`` its standard uncertainty. The method follows
+    :func:`sampling_method`."""
+    finite = np.isfinite(ref)
+    if not finite.any():
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
+                         expected="finite values on an arc")
+    if sampling_method(geom, finite) == "disk":
+        return _reconstruct_disk(geom, ref, ref_std, n_psi, n_r)
+    return _reconstruct_arcs(geom, ref, ref_std, n_psi, n_r)
+
+
+def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
+                      n_psi: int = 256, n_r: int = 400) -> Reconstruction:
     finite = np.isfinite(ref)
     if not finite.any():
         raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
@@ -636,8 +677,8 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
         other = "specular" if body_center == "normal" else "normal"
         if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
             other_center = other
-    body, lobe, ends, (kappa, kappa_alt) = _body_and_lobe(geom, region, finite, ref, "trend", n_psi, n_r,
-                                                           with_kappa=True, body_center=body_center)
+    body, lobe, ends, (kappa, kappa_alt), evaluate = _body_and_lobe(
+        geom, region, finite, ref, "trend", n_psi, n_r, with_kappa=True, body_center=body_center)
 
     bound = _unresolved_lobe_bound(geom, region, ref, s) if region.records.size else None
     linear_lobe = float(lobe @ np.nan_to_num(ref))
@@ -647,7 +688,7 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
     def variant(reg: Region = region, rule: str = "trend", grid: tuple[int, int] = (n_psi, n_r),
                 **kw) -> NDArray[np.float64]:
         kw.setdefault("body_center", body_center)
-        b, lo, _, _ = _body_and_lobe(geom, reg, finite, ref, rule, *grid, **kw)
+        b, lo, _, _, _ = _body_and_lobe(geom, reg, finite, ref, rule, *grid, **kw)
         return b + kappa * lo
 
     alt: dict[str, dict[str, NDArray]] = {}
@@ -719,7 +760,178 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
                            "its last three samples (error bar: held at the last value, or linear to 0 at 90 deg)")
     return Reconstruction(central=body + kappa * lobe, alternatives=alt, comparisons=comparisons,
                           lobe=kappa * lobe, region=region, extrapolated_beyond_deg=min(ends) if ends else None,
-                          assumptions=assumptions, method=method)
+                          assumptions=assumptions, method=method,
+                          evaluate=lambda values, directions: evaluate(values, directions, kappa))
+
+
+# ------------------------------------------------------------------------------------------- disk sampling
+def direction_frame(geom: Geometry, directions: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """(x, y) of unit vectors (..., 3) in the sample frame, in the frame of :meth:`Geometry.frame`."""
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    u = np.radians(geom.phi_i) - np.pi
+    a, b = d[:, 0], d[:, 1]
+    return a * np.cos(u) + b * np.sin(u), -a * np.sin(u) + b * np.cos(u)
+
+
+#: Lobe regions one and two steps wider (factors on the region radius) for the ``separation`` error.
+DISK_WIDER = (1.25, 1.5)
+
+
+def _disk_region(geom: Geometry, ref: NDArray[np.float64], s: NDArray[np.float64]
+                 ) -> tuple[float | None, float, NDArray[np.int64]]:
+    """Lobe centre (in-plane direction cosine), region radius and the in-plane region found on the records of
+    the in-plane and perpendicular arcs (:func:`find_region`, grown like the arcs'); (None, 0, []) without a
+    separable lobe or without an in-plane arc."""
+    on = np.flatnonzero(np.isfinite(ref) & np.isin(geom.arc, ("in_plane", "perpendicular")))
+    if np.sum(geom.arc[on] == "in_plane") < 5:
+        return None, 0.0, np.zeros(0, dtype=np.int64)
+    sub = Geometry(theta_i=geom.theta_i, phi_i=geom.phi_i, theta_s=geom.theta_s[on], phi_s=geom.phi_s[on],
+                   arc=geom.arc[on], side=geom.side)
+    region = _grown_until_symmetric(sub, ref[on], find_region(sub, ref[on], s[on]))
+    if not region.records.size or region.center_deg is None:
+        return None, 0.0, np.zeros(0, dtype=np.int64)
+    x, y = sub.frame()
+    c = float(np.sin(np.radians(region.center_deg)))
+    dist = np.hypot(x - c, y)
+    inside = dist[region.records].max()
+    members = np.zeros(on.size, dtype=bool)
+    members[region.records] = True
+    beyond = dist[~members & (dist > inside + 1e-12)]
+    radius = 0.5 * (inside + beyond.min()) if beyond.size else inside * 1.1 + 1e-6
+    return c, float(radius), on[region.records]
+
+
+def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], body_center: str,
+                lobe_c: float | None, radius: float, rim: str = "trend", n_psi: int = 256, n_r: int = 400,
+                mirror: str | None = None):
+    """Body (about ``body_center``) and lobe (about (lobe_c, 0) within ``radius``) weights over the profile's
+    records, the linear lobe integral's log/linear ratio on ``ref``, extrapolated radius, and an evaluator."""
+    x, y = geom.frame()
+    n = geom.n
+    keep = np.flatnonzero(finite)
+    x0 = float(np.sin(np.radians(geom.theta_i)))
+    bc = (0.0, 0.0) if body_center == "normal" else (x0, 0.0)
+    if lobe_c is not None:
+        dist = np.hypot(x[keep] - lobe_c, y[keep])
+        region, outside = keep[dist < radius], keep[dist >= radius]
+    else:
+        region, outside = np.zeros(0, dtype=np.int64), keep
+    body = disk.build(x[outside], y[outside], bc, rim=rim, normal_centered=body_center == "normal",
+                      reference=ref[outside])
+    c_body = np.zeros(n)
+    c_body[outside] = body.weights()
+    c_lobe = np.zeros(n)
+    ratio = 1.0
+    lobe = None
+    resid = None
+    if region.size:
+        e = body.matrix(x[region], y[region]).toarray()  # body at the region's records
+        resid = np.zeros((region.size, n))
+        resid[:, outside] = -e
+        resid[np.arange(region.size), region] += 1.0
+        lx, ly, rows = x[region], y[region], resid
+        if mirror is not None:  # one in-plane half mirrored onto the other (lobe isotropy alternative)
+            half = (lx - lobe_c) >= -1e-12 if mirror == "forward" else (lx - lobe_c) <= 1e-12
+            lx = np.concatenate([lx[half], 2 * lobe_c - lx[half]])
+            ly = np.concatenate([ly[half], -ly[half]])
+            rows = np.concatenate([resid[half], resid[half]])
+            lx, uniq = np.unique(np.round(np.stack([lx, ly], 1), 12), axis=0, return_index=True)
+            lx, ly, rows = lx[:, 0], lx[:, 1], rows[uniq]
+        lobe = disk.build(lx, ly, (lobe_c, 0.0), rim="ring", radius=radius, normal_centered=False)
+        w = lobe.weights()
+        c_lobe = w @ rows
+        lv = rows @ np.nan_to_num(ref)
+        linear = float(w @ lv)
+        if linear > 0:
+            ratio = float(np.clip(lobe.integral(lv, "log") / linear, 0.5, 1.5))
+        resid = rows
+
+    def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64], k: float = 1.0) -> NDArray:
+        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        dx, dy = direction_frame(geom, directions)
+        out = body.matrix(dx, dy) @ v[outside]
+        if lobe is not None and k != 0.0:
+            out = out + k * (lobe.matrix(dx, dy) @ (resid @ v))
+        return out
+
+    return c_body, c_lobe, ratio, body.extrapolated_beyond, evaluate, region
+
+
+def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
+                      n_psi: int = 256, n_r: int = 400) -> Reconstruction:
+    """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`)."""
+    finite = np.isfinite(ref)
+    s = np.nan_to_num(ref_std)
+    lobe_c, radius, in_plane_region = _disk_region(geom, ref, s)
+    body_center, other_center, mismatch = "normal", None, {}
+    if lobe_c is None:
+        mismatch = {c: _mismatch(geom, ref, c) for c in ("normal", "specular")}
+        m_n, m_s = mismatch["normal"], mismatch["specular"]
+        if np.isfinite(m_s) and np.isfinite(m_n) and m_s < m_n:
+            body_center = "specular"
+        other = "specular" if body_center == "normal" else "normal"
+        if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
+            other_center = other
+    body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius,
+                                                              n_psi=n_psi, n_r=n_r)
+
+    def variant(**kw) -> NDArray[np.float64]:
+        args = dict(body_center=body_center, lobe_c=lobe_c, radius=radius, n_psi=n_psi, n_r=n_r) | kw
+        b, lo, _, _, _, _ = _disk_parts(geom, finite, ref, **args)
+        return b + kappa * lo
+
+    alt: dict[str, dict[str, NDArray]] = {}
+    if other_center is not None:
+        alt["centre"] = {f"{other_center}_centred": variant(body_center=other_center)}
+    if beyond is not None:
+        alt["tail"] = {rule: variant(rim=rule) for rule in ("hold", "zero")}
+    lobe_psi = np.unique(np.round(np.degrees(np.arctan2(geom.frame()[1][region], geom.frame()[0][region]
+                                                        - (lobe_c or 0.0))) % 180.0, 1)) if region.size else []
+    sparse_lobe = region.size > 0 and len(lobe_psi) < 3
+    if sparse_lobe:
+        alt["azimuth"] = {m: variant(mirror=m) for m in ("forward", "backward")}
+    if region.size:
+        alt["separation"] = {f"wider_{k + 1}": variant(radius=f * radius) for k, f in enumerate(DISK_WIDER)}
+        alt["interpolation"] = {"linear_lobe": body + lobe}
+    else:
+        keep = np.flatnonzero(finite)
+        x, y = geom.frame()
+        whole = disk.build(x[keep], y[keep], (0.0, 0.0) if body_center == "normal" else
+                           (float(np.sin(np.radians(geom.theta_i))), 0.0), normal_centered=body_center == "normal",
+                           reference=ref[keep])
+        v = np.nan_to_num(ref[keep])
+        linear = whole.integral(v, "linear")
+        if linear > 0:
+            alt["interpolation"] = {"log_f": body * float(np.clip(whole.integral(v, "log") / linear, 0.5, 1.5))}
+    comparisons = {"normal_centred": variant(lobe_c=None, body_center="normal")}
+    n_other = int(np.sum(finite & (geom.arc == "other")))
+    assumptions = [f"records off the in-plane and perpendicular arcs ({n_other} of {int(finite.sum())}): "
+                   "interpolated over the projected disk in polar coordinates (linear in the distance from the "
+                   "centre, across azimuth between records at about the same distance)"]
+    center_deg = None if lobe_c is None else float(np.degrees(np.arcsin(lobe_c)))
+    if region.size:
+        method = "disk: body about the normal + lobe about its peak"
+        assumptions.append(f"specular lobe about its in-plane peak at {center_deg:.2f} deg within "
+                           f"{radius:.3g} (direction cosines), {region.size} record(s); the body under it "
+                           "interpolated from the records around it")
+        if sparse_lobe:
+            assumptions.append("lobe measured on the in-plane arc only: rotationally symmetric about its peak "
+                               "(error bar: either in-plane half alone)")
+    else:
+        what = {"normal": "the normal", "specular": "the specular direction"}
+        method = f"disk: everything about {what[body_center]} (no separable specular lobe)"
+    if beyond is not None:
+        edge = float(np.degrees(np.arcsin(min(beyond, 1.0)))) if body_center == "normal" else None
+        assumptions.append("data end short of the horizon" + (f" (from {edge:.3g} deg)" if edge is not None else "")
+                           + ": extrapolated along the trend of the last 10 deg (error bar: held at the last value, "
+                           "or linear to 0 at the horizon)")
+    reg = Region(in_plane_region, None if lobe_c is None else (center_deg, center_deg), None, center_deg, ())
+    return Reconstruction(central=body + kappa * lobe, alternatives=alt, comparisons=comparisons,
+                          lobe=kappa * lobe, region=reg,
+                          extrapolated_beyond_deg=(None if beyond is None else
+                                                   float(np.degrees(np.arcsin(min(beyond, 1.0))))),
+                          assumptions=assumptions, method=method,
+                          evaluate=lambda values, directions: evaluate(values, directions, kappa))
 
 
 # ------------------------------------------------------------------------------------------- datasets
@@ -741,6 +953,7 @@ class HemisphericalResult:
     extrapolated_beyond_deg: float | None
     lobe_region_deg: tuple[float, float] | None
     lobe: NDArray[np.float64]
+    notes: tuple[str, ...] = ()  # conflicting duplicates and other facts a user must see (with ``warnings``)
 
     @property
     def std(self) -> NDArray[np.float64]:
@@ -794,13 +1007,13 @@ class HemisphericalResult:
         :data:`IMPOSSIBLE_SIGMA` standard uncertainties (a calibration, quantity or reconstruction problem)."""
         over = np.flatnonzero(self.value - IMPOSSIBLE_SIGMA * self.std > 1.0)
         if not over.size:
-            return []
+            return list(self.notes)
         k = int(over[np.argmax(self.value[over])])
         where = f"{self.wavelength[k]:g} nm" if np.isfinite(self.wavelength[k]) else "the one wavelength"
         return [f"{self.side} at {self.theta_i:g} deg exceeds 1 by more than {IMPOSSIBLE_SIGMA:g} standard "
                 f"uncertainties at {over.size} of {self.value.size} wavelengths (largest {self.value[k]:.4g} "
                 f"± {self.std[k]:.2g} at {where}): not a physical result; check the reference-beam calibration, "
-                "the table's quantity (--quantity) or the sampling of the specular lobe"]
+                "the table's quantity (--quantity) or the sampling of the specular lobe", *self.notes]
 
     def as_dict(self) -> dict:
         return {"incidence_deg": self.theta_i, "side": self.side, "config": self.config,
@@ -819,6 +1032,166 @@ def _scale_std(ds: xr.Dataset, config: str, n_wl: int) -> NDArray[np.float64]:
             extra = np.nan_to_num(ds["incident_relative_std"].values[names.index(config)])
             rel = np.hypot(rel, extra)
     return rel
+
+
+#: Duplicates (one direction measured more than once) disagree when their χ² per degree of freedom exceeds this.
+DUPLICATE_CHI2 = 4.0
+
+
+@dataclass(frozen=True)
+class ProfileModel:
+    """One configuration, incidence and side of a dataset, ready to integrate and to evaluate.
+
+    Records measured at the same direction are merged (``geom``, ``f``, ``u`` are per merged record): their mean,
+    with the larger of the propagated and the observed standard error of the mean. ``parts`` holds one
+    :class:`Reconstruction` per set of wavelengths with the same finite records (columns ``cols`` of ``f``)."""
+
+    config: str
+    theta_i: float
+    side: str
+    geom: Geometry
+    f: NDArray[np.float64]  # merged records × wavelengths [1/sr]
+    u: NDArray[np.float64]
+    wavelength: NDArray[np.float64]  # [nm] (NaN: unknown)
+    cols: NDArray[np.int64]  # wavelengths with finite data
+    parts: tuple[tuple[NDArray[np.int64], Reconstruction], ...]  # (indices into cols, reconstruction)
+    scale: NDArray[np.float64]  # relative standard uncertainty common to all records, per wavelength
+    warnings: tuple[str, ...] = ()
+
+    def reconstruction_of(self, j: int) -> Reconstruction:
+        """The reconstruction of wavelength column ``cols[j]``."""
+        for js, rec in self.parts:
+            if j in js:
+                return rec
+        raise InputError("wavelength without data", field="wavelength")
+
+    def band_weights(self, band: tuple[float, float] | None = None) -> NDArray[np.float64]:
+        """Δλ weights (summing to 1) over ``cols`` of the band mean (every finite wavelength by default)."""
+        wl = self.wavelength[self.cols]
+        if not np.all(np.isfinite(wl)):
+            return np.full(wl.size, 1.0 / wl.size)
+        lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
+        if not hi >= lo:
+            raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
+        sel = (wl >= lo - 1e-9) & (wl <= hi + 1e-9)
+        if not sel.any():
+            raise InputError("no measured wavelength in the band", field="band",
+                             expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))
+        w = np.zeros(wl.size)
+        w[sel] = np.gradient(wl[sel]) if sel.sum() > 1 else 1.0
+        return w / w.sum()
+
+    def bsdf_at(self, weights: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The reconstructed BSDF [1/sr] of the weighted wavelength mean (``weights`` over ``cols``) at unit
+        vectors (..., 3) in the sample frame: the function whose integral :func:`hemispherical_profile` reports."""
+        d = np.asarray(directions, dtype=np.float64)
+        out = np.zeros(d.shape[:-1]).ravel()
+        fz = np.nan_to_num(self.f[:, self.cols])
+        for js, rec in self.parts:
+            a = weights[js]
+            if np.any(a):
+                out = out + rec.evaluate(fz[:, js] @ a, d.reshape(-1, 3))
+        return out.reshape(d.shape[:-1])
+
+
+def _merge_duplicates(geom: Geometry, f: NDArray, u: NDArray, label: str
+                      ) -> tuple[Geometry, NDArray, NDArray, list[str]]:
+    """Records at the same direction merged: mean value; standard uncertainty the larger of the propagated
+    (rms u/√k) and the observed (sample std/√k) standard error of the mean; a warning when they disagree beyond
+    their uncertainties (χ²/dof > :data:`DUPLICATE_CHI2`)."""
+    x, y = geom.frame()
+    key = np.round(np.stack([x, y], axis=1), 9)
+    _, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    inverse = np.asarray(inverse).ravel()
+    if counts.max() == 1:
+        return geom, f, u, []
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    group = rank[inverse]
+    m = first.size
+    fm = np.full((m, f.shape[1]), np.nan)
+    um = np.full((m, f.shape[1]), np.nan)
+    warnings: list[str] = []
+    worst = (0.0, -1)
+    for g in range(m):
+        members = np.flatnonzero(group == g)
+        if members.size == 1:
+            fm[g], um[g] = f[members[0]], u[members[0]]
+            continue
+        v, s = f[members], u[members]
+        k = np.sum(np.isfinite(v), axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.nanmean(np.where(np.isfinite(v), v, np.nan), axis=0) if np.isfinite(v).any() else v[0]
+            prop = np.sqrt(np.nanmean(s ** 2, axis=0) / np.maximum(k, 1))
+            spread = np.nanstd(v, axis=0, ddof=1) / np.sqrt(np.maximum(k, 1)) if members.size > 1 else 0.0
+            chi2 = np.nansum((v - mean) ** 2 / np.where(s > 0, s, np.inf) ** 2, axis=0) / np.maximum(k - 1, 1)
+        fm[g] = mean
+        um[g] = np.fmax(prop, np.nan_to_num(spread))
+        c = float(np.nanmax(chi2)) if np.isfinite(chi2).any() else 0.0
+        if c > worst[0]:
+            worst = (c, g)
+    keep = first[order]
+    arc = geom.arc[keep].copy()
+    for g in range(m):  # a merged direction lies on an arc if any of its records does
+        labels = set(geom.arc[group == g])
+        arc[g] = "in_plane" if "in_plane" in labels else "perpendicular" if "perpendicular" in labels else arc[g]
+    merged = Geometry(theta_i=geom.theta_i, phi_i=geom.phi_i, theta_s=geom.theta_s[keep], phi_s=geom.phi_s[keep],
+                      arc=arc, side=geom.side)
+    n_dup = int(np.sum(counts > 1))
+    if worst[0] > DUPLICATE_CHI2:
+        g = worst[1]
+        vals = f[group == g]
+        warnings.append(f"{label}: {geom.side} at {geom.theta_i:g} deg: the direction θs = {merged.theta_s[g]:g}, "
+                        f"φs = {merged.phi_s[g]:g} deg is measured {int(np.sum(group == g))} times with values "
+                        f"{np.nanmin(vals):.4g}-{np.nanmax(vals):.4g} 1/sr, beyond their uncertainties "
+                        f"(χ²/dof = {worst[0]:.3g}); merged as their mean, the spread in its uncertainty "
+                        f"({n_dup} direction(s) measured more than once)")
+    return merged, fm, um, warnings
+
+
+def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
+                  n_r: int = 400) -> ProfileModel:
+    """The records of one configuration, incidence [deg] and side, merged and reconstructed (:class:`ProfileModel`)."""
+    sel = (np.asarray(ds["config"].values).astype(str) == config) & (ds["side"].values == side) & np.isclose(
+        ds["theta_i"].values, theta_i, atol=1e-6, rtol=0)
+    if not sel.any():
+        raise InputError("no records for this configuration, incidence and side", file=ds.attrs.get("source"),
+                         field="theta_i", expected=f"records of '{config}' at {theta_i:g} deg, {side}")
+    idx = np.flatnonzero(sel)
+    f = np.atleast_2d(ds["bsdf"].values[idx].reshape(idx.size, -1)).astype(np.float64)
+    u = (ds["bsdf_std"].values[idx].reshape(idx.size, -1).astype(np.float64) if "bsdf_std" in ds
+         else np.zeros_like(f))
+    wl = np.atleast_1d(ds["wavelength"].values if "wavelength" in ds.dims else np.array([np.nan])).astype(float)
+    phi_i = ds["phi_i"].values[idx]
+    if np.ptp(phi_i) > 1e-9:
+        raise InputError("records of one incidence have different source azimuths", field="phi_i",
+                         expected="one phi_i per incidence")
+    arc = (np.asarray(ds["arc"].values[idx]).astype(str) if "arc" in ds.coords
+           else np.full(idx.size, "in_plane"))
+    geom = Geometry(theta_i=float(theta_i), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
+                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side)
+    label = str(ds.attrs.get("source", "dataset"))
+    geom, f, u, warnings = _merge_duplicates(geom, f, u, label)
+    finite = np.isfinite(f)
+    cols = np.flatnonzero(finite.any(axis=0))
+    if cols.size == 0:
+        raise InputError("no finite BSDF values", file=ds.attrs.get("source"), field="bsdf",
+                         expected=f"values for '{config}' at {theta_i:g} deg, {side}")
+    # wavelengths with the same set of finite records share one reconstruction
+    patterns: dict[bytes, list[int]] = {}
+    for j, c in enumerate(cols):
+        patterns.setdefault(finite[:, c].tobytes(), []).append(j)
+    parts = []
+    for key, js in patterns.items():
+        mask = np.frombuffer(key, dtype=bool)
+        sub = f[:, cols[js]]
+        ref = np.where(mask, np.nan_to_num(sub).mean(axis=1), np.nan)
+        ref_std = np.sqrt(np.mean(np.nan_to_num(u[:, cols[js]]) ** 2, axis=1) / len(js))
+        parts.append((np.asarray(js, dtype=np.int64), reconstruct(geom, ref, ref_std, n_psi, n_r)))
+    return ProfileModel(config=config, theta_i=float(theta_i), side=side, geom=geom, f=f, u=u, wavelength=wl,
+                        cols=cols, parts=tuple(parts), scale=_scale_std(ds, config, wl.size),
+                        warnings=tuple(warnings))
 
 
 def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
@@ -846,49 +1219,22 @@ def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str
         reconstruction standard uncertainties [fraction], the lobe part, the components of the error, the
         method and the assumptions (module docstring).
     """
-    sel = (np.asarray(ds["config"].values).astype(str) == config) & (ds["side"].values == side) & np.isclose(
-        ds["theta_i"].values, theta_i, atol=1e-6, rtol=0)
-    if not sel.any():
-        raise InputError("no records for this configuration, incidence and side", file=ds.attrs.get("source"),
-                         field="theta_i", expected=f"records of '{config}' at {theta_i:g} deg, {side}")
-    idx = np.flatnonzero(sel)
-    f = np.atleast_2d(ds["bsdf"].values[idx].reshape(idx.size, -1))
-    u = (ds["bsdf_std"].values[idx].reshape(idx.size, -1) if "bsdf_std" in ds else np.zeros_like(f))
-    wl = np.atleast_1d(ds["wavelength"].values if "wavelength" in ds.dims else np.array([np.nan])).astype(float)
-    phi_i = ds["phi_i"].values[idx]
-    if np.ptp(phi_i) > 1e-9:
-        raise InputError("records of one incidence have different source azimuths", field="phi_i",
-                         expected="one phi_i per incidence")
-    arc = (np.asarray(ds["arc"].values[idx]).astype(str) if "arc" in ds.coords
-           else np.full(idx.size, "in_plane"))
-    geom = Geometry(theta_i=float(theta_i), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
-                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side)
-    finite = np.isfinite(f)
-    cols = np.flatnonzero(finite.any(axis=0))
-    if cols.size == 0:
-        raise InputError("no finite BSDF values", file=ds.attrs.get("source"), field="bsdf",
-                         expected=f"values for '{config}' at {theta_i:g} deg, {side}")
-    scale = _scale_std(ds, config, wl.size)
+    return result_of(profile_model(ds, config, theta_i, side, n_psi, n_r))
+
+
+def result_of(model: ProfileModel) -> HemisphericalResult:
+    """The :class:`HemisphericalResult` of a :class:`ProfileModel`: every wavelength one dot product."""
+    cols, f, u, scale = model.cols, model.f, model.u, model.scale
     out = {k: np.full(cols.size, np.nan) for k in ("value", "meas", "rec", "lobe")}
     comps: dict[str, NDArray] = {}
     info = None
-    # wavelengths with the same set of finite records share one reconstruction
-    patterns: dict[bytes, list[int]] = {}
-    for j, c in enumerate(cols):
-        patterns.setdefault(finite[:, c].tobytes(), []).append(j)
-    for key, js in patterns.items():
-        mask = np.frombuffer(key, dtype=bool)
-        sub = f[:, cols[js]]
-        ref = np.where(mask, np.nan_to_num(sub).mean(axis=1), np.nan)
-        ref_std = np.sqrt(np.mean(np.nan_to_num(u[:, cols[js]]) ** 2, axis=1) / len(js))
-        rec = reconstruct(geom, ref, ref_std, n_psi, n_r)
+    for js, rec in model.parts:
         info = rec if info is None or len(js) > 1 else info
-        fz = np.nan_to_num(sub)
+        fz = np.nan_to_num(f[:, cols[js]])
         uz = np.nan_to_num(u[:, cols[js]])
         value = rec.central @ fz
-        lobe = rec.lobe @ fz
         out["value"][js] = value
-        out["lobe"][js] = lobe
+        out["lobe"][js] = rec.lobe @ fz
         out["meas"][js] = np.hypot(np.sqrt((rec.central ** 2) @ uz ** 2), scale[cols[js]] * value)
         parts = []
         for group, alts in rec.alternatives.items():
@@ -899,11 +1245,12 @@ def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str
         for name, w in rec.comparisons.items():
             comps.setdefault(name, np.full(cols.size, np.nan))[js] = w @ fz
     assert info is not None
-    return HemisphericalResult(config=config, theta_i=float(theta_i), side=side, wavelength=wl[cols],
-                               value=out["value"], std_measurement=out["meas"], std_reconstruction=out["rec"],
-                               components=comps, method=info.method, assumptions=info.assumptions,
-                               extrapolated_beyond_deg=info.extrapolated_beyond_deg,
-                               lobe_region_deg=info.region.in_plane_deg, lobe=out["lobe"])
+    return HemisphericalResult(config=model.config, theta_i=model.theta_i, side=model.side,
+                               wavelength=model.wavelength[cols], value=out["value"], std_measurement=out["meas"],
+                               std_reconstruction=out["rec"], components=comps, method=info.method,
+                               assumptions=info.assumptions, extrapolated_beyond_deg=info.extrapolated_beyond_deg,
+                               lobe_region_deg=info.region.in_plane_deg, lobe=out["lobe"],
+                               notes=model.warnings)
 
 
 def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tuple[str, ...] | None = None,

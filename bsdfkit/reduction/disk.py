@@ -1,0 +1,321 @@
+"""Polar interpolation of BSDF records sampled anywhere on the projected disk, and its exact quadrature weights.
+
+The hemispherical integral of elastic scatter is ρ = ∬_{|β| ≤ 1} f dβx dβy in Harvey–Shack direction cosines
+(:mod:`bsdfkit.reduction.tis`). Where records lie on one or two arcs, :mod:`bsdfkit.reduction.hemispherical`
+reconstructs half-profiles about the normal and the specular point. Everything else an instrument writes — a
+θs × φs grid of an imaging sphere or scatterometer, photometric C-planes through the normal, several planes
+through the specular point, a φs = 90/270° arc, scattered records — is interpolated here:
+
+* about a centre c (the normal for a diffuse body, the lobe's peak for a specular lobe) every record has polar
+  coordinates (ψ, r), r = |β − c|;
+* the records, a line of nodes at r = 0 (the value at the centre: the record there, or the mean of the innermost
+  records) and a rim of nodes at the outer edge of the domain are triangulated (Delaunay) in (s·ψ, r) with the
+  azimuth weighted by :data:`AZIMUTH_WEIGHT` (≪ 1) and copied at ψ ± 2π, so that f is interpolated linearly in r
+  along spokes and between records at about the same distance from the centre across azimuth: exact for any f
+  that depends on r only, on any sampling, and the trapezoid rule in ψ between planes of a C-plane set;
+* rim nodes: on the horizon, by an extrapolation rule from the outermost data along each azimuth (``trend``:
+  along the slope of the last 10° in θ, kept between 0 and the last value; ``hold``; ``zero``); for a lobe, a
+  ring of zeros at the lobe region's radius.
+
+Every node value is a fixed linear combination of the record values, so the integral on a polar quadrature
+grid about c (midpoint in ψ, Gauss–Legendre in r, clipped to the unit disk) is a dot product w · f, and the
+same interpolant evaluated at any direction is what an exported table samples: one reconstruction for the
+number and for the table.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.spatial import Delaunay, QhullError
+
+from bsdfkit.core.errors import InputError
+
+#: Weight of the azimuth (radians) against the radius (direction cosines) in the triangulation metric: records
+#: at about the same distance from the centre are joined across azimuth before records along a spoke.
+AZIMUTH_WEIGHT = 0.05
+#: Nodes on the centre line and on the rim (one every 2° of azimuth).
+N_RIM = 180
+#: The trend extrapolation takes its slope over this polar angle [deg] inside the last data.
+TREND_SPAN_DEG = 10.0
+#: Records within this distance (direction cosines) of the centre define the centre value.
+CENTER_TOL = 1e-7
+
+
+def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad]."""
+    bu = center[0] * np.cos(psi) + center[1] * np.sin(psi)
+    b2 = center[0] ** 2 + center[1] ** 2
+    return -bu + np.sqrt(bu * bu + 1.0 - b2)
+
+
+@dataclass(frozen=True)
+class PolarInterpolant:
+    """A linear interpolant of n records over a polar domain about ``center`` (β, direction cosines).
+
+    ``nodes`` (N × n, sparse) gives the value of every interpolation node from the record values; the
+    triangulation ``tri`` of the points (s·ψ, r) maps each point to a node through ``point_node``.
+    ``radius`` (None = the unit disk) bounds the domain at min(radius, t_max(ψ)).
+    """
+
+    center: tuple[float, float]
+    tri: Delaunay
+    point_node: NDArray[np.int64]
+    nodes: sp.csr_matrix
+    n_records: int
+    radius: float | None
+    extrapolated_beyond: float | None  # smallest polar distance [direction cosines] where the rim extrapolates
+
+    def matrix(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> sp.csr_matrix:
+        """M (m × n, sparse) such that the interpolant at β = (x, y) is M @ values."""
+        dx, dy = np.ravel(x) - self.center[0], np.ravel(y) - self.center[1]
+        r = np.hypot(dx, dy)
+        psi = np.arctan2(dy, dx)
+        return self._matrix_polar(psi, r)
+
+    def _matrix_polar(self, psi: NDArray[np.float64], r: NDArray[np.float64]) -> sp.csr_matrix:
+        psi = np.mod(psi + np.pi, 2.0 * np.pi) - np.pi
+        top = self._top(psi)
+        q = np.stack([AZIMUTH_WEIGHT * psi, np.clip(r, 0.0, top * (1.0 - 1e-12))], axis=1)
+        q, simplex = _locate(self.tri, q)
+        t = self.tri.transform[simplex]
+        b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
+        bary = np.concatenate([b, 1.0 - b.sum(axis=1, keepdims=True)], axis=1)
+        cols = self.point_node[self.tri.simplices[simplex]]
+        m = r.size
+        rows = np.repeat(np.arange(m), 3)
+        bmat = sp.csr_matrix((bary.ravel(), (rows, cols.ravel())), shape=(m, self.nodes.shape[0]))
+        out = bmat @ self.nodes
+        outside = r > top * (1.0 + 1e-9) + 1e-12
+        if outside.any():  # beyond the domain of a lobe: zero
+            out = sp.diags((~outside).astype(float)) @ out
+        return out.tocsr()
+
+    def _top(self, psi: NDArray[np.float64]) -> NDArray[np.float64]:
+        t = horizon_distance(self.center, psi)
+        return t if self.radius is None else np.minimum(t, self.radius)
+
+    def evaluate(self, values: NDArray[np.float64], x: NDArray[np.float64],
+                 y: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The (linear) interpolant of ``values`` (per record) at β = (x, y)."""
+        return self.matrix(x, y) @ values
+
+    def _cells(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Triangles of one period (centroid ψ in [−π, π)) inside the domain (not all three on the rim): their
+        nodes (K, 3), areas in (ψ, r) [rad × direction cosines] and vertex radii (K, 3)."""
+        simp = self.tri.simplices
+        pts = self.tri.points[simp]  # (T, 3, 2) in (s·ψ, r)
+        nodes = self.point_node[simp]
+        psi_c = pts[:, :, 0].mean(axis=1) / AZIMUTH_WEIGHT
+        on_rim = nodes > self.n_records  # the centre line is node n, the rim n + 1 ...
+        keep = (psi_c >= -np.pi) & (psi_c < np.pi) & ~(nodes > self.n_records).all(axis=1)
+        keep &= ~(on_rim.all(axis=1))
+        p = pts[keep]
+        e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / AZIMUTH_WEIGHT
+        return nodes[keep], area, p[:, :, 1]
+
+    def weights(self) -> NDArray[np.float64]:
+        """w such that the integral of the (linear) interpolant over its domain is w @ values [sr]: exact on
+        each triangle, ∫ λ_i r dψ dr = A (2 r_i + r_j + r_k) / 12."""
+        nodes, area, r = self._cells()
+        per = area[:, None] / 12.0 * (r + r.sum(axis=1, keepdims=True))
+        w_nodes = np.bincount(nodes.ravel(), weights=per.ravel(), minlength=self.nodes.shape[0])
+        return np.asarray(self.nodes.T @ w_nodes).ravel()
+
+    def integral(self, values: NDArray[np.float64], mode: str = "linear") -> float:
+        """∬ f dβ of the interpolant of ``values``; ``mode="log"`` interpolates ln f on triangles whose three
+        nodes are positive (a 7-point degree-5 rule per triangle), f elsewhere."""
+        if mode == "linear":
+            return float(self.weights() @ values)
+        nodes, area, r = self._cells()
+        v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]  # (K, 3)
+        pos = (v > 0).all(axis=1)
+        lam = _DUNAVANT_POINTS  # (7, 3)
+        rq = r @ lam.T  # (K, 7)
+        lin = v @ lam.T
+        logv = np.log(np.where(v > 0, v, 1.0)) @ lam.T
+        g = np.where(pos[:, None], np.exp(logv), lin)
+        return float(np.sum(area[:, None] * _DUNAVANT_WEIGHTS[None, :] * g * rq))
+
+
+#: Dunavant's 7-point rule on a triangle (degree 5): barycentric points and weights summing to 1.
+_A1, _B1, _A2, _B2 = 0.059715871789770, 0.470142064105115, 0.797426985353087, 0.101286507323456
+_DUNAVANT_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [_A1, _B1, _B1], [_B1, _A1, _B1], [_B1, _B1, _A1],
+                             [_A2, _B2, _B2], [_B2, _A2, _B2], [_B2, _B2, _A2]])
+_DUNAVANT_WEIGHTS = np.array([0.225] + [0.132394152788506] * 3 + [0.125939180544827] * 3)
+
+
+def _locate(tri: Delaunay, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Simplices of the points q (s·ψ, r); a point just beyond the hull (the rim is a polygon through nodes on
+    a curve) is moved inward along its radius to the hull's edge."""
+    simplex = tri.find_simplex(q)
+    bad = np.flatnonzero(simplex < 0)
+    if bad.size:
+        lo, hi = np.zeros(bad.size), q[bad, 1].copy()
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            ok = tri.find_simplex(np.stack([q[bad, 0], mid], axis=1)) >= 0
+            lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+        q = q.copy()
+        q[bad, 1] = lo
+        simplex[bad] = tri.find_simplex(q[bad])
+        if (simplex[bad] < 0).any():
+            raise InputError("direction outside the reconstructed disk", field="directions",
+                             expected="directions above the horizon")
+    return q, simplex
+
+
+def _triangulate(psi: NDArray, r: NDArray) -> Delaunay:
+    pts = np.stack([AZIMUTH_WEIGHT * psi, r], axis=1)
+    return Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
+
+
+def _periodic(psi: NDArray, r: NDArray, node: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Points copied at ψ ± 2π (only those within π of the seam are needed)."""
+    near_lo, near_hi = psi < 0.0, psi >= 0.0
+    p = np.concatenate([psi, psi[near_lo] + 2 * np.pi, psi[near_hi] - 2 * np.pi])
+    rr = np.concatenate([r, r[near_lo], r[near_hi]])
+    nn = np.concatenate([node, node[near_lo], node[near_hi]])
+    return p, rr, nn
+
+
+def _rim_psi() -> NDArray[np.float64]:
+    return (np.arange(N_RIM) + 0.5) * (2 * np.pi / N_RIM) - np.pi
+
+
+def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], *,
+          rim: str = "trend", radius: float | None = None, normal_centered: bool = True,
+          reference: NDArray[np.float64] | None = None) -> PolarInterpolant:
+    """The polar interpolant of records at β = (x, y) about ``center``.
+
+    Parameters
+    ----------
+    x, y
+        Record positions [direction cosines] in the frame of the incidence (x toward the specular side).
+    center
+        Centre of the polar coordinates [direction cosines].
+    rim
+        ``trend`` | ``hold`` | ``zero``: the value on the horizon beyond the outermost data (module doc);
+        ``ring``: zeros on the circle of ``radius`` (a lobe).
+    radius
+        With ``rim="ring"``: the domain's radius about the centre [direction cosines].
+    normal_centered
+        The centre is the normal (θs = arcsin r: the trend's slope is taken in θs).
+    reference
+        Band-mean record values that decide the trend's clipping (between 0 and the last value).
+
+    Returns
+    -------
+    PolarInterpolant
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    n = x.size
+    if n == 0:
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
+                         expected="finite values")
+    dx, dy = x - center[0], y - center[1]
+    r = np.hypot(dx, dy)
+    psi = np.arctan2(dy, dx)
+    at_center = r < CENTER_TOL
+    off = np.flatnonzero(~at_center)
+    if off.size < 2:
+        raise InputError("too few records off the centre to interpolate the hemisphere", field="bsdf",
+                         expected="records at two or more directions")
+    # centre value: the records there, else the mean of the innermost ring
+    c_row = np.zeros(n)
+    if at_center.any():
+        c_row[at_center] = 1.0 / at_center.sum()
+    else:
+        inner = off[r[off] <= 1.5 * r[off].min() + 1e-12]
+        c_row[inner] = 1.0 / inner.size
+    rim_psi = _rim_psi()
+    i_center = n
+    # stage 1: records + centre line
+    p0 = np.concatenate([psi[off], rim_psi])
+    r0 = np.concatenate([r[off], np.zeros(N_RIM)])
+    n0 = np.concatenate([off, np.full(N_RIM, i_center)])
+    pp, rr, nn = _periodic(p0, r0, n0)
+    rows_c = sp.csr_matrix(c_row[None, :])
+    base = sp.vstack([sp.identity(n, format="csr"), rows_c]).tocsr()
+    try:
+        tri0 = _triangulate(pp, rr)
+    except QhullError as exc:
+        raise InputError("records are degenerate on the disk (all on one line through the centre)",
+                         field="bsdf", expected="records spanning an area of the disk") from exc
+    stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None)
+    t_max = horizon_distance(center, rim_psi)
+    if rim == "ring":
+        if radius is None:
+            raise InputError("a ring rim needs a radius", field="radius")
+        top = np.minimum(t_max, radius)
+        rim_rows = sp.csr_matrix((N_RIM, n))
+        extrapolated = None
+    else:
+        edge = _edge(tri0, rim_psi, t_max)
+        m_edge = stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))
+        top = t_max
+        gap = t_max - edge > 1e-6
+        extrapolated = float(edge[gap].min()) if gap.any() else None
+        if rim == "hold" or not gap.any():
+            rim_rows = m_edge
+        elif rim == "zero":
+            rim_rows = sp.diags((~gap).astype(float)) @ m_edge
+        elif rim == "trend":
+            rim_rows = _trend_rows(stage0, rim_psi, edge, t_max, m_edge, normal_centered, reference)
+        else:
+            raise InputError("unknown rim rule", field="rim", expected="trend, hold, zero or ring", got=rim)
+    nodes = sp.vstack([base, rim_rows]).tocsr()
+    i_rim = n + 1 + np.arange(N_RIM)
+    p1 = np.concatenate([p0, rim_psi])
+    r1 = np.concatenate([r0, top])
+    n1 = np.concatenate([n0, i_rim])
+    if radius is not None:  # a lobe: only the records inside its ring
+        keep = r1 <= np.concatenate([np.minimum(radius, horizon_distance(center, p0)), top]) + 1e-12
+        p1, r1, n1 = p1[keep], r1[keep], n1[keep]
+    pp, rr, nn = _periodic(p1, r1, n1)
+    tri = _triangulate(pp, rr)
+    return PolarInterpolant(center, tri, nn.astype(np.int64), nodes, n, radius, extrapolated)
+
+
+def _edge(tri: Delaunay, psi: NDArray, t_max: NDArray) -> NDArray[np.float64]:
+    """Outermost radius of the triangulation's hull along each azimuth, at most t_max."""
+    hull = tri.convex_hull  # (E, 2) point indices
+    p = tri.points[hull]  # (E, 2, 2)
+    x = AZIMUTH_WEIGHT * psi
+    a, b = np.minimum(p[:, 0, 0], p[:, 1, 0]), np.maximum(p[:, 0, 0], p[:, 1, 0])
+    span = p[:, 1, 0] - p[:, 0, 0]
+    t = (x[:, None] - p[None, :, 0, 0]) / np.where(np.abs(span) > 0, span, np.inf)[None, :]
+    r = p[None, :, 0, 1] + t * (p[None, :, 1, 1] - p[None, :, 0, 1])
+    spans = (x[:, None] >= a[None, :] - 1e-15) & (x[:, None] <= b[None, :] + 1e-15)
+    edge = np.max(np.where(spans, r, -np.inf), axis=1)
+    return np.clip(edge, 0.0, t_max)
+
+
+def _trend_rows(stage0: PolarInterpolant, psi: NDArray, edge: NDArray, t_max: NDArray, m_edge: sp.csr_matrix,
+                normal_centered: bool, reference: NDArray | None) -> sp.csr_matrix:
+    """Horizon values along the slope of the last :data:`TREND_SPAN_DEG` inside the data edge, kept between 0
+    and the edge value on the reference profile (a body rising toward the horizon is held, not raised)."""
+    if normal_centered:
+        th_edge = np.arcsin(np.clip(edge, 0.0, 1.0))
+        th_in = np.maximum(th_edge - np.radians(TREND_SPAN_DEG), 0.0)
+        r_in = np.sin(th_in)
+        gone = np.arcsin(np.clip(t_max, 0.0, 1.0)) - th_edge
+        span = th_edge - th_in
+    else:
+        r_in = np.maximum(edge - np.sin(np.radians(TREND_SPAN_DEG)), 0.0)
+        gone, span = t_max - edge, edge - r_in
+    m_in = stage0._matrix_polar(psi, r_in)
+    slope = sp.diags(np.where(span > 1e-9, gone / np.where(span > 1e-9, span, 1.0), 0.0)) @ (m_edge - m_in)
+    rows = (m_edge + slope).tocsr()
+    if reference is not None:
+        ref = np.nan_to_num(reference)
+        v_edge, v = m_edge @ ref, rows @ ref
+        hold = v > v_edge  # rising: hold the edge value
+        zero = v < 0
+        keep = ~(hold | zero)
+        rows = (sp.diags(keep.astype(float)) @ rows + sp.diags(hold.astype(float)) @ m_edge).tocsr()
+    return rows

@@ -1,0 +1,112 @@
+"""Synthetic BSDF tables with exact hemispherical truth, in the sampling geometries instruments write.
+
+Truth: f(β) = ρ/π (1 − b|β|²)(1 + a cos 2φ) + A exp(−Δx²/2σx² − Δy²/2σy²), Δ = β − (sin θi, 0), φ the azimuth of β
+about the normal. The body integrates to ρ(1 − b/2) exactly (the cos 2φ term to 0); the lobe's integral over the
+unit disk is computed on a fine polar grid about its centre (Gauss–Legendre in r: converged to 1e-10 for these
+widths). Angles in degrees; the source at φi = 180°, so the specular direction is at φs = 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bsdfkit.measurement.table import records_dataset
+from bsdfkit.reduction.tis import polar_grid
+
+
+@dataclass(frozen=True)
+class Truth:
+    rho: float = 0.6
+    b: float = 0.3
+    a: float = 0.0  # anisotropy of the body (cos 2φ)
+    A: float = 3.0  # lobe peak [1/sr]
+    sx: float = 0.06  # lobe widths [direction cosines]
+    sy: float = 0.06
+
+    def f(self, theta_i: float, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
+        r2 = bx * bx + by * by
+        phi = np.arctan2(by, bx)
+        body = self.rho / np.pi * (1 - self.b * r2) * (1 + self.a * np.cos(2 * phi))
+        dx = bx - np.sin(np.radians(theta_i))
+        lobe = self.A * np.exp(-dx * dx / (2 * self.sx ** 2) - by * by / (2 * self.sy ** 2))
+        return body + lobe
+
+    def tis(self, theta_i: float) -> float:
+        x0 = float(np.sin(np.radians(theta_i)))
+        g = polar_grid((x0, 0.0), 2048, 1200)
+        bx, by = x0 + g.r * np.cos(g.psi), g.r * np.sin(g.psi)
+        lobe = self.A * np.exp(-(bx - x0) ** 2 / (2 * self.sx ** 2) - by ** 2 / (2 * self.sy ** 2))
+        return self.rho * (1 - self.b / 2) + float(g.w @ lobe)
+
+
+def _circle(theta_i: float, chi_deg: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """(θs, φs) along the great circle through the specular direction, rotated by χ about it (χ = 0: in-plane)."""
+    ti = np.radians(theta_i)
+    s0 = np.array([np.sin(ti), 0.0, np.cos(ti)])
+    e1 = np.array([np.cos(ti), 0.0, -np.sin(ti)])
+    e2 = np.array([0.0, 1.0, 0.0])
+    e = np.cos(np.radians(chi_deg)) * e1 + np.sin(np.radians(chi_deg)) * e2
+    t = np.radians(np.arange(-180.0, 180.0, step))
+    d = np.cos(t)[:, None] * s0 + np.sin(t)[:, None] * e
+    d = d[d[:, 2] > np.cos(np.radians(88.0))]
+    th = np.degrees(np.arccos(np.clip(d[:, 2], -1, 1)))
+    ph = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 360.0)
+    return th, np.where(th < 1e-9, 0.0, ph)
+
+
+def directions(geometry: str, theta_i: float) -> tuple[np.ndarray, np.ndarray]:
+    """(θs, φs) [deg] of one geometry: grid, cplanes, multiplane, one_arc, two_arcs, phi90."""
+    if geometry == "grid":  # θs × φs, the nadir once per azimuth, finer near specular
+        th, ph = np.meshgrid(np.arange(0.0, 86.0, 5.0), np.arange(0.0, 360.0, 10.0), indexing="ij")
+        th, ph = th.ravel(), ph.ravel()
+        # a patch of 0.015 steps in direction cosines (about 0.9 deg) within 0.15 of the specular point
+        px, py = np.meshgrid(np.arange(-10, 11) * 0.015, np.arange(-10, 11) * 0.015, indexing="ij")
+        bx, by = px.ravel() + np.sin(np.radians(theta_i)), py.ravel()
+        ok = (np.hypot(bx, by) < np.sin(np.radians(85.0))) & (np.hypot(bx, by) > 1e-9)
+        th = np.concatenate([th, np.degrees(np.arcsin(np.hypot(bx[ok], by[ok])))])
+        ph = np.concatenate([ph, np.mod(np.degrees(np.arctan2(by[ok], bx[ok])), 360.0)])
+        key = np.unique(np.round(np.stack([th, np.where(th == 0, -1, ph)], 1), 6), axis=0, return_index=True)[1]
+        keep = np.sort(np.concatenate([key, np.flatnonzero(th == 0)]))
+        keep = np.unique(keep)
+        return th[keep], ph[keep]
+    if geometry == "cplanes":  # planes through the normal at C = 0, 30, ..., 150 deg, the nadir in every plane
+        g = np.arange(-85.0, 85.1, 2.5)
+        th = np.concatenate([np.abs(g) for _ in range(6)])
+        ph = np.concatenate([np.where(g >= 0, c, c + 180.0) for c in range(0, 180, 30)])
+        return th, np.mod(ph, 360.0)
+    if geometry == "multiplane":  # planes through the specular direction at χ = 0, 45, 90, 135 deg
+        parts = [_circle(theta_i, chi, 2.5) for chi in (0.0, 45.0, 90.0, 135.0)]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+    if geometry == "one_arc":
+        g = np.arange(-85.0, 85.1, 2.5)
+        return np.abs(g), np.where(g >= 0, 0.0, 180.0)
+    if geometry == "two_arcs":
+        a = directions("one_arc", theta_i)
+        p = _circle(theta_i, 90.0, 2.5)
+        return np.concatenate([a[0], p[0]]), np.concatenate([a[1], p[1]])
+    if geometry == "phi90":  # the in-plane arc plus a φs = 90/270 deg arc through the normal
+        a = directions("one_arc", theta_i)
+        g = np.arange(-85.0, 85.1, 5.0)
+        g = g[g != 0]
+        return np.concatenate([a[0], np.abs(g)]), np.concatenate([a[1], np.where(g > 0, 90.0, 270.0)])
+    raise ValueError(geometry)
+
+
+def table(truth: Truth, geometry: str, incidences: tuple[float, ...], side: str = "reflection",
+          relative_std: float = 0.01, noise: float = 0.0, seed: int = 0):
+    """A one-wavelength (550 nm) dataset of ``truth`` sampled in ``geometry`` at ``incidences``."""
+    rng = np.random.default_rng(seed)
+    ti, th, ph = [], [], []
+    for t in incidences:
+        a, b = directions(geometry, t)
+        ti += [t] * a.size
+        th.append(a)
+        ph.append(b)
+    th, ph, ti = np.concatenate(th), np.concatenate(ph), np.asarray(ti)
+    bx = np.sin(np.radians(th)) * np.cos(np.radians(ph))
+    by = np.sin(np.radians(th)) * np.sin(np.radians(ph))
+    f = np.array([truth.f(t, x, y) for t, x, y in zip(ti, bx, by)])
+    f = f * (1 + noise * rng.standard_normal(f.size))
+    return records_dataset(ti, np.full(ti.size, 180.0), th, ph, [side] * ti.size, [550.0], f[:, None],
+                           relative_std * np.abs(f)[:, None], source=f"synthetic-{geometry}")
