@@ -199,7 +199,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         Centre of the polar coordinates [direction cosines].
     rim
         ``trend`` | ``hold`` | ``zero``: the value on the horizon beyond the outermost data (module doc);
-        ``ring``: zeros on the circle of ``radius`` (a lobe).
+        ``ring``: zeros on the circle of ``radius`` (a lobe), the edge value held where the horizon cuts it.
     radius
         With ``rim="ring"``: the domain's radius about the centre [direction cosines].
     normal_centered
@@ -252,7 +252,12 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         if radius is None:
             raise InputError("a ring rim needs a radius", field="radius")
         top = np.minimum(t_max, radius)
+        # zeros on the ring; where the horizon cuts the ring, the lobe goes on: its edge value held there
+        cut = t_max < radius
         rim_rows = sp.csr_matrix((N_RIM, n))
+        if cut.any():
+            edge = np.minimum(_edge(tri0, rim_psi, t_max), top)
+            rim_rows = (sp.diags(cut.astype(float)) @ stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))).tocsr()
         extrapolated = None
     else:
         edge = _edge(tri0, rim_psi, t_max)

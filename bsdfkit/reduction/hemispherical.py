@@ -644,21 +644,21 @@ def sampling_method(geom: Geometry, finite: NDArray[np.bool_]) -> str:
 
 
 def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
-                n_psi: int = 256, n_r: int = 400) -> Reconstruction:
+                n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
     """Central weights and alternatives for one profile (module docstring); ``ref`` is the band-mean profile
     (NaN = record without data), ``ref_std`` its standard uncertainty. The method follows
-    :func:`sampling_method`."""
+    :func:`sampling_method`. ``errors=False`` skips the alternative reconstructions (the value only)."""
     finite = np.isfinite(ref)
     if not finite.any():
         raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
                          expected="finite values on an arc")
     if sampling_method(geom, finite) == "disk":
-        return _reconstruct_disk(geom, ref, ref_std, n_psi, n_r)
-    return _reconstruct_arcs(geom, ref, ref_std, n_psi, n_r)
+        return _reconstruct_disk(geom, ref, ref_std, n_psi, n_r, errors)
+    return _reconstruct_arcs(geom, ref, ref_std, n_psi, n_r, errors)
 
 
 def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
-                      n_psi: int = 256, n_r: int = 400) -> Reconstruction:
+                      n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
     finite = np.isfinite(ref)
     if not finite.any():
         raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
@@ -687,6 +687,8 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
 
     def variant(reg: Region = region, rule: str = "trend", grid: tuple[int, int] = (n_psi, n_r),
                 **kw) -> NDArray[np.float64]:
+        if not errors:
+            return body + kappa * lobe
         kw.setdefault("body_center", body_center)
         b, lo, _, _, _ = _body_and_lobe(geom, reg, finite, ref, rule, *grid, **kw)
         return b + kappa * lo
@@ -725,7 +727,7 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     alt["quadrature"] = {"half_grid": variant(grid=(n_psi // 2, n_r // 2))}
     comparisons = {}
     keep = np.flatnonzero(finite)
-    for center in ("specular", "normal"):
+    for center in ("specular", "normal") if errors else ():
         hemi = Hemisphere.from_profile(geom.dataset(keep), center=center)
         w = np.zeros(geom.n)
         w[keep] = hemi.weights(n_psi, n_r)
@@ -775,6 +777,12 @@ def direction_frame(geom: Geometry, directions: NDArray[np.float64]) -> tuple[ND
 
 #: Lobe regions one and two steps wider (factors on the region radius) for the ``separation`` error.
 DISK_WIDER = (1.25, 1.5)
+#: A lobe region must leave at least this share of the records to the body (else no separable lobe).
+MIN_BODY_SHARE = 0.2
+
+
+class _RegionTooWide(Exception):
+    """A lobe region that leaves too few records to reconstruct the body."""
 
 
 def _disk_region(geom: Geometry, ref: NDArray[np.float64], s: NDArray[np.float64]
@@ -801,9 +809,12 @@ def _disk_region(geom: Geometry, ref: NDArray[np.float64], s: NDArray[np.float64
     return c, float(radius), on[region.records]
 
 
+#: A lobe region wider than this (direction cosines) is no specular lobe (scatter rising toward grazing).
+LOBE_MAX_RADIUS = 0.5
+
+
 def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], body_center: str,
-                lobe_c: float | None, radius: float, rim: str = "trend", n_psi: int = 256, n_r: int = 400,
-                mirror: str | None = None):
+                lobe_c: float | None, radius: float, rim: str = "trend", mirror: str | None = None):
     """Body (about ``body_center``) and lobe (about (lobe_c, 0) within ``radius``) weights over the profile's
     records, the linear lobe integral's log/linear ratio on ``ref``, extrapolated radius, and an evaluator."""
     x, y = geom.frame()
@@ -814,6 +825,8 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
     if lobe_c is not None:
         dist = np.hypot(x[keep] - lobe_c, y[keep])
         region, outside = keep[dist < radius], keep[dist >= radius]
+        if outside.size < max(3, MIN_BODY_SHARE * keep.size):
+            raise _RegionTooWide(f"{outside.size} of {keep.size} records outside the lobe region")
     else:
         region, outside = np.zeros(0, dtype=np.int64), keep
     body = disk.build(x[outside], y[outside], bc, rim=rim, normal_centered=body_center == "normal",
@@ -858,13 +871,16 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
 
 
 def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
-                      n_psi: int = 256, n_r: int = 400) -> Reconstruction:
+                      n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
     """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`)."""
     finite = np.isfinite(ref)
     s = np.nan_to_num(ref_std)
     lobe_c, radius, in_plane_region = _disk_region(geom, ref, s)
+    resolved = lobe_c is not None and radius > LOBE_MAX_RADIUS
+    if resolved:  # scatter rising over most of the disk is no specular lobe: integrated directly with the body
+        lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
     body_center, other_center, mismatch = "normal", None, {}
-    if lobe_c is None:
+    if lobe_c is None and not resolved:
         mismatch = {c: _mismatch(geom, ref, c) for c in ("normal", "specular")}
         m_n, m_s = mismatch["normal"], mismatch["specular"]
         if np.isfinite(m_s) and np.isfinite(m_n) and m_s < m_n:
@@ -872,11 +888,16 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
         other = "specular" if body_center == "normal" else "normal"
         if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
             other_center = other
-    body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius,
-                                                              n_psi=n_psi, n_r=n_r)
+    try:
+        body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius)
+    except _RegionTooWide:  # a "lobe" covering most of the disk is the body itself
+        lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
+        body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, None, 0.0)
 
     def variant(**kw) -> NDArray[np.float64]:
-        args = dict(body_center=body_center, lobe_c=lobe_c, radius=radius, n_psi=n_psi, n_r=n_r) | kw
+        if not errors:
+            return body + kappa * lobe
+        args = dict(body_center=body_center, lobe_c=lobe_c, radius=radius) | kw
         b, lo, _, _, _, _ = _disk_parts(geom, finite, ref, **args)
         return b + kappa * lo
 
@@ -891,9 +912,16 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     if sparse_lobe:
         alt["azimuth"] = {m: variant(mirror=m) for m in ("forward", "backward")}
     if region.size:
-        alt["separation"] = {f"wider_{k + 1}": variant(radius=f * radius) for k, f in enumerate(DISK_WIDER)}
+        sep = {}
+        for k, factor in enumerate(DISK_WIDER):
+            try:
+                sep[f"wider_{k + 1}"] = variant(radius=factor * radius)
+            except _RegionTooWide:
+                break
+        if sep:
+            alt["separation"] = sep
         alt["interpolation"] = {"linear_lobe": body + lobe}
-    else:
+    elif errors:
         keep = np.flatnonzero(finite)
         x, y = geom.frame()
         whole = disk.build(x[keep], y[keep], (0.0, 0.0) if body_center == "normal" else
@@ -917,6 +945,10 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
         if sparse_lobe:
             assumptions.append("lobe measured on the in-plane arc only: rotationally symmetric about its peak "
                                "(error bar: either in-plane half alone)")
+    elif resolved:
+        method = "disk: everything about the normal (no specular lobe narrower than the disk)"
+        assumptions.append(f"the peak near the specular direction extends over more than {LOBE_MAX_RADIUS:g} in "
+                           "direction cosines: no separable specular lobe, every record interpolated about the normal")
     else:
         what = {"normal": "the normal", "specular": "the specular direction"}
         method = f"disk: everything about {what[body_center]} (no separable specular lobe)"
@@ -1151,8 +1183,9 @@ def _merge_duplicates(geom: Geometry, f: NDArray, u: NDArray, label: str
 
 
 def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
-                  n_r: int = 400) -> ProfileModel:
-    """The records of one configuration, incidence [deg] and side, merged and reconstructed (:class:`ProfileModel`)."""
+                  n_r: int = 400, errors: bool = True) -> ProfileModel:
+    """The records of one configuration, incidence [deg] and side, merged and reconstructed (:class:`ProfileModel`);
+    ``errors=False`` gives the value without the reconstruction error (no alternative reconstructions)."""
     sel = (np.asarray(ds["config"].values).astype(str) == config) & (ds["side"].values == side) & np.isclose(
         ds["theta_i"].values, theta_i, atol=1e-6, rtol=0)
     if not sel.any():
@@ -1188,7 +1221,7 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
         sub = f[:, cols[js]]
         ref = np.where(mask, np.nan_to_num(sub).mean(axis=1), np.nan)
         ref_std = np.sqrt(np.mean(np.nan_to_num(u[:, cols[js]]) ** 2, axis=1) / len(js))
-        parts.append((np.asarray(js, dtype=np.int64), reconstruct(geom, ref, ref_std, n_psi, n_r)))
+        parts.append((np.asarray(js, dtype=np.int64), reconstruct(geom, ref, ref_std, n_psi, n_r, errors)))
     return ProfileModel(config=config, theta_i=float(theta_i), side=side, geom=geom, f=f, u=u, wavelength=wl,
                         cols=cols, parts=tuple(parts), scale=_scale_std(ds, config, wl.size),
                         warnings=tuple(warnings))
@@ -1254,7 +1287,8 @@ def result_of(model: ProfileModel) -> HemisphericalResult:
 
 
 def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tuple[str, ...] | None = None,
-                  configs: list[str] | None = None, n_psi: int = 256, n_r: int = 400) -> list[HemisphericalResult]:
+                  configs: list[str] | None = None, n_psi: int = 256, n_r: int = 400,
+                  errors: bool = True) -> list[HemisphericalResult]:
     """Directional-hemispherical reflectance/transmittance for every configuration, incidence and side.
 
     Parameters
@@ -1269,6 +1303,8 @@ def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tup
         Configurations to reduce; default: all.
     n_psi, n_r
         Quadrature nodes (see :func:`hemispherical_profile`).
+    errors
+        False: the values only, without the reconstruction error (``std_reconstruction`` 0).
 
     Returns
     -------
@@ -1287,7 +1323,7 @@ def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tup
             if on_side.sizes["record"] == 0:
                 continue
             for th in theta_i if theta_i is not None else incidences(on_side):
-                out.append(hemispherical_profile(ds, config, th, side, n_psi, n_r))
+                out.append(result_of(profile_model(ds, config, th, side, n_psi, n_r, errors)))
     if not out:
         raise InputError("no records to reduce", file=ds.attrs.get("source"), field="side",
                          expected="reflection or transmission records")
@@ -1311,3 +1347,116 @@ def reduction_kind(ds: xr.Dataset) -> str:
     if bispectral and {"blue", "yellow"} <= configs and set(SIDES) <= sides:
         return "interactions"
     return "hemispherical"
+
+
+# ---------------------------------------------------------------------------------- one reconstruction, every path
+@dataclass(frozen=True)
+class ElasticSource:
+    """The reconstructed BSDF of elastic data at one wavelength (or a band mean) per side, with the engine's
+    hemispherical value per incidence: what ``convert`` and ``export`` write and check against."""
+
+    fn: Callable[[float, str, NDArray[np.float64]], NDArray[np.float64]]  # bsdf_fn(theta_i_deg, side, dirs)
+    incidences_deg: dict[str, list[float]]
+    tis: dict[str, list[float]]  # per side, one value per incidence [fraction]
+    tis_std: dict[str, list[float]]
+    wavelength_nm: float | None
+    what: str  # "550 nm", "mean over 12 wavelengths 500-600 nm", "single wavelength"
+    methods: dict[str, list[str]]
+
+
+def _spectral_weights(model: ProfileModel, wavelength: float | None, band: tuple[float, float] | None,
+                      label: str) -> tuple[NDArray[np.float64], float | None, str]:
+    wl = model.wavelength[model.cols]
+    if band is not None:
+        w = model.band_weights(band)
+        lo, hi = band
+        return w, float(w @ wl), f"mean over {int(np.sum(w > 0))} wavelengths {lo:g}-{hi:g} nm (Δλ-weighted)"
+    if wl.size == 1:
+        if wavelength is not None and np.isfinite(wl[0]) and abs(wl[0] - wavelength) > 1e-6:
+            raise InputError("wavelength not in the source", file=label, field="--wavelength",
+                             expected=f"{wl[0]:g} nm", got=wavelength)
+        chosen = float(wl[0]) if np.isfinite(wl[0]) else wavelength
+        return np.ones(1), chosen, "single wavelength" if chosen is None else f"{chosen:g} nm"
+    if wavelength is None:
+        raise InputError(f"the source holds {wl.size} wavelengths; a ray-tracer table holds one", file=label,
+                         field="--wavelength", expected=f"--wavelength NM ({wl.min():g}-{wl.max():g} nm) or "
+                         "--band LO,HI for their mean")
+    k = int(np.argmin(np.abs(wl - wavelength)))
+    if abs(wl[k] - wavelength) > 1e-6:
+        raise InputError("wavelength not measured", file=label, field="--wavelength",
+                         expected=f"one of the measured wavelengths ({wl.min():g}-{wl.max():g} nm, "
+                                  f"{wl.size} values) or --band LO,HI", got=wavelength)
+    w = np.zeros(wl.size)
+    w[k] = 1.0
+    return w, float(wl[k]), f"{wl[k]:g} nm"
+
+
+def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelength: float | None = None,
+                   band: tuple[float, float] | None = None, config: str | None = None,
+                   theta_i: list[float] | None = None) -> ElasticSource:
+    """The engine's reconstruction of elastic data as a BSDF callable, and its hemispherical values.
+
+    Parameters
+    ----------
+    ds
+        Calibrated dataset of one configuration (elastic scatter).
+    sides
+        Sides to reconstruct.
+    wavelength
+        Wavelength [nm] to write from a spectral dataset (a monochrome one takes it as its label).
+    band
+        (low, high) [nm]: the Δλ-weighted mean over the band (as :meth:`HemisphericalResult.band_average`).
+    config
+        Configuration (default: the only one).
+    theta_i
+        Incidences [deg] (default: every measured one, per side).
+
+    Returns
+    -------
+    ElasticSource
+        ``fn(theta_i_deg, side, directions)`` [1/sr] integrates to ``tis`` at every incidence: the table a
+        writer samples from it integrates to what ``bsdfkit tis`` reports.
+    """
+    label = str(ds.attrs.get("source", "dataset"))
+    configs = sorted(set(np.asarray(ds["config"].values).astype(str)))
+    if config is None:
+        if len(configs) != 1:
+            raise InputError("the dataset holds several configurations; choose one", file=label,
+                             field="config", expected=" or ".join(configs))
+        config = configs[0]
+    models: dict[tuple[str, float], ProfileModel] = {}
+    weights: dict[tuple[str, float], NDArray] = {}
+    out_t: dict[str, list[float]] = {}
+    out_tis: dict[str, list[float]] = {}
+    out_std: dict[str, list[float]] = {}
+    methods: dict[str, list[str]] = {}
+    chosen, what = None, ""
+    for side in sides:
+        on = ds.isel(record=np.flatnonzero((ds["side"].values == side)
+                                           & (np.asarray(ds["config"].values).astype(str) == config)))
+        if on.sizes["record"] == 0:
+            raise InputError("the source holds no data for this side", file=label, field="--side", got=side)
+        angles = theta_i if theta_i is not None else incidences(on)
+        out_t[side], out_tis[side], out_std[side], methods[side] = [], [], [], []
+        for th in angles:
+            model = profile_model(ds, config, float(th), side)
+            w, chosen, what = _spectral_weights(model, wavelength, band, label)
+            res = result_of(model)
+            key = (side, round(float(th), 6))
+            models[key], weights[key] = model, w
+            out_t[side].append(float(th))
+            out_tis[side].append(float(w @ res.value))
+            out_std[side].append(float(np.hypot(np.sqrt(np.sum((w * res.std_measurement) ** 2)),
+                                                w @ res.std_reconstruction)))
+            methods[side].append(res.method)
+
+    def fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        key = (side, round(float(theta_i_deg), 6))
+        if key not in models:
+            raise InputError("incidence not measured", file=label, field="theta_i",
+                             expected="one of " + ", ".join(f"{t:g}" for t in out_t.get(side, [])),
+                             got=theta_i_deg)
+        return models[key].bsdf_at(weights[key], directions)
+
+    return ElasticSource(fn=fn, incidences_deg=out_t, tis=out_tis, tis_std=out_std, wavelength_nm=chosen,
+                         what=what, methods=methods)

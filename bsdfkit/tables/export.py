@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Literal
@@ -36,11 +36,12 @@ from numpy.typing import NDArray
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic
-from bsdfkit.io.text import decode_text
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
+from bsdfkit.reduction.hemispherical import hemispherical
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import grids
 from bsdfkit.tables.formats import asap, tracepro, zemax
+from bsdfkit.tables.vendor import sniff_format, vendor_dataset
 
 __all__ = [
     "FORMATS",
@@ -444,36 +445,45 @@ def export(
 # --------------------------------------------------------------------------------------------------
 # reading any table
 # --------------------------------------------------------------------------------------------------
-def sniff_format(path: str | Path) -> str:
-    """``tracepro`` | ``zemax`` | ``asap`` from the first lines of the file (FormatError otherwise)."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            head = decode_text(fh.read(4096), path, expected="a table", legacy="latin-1")
-    except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
-    lines = head.splitlines()
-    first = lines[0].strip() if lines else ""
-    if first == tracepro.MAGIC:
-        return "tracepro"
-    if first == asap.MAGIC:
-        return "asap"
-    for line in lines:
-        body = line.split("#", 1)[0].strip()
-        if body:
-            if body.split()[0].lower() in ("source", "symmetry", "spectralcontent", "scattertype"):
-                return "zemax"
-            break
-    raise FormatError("unrecognised table format", file=path, line=1, field="format",
-                      expected="a TracePro, Zemax BSDF or bsdfkit ASAP-style file", got=first[:60])
-
-
 def _floats(values: Any) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
 
 
+def file_tis(path: str | Path, incidences_deg: Sequence[float]) -> dict[str, list[float]]:
+    """Hemispherical TIS per side and incidence of a vendor file by the engine of
+    :mod:`bsdfkit.reduction.hemispherical` on the file's nodes (:func:`bsdfkit.tables.vendor.vendor_dataset`): the
+    same integral ``bsdfkit tis`` computes for the ingested file. A side the file leaves all zero gives 0."""
+    ds = vendor_dataset(path)
+    out: dict[str, list[float]] = {}
+    for res in hemispherical(ds, errors=False):
+        values = out.setdefault(res.side, [0.0] * len(incidences_deg))
+        k = int(np.argmin(np.abs(np.asarray(incidences_deg, dtype=float) - res.theta_i)))
+        values[k] = float(res.band_average()["value"])
+    return out
+
+
 def read_any(path: str | Path) -> FileSummary:
-    """Read a TracePro, Zemax or ASAP-style table and summarise incidences and TIS (see :class:`FileSummary`)."""
+    """Read a TracePro, Zemax or ASAP-style table and summarise incidences and TIS (see :class:`FileSummary`).
+
+    ``tis_computed`` is the engine's integral of the file's nodes (:func:`file_tis`, one number for one BSDF
+    whatever the path); the format's own quadrature on its native grid is kept in
+    ``details['tis_format_quadrature']`` (files with several Zemax sample rotations use it as ``tis_computed``).
+    """
+    summary = _read_format(path)
+    if any("@rotation=" in k for k in summary.tis_computed):
+        summary.details["tis_rule"] = "format quadrature (several sample rotations)"
+        return summary
+    engine = file_tis(path, summary.incidences_deg)
+    computed = {k: engine.get(k, [0.0] * len(summary.incidences_deg)) for k in summary.tis_computed
+                if k != "total"}
+    if "total" in summary.tis_computed:
+        computed["total"] = [float(sum(v)) for v in zip(*[computed[k] for k in computed])]
+    details = dict(summary.details, tis_format_quadrature=summary.tis_computed,
+                   tis_rule="bsdfkit.reduction.hemispherical on the file's nodes (as bsdfkit tis)")
+    return replace(summary, tis_computed=computed, details=details)
+
+
+def _read_format(path: str | Path) -> FileSummary:
     fmt = sniff_format(path)
     path = str(path)
     if fmt == "tracepro":

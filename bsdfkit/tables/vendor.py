@@ -1,0 +1,260 @@
+"""Vendor BSDF files (Zemax/Radiant ``.bsdf``, TracePro Scatter 5, bsdfkit ASAP-style) as calibrated datasets.
+
+:func:`sniff_format` tells the formats apart by content; :func:`vendor_dataset` turns every table node above the
+horizon into one record of the calibrated-dataset schema (:func:`bsdfkit.measurement.table.records_dataset`), in
+the sample frame, so that the hemispherical engine of :mod:`bsdfkit.reduction.hemispherical` integrates a vendor
+file exactly as it integrates a measurement (``bsdfkit read``, ``ingest``, ``tis`` and the TIS checks of
+``convert`` and ``export`` all do).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core import frames
+from bsdfkit.core.errors import FormatError, InputError
+from bsdfkit.io.text import decode_text
+from bsdfkit.measurement.table import (
+    DEFAULT_RELATIVE_STD,
+    ZERO_POLICIES,
+    normalise_quantity,
+    records_dataset,
+    side_of_quantity,
+)
+from bsdfkit.tables import grids
+from bsdfkit.tables.formats import asap, tracepro, zemax
+
+__all__ = ["sniff_format", "vendor_dataset"]
+
+
+def sniff_format(path: str | Path) -> str:
+    """``tracepro`` | ``zemax`` | ``asap`` from the first lines of the file (FormatError otherwise)."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = decode_text(fh.read(4096), path, expected="a table", legacy="latin-1")
+    except OSError as exc:
+        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
+    lines = head.splitlines()
+    first = lines[0].strip() if lines else ""
+    if first == tracepro.MAGIC:
+        return "tracepro"
+    if first == asap.MAGIC:
+        return "asap"
+    for line in lines:
+        body = line.split("#", 1)[0].strip()
+        if body:
+            if body.split()[0].lower() in ("source", "symmetry", "spectralcontent", "scattertype"):
+                return "zemax"
+            break
+    raise FormatError("unrecognised table format", file=path, line=1, field="format",
+                      expected="a TracePro, Zemax BSDF or bsdfkit ASAP-style file", got=first[:60])
+
+
+
+# ------------------------------------------------------------------------------------------- vendor → dataset
+@dataclass(frozen=True)
+class _Grid:
+    """One side of a vendor table in its native coordinates."""
+
+    kind: str  # "specular" (Zemax) or "harvey_shack" (TracePro, ASAP)
+    side: str
+    theta_i: NDArray[np.float64]  # deg
+    first: NDArray[np.float64]  # radial [deg] or rho (ascending)
+    azimuth: NDArray[np.float64]  # table azimuth [deg] (ascending)
+    values: NDArray[np.float64]  # (theta_i, azimuth, first)
+    plane_symmetric: bool = False
+    zero_azimuth_deg: float = 0.0  # harvey_shack: sample azimuth of table azimuth 0
+
+
+@dataclass(frozen=True)
+class _Vendor:
+    format: str
+    grids: tuple[_Grid, ...]
+    wavelength_nm: float | None
+    details: dict[str, Any] = field(default_factory=dict)
+
+
+def _read_vendor(path: str | Path, fmt: str | None = None) -> _Vendor:
+    fmt = fmt or sniff_format(path)
+    if fmt == "zemax":
+        z = zemax.read_zemax(path)
+        if z.table.sizes["sample_rotation"] != 1:
+            raise FormatError("several sample rotations are not supported", file=path, field="SampleRotation",
+                              expected="1 sample rotation", got=int(z.table.sizes["sample_rotation"]))
+        t = z.table.isel(sample_rotation=0)
+        grid = _Grid("specular", z.side, np.asarray(t["theta_i"].values, dtype=np.float64),
+                     np.asarray(t["radial"].values, dtype=np.float64),
+                     np.asarray(t["azimuth"].values, dtype=np.float64), np.asarray(t.values, dtype=np.float64),
+                     plane_symmetric=z.plane_symmetric)
+        return _Vendor("zemax", (grid,), None, {"symmetry": z.symmetry, "source": z.source,
+                                                "scatter_type": z.scatter_type})
+    if fmt == "tracepro":
+        prop = tracepro.read_tracepro(path)
+        if prop.scatter != 5 or prop.table is None:
+            raise FormatError("only TracePro tables (Scatter 5) can be read as data", file=path, field="Scatter",
+                              expected="5 (asymmetric table)", got=prop.scatter)
+        table = prop.table
+        out = []
+        for side in [str(s) for s in table["side"].values]:
+            v = np.asarray(table.sel(side=side).values, dtype=np.float64)  # (theta, rho, psi)
+            if not np.any(v):
+                continue  # TracePro writes both columns; a side that is all zero was not given
+            out.append(_Grid("harvey_shack", side, np.asarray(table["theta_i"].values, dtype=np.float64),
+                             np.asarray(table["rho"].values, dtype=np.float64),
+                             np.asarray(table["psi"].values, dtype=np.float64), np.moveaxis(v, -1, -2),
+                             zero_azimuth_deg=float(prop.options.zero_azimuth_deg)))
+        if not out:
+            raise FormatError("the TracePro table is zero everywhere", file=path, field="Table_BSDF_Data",
+                              expected="some non-zero BRDF or BTDF")
+        return _Vendor("tracepro", tuple(out), 1000.0 * float(prop.options.wavelength_um),
+                       {"name": prop.options.name, "zero_azimuth_deg": prop.options.zero_azimuth_deg})
+    table = asap.read_asap(path).table
+    out = [_Grid("harvey_shack", str(side), np.asarray(table["theta_i"].values, dtype=np.float64),
+                 np.asarray(table["rho"].values, dtype=np.float64), np.asarray(table["psi"].values, dtype=np.float64),
+                 np.moveaxis(np.asarray(table.sel(side=side).values, dtype=np.float64), -1, -2))
+           for side in table["side"].values]
+    return _Vendor("asap", tuple(out), None, {})
+
+
+def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Directions (n, 3) of the nodes of incidence k above the horizon, their values, table azimuths and the
+    perpendicular-arc flag (for the two-arc reconstruction)."""
+    theta = grid.theta_i[k]
+    az = grid.azimuth
+    vals = grid.values[k]
+    if grid.plane_symmetric:
+        mirror = (az > 1e-9) & (az < 180.0 - 1e-9)
+        az = np.concatenate([az, 360.0 - az[mirror]])
+        vals = np.concatenate([vals, vals[mirror]], axis=0)
+    a2, f2 = np.meshgrid(np.radians(az), grid.first, indexing="ij")
+    if grid.kind == "specular":
+        inside = np.radians(f2) <= grids.horizon_radial(theta, np.degrees(a2)) + 1e-12
+        d = frames.direction_from_specular(np.radians(f2[inside]), a2[inside], np.radians(theta))
+        d[:, 2] = np.maximum(d[:, 2], 0.0)
+        perp_az = np.degrees(a2[inside])
+    else:
+        psi_sample = np.degrees(a2) + grid.zero_azimuth_deg
+        inside = f2 <= grids.rho_max(theta, psi_sample) + 1e-12
+        d = frames.direction_from_harvey_shack(f2[inside], np.radians(psi_sample[inside]), np.radians(theta))
+        perp_az = psi_sample[inside]
+    perp = np.isclose(np.mod(perp_az, 180.0), 90.0, atol=1e-9)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True), vals[inside], np.degrees(a2[inside]), perp
+
+
+def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | None = None,
+                   relative_std: float | None = None, *, wavelength: float | None = None, zeros: str = "keep",
+                   sample: str | None = None) -> xr.Dataset:
+    """A Zemax, TracePro (Scatter 5) or ASAP-style table as a calibrated BSDF dataset.
+
+    Parameters
+    ----------
+    path
+        The vendor file (format sniffed like ``bsdfkit read``).
+    quantity, side
+        Checked against the file (its ScatterType / BRDF-BTDF columns say what it holds); ``side`` also selects
+        one side of a two-sided TracePro or ASAP table.
+    relative_std
+        Standard uncertainty as a fraction of the value (vendor tables state none; default
+        :data:`bsdfkit.measurement.table.DEFAULT_RELATIVE_STD`).
+    wavelength
+        Wavelength [nm] of a Monochrome Zemax or an ASAP-style file (TracePro files state theirs).
+    zeros
+        ``keep`` (default: a table value 0 is a value) | ``missing`` | ``auto`` (as for text tables).
+
+    Returns
+    -------
+    xarray.Dataset
+        One record per table node above the horizon (sample frame, degrees; PlaneSymmetrical Zemax tables
+        are mirrored to the full circle; the specular node once), ``bsdf``/``bsdf_std`` [1/sr].
+    """
+    path = str(path)
+    if zeros not in ZERO_POLICIES:
+        raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
+    vendor = _read_vendor(path)
+    sides_in = [g.side for g in vendor.grids]
+    if quantity is not None:
+        q = normalise_quantity(quantity, field="--quantity")
+        q_side = side_of_quantity(q)
+        if q not in ("brdf", "btdf", "bsdf") or (q_side is not None and q_side not in sides_in):
+            raise InputError("the file states another quantity than --quantity", file=path, field="--quantity",
+                             expected=" or ".join("brdf" if s == "reflection" else "btdf" for s in sides_in), got=q)
+        side = side or q_side
+    if side is not None:
+        if side not in sides_in:
+            raise InputError("the file holds no data for this side", file=path, field="--side",
+                             expected=" or ".join(sides_in), got=side)
+    chosen = [g for g in vendor.grids if side is None or g.side == side]
+    lam = vendor.wavelength_nm
+    if wavelength is not None:
+        if not (np.isfinite(wavelength) and wavelength > 0):
+            raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+        if lam is not None and abs(lam - wavelength) > 1e-6:
+            raise InputError("the file states another wavelength", file=path, field="--wavelength",
+                             expected=f"{lam:g} nm (or no --wavelength)", got=wavelength)
+        lam = float(wavelength)
+    rel = DEFAULT_RELATIVE_STD if relative_std is None else float(relative_std)
+    if not (np.isfinite(rel) and rel > 0):
+        raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
+                         expected="> 0", got=relative_std)
+    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc")}
+    for grid in chosen:
+        for k, theta in enumerate(grid.theta_i):
+            d, v, _, perp = _grid_nodes(grid, k)
+            th, ph = frames.angles_from_direction(d)
+            th_deg = np.degrees(th)
+            ph_deg = np.where(th_deg < 1e-9, 0.0, np.mod(np.round(np.degrees(ph), 9), 360.0))
+            key = np.round(np.stack([th_deg, ph_deg], axis=-1), 7)
+            _, first = np.unique(key, axis=0, return_index=True)
+            first = np.sort(first)
+            arcs = _arc_of(theta, th_deg[first], ph_deg[first], perp[first])
+            cols["theta_i"] += [float(theta)] * first.size
+            cols["theta_s"] += th_deg[first].tolist()
+            cols["phi_s"] += ph_deg[first].tolist()
+            cols["side"] += [grid.side] * first.size
+            cols["value"] += v[first].tolist()
+            cols["arc"] += arcs.tolist()
+    f = np.asarray(cols["value"], dtype=np.float64)
+    if zeros == "missing" or zeros == "auto":
+        f = np.where(f == 0.0, np.nan, f)
+    keep = np.isfinite(f)
+    if not keep.any():
+        raise InputError("the file holds no usable values", file=path, field="data", expected="non-zero values")
+    idx = np.flatnonzero(keep)
+    n = idx.size
+    pick = (lambda name: [cols[name][i] for i in idx])  # noqa: E731
+    ds = records_dataset(pick("theta_i"), np.full(n, 180.0), pick("theta_s"), pick("phi_s"), pick("side"),
+                         [np.nan if lam is None else lam], f[idx][:, None], rel * np.abs(f[idx])[:, None],
+                         source=path, arc=pick("arc"),
+                         std_origin=f"{rel:g} x |bsdf|" + (" (assumed default: the file states no uncertainty)"
+                                                          if relative_std is None else " (relative_std given)"),
+                         description=f"{vendor.format} file {Path(path).name}",
+                         wavelength_note="" if lam is not None else
+                         "not stated by the file; pass --wavelength NM (NaN = unknown)")
+    ds.attrs.update(source_format=vendor.format, source_layout=vendor.grids[0].kind,
+                    source_quantity=" ".join("brdf" if g.side == "reflection" else "btdf" for g in chosen),
+                    sample_name=sample or Path(path).stem, zeros_policy=zeros, relative_std=rel,
+                    gap_records_dropped=int((~keep).sum()),
+                    manifest_json=_json({"format": vendor.format, "details": vendor.details,
+                                         "reader": "bsdfkit.tables.to_dataset"}))
+    if lam is None:
+        ds.attrs["wavelength_note"] = "not stated by the file; pass --wavelength NM (NaN = unknown)"
+    return ds
+
+
+def _arc_of(theta_i: float, theta_s: NDArray, phi_s: NDArray, perp_line: NDArray) -> NDArray[np.object_]:
+    rel = np.radians(phi_s)
+    in_plane = (np.abs(np.sin(rel)) * np.sin(np.radians(theta_s)) < 1e-9) | (theta_s < 1e-9)
+    return np.where(in_plane, "in_plane", np.where(perp_line, "perpendicular", "other")).astype(object)
+
+
+def _json(obj: Any) -> str:
+    return json.dumps(obj, default=str)
+
+
