@@ -35,7 +35,7 @@ from bsdfkit.core.errors import InputError
 
 #: Weight of the azimuth (radians) against the radius (direction cosines) in the triangulation metric: records
 #: at about the same distance from the centre are joined across azimuth before records along a spoke.
-AZIMUTH_WEIGHT = 0.05
+AZIMUTH_WEIGHT = 0.02
 #: Nodes on the centre line and on the rim (one every 2° of azimuth).
 N_RIM = 180
 #: The trend extrapolation takes its slope over this polar angle [deg] inside the last data.
@@ -102,26 +102,47 @@ class PolarInterpolant:
         """The (linear) interpolant of ``values`` (per record) at β = (x, y)."""
         return self.matrix(x, y) @ values
 
-    def _cells(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
-        """Triangles of one period (centroid ψ in [−π, π)) inside the domain (not all three on the rim): their
-        nodes (K, 3), areas in (ψ, r) [rad × direction cosines] and vertex radii (K, 3)."""
+    def _cells(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The triangles clipped to one period ψ ∈ [−π, π) and to the domain, as sub-triangles: parent nodes
+        (K, 3), the parents' barycentric coordinates at the sub-triangle's vertices (K, 3, 3), areas in (ψ, r)
+        [rad × direction cosines] and vertex radii (K, 3). Clipping (not a centroid rule) keeps the integral
+        exactly that of the evaluated interpolant: ring interpolation makes triangles that span wide azimuths."""
         simp = self.tri.simplices
-        pts = self.tri.points[simp]  # (T, 3, 2) in (s·ψ, r)
+        pts = self.tri.points[simp].copy()  # (T, 3, 2) in (s·ψ, r)
+        pts[:, :, 0] /= AZIMUTH_WEIGHT
         nodes = self.point_node[simp]
-        psi_c = pts[:, :, 0].mean(axis=1) / AZIMUTH_WEIGHT
-        on_rim = nodes > self.n_records  # the centre line is node n, the rim n + 1 ...
-        keep = (psi_c >= -np.pi) & (psi_c < np.pi) & ~(nodes > self.n_records).all(axis=1)
-        keep &= ~(on_rim.all(axis=1))
-        p = pts[keep]
+        psi_c, r_c = pts[:, :, 0].mean(axis=1), pts[:, :, 1].mean(axis=1)
+        # the hull bridges concave stretches of the rim polygon with triangles of rim nodes outside the domain
+        on_rim = (nodes > self.n_records).all(axis=1)  # the centre line is node n, the rim n + 1 ...
+        outside = on_rim & (r_c > self._top(psi_c) * (1.0 + 1e-12))
+        lo, hi = pts[:, :, 0].min(axis=1), pts[:, :, 0].max(axis=1)
+        inner = ~outside & (lo >= -np.pi) & (hi <= np.pi)
+        eye = np.broadcast_to(np.eye(3), (int(inner.sum()), 3, 3))
+        out_nodes, out_bary, out_pts = [nodes[inner]], [eye], [pts[inner]]
+        for t in np.flatnonzero(~outside & ~inner & (hi > -np.pi) & (lo < np.pi)):
+            poly = [(pts[t, k], np.eye(3)[k]) for k in range(3)]
+            for bound, sign in ((-np.pi, 1.0), (np.pi, -1.0)):
+                poly = _clip(poly, bound, sign)
+                if len(poly) < 3:
+                    break
+            for k in range(1, len(poly) - 1):  # fan
+                tri = (poly[0], poly[k], poly[k + 1])
+                out_nodes.append(nodes[t][None, :])
+                out_bary.append(np.stack([v[1] for v in tri])[None])
+                out_pts.append(np.stack([v[0] for v in tri])[None])
+        n_ = np.concatenate(out_nodes)
+        bary = np.concatenate(out_bary)
+        p = np.concatenate(out_pts)
         e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / AZIMUTH_WEIGHT
-        return nodes[keep], area, p[:, :, 1]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+        return n_, bary, area, p[:, :, 1]
 
     def weights(self) -> NDArray[np.float64]:
         """w such that the integral of the (linear) interpolant over its domain is w @ values [sr]: exact on
-        each triangle, ∫ λ_i r dψ dr = A (2 r_i + r_j + r_k) / 12."""
-        nodes, area, r = self._cells()
-        per = area[:, None] / 12.0 * (r + r.sum(axis=1, keepdims=True))
+        each (sub-)triangle, ∫ g r dA = A [Σ_k g_k r_k + (Σ_k g_k)(Σ_k r_k)] / 12 for g linear."""
+        nodes, bary, area, r = self._cells()
+        # per parent node i: g = λ_i, its values at the sub-triangle's vertices bary[:, k, i]
+        per = area[:, None] / 12.0 * (np.einsum("kvi,kv->ki", bary, r) + bary.sum(axis=1) * r.sum(axis=1)[:, None])
         w_nodes = np.bincount(nodes.ravel(), weights=per.ravel(), minlength=self.nodes.shape[0])
         return np.asarray(self.nodes.T @ w_nodes).ravel()
 
@@ -130,15 +151,31 @@ class PolarInterpolant:
         nodes are positive (a 7-point degree-5 rule per triangle), f elsewhere."""
         if mode == "linear":
             return float(self.weights() @ values)
-        nodes, area, r = self._cells()
-        v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]  # (K, 3)
+        nodes, bary, area, r = self._cells()
+        v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]  # (K, 3) parent node values
         pos = (v > 0).all(axis=1)
-        lam = _DUNAVANT_POINTS  # (7, 3)
-        rq = r @ lam.T  # (K, 7)
-        lin = v @ lam.T
-        logv = np.log(np.where(v > 0, v, 1.0)) @ lam.T
+        lam = np.einsum("qv,kvi->kqi", _DUNAVANT_POINTS, bary)  # parent barycentrics at the points (K, 7, 3)
+        rq = r @ _DUNAVANT_POINTS.T  # (K, 7)
+        lin = np.einsum("kqi,ki->kq", lam, v)
+        logv = np.einsum("kqi,ki->kq", lam, np.log(np.where(v > 0, v, 1.0)))
         g = np.where(pos[:, None], np.exp(logv), lin)
         return float(np.sum(area[:, None] * _DUNAVANT_WEIGHTS[None, :] * g * rq))
+
+
+def _clip(poly: list, bound: float, sign: float) -> list:
+    """Sutherland–Hodgman: the part of a polygon (vertices (point (ψ, r), barycentrics)) with sign·(ψ − bound)
+    ≥ 0 (ψ ≥ −π, or ψ ≤ π)."""
+    out = []
+    n = len(poly)
+    for k in range(n):
+        (p, b), (q, c) = poly[k], poly[(k + 1) % n]
+        dp, dq = sign * (p[0] - bound), sign * (q[0] - bound)
+        if dp >= 0:
+            out.append((p, b))
+        if (dp >= 0) != (dq >= 0):
+            t = dp / (dp - dq)
+            out.append((p + t * (q - p), b + t * (c - b)))
+    return out
 
 
 #: Dunavant's 7-point rule on a triangle (degree 5): barycentric points and weights summing to 1.

@@ -196,6 +196,10 @@ class SpecularAxes:
 # --------------------------------------------------------------------------------------------------
 # evaluating a callable
 # --------------------------------------------------------------------------------------------------
+#: Values below zero by at most this fraction of the block's largest |f| are round-off and taken as 0.
+ROUND_OFF = 1e-9
+
+
 def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
                   directions: NDArray[np.float64]) -> NDArray[np.float64]:
     """Call ``bsdf_fn`` and check its answer: shape ``directions.shape[:-1]``, finite, ≥ 0.
@@ -216,6 +220,9 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
         bad = directions[~np.isfinite(values)][0]
         raise ValidationError(f"{where} returned a non-finite value", field="bsdf", expected="finite BSDF in 1/sr",
                               got=f"direction {np.round(bad, 6).tolist()}")
+    # round-off below zero (interpolating non-negative data) is zero, not an error
+    floor = ROUND_OFF * max(float(np.max(np.abs(values))) if values.size else 0.0, 1e-300)
+    values = np.where((values < 0.0) & (values >= -floor), 0.0, values)
     if np.any(values < 0.0):
         raise ValidationError(f"{where} returned a negative BSDF", field="bsdf", expected=">= 0",
                               got=float(values.min()))

@@ -26,20 +26,17 @@ from typing import Any
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
-from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
-from scipy.spatial import QhullError
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
-from bsdfkit.core.records import incidences
 from bsdfkit.io import atomic, netcdf
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.measurement.table import (
-    CONFIG_NAME,
     read_table,
 )
-from bsdfkit.reduction.tis import Hemisphere, hemisphere_bsdf_fn
+from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
+from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import grids
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export, read_any
 from bsdfkit.tables.vendor import _Grid, _read_vendor, sniff_format, vendor_dataset
@@ -224,118 +221,6 @@ class ConvertResult:
                 "ok": self.ok, "wavelength_nm": self.wavelength_nm, "notes": list(self.notes)}
 
 
-def _elastic_profile(ds: xr.Dataset, side: str, wavelength: float | None, band: tuple[float, float] | None,
-                     label: str) -> tuple[xr.Dataset, float | None, str]:
-    """Per-record BSDF of one side at one wavelength (or the mean over a band) for the reconstruction."""
-    lam = np.asarray(ds["wavelength"].values, dtype=np.float64)
-    sub = ds.isel(record=np.flatnonzero(ds["side"].values == side))
-    f = np.asarray(sub["bsdf"].values, dtype=np.float64)
-    s = np.asarray(sub["bsdf_std"].values, dtype=np.float64)
-    if band is not None:
-        lo, hi = band
-        inside = (lam >= lo - 1e-9) & (lam <= hi + 1e-9)
-        if not inside.any():
-            raise InputError("no wavelength in the band", file=label, field="--band",
-                             expected=f"a band overlapping {np.nanmin(lam):g}-{np.nanmax(lam):g} nm", got=band)
-        with np.errstate(invalid="ignore"):
-            value = np.nanmean(np.where(inside, f, np.nan), axis=1) if inside.sum() > 1 else f[:, inside][:, 0]
-            std = np.sqrt(np.nansum(np.where(inside, s, np.nan) ** 2, axis=1)) / max(int(inside.sum()), 1)
-        chosen, what = float(np.mean(lam[inside])), f"mean over {inside.sum()} wavelengths {lo:g}-{hi:g} nm"
-    elif lam.size == 1:
-        value, std = f[:, 0], s[:, 0]
-        if wavelength is not None and np.isfinite(lam[0]) and abs(lam[0] - wavelength) > 1e-6:
-            raise InputError("wavelength not in the source", file=label, field="--wavelength",
-                             expected=f"{lam[0]:g} nm", got=wavelength)
-        chosen = float(lam[0]) if np.isfinite(lam[0]) else wavelength
-        what = "single wavelength" if chosen is None else f"{chosen:g} nm"
-    else:
-        if wavelength is None:
-            raise InputError(f"the source holds {lam.size} wavelengths; a ray-tracer table holds one", file=label,
-                             field="--wavelength", expected=f"--wavelength NM ({lam.min():g}-{lam.max():g} nm) or "
-                             "--band LO,HI for their mean")
-        k = int(np.argmin(np.abs(lam - wavelength)))
-        if abs(lam[k] - wavelength) > 1e-6:
-            raise InputError("wavelength not measured", file=label, field="--wavelength",
-                             expected=f"one of the measured wavelengths ({lam.min():g}-{lam.max():g} nm, "
-                                      f"{lam.size} values) or --band LO,HI", got=wavelength)
-        value, std, chosen, what = f[:, k], s[:, k], float(lam[k]), f"{lam[k]:g} nm"
-    keep = np.isfinite(value)
-    coords = {k: ("record", sub[k].values[keep]) for k in ("theta_i", "phi_i", "theta_s", "phi_s", "side", "arc")}
-    prof = xr.Dataset({"bsdf": ("record", value[keep]), "bsdf_std": ("record", np.nan_to_num(std[keep]))},
-                      coords=coords)
-    return prof, chosen, what
-
-
-#: Fraction of off-arc records (``arc = other``) above which an incidence is interpolated as scattered data.
-SCATTERED_FRACTION = 0.1
-
-
-class _Scattered:
-    """Piecewise-linear interpolation of scattered records over the projected disk (β = (ω_x, ω_y), source at
-    φi = 180°), nearest record outside their convex hull; records on one half of the plane of incidence only are
-    mirrored (plane symmetry assumed)."""
-
-    def __init__(self, prof: xr.Dataset) -> None:
-        ts = np.radians(prof["theta_s"].values)
-        rel = np.radians(prof["phi_s"].values - (prof["phi_i"].values - 180.0))
-        beta = np.stack([np.sin(ts) * np.cos(rel), np.sin(ts) * np.sin(rel)], axis=-1)
-        values = np.asarray(prof["bsdf"].values, dtype=np.float64)
-        by = beta[:, 1]
-        self.mirrored = bool((np.all(by >= -1e-9) or np.all(by <= 1e-9)) and np.any(np.abs(by) > 1e-9))
-        if self.mirrored:
-            off = np.abs(by) > 1e-9
-            beta = np.concatenate([beta, beta[off] * np.array([1.0, -1.0])])
-            values = np.concatenate([values, values[off]])
-        self.linear = LinearNDInterpolator(beta, values)
-        self.nearest = NearestNDInterpolator(beta, values)
-
-    def bsdf(self, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        b = np.asarray(directions, dtype=np.float64)[..., :2]
-        shape = b.shape[:-1]
-        flat = b.reshape(-1, 2)
-        v = self.linear(flat)
-        missing = ~np.isfinite(v)
-        if missing.any():
-            v[missing] = self.nearest(flat[missing])
-        return v.reshape(shape)
-
-
-def _profile_fn(prof: xr.Dataset, side: str, label: str, notes: list[str] | None = None
-                ) -> tuple[BsdfFn, list[float]]:
-    cache: dict[float, Hemisphere | _Scattered] = {}
-    thetas = incidences(prof)
-    for t in thetas:
-        sel = np.isclose(prof["theta_i"].values, t, atol=_MATCH_DEG)
-        one = prof.isel(record=np.flatnonzero(sel))
-        off_arc = int(np.sum(one["arc"].values == "other"))
-        try:
-            if off_arc >= max(3, SCATTERED_FRACTION * one.sizes["record"]):
-                try:
-                    cache[round(t, 6)] = scattered = _Scattered(one)
-                    if notes is not None:
-                        notes.append(f"theta_i = {t:g} deg, {side}: {one.sizes['record']} records interpolated "
-                                     "over the projected disk (scattered data"
-                                     + (", mirrored: plane symmetry assumed)" if scattered.mirrored else ")"))
-                    continue
-                except (QhullError, ValueError):
-                    pass  # degenerate point set: fall back to the two arcs
-            cache[round(t, 6)] = Hemisphere.from_profile(one, center="specular")
-        except InputError as exc:
-            raise InputError(f"cannot reconstruct the hemisphere at theta_i = {t:g} deg, {side}: {exc}",
-                             file=label) from None
-
-    def fn(theta_i_deg: float, side_: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        if side_ != side:
-            raise ValidationError("this reconstruction is for another side", field="side", expected=side, got=side_)
-        key = round(float(theta_i_deg), 6)
-        if key not in cache:
-            raise InputError("incidence not measured", file=label, field="theta_i",
-                             expected="one of " + ", ".join(f"{t:g}" for t in thetas), got=theta_i_deg)
-        return cache[key].bsdf(directions)
-
-    return fn, thetas
-
-
 def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
     def fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         if side not in fns:
@@ -398,6 +283,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     settings = settings or ExportSettings()
     notes: list[str] = []
     tis_original: dict[str, list[float]] = {}
+    engine_tis: dict[str, list[float]] | None = None
+    src_t: dict[str, list[float]] = {}
     label = "dataset" if isinstance(source, xr.Dataset) else str(source)
     kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
     chosen_lambda: float | None = None
@@ -426,7 +313,6 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
             if kind == "table" and "side" not in opts and side in ("reflection", "transmission"):
                 opts["side"] = side
             ds = ingest(source, **opts)
-        configs = [str(c) for c in ds["configuration"].values] if "configuration" in ds.coords else [CONFIG_NAME]
         sides_ds = [s for s in ("reflection", "transmission") if s in set(map(str, ds["side"].values))]
         use_sides = sides_ds if side in (None, "both") else [side]
         for s in use_sides:
@@ -435,19 +321,22 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
                                  expected=" or ".join(sides_ds), got=s)
         fns = {}
         theta_sets = []
-        if CONFIG_NAME in configs or ds.attrs.get("elastic"):
+        if reduction_kind(ds) == "hemispherical":
             if interaction is not None:
-                raise InputError("--interaction applies to calibrated scans with blue/yellow configurations",
-                                 file=label, field="--interaction", got=interaction)
+                raise InputError("--interaction applies to calibrated phosphor scans with blue/yellow "
+                                 "configurations", file=label, field="--interaction", got=interaction)
             if ds.sizes.get("wavelength", 0) == 1 and not np.isfinite(ds["wavelength"].values[0]) \
                     and wavelength is not None:
                 ds = ds.assign_coords(wavelength=[float(wavelength)])
+            src = elastic_source(ds, use_sides, wavelength, band)
+            chosen_lambda = src.wavelength_nm
             for s in use_sides:
-                prof, chosen_lambda, what = _elastic_profile(ds, s, wavelength, band, label)
-                fns[s], th = _profile_fn(prof, s, label, notes)
-                theta_sets.append(set(np.round(th, 9)))
-            notes.insert(0, f"values at {what}; hemisphere reconstructed from the in-plane and perpendicular "
-                            "arcs about the specular point (bsdfkit.reduction.tis.Hemisphere) unless noted")
+                fns[s] = src.fn
+                theta_sets.append(set(np.round(src.incidences_deg[s], 9)))
+            engine_tis, src_t = src.tis, src.incidences_deg
+            notes.insert(0, f"values at {src.what}; reconstructed by the hemispherical engine "
+                            "(bsdfkit.reduction.hemispherical: " + ", ".join(sorted(set(
+                                m for ms in src.methods.values() for m in ms))) + ")")
         else:
             if interaction is None:
                 raise InputError("a calibrated scan holds several interactions; choose one", file=label,
@@ -485,7 +374,10 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
                        comments=tuple(settings.comments) + (f"converted by bsdfkit from {Path(label).name}",))
     result = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0], path,
                     force, settings=settings)
-    if not tis_original:
+    if engine_tis is not None:  # a dataset: what bsdfkit tis reports for it, at the written wavelength
+        tis_original = {s: [engine_tis[s][[round(u, 6) for u in src_t[s]].index(round(t, 6))] for t in thetas]
+                        for s in sides}
+    elif not tis_original:
         tis_original = {s: list(result.tis_source[s]) for s in sides}
     else:
         keep = [k for k, t in enumerate(thetas_all) if any(abs(t - u) <= _MATCH_DEG for u in thetas)]
