@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from scipy.spatial import Delaunay, QhullError
 
 from bsdfkit.core.errors import InputError
+from bsdfkit.core.quadrature import gauss_legendre
 
 #: Weight of the azimuth (radians) against the radius (direction cosines) in the triangulation metric: records
 #: at about the same distance from the centre are joined across azimuth before records along a spoke.
@@ -40,6 +41,8 @@ AZIMUTH_WEIGHT = 0.02
 N_RIM = 180
 #: The trend extrapolation takes its slope over this polar angle [deg] inside the last data.
 TREND_SPAN_DEG = 10.0
+#: Polar quadrature grid (azimuths × Gauss–Legendre radii) for domains not bounded by r = 1 about the normal.
+QUAD_PSI, QUAD_R = 256, 160
 #: Records within this distance (direction cosines) of the centre define the centre value.
 CENTER_TOL = 1e-7
 
@@ -67,6 +70,7 @@ class PolarInterpolant:
     n_records: int
     radius: float | None
     extrapolated_beyond: float | None  # smallest polar distance [direction cosines] where the rim extrapolates
+    azimuth_weight: float = AZIMUTH_WEIGHT  # s of the triangulation metric (s·ψ, r)
 
     def matrix(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> sp.csr_matrix:
         """M (m × n, sparse) such that the interpolant at β = (x, y) is M @ values."""
@@ -75,15 +79,21 @@ class PolarInterpolant:
         psi = np.arctan2(dy, dx)
         return self._matrix_polar(psi, r)
 
-    def _matrix_polar(self, psi: NDArray[np.float64], r: NDArray[np.float64]) -> sp.csr_matrix:
+    def _barycentric(self, psi: NDArray[np.float64], r: NDArray[np.float64]
+                     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Barycentric coordinates (m, 3) and node indices (m, 3) of polar points (clipped to the domain)."""
         psi = np.mod(psi + np.pi, 2.0 * np.pi) - np.pi
         top = self._top(psi)
-        q = np.stack([AZIMUTH_WEIGHT * psi, np.clip(r, 0.0, top * (1.0 - 1e-12))], axis=1)
+        q = np.stack([self.azimuth_weight * psi, np.clip(r, 0.0, top * (1.0 - 1e-12))], axis=1)
         q, simplex = _locate(self.tri, q)
         t = self.tri.transform[simplex]
         b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
         bary = np.concatenate([b, 1.0 - b.sum(axis=1, keepdims=True)], axis=1)
-        cols = self.point_node[self.tri.simplices[simplex]]
+        return bary, self.point_node[self.tri.simplices[simplex]]
+
+    def _matrix_polar(self, psi: NDArray[np.float64], r: NDArray[np.float64]) -> sp.csr_matrix:
+        bary, cols = self._barycentric(psi, r)
+        top = self._top(np.mod(psi + np.pi, 2.0 * np.pi) - np.pi)
         m = r.size
         rows = np.repeat(np.arange(m), 3)
         bmat = sp.csr_matrix((bary.ravel(), (rows, cols.ravel())), shape=(m, self.nodes.shape[0]))
@@ -109,7 +119,7 @@ class PolarInterpolant:
         exactly that of the evaluated interpolant: ring interpolation makes triangles that span wide azimuths."""
         simp = self.tri.simplices
         pts = self.tri.points[simp].copy()  # (T, 3, 2) in (s·ψ, r)
-        pts[:, :, 0] /= AZIMUTH_WEIGHT
+        pts[:, :, 0] /= self.azimuth_weight
         nodes = self.point_node[simp]
         psi_c, r_c = pts[:, :, 0].mean(axis=1), pts[:, :, 1].mean(axis=1)
         # the hull bridges concave stretches of the rim polygon with triangles of rim nodes outside the domain
@@ -137,9 +147,31 @@ class PolarInterpolant:
         area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
         return n_, bary, area, p[:, :, 1]
 
+    @property
+    def _flat_top(self) -> bool:
+        """The domain is r ≤ 1 about the normal: a rectangle in (ψ, r), integrated exactly per triangle. Elsewhere
+        (a centre off the normal, a lobe's ring) the horizon bounds it by a curve the triangulation's hull does not
+        follow, and a polar quadrature grid clipped to the domain integrates what :meth:`matrix` evaluates."""
+        return self.radius is None and self.center == (0.0, 0.0)
+
+    def _grid(self, n_psi: int = QUAD_PSI, n_r: int = QUAD_R
+              ) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+        psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi) - np.pi
+        top = self._top(psi)
+        x, tw = gauss_legendre(n_r)
+        x, tw = 0.5 * (x + 1.0), 0.5 * tw
+        r = top[:, None] * x[None, :]
+        w = (top[:, None] ** 2) * x[None, :] * tw[None, :] * (2 * np.pi / n_psi)
+        m = self._matrix_polar(np.repeat(psi, n_r), r.ravel())
+        return m, w.ravel()
+
     def weights(self) -> NDArray[np.float64]:
         """w such that the integral of the (linear) interpolant over its domain is w @ values [sr]: exact on
-        each (sub-)triangle, ∫ g r dA = A [Σ_k g_k r_k + (Σ_k g_k)(Σ_k r_k)] / 12 for g linear."""
+        each (sub-)triangle, ∫ g r dA = A [Σ_k g_k r_k + (Σ_k g_k)(Σ_k r_k)] / 12 for g linear (about the
+        normal), else on a polar grid of :data:`QUAD_PSI` × :data:`QUAD_R` nodes clipped to the domain."""
+        if not self._flat_top:
+            m, w = self._grid()
+            return np.asarray(m.T @ w).ravel()
         nodes, bary, area, r = self._cells()
         # per parent node i: g = λ_i, its values at the sub-triangle's vertices bary[:, k, i]
         per = area[:, None] / 12.0 * (np.einsum("kvi,kv->ki", bary, r) + bary.sum(axis=1) * r.sum(axis=1)[:, None])
@@ -151,6 +183,9 @@ class PolarInterpolant:
         nodes are positive (a 7-point degree-5 rule per triangle), f elsewhere."""
         if mode == "linear":
             return float(self.weights() @ values)
+        if not self._flat_top:
+            m, w = self._grid()
+            return float(w @ self._log_values(m, np.asarray(values, dtype=np.float64)))
         nodes, bary, area, r = self._cells()
         v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]  # (K, 3) parent node values
         pos = (v > 0).all(axis=1)
@@ -160,6 +195,21 @@ class PolarInterpolant:
         logv = np.einsum("kqi,ki->kq", lam, np.log(np.where(v > 0, v, 1.0)))
         g = np.where(pos[:, None], np.exp(logv), lin)
         return float(np.sum(area[:, None] * _DUNAVANT_WEIGHTS[None, :] * g * rq))
+
+
+    def _log_values(self, m: sp.csr_matrix, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """ln-f interpolation on the quadrature grid of :meth:`_grid`, f where a node is not positive."""
+        n_psi, n_r = QUAD_PSI, QUAD_R
+        psi = np.repeat((np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi) - np.pi, n_r)
+        x, _ = gauss_legendre(n_r)
+        r = (self._top(psi[::n_r])[:, None] * (0.5 * (x + 1.0))[None, :]).ravel()
+        bary, nodes = self._barycentric(psi, r)
+        node_v = self.nodes @ values
+        v = node_v[nodes]
+        pos = (v > 0).all(axis=1)
+        out = m @ values
+        out[pos] = np.exp(np.sum(bary[pos] * np.log(v[pos]), axis=1))
+        return out
 
 
 def _clip(poly: list, bound: float, sign: float) -> list:
@@ -205,8 +255,8 @@ def _locate(tri: Delaunay, q: NDArray[np.float64]) -> tuple[NDArray[np.float64],
     return q, simplex
 
 
-def _triangulate(psi: NDArray, r: NDArray) -> Delaunay:
-    pts = np.stack([AZIMUTH_WEIGHT * psi, r], axis=1)
+def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
+    pts = np.stack([s * psi, r], axis=1)
     return Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
 
 
@@ -225,7 +275,7 @@ def _rim_psi() -> NDArray[np.float64]:
 
 def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], *,
           rim: str = "trend", radius: float | None = None, normal_centered: bool = True,
-          reference: NDArray[np.float64] | None = None) -> PolarInterpolant:
+          reference: NDArray[np.float64] | None = None, azimuth_weight: float = AZIMUTH_WEIGHT) -> PolarInterpolant:
     """The polar interpolant of records at β = (x, y) about ``center``.
 
     Parameters
@@ -243,6 +293,8 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         The centre is the normal (θs = arcsin r: the trend's slope is taken in θs).
     reference
         Band-mean record values that decide the trend's clipping (between 0 and the last value).
+    azimuth_weight
+        s of the triangulation metric (s·ψ, r) [direction cosines per radian].
 
     Returns
     -------
@@ -279,11 +331,11 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     rows_c = sp.csr_matrix(c_row[None, :])
     base = sp.vstack([sp.identity(n, format="csr"), rows_c]).tocsr()
     try:
-        tri0 = _triangulate(pp, rr)
+        tri0 = _triangulate(pp, rr, azimuth_weight)
     except QhullError as exc:
         raise InputError("records are degenerate on the disk (all on one line through the centre)",
                          field="bsdf", expected="records spanning an area of the disk") from exc
-    stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None)
+    stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)
     t_max = horizon_distance(center, rim_psi)
     if rim == "ring":
         if radius is None:
@@ -293,11 +345,11 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         cut = t_max < radius
         rim_rows = sp.csr_matrix((N_RIM, n))
         if cut.any():
-            edge = np.minimum(_edge(tri0, rim_psi, t_max), top)
+            edge = np.minimum(_edge(tri0, rim_psi, t_max, azimuth_weight), top)
             rim_rows = (sp.diags(cut.astype(float)) @ stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))).tocsr()
         extrapolated = None
     else:
-        edge = _edge(tri0, rim_psi, t_max)
+        edge = _edge(tri0, rim_psi, t_max, azimuth_weight)
         m_edge = stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))
         top = t_max
         gap = t_max - edge > 1e-6
@@ -319,15 +371,15 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         keep = r1 <= np.concatenate([np.minimum(radius, horizon_distance(center, p0)), top]) + 1e-12
         p1, r1, n1 = p1[keep], r1[keep], n1[keep]
     pp, rr, nn = _periodic(p1, r1, n1)
-    tri = _triangulate(pp, rr)
-    return PolarInterpolant(center, tri, nn.astype(np.int64), nodes, n, radius, extrapolated)
+    tri = _triangulate(pp, rr, azimuth_weight)
+    return PolarInterpolant(center, tri, nn.astype(np.int64), nodes, n, radius, extrapolated, azimuth_weight)
 
 
-def _edge(tri: Delaunay, psi: NDArray, t_max: NDArray) -> NDArray[np.float64]:
+def _edge(tri: Delaunay, psi: NDArray, t_max: NDArray, s: float) -> NDArray[np.float64]:
     """Outermost radius of the triangulation's hull along each azimuth, at most t_max."""
     hull = tri.convex_hull  # (E, 2) point indices
     p = tri.points[hull]  # (E, 2, 2)
-    x = AZIMUTH_WEIGHT * psi
+    x = s * psi
     a, b = np.minimum(p[:, 0, 0], p[:, 1, 0]), np.maximum(p[:, 0, 0], p[:, 1, 0])
     span = p[:, 1, 0] - p[:, 0, 0]
     t = (x[:, None] - p[None, :, 0, 0]) / np.where(np.abs(span) > 0, span, np.inf)[None, :]

@@ -813,6 +813,28 @@ def _disk_region(geom: Geometry, ref: NDArray[np.float64], s: NDArray[np.float64
 LOBE_MAX_RADIUS = 0.5
 
 
+#: Azimuth weight of the body's triangulation where the records cover the azimuths densely (near the metric of
+#: the disk at mid radius: records joined to their nearest neighbours), and the share of ring sectors that counts
+#: as dense. Sparse azimuths (C-planes, a few planes) keep :data:`bsdfkit.reduction.disk.AZIMUTH_WEIGHT`, which
+#: joins records at one distance from the centre across the gaps between planes.
+DENSE_AZIMUTH_WEIGHT = 0.5
+DENSE_COVERAGE = 0.5
+
+
+def _body_azimuth_weight(x: NDArray[np.float64], y: NDArray[np.float64]) -> float:
+    """:data:`DENSE_AZIMUTH_WEIGHT` when the records occupy at least :data:`DENSE_COVERAGE` of the 10° sectors of
+    the rings (0.05 wide in |β|) they reach, area-weighted; else :data:`bsdfkit.reduction.disk.AZIMUTH_WEIGHT`."""
+    r = np.hypot(x, y)
+    ring = np.minimum((r / 0.05).astype(int), 19)
+    sector = (np.mod(np.degrees(np.arctan2(y, x)), 360.0) // 10).astype(int)
+    occupied = np.zeros((20, 36), dtype=bool)
+    occupied[ring, sector] = True
+    reached = occupied.any(axis=1)
+    area = (np.arange(20) + 0.5)[reached]
+    share = float(np.sum(area * occupied[reached].mean(axis=1)) / np.sum(area)) if reached.any() else 0.0
+    return DENSE_AZIMUTH_WEIGHT if share >= DENSE_COVERAGE else disk.AZIMUTH_WEIGHT
+
+
 def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], body_center: str,
                 lobe_c: float | None, radius: float, rim: str = "trend", mirror: str | None = None):
     """Body (about ``body_center``) and lobe (about (lobe_c, 0) within ``radius``) weights over the profile's
@@ -830,7 +852,7 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
     else:
         region, outside = np.zeros(0, dtype=np.int64), keep
     body = disk.build(x[outside], y[outside], bc, rim=rim, normal_centered=body_center == "normal",
-                      reference=ref[outside])
+                      reference=ref[outside], azimuth_weight=_body_azimuth_weight(x[outside], y[outside]))
     c_body = np.zeros(n)
     c_body[outside] = body.weights()
     c_lobe = np.zeros(n)
@@ -879,15 +901,10 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     resolved = lobe_c is not None and radius > LOBE_MAX_RADIUS
     if resolved:  # scatter rising over most of the disk is no specular lobe: integrated directly with the body
         lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
-    body_center, other_center, mismatch = "normal", None, {}
-    if lobe_c is None and not resolved:
-        mismatch = {c: _mismatch(geom, ref, c) for c in ("normal", "specular")}
-        m_n, m_s = mismatch["normal"], mismatch["specular"]
-        if np.isfinite(m_s) and np.isfinite(m_n) and m_s < m_n:
-            body_center = "specular"
-        other = "specular" if body_center == "normal" else "normal"
-        if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
-            other_center = other
+    # the body is always interpolated about the normal: there the domain is r ≤ 1 for every azimuth, so records
+    # at one distance from the centre never straddle the horizon (about an off-normal centre they do, and
+    # interpolating across azimuth at constant distance bridges the concave edge of the domain)
+    body_center, other_center = "normal", None
     try:
         body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius)
     except _RegionTooWide:  # a "lobe" covering most of the disk is the body itself
