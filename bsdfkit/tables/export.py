@@ -37,8 +37,8 @@ from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
-from bsdfkit.reduction.hemispherical import hemispherical
-from bsdfkit.reduction.tis import hemisphere_bsdf_fn
+from bsdfkit.reduction.hemispherical import elastic_source, hemispherical, reduction_kind
+from bsdfkit.reduction.tis import CENTER, hemisphere_bsdf_fn
 from bsdfkit.tables import grids
 from bsdfkit.tables.formats import asap, tracepro, zemax
 from bsdfkit.tables.vendor import sniff_format, vendor_dataset
@@ -87,6 +87,8 @@ class ExportSettings:
     specular_transmittance: float = 0.0
     comments: tuple[str, ...] = ()
     symmetry_tolerance: float = 0.01
+    #: the wavelength [nm] to write from a spectral elastic dataset (a ray-tracer table holds one)
+    wavelength_nm: float | None = None
 
     def __post_init__(self) -> None:
         if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
@@ -261,10 +263,13 @@ class _Source:
     theta_i_deg: NDArray[np.float64]
     abg: tuple[asap.AbgParameters, ...]
     description: str
+    #: the engine's hemispherical value per side and incidence (elastic datasets): the TIS the table is checked
+    #: against, the number ``bsdfkit tis`` reports for the same data
+    engine_tis: dict[str, dict[float, float]] | None = None
 
 
 def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
-                    theta_i_deg: Sequence[float] | None) -> _Source:
+                    theta_i_deg: Sequence[float] | None, wavelength_nm: float | None = None) -> _Source:
     if callable(source) and not isinstance(source, xr.Dataset):
         if theta_i_deg is None:
             raise ValidationError("a BSDF callable needs explicit incidences", field="theta_i_deg",
@@ -292,6 +297,11 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
                     abg.append(asap.AbgParameters(s, t, p["A"], p["B"], p["g"]))
         chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
         return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}")
+    if reduction_kind(ds) == "hemispherical":
+        return _elastic(ds, label, interaction, sides, theta_i_deg, wavelength_nm)
+    if interaction not in CENTER:
+        raise InputError("unknown interaction for a phosphor scan", file=label, field="--interaction",
+                         expected=" | ".join(CENTER), got=interaction)
     fns = {s: hemisphere_bsdf_fn(ds, interaction, s) for s in sides}
     if theta_i_deg is None:
         measured = [set(np.round(np.asarray(f.incidences_deg, dtype=float), 9))
@@ -309,6 +319,32 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
             theta_i_deg = np.unique(np.asarray(ds["theta_i"].values, dtype=np.float64))
     return _Source(fns, np.asarray(theta_i_deg, dtype=np.float64), (),
                    f"calibrated scan {label}, interaction {interaction}")
+
+
+#: Interaction names that mean "the elastic scatter of the sample" for a dataset that is not a phosphor scan.
+ELASTIC_INTERACTIONS = ("", "elastic")
+
+
+def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...],
+             theta_i_deg: Sequence[float] | None, wavelength_nm: float | None) -> _Source:
+    """An elastic dataset (any sample) through the hemispherical engine's reconstruction."""
+    if interaction not in ELASTIC_INTERACTIONS:
+        raise InputError("this dataset holds elastic scatter, not the interactions of a phosphor scan", file=label,
+                         field="--interaction", expected="elastic", got=interaction)
+    have = sorted(set(map(str, ds["side"].values)))
+    for s in sides:
+        if s not in have:
+            raise InputError("the source holds no data for this side", file=label, field="--side",
+                             expected=" or ".join(have), got=s)
+    src = elastic_source(ds, sides, wavelength=wavelength_nm,
+                         theta_i=None if theta_i_deg is None else [float(t) for t in theta_i_deg])
+    common = sorted(set.intersection(*[set(np.round(src.incidences_deg[s], 9)) for s in sides]))
+    if not common:
+        raise InputError("the sides share no measured incidence", file=label, field="theta_i",
+                         expected="a common incidence, or one side")
+    engine = {s: {round(t, 6): v for t, v in zip(src.incidences_deg[s], src.tis[s])} for s in sides}
+    return _Source({s: src.fn for s in sides}, np.asarray(common, dtype=np.float64), (),
+                   f"measured dataset {label} at {src.what} (hemispherical engine)", engine)
 
 
 def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
@@ -390,7 +426,7 @@ def export(
     # before computing: existing output, output that is the source itself (refused even with force), writability
     atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
     sides = frames.SIDES if side == "both" else (side,)
-    src = _resolve_source(source, interaction, sides, settings.theta_i_deg)
+    src = _resolve_source(source, interaction, sides, settings.theta_i_deg, settings.wavelength_nm)
     theta = np.asarray(src.theta_i_deg, dtype=np.float64)
     fn = _dispatch(src.fns)
     comments = (f"source: {src.description}",) + tuple(settings.comments)
@@ -433,7 +469,10 @@ def export(
         asap.write_asap(path, table, force=force, generated_at=generated_at)
         computed = table.tis_computed()
         tis_table = {s: computed.sel(side=s).values for s in sides}
-    tis_source = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+    if src.engine_tis is not None:
+        tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
+    else:
+        tis_source = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
     return ExportResult(
         format=to, path=str(path), sides=tuple(sides), incidences_deg=tuple(float(t) for t in theta),
         tis_source={s: [float(v) for v in vals] for s, vals in tis_source.items()},
