@@ -22,7 +22,6 @@ Every write is atomic and refuses to overwrite an existing file unless ``force``
 """
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -35,6 +34,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.fit import plausibility
 from bsdfkit.io import atomic
 from bsdfkit.io.text import decode_text
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
@@ -235,16 +235,6 @@ def _model_bsdf_fn(model: str, params: Mapping[float, Mapping[str, float]], side
     return bsdf_fn
 
 
-def _refuse_implausible_fit(ds: xr.Dataset, label: str) -> None:
-    """A fit flagged physically impossible or undetermined (:func:`bsdfkit.fit.least_squares.fit_bsdf`) is not
-    exported: the table would carry a number that is not a result."""
-    for flag, what in (("physically_possible", "physically impossible"), ("determined", "undetermined")):
-        if flag in ds and not bool(np.all(ds[flag].values)):
-            reasons = json.loads(ds.attrs.get("warnings", "[]"))
-            raise ValidationError(f"the fit is {what}: " + ("; ".join(reasons[:3]) or "see its warnings"),
-                                  file=label, field=flag, expected="a fit without warnings", got=False)
-
-
 def fit_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> BsdfFn:
     """BSDF callable of a fit result (see the module docstring for the dataset layout)."""
     model = str(ds.attrs.get("model", ""))
@@ -260,6 +250,8 @@ class _Source:
     theta_i_deg: NDArray[np.float64]
     abg: tuple[asap.AbgParameters, ...]
     description: str
+    #: per exported incidence, how far the table's total scatter may exceed 1 (the gate's k·u(TIS) for a fit)
+    tis_excess_allowed: NDArray[np.float64] | float = 0.0
 
 
 def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
@@ -280,17 +272,24 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
     ds = source
     if "model" in ds.attrs:
         model = str(ds.attrs["model"])
-        _refuse_implausible_fit(ds, label)
         fns = {s: fit_bsdf_fn(ds, interaction, s) for s in sides}
         theta = np.atleast_1d(np.asarray(ds["theta_i"].values, dtype=np.float64))
+        chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
+        # the one plausibility gate, on exactly what is written (these sides, these incidences); every format alike
+        written = [_select(_select(ds, "interaction", interaction, "interaction"), "side", s, "side") for s in sides]
+        written = [w.sel(theta_i=[t for t in theta if np.any(np.abs(chosen - t) <= _THETA_MATCH_DEG)])
+                   if "theta_i" in w.dims else w for w in written]
+        for w in written:
+            plausibility.refuse_implausible(w, label)
+        allowed = np.sqrt(sum(plausibility.tis_excess_allowed(w, chosen) ** 2 for w in written))
         abg: list[asap.AbgParameters] = []
         if model == "abg":
             for s in sides:
                 sub = _select(_select(ds, "interaction", interaction, "interaction"), "side", s, "side")
                 for t, p in _fit_parameters(sub, model).items():
                     abg.append(asap.AbgParameters(s, t, p["A"], p["B"], p["g"]))
-        chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
-        return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}")
+        return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}",
+                       allowed)
     fns = {s: hemisphere_bsdf_fn(ds, interaction, s) for s in sides}
     if theta_i_deg is None:
         measured = [set(np.round(np.asarray(f.incidences_deg, dtype=float), 9))
@@ -405,13 +404,14 @@ def export(
             prop = tracepro.abg_property(
                 theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
                 specular_reflectance=settings.specular_reflectance,
-                specular_transmittance=settings.specular_transmittance,
+                specular_transmittance=settings.specular_transmittance, scatter_excess_allowed=src.tis_excess_allowed,
             )
         else:
             axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=opts.zero_azimuth_deg)
             grid = grids.harvey_shack_grid(fn, theta, sides, axes)
             prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
-                                           specular_transmittance=settings.specular_transmittance)
+                                           specular_transmittance=settings.specular_transmittance,
+                                           scatter_excess_allowed=src.tis_excess_allowed)
         tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
         tis_table = {s: v for s, v in prop.tis_computed().items() if s in sides}
     elif to == "zemax":
