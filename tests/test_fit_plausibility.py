@@ -187,3 +187,23 @@ def test_thresholds_are_stated_and_used():
     with pytest.raises(ValidationError):
         plausibility.Thresholds(min_r2=1.5)
 
+
+def test_fit_bsdf_cli_reports_the_gate(capsys):
+    # the main job's converted light fitted as Lambertian: converged, but R² far below 0.9 at 56°
+    from pathlib import Path
+
+    from bsdfkit.cli.main import main
+
+    scan = Path(__file__).resolve().parents[1] / "measurements" / "cl830-synthetic"
+    argv = ["fit", "bsdf", str(scan), "--interaction", "biys", "--side", "reflection", "--model", "lambert",
+            "--incidence", "56"]
+    assert main(argv + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    (row,) = out["fits"]
+    assert row["converged"] and row["r2"] < 0.9
+    assert row["plausible"] is False and out["plausible"] is False
+    assert any(r.startswith("R² = ") and "< 0.9" in r for r in row["reasons"]), row["reasons"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if "θi = 56°" in x)
+    assert "converged, FAILS the plausibility gate: R² = " in line
