@@ -31,12 +31,18 @@ def test_measured_table_fit_saved_and_exported(tmp_path, scan):
     done = cli("fit", "bsdf", scan, "--interaction", "elastic", "--side", "reflection", "-o", fit, "--json")
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)
-    assert out["warnings"] == [] and len(out["fits"]) == 5
+    assert len(out["fits"]) == 5
     # a white diffuser with a gloss lobe: 0.9 < TIS < 1 at the near-normal incidences
     assert all(0.9 < f["tis"] < 1.0 for f in out["fits"] if f["theta_i_deg"] <= 40)
+    # at 80° the Lambert + Gaussian model explains too little of the data (R² 0.85): that fit fails the gate
+    assert [f["theta_i_deg"] for f in out["fits"] if not f["plausible"]] == [80.0]
+    assert len(out["warnings"]) == 1 and "incidence 80 deg: R² = 0.85" in out["warnings"][0]
     table = tmp_path / "t.bsdf"
+    refused = cli("export", fit, "--to", "zemax", "--interaction", "elastic", "--side", "reflection", "-o", table)
+    assert refused.returncode == 2 and "fails the plausibility gate: incidence 80 deg: R²" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1 and not table.exists()
     done = cli("export", fit, "--to", "zemax", "--interaction", "elastic", "--side", "reflection", "-o", table,
-               "--json")
+               "--incidences", "10,25,40,60", "--json")
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     np.testing.assert_allclose(result["tis_table"]["reflection"], result["tis_source"]["reflection"], rtol=0.01)

@@ -8,7 +8,9 @@ reduces a scan (netCDF written by bsdfkit, or a raw measurement folder) to the p
 side (:func:`bsdfkit.reduction.spectral.interaction_profile`) and fits a BSDF model per incidence
 (:func:`bsdfkit.fit.least_squares.fit_bsdf`). Suspicious fits (iteration limit, R² < 0, parameters on a bound,
 fitted peak or FWHM far from the measured) are reported with warning lines on stderr and, with ``--json``, in
-each record's ``warnings``; degenerate fits are one-line errors (exit status 2).
+each record's ``warnings``; degenerate fits are one-line errors (exit status 2). A BSDF fit is judged by the
+plausibility gate (:mod:`bsdfkit.fit.plausibility`): each incidence says whether it passes and, if not, why
+(``plausible`` and ``reasons`` with ``--json``); exports refuse a fit that fails it.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from bsdfkit.cli._common import emit_json
 from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
+from bsdfkit.fit import plausibility
 from bsdfkit.fit.lambertian import lambertian_from_reflectance
 from bsdfkit.fit.least_squares import FitOptions, fit_bsdf
 from bsdfkit.fit.spectrum import CRITERIA, SPECTRUM_MODELS, TWO_BAND_MODELS, analyse_spectra
@@ -192,11 +195,13 @@ def _run_bsdf(args: argparse.Namespace) -> int:
     if args.output:
         netcdf.save(result, args.output, args.force)
     names = [str(n) for n in result.parameter.values]
+    verdict = plausibility.evaluate(result)
     fits = []
     for k, theta in enumerate(result.theta_i.values):
         row = result.isel(theta_i=k)
         if not bool(row.converged):
             _warn_unconverged(f"{args.model} fit at θi = {theta:g}°", int(row.iterations))
+        where = f"incidence {theta:g} deg: "
         fits.append({
             "theta_i_deg": float(theta),
             "params": {n: float(row[n]) for n in names},
@@ -204,19 +209,24 @@ def _run_bsdf(args: argparse.Namespace) -> int:
             "r2": float(row.r2), "rms": float(row.rms), "tis": float(row.tis), "tis_std": float(row.tis_std),
             "converged": bool(row.converged), "n_points": int(row.n_points),
             "physically_possible": bool(row.physically_possible), "determined": bool(row.determined),
+            "plausible": bool(verdict.plausible.values[k]),
+            "reasons": [r[len(where):] for r in verdict.reasons if r.startswith(where)],
         })
     if args.json:
         emit_json({"scan": str(args.scan), "interaction": args.interaction, "side": args.side,
                    "model": args.model, "residual": result.attrs["residual"], "fits": fits,
-                   "warnings": warnings, "output": args.output})
+                   "plausible": verdict.passed, "warnings": warnings, "output": args.output})
         return 0
     for w in warnings:
         print(f"bsdfkit fit: warning: {w}", file=sys.stderr)
     print(f"{args.scan}: {args.interaction} {args.side}, model {args.model} ({result.attrs['residual']} residuals)")
     for f in fits:
         parts = ", ".join(f"{n} = {f['params'][n]:.4g} ± {f['std'][n]:.2g}" for n in names)
-        print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f}; R² = {f['r2']:.4f}"
-              f"{'' if f['converged'] else ' (NOT converged)'}")
+        gate = ("passes the plausibility gate" if f["plausible"] else
+                "FAILS the plausibility gate: " + "; ".join(f["reasons"]))
+        print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f} ± {f['tis_std']:.2g}; R² = {f['r2']:.4f}; "
+              f"{'converged' if f['converged'] else 'NOT converged'}, {gate}")
     if args.output:
-        print(f"wrote {args.output}" + (" (flagged: exports refuse it; see the warnings)" if warnings else ""))
+        print(f"wrote {args.output}" + ("" if verdict.passed else
+                                        " (fails the plausibility gate: exports refuse it; see the warnings)"))
     return 0

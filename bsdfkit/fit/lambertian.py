@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
+from bsdfkit.fit import plausibility
 from bsdfkit.reduction.spectral import band_sum
 
 #: Incidences of the model [deg]: a Lambertian surface is the same at every incidence; exports need a grid.
@@ -60,7 +61,9 @@ def lambertian_from_reflectance(
     Returns
     -------
     xarray.Dataset
-        ``rho`` and ``rho_std`` on (interaction, side, wavelength, theta_i), attrs ``model = "lambert"``.
+        ``rho`` and ``rho_std`` on (interaction, side, wavelength, theta_i), attrs ``model = "lambert"``, and the
+        verdict of the plausibility gate (:func:`bsdfkit.fit.plausibility.annotate`: ``physically_possible``,
+        ``determined``, ``plausible``, ``attrs['warnings']``).
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     rho = np.asarray(reflectance, dtype=np.float64)
@@ -104,18 +107,20 @@ def lambertian_from_reflectance(
         attrs={"model": "lambert", "quantity": "bsdf_fit", "source": source, "warnings": json.dumps([]),
                "note": "Lambertian model of a measured reflectance spectrum (values clipped to [0, 1])"},
     )
-    return ds
+    return plausibility.annotate(ds)
 
 
 def at_wavelength(model: xr.Dataset, wavelength_nm: float) -> xr.Dataset:
-    """The model at one wavelength [nm] (linear interpolation; no extrapolation): an ordinary fit result."""
+    """The model at one wavelength [nm] (linear interpolation; no extrapolation): an ordinary fit result, with
+    the plausibility gate's verdict at that wavelength."""
     wl = model["wavelength"].values
     if not (np.isfinite(wavelength_nm) and wl[0] <= wavelength_nm <= wl[-1]):
         raise InputError("wavelength outside the measured spectrum", file=model.attrs.get("source") or None,
                          field="wavelength", expected=f"{wl[0]:g}-{wl[-1]:g} nm", got=wavelength_nm)
-    out = model.interp(wavelength=float(wavelength_nm))
+    flags = [v for v in ("physically_possible", "determined", "plausible") if v in model]
+    out = model.drop_vars(flags).interp(wavelength=float(wavelength_nm))
     out.attrs = dict(model.attrs, wavelength_nm=float(wavelength_nm))
-    return out
+    return plausibility.annotate(out)
 
 
 def band_weighted_reflectance(model: xr.Dataset, spectrum_wavelength_nm: ArrayLike, spectrum: ArrayLike,

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import math
 import warnings
 from collections.abc import Callable, Sequence
@@ -51,7 +50,7 @@ import xarray as xr
 
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
-from bsdfkit.fit import lm
+from bsdfkit.fit import lm, plausibility
 from bsdfkit.measurement.instrument import Instrument, aperture_quadrature
 from bsdfkit.models.registry import BSDF_MODELS, Parameter, bsdf_model
 
@@ -74,6 +73,8 @@ _U_CLIP_EXP = 60.0
 _U_CLIP_SIGMOID = 40.0
 # Stand-in for a non-finite residual at a trial point: large, so the step is rejected, and finite.
 _BAD_RESIDUAL = 1e100
+# Residual norm, relative to the norm of the data (in residual space), below which a fit reproduces the data exactly.
+_EXACT_RESIDUAL = 1e-10
 
 
 @dataclass(frozen=True)
@@ -641,19 +642,18 @@ def least_squares(
         ss_tot = np.sum(np.where(m, (y_t - mean[:, None]) ** 2, 0.0), axis=1)
         rms = np.sqrt(ss_res / n_used)
         ss_for_r2 = ss_res
+    # Residuals at rounding level (a model that reproduces the data exactly) give R² = 1 even when the data are
+    # constant (ss_tot = 0, e.g. a noiseless Lambertian profile), where 1 − ss_res/ss_tot is 0/0 or rounding noise.
+    scale = np.sqrt(np.sum(np.where(m, y_t if options.residual != "relative" else y2, 0.0) ** 2, axis=1))
+    exact = ss_for_r2 <= (_EXACT_RESIDUAL * scale) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
-        r2 = np.where(ss_tot > 0, 1.0 - ss_for_r2 / ss_tot, np.nan)
+        r2 = np.where(exact, 1.0, np.where(ss_tot > 0, 1.0 - ss_for_r2 / ss_tot, np.nan))
 
     iterations = out["iterations"].astype(int)
     converged = out["converged"] & np.all(np.isfinite(theta), axis=1) & np.isfinite(out["sum_sq"])
 
     std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
-    lowers = np.array([p.lower for p in parameters])
-    uppers = np.array([p.upper for p in parameters])
-    finite_range = np.isfinite(lowers) & np.isfinite(uppers)
-    tol = np.where(finite_range, 1e-6 * np.where(finite_range, uppers - lowers, 0.0),
-                   1e-9 * np.maximum(1.0, np.abs(theta)))
-    at_bound = (np.isfinite(lowers) & (theta - lowers <= tol)) | (np.isfinite(uppers) & (uppers - theta <= tol))
+    at_bound = np.stack([plausibility.at_bound(theta[:, k], p) for k, p in enumerate(parameters)], axis=-1)
     data_vars: dict[str, Any] = {}
     for k, p in enumerate(parameters):
         data_vars[p.name] = ((batch_dim,), theta[:, k], {"units": p.unit, "lower": p.lower, "upper": p.upper})
@@ -663,7 +663,8 @@ def least_squares(
     data_vars["at_bound"] = ((batch_dim, "parameter"), at_bound,
                              {"long_name": "parameter ended on (within 1e-6 of) a bound"})
     data_vars["r2"] = ((batch_dim,), r2, {"long_name": "coefficient of determination",
-                                          "note": "NaN only if the unmasked data are constant"})
+                                          "note": "1 when the residuals vanish (to 1e-10 of the data); NaN only "
+                                                  "if the unmasked data are constant and the model misses them"})
     data_vars["rms"] = ((batch_dim,), rms, {"long_name": f"RMS of the unweighted {options.residual} residuals"})
     data_vars["cost"] = ((batch_dim,), 0.5 * out["sum_sq"], {"long_name": "final cost ½Σr̃²"})
     data_vars["n_points"] = ((batch_dim,), n_used.astype(int))
@@ -807,7 +808,9 @@ def fit_bsdf(
     -------
     xarray.Dataset over ``theta_i`` (degrees) with each parameter and its ``_std``, ``r2``, ``rms``,
     ``converged``, ``iterations``, ``n_points`` and ``tis``: the model's total integrated scatter over
-    the hemisphere (exact numerical integral of the lobe clipped by the unit disk).
+    the hemisphere (exact numerical integral of the lobe clipped by the unit disk), ``tis_std``, and the verdict
+    of the plausibility gate (:mod:`bsdfkit.fit.plausibility`): ``physically_possible``, ``determined``,
+    ``plausible`` and the JSON list of reasons ``attrs['warnings']``.
     """
     options = options or BsdfFitOptions()
     spec = bsdf_model(model)
@@ -922,71 +925,11 @@ def fit_bsdf(
     return _with_plausibility(ds, model, incidences.astype(float))
 
 
-#: A fitted TIS is impossible when it exceeds 1 by more than this many standard uncertainties.
-TIS_SIGMA_LIMIT = 3.0
-#: A parameter is "at a bound" when within this relative distance of a finite bound.
-BOUND_RTOL = 1e-9
-#: A parameter is undetermined when its standard error exceeds this multiple of its magnitude.
-UNDETERMINED_RATIO = 1e3
-
-
-def _tis_std(model: str, theta_i_deg: np.ndarray, ds: xr.Dataset) -> np.ndarray:
-    """Standard uncertainty of the model TIS from the parameter covariance (central differences)."""
-    spec = bsdf_model(model)
-    names = spec.parameter_names
-    values = np.stack([np.atleast_1d(ds[n].values).astype(float) for n in names], axis=-1)
-    grad = np.zeros_like(values)
-    for k in range(len(names)):
-        h = 1e-6 * np.maximum(np.abs(values[:, k]), 1e-12)
-        up, down = values.copy(), values.copy()
-        up[:, k] += h
-        down[:, k] = np.maximum(down[:, k] - h, 0.0) if spec.parameters[k].lower == 0 else down[:, k] - h
-        t_up = spec.total_integrated_scatter(dict(zip(names, up.T)), theta_i_deg)
-        t_down = spec.total_integrated_scatter(dict(zip(names, down.T)), theta_i_deg)
-        grad[:, k] = (t_up - t_down) / (up[:, k] - down[:, k])
-    cov = np.asarray(ds["covariance"].values, dtype=float).reshape(len(theta_i_deg), len(names), len(names))
-    var = np.einsum("bi,bij,bj->b", grad, cov, grad)
-    return np.sqrt(np.where(np.isfinite(var) & (var > 0), var, np.nan))
-
-
 def _with_plausibility(ds: xr.Dataset, model: str, theta_i_deg: np.ndarray) -> xr.Dataset:
-    """Flag fits that are physically impossible or undetermined; ``warnings`` lists why (never silent).
-
-    Per incidence: TIS above 1 beyond :data:`TIS_SIGMA_LIMIT` standard uncertainties, R² < 0, a parameter
-    stuck at a bound, or a parameter whose standard error is non-finite or exceeds :data:`UNDETERMINED_RATIO`
-    times its value. ``physically_possible`` is False for the first two, ``determined`` for the last two;
-    exports refuse a fit that is either.
-    """
-    spec = bsdf_model(model)
-    tis = np.atleast_1d(ds["tis"].values).astype(float)
-    tis_std = _tis_std(model, theta_i_deg, ds)
-    ds["tis_std"] = ("theta_i", tis_std, {"long_name": "standard uncertainty of the model TIS (from the "
-                                                        "parameter covariance)"})
-    possible = np.ones(theta_i_deg.size, bool)
-    determined = np.ones(theta_i_deg.size, bool)
-    warnings_: list[str] = []
-    r2 = np.atleast_1d(ds["r2"].values).astype(float)
-    for b, t in enumerate(theta_i_deg):
-        where = f"incidence {t:g} deg"
-        excess = tis[b] - 1.0
-        if excess > TIS_SIGMA_LIMIT * (tis_std[b] if np.isfinite(tis_std[b]) else 0.0):
-            possible[b] = False
-            warnings_.append(f"{where}: model TIS {tis[b]:.4f} exceeds 1 (uncertainty {tis_std[b]:.2g}): "
-                             "physically impossible")
-        if not r2[b] >= 0:
-            possible[b] = False
-            warnings_.append(f"{where}: R² = {r2[b]:.3g} < 0, the model describes the data worse than a constant")
-        for p in spec.parameters:
-            value = float(np.atleast_1d(ds[p.name].values)[b])
-            std = float(np.atleast_1d(ds[f"{p.name}_std"].values)[b])
-            for bound in (p.lower, p.upper):
-                if math.isfinite(bound) and abs(value - bound) <= BOUND_RTOL * max(abs(bound), 1.0):
-                    determined[b] = False
-                    warnings_.append(f"{where}: {p.name} = {value:.4g} is at its bound {bound:g}")
-            if not math.isfinite(std) or std > UNDETERMINED_RATIO * max(abs(value), 1e-300):
-                determined[b] = False
-                warnings_.append(f"{where}: {p.name} = {value:.4g} is undetermined (standard error {std:.3g})")
-    ds["physically_possible"] = ("theta_i", possible)
-    ds["determined"] = ("theta_i", determined)
-    ds.attrs["warnings"] = json.dumps(warnings_)
-    return ds
+    """The model TIS's standard uncertainty ``tis_std`` and the verdict of the plausibility gate
+    (:mod:`bsdfkit.fit.plausibility`: ``physically_possible``, ``determined``, ``plausible`` and the reasons in
+    ``attrs['warnings']``); exports refuse a fit that fails the gate."""
+    values = np.stack([np.atleast_1d(ds[n].values).astype(float) for n in bsdf_model(model).parameter_names], axis=-1)
+    ds["tis_std"] = ("theta_i", plausibility.tis_std(model, theta_i_deg, values, ds["covariance"].values),
+                     {"long_name": "standard uncertainty of the model TIS (from the parameter covariance)"})
+    return plausibility.annotate(ds)

@@ -16,7 +16,7 @@ import contextlib
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from bsdfkit.core.conventions import (
 )
 from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
 from bsdfkit.core.records import incidences
+from bsdfkit.fit import plausibility
 from bsdfkit.fit.least_squares import fit_bsdf
 from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_band_spectrum, spectrum_model_values
 from bsdfkit.io import netcdf
@@ -745,15 +746,21 @@ def stage_fits(state: RunState) -> None:
             prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
             fit = fit_bsdf(prof, model)
             state.fits[(inter, side)] = (fit, prof)
-            for th in fit["theta_i"].values:
+            verdict = plausibility.evaluate(fit)  # the one gate of the exports, the CLI and the report
+            for k, th in enumerate(fit["theta_i"].values):
                 row = fit.sel(theta_i=th)
                 params = {p: float(row[p]) for p in ("rho", "A", "sigma", "B", "g") if p in row}
                 stds = {p: float(row[f"{p}_std"]) for p in params}
                 measured = float(tis["tis"].sel(interaction=inter, side=side, theta_i=th))
+                where = f"incidence {th:g} deg: "
                 rows.append({"interaction": inter, "side": side, "theta_i_deg": float(th), "model": model,
                              "params": params, "std": stds, "r2": float(row["r2"]), "converged": bool(row["converged"]),
                              "model_tis": float(row["tis"]), "measured_tis": measured,
-                             "tis_difference_pp": 100 * (float(row["tis"]) - measured)})
+                             "tis_difference_pp": 100 * (float(row["tis"]) - measured),
+                             "plausible": bool(verdict.plausible.values[k]),
+                             "physically_possible": bool(verdict.physically_possible.values[k]),
+                             "determined": bool(verdict.determined.values[k]),
+                             "gate_reasons": [r[len(where):] for r in verdict.reasons if r.startswith(where)]})
     # the converted light's spectrum, both hemispheres, at the chosen incidence
     th = opts.emission_incidence_deg
     density = sum(angular.hemispherical_spectrum(scan, "blue", th, side) for side in ("reflection", "transmission"))
@@ -771,8 +778,15 @@ def stage_fits(state: RunState) -> None:
     fig = bsdf_fits_figure(state.fits)
     state.outputs["bsdf_fits.png"] = lambda p, force: save_figure(fig, p, force)
     worst = max(rows, key=lambda r: abs(r["tis_difference_pp"]))
+    failing = [r for r in rows if not r["plausible"]]
+    gate = (f"{len(failing)}/{len(rows)} FAIL the plausibility gate (" + "; ".join(
+        f"{r['interaction']} {r['side']} {r['theta_i_deg']:g} deg: {r['gate_reasons'][0]}" for r in failing[:3])
+        + ("; ..." if len(failing) > 3 else "") + ")") if failing else "all pass the plausibility gate"
+    state.summary["bsdf_fit_gate"] = {
+        "thresholds": asdict(plausibility.THRESHOLDS), "failing": len(failing), "fits": len(rows),
+        "exported": "no fit is exported by this job (its tables are written from the calibrated scan)"}
     state.summary.setdefault("report_lines", []).extend([
-        f"BSDF fits: {sum(r['converged'] for r in rows)}/{len(rows)} converged; fitted-model TIS within "
+        f"BSDF fits: {sum(r['converged'] for r in rows)}/{len(rows)} converged, {gate}; fitted-model TIS within "
         f"{abs(worst['tis_difference_pp']):.3f} pp of the measured TIS (worst {worst['interaction']} {worst['side']} "
         f"{worst['theta_i_deg']:g} deg)",
         f"emission fit ({opts.emission_model}, θi = {th:g}°): peak {emission['peak_nm']:.1f} nm, "

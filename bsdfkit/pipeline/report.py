@@ -188,6 +188,16 @@ class Verdicts:
         return f'<span class="differs">{_esc(text)}</span>'
 
 
+def _gate_cell(fit: dict) -> str:
+    """The plausibility-gate cell of a BSDF fit row: 'passes', the reasons it fails, or '—' (older summaries)."""
+    if "plausible" not in fit:
+        return "—"
+    if fit.get("plausible"):
+        return "passes"
+    reasons = "; ".join(fit.get("gate_reasons") or ["see summary.json"])
+    return f'<span class="differs">fails: {_esc(reasons)}</span>'
+
+
 def _table(headers: Sequence[str], rows: Iterable[Sequence[Any]], caption: str = "", left: int = 1,
            text_cols: Iterable[int] = ()) -> str:
     """An HTML table; cells are HTML already (escape text before).
@@ -567,10 +577,22 @@ class _Report:
                          _pm_sig(p.get("A"), sd.get("A")) if "A" in p else "—",
                          _pm_sig(p.get("sigma"), sd.get("sigma")) if "sigma" in p else "—", _f(f.get("r2"), 4),
                          _f(f.get("tis_difference_pp"), 3),
-                         "yes" if f.get("converged") else '<span class="differs">no</span>'])
+                         "yes" if f.get("converged") else '<span class="differs">no</span>', _gate_cell(f)])
+        failing = sum(1 for f in fits if f.get("plausible") is False)
+        gate = self.s.get("bsdf_fit_gate") or {}
+        th = gate.get("thresholds") or {}
+        rule = (f"TIS above 1 by more than {_f(th.get('tis_sigma'), 0)} σ, a parameter at a bound or with a standard "
+                f"error above {_f(th.get('undetermined_ratio'), 0)}× its value, R² below {_f(th.get('min_r2'), 1)}"
+                if th else "see bsdfkit.fit.plausibility")
+        caption = (f"BSDF fits (± 1σ); ρ/π is the Lambertian term. Plausibility gate ({rule}): "
+                   + (f"{failing} of {len(fits)} fits fail it; exports refuse such a fit." if failing else
+                      "every fit passes it."))
         tab = _table(["interaction", "side", "θi (deg)", "model", "ρ (1)", "A (1/sr)", "σ (direction cosines)", "R²",
-                      "TIS model − data (pp)", "converged"], rows,
-                     "BSDF fits (± 1σ); ρ/π is the Lambertian term") if rows else _missing("No BSDF fits.")
+                      "TIS model − data (pp)", "converged", "plausibility gate"], rows,
+                     _esc(caption)) if rows else _missing("No BSDF fits.")
+        if failing:
+            tab = (f'<p><span class="differs">{failing} of {len(fits)} BSDF fits fail the plausibility gate</span> '
+                   "(flagged in the last column; converged means only that the solver stopped).</p>") + tab
         biys = [f for f in fits if f.get("interaction") == "biys"]
         note = ("<p>[Power-budget] §4.2: converted light (biys) is Lambertian, without a specular peak; this run fits "
                 f"biys with <b>{_esc(', '.join(sorted({f.get('model', '?') for f in biys})))}</b>.</p>") if biys else ""

@@ -22,7 +22,6 @@ Every write is atomic and refuses to overwrite an existing file unless ``force``
 """
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
@@ -35,6 +34,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
+from bsdfkit.fit import plausibility
 from bsdfkit.io import atomic
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
 from bsdfkit.reduction.hemispherical import elastic_source, hemispherical, reduction_kind
@@ -238,16 +238,6 @@ def _model_bsdf_fn(model: str, params: Mapping[float, Mapping[str, float]], side
     return bsdf_fn
 
 
-def _refuse_implausible_fit(ds: xr.Dataset, label: str) -> None:
-    """A fit flagged physically impossible or undetermined (:func:`bsdfkit.fit.least_squares.fit_bsdf`) is not
-    exported: the table would carry a number that is not a result."""
-    for flag, what in (("physically_possible", "physically impossible"), ("determined", "undetermined")):
-        if flag in ds and not bool(np.all(ds[flag].values)):
-            reasons = json.loads(ds.attrs.get("warnings", "[]"))
-            raise ValidationError(f"the fit is {what}: " + ("; ".join(reasons[:3]) or "see its warnings"),
-                                  file=label, field=flag, expected="a fit without warnings", got=False)
-
-
 def fit_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> BsdfFn:
     """BSDF callable of a fit result (see the module docstring for the dataset layout)."""
     model = str(ds.attrs.get("model", ""))
@@ -263,6 +253,8 @@ class _Source:
     theta_i_deg: NDArray[np.float64]
     abg: tuple[asap.AbgParameters, ...]
     description: str
+    #: per exported incidence, how far the table's total scatter may exceed 1 (the gate's k·u(TIS) for a fit)
+    tis_excess_allowed: NDArray[np.float64] | float = 0.0
     #: the engine's hemispherical value per side and incidence (elastic datasets): the TIS the table is checked
     #: against, the number ``bsdfkit tis`` reports for the same data
     engine_tis: dict[str, dict[float, float]] | None = None
@@ -286,17 +278,24 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
     ds = source
     if "model" in ds.attrs:
         model = str(ds.attrs["model"])
-        _refuse_implausible_fit(ds, label)
         fns = {s: fit_bsdf_fn(ds, interaction, s) for s in sides}
         theta = np.atleast_1d(np.asarray(ds["theta_i"].values, dtype=np.float64))
+        chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
+        # the one plausibility gate, on exactly what is written (these sides, these incidences); every format alike
+        written = [_select(_select(ds, "interaction", interaction, "interaction"), "side", s, "side") for s in sides]
+        written = [w.sel(theta_i=[t for t in theta if np.any(np.abs(chosen - t) <= _THETA_MATCH_DEG)])
+                   if "theta_i" in w.dims else w for w in written]
+        for w in written:
+            plausibility.refuse_implausible(w, label)
+        allowed = np.sqrt(sum(plausibility.tis_excess_allowed(w, chosen) ** 2 for w in written))
         abg: list[asap.AbgParameters] = []
         if model == "abg":
             for s in sides:
                 sub = _select(_select(ds, "interaction", interaction, "interaction"), "side", s, "side")
                 for t, p in _fit_parameters(sub, model).items():
                     abg.append(asap.AbgParameters(s, t, p["A"], p["B"], p["g"]))
-        chosen = theta if theta_i_deg is None else np.asarray(theta_i_deg, dtype=np.float64)
-        return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}")
+        return _Source(fns, chosen, tuple(abg), f"fit result ({model}) from {label}, interaction {interaction}",
+                       allowed)
     if reduction_kind(ds) == "hemispherical":
         return _elastic(ds, label, interaction, sides, theta_i_deg, wavelength_nm)
     if interaction not in CENTER:
@@ -344,7 +343,7 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
                          expected="a common incidence, or one side")
     engine = {s: {round(t, 6): v for t, v in zip(src.incidences_deg[s], src.tis[s])} for s in sides}
     return _Source({s: src.fn for s in sides}, np.asarray(common, dtype=np.float64), (),
-                   f"measured dataset {label} at {src.what} (hemispherical engine)", engine)
+                   f"measured dataset {label} at {src.what} (hemispherical engine)", engine_tis=engine)
 
 
 def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
@@ -442,13 +441,14 @@ def export(
             prop = tracepro.abg_property(
                 theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
                 specular_reflectance=settings.specular_reflectance,
-                specular_transmittance=settings.specular_transmittance,
+                specular_transmittance=settings.specular_transmittance, scatter_excess_allowed=src.tis_excess_allowed,
             )
         else:
             axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=opts.zero_azimuth_deg)
             grid = grids.harvey_shack_grid(fn, theta, sides, axes)
             prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
-                                           specular_transmittance=settings.specular_transmittance)
+                                           specular_transmittance=settings.specular_transmittance,
+                                           scatter_excess_allowed=src.tis_excess_allowed)
         tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
         tis_table = {s: v for s, v in prop.tis_computed().items() if s in sides}
     elif to == "zemax":

@@ -23,7 +23,10 @@ Conventions ([TracePro-UM]; docs/exports.md §2.1):
 * Energy: TracePro requires a + Rs + Ts + TS_R + TS_T = 1 (eq. 7.30 of [TracePro-UM]). The writer sets
   Abso_S = Abso_P = 1 − TS_R − TS_T − Refl − Tran with TS computed from the written (rounded) table by
   :func:`bsdfkit.tables.grids.tis_harvey_shack_table` — the same function the reader uses — so the file's
-  implied total scatter and its recomputed TIS agree to rounding.
+  implied total scatter and its recomputed TIS agree to rounding. A sum above 1 is refused, except by the
+  ``scatter_excess_allowed`` of a fit that passed the plausibility gate (TIS above 1 within k standard
+  uncertainties, :mod:`bsdfkit.fit.plausibility`): that fit is written as fitted, as by the Zemax and ASAP
+  writers, with Abso = 0, and the file's energy balance then exceeds 1 by that insignificant excess.
 * ABg (Scatter 1): BSDF = A/(B + |β − β0|^g) (eq. 7.25 of [TracePro-UM]); TIS by :func:`tis_abg` (polar
   quadrature over the unit disk about β0).
 
@@ -180,16 +183,29 @@ def _per_incidence(name: str, value: ArrayLike, n: int) -> NDArray[np.float64]:
     return arr
 
 
-def _absorptance(theta: NDArray, scatter_total: NDArray, refl: NDArray, tran: NDArray) -> NDArray:
+def _absorptance(theta: NDArray, scatter_total: NDArray, refl: NDArray, tran: NDArray,
+                 allowed: ArrayLike = 0.0) -> NDArray:
+    """Abso = 1 − TIS_R − TIS_T − Refl − Tran, refused where the sum exceeds 1 by more than ``allowed`` (+ rounding
+    slack); where a source's uncertainty allows an excess (a fit consistent with TIS ≤ 1), Abso is written as 0."""
+    allowed = np.broadcast_to(np.asarray(allowed, dtype=np.float64), np.shape(theta))
     abso = 1.0 - scatter_total - refl - tran
-    bad = abso < -_ENERGY_SLACK
+    bad = abso < -(_ENERGY_SLACK + allowed)
     if np.any(bad):
         k = int(np.argmax(bad))
+        within = f" + {allowed[k]:.3g} (the source's uncertainty)" if allowed[k] > 0 else ""
         raise ValidationError(
             f"energy balance exceeds 1 at IncAngle {theta[k]:g} deg (TIS_R + TIS_T + Refl + Tran)",
-            field="absorptance", expected="<= 1", got=float(scatter_total[k] + refl[k] + tran[k]),
+            field="absorptance", expected=f"<= 1{within}", got=float(scatter_total[k] + refl[k] + tran[k]),
         )
     return _quantize(np.clip(abso, 0.0, 1.0))
+
+
+def _allowance(value: ArrayLike, n: int) -> NDArray[np.float64]:
+    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy()
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValidationError("allowed scatter excess must be finite and >= 0", field="scatter_excess_allowed",
+                              got=arr.tolist())
+    return arr
 
 
 def table_property(
@@ -198,12 +214,16 @@ def table_property(
     options: TraceProOptions = TraceProOptions(),
     specular_reflectance: ArrayLike = 0.0,
     specular_transmittance: ArrayLike = 0.0,
+    scatter_excess_allowed: ArrayLike = 0.0,
 ) -> TraceProProperty:
     """Asymmetric-table (Scatter 5) property from a Harvey–Shack grid.
 
     ``grid`` comes from :func:`bsdfkit.tables.grids.harvey_shack_grid` with
     ``zero_azimuth_deg = options.zero_azimuth_deg``; a missing side is written as zeros. Values are
     rounded to what the file will hold before the TIS and the absorptance are computed.
+    ``scatter_excess_allowed`` [1] (per incidence): by how much TIS_R + TIS_T + Refl + Tran may exceed 1 —
+    k·u(TIS) of a fit that passed :mod:`bsdfkit.fit.plausibility`, so that this writer refuses what the gate
+    refuses and nothing more (Abso is then 0); 0 by default (the sum may exceed 1 only by rounding).
     """
     if tuple(grid.dims) != ("side", "theta_i", "rho", "psi"):
         raise ValidationError("grid must have dims (side, theta_i, rho, psi)", field="grid", got=str(grid.dims))
@@ -225,8 +245,10 @@ def table_property(
     refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)
     tran = _per_incidence("specular_transmittance", specular_transmittance, theta.size)
     tis = grids.tis_harvey_shack_table(full, table["rho"].values, table["psi"].values, theta, zero)
+    allowed = _allowance(scatter_excess_allowed, theta.size)
     return TraceProProperty(
-        options=options, scatter=5, theta_i_deg=theta, absorptance=_absorptance(theta, tis.sum(axis=0), refl, tran),
+        options=options, scatter=5, theta_i_deg=theta,
+        absorptance=_absorptance(theta, tis.sum(axis=0), refl, tran, allowed),
         specular_reflectance=refl, specular_transmittance=tran, table=table,
     )
 
@@ -239,8 +261,11 @@ def abg_property(
     options: TraceProOptions = TraceProOptions(),
     specular_reflectance: ArrayLike = 0.0,
     specular_transmittance: ArrayLike = 0.0,
+    scatter_excess_allowed: ArrayLike = 0.0,
 ) -> TraceProProperty:
-    """ABg (Scatter 1) property: ``brdf_abg``/``btdf_abg`` are (A, B, g) per incidence, shape (n, 3) or (3,)."""
+    """ABg (Scatter 1) property: ``brdf_abg``/``btdf_abg`` are (A, B, g) per incidence, shape (n, 3) or (3,).
+
+    ``scatter_excess_allowed`` as in :func:`table_property`."""
     theta = np.asarray(theta_i_deg, dtype=np.float64)
     params = np.zeros((2, theta.size, 3))
     for k, (side, value) in enumerate(zip(SIDES, (brdf_abg, btdf_abg))):
@@ -257,8 +282,9 @@ def abg_property(
     refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)
     tran = _per_incidence("specular_transmittance", specular_transmittance, theta.size)
     total = np.array([sum(tis_abg(*params[s, t], theta_i_deg=theta[t]) for s in range(2)) for t in range(theta.size)])
+    allowed = _allowance(scatter_excess_allowed, theta.size)
     return TraceProProperty(
-        options=options, scatter=1, theta_i_deg=theta, absorptance=_absorptance(theta, total, refl, tran),
+        options=options, scatter=1, theta_i_deg=theta, absorptance=_absorptance(theta, total, refl, tran, allowed),
         specular_reflectance=refl, specular_transmittance=tran, abg=abg,
     )
 
