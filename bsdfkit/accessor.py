@@ -27,11 +27,16 @@ class BsdfAccessor:
     def __init__(self, ds: xr.Dataset) -> None:
         self._ds = ds
 
-    def tis(self, incidence: float | None = None) -> Any:
-        """TIS per interaction and side with power and photon budgets (:func:`bsdfkit.tis`)."""
+    def tis(self, incidence: float | None = None, band: tuple[float, float] | None = None) -> xr.Dataset:
+        """TIS [fraction]: hemispherical values of elastic data, the interaction TIS of a phosphor plate
+        (:func:`bsdfkit.tis`).
+
+        ``incidence`` [deg]: one measured incidence (only it is reduced); ``band`` (low, high) [nm]: the band of
+        the band average of elastic data (refused for a phosphor plate).
+        """
         from bsdfkit import api
 
-        return api.tis(self._ds, incidence)
+        return api.tis(self._ds, incidence, band)
 
     def profile(self, interaction: str, side: str | None = None) -> xr.Dataset:
         """Band-averaged BSDF profile [1/sr] of one interaction (:func:`bsdfkit.profile`)."""

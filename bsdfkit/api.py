@@ -18,7 +18,6 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import InputError
-from bsdfkit.core.records import incidences
 from bsdfkit.fit.lambertian import at_wavelength
 from bsdfkit.fit.least_squares import BsdfFitOptions
 from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
@@ -29,9 +28,10 @@ from bsdfkit.pipeline.recipe import run
 from bsdfkit.raytrace import TraceResult, load_scene
 from bsdfkit.raytrace import trace as _trace
 from bsdfkit.raytrace.scene import Scene
-from bsdfkit.reduction.budget import InteractionTable, interaction_table
+from bsdfkit.reduction.any_sample import budget as _budget_any
+from bsdfkit.reduction.any_sample import tis as _tis_any
+from bsdfkit.reduction.budget import InteractionTable
 from bsdfkit.reduction.spectral import interaction_profile
-from bsdfkit.reduction.tis import tis_table
 from bsdfkit.tables.export import ExportResult, ExportSettings, FileSummary, read_any
 from bsdfkit.tables.export import export as _export
 from bsdfkit.tables.to_dataset import ingest as _ingest_any
@@ -62,45 +62,69 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     return _ingest_any(path, **options)
 
 
-def tis(ds: xr.Dataset, incidence: float | None = None) -> xr.Dataset:
-    """TIS [fraction] per interaction, side and incidence, with measurement and reconstruction error bars.
+def tis(ds: xr.Dataset, incidence: float | None = None,
+        band: tuple[float, float] | None = None) -> xr.Dataset:
+    """TIS [fraction] of any sample: the hemispherical values of elastic data, the interaction TIS of a phosphor
+    plate; the same function as ``bsdfkit tis`` (:func:`bsdfkit.reduction.any_sample.tis`).
+
+    Which reduction runs is decided by what the dataset holds
+    (:func:`bsdfkit.reduction.hemispherical.reduction_kind`).
 
     Parameters
     ----------
     ds
         Calibrated dataset from :func:`ingest`.
     incidence
-        Incidence angle [deg], one of the measured ones; ``None`` gives every measured incidence.
+        Incidence angle [deg], one of the measured ones: only that incidence is reduced and ``theta_i`` is a
+        scalar coordinate of the result. ``None`` reduces every measured incidence.
+    band
+        (low, high) [nm], closed. Elastic data: the band of the Δλ-weighted band average (default: the measured
+        range). A phosphor plate: refused (:class:`~bsdfkit.core.errors.InputError`, field ``band``), since
+        each of its interactions has its own band (bibs 450-470 nm, biys and yiys 470-740 nm).
 
     Returns
     -------
     xarray.Dataset
-        ``tis`` and its standard uncertainties on (interaction, side, theta_i); the two-arc hemisphere
-        reconstruction of ``docs/reductions.md``. The power and photon budget of Table 2 of the power-budget
-        paper [1]_ is :func:`budget`.
+        Elastic data (any sample): on (config, side, theta_i [deg], wavelength [nm]) ``tis`` (directional-
+        hemispherical reflectance on the reflection side, transmittance on the transmission side), ``tis_std``,
+        ``tis_std_measurement``, ``tis_std_reconstruction`` and ``lobe`` [1]; on (config, side, theta_i) their
+        band averages ``tis_band``, ``tis_band_std``, ``tis_band_std_measurement``,
+        ``tis_band_std_reconstruction``, ``lobe_band`` [1]; method, assumptions and warnings in the JSON attrs
+        ``entries`` and ``warnings`` (:func:`bsdfkit.reduction.any_sample.hemispherical_table`).
+        A phosphor plate: ``tis`` and its standard uncertainties [1] on (interaction, side, theta_i), the
+        two-arc hemisphere reconstruction of ``docs/reductions.md``. The power and photon budget of Table 2 of
+        the power-budget paper [1]_ is :func:`budget`.
 
     References
     ----------
     .. [1] ``docs/references.md``, [Power-budget].
     """
-    table = tis_table(ds)
-    if incidence is None:
-        return table
-    if not any(abs(t - float(incidence)) < 1e-6 for t in incidences(ds)):
-        raise InputError("no records at this incidence", file=ds.attrs.get("source"), field="incidence",
-                         expected="one of " + ", ".join(f"{t:g}" for t in incidences(ds)) + " deg", got=incidence)
-    return table.sel(theta_i=float(incidence), method="nearest")
+    return _tis_any(ds, incidence, band)
 
 
 def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
-    """Table 2 of the power-budget paper [1]_ at one measured incidence [deg]: TIS in % of the initial power
+    """Table 2 of the power-budget paper [1]_ at one measured incidence: TIS in % of the initial power
     and photons per interaction and side, losses and EQE.
+
+    Parameters
+    ----------
+    ds
+        A calibrated phosphor scan (configurations ``blue`` and ``yellow``, both sides, bi-spectral BSDF).
+        Elastic data is refused with one line saying why (:class:`~bsdfkit.core.errors.InputError`): its
+        hemispherical values are :func:`tis`.
+    incidence
+        Incidence angle [deg], one of the measured ones.
+
+    Returns
+    -------
+    InteractionTable
+        Power and photon entries [%] with standard uncertainties [%], EQE [1] and the photon ratio of biys.
 
     References
     ----------
     .. [1] ``docs/references.md``, [Power-budget].
     """
-    return interaction_table(ds, float(incidence))
+    return _budget_any(ds, incidence)
 
 
 def profile(ds: xr.Dataset, interaction: str, side: str | None = None) -> xr.Dataset:

@@ -10,7 +10,8 @@ from bsdfkit.cli._common import emit_json
 from bsdfkit.cli.tis import load_scan
 from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.io.text import read_text
-from bsdfkit.reduction.budget import MAX_ITERATIONS, interaction_table, module_budget, table_from_json
+from bsdfkit.reduction.any_sample import budget
+from bsdfkit.reduction.budget import MAX_ITERATIONS, module_budget, table_from_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,7 +54,7 @@ def _run(args: argparse.Namespace) -> int:
     else:
         if args.incidence is None:
             raise InputError("a scan needs --incidence", field="--incidence")
-        t = interaction_table(load_scan(args.scan), args.incidence)
+        t = budget(load_scan(args.scan), args.incidence)  # bsdfkit.budget: elastic data refused with one line
         tables = {"power": t.power, "photons": t.photons}
     result = module_budget(tables["power"], args.eta_mc, args.iterations).as_dict()
     if "photons" in tables:

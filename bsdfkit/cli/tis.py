@@ -9,19 +9,22 @@ Which reduction runs is decided by what the dataset holds (:func:`bsdfkit.reduct
   directional-hemispherical reflectance/transmittance per wavelength and its band average over ``--band``
   (default: the measured range), with measurement and reconstruction error bars and the assumptions made.
 
-``--mode`` overrides the choice.
+``--mode`` overrides the choice. ``--band`` is refused (one line, exit 2) for the interaction table, whose
+interactions each have their own band. The numbers are those of the API's :func:`bsdfkit.tis` (the same function,
+:func:`bsdfkit.reduction.any_sample.tis`), and of :func:`bsdfkit.budget` for the interaction table.
 """
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import InputError
 from bsdfkit.measurement.table import QUANTITIES
-from bsdfkit.reduction.budget import KEYS, interaction_table
-from bsdfkit.reduction.hemispherical import hemispherical, reduction_kind
+from bsdfkit.reduction.any_sample import budget, check_band, check_incidence, hemispherical_json, tis
+from bsdfkit.reduction.any_sample import refuse_band_for_interactions as refuse_band
+from bsdfkit.reduction.budget import KEYS
+from bsdfkit.reduction.hemispherical import reduction_kind
 from bsdfkit.tables.to_dataset import ingest
 
 
@@ -48,21 +51,20 @@ def load_scan(path: str, quantity: str | None = None):
 
 def _run(args: argparse.Namespace) -> int:
     ds = load_scan(args.scan, getattr(args, "quantity", None))
-    band = tuple(args.band) if args.band else None
-    if band is not None and not (all(math.isfinite(b) and 0 < b <= 1e6 for b in band) and band[0] < band[1]):
-        raise InputError("option out of range", field="--band", expected="LO < HI, finite wavelengths in nm > 0",
-                         got=band)
+    band = check_band(args.band, "--band")
+    check_incidence(ds, args.incidence, "--incidence")
     kind = reduction_kind(ds) if args.mode == "auto" else args.mode
     if kind == "interactions":
-        return _interactions(ds, args)
-    return _hemispherical(ds, args)
+        return _interactions(ds, args, band)
+    return _hemispherical(ds, args, band)
 
 
-def _interactions(ds, args: argparse.Namespace) -> int:
+def _interactions(ds, args: argparse.Namespace, band: tuple[float, float] | None) -> int:
     if args.incidence is None:
         raise InputError("the interaction table needs an incidence", file=args.scan, field="--incidence",
                          expected="a measured incidence angle in degrees")
-    table = interaction_table(ds, args.incidence)
+    refuse_band(band, "--band")
+    table = budget(ds, args.incidence)
     if args.json:
         emit_json(table.as_dict())
         return 0
@@ -74,26 +76,20 @@ def _interactions(ds, args: argparse.Namespace) -> int:
     return 0
 
 
-def _hemispherical(ds, args: argparse.Namespace) -> int:
-    band = tuple(args.band) if args.band else None
-    results = hemispherical(ds, theta_i=None if args.incidence is None else [args.incidence])
-    quantity = {"reflection": "directional-hemispherical reflectance",
-                "transmission": "directional-hemispherical transmittance"}
-    records = [r.as_dict() | {"quantity": quantity[r.side]} for r in results]
-    bands = [r.band_average(band) | {"quantity": quantity[r.side]} for r in results]
-    warnings = [w for r in results for w in r.warnings]
+def _hemispherical(ds, args: argparse.Namespace, band: tuple[float, float] | None) -> int:
+    # the API's function (bsdfkit.tis), so that the command line and the API give the same numbers
+    out = hemispherical_json(tis(ds, args.incidence, band, mode="hemispherical"))
     if args.json:
         emit_json({"reduction": "hemispherical", "source": str(args.scan), "units": "1 (fraction of incident power)",
-                   "rule": reduction_kind.__doc__.split("\n\n")[1].strip().replace("\n    ", " "),
-                   "hemispherical": records, "band_averaged": bands, "warnings": warnings})
+                   "rule": reduction_kind.__doc__.split("\n\n")[1].strip().replace("\n    ", " "), **out})
         return 0
-    for w in warnings:
+    for w in out["warnings"]:
         print(f"bsdfkit tis: warning: {w}", file=sys.stderr)
-    for r, b in zip(results, bands):
+    for r, b in zip(out["hemispherical"], out["band_averaged"]):
         span = "monochrome" if b["band_nm"] is None else f"{b['band_nm'][0]:g}-{b['band_nm'][1]:g} nm"
-        note = f"; specular lobe {b['lobe']:.4f}" if r.lobe_region_deg is not None else ""
-        if r.extrapolated_beyond_deg is not None:
-            note += f"; extrapolated beyond {r.extrapolated_beyond_deg:g}°"
-        print(f"{r.side:12s} θi = {r.theta_i:5g}°  {r.config}: {b['value']:.4f} ± {b['std']:.4f} "
+        note = f"; specular lobe {b['lobe']:.4f}" if r["lobe_region_deg"] is not None else ""
+        if r["extrapolated_beyond_deg"] is not None:
+            note += f"; extrapolated beyond {r['extrapolated_beyond_deg']:g}°"
+        print(f"{r['side']:12s} θi = {r['incidence_deg']:5g}°  {r['config']}: {b['value']:.4f} ± {b['std']:.4f} "
               f"({span}, {b['wavelengths']} wavelengths{note})")
     return 0

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.reduction import spectral
 from bsdfkit.reduction import tis as angular
@@ -65,11 +66,37 @@ def _losses_std(std: dict[str, float]) -> dict[str, float]:
     return {k: out[k] for k in KEYS}
 
 
+def require_phosphor_scan(ds: xr.Dataset) -> None:
+    """Refuse, with one line saying why, a dataset the interaction table and the power/photon budget cannot use.
+
+    They need a phosphor scan of the two-wavelength approach: configurations ``blue`` and ``yellow``, records
+    on both sides and a bi-spectral BSDF (``bsdf_bispectral`` with finite values). Elastic data (any other
+    sample) has directional-hemispherical values instead (``bsdfkit.tis`` / ``bsdfkit tis``).
+    """
+    configs = sorted({str(c) for c in ds["config"].values}) if "config" in ds.coords else []
+    sides = sorted({str(s) for s in ds["side"].values}) if "side" in ds.coords else []
+    missing = []
+    if not {"blue", "yellow"} <= set(configs):
+        missing.append("configuration(s) " + (", ".join(repr(c) for c in configs) or "none"))
+    if not set(SIDES) <= set(sides):
+        missing.append((" and ".join(sides) or "no side") + " only")
+    if not ("bsdf_bispectral" in ds and bool(np.isfinite(ds["bsdf_bispectral"].values).any())):
+        missing.append("no bi-spectral BSDF")
+    if missing:
+        raise InputError("the power/photon budget does not apply to elastic data (" + ", ".join(missing)
+                         + "): it needs a phosphor scan with configurations 'blue' and 'yellow', both sides and a "
+                         "bi-spectral BSDF; use tis for the hemispherical values of elastic data",
+                         file=ds.attrs.get("source") or None)
+
+
 def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = None,
                       blue_band: tuple[float, float] = (450.0, 470.0),
                       yellow_band: tuple[float, float] = (470.0, 740.0)) -> InteractionTable:
-    """Table 2 of the power-budget paper at incidence ``theta_i`` (deg) from a calibrated scan."""
+    """Table 2 of the power-budget paper at incidence ``theta_i`` (deg) from a calibrated scan.
 
+    A dataset that is not a phosphor scan is refused with one line (:func:`require_phosphor_scan`).
+    """
+    require_phosphor_scan(ds)
     tis = tis if tis is not None else angular.tis_table(ds, theta_i=[theta_i])
     sel = tis.sel(theta_i=theta_i, method="nearest")
     if abs(float(sel["theta_i"]) - theta_i) > 1e-6:
