@@ -11,6 +11,7 @@ Every CLI verb is a thin wrapper over one of these functions, and ``import bsdfk
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -154,13 +155,17 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
     """Write a TracePro, Zemax or ASAP-style table of a dataset or fit, with the TIS check of the written file.
 
     ``wavelength_nm`` [nm] picks one wavelength of a model with a wavelength dimension (e.g. the Lambertian
-    model of a reflectance standard, :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance`); the tables
-    are monochrome.
+    model of a reflectance standard, :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance`) or of a
+    measured spectral dataset (reconstructed by :mod:`bsdfkit.reduction.hemispherical`); the tables are
+    monochrome. A measured elastic dataset takes ``interaction="elastic"``.
     """
     if wavelength_nm is not None:
         model = source if isinstance(source, xr.Dataset) else netcdf.load(source)
+        if "model" not in model.attrs and "bsdf" in model:  # a measured dataset: the engine picks the wavelength
+            settings = replace(settings or ExportSettings(), wavelength_nm=float(wavelength_nm))
+            return _export(model, to, interaction, side, path, force, settings=settings)
         if "wavelength" not in model.dims or "model" not in model.attrs:
-            raise InputError("--wavelength-nm applies to a model with a wavelength dimension",
+            raise InputError("--wavelength-nm applies to a model with a wavelength dimension or a measured dataset",
                              file=None if isinstance(source, xr.Dataset) else source, field="wavelength",
                              expected="a per-wavelength model (bsdfkit fit reflectance)", got=wavelength_nm)
         source = at_wavelength(model, float(wavelength_nm))

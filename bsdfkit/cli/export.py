@@ -1,7 +1,9 @@
-"""``bsdfkit export SOURCE --to tracepro|zemax|asap --interaction I --side S -o PATH [--force]``.
+"""``bsdfkit export SOURCE --to tracepro|zemax|asap [--interaction I] --side S -o PATH [--force]``.
 
-SOURCE is a fit result netCDF (attribute ``model``) or a calibrated scan netCDF (reconstructed by
-``bsdfkit.reduction.tis.hemisphere_bsdf_fn``); see :func:`bsdfkit.tables.export.export`.
+SOURCE is a fit result netCDF (attribute ``model``), a calibrated phosphor scan netCDF (an interaction, reconstructed
+by ``bsdfkit.reduction.tis.hemisphere_bsdf_fn``) or any other measured dataset (elastic scatter, reconstructed by the
+hemispherical engine of ``bsdfkit.reduction.hemispherical``: the table integrates to what ``bsdfkit tis`` reports);
+see :func:`bsdfkit.tables.export.export`.
 """
 from __future__ import annotations
 
@@ -32,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "calibrated scan, and report the TIS of source and table (docs/exports.md).")
     p.add_argument("source", metavar="SOURCE", help="fit result or calibrated scan (netCDF)")
     p.add_argument("--to", required=True, choices=("tracepro", "zemax", "asap"), help="target format")
-    p.add_argument("--interaction", required=True, help="interaction to export (e.g. bibs, biys, yiys)")
+    p.add_argument("--interaction", default="", help="interaction of a phosphor scan or fit (bibs, biys, yiys); "
+                                                     "'elastic' or nothing for any other sample")
     p.add_argument("--side", default="reflection", choices=("reflection", "transmission", "both"),
                    help="scattering side (TracePro and ASAP accept both; default reflection)")
     p.add_argument("-o", "--output", required=True, metavar="PATH", help="output file")
