@@ -1186,6 +1186,17 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     side_code = np.array([SIDES.index(x) for x in rows.side], dtype=np.float64)
     keys = np.stack([side_code, np.round(th_i, 9), np.round(np.mod(ph_i, 360.0), 9), np.round(th_s, 9),
                      np.mod(np.round(phi_norm, 9), 360.0)], axis=1)
+    # a direction measured more than once (the nadir of every C-plane, a repeated point) is kept as several
+    # records, one per repetition: the hemispherical engine merges them with their spread in the uncertainty
+    lam_key = np.nan_to_num(np.asarray(rows.wavelength, dtype=np.float64), nan=-1.0)
+    _, cell_of = np.unique(np.column_stack([keys, lam_key]), axis=0, return_inverse=True)
+    cell_of = np.asarray(cell_of).ravel()
+    order_rows = np.argsort(cell_of, kind="stable")
+    occurrence = np.empty(cell_of.size, dtype=np.float64)
+    starts = np.r_[0, np.flatnonzero(np.diff(cell_of[order_rows])) + 1]
+    run = np.arange(cell_of.size) - np.repeat(starts, np.diff(np.r_[starts, cell_of.size]))
+    occurrence[order_rows] = run
+    keys = np.column_stack([keys, occurrence])
     _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first, kind="stable")  # records in order of first appearance
     rank = np.empty_like(order)
