@@ -71,6 +71,9 @@ class PolarInterpolant:
     radius: float | None
     extrapolated_beyond: float | None  # smallest polar distance [direction cosines] where the rim extrapolates
     azimuth_weight: float = AZIMUTH_WEIGHT  # s of the triangulation metric (s·ψ, r)
+    #: polar coordinates of the interpolation other than (ψ, r) about the centre in β: the incidence [deg]
+    #: of a grid about the specular *direction* (azimuth about it, angle from it), or None
+    direction_polar: float | None = None
 
     def matrix(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> sp.csr_matrix:
         """M (m × n, sparse) such that the interpolant at β = (x, y) is M @ values."""
@@ -84,7 +87,10 @@ class PolarInterpolant:
         """Barycentric coordinates (m, 3) and node indices (m, 3) of polar points (clipped to the domain)."""
         psi = np.mod(psi + np.pi, 2.0 * np.pi) - np.pi
         top = self._top(psi)
-        q = np.stack([self.azimuth_weight * psi, np.clip(r, 0.0, top * (1.0 - 1e-12))], axis=1)
+        r = np.clip(r, 0.0, top * (1.0 - 1e-12))
+        if self.direction_polar is not None:
+            psi, r = direction_polar(self.center, psi, r, self.direction_polar)
+        q = _coords(psi, r, self.azimuth_weight)
         q, simplex = _locate(self.tri, q)
         t = self.tri.transform[simplex]
         b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
@@ -255,8 +261,18 @@ def _locate(tri: Delaunay, q: NDArray[np.float64]) -> tuple[NDArray[np.float64],
     return q, simplex
 
 
+#: Shear that breaks the ties of a regular polar grid mirror-symmetrically (a cell's diagonal follows the sign of
+#: the azimuth), so that data symmetric about the plane of incidence are interpolated symmetrically.
+TIE_SHEAR = 1e-7
+
+
+def _coords(psi: NDArray, r: NDArray, s: float) -> NDArray[np.float64]:
+    """Triangulation coordinates (s·ψ + shear, r) of polar points."""
+    return np.stack([s * psi + TIE_SHEAR * np.sign(np.sin(psi)) * r, r], axis=1)
+
+
 def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
-    pts = np.stack([s * psi, r], axis=1)
+    pts = _coords(psi, r, s)
     return Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
 
 
@@ -275,7 +291,8 @@ def _rim_psi() -> NDArray[np.float64]:
 
 def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], *,
           rim: str = "trend", radius: float | None = None, normal_centered: bool = True,
-          reference: NDArray[np.float64] | None = None, azimuth_weight: float = AZIMUTH_WEIGHT) -> PolarInterpolant:
+          reference: NDArray[np.float64] | None = None, azimuth_weight: float = AZIMUTH_WEIGHT,
+          spokes: bool = False, about_direction: float | None = None) -> PolarInterpolant:
     """The polar interpolant of records at β = (x, y) about ``center``.
 
     Parameters
@@ -295,6 +312,13 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         Band-mean record values that decide the trend's clipping (between 0 and the last value).
     azimuth_weight
         s of the triangulation metric (s·ψ, r) [direction cosines per radian].
+    spokes
+        The records are a polar grid about ``center`` (straight spokes in β, as a Harvey–Shack table): each spoke
+        is held at its outermost value beyond it (as the table's own readers do), instead of a rim; the horizon
+        then cuts a domain that the spokes fill.
+    about_direction
+        With ``spokes``: the incidence [deg] of a grid whose spokes are great circles through the specular
+        *direction* (a Zemax table: radial angle and azimuth about it); interpolated in those coordinates.
 
     Returns
     -------
@@ -309,6 +333,8 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     dx, dy = x - center[0], y - center[1]
     r = np.hypot(dx, dy)
     psi = np.arctan2(dy, dx)
+    if about_direction is not None:
+        psi, r = direction_polar(center, psi, r, about_direction)
     at_center = r < CENTER_TOL
     off = np.flatnonzero(~at_center)
     if off.size < 2:
@@ -337,6 +363,8 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
                          field="bsdf", expected="records spanning an area of the disk") from exc
     stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)
     t_max = horizon_distance(center, rim_psi)
+    if spokes:
+        return _with_spokes(center, psi, r, off, base, n, azimuth_weight, rim_psi, about_direction)
     if rim == "ring":
         if radius is None:
             raise InputError("a ring rim needs a radius", field="radius")
@@ -413,3 +441,43 @@ def _trend_rows(stage0: PolarInterpolant, psi: NDArray, edge: NDArray, t_max: ND
         keep = ~(hold | zero)
         rows = (sp.diags(keep.astype(float)) @ rows + sp.diags(hold.astype(float)) @ m_edge).tocsr()
     return rows
+
+
+#: Spokes of a polar grid are held out to this distance from the centre (beyond any horizon: |β − β0| < 2).
+SPOKE_END = 2.0
+
+
+def _with_spokes(center: tuple[float, float], psi: NDArray, r: NDArray, off: NDArray[np.int64],
+                 base: sp.csr_matrix, n: int, s: float, rim_psi: NDArray,
+                 about_direction: float | None = None) -> PolarInterpolant:
+    """A polar grid about ``center``: every spoke (records at one azimuth) held at its outermost value out to
+    :data:`SPOKE_END`, so that the triangulation fills the whole disk between spokes (no rim)."""
+    key = np.round(psi[off] / 1e-6).astype(np.int64)
+    ends_p, ends_n = [], []
+    for k in np.unique(key):
+        members = off[key == k]
+        last = members[np.argmax(r[members])]
+        ends_p.append(psi[last])
+        ends_n.append(last)
+    ends_p, ends_n = np.asarray(ends_p), np.asarray(ends_n, dtype=np.int64)
+    p1 = np.concatenate([psi[off], rim_psi, ends_p])
+    end = SPOKE_END if about_direction is None else np.pi  # beyond the horizon in either coordinates
+    r1 = np.concatenate([r[off], np.zeros(N_RIM), np.full(ends_p.size, end)])
+    n1 = np.concatenate([off, np.full(N_RIM, n), ends_n])
+    pp, rr, nn = _periodic(p1, r1, n1)
+    tri = _triangulate(pp, rr, s)
+    return PolarInterpolant(center, tri, nn.astype(np.int64), base, n, None, None, s, about_direction)
+
+
+def direction_polar(center: tuple[float, float], psi: NDArray, r: NDArray, theta_i_deg: float
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(azimuth about the specular direction, angle from it) [rad] of the points at polar (ψ, r) about
+    ``center`` in β (the frame of the incidence: +x toward the specular side)."""
+    x = center[0] + r * np.cos(psi)
+    y = center[1] + r * np.sin(psi)
+    z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))
+    ti = np.radians(theta_i_deg)
+    along = x * np.cos(ti) - z * np.sin(ti)  # on e1 = (cos θi, 0, −sin θi)
+    cos_a = np.clip(x * np.sin(ti) + z * np.cos(ti), -1.0, 1.0)
+    return np.arctan2(y, along), np.arccos(cos_a)
+

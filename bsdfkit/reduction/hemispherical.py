@@ -823,10 +823,47 @@ DENSE_COVERAGE = 0.5
 
 
 def _body_interpolant(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], rim: str,
-                      reference: NDArray[np.float64]):
-    """The body's polar interpolant about the normal, its azimuth weight by :func:`_body_azimuth_weight`."""
-    return disk.build(x, y, center, rim=rim, normal_centered=center == (0.0, 0.0), reference=reference,
+                      reference: NDArray[np.float64], about_direction: float | None = None):
+    """The body's polar interpolant: about the normal with the azimuth weight of :func:`_body_azimuth_weight`,
+    or, about the specular point, a polar grid on its own spokes (straight in β, or great circles through the
+    specular direction when ``about_direction`` gives the incidence [deg])."""
+    if center != (0.0, 0.0):
+        return disk.build(x, y, center, rim=rim, normal_centered=False, reference=reference, spokes=True,
+                          about_direction=about_direction)
+    return disk.build(x, y, center, rim=rim, normal_centered=True, reference=reference,
                       azimuth_weight=_body_azimuth_weight(x, y))
+
+
+#: Share of the records on spokes (four or more records at one azimuth) about the specular point from which the
+#: records are a polar grid about it (:func:`_native_grid`).
+SPOKE_SHARE = 0.9
+
+
+#: A native polar grid has at least this many spokes (planes through the specular point are not one).
+MIN_SPOKES = 24
+
+
+def _native_grid(geom: Geometry, finite: NDArray[np.bool_]) -> str | None:
+    """``beta`` when at least :data:`SPOKE_SHARE` of the records lie on :data:`MIN_SPOKES` or more straight spokes
+    about the specular point in β (Harvey–Shack tables: TracePro, ASAP-style), ``direction`` when they lie on as
+    many great circles through the specular direction (Zemax tables), else None."""
+    x, y = geom.frame()
+    k = np.flatnonzero(finite)
+    c = float(np.sin(np.radians(geom.theta_i)))
+    dx, dy = x[k] - c, y[k]
+    r = np.hypot(dx, dy)
+    off = r > 1e-9
+    if off.sum() < 4 * MIN_SPOKES:
+        return None
+    psi = np.arctan2(dy[off], dx[off])
+    spoke_dir, _ = disk.direction_polar((c, 0.0), psi, r[off], geom.theta_i)
+    for name, az in (("beta", psi), ("direction", spoke_dir)):
+        key = np.round(az / 1e-6).astype(np.int64)
+        uniq, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+        on = counts[np.asarray(inverse).ravel()] >= 4
+        if np.mean(on) >= SPOKE_SHARE and np.sum(counts >= 4) >= MIN_SPOKES:
+            return name
+    return None
 
 
 def _body_azimuth_weight(x: NDArray[np.float64], y: NDArray[np.float64]) -> float:
@@ -868,7 +905,8 @@ def _azimuth_gap(geom: Geometry, finite: NDArray[np.bool_], region: NDArray[np.i
 
 
 def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], body_center: str,
-                lobe_c: float | None, radius: float, rim: str = "trend", mirror: str | None = None):
+                lobe_c: float | None, radius: float, rim: str = "trend", mirror: str | None = None,
+                native: str | None = None):
     """Body (about ``body_center``) and lobe (about (lobe_c, 0) within ``radius``) weights over the profile's
     records, the linear lobe integral's log/linear ratio on ``ref``, extrapolated radius, and an evaluator."""
     x, y = geom.frame()
@@ -883,7 +921,8 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
             raise _RegionTooWide(f"{outside.size} of {keep.size} records outside the lobe region")
     else:
         region, outside = np.zeros(0, dtype=np.int64), keep
-    body = _body_interpolant(x[outside], y[outside], bc, rim, ref[outside])
+    body = _body_interpolant(x[outside], y[outside], bc, rim, ref[outside],
+                             None if native != "direction" else geom.theta_i)
     c_body = np.zeros(n)
     c_body[outside] = body.weights()
     c_lobe = np.zeros(n)
@@ -931,15 +970,19 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     finite = np.isfinite(ref)
     s = np.nan_to_num(ref_std)
     lobe_c, radius, in_plane_region = _disk_region(geom, ref, s)
+    native = _native_grid(geom, finite)
+    if native:  # a polar grid about the specular point or direction: integrated on its own spokes
+        lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
     resolved = lobe_c is not None and radius > LOBE_MAX_RADIUS
     if resolved:  # scatter rising over most of the disk is no specular lobe: integrated directly with the body
         lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
     # the body is always interpolated about the normal: there the domain is r ≤ 1 for every azimuth, so records
     # at one distance from the centre never straddle the horizon (about an off-normal centre they do, and
     # interpolating across azimuth at constant distance bridges the concave edge of the domain)
-    body_center, other_center = "normal", None
+    body_center, other_center = ("specular" if native else "normal"), None
     try:
-        body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius)
+        body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius,
+                                                              native=native)
     except _RegionTooWide:  # a "lobe" covering most of the disk is the body itself
         lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
         body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, None, 0.0)
@@ -947,7 +990,7 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     def variant(**kw) -> NDArray[np.float64]:
         if not errors:
             return body + kappa * lobe
-        args = dict(body_center=body_center, lobe_c=lobe_c, radius=radius) | kw
+        args = dict(body_center=body_center, lobe_c=lobe_c, radius=radius, native=native) | kw
         b, lo, _, _, _, _ = _disk_parts(geom, finite, ref, **args)
         return b + kappa * lo
 
@@ -1001,6 +1044,13 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
         if sparse_lobe:
             assumptions.append("lobe measured on the in-plane arc only: rotationally symmetric about its peak "
                                "(error bar: either in-plane half alone)")
+    elif native:
+        what = ("straight spokes about the specular point in direction cosines (a Harvey-Shack table)"
+                if native == "beta" else "great circles through the specular direction (a radial x azimuth "
+                "table about it)")
+        method = "disk: a polar grid about the specular point, on its own spokes"
+        assumptions.append(f"the records lie on {what}: interpolated along and between its spokes, each spoke "
+                           "held at its outermost value up to the horizon (as the format's readers do)")
     elif resolved:
         method = "disk: everything about the normal (no specular lobe narrower than the disk)"
         assumptions.append(f"the peak near the specular direction extends over more than {LOBE_MAX_RADIUS:g} in "
