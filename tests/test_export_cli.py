@@ -62,11 +62,13 @@ def test_export_then_read_json(tmp_path, capsys, to, side):
         assert source[0] == pytest.approx(lobe_inside, rel=1e-9)  # Lambert + 2 pi sigma^2 A at normal incidence
         np.testing.assert_allclose(summary["tis_computed"][s], source, rtol=5e-3)
     ds.close()
+    # the file's own TIS line is the format's quadrature of its table (the writer's self-check)
+    quadrature = summary["details"]["tis_format_quadrature"]
     if to == "tracepro":
-        np.testing.assert_allclose(summary["tis_stated"]["total"], summary["tis_computed"]["total"], atol=2e-7)
+        np.testing.assert_allclose(summary["tis_stated"]["total"], quadrature["total"], atol=2e-7)
     else:
         for s in sides:
-            np.testing.assert_allclose(summary["tis_stated"][s], summary["tis_computed"][s], rtol=1e-6)
+            np.testing.assert_allclose(summary["tis_stated"][s], quadrature[s], rtol=1e-6)
 
 
 def test_force_is_needed_to_overwrite(tmp_path, capsys):
@@ -134,6 +136,7 @@ def test_scan_source_uses_the_hemisphere_reconstruction(tmp_path, monkeypatch):
         return lambda theta_i_deg, side_, d: np.full(d.shape[:-1], 0.25 / np.pi)
 
     monkeypatch.setattr(export_module, "hemisphere_bsdf_fn", hemisphere_bsdf_fn)
+    monkeypatch.setattr(export_module, "reduction_kind", lambda ds: "interactions")  # a phosphor scan
     result = export_module.export(scan_dataset(), "tracepro", "yiys", "both", tmp_path / "scan.txt")
     assert calls == [("yiys", "reflection", 6.0), ("yiys", "transmission", 6.0)]
     assert result.incidences_deg == (0.0, 45.0)
@@ -144,11 +147,17 @@ def test_scan_source_uses_the_hemisphere_reconstruction(tmp_path, monkeypatch):
 def test_read_real_zemax_file_text_and_json(capsys):
     code, text, err = run(capsys, "read", str(REAL))
     assert code == 0, err
-    assert "zemax" in text and "0.134506" in text and "-3.35" in text
+    assert "zemax" in text and "0.134506" in text
     code, text, _ = run(capsys, "read", str(REAL), "--json")
     summary = json.loads(text)
     assert summary["tis_stated"]["reflection"][0] == 0.134506
     assert len(summary["tis_computed"]["reflection"]) == 13
+    # the format's quadrature (zero beyond its last radial node) is kept beside the engine's value
+    assert summary["details"]["tis_format_quadrature"]["reflection"][0] == pytest.approx(0.1300, abs=5e-5)
+    # one BSDF, one answer: read reports what tis reports for the same file
+    code, text, _ = run(capsys, "tis", str(REAL), "--json")
+    tis = [b["value"] for b in json.loads(text)["band_averaged"]]
+    np.testing.assert_allclose(summary["tis_computed"]["reflection"], tis, rtol=1e-12)
 
 
 def test_read_errors_are_one_line(tmp_path, capsys):

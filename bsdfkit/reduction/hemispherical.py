@@ -1466,7 +1466,6 @@ class ElasticSource:
     fn: Callable[[float, str, NDArray[np.float64]], NDArray[np.float64]]  # bsdf_fn(theta_i_deg, side, dirs)
     incidences_deg: dict[str, list[float]]
     tis: dict[str, list[float]]  # per side, one value per incidence [fraction]
-    tis_std: dict[str, list[float]]
     wavelength_nm: float | None
     what: str  # "550 nm", "mean over 12 wavelengths 500-600 nm", "single wavelength"
     methods: dict[str, list[str]]
@@ -1536,7 +1535,6 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
     weights: dict[tuple[str, float], NDArray] = {}
     out_t: dict[str, list[float]] = {}
     out_tis: dict[str, list[float]] = {}
-    out_std: dict[str, list[float]] = {}
     methods: dict[str, list[str]] = {}
     chosen, what = None, ""
     for side in sides:
@@ -1545,17 +1543,15 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
         if on.sizes["record"] == 0:
             raise InputError("the source holds no data for this side", file=label, field="--side", got=side)
         angles = theta_i if theta_i is not None else incidences(on)
-        out_t[side], out_tis[side], out_std[side], methods[side] = [], [], [], []
+        out_t[side], out_tis[side], methods[side] = [], [], []
         for th in angles:
-            model = profile_model(ds, config, float(th), side)
+            model = profile_model(ds, config, float(th), side, errors=False)  # the value is what is checked
             w, chosen, what = _spectral_weights(model, wavelength, band, label)
             res = result_of(model)
             key = (side, round(float(th), 6))
             models[key], weights[key] = model, w
             out_t[side].append(float(th))
             out_tis[side].append(float(w @ res.value))
-            out_std[side].append(float(np.hypot(np.sqrt(np.sum((w * res.std_measurement) ** 2)),
-                                                w @ res.std_reconstruction)))
             methods[side].append(res.method)
 
     def fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -1566,5 +1562,5 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
                              got=theta_i_deg)
         return models[key].bsdf_at(weights[key], directions)
 
-    return ElasticSource(fn=fn, incidences_deg=out_t, tis=out_tis, tis_std=out_std, wavelength_nm=chosen,
+    return ElasticSource(fn=fn, incidences_deg=out_t, tis=out_tis, wavelength_nm=chosen,
                          what=what, methods=methods)

@@ -113,7 +113,8 @@ class ExportSettings:
 
 @dataclass(frozen=True)
 class ExportResult:
-    """What was written: TIS of the source (direct integral) and of the written table, per side and incidence."""
+    """What was written: TIS of the source and of the written table (as `bsdfkit read` integrates it), per side
+    and incidence."""
 
     format: str
     path: str
@@ -411,8 +412,9 @@ def export(
 
     TracePro takes both sides in one file (BRDF and BTDF columns; a side not exported is zero); Zemax
     holds one ScatterType per file (``both`` is refused); ASAP-style tables list the sides as rows.
-    Returns the TIS of the source (direct integral, :func:`bsdfkit.tables.grids.tis_reference`) and of the
-    written table (the reader's quadrature) so that grid adequacy is visible.
+    Returns the TIS of the source (the hemispherical engine's value for a measured dataset, else the direct
+    integral :func:`bsdfkit.tables.grids.tis_reference`) and of the written table as :func:`read_any` integrates
+    it (the value ``bsdfkit read`` reports), so that grid adequacy is visible.
     """
     settings = settings or ExportSettings()
     if to not in FORMATS:
@@ -430,7 +432,6 @@ def export(
     fn = _dispatch(src.fns)
     comments = (f"source: {src.description}",) + tuple(settings.comments)
     deviation: float | None = None
-    tis_table: dict[str, NDArray[np.float64]]
     if to == "tracepro":
         opts = settings.tracepro
         if settings.tracepro_scatter == "abg":
@@ -450,7 +451,6 @@ def export(
                                            specular_transmittance=settings.specular_transmittance,
                                            scatter_excess_allowed=src.tis_excess_allowed)
         tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
-        tis_table = {s: v for s, v in prop.tis_computed().items() if s in sides}
     elif to == "zemax":
         axes = settings.specular_axes or grids.SpecularAxes.default(
             plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
@@ -460,15 +460,15 @@ def export(
             grid = grids.specular_grid(fn, theta, side, axes)
         bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
         zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
-        tis_table = {side: bsdf.tis_computed().values[0]}
     else:
         axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=0.0)
         grid = grids.harvey_shack_grid(fn, theta, sides, axes)
         chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
         table = asap.asap_table(grid, abg=chosen, comments=comments)
         asap.write_asap(path, table, force=force, generated_at=generated_at)
-        computed = table.tis_computed()
-        tis_table = {s: computed.sel(side=s).values for s in sides}
+    # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
+    reread = read_any(path)
+    tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     if src.engine_tis is not None:
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:
@@ -511,6 +511,9 @@ def read_any(path: str | Path) -> FileSummary:
     summary = _read_format(path)
     if any("@rotation=" in k for k in summary.tis_computed):
         summary.details["tis_rule"] = "format quadrature (several sample rotations)"
+        return summary
+    if summary.format == "tracepro" and summary.details.get("scatter") != 5:
+        summary.details["tis_rule"] = "the model's own integral (a TracePro ABg property holds no table)"
         return summary
     engine = file_tis(path, summary.incidences_deg)
     computed = {k: engine.get(k, [0.0] * len(summary.incidences_deg)) for k in summary.tis_computed
