@@ -277,8 +277,13 @@ def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
 
 
 def _periodic(psi: NDArray, r: NDArray, node: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """Points copied at ψ ± 2π (only those within π of the seam are needed)."""
-    near_lo, near_hi = psi < 0.0, psi >= 0.0
+    """Points within a margin of the seam ψ = ±π copied across it (at ψ ± 2π): the margin is twice the widest
+    azimuth gap between points (at least 30°), so that triangles across the seam join the same neighbours as
+    anywhere else."""
+    u = np.unique(np.round(psi, 9))
+    gap = float(np.max(np.diff(np.r_[u, u[0] + 2 * np.pi]))) if u.size > 1 else 2 * np.pi
+    margin = min(np.pi, max(np.pi / 6, 2.0 * gap))
+    near_lo, near_hi = psi < -np.pi + margin, psi >= np.pi - margin
     p = np.concatenate([psi, psi[near_lo] + 2 * np.pi, psi[near_hi] - 2 * np.pi])
     rr = np.concatenate([r, r[near_lo], r[near_hi]])
     nn = np.concatenate([node, node[near_lo], node[near_hi]])
@@ -353,9 +358,11 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     p0 = np.concatenate([psi[off], rim_psi])
     r0 = np.concatenate([r[off], np.zeros(N_RIM)])
     n0 = np.concatenate([off, np.full(N_RIM, i_center)])
-    pp, rr, nn = _periodic(p0, r0, n0)
     rows_c = sp.csr_matrix(c_row[None, :])
     base = sp.vstack([sp.identity(n, format="csr"), rows_c]).tocsr()
+    if spokes:
+        return _with_spokes(center, psi, r, off, base, n, azimuth_weight, rim_psi, about_direction)
+    pp, rr, nn = _periodic(p0, r0, n0)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)
     except QhullError as exc:
@@ -363,8 +370,6 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
                          field="bsdf", expected="records spanning an area of the disk") from exc
     stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)
     t_max = horizon_distance(center, rim_psi)
-    if spokes:
-        return _with_spokes(center, psi, r, off, base, n, azimuth_weight, rim_psi, about_direction)
     if rim == "ring":
         if radius is None:
             raise InputError("a ring rim needs a radius", field="radius")

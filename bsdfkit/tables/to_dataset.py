@@ -21,7 +21,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic, netcdf
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
@@ -30,7 +30,7 @@ from bsdfkit.measurement.table import (
 )
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
-from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export, read_any
+from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
 from bsdfkit.tables.vendor import sniff_format, vendor_dataset
 
 __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "ingest",
@@ -139,17 +139,6 @@ def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
     return fn
-
-
-def _written_tis(path: str | Path, fmt: str, sides: Sequence[str]) -> tuple[list[float], dict[str, list[float]]]:
-    summary = read_any(path)
-    out = {}
-    for side in sides:
-        if side not in summary.tis_computed:
-            raise NumericalError("the re-read table has no TIS for this side", file=path, field=side,
-                                 expected=", ".join(summary.tis_computed))
-        out[side] = [float(v) for v in summary.tis_computed[side]]
-    return [float(t) for t in summary.incidences_deg], out
 
 
 def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: bool = False, *,
@@ -279,7 +268,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
                         for s in sides}
     else:  # a phosphor interaction: the direct integral of its reconstruction
         tis_original = {s: list(result.tis_source[s]) for s in sides}
-    read_thetas, tis_written = _written_tis(path, to, sides)
+    read_thetas = list(result.incidences_deg)  # export re-read the written file as bsdfkit read does
+    tis_written = {s: [float(v) for v in result.tis_table[s]] for s in sides}
     worst = 0.0
     for s in sides:
         for k, t in enumerate(thetas):
