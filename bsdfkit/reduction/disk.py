@@ -276,11 +276,13 @@ def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
     return Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
 
 
-def _periodic(psi: NDArray, r: NDArray, node: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+def _periodic(psi: NDArray, r: NDArray, node: NDArray, n_records: int | None = None
+              ) -> tuple[NDArray, NDArray, NDArray]:
     """Points within a margin of the seam ψ = ±π copied across it (at ψ ± 2π): the margin is twice the widest
-    azimuth gap between points (at least 30°), so that triangles across the seam join the same neighbours as
-    anywhere else."""
-    u = np.unique(np.round(psi, 9))
+    azimuth gap between the records (nodes below ``n_records``; at least 30°), so that triangles across the seam
+    join the same neighbours as anywhere else."""
+    own = psi if n_records is None else psi[node < n_records]
+    u = np.unique(np.round(own, 9))
     gap = float(np.max(np.diff(np.r_[u, u[0] + 2 * np.pi]))) if u.size > 1 else 2 * np.pi
     margin = min(np.pi, max(np.pi / 6, 2.0 * gap))
     near_lo, near_hi = psi < -np.pi + margin, psi >= np.pi - margin
@@ -362,7 +364,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     base = sp.vstack([sp.identity(n, format="csr"), rows_c]).tocsr()
     if spokes:
         return _with_spokes(center, psi, r, off, base, n, azimuth_weight, rim_psi, about_direction)
-    pp, rr, nn = _periodic(p0, r0, n0)
+    pp, rr, nn = _periodic(p0, r0, n0, n)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)
     except QhullError as exc:
@@ -403,7 +405,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     if radius is not None:  # a lobe: only the records inside its ring
         keep = r1 <= np.concatenate([np.minimum(radius, horizon_distance(center, p0)), top]) + 1e-12
         p1, r1, n1 = p1[keep], r1[keep], n1[keep]
-    pp, rr, nn = _periodic(p1, r1, n1)
+    pp, rr, nn = _periodic(p1, r1, n1, n)
     tri = _triangulate(pp, rr, azimuth_weight)
     return PolarInterpolant(center, tri, nn.astype(np.int64), nodes, n, radius, extrapolated, azimuth_weight)
 
@@ -469,7 +471,7 @@ def _with_spokes(center: tuple[float, float], psi: NDArray, r: NDArray, off: NDA
     end = SPOKE_END if about_direction is None else np.pi  # beyond the horizon in either coordinates
     r1 = np.concatenate([r[off], np.zeros(N_RIM), np.full(ends_p.size, end)])
     n1 = np.concatenate([off, np.full(N_RIM, n), ends_n])
-    pp, rr, nn = _periodic(p1, r1, n1)
+    pp, rr, nn = _periodic(p1, r1, n1, n)
     tri = _triangulate(pp, rr, s)
     return PolarInterpolant(center, tri, nn.astype(np.int64), base, n, None, None, s, about_direction)
 

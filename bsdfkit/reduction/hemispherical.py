@@ -834,7 +834,7 @@ def _body_interpolant(x: NDArray[np.float64], y: NDArray[np.float64], center: tu
                       azimuth_weight=_body_azimuth_weight(x, y))
 
 
-#: Share of the records on spokes (four or more records at one azimuth) about the specular point from which the
+#: Share of the records on spokes (three or more records at one azimuth) about the specular point from which the
 #: records are a polar grid about it (:func:`_native_grid`).
 SPOKE_SHARE = 0.9
 
@@ -860,8 +860,8 @@ def _native_grid(geom: Geometry, finite: NDArray[np.bool_]) -> str | None:
     for name, az in (("beta", psi), ("direction", spoke_dir)):
         key = np.round(az / 1e-6).astype(np.int64)
         uniq, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-        on = counts[np.asarray(inverse).ravel()] >= 4
-        if np.mean(on) >= SPOKE_SHARE and np.sum(counts >= 4) >= MIN_SPOKES:
+        on = counts[np.asarray(inverse).ravel()] >= 3
+        if np.mean(on) >= SPOKE_SHARE and np.sum(counts >= 3) >= MIN_SPOKES:
             return name
     return None
 
