@@ -158,7 +158,8 @@ class PolarInterpolant:
         """The domain is r ≤ 1 about the normal: a rectangle in (ψ, r), integrated exactly per triangle. Elsewhere
         (a centre off the normal, a lobe's ring) the horizon bounds it by a curve the triangulation's hull does not
         follow, and a polar quadrature grid clipped to the domain integrates what :meth:`matrix` evaluates."""
-        return self.radius is None and self.center == (0.0, 0.0)
+        return (self.radius is None and self.center == (0.0, 0.0)
+                and float(self.tri.points[:, 1].max()) <= 1.0 + 1e-9)  # held spokes reach beyond the horizon
 
     def _grid(self, n_psi: int = QUAD_PSI, n_r: int = QUAD_R
               ) -> tuple[sp.csr_matrix, NDArray[np.float64]]:

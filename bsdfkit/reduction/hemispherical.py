@@ -823,11 +823,12 @@ DENSE_COVERAGE = 0.5
 
 
 def _body_interpolant(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], rim: str,
-                      reference: NDArray[np.float64], about_direction: float | None = None):
+                      reference: NDArray[np.float64], about_direction: float | None = None,
+                      spokes: bool = False):
     """The body's polar interpolant: about the normal with the azimuth weight of :func:`_body_azimuth_weight`,
     or, about the specular point, a polar grid on its own spokes (straight in β, or great circles through the
     specular direction when ``about_direction`` gives the incidence [deg])."""
-    if center != (0.0, 0.0):
+    if spokes:
         return disk.build(x, y, center, rim=rim, normal_centered=False, reference=reference, spokes=True,
                           about_direction=about_direction)
     return disk.build(x, y, center, rim=rim, normal_centered=True, reference=reference,
@@ -922,7 +923,7 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
     else:
         region, outside = np.zeros(0, dtype=np.int64), keep
     body = _body_interpolant(x[outside], y[outside], bc, rim, ref[outside],
-                             None if native != "direction" else geom.theta_i)
+                             None if native != "direction" else geom.theta_i, spokes=native is not None)
     c_body = np.zeros(n)
     c_body[outside] = body.weights()
     c_lobe = np.zeros(n)
@@ -1195,6 +1196,7 @@ class ProfileModel:
     parts: tuple[tuple[NDArray[np.int64], Reconstruction], ...]  # (indices into cols, reconstruction)
     scale: NDArray[np.float64]  # relative standard uncertainty common to all records, per wavelength
     warnings: tuple[str, ...] = ()
+    assumptions: tuple[str, ...] = ()  # made on the records before the reconstruction (a mirrored half)
 
     def reconstruction_of(self, j: int) -> Reconstruction:
         """The reconstruction of wavelength column ``cols[j]``."""
@@ -1290,6 +1292,26 @@ def _merge_duplicates(geom: Geometry, f: NDArray, u: NDArray, label: str
     return merged, fm, um, warnings
 
 
+def _mirrored_half(geom: Geometry, f: NDArray, u: NDArray) -> tuple[Geometry, NDArray, NDArray, list[str]]:
+    """Records on one side of the plane of incidence only (a half-hemisphere scan) mirrored across it: plane
+    symmetry assumed and stated. The mirrored records repeat the measured values (their uncertainties are not
+    independent of the originals: the measurement part is then understated by up to √2 off the plane)."""
+    _, y = geom.frame()
+    ok = np.isfinite(f).any(axis=1)
+    yy = y[ok]
+    if not (np.any(np.abs(yy) > 1e-9) and (np.all(yy >= -1e-9) or np.all(yy <= 1e-9))):
+        return geom, f, u, []
+    off = np.flatnonzero(np.abs(y) > 1e-9)
+    phi_spec = geom.phi_i - 180.0
+    mirrored = Geometry(theta_i=geom.theta_i, phi_i=geom.phi_i,
+                        theta_s=np.concatenate([geom.theta_s, geom.theta_s[off]]),
+                        phi_s=np.concatenate([geom.phi_s, np.mod(2.0 * phi_spec - geom.phi_s[off], 360.0)]),
+                        arc=np.concatenate([geom.arc, geom.arc[off]]), side=geom.side)
+    note = (f"records on one side of the plane of incidence only: mirrored across it ({off.size} records), the "
+            "sample assumed plane-symmetric")
+    return mirrored, np.concatenate([f, f[off]]), np.concatenate([u, u[off]]), [note]
+
+
 def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
                   n_r: int = 400, errors: bool = True) -> ProfileModel:
     """The records of one configuration, incidence [deg] and side, merged and reconstructed (:class:`ProfileModel`);
@@ -1314,6 +1336,7 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
                     phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side)
     label = str(ds.attrs.get("source", "dataset"))
     geom, f, u, warnings = _merge_duplicates(geom, f, u, label)
+    geom, f, u, stated = _mirrored_half(geom, f, u)
     finite = np.isfinite(f)
     cols = np.flatnonzero(finite.any(axis=0))
     if cols.size == 0:
@@ -1332,7 +1355,7 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
         parts.append((np.asarray(js, dtype=np.int64), reconstruct(geom, ref, ref_std, n_psi, n_r, errors)))
     return ProfileModel(config=config, theta_i=float(theta_i), side=side, geom=geom, f=f, u=u, wavelength=wl,
                         cols=cols, parts=tuple(parts), scale=_scale_std(ds, config, wl.size),
-                        warnings=tuple(warnings))
+                        warnings=tuple(warnings), assumptions=tuple(stated))
 
 
 def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
@@ -1389,7 +1412,8 @@ def result_of(model: ProfileModel) -> HemisphericalResult:
     return HemisphericalResult(config=model.config, theta_i=model.theta_i, side=model.side,
                                wavelength=model.wavelength[cols], value=out["value"], std_measurement=out["meas"],
                                std_reconstruction=out["rec"], components=comps, method=info.method,
-                               assumptions=info.assumptions, extrapolated_beyond_deg=info.extrapolated_beyond_deg,
+                               assumptions=[*model.assumptions, *info.assumptions],
+                               extrapolated_beyond_deg=info.extrapolated_beyond_deg,
                                lobe_region_deg=info.region.in_plane_deg, lobe=out["lobe"],
                                notes=model.warnings)
 
