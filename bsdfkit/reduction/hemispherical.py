@@ -635,13 +635,12 @@ def _grown_until_symmetric(geom: Geometry, ref: NDArray[np.float64], region: Reg
 
 
 def sampling_method(geom: Geometry, finite: NDArray[np.bool_]) -> str:
-    """``arcs`` when every finite record lies on the in-plane arc (half-profiles about the normal and the specular
-    point, with the in-plane lobe rules: under-sampled and unresolved lobes), else ``disk`` (polar interpolation
-    of every record over the projected disk, :mod:`bsdfkit.reduction.disk`): a perpendicular arc, grids,
-    C-planes, other planes, scattered records. On synthetic tables of exact truth the disk method is the more
-    accurate wherever records leave the plane of incidence (two arcs: within 0.1 % for an isotropic sample, where
-    the two-arc blend is 0.3-2 % off; docs/reductions.md)."""
-    return "arcs" if bool(np.all(geom.arc[finite] == "in_plane")) else "disk"
+    """``arcs`` when every finite record lies on the in-plane arc or the perpendicular arc through the specular
+    direction (half-profiles about the normal and the specular point, with the in-plane lobe rules: under-sampled
+    and unresolved lobes), else ``disk`` (polar interpolation of every record over the projected disk,
+    :mod:`bsdfkit.reduction.disk`): grids, C-planes, other planes, a φs = 90/270° arc, scattered records."""
+    on_arcs = np.isin(geom.arc[finite], ("in_plane", "perpendicular"))
+    return "arcs" if bool(on_arcs.all()) else "disk"
 
 
 def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
@@ -1074,6 +1073,20 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
 
 
 # ------------------------------------------------------------------------------------------- datasets
+def band_selection(wl: NDArray[np.float64], band: tuple[float, float] | None
+                   ) -> tuple[NDArray[np.bool_], float, float]:
+    """The wavelengths [nm] of a closed band (low, high) [nm] (default: all of ``wl``) and its edges; one line
+    naming the band when it is empty or holds no measured wavelength."""
+    lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
+    if not hi >= lo:
+        raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
+    sel = (wl >= lo - 1e-9) & (wl <= hi + 1e-9)
+    if not sel.any():
+        raise InputError("no measured wavelength in the band", field="band",
+                         expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))
+    return sel, float(lo), float(hi)
+
+
 @dataclass(frozen=True)
 class HemisphericalResult:
     """Directional-hemispherical reflectance or transmittance (fractions) of one configuration, incidence and side,
@@ -1116,13 +1129,7 @@ class HemisphericalResult:
         wl = self.wavelength
         if not np.all(np.isfinite(wl)):  # a monochrome dataset without a wavelength coordinate
             return self._summary(np.ones(wl.size, dtype=bool), None)
-        lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
-        if not hi >= lo:
-            raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
-        sel = (wl >= lo - 1e-9) & (wl <= hi + 1e-9)
-        if not sel.any():
-            raise InputError("no measured wavelength in the band", field="band",
-                             expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))
+        sel, lo, hi = band_selection(wl, band)
         return self._summary(sel, [lo, hi])
 
     def _summary(self, sel: NDArray[np.bool_], band: list[float] | None) -> dict:
@@ -1210,13 +1217,7 @@ class ProfileModel:
         wl = self.wavelength[self.cols]
         if not np.all(np.isfinite(wl)):
             return np.full(wl.size, 1.0 / wl.size)
-        lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
-        if not hi >= lo:
-            raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
-        sel = (wl >= lo - 1e-9) & (wl <= hi + 1e-9)
-        if not sel.any():
-            raise InputError("no measured wavelength in the band", field="band",
-                             expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))
+        sel, _, _ = band_selection(wl, band)
         w = np.zeros(wl.size)
         w[sel] = np.gradient(wl[sel]) if sel.sum() > 1 else 1.0
         return w / w.sum()
