@@ -250,8 +250,6 @@ MALFORMED = [
     ("field_count", [GOOD_HEADER, "10,5,0.1,0.2", "10,10,0.1"], {"quantity": "brdf"}, [":3", "wrong number of fields"]),
     ("incidence_range", [GOOD_HEADER, "95,5,0.1,0.2"], {"quantity": "brdf"}, [":2", "theta_i", "out of range"]),
     ("scatter_range", [GOOD_HEADER, "10,120,0.1,0.2"], {"quantity": "brdf"}, [":2", "theta_s", "out of range"]),
-    ("duplicate", [GOOD_HEADER, "10,5,0.1,0.2", "10,6,0.1,0.2", "10,5,0.3,0.2"], {"quantity": "brdf"},
-     [":4", "duplicate", "line 2"]),
     ("no_quantity", [GOOD_HEADER, "10,5,0.1,0.2"], {}, [":1", "500nm", "--quantity"]),
     ("quantity_conflict", ["theta_i,theta_s,BRDF", "10,5,0.1"], {"quantity": "btdf"}, [":1", "BRDF", "btdf"]),
     ("side_conflict", ["theta_i,theta_s,BRDF", "10,5,0.1"], {"side": "transmission"}, [":2", "BRDF", "side"]),
@@ -291,7 +289,7 @@ def test_missing_file_and_folder(tmp_path):
         read_table(tmp_path, quantity="brdf")
 
 
-@pytest.mark.parametrize("name", ["text_cell", "no_quantity", "duplicate", "field_count"])
+@pytest.mark.parametrize("name", ["text_cell", "no_quantity", "field_count"])
 def test_cli_errors_exit_2_one_line(tmp_path, capsys, name):
     _, lines, options, parts = next(m for m in MALFORMED if m[0] == name)
     path = write(tmp_path / f"{name}.csv", lines)
@@ -426,3 +424,14 @@ def test_full_sphere_polar_angles_from_the_front_normal(tmp_path):
 def test_polar_angles_beyond_90_that_contradict(tmp_path, rows, message):
     with pytest.raises(BsdfkitError, match=message):
         read_table(write(tmp_path / "bad.csv", rows), wavelength=550.0)
+
+
+def test_a_direction_measured_twice_is_kept_for_the_engine_to_merge(tmp_path):
+    """Repeated directions (every C-plane's nadir, a repeated point) are records, not an error: the
+    hemispherical engine merges them with their spread (tests/test_hemisphere_geometries.py)."""
+    path = write(tmp_path / "twice.csv", [GOOD_HEADER, "10,5,0.1,0.2", "10,6,0.1,0.2", "10,5,0.3,0.2"])
+    ds = read_table(path, quantity="brdf")
+    same = (ds["theta_s"].values == 5.0)
+    assert int(same.sum()) == 2
+    assert sorted(ds["bsdf"].values[same][:, 0].tolist()) == pytest.approx([0.1, 0.3])
+
