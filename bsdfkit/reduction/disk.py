@@ -162,23 +162,23 @@ class PolarInterpolant:
                 and float(self.tri.points[:, 1].max()) <= 1.0 + 1e-9)  # held spokes reach beyond the horizon
 
     def _grid(self, n_psi: int = QUAD_PSI, n_r: int = QUAD_R
-              ) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Nodes (ψ, r) and area weights of the polar quadrature grid clipped to the domain."""
         psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi) - np.pi
         top = self._top(psi)
         x, tw = gauss_legendre(n_r)
         x, tw = 0.5 * (x + 1.0), 0.5 * tw
         r = top[:, None] * x[None, :]
         w = (top[:, None] ** 2) * x[None, :] * tw[None, :] * (2 * np.pi / n_psi)
-        m = self._matrix_polar(np.repeat(psi, n_r), r.ravel())
-        return m, w.ravel()
+        return np.repeat(psi, n_r), r.ravel(), w.ravel()
 
     def weights(self) -> NDArray[np.float64]:
         """w such that the integral of the (linear) interpolant over its domain is w @ values [sr]: exact on
         each (sub-)triangle, ∫ g r dA = A [Σ_k g_k r_k + (Σ_k g_k)(Σ_k r_k)] / 12 for g linear (about the
         normal), else on a polar grid of :data:`QUAD_PSI` × :data:`QUAD_R` nodes clipped to the domain."""
         if not self._flat_top:
-            m, w = self._grid()
-            return np.asarray(m.T @ w).ravel()
+            psi, r, w = self._grid()
+            return np.asarray(self._matrix_polar(psi, r).T @ w).ravel()
         nodes, bary, area, r = self._cells()
         # per parent node i: g = λ_i, its values at the sub-triangle's vertices bary[:, k, i]
         per = area[:, None] / 12.0 * (np.einsum("kvi,kv->ki", bary, r) + bary.sum(axis=1) * r.sum(axis=1)[:, None])
@@ -191,8 +191,13 @@ class PolarInterpolant:
         if mode == "linear":
             return float(self.weights() @ values)
         if not self._flat_top:
-            m, w = self._grid()
-            return float(w @ self._log_values(m, np.asarray(values, dtype=np.float64)))
+            psi, r, w = self._grid()
+            bary, nodes = self._barycentric(psi, r)
+            v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]
+            pos = (v > 0).all(axis=1)
+            out = np.sum(bary * v, axis=1)
+            out[pos] = np.exp(np.sum(bary[pos] * np.log(v[pos]), axis=1))
+            return float(w @ out)
         nodes, bary, area, r = self._cells()
         v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]  # (K, 3) parent node values
         pos = (v > 0).all(axis=1)
@@ -203,20 +208,6 @@ class PolarInterpolant:
         g = np.where(pos[:, None], np.exp(logv), lin)
         return float(np.sum(area[:, None] * _DUNAVANT_WEIGHTS[None, :] * g * rq))
 
-
-    def _log_values(self, m: sp.csr_matrix, values: NDArray[np.float64]) -> NDArray[np.float64]:
-        """ln-f interpolation on the quadrature grid of :meth:`_grid`, f where a node is not positive."""
-        n_psi, n_r = QUAD_PSI, QUAD_R
-        psi = np.repeat((np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi) - np.pi, n_r)
-        x, _ = gauss_legendre(n_r)
-        r = (self._top(psi[::n_r])[:, None] * (0.5 * (x + 1.0))[None, :]).ravel()
-        bary, nodes = self._barycentric(psi, r)
-        node_v = self.nodes @ values
-        v = node_v[nodes]
-        pos = (v > 0).all(axis=1)
-        out = m @ values
-        out[pos] = np.exp(np.sum(bary[pos] * np.log(v[pos]), axis=1))
-        return out
 
 
 def _clip(poly: list, bound: float, sign: float) -> list:

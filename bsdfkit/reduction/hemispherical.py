@@ -884,12 +884,10 @@ def _body_azimuth_weight(x: NDArray[np.float64], y: NDArray[np.float64]) -> floa
 AZIMUTH_GAP_DEG = 90.0
 
 
-def _azimuth_gap(geom: Geometry, finite: NDArray[np.bool_], region: NDArray[np.int64]
-                 ) -> tuple[float, float, float] | None:
+def _azimuth_gap(geom: Geometry, finite: NDArray[np.bool_]) -> tuple[float, float, float] | None:
     """The widest azimuth gap [deg] of the records in rings 0.1 wide in |β| (up to 0.9) and that ring's edges,
     when wider than :data:`AZIMUTH_GAP_DEG`; None otherwise (the lobe region's records count: they are measured)."""
     x, y = geom.frame()
-    del region
     keep = np.flatnonzero(finite)
     r = np.hypot(x[keep], y[keep])
     ang = np.mod(np.degrees(np.arctan2(y[keep], x[keep])), 360.0)
@@ -1029,7 +1027,7 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     assumptions = [f"records off the in-plane and perpendicular arcs ({n_other} of {int(finite.sum())}): "
                    "interpolated over the projected disk in polar coordinates (linear in the distance from the "
                    "centre, across azimuth between records at about the same distance)"]
-    gap = _azimuth_gap(geom, finite, region)
+    gap = _azimuth_gap(geom, finite)
     if gap is not None:
         assumptions.append(f"the records leave azimuths of up to {gap[0]:.0f} deg unmeasured at {gap[1]:.2g}-"
                            f"{gap[2]:.2g} from the normal (direction cosines): the body there is interpolated "
@@ -1204,13 +1202,6 @@ class ProfileModel:
     scale: NDArray[np.float64]  # relative standard uncertainty common to all records, per wavelength
     warnings: tuple[str, ...] = ()
     assumptions: tuple[str, ...] = ()  # made on the records before the reconstruction (a mirrored half)
-
-    def reconstruction_of(self, j: int) -> Reconstruction:
-        """The reconstruction of wavelength column ``cols[j]``."""
-        for js, rec in self.parts:
-            if j in js:
-                return rec
-        raise InputError("wavelength without data", field="wavelength")
 
     def band_weights(self, band: tuple[float, float] | None = None) -> NDArray[np.float64]:
         """Δλ weights (summing to 1) over ``cols`` of the band mean (every finite wavelength by default)."""
