@@ -887,19 +887,65 @@ AZIMUTH_GAP_DEG = 90.0
 def _azimuth_gap(geom: Geometry, finite: NDArray[np.bool_]) -> tuple[float, float, float] | None:
     """The widest azimuth gap [deg] of the records in rings 0.1 wide in |β| (up to 0.9) and that ring's edges,
     when wider than :data:`AZIMUTH_GAP_DEG`; None otherwise (the lobe region's records count: they are measured)."""
+    gaps = [g for g in _ring_gaps(geom, finite) if g[0] > AZIMUTH_GAP_DEG and g[1] > 0.05]
+    return max(gaps, key=lambda g: g[0])[:3] if gaps else None
+
+
+#: Ring width [direction cosines] of the azimuth-gap analysis (:func:`_ring_gaps`).
+RING_WIDTH = 0.1
+
+
+def _ring_gaps(geom: Geometry, finite: NDArray[np.bool_]) -> list[tuple[float, float, float, NDArray[np.int64]]]:
+    """Per ring :data:`RING_WIDTH` wide in |β| about the normal: (widest azimuth gap [deg], inner edge, outer edge,
+    the ring's finite records); rings with fewer than two records are left out."""
     x, y = geom.frame()
     keep = np.flatnonzero(finite)
     r = np.hypot(x[keep], y[keep])
     ang = np.mod(np.degrees(np.arctan2(y[keep], x[keep])), 360.0)
-    worst = None
-    for lo in np.arange(0.1, 0.9, 0.1):
-        a = np.sort(ang[(r >= lo) & (r < lo + 0.1)])
+    out = []
+    for lo in np.arange(0.0, 1.0 - 1e-9, RING_WIDTH):
+        on = (r >= lo) & (r < lo + RING_WIDTH) & (r > 1e-9)
+        a = np.sort(ang[on])
         if a.size < 2:
             continue
-        g = float(np.max(np.diff(np.r_[a, a[0] + 360.0])))
-        if g > AZIMUTH_GAP_DEG and (worst is None or g > worst[0]):
-            worst = (g, float(lo), float(lo + 0.1))
-    return worst
+        out.append((float(np.max(np.diff(np.r_[a, a[0] + 360.0]))), float(lo), float(lo + RING_WIDTH), keep[on]))
+    return out
+
+
+#: A ring counts as covered in azimuth (its spread measures the body's anisotropy) with records in this many 30°
+#: sectors (:func:`_gap_anisotropy`).
+COVERED_SECTORS = 4
+
+
+def _gap_anisotropy(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64],
+                    body_records: NDArray[np.int64]) -> tuple[NDArray[np.float64], float] | None:
+    """Weights whose dot product with the records is the body's integral [fraction] over the azimuth gaps wider
+    than :data:`AZIMUTH_GAP_DEG`, times the body's relative azimuthal variation δ measured in the rings that are
+    covered in azimuth (rms about a linear radial trend, relative to the ring's mean; the largest ring); and δ.
+    None when no ring has such a gap or no ring is covered (then the anisotropy is not measured at all)."""
+    x, y = geom.frame()
+    body = np.zeros(geom.n, dtype=bool)
+    body[body_records] = True
+    rings = _ring_gaps(geom, finite & body)
+    gapped = [g for g in rings if g[0] > AZIMUTH_GAP_DEG]
+    if not gapped:
+        return None
+    deltas = []
+    for _, _, _, k in rings:
+        sectors = np.unique((np.mod(np.degrees(np.arctan2(y[k], x[k])), 360.0) // 30).astype(int))
+        v = np.nan_to_num(ref[k])
+        if sectors.size < COVERED_SECTORS or k.size < 6 or np.mean(v) <= 0:
+            continue
+        a = np.stack([np.ones(k.size), np.hypot(x[k], y[k])], 1)
+        resid = v - a @ np.linalg.lstsq(a, v, rcond=None)[0]
+        deltas.append(float(np.sqrt(np.mean(resid ** 2)) / np.mean(v)))
+    if not deltas:
+        return None
+    delta = max(deltas)
+    w = np.zeros(geom.n)
+    for gap, lo, hi, k in gapped:
+        w[k] += delta * (gap / 360.0) * np.pi * (hi * hi - lo * lo) / k.size  # the gap's share of the ring's area
+    return w, delta
 
 
 def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], body_center: str,
@@ -1029,10 +1075,18 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
                    "centre, across azimuth between records at about the same distance)"]
     gap = _azimuth_gap(geom, finite)
     if gap is not None:
-        assumptions.append(f"the records leave azimuths of up to {gap[0]:.0f} deg unmeasured at {gap[1]:.2g}-"
-                           f"{gap[2]:.2g} from the normal (direction cosines): the body there is interpolated "
-                           "across the gap at the same distance from the normal, exact for a body symmetric about "
-                           "the normal; an anisotropy there is not measured and not in the error bar")
+        text = (f"the records leave azimuths of up to {gap[0]:.0f} deg unmeasured at {gap[1]:.2g}-{gap[2]:.2g} "
+                "from the normal (direction cosines): the body there is interpolated across the gap at the same "
+                "distance from the normal, exact for a body symmetric about the normal; ")
+        aniso = (_gap_anisotropy(geom, finite, ref, np.setdiff1d(np.flatnonzero(finite), region)) if errors
+                 else None)
+        if aniso is not None:
+            alt["azimuth_gap"] = {"anisotropic_body": body + kappa * lobe + aniso[0]}
+            text += (f"error bar: the body over the gaps varying as much as it does across azimuth where the "
+                     f"records cover it ({100 * aniso[1]:.2g} % rms)")
+        else:
+            text += "an anisotropy there is not measured and not in the error bar"
+        assumptions.append(text)
     center_deg = None if lobe_c is None else float(np.degrees(np.arcsin(lobe_c)))
     if region.size:
         method = "disk: body about the normal + lobe about its peak"
