@@ -34,6 +34,17 @@ def test_measured_table_fit_saved_and_exported(tmp_path, scan):
     assert len(out["fits"]) == 5
     # a white diffuser with a gloss lobe: 0.9 < TIS < 1 at the near-normal incidences
     assert all(0.9 < f["tis"] < 1.0 for f in out["fits"] if f["theta_i_deg"] <= 40)
+    # the data's TIS beside the fit's is the engine's value (what `bsdfkit tis` reports), one function
+    import xarray as xr
+
+    from bsdfkit.reduction.any_sample import tis
+    table = tis(xr.load_dataset(scan))
+    for f in out["fits"]:
+        row = table.sel(side="reflection", theta_i=f["theta_i_deg"]).isel(config=0)
+        assert f["data_tis"] == pytest.approx(float(row["tis_band"]), rel=1e-12)
+        assert f["data_tis_std"] == pytest.approx(float(row["tis_band_std"]), rel=1e-12)
+        if f["plausible"]:  # a plausible fit integrates to the data within their combined uncertainties
+            assert abs(f["tis"] - f["data_tis"]) < 3 * np.hypot(f["tis_std"], f["data_tis_std"]), f
     # at 80° the Lambert + Gaussian model explains too little of the data (R² 0.85): that fit fails the gate
     assert [f["theta_i_deg"] for f in out["fits"] if not f["plausible"]] == [80.0]
     assert len(out["warnings"]) == 1 and "incidence 80 deg: R² = 0.85" in out["warnings"][0]

@@ -289,3 +289,8 @@ def test_fit_bsdf_cli_on_bundled_measurement(capsys):
     assert 0 < p["rho"] < 1 and p["A"] > 0 and 0 < p["sigma"] < 0.5
     # TIS = ρ + (clipped) lobe ≥ ρ, and below 1 for a passive sample
     assert p["rho"] <= row["tis"] < 1.0
+    # the data's TIS beside it: the interaction table `bsdfkit tis` reports
+    from bsdfkit import api
+    from bsdfkit.reduction.any_sample import tis
+    measured = tis(api.ingest(scan), 45.0).sel(interaction="bibs", side="reflection")
+    assert row["data_tis"] == pytest.approx(float(measured["tis"]), rel=1e-12)

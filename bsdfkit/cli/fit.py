@@ -33,6 +33,7 @@ from bsdfkit.io import atomic, netcdf
 from bsdfkit.io.jsonout import to_jsonable
 from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
 from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
+from bsdfkit.reduction.any_sample import measured_tis
 from bsdfkit.reduction.spectral import interaction_profile
 
 BSDF_MODELS = tuple(REGISTERED_BSDF_MODELS)
@@ -202,11 +203,13 @@ def _run_bsdf(args: argparse.Namespace) -> int:
         if not bool(row.converged):
             _warn_unconverged(f"{args.model} fit at θi = {theta:g}°", int(row.iterations))
         where = f"incidence {theta:g} deg: "
+        data_tis, data_tis_std = measured_tis(ds, args.interaction, args.side, float(theta))
         fits.append({
             "theta_i_deg": float(theta),
             "params": {n: float(row[n]) for n in names},
             "std": {n: float(row[f"{n}_std"]) for n in names},
             "r2": float(row.r2), "rms": float(row.rms), "tis": float(row.tis), "tis_std": float(row.tis_std),
+            "data_tis": data_tis, "data_tis_std": data_tis_std,
             "converged": bool(row.converged), "n_points": int(row.n_points),
             "physically_possible": bool(row.physically_possible), "determined": bool(row.determined),
             "plausible": bool(verdict.plausible.values[k]),
@@ -224,7 +227,8 @@ def _run_bsdf(args: argparse.Namespace) -> int:
         parts = ", ".join(f"{n} = {f['params'][n]:.4g} ± {f['std'][n]:.2g}" for n in names)
         gate = ("passes the plausibility gate" if f["plausible"] else
                 "FAILS the plausibility gate: " + "; ".join(f["reasons"]))
-        print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f} ± {f['tis_std']:.2g}; R² = {f['r2']:.4f}; "
+        print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f} ± {f['tis_std']:.2g} "
+              f"(data {f['data_tis']:.4f} ± {f['data_tis_std']:.2g}); R² = {f['r2']:.4f}; "
               f"{'converged' if f['converged'] else 'NOT converged'}, {gate}")
     if args.output:
         print(f"wrote {args.output}" + ("" if verdict.passed else

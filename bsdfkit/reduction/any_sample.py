@@ -129,6 +129,18 @@ def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | 
     return table if theta is None else table.isel(theta_i=0)
 
 
+def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence: float) -> tuple[float, float]:
+    """The data's TIS [fraction] and its standard uncertainty beside a fit of one interaction profile: what
+    :func:`tis` reports for that interaction (phosphor plate) or the band average over the measured range of
+    the dataset's only configuration (``elastic``), at one measured incidence [deg] and side."""
+    table = tis(ds, incidence)
+    if table.attrs.get("reduction") == "interactions":
+        row = table.sel(interaction=interaction, side=side)
+        return float(row["tis"]), float(row["tis_std"])
+    row = table.sel(side=side).isel(config=0)
+    return float(row["tis_band"]), float(row["tis_band_std"])
+
+
 def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
     """Table 2 of the power-budget paper at one measured incidence [deg] (a phosphor scan only).
 
