@@ -657,6 +657,47 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
     return _reconstruct_arcs(geom, ref, ref_std, n_psi, n_r, errors)
 
 
+def _perpendicular_anisotropy(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
+                              lobe_records: NDArray[np.int64]) -> float:
+    """The body's relative departure from symmetry about the normal that the perpendicular arc shows: its records
+    (outside the lobe region) against the in-plane body at the same |β| (the mean of the in-plane halves there,
+    linear in |β|), rms over the records with the measurement noise removed in quadrature; 0 when the excess over
+    the noise is within twice its standard error."""
+    x, y = geom.frame()
+    finite = np.isfinite(ref)
+    off = np.ones(geom.n, dtype=bool)
+    off[lobe_records] = False
+    ip = np.flatnonzero(finite & off & (geom.arc == "in_plane"))
+    pp = np.flatnonzero(finite & off & (geom.arc == "perpendicular"))
+    r_pp = np.hypot(x[pp], y[pp])
+    pred, pred_u, n = np.zeros(pp.size), np.zeros(pp.size), np.zeros(pp.size)
+    for half in (x[ip] >= 0, x[ip] < 0):
+        k = ip[half]
+        if k.size < 2:
+            continue
+        order = np.argsort(np.abs(x[k]))
+        rk = np.abs(x[k])[order]
+        inside = (r_pp >= rk[0]) & (r_pp <= rk[-1])
+        pred[inside] += np.interp(r_pp[inside], rk, ref[k][order])
+        pred_u[inside] += np.interp(r_pp[inside], rk, np.nan_to_num(ref_std[k][order])) ** 2
+        n[inside] += 1
+    ok = (n > 0) & (pred > 0)
+    if np.sum(ok) < 3:
+        return 0.0
+    pred, pred_u = pred[ok] / n[ok], np.sqrt(pred_u[ok]) / n[ok]
+    d = ref[pp[ok]] / pred - 1.0
+    noise = (np.nan_to_num(ref_std[pp[ok]]) ** 2 + pred_u ** 2) / pred ** 2
+    excess = d * d - noise
+    # a departure within twice its own standard error is noise, not anisotropy
+    if float(np.mean(excess)) <= 2.0 * float(np.std(excess)) / np.sqrt(excess.size):
+        return 0.0
+    return float(np.sqrt(float(np.mean(excess))))
+
+
+#: A perpendicular-arc departure from the in-plane body [relative rms] above this is stated in the assumptions.
+ANISOTROPY_STATED = 0.01
+
+
 def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
                       n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
     finite = np.isfinite(ref)
@@ -698,8 +739,11 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
         alt["centre"] = {f"{other_center}_centred": variant(body_center=other_center)}
     if ends:
         alt["tail"] = {rule: variant(rule=rule) for rule in ("hold", "zero")}
+    aniso = _perpendicular_anisotropy(geom, ref, s, region.records) if two_arcs and errors else 0.0
     if two_arcs:
         alt["azimuth"] = {f"blend_p{p:g}": variant(p=p) for p in (1.0, 4.0)}
+        if aniso > 0:  # the arcs show a body not symmetric about the normal: unmeasured azimuths may vary as much
+            alt["anisotropy"] = {"body_scaled": body + kappa * lobe + aniso * body}
     else:
         alt["azimuth"] = {"forward": variant(azimuth="+alpha"), "backward": variant(azimuth="-alpha")}
     sep = {}
@@ -754,6 +798,11 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
         assumptions.append(f"specular lobe narrower than the sampling ({n_in} in-plane sample(s)): its integral "
                            f"is bounded, 0 to {bound:.3g} on the band mean, and "
                            "reported as half the bound with half the bound as its error")
+    if aniso > ANISOTROPY_STATED:
+        assumptions.append(f"the perpendicular arc departs from the in-plane body at the same distance from the "
+                           f"normal by {100 * aniso:.2g} % rms beyond noise: the body is not symmetric about the "
+                           "normal, the azimuths between the arcs are not measured (error bar: the whole body "
+                           "scaled by that departure)")
     if not two_arcs:
         assumptions.append("in-plane data only: the perpendicular half-profiles are the mean of the two in-plane "
                            "halves (error bar: either half alone)")
