@@ -1,0 +1,131 @@
+"""Issue #26, command/tracer/output part: nothing silent, nothing cryptic.
+
+Each fault is one line on stderr naming its cause (the wording is checked, not only the exit status 2), and
+never a traceback: degenerate LED beam widths, closed lossless cavities under a plate, worker failures of a
+sweep, output folders (mode, mount points, full disks, long names), ``--force`` on an input, usage errors.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from bsdfkit.cli.main import main
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.raytrace import loads_scene, trace
+from bsdfkit.raytrace.scene import COLLIMATED_EXPONENT, LOSSLESS_MAX_EVENTS, events_per_ray
+
+SCENE = """
+[cavity]
+radius_mm = 35.0
+height_mm = 43.0
+[wall]
+reflectance = {rho}
+[base]
+reflectance = {rho}
+[leds]
+count = 4
+pitch_mm = 20.0
+emitter_radius_mm = 1.0
+{beam}
+power_W = 1.0
+[top]
+{top}
+[trace]
+lanes = 512
+{trace}
+"""
+
+LAMBERTIAN = 'distribution = "lambertian"'
+
+
+def scene_text(rho: float = 0.9, beam: str = LAMBERTIAN, top: str = 'kind = "exit"', trace_opts: str = "") -> str:
+    return SCENE.format(rho=rho, beam=beam, top=top, trace=trace_opts)
+
+
+def plate_top(reflection: float, transmission: float = 0.0) -> str:
+    """A Lambertian plate that reflects ``reflection`` and transmits ``transmission`` of blue and yellow."""
+    lines = ['kind = "phosphor"', "[top.plate]", "theta_i_deg = [0.0, 90.0]"]
+    for inter, (r, t) in (("bibs", (reflection, transmission)), ("biys", (0.0, 0.0)),
+                          ("yiys", (reflection, transmission))):
+        for side, value in (("reflection", r), ("transmission", t)):
+            lines += [f"[top.plate.{inter}.{side}]", f"tis = [{value}, {value}]",
+                      'distribution = {kind = "lambertian"}']
+    return "\n".join(lines)
+
+
+def one_line(code: int, err: str, *needles: str) -> None:
+    """Exit status 2, one line on stderr, no traceback, and every needle (the cause) in that line."""
+    assert code == 2, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    for needle in needles:
+        assert needle in err, err
+
+
+# ----------------------------------------------------------------------------------------- beam widths
+@pytest.mark.parametrize("fwhm_deg", [1e-6, 1e-12, 1e-300])
+def test_narrowest_beam_is_its_collimated_limit(fwhm_deg):
+    """FWHM below float resolution: m is finite (no ZeroDivisionError) and the beam is traced collimated:
+    under an exit top every ray leaves at its first event, LER = 1 exactly."""
+    s = loads_scene(scene_text(beam=f"fwhm_deg = {fwhm_deg}"))
+    m = s.leds.cos_exponent
+    assert math.isfinite(m) and 1e15 < m <= COLLIMATED_EXPONENT
+    r = trace(s, 2000)
+    assert r.LER == 1.0 and r.absorbed["wall"] == 0.0
+
+
+def test_narrow_but_resolvable_beam_keeps_its_half_maximum():
+    """cos(FWHM/2)^m = 1/2 to 1e-9 for beams from 1e-4 to 179 deg; below 1 deg checked against the series
+    ln cos h = -h²/2 - h⁴/12 - h⁶/45 (plain ln cos loses digits there)."""
+    for fwhm_deg in (1e-4, 0.01, 0.5, 30.0, 120.0, 179.0):
+        s = loads_scene(scene_text(beam=f"fwhm_deg = {fwhm_deg}"))
+        h = math.radians(fwhm_deg) / 2
+        log_cos = -(h**2 / 2 + h**4 / 12 + h**6 / 45) if fwhm_deg < 1 else math.log(math.cos(h))
+        assert math.exp(s.leds.cos_exponent * log_cos) == pytest.approx(0.5, rel=1e-9)
+
+
+def test_narrow_beam_trace_command_succeeds(tmp_path, capsys):
+    path = tmp_path / "s.toml"
+    path.write_text(scene_text(beam="fwhm_deg = 1e-06"))
+    assert main(["trace", str(path), "--rays", "1000"]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ closed lossless cavities
+def test_closed_lossless_cavity_under_a_plate_is_refused_at_once(tmp_path, capsys):
+    """White walls under a plate that reflects everything: formerly 2e6 rays x 1e4 events (>100 s); now refused
+    at scene validation with the reason and the allowed max_events."""
+    path = tmp_path / "s.toml"
+    path.write_text(scene_text(1.0, top=plate_top(1.0)))
+    started = time.perf_counter()
+    code = main(["trace", str(path), "--rays", "2000000"])
+    one_line(code, capsys.readouterr().err, "s.toml", "trace.max_events", "no ray can ever leave or be absorbed",
+             "a plate that reflects everything", f"max_events <= LOSSLESS_MAX_EVENTS ({LOSSLESS_MAX_EVENTS})")
+    assert time.perf_counter() - started < 10.0
+
+
+def test_plate_that_loses_a_little_is_bounded_and_its_ledger_closes():
+    """A plate transmitting 1 % is not closed; its events per ray are bounded by the roulette, and a run
+    capped at max_events reports the truncated power so that emitted = extracted + absorbed + roulette +
+    discarded + truncated to float64 rounding."""
+    s = loads_scene(scene_text(1.0, top=plate_top(0.99, 0.01), trace_opts="max_events = 50"))
+    n = events_per_ray(s.wall, s.base, s.leds, s.top, s.trace)
+    assert n == 50.0  # 1/(1 - 0.99) = 100 roulette events on average > cap
+    r = trace(s, 4000)
+    assert r.truncated > 0
+    total = r.extracted["total"] + sum(r.absorbed.values()) + r.roulette + r.discarded + r.truncated
+    assert total == pytest.approx(r.emitted, rel=1e-12, abs=1e-12)
+    assert r.ledger_error < 1e-12
+    # the closed plate with a short cap is accepted as a test of the truncation ledger: everything truncated
+    closed = loads_scene(scene_text(1.0, top=plate_top(1.0), trace_opts="max_events = 20"))
+    rc = trace(closed, 1000)
+    assert rc.truncated == pytest.approx(rc.emitted, rel=1e-12) and rc.extracted["total"] == 0.0
+
+
+def test_lossless_plate_scene_built_in_python_is_refused_by_the_tracer():
+    from dataclasses import replace
+
+    ok = loads_scene(scene_text(1.0, top=plate_top(1.0), trace_opts="max_events = 20"))
+    with pytest.raises(ValidationError, match="LOSSLESS_MAX_EVENTS"):
+        trace(replace(ok, trace=replace(ok.trace, max_events=10**6)), 10)
