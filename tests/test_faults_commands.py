@@ -129,3 +129,48 @@ def test_lossless_plate_scene_built_in_python_is_refused_by_the_tracer():
     ok = loads_scene(scene_text(1.0, top=plate_top(1.0), trace_opts="max_events = 20"))
     with pytest.raises(ValidationError, match="LOSSLESS_MAX_EVENTS"):
         trace(replace(ok, trace=replace(ok.trace, max_events=10**6)), 10)
+
+
+# ------------------------------------------------------------------------------------ --force and inputs
+VERB_ARGS = {
+    "fit bsdf": ["fit", "bsdf", "{i}", "--interaction", "bibs", "--side", "reflection", "-o", "{o}"],
+    "fit reflectance": ["fit", "reflectance", "{i}", "-o", "{o}"],
+    "ingest": ["ingest", "{i}", "-o", "{o}"],
+    "convert": ["convert", "{i}", "--to", "zemax", "-o", "{o}"],
+    "export": ["export", "{i}", "--to", "zemax", "-o", "{o}"],
+    "trace": ["trace", "{i}", "-o", "{o}"],
+    "sweep": ["sweep", "{i}", "--param", "wall.reflectance=0.8,0.9", "-o", "{o}"],
+}
+
+
+@pytest.mark.parametrize("verb", sorted(VERB_ARGS))
+@pytest.mark.parametrize("how", ["same path", "other spelling", "hard link"])
+def test_force_never_replaces_an_input_of_any_verb(tmp_path, monkeypatch, capsys, verb, how):
+    monkeypatch.chdir(tmp_path)
+    src = tmp_path / "IN.nc"
+    src.write_bytes(b"measured scan\n")
+    out = {"same path": "IN.nc", "other spelling": f"../{tmp_path.name}/./IN.nc", "hard link": "link.nc"}[how]
+    if how == "hard link":
+        (tmp_path / "link.nc").hardlink_to(src)
+    argv = [a.format(i="IN.nc", o=out) for a in VERB_ARGS[verb]] + ["--force"]
+    one_line(main(argv), capsys.readouterr().err, "output would overwrite an input of this command",
+             "refused even with --force")
+    assert src.read_bytes() == b"measured scan\n"
+
+
+def test_sweep_plot_beside_the_output_is_an_output_too(tmp_path, monkeypatch, capsys):
+    """``sweep -o out.nc`` also writes out_LER_YBR.png: an input at that path is refused with --force."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "out_LER_YBR.png").write_bytes(b"not a scene")
+    code = main(["sweep", "out_LER_YBR.png", "--param", "wall.reflectance=0.8,0.9", "-o", "out.nc", "--force"])
+    one_line(code, capsys.readouterr().err, "out_LER_YBR.png", "output would overwrite an input")
+
+
+# ------------------------------------------------------------------------------------------ usage errors
+def test_fit_without_a_sub_verb_is_a_usage_error_on_stderr(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["fit"])
+    assert info.value.code == 2
+    cap = capsys.readouterr()
+    assert cap.out == ""
+    one_line(2, cap.err, "bsdfkit fit: error: no sub-verb given; expected one of spectrum, bsdf, reflectance")

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.core.errors import InputError
 from bsdfkit.plotting.figures import sweep_figure
 from bsdfkit.raytrace import load_scene
-from bsdfkit.raytrace.sweep import Cluster, run_sweep
+from bsdfkit.raytrace.sweep import Cluster, plot_paths, run_sweep
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extra_outputs=lambda args: [] if args.no_plots else plot_paths(Path(args.output)))
 
 
 def run(args: argparse.Namespace) -> int:
