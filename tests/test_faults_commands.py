@@ -174,3 +174,119 @@ def test_fit_without_a_sub_verb_is_a_usage_error_on_stderr(capsys):
     cap = capsys.readouterr()
     assert cap.out == ""
     one_line(2, cap.err, "bsdfkit fit: error: no sub-verb given; expected one of spectrum, bsdf, reflectance")
+
+
+# ------------------------------------------------------------------------------------------ output folders
+def _trace(tmp_path, out, *extra, tallies: str = "") -> list[str]:
+    scene = tmp_path / "s.toml"
+    scene.write_text(scene_text() + tallies)
+    return ["trace", str(scene), "--rays", "1000", "-o", str(out), *extra]
+
+
+def _has_root_mount() -> bool:
+    import os
+    import shutil
+    return os.geteuid() == 0 and shutil.which("mount") is not None
+
+
+def test_read_only_output_folder_is_refused_and_kept(tmp_path, capsys):
+    """An empty folder of mode 555: formerly replaced by a new mode-755 folder (for root); now refused with the
+    permission named, and left as it was."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        code = main(_trace(tmp_path, folder / "x.nc"))
+        one_line(code, capsys.readouterr().err, str(folder), "not writable (permission denied, mode 555)",
+                 "chmod u+w")
+        assert oct(folder.stat().st_mode & 0o777) == "0o555" and list(folder.iterdir()) == []
+    finally:
+        folder.chmod(0o755)
+
+
+@pytest.mark.parametrize("verb", ["trace", "sweep"])
+def test_output_folder_keeps_its_owner_and_mode(tmp_path, verb):
+    import os
+
+    folder = tmp_path / "out"
+    folder.mkdir()
+    folder.chmod(0o750)
+    owner = (folder.stat().st_uid, folder.stat().st_gid)
+    if os.geteuid() == 0:
+        os.chown(folder, 1234, 1234)
+        owner = (1234, 1234)
+    if verb == "trace":
+        argv = _trace(tmp_path, folder / "x.nc")
+    else:
+        scene = tmp_path / "s.toml"
+        scene.write_text(scene_text())
+        argv = ["sweep", str(scene), "--param", "wall.reflectance=0.8,0.9", "--rays", "500", "--no-plots",
+                "-o", str(folder / "x.nc")]
+    assert main(argv) == 0
+    st = folder.stat()
+    assert (st.st_mode & 0o777, st.st_uid, st.st_gid) == (0o750, *owner)
+    assert [p.name for p in folder.iterdir()] == ["x.nc"]
+    assert main(argv + ["--force"]) == 0  # replacing the previous set keeps them too
+    st = folder.stat()
+    assert (st.st_mode & 0o777, st.st_uid, st.st_gid) == (0o750, *owner)
+
+
+def test_a_250_byte_output_name_is_written(tmp_path, capsys):
+    """Temporary names are at most 33 bytes: any valid output name (here 250 bytes) can be written, as a
+    single file and inside an output set; a name over NAME_MAX is refused as too long."""
+    from bsdfkit.io.atomic import write_text
+
+    name = "a" * 247 + ".nc"
+    assert len(name.encode()) == 250
+    assert main(_trace(tmp_path, tmp_path / name)) == 0
+    assert (tmp_path / name).is_file()
+    write_text(tmp_path / ("b" * 250), "x")
+    assert (tmp_path / ("b" * 250)).read_text() == "x"
+    code = main(_trace(tmp_path, tmp_path / ("c" * 253 + ".nc")))
+    one_line(code, capsys.readouterr().err, "file name too long [ENAMETOOLONG]")
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith((".part", ".staging"))]
+
+
+@pytest.fixture
+def mounted(tmp_path):
+    """Mount helper (root only): yields mount(kind, path) and unmounts everything afterwards."""
+    import subprocess
+
+    if not _has_root_mount():
+        pytest.skip("needs root and mount")
+    done = []
+
+    def mount(*args) -> None:
+        proc = subprocess.run(["mount", *args], capture_output=True)
+        if proc.returncode != 0:
+            pytest.skip(f"mount failed: {proc.stderr.decode().strip()}")
+        done.append(args[-1])
+
+    yield mount
+    for point in reversed(done):
+        subprocess.run(["umount", point], capture_output=True)
+
+
+def test_bind_mounted_output_folder_is_written_in_place(tmp_path, mounted, capsys):
+    """A writable bind mount of the same file system (os.path.ismount says False): formerly "device or resource
+    busy" (the folder cannot be renamed); now staged inside it and written file by file, atomically."""
+    src, dst = tmp_path / "src", tmp_path / "dst"
+    src.mkdir()
+    dst.mkdir()
+    mounted("--bind", str(src), str(dst))
+    assert main(_trace(tmp_path, dst / "x.nc")) == 0
+    assert [p.name for p in dst.iterdir()] == ["x.nc"] and (src / "x.nc").is_file()
+    code = main(_trace(tmp_path, dst / "x.nc"))
+    one_line(code, capsys.readouterr().err, "output exists; pass --force")
+    assert main(_trace(tmp_path, dst / "x.nc", "--force")) == 0
+    assert [p.name for p in dst.iterdir()] == ["x.nc"]
+
+
+def test_full_device_says_no_space_and_names_the_file(tmp_path, mounted, capsys):
+    """A 256 KiB tmpfs and a 2 MB irradiance map: formerly "the netCDF library failed (NetCDF: HDF error)"."""
+    full = tmp_path / "full"
+    full.mkdir()
+    mounted("-t", "tmpfs", "-o", "size=256k", "tmpfs", str(full))
+    code = main(_trace(tmp_path, full / "m.nc", tallies="[tallies]\nirradiance_map = true\nmap_bins = 512\n"))
+    one_line(code, capsys.readouterr().err, "no space left on device while writing m.nc [ENOSPC]", str(full))
+    assert list(full.iterdir()) == []
