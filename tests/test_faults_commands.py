@@ -290,3 +290,13 @@ def test_full_device_says_no_space_and_names_the_file(tmp_path, mounted, capsys)
     code = main(_trace(tmp_path, full / "m.nc", tallies="[tallies]\nirradiance_map = true\nmap_bins = 512\n"))
     one_line(code, capsys.readouterr().err, "no space left on device while writing m.nc [ENOSPC]", str(full))
     assert list(full.iterdir()) == []
+
+
+def test_a_trace_mostly_truncated_says_so(tmp_path, capsys):
+    """A closed white cavity capped at 20 events: all its power is truncated; the result is printed with one
+    warning line naming max_events (nothing silent)."""
+    path = tmp_path / "s.toml"
+    path.write_text(scene_text(1.0, top=plate_top(1.0), trace_opts="max_events = 20"))
+    assert main(["trace", str(path), "--rays", "1000"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "100 % of the emitted power was truncated at trace.max_events = 20" in err[0], err
