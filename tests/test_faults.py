@@ -65,7 +65,7 @@ def test_full_disk_mid_write_leaves_old_file_and_no_temp(tmp_path):
             fh.write(b"partial")
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    with pytest.raises(OutputError, match=r"no space left on the device \[ENOSPC\]") as info:
+    with pytest.raises(OutputError, match=r"no space left on device while writing table\.txt \[ENOSPC\]") as info:
         write_with(target, writer, force=True)
     assert str(target) in str(info.value)
     assert target.read_text() == "OLD"
@@ -208,8 +208,10 @@ def test_stale_temporary_files_of_dead_processes_are_removed(tmp_path):
     stale.write_bytes(b"x" * 1000)
     alive = tmp_path / f".out.txt.{os.getpid()}.cafecafe.part"
     alive.write_bytes(b"mine")
+    short_stale = tmp_path / f".bsdfkit-{dead}.deadbeef.part"  # today's short temporary names
+    short_stale.write_bytes(b"x")
     write_text(tmp_path / "out.txt", "done")
-    assert not stale.exists()
+    assert not stale.exists() and not short_stale.exists()
     assert alive.exists()  # a live process's temporary file is left alone
     alive.unlink()
 

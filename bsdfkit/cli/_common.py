@@ -1,11 +1,15 @@
-"""Helpers shared by the CLI verbs: JSON output, option ranges and progress reporting."""
+"""Helpers shared by the CLI verbs: JSON output, option ranges, progress reporting and the rule that
+``--force`` never replaces an input (:func:`refuse_replacing_inputs`, run by ``bsdfkit.cli.main`` before every
+verb)."""
 from __future__ import annotations
 
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from bsdfkit.core.errors import InputError
+from bsdfkit.io.atomic import refuse_inputs
 from bsdfkit.io.jsonout import dumps
 
 
@@ -19,6 +23,43 @@ def check_options(args: Any, ranges: dict[str, tuple[float, float, str]]) -> Non
         if value is not None and not (math.isfinite(value) and lo <= value <= hi):
             raise InputError("option out of range", field="--" + name.replace("_", "-"), expected=expected,
                              got=value)
+
+
+#: argument names that hold a verb's input paths (positional arguments and ``--table``)
+INPUT_ARGS = ("scan", "source", "path", "file", "files", "scene", "recipe", "table")
+
+
+def _paths(value: Any) -> list[str]:
+    if isinstance(value, str | Path):
+        return [str(value)]
+    if isinstance(value, list | tuple):
+        return [str(v) for v in value if isinstance(v, str | Path)]
+    return []
+
+
+def io_paths(args: Any) -> tuple[list[str], list[str]]:
+    """(inputs, outputs) of a parsed command line: the :data:`INPUT_ARGS` it holds, and ``--output`` with the
+    files a verb writes beside or inside it (``args.extra_outputs(args)``, set by the verb, e.g. the plots of
+    ``sweep``)."""
+    inputs = [p for name in INPUT_ARGS for p in _paths(getattr(args, name, None))]
+    outputs = _paths(getattr(args, "output", None))
+    extra = getattr(args, "extra_outputs", None)
+    if outputs and callable(extra):
+        outputs += [str(p) for p in extra(args)]
+    return inputs, outputs
+
+
+def refuse_replacing_inputs(args: Any) -> None:
+    """Refuse, before any work and whatever ``--force`` says, a command whose output is one of its inputs.
+
+    Every output (and every file a verb writes beside or inside its output, :func:`io_paths`) is compared with
+    every input by resolved path and, for existing files, ``os.path.samefile`` (a hard link or a second path to
+    the same file); an input inside an output folder that a verb replaces as a whole is refused by
+    :func:`bsdfkit.io.atomic.check_output_folder`. One shared check for every verb, so a new verb cannot forget it.
+    """
+    inputs, outputs = io_paths(args)
+    for out in outputs:
+        refuse_inputs(out, inputs)
 
 
 def emit_json(obj: Any) -> None:

@@ -85,8 +85,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _help(parser: argparse.ArgumentParser) -> int:
-    parser.print_help()
-    return 2
+    """``bsdfkit fit`` without a sub-verb: a usage error, one line on stderr with exit status 2 (argparse's)."""
+    parser.error("no sub-verb given; expected one of spectrum, bsdf, reflectance")
 
 
 def _warn_unconverged(label: str, iterations: int) -> None:
@@ -168,7 +168,7 @@ def _print_spectrum(label: str, rec: dict) -> None:
 
 
 def _run_reflectance(args: argparse.Namespace) -> int:
-    atomic.check_writable(args.output, args.force)
+    atomic.check_writable(args.output, args.force, inputs=[args.file])
     wl, columns, _ = read_spectrum_table(args.file)
     values = list(columns.values())
     if len(values) > 2:
@@ -178,7 +178,7 @@ def _run_reflectance(args: argparse.Namespace) -> int:
     rho = values[0] * scale
     std = values[1] * scale if len(values) == 2 else None
     model = lambertian_from_reflectance(wl, rho, std, side=args.side, source=Path(args.file).name)
-    netcdf.save(model, args.output, args.force)
+    netcdf.save(model, args.output, args.force, inputs=[args.file])
     print(f"wrote {args.output}: Lambertian {args.side} model, {wl.size} wavelengths {wl[0]:g}-{wl[-1]:g} nm, "
           f"mean reflectance {float(rho.mean()):.4f}; export one wavelength with "
           f"`bsdfkit export {args.output} --interaction elastic --wavelength-nm NM ...`")
@@ -187,14 +187,14 @@ def _run_reflectance(args: argparse.Namespace) -> int:
 
 def _run_bsdf(args: argparse.Namespace) -> int:
     if args.output:
-        atomic.check_writable(args.output, args.force)
+        atomic.check_writable(args.output, args.force, inputs=[args.scan])
     ds = api.ingest(args.scan)
     profile = interaction_profile(ds, args.interaction, args.side)
     result = fit_bsdf(profile, args.model, incidence_deg=args.incidence)
     result.attrs["interaction"] = args.interaction
     warnings = json.loads(result.attrs.get("warnings", "[]"))
     if args.output:
-        netcdf.save(result, args.output, args.force)
+        netcdf.save(result, args.output, args.force, inputs=[args.scan])
     names = [str(n) for n in result.parameter.values]
     verdict = plausibility.evaluate(result)
     fits = []

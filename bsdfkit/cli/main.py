@@ -174,6 +174,8 @@ def _run(argv: list[str]) -> int:
         parser.error(f"no verb given; expected one of {', '.join(VERBS)}")
     try:
         with prompt_signals():
+            from bsdfkit.cli._common import refuse_replacing_inputs  # a verb's module imported it already
+            refuse_replacing_inputs(args)  # --force never replaces an input, for every verb
             return int(args.func(args) or 0)
     except BsdfkitError as exc:
         print(f"bsdfkit {args.verb}: error: {exc}", file=sys.stderr)

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.core.errors import InputError
 from bsdfkit.plotting.figures import sweep_figure
 from bsdfkit.raytrace import load_scene
-from bsdfkit.raytrace.sweep import Cluster, run_sweep
+from bsdfkit.raytrace.sweep import Cluster, plot_paths, run_sweep
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,10 +27,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run the points as tasks on a local dask.distributed cluster of N worker processes")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the points on an existing dask.distributed scheduler (e.g. tcp://host:8786)")
+    p.add_argument("--verbose", action="store_true",
+                   help="show dask's own log on stderr (worker failures with tracebacks); by default a failed "
+                        "point is reported once, in the one error line")
     p.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extra_outputs=lambda args: [] if args.no_plots else plot_paths(Path(args.output)))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,7 +51,8 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.scheduler:
         raise InputError("--workers and --scheduler exclude each other", field="--workers",
                          expected="a local cluster (--workers N) or an existing one (--scheduler ADDRESS)")
-    cluster = Cluster(args.workers, args.scheduler) if args.workers is not None or args.scheduler else None
+    distributed = args.workers is not None or args.scheduler
+    cluster = Cluster(args.workers, args.scheduler, args.verbose) if distributed else None
     bar = Progress(1, label="sweep")
 
     def progress(done: int, total: int) -> None:

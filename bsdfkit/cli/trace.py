@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import sys
 from pathlib import Path
 
 from bsdfkit.cli._common import Progress, emit_json
@@ -11,6 +12,10 @@ from bsdfkit.raytrace import load_scene, trace
 
 # the tracer's own entry points (what bsdfkit.api.trace calls), not bsdfkit.api: importing the whole API (fits,
 # plotting of spectra) would add time to every cold start of this verb
+
+
+#: a trace whose truncated power exceeds this fraction of the emitted power says so on stderr (one line)
+TRUNCATION_WARNING = 1e-3
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -44,6 +49,11 @@ def run(args: argparse.Namespace) -> int:
         if out:
             ds = result.to_dataset()
             write_with(outputs.path(out.name), lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), True)
+    if result.truncated > TRUNCATION_WARNING * result.emitted:
+        # rays still bouncing at max_events: the ledger holds their power, but LER and YBR are lower bounds
+        print(f"bsdfkit trace: warning: {100 * result.truncated / result.emitted:.3g} % of the emitted power was "
+              f"truncated at trace.max_events = {scene.trace.max_events} (rays still in flight); LER and YBR are "
+              "lower bounds: raise max_events or add a loss", file=sys.stderr)
     report = result.to_dict()
     if args.json:
         emit_json(report)

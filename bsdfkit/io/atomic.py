@@ -1,7 +1,8 @@
 """Atomic, non-clobbering output: single files and whole output sets.
 
-**Single files.** Every file bsdfkit writes goes to a temporary file ``.<name>.<pid>.<token>.part`` in the
-destination directory, is flushed and fsynced, and is then moved to the target. Without ``force`` the move is
+**Single files.** Every file bsdfkit writes goes to a temporary file ``.bsdfkit-<pid>.<8 hex>.part`` in the
+destination directory (at most 33 bytes, so that any valid output name, up to the 255 bytes of NAME_MAX, has a
+temporary name that fits), is flushed and fsynced, and is then moved to the target. Without ``force`` the move is
 an exclusive create (``os.link`` of the finished temporary file, which fails if the target exists), so of two
 concurrent writers exactly one succeeds and the other gets :class:`OutputExistsError`; with ``force`` it is
 ``os.replace``. A reader therefore sees either the old file or the complete new one, never a partial file,
@@ -15,6 +16,14 @@ the same outputs is swapped (with ``force``), and only a target that also holds 
 files one by one. A kill or a full disk therefore leaves the previous complete set or nothing, and a rerun
 works without ``force``; stale staging folders of dead processes are removed by the next run.
 
+An existing output folder keeps its owner and mode: the folder moved into its place takes them, and a folder
+whose mode grants no write permission (mode 555, also for root, who could write anyway) is refused before any
+work. A folder that is a mount point (a bind mount, on the same file system or not; ``/proc/self/mountinfo``)
+cannot be renamed (EBUSY) nor receive renamed files from outside it (EXDEV): the set is staged inside it and
+its files are moved into place one by one, each atomically; a rename that still fails with EBUSY or EXDEV
+falls back to the same per-file placement (a file is then copied into a temporary file inside the target
+first).
+
 A folder that *is* the output (``whole_folder``: ``run``, ``simulate``; :func:`check_output_folder`) is never
 mixed with other files: when it exists and is not empty it is refused without ``force`` and replaced as a
 whole with it (swapped in by two renames), never when it is or holds an input of the command.
@@ -25,7 +34,9 @@ the command's own inputs (even with ``force``) and a destination that cannot be 
 created and removed, which also catches read-only file systems when running as root).
 
 Operating-system faults (permission, read-only file system, no space, ...) become :class:`OutputError`: one
-line naming the path and the fault.
+line naming the path and the fault. A full device says so (``no space left on device while writing <file>``),
+also when the netCDF/HDF5 library reports it only as "NetCDF: HDF error" (the free space is checked after
+the failure, :data:`FULL_DEVICE_BYTES`).
 """
 from __future__ import annotations
 
@@ -34,6 +45,7 @@ import errno
 import os
 import secrets
 import shutil
+import stat
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -81,8 +93,26 @@ _REASONS = {
     errno.EIO: "input/output error",
     errno.ENOENT: "no such file or folder",
     errno.ELOOP: "too many levels of symbolic links",
-    errno.EXDEV: "cross-device move",
+    errno.EXDEV: "cross-device move (the folder is a mount point)",
+    errno.EBUSY: "the folder is a mount point or in use (device or resource busy)",
 }
+
+#: prefix of temporary files, probes and (for names too long to prefix) staging folders:
+#: ``.bsdfkit-<pid>.<8 hex>.part``
+TEMP_PREFIX = ".bsdfkit-"
+#: the longest file name most file systems take (bytes of the encoded name)
+NAME_MAX = 255
+
+
+def _temp_name(suffix: str = ".part") -> str:
+    """A short temporary name of this process: fits beside any valid output name."""
+    return f"{TEMP_PREFIX}{os.getpid()}.{secrets.token_hex(4)}{suffix}"
+
+
+def _beside_name(name: str, suffix: str) -> str:
+    """``.<name>.<pid>.<8 hex><suffix>`` when it fits in :data:`NAME_MAX` bytes, else a :func:`_temp_name`."""
+    long = f".{name}.{os.getpid()}.{secrets.token_hex(4)}{suffix}"
+    return long if len(os.fsencode(long)) <= NAME_MAX else _temp_name(suffix)
 
 
 def describe_os_error(exc: BaseException) -> str:
@@ -96,7 +126,25 @@ def describe_os_error(exc: BaseException) -> str:
 
 
 def _fault(exc: OSError, path: PathLike) -> OutputError:
+    code = getattr(exc, "errno", None)
+    if code in (errno.ENOSPC, errno.EDQUOT):
+        return _no_space(path, code)
+    if code is None and _device_full(Path(path).parent):
+        return _no_space(path)
     return OutputError(f"cannot write output: {describe_os_error(exc)}", file=path)
+
+
+def _no_space(path: PathLike, code: int = errno.ENOSPC) -> OutputError:
+    """The one line of a full device (or quota): which file, and how much is free where."""
+    path = Path(path)
+    what = "no space left on device" if code == errno.ENOSPC else "disk quota exceeded"
+    try:
+        free = f"{shutil.disk_usage(_nearest_existing(path.parent)).free / 1e6:.3g} MB free when the write failed"
+    except OSError:
+        free = None
+    return OutputError(f"{what} while writing {path.name} [{errno.errorcode[code]}]", file=path,
+                       expected=f"free space on the device of {path.parent} (free some, or write elsewhere)",
+                       got=free)
 
 
 def _pid_alive(pid: int) -> bool:
@@ -131,10 +179,12 @@ def _stale(folder: Path, prefix: str, suffix: str) -> Iterator[Path]:
 
 
 def _remove_stale_temps(path: Path) -> None:
-    """Remove temporary files for ``path`` left by processes that were killed."""
-    for entry in _stale(path.parent, f".{path.name}.", ".part"):
-        with contextlib.suppress(OSError):
-            entry.unlink()
+    """Remove temporary files in the folder of ``path`` left by processes that were killed (both the short
+    names of today and the ``.<name>.<pid>.<hex>.part`` names of earlier versions)."""
+    for prefix in (TEMP_PREFIX, f".{path.name}."):
+        for entry in _stale(path.parent, prefix, ".part"):
+            with contextlib.suppress(OSError):
+                entry.unlink()
 
 
 def refuse_inputs(output: PathLike, inputs: Iterable[PathLike | None]) -> None:
@@ -169,7 +219,8 @@ def _nearest_existing(path: Path) -> Path:
 
 def _probe(folder: Path, name: str, target: Path) -> None:
     """Create and remove a small file in ``folder`` (the nearest existing ancestor of the output)."""
-    probe = folder / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.probe.part"
+    _check_mode(folder, target)
+    probe = folder / _temp_name(".probe.part")
     try:
         fd = os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
         os.close(fd)
@@ -177,6 +228,76 @@ def _probe(folder: Path, name: str, target: Path) -> None:
     except OSError as exc:
         raise OutputError(f"cannot write output: {describe_os_error(exc)}", file=target,
                           expected=f"a writable folder ({folder})") from None
+
+
+def _check_mode(folder: Path, target: Path) -> None:
+    """Refuse a folder whose mode grants no write permission (555): for root too, who could write anyway but
+    would then ignore what the owner of the folder said."""
+    try:
+        mode = folder.stat().st_mode
+    except OSError:
+        return
+    if not mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
+        raise OutputError(f"cannot write output: the folder {folder} is not writable (permission denied, mode "
+                          f"{stat.S_IMODE(mode):o})", file=target,
+                          expected="a folder you may write into (chmod u+w, or another output folder)",
+                          got=f"mode {stat.S_IMODE(mode):o}")
+
+
+def _is_mount_point(folder: Path) -> bool:
+    """True for a mount point, bind mounts of the same file system included (``os.path.ismount`` misses those)."""
+    with contextlib.suppress(OSError):
+        if os.path.ismount(folder):
+            return True
+    try:
+        with open("/proc/self/mountinfo", encoding="utf-8", errors="surrogateescape") as fh:
+            points = {line.split()[4] for line in fh if len(line.split()) > 4}
+    except OSError:
+        return False
+    # mountinfo escapes space, tab, newline and backslash as octal (\040 ...)
+    decode = {"\\040": " ", "\\011": "\t", "\\012": "\n", "\\134": "\\"}
+    for point in points:
+        for code, char in decode.items():
+            point = point.replace(code, char)
+        if point == str(folder):
+            return True
+    return False
+
+
+def _adopt_owner_and_mode(new: Path, old: Path) -> None:
+    """Give folder ``new`` (moved into the place of ``old``) the owner, group and mode of ``old``."""
+    try:
+        st = old.stat()
+        os.chmod(new, stat.S_IMODE(st.st_mode))
+        if (st.st_uid, st.st_gid) != (os.getuid(), os.getgid()):
+            with contextlib.suppress(PermissionError):
+                os.chown(new, st.st_uid, st.st_gid)
+    except OSError:
+        pass
+
+
+def _move_file(src: Path, dst: Path, force: bool) -> None:
+    """:func:`_place` ``src`` at ``dst``; across a mount point (EXDEV) it is first copied into a temporary file
+    beside ``dst`` (fsynced), so ``dst`` still appears complete or not at all."""
+    try:
+        _place(src, dst, force)
+        return
+    except OSError as exc:
+        if exc.errno not in (errno.EXDEV, errno.EBUSY):
+            raise
+    tmp = dst.parent / _temp_name()
+    _PARTIAL.add(tmp)
+    try:
+        shutil.copyfile(src, tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        _place(tmp, dst, force)
+        with contextlib.suppress(OSError):
+            src.unlink()
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        _PARTIAL.discard(tmp)
 
 
 def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None] = ()) -> Path:
@@ -308,7 +429,7 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         _remove_stale_temps(path)
-        tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part"
+        tmp = path.parent / _temp_name()
         # 0o666 & ~umask: the permissions an ordinary open() would give the final file
         _PARTIAL.add(tmp)
         os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
@@ -319,10 +440,12 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
         _fsync_dir(path.parent)
     except OSError as exc:
         raise _fault(exc, path) from None
-    except RuntimeError:
+    except RuntimeError as exc:
         # netCDF4/HDF5 report a write that failed for want of space as "NetCDF: HDF error", without an errno
         if tmp is not None and _device_full(tmp.parent):
-            raise _fault(OSError(errno.ENOSPC, "No space left on device"), path) from None
+            raise _no_space(path) from None
+        if "netcdf" in str(exc).lower() or "hdf" in str(exc).lower():
+            raise OutputError(f"cannot write output: the netCDF library failed ({exc})", file=path) from None
         raise
     finally:
         if tmp is not None:
@@ -407,6 +530,8 @@ class OutputSet:
             check_output_folder(folder, self.force, self.inputs)
         else:
             _folder_anchor(folder)  # the folder and its parents are folders (or do not exist yet)
+        if folder.is_dir():
+            _check_mode(folder, folder)  # an existing output folder that says "not writable" is refused
         for name in self.names:
             target = folder / name
             if target.is_dir():
@@ -419,7 +544,7 @@ class OutputSet:
         resolved = self.folder.resolve()
         parent, name = resolved.parent, resolved.name
         try:
-            if resolved.is_dir() and (resolved.stat().st_dev != parent.stat().st_dev
+            if resolved.is_dir() and (resolved.stat().st_dev != parent.stat().st_dev or _is_mount_point(resolved)
                                       or Path.cwd().resolve().is_relative_to(resolved)):
                 # the target is a mount point (staged files beside it could not be renamed into it, EXDEV) or
                 # holds the current folder (a rename would leave this process in a deleted folder)
@@ -429,15 +554,16 @@ class OutputSet:
             pass
         try:
             parent.mkdir(parents=True, exist_ok=True)
-            for entry in _stale(parent, f".{name}.", ".staging"):
-                _rmtree(entry)
+            for prefix in (f".{name}.", TEMP_PREFIX):
+                for entry in _stale(parent, prefix, ".staging"):
+                    _rmtree(entry)
             for entry in _stale(parent, f".{name}.", ".old"):
                 # a swap interrupted between its two renames: restore the previous set if the target is gone
                 if not resolved.exists():
                     os.rename(entry, resolved)
                 else:
                     _rmtree(entry)
-            self.staging = parent / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.staging"
+            self.staging = parent / _beside_name(name, ".staging")
             _PARTIAL.add(self.staging)
             self.staging.mkdir()
         except OSError as exc:
@@ -531,6 +657,17 @@ class OutputSet:
                     _PARTIAL.add(stage)
                 raise
 
+    def _swap_in(self, stage: Path, target: Path, old: Path) -> None:
+        """Second rename of a swap: the staged set into the place of the previous one (moved to ``old``)."""
+        try:
+            os.rename(stage, target)
+        except OSError:
+            os.rename(old, target)
+            raise
+        self.staging = None
+        _rmtree(old)
+        _fsync_dir(target.parent)
+
     def _commit(self, stage: Path, target: Path) -> None:
         missing = [n for n in self.names if not (stage / n).is_file()]
         if missing:
@@ -539,31 +676,35 @@ class OutputSet:
             inside = stage.parent == target
             if not inside and (not target.exists() or (target.is_dir() and not any(target.iterdir()))):
                 try:
+                    if target.is_dir():  # an empty folder that is replaced keeps its owner and mode
+                        _adopt_owner_and_mode(stage, target)
                     os.rename(stage, target)  # replaces a missing or empty folder in one step
                     self.staging = None
                     _fsync_dir(target.parent)
                     return
                 except OSError as exc:
-                    if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY):
+                    if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EBUSY, errno.EXDEV):
                         raise
-                    # someone wrote into the target meanwhile: check and merge below
+                    # someone wrote into the target meanwhile (check and merge below), or the target is a
+                    # mount point that cannot be replaced (EBUSY, EXDEV): its files are placed one by one below
+                    inside = inside or exc.errno in (errno.EBUSY, errno.EXDEV)
             clash = ([e.name for e in _other_entries(target) if e != stage] if self.whole_folder
                      else [n for n in self.names if (target / n).exists()])
             if clash and not self.force:
                 raise OutputExistsError("output appeared while computing (another process?); pass --force to "
                                         "overwrite", file=self.folder / clash[0])
             if self.force and not inside and (self.whole_folder or self._only_ours(target)):
-                old = target.parent / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.old"
-                os.rename(target, old)
+                old = target.parent / _beside_name(target.name, ".old")
+                _adopt_owner_and_mode(stage, target)
                 try:
-                    os.rename(stage, target)
-                except OSError:
-                    os.rename(old, target)
-                    raise
-                self.staging = None
-                _rmtree(old)
-                _fsync_dir(target.parent)
-                return
+                    os.rename(target, old)
+                except OSError as exc:
+                    if exc.errno not in (errno.EBUSY, errno.EXDEV):
+                        raise
+                    inside = True  # a mount point: placed file by file below
+                else:
+                    self._swap_in(stage, target, old)
+                    return
             if self.whole_folder:  # staged inside the target: the previous content goes first
                 for entry in _other_entries(target):
                     if entry.is_dir() and not entry.is_symlink():
@@ -573,7 +714,7 @@ class OutputSet:
             for name in self.names:  # the target holds other files: move ours in one by one
                 dst = target / name
                 dst.parent.mkdir(parents=True, exist_ok=True)
-                _place(stage / name, dst, self.force)
+                _move_file(stage / name, dst, self.force)
             _rmtree(stage)
             self.staging = None
         except OSError as exc:

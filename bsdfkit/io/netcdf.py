@@ -10,7 +10,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from bsdfkit.core.errors import FormatError, InputError, OutputError
+from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.io.atomic import write_with
 
 ENGINE = "netcdf4"
@@ -32,10 +32,9 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Pa
     enc = _encodable(ds)
 
     def writer(tmp: Path) -> None:
-        try:
-            enc.to_netcdf(tmp, engine=ENGINE)
-        except RuntimeError as exc:  # the netCDF/HDF5 library reports a failed write (e.g. a full disk) so
-            raise OutputError(f"cannot write output: the netCDF library failed ({exc})", file=path) from None
+        # a failed write of the netCDF/HDF5 library (RuntimeError "NetCDF: HDF error") is told apart by
+        # atomic_path: a full device is said as such, anything else names the library
+        enc.to_netcdf(tmp, engine=ENGINE)
 
     return write_with(path, writer, force, inputs)
 

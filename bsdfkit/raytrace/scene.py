@@ -125,16 +125,30 @@ class Leds:
 
     @property
     def cos_exponent(self) -> float:
-        """m of the cos^m intensity (1 for Lambertian)."""
+        """m of the cos^m intensity (1 for Lambertian), at most :data:`COLLIMATED_EXPONENT`.
+
+        ln cos(FWHM/2) is taken as log1p(−2 sin²(FWHM/4)), exact down to the narrowest beams (plain
+        ln cos(x) is 0 in float64 below x ≈ 1e-8 rad, which divided by zero). A beam narrower than the tracer
+        can resolve is its collimated limit: m is capped at :data:`COLLIMATED_EXPONENT`, for which every
+        sampled cos θ rounds to 1 (a legitimate scene, traced exactly as a collimated beam).
+        """
         if self.fwhm is None:
             return 1.0
-        return math.log(0.5) / math.log(math.cos(self.fwhm / 2.0))
+        log_cos = math.log1p(-2.0 * math.sin(self.fwhm / 4.0) ** 2)
+        if log_cos == 0.0:
+            return COLLIMATED_EXPONENT
+        return min(math.log(0.5) / log_cos, COLLIMATED_EXPONENT)
 
     def centres(self) -> list[tuple[float, float]]:
         """LED centres (x, y) in mm, row-major over the k × k grid."""
         k = self.grid
         off = [(i - (k - 1) / 2.0) * self.pitch_mm for i in range(k)]
         return [(x, y) for x in off for y in off]
+
+
+#: cos^m exponent of the collimated limit of an LED beam: cos θ = (1 − u)^{1/(m+1)} with m = 1e30 is 1 to within
+#: 2e-29 for every u a float32 or float64 sampler draws, i.e. exactly 1 (θ = 0) in the tracer; finite in float32.
+COLLIMATED_EXPONENT = 1e30
 
 
 @dataclass(frozen=True)
@@ -819,18 +833,55 @@ def _drop_none(node: Any) -> Any:
 MAX_TRACE_EVENTS = 10 ** 11
 
 
-def events_per_ray(wall: Surface, base: Surface, leds: Leds, top: Top, trace: TraceOptions) -> float | None:
-    """Events one ray costs at most (on average, with the roulette) in a cavity closed by a Lambertian top.
+def _max_reflectance(surface: Surface) -> float:
+    """The largest fraction [1] of the incident power ``surface`` returns at any wavelength it is traced at."""
+    if surface.spectrum is None:
+        return float(surface.reflectance)
+    return max(float(surface.reflectance), float(np.max(surface.spectrum[1])))
 
-    Every event multiplies a ray's weight by at most ρ_max (the largest reflectance of wall, base, LEDs and top;
-    light the top transmits leaves), so the flux threshold Th ends it after ln Th / ln ρ_max events and the
-    roulette, once the weight is at its threshold, after 1/(1 − ρ_max) more on average; ``max_events`` caps
-    both. None for an exit or phosphor top, through which rays leave at a rate the geometry sets.
+
+def top_reflectance(top: Top, mode: str = "two-wavelength", least: bool = False) -> float | None:
+    """The largest (``least``: the smallest) fraction [1] of the power meeting the top that it sends back into
+    the cavity, over every incidence, colour (and excitation wavelength in the spectral mode); None for an exit
+    (everything leaves).
+
+    Lambertian top: its ``reflectance``. Phosphor plate: the reflection-side TIS, bibs + biys for blue and yiys
+    for yellow rays (two-wavelength mode; yellow only counts when blue converts, biys > 0), elastic + converted
+    reflection TIS of the spectral model (spectral mode); the rest is transmitted out of the module or absorbed.
+    The largest bounds the events of a ray (:func:`events_per_ray`); the smallest is 1 only for a top that loses
+    nothing at any incidence (:func:`check_termination`).
     """
-    if top.kind != "lambertian":
+    pick = np.min if least else np.max
+    if top.kind == "exit":
+        return None
+    if top.kind == "lambertian":
+        return float(top.reflectance)
+    if mode == "spectral" and top.spectral_model is not None:
+        m = top.spectral_model
+        return float(pick(m.elastic_tis[0] + m.converted_tis[0]))
+    if top.plate is None:
+        return None
+    p = top.plate
+    values = [pick(np.asarray(p.bibs_reflection.tis) + np.asarray(p.biys_reflection.tis))]
+    if np.any(np.asarray(p.biys_reflection.tis) > 0) or np.any(np.asarray(p.biys_transmission.tis) > 0):
+        values.append(pick(p.yiys_reflection.tis))
+    return float(pick(values))
+
+
+def events_per_ray(wall: Surface, base: Surface, leds: Leds, top: Top, trace: TraceOptions) -> float | None:
+    """Events one ray costs at most (on average, with the roulette) in a cavity closed by a reflecting top.
+
+    Every event multiplies a ray's weight by at most ρ_max (the largest reflectance of wall, base, LEDs and
+    top, :func:`top_reflectance`: a Lambertian top or a phosphor plate; light the top transmits leaves), so
+    the flux threshold Th ends it after ln Th / ln ρ_max events and the roulette, once the weight is at its
+    threshold, after 1/(1 − ρ_max) more on average; ``max_events`` caps both. None for an exit top, through
+    which rays leave at a rate the geometry sets.
+    """
+    rho_top = top_reflectance(top, trace.mode)
+    if rho_top is None:
         return None
     rho_led = base.reflectance if leds.led_reflectance is None else leds.led_reflectance
-    rho = max(wall.reflectance, base.reflectance, rho_led, top.reflectance)
+    rho = max(_max_reflectance(wall), _max_reflectance(base), rho_led, rho_top)
     if rho >= 1.0:
         return float(trace.max_events)
     if rho <= 0.0:
@@ -858,15 +909,20 @@ def check_termination(wall: Surface, base: Surface, leds: Leds, top: Top, trace:
 
     A ray ends when it leaves through the top, when a surface absorbs it (its weight drops by the
     reflectance at every bounce until the roulette or the flux threshold ends it) or after ``max_events``.
-    With wall, base and LEDs of reflectance 1 and a top that neither transmits nor absorbs (a Lambertian top
-    of reflectance 1), nothing can leave or absorb: every ray runs to ``max_events`` whatever the
-    termination, all its power is "truncated", and the run costs rays x max_events events. Such a scene is
-    accepted only as a test of the truncation ledger, with ``max_events`` <= :data:`LOSSLESS_MAX_EVENTS`.
+    With wall, base and LEDs of reflectance 1 and a top that sends everything back (a Lambertian top of
+    reflectance 1, or a phosphor plate whose reflection-side TIS is 1 at every incidence: it neither
+    transmits nor absorbs, :func:`top_reflectance`), rays need not ever leave or lose weight: they run to
+    ``max_events`` whatever the termination, their power is "truncated", and the run costs rays x max_events
+    events (2e6 rays under a lossless plate: 2e10 events, hours). Such a scene is accepted only as a test of
+    the truncation ledger, with ``max_events`` <= :data:`LOSSLESS_MAX_EVENTS`.
     """
     rho_led = base.reflectance if leds.led_reflectance is None else leds.led_reflectance
-    closed = top.kind == "lambertian" and top.reflectance >= 1.0
-    if closed and min(wall.reflectance, base.reflectance, rho_led) >= 1.0 and trace.max_events > LOSSLESS_MAX_EVENTS:
-        raise ValidationError("no ray can ever leave or be absorbed (reflectance 1 everywhere, closed top): every "
+    rho_top = top_reflectance(top, trace.mode, least=True)
+    closed = rho_top is not None and rho_top >= 1.0
+    lossless = min(_max_reflectance(wall), _max_reflectance(base), rho_led) >= 1.0
+    if closed and lossless and trace.max_events > LOSSLESS_MAX_EVENTS:
+        what = "closed top" if top.kind == "lambertian" else "a plate that reflects everything"
+        raise ValidationError(f"no ray can ever leave or be absorbed (reflectance 1 everywhere, {what}): every "
                               "ray would run to max_events", file=file, field="trace.max_events",
                               expected=f"an exit, a transmitting top or a reflectance < 1, or max_events <= "
                                        f"LOSSLESS_MAX_EVENTS ({LOSSLESS_MAX_EVENTS})", got=trace.max_events)

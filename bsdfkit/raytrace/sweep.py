@@ -23,7 +23,9 @@ reported, never dropped: the dataset gets NaN there and a ``failed_points`` attr
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
+import logging
 import os
 import re
 from collections.abc import Callable, Sequence
@@ -114,6 +116,9 @@ class Cluster:
 
     workers: int | None = None
     scheduler: str | None = None
+    #: dask's own log (worker "Compute Failed" records with tracebacks, nanny restarts) on stderr; off by
+    #: default: a failed point is reported once, in the one line of :class:`SweepPointsFailed`
+    verbose: bool = False
 
     def __post_init__(self) -> None:
         if self.workers is not None and (not isinstance(self.workers, int) or self.workers < 1):
@@ -149,17 +154,47 @@ def _worker_env(workers: int) -> dict[str, str]:
     return {"XLA_FLAGS": " ".join(flags + [f"{DEVICES_FLAG}={max(1, cores // workers)}"])}
 
 
+#: level of the ``distributed`` loggers (scheduler, workers, nannies) of a sweep unless ``verbose``: above ERROR,
+#: so a failing task's "Compute Failed" record and traceback never reach stderr (the failure is in the one line)
+QUIET_LOG_LEVEL = logging.CRITICAL + 10
+
+
+@contextlib.contextmanager
+def _dask_logs(verbose: bool):
+    """The parent's ``distributed`` loggers at :data:`QUIET_LOG_LEVEL` for the block (restored on exit)."""
+    if verbose:
+        yield
+        return
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
+    saved = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(QUIET_LOG_LEVEL)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, saved):
+            lg.setLevel(level)
+
+
 def _run_distributed(scene: Scene, spec: SweepSpec, points: list, cluster: Cluster,
                      progress: Callable[[int, int], None] | None) -> tuple[dict, list[str]]:
     """Trace ``points`` [(index, values)] as tasks on dask.distributed; returns (results, failures)."""
+    with _dask_logs(cluster.verbose):
+        return _run_on_cluster(scene, spec, points, cluster, progress)
+
+
+def _run_on_cluster(scene: Scene, spec: SweepSpec, points: list, cluster: Cluster,
+                    progress: Callable[[int, int], None] | None) -> tuple[dict, list[str]]:
     local = None
     if cluster.scheduler:
         client = distributed.Client(cluster.scheduler, timeout="30s")
     else:
         # single-threaded worker processes on the loopback interface, no dashboard; workers inherit the
-        # environment (JAX's compilation cache settings of the command line)
+        # environment (JAX's compilation cache settings of the command line). silence_logs is the level of the
+        # workers' and nannies' distributed loggers (in their processes, whose stderr is ours)
         local = distributed.LocalCluster(n_workers=cluster.workers or 1, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=None, silence_logs=40,
+                                         host="127.0.0.1", dashboard_address=None,
+                                         silence_logs=logging.WARNING if cluster.verbose else QUIET_LOG_LEVEL,
                                          env=_worker_env(cluster.workers or 1))
         client = distributed.Client(local)
     results, failures = {}, []
@@ -209,6 +244,11 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
             for key in p.keys:
                 values[key] = p.values[i]
         points.append((index, values))
+    for _, values in points:
+        # every point's scene is checked here, before anything is traced: a value out of range is one error
+        # line naming the key, the same with or without a cluster (not a failed task and a NaN point)
+        if values:
+            with_values(scene, values)
     failures: list[str] = []
     if cluster is None:
         results = {}

@@ -11,7 +11,9 @@ Every case runs ``python -m bsdfkit.cli.main …`` in a subprocess and is classi
 * ``partial`` — a temporary (``.part``/``.staging``/``.old``/``.probe``) left behind, an output of a failed
   run present, an input changed, or a file that a replaced output folder held still there (a mixed set);
 * ``silent`` — exit 0 where an error was expected (bad input accepted);
-* ``refused`` — an error where success was expected; ``cryptic`` — a failure that is not one line / exit 2.
+* ``refused`` — an error where success was expected; ``cryptic`` — a failure that is not one line / exit 2;
+* ``misleading`` — a one-line error (or a success) that does not name its cause, or whose after-check fails
+  (the issue-26 cases of :func:`command_cases`, judged by :data:`CAUSES`).
 
 Full disks are a 256 KiB tmpfs and read-only folders a read-only bind mount when ``mount`` works (root);
 otherwise those cases are skipped. Prints one line per non-ok/error case and a table per class.
@@ -527,6 +529,142 @@ def concurrency_cases(work: Path, f: dict[str, Path]) -> list[Case]:
     ]
 
 
+# ------------------------------------------------------------------ issue 26: commands, tracer and outputs
+#: what the one error line of a case must say (the cause named), and checks after the run: (case name) ->
+#: (substrings of stderr, a callable returning a problem or None). A case whose line misses a substring, or
+#: whose check fails, is "misleading" (kept apart from the Case fields, which other audits extend).
+CAUSES: dict[str, tuple[tuple[str, ...], object]] = {}
+#: bind mounts made by these cases, unmounted when the audit ends
+_MOUNTED: list[Path] = []
+
+
+def _unmount_all() -> None:
+    for point in reversed(_MOUNTED):
+        subprocess.run(["umount", str(point)], capture_output=True)
+
+
+def judge_cause(case: Case, verdict: str, err: str) -> tuple[str, str] | None:
+    """("misleading", why) when a case of :data:`CAUSES` does not name its cause or its check fails."""
+    if case.name not in CAUSES:
+        return None
+    needles, check = CAUSES[case.name]
+    if verdict in ("error", "ok"):
+        missing = [n for n in needles if n not in err]
+        if missing:
+            return "misleading", f"the line does not say {missing!r}: {err.strip()[-300:]}"
+        problem = check() if callable(check) else None
+        if problem:
+            return "misleading", problem
+    return None
+
+
+def command_cases(work: Path, f: dict[str, Path], mounts: dict[str, Path]) -> list[Case]:
+    """Issue 26 (commands/tracer/outputs): degenerate beam widths, worker failures, closed lossless cavities,
+    read-only and bind-mounted output folders, --force onto an input of every verb, usage errors, long names,
+    a full disk. Every expected error must name its cause (:data:`CAUSES`)."""
+    import atexit
+
+    d = work / "i26"
+    d.mkdir()
+    cases: list[Case] = []
+
+    def add(case: Case, *needles: str, check=None) -> None:
+        cases.append(case)
+        CAUSES[case.name] = (needles, check)
+
+    base = SCENE.format(extra_leds="")
+    for fwhm in ("1e-06", "1e-300"):
+        sc = d / f"narrow_{fwhm}.toml"
+        sc.write_text(base.replace('distribution = "lambertian"', f"fwhm_deg = {fwhm}"))
+        add(Case(f"i26 trace beam fwhm_deg = {fwhm}", ["trace", str(sc), "--rays", "2000"], "ok"))
+    sc = d / "wide.toml"
+    sc.write_text(base.replace('distribution = "lambertian"', "fwhm_deg = 180"))
+    add(Case("i26 trace beam fwhm_deg = 180", ["trace", str(sc), "--rays", "2000"]), "leds.fwhm_deg", "180")
+    # a closed cavity whose second point costs more than MAX_TRACE_EVENTS: it fails in its worker
+    closed = d / "closed.toml"
+    closed.write_text(base.replace('kind = "exit"', 'kind = "lambertian"\nreflectance = 0.5\ntransmittance = 0.5')
+                      + "max_events = 300000\n")
+    out = d / "workers.nc"
+    add(Case("i26 sweep --workers 2 with one failing point",
+             ["sweep", str(closed), "--param", "base.reflectance=0.9,0.999999", "--rays", "1000000", "--workers", "2",
+              "--no-plots", "-o", str(out)], timeout=300),
+        "1 sweep point(s) failed, written as NaN", "base.reflectance=0.999999", "MAX_TRACE_EVENTS")
+    add(Case("i26 sweep --workers 2 with a value out of range",
+             ["sweep", str(f["scene"]), "--param", "cavity.height_mm=10,-5", "--rays", "2000", "--workers", "2",
+              "--no-plots", "-o", str(d / "range.nc")], outputs=[d / "range.nc"], timeout=300), "cavity.height_mm")
+    # white closed cavity under a plate that loses nothing: formerly > 100 s at 2e6 rays; 60 s is a hang here
+    plate = ['kind = "phosphor"', "[top.plate]", "theta_i_deg = [0.0, 90.0]"]
+    for inter, r in (("bibs", 1.0), ("biys", 0.0), ("yiys", 1.0)):
+        for side, v in (("reflection", r), ("transmission", 0.0)):
+            plate += [f"[top.plate.{inter}.{side}]", f"tis = [{v}, {v}]", 'distribution = {kind = "lambertian"}']
+    lossless = d / "lossless.toml"
+    lossless.write_text(SCENE.format(extra_leds="").replace("reflectance = 0.90", "reflectance = 1.0")
+                        .replace('[top]\nkind = "exit"', "[top]\n" + "\n".join(plate)))
+    add(Case("i26 trace closed lossless cavity under a plate, 2e6 rays", ["trace", str(lossless), "--rays", "2000000"],
+             timeout=60), "no ray can ever leave or be absorbed", "LOSSLESS_MAX_EVENTS")
+    # read-only (555) empty output folder: refused, and still 555 afterwards
+    for verb in ("trace", "sweep"):
+        ro = d / f"ro_{verb}"
+        ro.mkdir()
+        ro.chmod(0o555)
+        argv = (["trace", str(f["scene"]), "--rays", "2000"] if verb == "trace" else
+                ["sweep", str(f["scene"]), "--param", "wall.reflectance=0.8,0.9", "--rays", "2000"])
+        add(Case(f"i26 {verb} -o into an empty read-only folder", argv + ["-o", str(ro / "x.nc")],
+                 outputs=[ro / "x.nc"]), "not writable", "mode 555",
+            check=lambda ro=ro: None if (ro.stat().st_mode & 0o777) == 0o555 else
+            f"the folder's mode changed to {ro.stat().st_mode & 0o777:o}")
+    # --force onto an input, for every verb that writes a file (same path and a hard link)
+    inputs = {"fit bsdf": (f["nc"], ["fit", "bsdf", "{i}", "--interaction", "bibs", "--side", "reflection"]),
+              "fit reflectance": (f["spectrum"], ["fit", "reflectance", "{i}"]),
+              "ingest": (f["csv_table"], ["ingest", "{i}"]), "convert": (f["zemax"], ["convert", "{i}", "--to",
+                                                                                        "tracepro"]),
+              "export": (f["nc"], ["export", "{i}", "--to", "zemax", "--interaction", "bibs"]),
+              "trace": (f["scene"], ["trace", "{i}", "--rays", "2000"]),
+              "sweep": (f["scene"], ["sweep", "{i}", "--param", "wall.reflectance=0.8,0.9", "--rays", "2000"])}
+    for verb, (src, argv) in inputs.items():
+        for how in ("same path", "hard link"):
+            folder = d / f"self_{verb.replace(' ', '_')}_{how.replace(' ', '_')}"
+            folder.mkdir()
+            local = folder / src.name
+            shutil.copy(src, local)
+            target = local
+            if how == "hard link":
+                target = folder / ("link" + src.suffix)
+                os.link(local, target)
+            add(Case(f"i26 {verb} --force onto its input ({how})",
+                     [a.format(i=local) for a in argv] + ["-o", str(target), "--force"], inputs=[local]),
+                "output would overwrite an input of this command", "refused even with --force")
+    add(Case("i26 fit without a sub-verb", ["fit"]), "no sub-verb given", "spectrum, bsdf, reflectance")
+    # a valid 250-byte output name (its temporary name must fit too), and a 256-byte one (too long)
+    for size, expect in ((250, "ok"), (256, "error")):
+        name = d / ("n" * (size - 3) + ".nc")
+        add(Case(f"i26 trace -o a {size}-byte name", ["trace", str(f["scene"]), "--rays", "2000", "-o", str(name)],
+                 expect, outputs=[name] if expect == "ok" else []),
+            *(() if expect == "ok" else ("file name too long",)))
+    # a full disk (the tmpfs of fault_mounts): the line says space and names the file
+    if "a full disk" in mounts:
+        target = mounts["a full disk"] / "i26_map.nc"
+        mapped = d / "map.toml"
+        mapped.write_text(base + "[tallies]\nirradiance_map = true\nmap_bins = 512\n")
+        add(Case("i26 trace -o onto a full disk", ["trace", str(mapped), "--rays", "2000", "-o", str(target)],
+                 outputs=[target]), "no space left on device while writing i26_map.nc")
+    # a writable bind mount of a folder of the same file system (os.path.ismount says False)
+    src, dst = d / "bind_src", d / "bind_dst"
+    src.mkdir()
+    dst.mkdir()
+    if subprocess.run(["mount", "--bind", str(src), str(dst)], capture_output=True).returncode == 0:
+        if not _MOUNTED:
+            atexit.register(_unmount_all)
+        _MOUNTED.append(dst)
+        for verb in ("trace", "sweep"):
+            target = dst / f"{verb}.nc"
+            argv = (["trace", str(f["scene"]), "--rays", "2000"] if verb == "trace" else
+                    ["sweep", str(f["scene"]), "--param", "wall.reflectance=0.8,0.9", "--rays", "2000"])
+            add(Case(f"i26 {verb} -o into a writable bind mount", argv + ["-o", str(target)], "ok",
+                     outputs=[target]))
+    return cases
+
+
 def verb_smoke_cases(work: Path, f: dict[str, Path]) -> list[Case]:
     s = work / "smoke"
     s.mkdir()
@@ -702,6 +840,9 @@ def run_case(case: Case) -> tuple[str, str]:
                                                                         f"exit in {waited:.2f}s")
     code, _, err = run_cli(case.argv, case.timeout, case.cwd)
     verdict = classify(case, code, err)
+    judged = judge_cause(case, verdict, err)
+    if judged is not None:
+        verdict, err = judged
     changed = [str(p) for p, data in before.items() if (p.read_bytes() if p.is_file() else None) != data]
     if changed:
         return "partial", f"input changed: {changed}"
@@ -767,6 +908,7 @@ def main() -> int:
             for group, made in (("smoke", verb_smoke_cases(work, f)), ("inputs", input_cases(work, f)),
                                 ("options", option_cases(work, f)), ("output faults", output_cases(work, f, mounts)),
                                 ("concurrency", concurrency_cases(work, f)),
+                                ("issue 26 commands", command_cases(work, f, mounts)),
                                 ("kills", [] if args.no_kills else kill_cases(work, f))):
                 for case in made:
                     case.group = f"input {case.name.rsplit(' ', 1)[-1]}" if group == "inputs" else group
@@ -792,15 +934,16 @@ def main() -> int:
             results += [run_logged(c) for c in serial]
             cases = parallel + serial
         tally = Counter(v for v, _ in results)
-        verdicts = ("ok", "error", "traceback", "hang", "partial", "silent", "refused", "cryptic")
+        verdicts = ("ok", "error", "traceback", "hang", "partial", "silent", "refused", "cryptic", "misleading")
         print(f"\n{len(cases)} cases in {time.time() - started:.0f} s; mounts: {sorted(mounts) or 'none'}")
-        print(f"  {'class':26s}" + "".join(f"{v:>10s}" for v in verdicts))
+        print(f"  {'class':26s}" + "".join(f"{v:>11s}" for v in verdicts))
         by_group = Counter((c.group, v) for c, (v, _) in zip(cases, results))
         for group in dict.fromkeys(c.group for c in cases):
-            print(f"  {group:26s}" + "".join(f"{by_group.get((group, v), 0):10d}" for v in verdicts))
-        print(f"  {'all':26s}" + "".join(f"{tally.get(v, 0):10d}" for v in verdicts))
+            print(f"  {group:26s}" + "".join(f"{by_group.get((group, v), 0):11d}" for v in verdicts))
+        print(f"  {'all':26s}" + "".join(f"{tally.get(v, 0):11d}" for v in verdicts))
         return 0 if set(tally) <= {"ok", "error"} else 1
     finally:
+        _unmount_all()
         if args.keep:
             print(f"work folder kept: {work}")
         else:
