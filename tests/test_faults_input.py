@@ -7,11 +7,7 @@ with exit status 2 and no traceback; the tests check the wording, not only the s
 from __future__ import annotations
 
 import gzip
-import math
 from pathlib import Path
-
-import numpy as np
-import pytest
 
 from bsdfkit.cli.main import main
 
@@ -55,3 +51,35 @@ def test_raw_scan_error_names_the_physical_line_past_a_comment(tiny_export, caps
     scan.write_bytes(gzip.compress(("\n".join(text) + "\n").encode()))
     line = _one_line_error(*_cli(capsys, "info", str(tiny_export)), "blue.csv.gz", "side", "sideways")
     assert "blue.csv.gz:6:" in line, line  # physical line 6 (header 1, rows 2, 5, 6), not the 4th row's 5
+
+
+# ------------------------------------------------------------------------------------- dark above the signal
+def _hot_darks(folder: Path, exposures=("10", "20"), factor=3) -> None:
+    """Dark frames of two exposures made ``factor`` times brighter (a light leak while the darks were taken)."""
+    dark = folder / "dark.csv.gz"
+    lines = gzip.decompress(dark.read_bytes()).decode().splitlines()
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        if cells[1] in exposures:
+            cells = cells[:2] + [str(int(float(c)) * factor) for c in cells[2:]]
+        out.append(",".join(cells))
+    dark.write_bytes(gzip.compress(("\n".join(out) + "\n").encode()))
+
+
+def test_dark_above_signal_is_said_by_ingest_and_every_reduction(tiny_export, tmp_path, capsys):
+    code, err = _cli(capsys, "ingest", str(tiny_export), "-o", str(tmp_path / "clean.nc"))
+    assert code == 0 and "dark" not in err, err  # the untouched export: nothing said
+    _hot_darks(tiny_export)
+    scan = tmp_path / "hot.nc"
+    for argv in (("ingest", str(tiny_export), "-o", str(scan)), ("tis", str(scan), "--incidence", "45"),
+                 ("budget", str(scan), "--incidence", "45", "--eta-mc", "0.5")):
+        code, err = _cli(capsys, *argv)
+        assert code == 0, err
+        lines = [x for x in err.strip().splitlines() if "dark" in x]
+        assert len(lines) == 1, err
+        line = lines[0]
+        assert line.startswith(f"bsdfkit {argv[0]}: warning: "), line
+        # names the records (their source lines) and the exposures whose darks are too bright
+        assert "dark frames above the signal" in line and "exposures 10, 20 s" in line, line
+        assert "lines 2," in line and "biased low" in line, line
