@@ -7,7 +7,11 @@ with exit status 2 and no traceback; the tests check the wording, not only the s
 from __future__ import annotations
 
 import gzip
+import json
+import math
 from pathlib import Path
+
+import pytest
 
 from bsdfkit.cli.main import main
 
@@ -83,3 +87,63 @@ def test_dark_above_signal_is_said_by_ingest_and_every_reduction(tiny_export, tm
         # names the records (their source lines) and the exposures whose darks are too bright
         assert "dark frames above the signal" in line and "exposures 10, 20 s" in line, line
         assert "lines 2," in line and "biased low" in line, line
+
+
+# ------------------------------------------------------------------------------------- fits of plain tables
+def _lambertian(rho):
+    return lambda lam, th, ph: rho / math.pi
+
+
+def test_fit_bsdf_of_a_single_wavelength_table_works(tmp_path, capsys):
+    table = _long_table(tmp_path / "mono.csv", _lambertian(0.8), wavelengths=(550.0,))
+    code = main(["fit", "bsdf", str(table), "--interaction", "elastic", "--side", "reflection", "--model", "lambert",
+                 "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    fit = json.loads(out.out)
+    text = json.dumps(fit)
+    assert "empty wavelength band" not in text and "nan, nan" not in text
+    rho = _find(fit, "rho")
+    assert rho == pytest.approx(0.8, rel=1e-6)  # the table's own value: 0.8/π per sr
+
+
+def _find(obj, key):
+    """First value under ``key`` anywhere in a JSON object (a number or a one-element list)."""
+    if isinstance(obj, dict):
+        if key in obj:
+            v = obj[key]
+            return v[0] if isinstance(v, list) else v
+        obj = list(obj.values())
+    if isinstance(obj, list):
+        for v in obj:
+            found = _find(v, key)
+            if found is not None:
+                return found
+    return None
+
+
+@pytest.mark.parametrize("rho", [0.5, 1.0])
+def test_a_perfect_lambertian_fit_is_not_flagged(tmp_path, capsys, rho):
+    """Constant data (zero variance) fitted exactly: R² is 1, not NaN or −10¹⁴; ρ = 1 on its bound is the data's."""
+    from bsdfkit import api
+    from bsdfkit.fit.least_squares import fit_bsdf
+    from bsdfkit.reduction.spectral import interaction_profile
+
+    table = _long_table(tmp_path / "white.csv", _lambertian(rho))
+    fit = fit_bsdf(interaction_profile(api.ingest(str(table)), "elastic", "reflection"), "lambert")
+    assert float(fit["rho"][0]) == pytest.approx(rho, rel=1e-6)
+    assert float(fit["r2"][0]) >= 1.0 - 1e-4
+    assert bool(fit["plausible"][0]), fit.attrs["warnings"]
+    code, err = _cli(capsys, "fit", "bsdf", str(table), "--interaction", "elastic", "--side", "reflection",
+                     "--model", "lambert")
+    assert code == 0 and err == "", err
+
+
+def test_all_zero_table_fit_names_the_file(tmp_path, capsys):
+    table = _long_table(tmp_path / "black.csv", lambda lam, th, ph: 0.0)
+    # kept zeros: the fit refuses naming the file and saying the table is all zero (not bsdf_std[record=0])
+    scan = tmp_path / "black.nc"
+    assert main(["ingest", str(table), "-o", str(scan), "--zeros", "keep"]) == 0
+    capsys.readouterr()
+    _one_line_error(*_cli(capsys, "fit", "bsdf", str(scan), "--interaction", "elastic", "--side", "reflection",
+                          "--model", "lambert"), "black.csv", "all-zero", "every BSDF value is 0")
