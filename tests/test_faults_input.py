@@ -9,8 +9,12 @@ from __future__ import annotations
 import gzip
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bsdfkit.cli.main import main
@@ -140,10 +144,101 @@ def test_a_perfect_lambertian_fit_is_not_flagged(tmp_path, capsys, rho):
 
 
 def test_all_zero_table_fit_names_the_file(tmp_path, capsys):
-    table = _long_table(tmp_path / "black.csv", lambda lam, th, ph: 0.0)
-    # kept zeros: the fit refuses naming the file and saying the table is all zero (not bsdf_std[record=0])
+    from bsdfkit import api
+
+    # a scan zeroed after reading (the reader refuses an all-zero table itself): the fit refuses naming the
+    # file and saying it is all zero, not "bsdf_std[record=0]"
+    table = _long_table(tmp_path / "black.csv", _lambertian(0.5))
+    ds = api.ingest(str(table))
+    ds["bsdf"][:] = 0.0
+    ds["bsdf_std"][:] = 0.0
     scan = tmp_path / "black.nc"
-    assert main(["ingest", str(table), "-o", str(scan), "--zeros", "keep"]) == 0
-    capsys.readouterr()
+    api.save(ds, str(scan))
     _one_line_error(*_cli(capsys, "fit", "bsdf", str(scan), "--interaction", "elastic", "--side", "reflection",
                           "--model", "lambert"), "black.csv", "all-zero", "every BSDF value is 0")
+
+
+# ------------------------------------------------------------------------------------- values and units
+def test_all_negative_table_is_refused_naming_file_line_and_field(tmp_path, capsys):
+    table = _long_table(tmp_path / "neg.csv", lambda lam, th, ph: -0.5 / math.pi)
+    line = _one_line_error(*_cli(capsys, "ingest", str(table), "-o", str(tmp_path / "o.nc")),
+                           "neg.csv:2:", "field 'brdf'", "negative beyond noise", "450 nm", "216 of 216")
+    assert "expected >= 0" in line and "got 'mean -0.1592" in line, line
+    assert not (tmp_path / "o.nc").exists()
+
+
+def test_dark_subtraction_noise_around_zero_is_read(tmp_path):
+    """A black sample: values scattered ±1e-4 around 0 (half of them negative) are noise, not refused."""
+    from bsdfkit import api
+
+    rng = np.random.default_rng(3)
+    noise = iter(rng.normal(0.0, 1e-4, 10_000))
+    ds = api.ingest(str(_long_table(tmp_path / "black.csv", lambda lam, th, ph: float(next(noise)))))
+    assert ds.attrs["negative_values"] > 0.3 * ds["bsdf"].size  # negatives kept as read
+
+
+def test_wavelengths_in_metres_are_refused_or_converted_when_declared(tmp_path, capsys):
+    plain = _long_table(tmp_path / "m.csv", _lambertian(0.5), wavelengths=(4.5e-7, 5.5e-7, 6.5e-7))
+    line = _one_line_error(*_cli(capsys, "ingest", str(plain), "-o", str(tmp_path / "o.nc")),
+                           "m.csv:2:", "column 4 'wavelength'", "look like metres", "4.5e-07..6.5e-07")
+    assert "expected 1..100000 nm" in line, line
+    from bsdfkit import api
+
+    declared = _long_table(tmp_path / "m2.csv", _lambertian(0.5), wavelengths=(4.5e-7, 5.5e-7, 6.5e-7),
+                           header="theta_i,theta_s,phi_s,wavelength [m],brdf")
+    assert api.ingest(str(declared))["wavelength"].values == pytest.approx([450.0, 550.0, 650.0], rel=1e-12)
+
+
+def test_um_and_nm_mixed_in_one_column_names_the_rows(tmp_path, capsys):
+    table = _long_table(tmp_path / "mix.csv", _lambertian(0.5), wavelengths=(450.0, 0.55, 650.0))
+    # rows of the 0.55 block: 2 + 18·12 = 218 onwards
+    _one_line_error(*_cli(capsys, "ingest", str(table), "-o", str(tmp_path / "o.nc")),
+                    "mix.csv:218:", "column 4 'wavelength'", "two units", "0.55..0.55 on lines 218, 219")
+
+
+def test_radians_under_a_degree_header_are_refused(tmp_path, capsys):
+    lines = ["theta_i [deg],theta_s [deg],phi_s [deg],wavelength,brdf"]
+    for th in np.linspace(0.0, 1.5, 16):
+        for ph in np.linspace(0.0, 6.0, 12):
+            lines.append(f"0.17,{th!r},{ph!r},550,{0.5 / math.pi!r}")
+    (tmp_path / "rad.csv").write_text("\n".join(lines) + "\n")
+    line = _one_line_error(*_cli(capsys, "ingest", str(tmp_path / "rad.csv"), "-o", str(tmp_path / "o.nc")),
+                           "rad.csv:2:", "column 2 'theta_s [deg]'", "look like radians", "16 distinct")
+    assert "[rad]" in line, line
+
+
+@pytest.mark.parametrize("verb", ["ingest", "tis"])
+def test_huge_values_are_one_line_without_numpy_warnings(tmp_path, capsys, verb):
+    table = _long_table(tmp_path / "huge.csv", lambda lam, th, ph: 1e308)
+    argv = (verb, str(table)) + (("-o", str(tmp_path / "o.nc")) if verb == "ingest" else ())
+    line = _one_line_error(*_cli(capsys, *argv), "huge.csv:2:", "field 'brdf'", "implausibly large",
+                           "got '1e+308'")
+    assert "RuntimeWarning" not in line
+
+
+def test_all_zero_table_is_refused_by_the_reader_naming_the_file(tmp_path, capsys):
+    table = _long_table(tmp_path / "zero.csv", lambda lam, th, ph: 0.0)
+    _one_line_error(*_cli(capsys, "ingest", str(table), "-o", str(tmp_path / "o.nc")), "zero.csv:2:",
+                    "field 'brdf'", "all zero", "0 in all 648 cells")
+
+
+def test_huge_values_in_a_netcdf_scan_are_one_line_before_computing(tmp_path, capsys):
+    from bsdfkit import api
+
+    ds = api.ingest(str(_long_table(tmp_path / "ok.csv", _lambertian(0.5))))
+    ds["bsdf"][:] = 1e308  # written by another tool: no reader saw it
+    api.save(ds, str(tmp_path / "huge.nc"))
+    _one_line_error(*_cli(capsys, "tis", str(tmp_path / "huge.nc")), "huge.nc:", "bsdf of record 0 (source line 2)",
+                    "implausibly large", "1e+308")
+
+
+def test_library_warnings_never_reach_stderr():
+    """A numpy RuntimeWarning inside a verb is not printed (bsdfkit says what matters in its own lines); run in a
+    fresh interpreter with warnings on, as pytest would capture them itself."""
+    code = ("import numpy as np, bsdfkit.cli.tis as t\n"
+            "t._run = lambda args: int(np.isinf(np.float64(1e308) * np.float64(10.0))) - 1\n"
+            "from bsdfkit.cli.main import main\nraise SystemExit(main(['tis', 'x.nc']))\n")
+    done = subprocess.run([sys.executable, "-W", "default", "-c", code], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "", done.stderr
