@@ -53,6 +53,7 @@ import hashlib
 import json
 import math
 import re
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -451,17 +452,19 @@ def _number(cell: str, decimal_comma: bool) -> float:
 class _Rows:
     """What the parser found: one entry per (row, value column) with a finite or NaN value."""
 
-    theta_i: list[float] = field(default_factory=list)
-    phi_i: list[float] = field(default_factory=list)
-    theta_s: list[float] = field(default_factory=list)  # signed for in-plane tables
-    phi_s: list[float] = field(default_factory=list)
+    # numbers in typed arrays (8 bytes an entry, not a 32-byte float object and its pointer): a table of
+    # millions of rows is held at a small multiple of its size; np.asarray reads them without a copy
+    theta_i: array = field(default_factory=lambda: array("d"))
+    phi_i: array = field(default_factory=lambda: array("d"))
+    theta_s: array = field(default_factory=lambda: array("d"))  # signed for in-plane tables
+    phi_s: array = field(default_factory=lambda: array("d"))
     side: list[str | None] = field(default_factory=list)
-    wavelength: list[float] = field(default_factory=list)
-    value: list[float] = field(default_factory=list)
-    std: list[float] = field(default_factory=list)
-    std_relative: list[bool] = field(default_factory=list)
+    wavelength: array = field(default_factory=lambda: array("d"))
+    value: array = field(default_factory=lambda: array("d"))
+    std: array = field(default_factory=lambda: array("d"))
+    std_relative: array = field(default_factory=lambda: array("b"))
     quantity: list[str] = field(default_factory=list)
-    line: list[int] = field(default_factory=list)
+    line: array = field(default_factory=lambda: array("q"))
     column: list[str] = field(default_factory=list)
 
 
@@ -874,9 +877,9 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
     front_frame: list[int] = []  # lines with a polar angle beyond 90° (front-normal frame)
     back_frame: list[int] = []  # lines of transmission angles within 90° (back-normal frame)
     sideless: list[tuple[int, str]] = []  # (line, column) of values whose side nothing states
-    out_value: list[float] = []
-    out_std: list[float] = []
-    out_rel: list[bool] = []
+    out_value = array("d")
+    out_std = array("d")
+    out_rel = array("b")
     for line, text in data:
         while pending and pending[0][0] < line:
             apply_block(_metadata([pending.pop(0)]))
@@ -967,11 +970,11 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
             out_std.append(s)
             out_rel.append(s_rel)
         n_v = len(specs)
-        rows.theta_i.extend(th_i if c.incidence is None else c.incidence for c in values)
+        rows.theta_i.extend([th_i if c.incidence is None else c.incidence for c in values])
         rows.phi_i.extend([ph_i] * n_v)
         rows.theta_s.extend([th_s] * n_v)
         rows.phi_s.extend([ph_s] * n_v)
-        rows.wavelength.extend(lam if c.wavelength is None else c.wavelength for c in values)
+        rows.wavelength.extend([lam if c.wavelength is None else c.wavelength for c in values])
         rows.quantity.extend(quantities)
         rows.line.extend([line] * n_v)
         rows.column.extend(headers)
