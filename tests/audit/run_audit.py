@@ -880,11 +880,11 @@ def main() -> int:
         tally = Counter(v for v, _ in results)
         verdicts = ("ok", "error", "traceback", "hang", "partial", "silent", "refused", "cryptic", "misleading")
         print(f"\n{len(cases)} cases in {time.time() - started:.0f} s; mounts: {sorted(mounts) or 'none'}")
-        print(f"  {'class':26s}" + "".join(f"{v:>10s}" for v in verdicts))
+        print(f"  {'class':26s}" + "".join(f"{v:>11s}" for v in verdicts))
         by_group = Counter((c.group, v) for c, (v, _) in zip(cases, results))
         for group in dict.fromkeys(c.group for c in cases):
-            print(f"  {group:26s}" + "".join(f"{by_group.get((group, v), 0):10d}" for v in verdicts))
-        print(f"  {'all':26s}" + "".join(f"{tally.get(v, 0):10d}" for v in verdicts))
+            print(f"  {group:26s}" + "".join(f"{by_group.get((group, v), 0):11d}" for v in verdicts))
+        print(f"  {'all':26s}" + "".join(f"{tally.get(v, 0):11d}" for v in verdicts))
         return 0 if set(tally) <= {"ok", "error"} else 1
     finally:
         if args.keep:
