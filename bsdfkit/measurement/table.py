@@ -635,6 +635,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     text = _load_text(path)
     k_header, delim, columns, preamble = _find_header(text)
     refuse_cut_last_line(text.text, path, delim, expected="a row of numbers", comments=_COMMENTS)
+    text.text = ""  # the lines hold what is still needed: the whole text (1× the file) is not kept while parsing
     header_line = text.lines[k_header][0]
     meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
     data = text.lines[k_header + 1:]
