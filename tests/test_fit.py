@@ -147,7 +147,7 @@ def test_bsdf_input_errors_are_one_line():
     cases = [
         (two_sides, InputError, "one side"),
         (profile.drop_vars("bsdf_std"), InputError, "bsdf_std"),
-        (bad, InputError, "bsdf[record=3]"),
+        (bad, InputError, "bsdf of record 3"),
     ]
     for ds, err, text in cases:
         with pytest.raises(err) as exc:

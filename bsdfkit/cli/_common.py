@@ -66,6 +66,19 @@ def emit_json(obj: Any) -> None:
     sys.stdout.write(dumps(obj) + "\n")
 
 
+def warn_dark(ds: Any, verb: str) -> None:
+    """One warning line on stderr when the scan ``ds`` has records whose dark frames are above the signal.
+
+    Said by ``ingest`` and by every verb that reduces such records (tis, budget, fit bsdf), not only recorded
+    in the ``below_dark`` flag: the numbers they give are biased low.
+    """
+    from bsdfkit.measurement.calibrate import dark_above_signal  # xarray only once a scan is read
+
+    line = dark_above_signal(ds)
+    if line is not None:
+        print(f"bsdfkit {verb}: warning: {line}", file=sys.stderr)
+
+
 class Progress:
     """A minimal text progress bar on stderr (silent when stderr is not a terminal unless forced)."""
 

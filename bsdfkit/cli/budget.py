@@ -54,7 +54,8 @@ def _run(args: argparse.Namespace) -> int:
     else:
         if args.incidence is None:
             raise InputError("a scan needs --incidence", field="--incidence")
-        t = budget(load_scan(args.scan), args.incidence)  # bsdfkit.budget: elastic data refused with one line
+        # bsdfkit.budget: elastic data refused with one line
+        t = budget(load_scan(args.scan, verb="budget"), args.incidence)
         tables = {"power": t.power, "photons": t.photons}
     result = module_budget(tables["power"], args.eta_mc, args.iterations).as_dict()
     if "photons" in tables:

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from bsdfkit import api
-from bsdfkit.cli._common import emit_json
+from bsdfkit.cli._common import emit_json, warn_dark
 from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
@@ -189,6 +189,7 @@ def _run_bsdf(args: argparse.Namespace) -> int:
     if args.output:
         atomic.check_writable(args.output, args.force, inputs=[args.scan])
     ds = api.ingest(args.scan)
+    warn_dark(ds, "fit bsdf")
     profile = interaction_profile(ds, args.interaction, args.side)
     result = fit_bsdf(profile, args.model, incidence_deg=args.incidence)
     result.attrs["interaction"] = args.interaction

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 
 from bsdfkit import api
-from bsdfkit.cli._common import check_options, emit_json
+from bsdfkit.cli._common import check_options, emit_json, warn_dark
 from bsdfkit.io import atomic
 from bsdfkit.measurement.table import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 
@@ -62,6 +62,7 @@ def _run(args: argparse.Namespace) -> int:
                 wavelength=args.wavelength, incidence=args.incidence, phi_i=args.phi_i, zeros=args.zeros,
                 sample=args.sample)
     api.save(ds, args.output, args.force)
+    warn_dark(ds, "ingest")
     info = api.describe(ds)
     extra = {k: ds.attrs[k] for k in ("source_format", "source_layout", "source_quantity", "bsdf_std_origin",
                                       "gap_records_dropped", "zero_records_as_gaps", "wavelength_note",

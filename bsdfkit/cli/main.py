@@ -27,6 +27,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 import zlib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -173,7 +174,10 @@ def _run(argv: list[str]) -> int:
     if not getattr(args, "func", None):
         parser.error(f"no verb given; expected one of {', '.join(VERBS)}")
     try:
-        with prompt_signals():
+        # library warnings (numpy's RuntimeWarning with its source line, xarray, dask) never reach stderr: what
+        # a user must know is said by bsdfkit in its own one-line warnings, which do not use the warnings module
+        with prompt_signals(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
             from bsdfkit.cli._common import refuse_replacing_inputs  # a verb's module imported it already
             refuse_replacing_inputs(args)  # --force never replaces an input, for every verb
             return int(args.func(args) or 0)

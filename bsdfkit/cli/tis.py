@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bsdfkit.cli._common import emit_json
+from bsdfkit.cli._common import emit_json, warn_dark
 from bsdfkit.core.errors import InputError
 from bsdfkit.measurement.table import QUANTITIES
 from bsdfkit.reduction.any_sample import budget, check_band, check_incidence, hemispherical_json, tis
@@ -44,9 +44,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_run)
 
 
-def load_scan(path: str, quantity: str | None = None):
-    """A calibrated dataset from a raw folder, a bsdfkit netCDF, a measured text table or a vendor file."""
-    return ingest(path, quantity=quantity)
+def load_scan(path: str, quantity: str | None = None, verb: str = "tis"):
+    """A calibrated dataset from a raw folder, a bsdfkit netCDF, a measured text table or a vendor file.
+
+    Records whose dark frames are brighter than their signal are said on stderr (one line, ``bsdfkit VERB:
+    warning: …``): every reduction of them is biased low.
+    """
+    ds = ingest(path, quantity=quantity)
+    warn_dark(ds, verb)
+    return ds
 
 
 def _run(args: argparse.Namespace) -> int:

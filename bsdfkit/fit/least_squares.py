@@ -75,6 +75,10 @@ _U_CLIP_SIGMOID = 40.0
 _BAD_RESIDUAL = 1e100
 # Residual norm, relative to the norm of the data (in residual space), below which a fit reproduces the data exactly.
 _EXACT_RESIDUAL = 1e-10
+# Spread of the data, relative to their norm, below which they count as constant: no measurement resolves a part
+# in 10⁶, and below it ss_tot is rounding noise (a noiseless Lambertian profile, a fit stopped at a bound a part in
+# 10⁹ from the data), so that 1 − ss_res/ss_tot would be 0/0 or −10¹⁴.
+_CONSTANT_DATA = 1e-6
 
 
 @dataclass(frozen=True)
@@ -646,8 +650,11 @@ def least_squares(
     # constant (ss_tot = 0, e.g. a noiseless Lambertian profile), where 1 − ss_res/ss_tot is 0/0 or rounding noise.
     scale = np.sqrt(np.sum(np.where(m, y_t if options.residual != "relative" else y2, 0.0) ** 2, axis=1))
     exact = ss_for_r2 <= (_EXACT_RESIDUAL * scale) ** 2
+    # the spread of constant data is floored at _CONSTANT_DATA of their norm: a model within that of the data
+    # scores R² ≈ 1, one further off scores R² ≪ 0 (worse than the constant that fits exactly), never NaN
+    ss_ref = np.maximum(ss_tot, (_CONSTANT_DATA * scale) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        r2 = np.where(exact, 1.0, np.where(ss_tot > 0, 1.0 - ss_for_r2 / ss_tot, np.nan))
+        r2 = np.where(exact, 1.0, np.where(ss_ref > 0, 1.0 - ss_for_r2 / ss_ref, np.nan))
 
     iterations = out["iterations"].astype(int)
     converged = out["converged"] & np.all(np.isfinite(theta), axis=1) & np.isfinite(out["sum_sq"])
@@ -820,17 +827,29 @@ def fit_bsdf(
     if sides.size != 1 or sides[0] not in ("reflection", "transmission"):
         raise InputError("fit one side at a time", field="side", expected="a single 'reflection' or "
                          "'transmission'", got=sides.tolist())
+    # messages name the scan and, where the records came from a text file, its line
+    source = str(profile.attrs.get("source", "")) or None
+    lines = np.asarray(profile["source_line"].values) if "source_line" in profile.coords else None
+
+    def at(k: int) -> str:
+        return f"record {k}" + (f" (line {int(lines[k])})" if lines is not None and lines.size > k and lines[k] > 0
+                                else "")
+
     for n in names[:6]:
         arr = fields[n].astype(float)
         bad = ~np.isfinite(arr)
         if bad.any():
-            raise InputError("value is not finite", field=f"{n}[record={int(np.argmax(bad))}]",
+            raise InputError("value is not finite", file=source, field=f"{n} of {at(int(np.argmax(bad)))}",
                              got=float(arr[bad][0]))
         fields[n] = arr
+    if fields["bsdf"].size and np.all(fields["bsdf"] == 0):
+        raise InputError("every BSDF value is 0 (an all-zero table: no scatter to fit)", file=source,
+                         field="bsdf", expected="values > 0 where the sample scatters",
+                         got=f"0 on all {fields['bsdf'].size} records")
     if np.any(fields["bsdf_std"] <= 0):
         k = int(np.argmax(fields["bsdf_std"] <= 0))
-        raise InputError("standard uncertainty must be > 0", field=f"bsdf_std[record={k}]",
-                         got=float(fields["bsdf_std"][k]))
+        raise InputError("standard uncertainty must be > 0", file=source, field=f"bsdf_std of {at(k)}",
+                         expected="> 0 1/sr", got=float(fields["bsdf_std"][k]))
     if np.any((fields["theta_s"] < 0) | (fields["theta_s"] > 90)):
         k = int(np.argmax((fields["theta_s"] < 0) | (fields["theta_s"] > 90)))
         raise InputError("scatter polar angle out of range", field=f"theta_s[record={k}]",

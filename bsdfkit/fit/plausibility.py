@@ -98,6 +98,11 @@ class Thresholds:
 #: The thresholds of the gate (:class:`Thresholds` defaults).
 THRESHOLDS = Thresholds()
 
+#: 1 − R² below which a fit reproduces its data (residual within 1 % of their spread; for constant data, within
+#: 1e-8 of their norm, :data:`bsdfkit.fit.least_squares._CONSTANT_DATA`): a parameter on its bound is then where
+#: the data put it (a solver stops a part in 10⁹ short of a bound) and is not flagged.
+EXACT_R2 = 1e-4
+
 
 @dataclass(frozen=True)
 class Verdict:
@@ -289,9 +294,12 @@ def evaluate(fit: xr.Dataset, thresholds: Thresholds = THRESHOLDS) -> Verdict:
             worse = ", worse than a constant" if r2[index] < 0 else ""
             reasons.append(f"{where}: R² = {r2[index]:.3g} < {thresholds.min_r2:g}: the model does not describe "
                            f"the data{worse}")
+        # a fit that reproduces the data (R² within EXACT_R2 of 1) has its parameters where the data put them,
+        # also on a bound (a noiseless white Lambertian: rho = 1): nothing pushes the model beyond its range
+        exact = r2 is not None and bool(r2[index] >= 1.0 - EXACT_R2)
         for p in spec.parameters:
             value, std = float(params[p.name][index]), float(stds[p.name][index])
-            if is_fit and bool(at_bound(value, p, thresholds)):
+            if is_fit and not exact and bool(at_bound(value, p, thresholds)):
                 determined[index] = False
                 bound = p.lower if abs(value - p.lower) <= abs(value - p.upper) else p.upper
                 reasons.append(f"{where}: {p.name} = {value:.4g} is at its bound {bound:g}")

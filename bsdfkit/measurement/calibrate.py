@@ -227,3 +227,50 @@ def truth_tis(ds: xr.Dataset) -> dict[str, dict[str, float]] | None:
     manifest = json.loads(ds.attrs.get("manifest_json", "{}"))
     truth = manifest.get("truth")
     return None if truth is None else truth.get("tis_percent")
+
+
+def dark_above_signal(ds: xr.Dataset, limit: int = 6) -> str | None:
+    """One line saying which records of a calibrated scan have pixels far below the dark level, or None.
+
+    A dark frame brighter than the signal (a light leak while the darks were taken, a dark of another
+    exposure) makes the net signal negative and biases every reduction of those records low; the flag
+    ``below_dark`` (pixels more than :data:`BELOW_DARK_SIGMA` standard uncertainties below the dark level)
+    records it, and this line says it where a person reads it.
+
+    Parameters
+    ----------
+    ds
+        A calibrated dataset; one without a ``below_dark`` flag (a measured table) gives None.
+    limit
+        At most this many source lines are listed.
+
+    Returns
+    -------
+    str or None
+        ``"dark frames above the signal: N of M pixels on K records (source lines …; exposures … s) lie more
+        than 6 standard uncertainties below the dark level: their BSDF is biased low (flag below_dark)"``.
+    """
+    if "below_dark" not in ds:
+        return None
+    flag = np.asarray(ds["below_dark"].values, dtype=bool)
+    per_record = flag.any(axis=tuple(range(1, flag.ndim)))
+    if not per_record.any():
+        return None
+    rec = np.flatnonzero(per_record)
+    lines = ds["source_line"].values[rec] if "source_line" in ds.coords else rec
+    configs = ds["config"].values[rec] if "config" in ds.coords else np.array([""] * rec.size)
+    groups = []
+    for c in dict.fromkeys(configs.tolist()):  # per configuration (its scan file), in order of appearance
+        n = [int(x) for x, cc in zip(lines, configs) if cc == c]
+        text = ", ".join(map(str, n[:limit])) + (f", … ({len(n) - limit} more)" if len(n) > limit else "")
+        groups.append(f"configuration {c} lines {text}" if c else f"lines {text}")
+    listed = "; ".join(groups)
+    exposures = ""
+    if "exposure" in ds.coords:
+        t = np.unique(ds["exposure"].values[rec][np.isfinite(ds["exposure"].values[rec])])
+        if t.size:
+            exposures = "; exposures " + ", ".join(f"{x:g}" for x in t) + " s"
+    return (f"{ds.attrs.get('source', '')}: dark frames above the signal: {int(flag.sum())} of {flag.size} pixels "
+            f"on {rec.size} records ({listed}{exposures}) lie more than {BELOW_DARK_SIGMA:g} standard "
+            "uncertainties below the dark level: their BSDF and every reduction of them is biased low "
+            "(flag below_dark)")

@@ -38,6 +38,8 @@ class SpectraTable:
     wavelength: NDArray[np.float64]
     counts: NDArray[np.float64]
     first_data_line: int
+    #: physical (1-based) line of each data row: comments and blank lines between rows count
+    lines: tuple[int, ...] = ()
 
 
 def _open_text(path: Path) -> str:
@@ -60,11 +62,13 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
     text = _open_text(path)
     refuse_cut_last_line(text, path, ",", expected="a row of counts")
     try:
-        rows = [r for r in csv.reader(io.StringIO(text))]
+        reader = csv.reader(io.StringIO(text))
+        # the reader's physical line (a quoted cell may span lines: a row's index is not its line)
+        rows = [(reader.line_num, r) for r in reader]
     except csv.Error as exc:
         raise FormatError(f"not valid CSV ({exc})", file=path) from None
-    # Skip blank and '#' comment lines but keep 1-based line numbers for messages.
-    numbered = [(k + 1, r) for k, r in enumerate(rows)
+    # Skip blank and '#' comment lines but keep 1-based physical line numbers for messages.
+    numbered = [(k, r) for k, r in rows
                 if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
     if not numbered:
         raise InputError("empty file", file=path, expected="a header line and at least one data row")
@@ -129,7 +133,8 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
             k = int(np.argmax(~np.isfinite(counts[r])))
             raise ValidationError("count is not finite", file=path, line=line, field=header[n_named + k],
                                   expected="a finite number", got=row[n_named + k])
-    return SpectraTable(path=path, columns=columns, wavelength=wavelength, counts=counts, first_data_line=data[0][0])
+    return SpectraTable(path=path, columns=columns, wavelength=wavelength, counts=counts, first_data_line=data[0][0],
+                        lines=tuple(line for line, _ in data))
 
 
 def _floats(table: SpectraTable, name: str, lo: float, hi: float, lo_open: bool = False,
@@ -151,8 +156,8 @@ def _floats(table: SpectraTable, name: str, lo: float, hi: float, lo_open: bool 
 
 
 def _line_of(table: SpectraTable, row: int) -> int:
-    # Data rows are contiguous after the header in files bsdfkit reads (comments only precede the header).
-    return table.first_data_line + row
+    # the physical line: comment or blank lines between data rows shift it (not first line + row)
+    return table.lines[row] if table.lines else table.first_data_line + row
 
 
 def _check_grid(table: SpectraTable, grid: NDArray[np.float64], manifest: Manifest) -> None:
@@ -255,7 +260,7 @@ def read_scan(folder: str | Path) -> xr.Dataset:
                 "side": ("record", np.array(side, dtype=object)),
                 "arc": ("record", np.array(arcs, dtype=object)),
                 "exposure": ("record", exposure),
-                "source_line": ("record", np.arange(len(side)) + table.first_data_line),
+                "source_line": ("record", np.array([_line_of(table, k) for k in range(len(side))], dtype=np.int64)),
             },
         ))
         ref = read_spectra_table(cfg.reference_file, FRAME_COLUMNS)

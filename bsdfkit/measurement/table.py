@@ -53,6 +53,7 @@ import hashlib
 import json
 import math
 import re
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -215,8 +216,10 @@ def _wavelength_scale(units: str, header: str, file: str, line: int) -> float:
         return 1000.0
     if u in ("a", "å", "angstrom", "angstroms"):
         return 0.1
+    if u in ("m", "meter", "meters", "metre", "metres"):
+        return 1e9  # declared in the header: converted (undeclared metres are refused by _check_units)
     raise FormatError("unknown wavelength unit in a column header", file=file, line=line, field=header,
-                      expected="nm or um", got=units)
+                      expected="nm, um or m", got=units)
 
 
 _STD_WORDS = re.compile(r"\b(std|stdev|stddev|std dev|sd|sigma|uncertainty|unc|u|error|err|stderr|"
@@ -449,17 +452,19 @@ def _number(cell: str, decimal_comma: bool) -> float:
 class _Rows:
     """What the parser found: one entry per (row, value column) with a finite or NaN value."""
 
-    theta_i: list[float] = field(default_factory=list)
-    phi_i: list[float] = field(default_factory=list)
-    theta_s: list[float] = field(default_factory=list)  # signed for in-plane tables
-    phi_s: list[float] = field(default_factory=list)
+    # numbers in typed arrays (8 bytes an entry, not a 32-byte float object and its pointer): a table of
+    # millions of rows is held at a small multiple of its size; np.asarray reads them without a copy
+    theta_i: array = field(default_factory=lambda: array("d"))
+    phi_i: array = field(default_factory=lambda: array("d"))
+    theta_s: array = field(default_factory=lambda: array("d"))  # signed for in-plane tables
+    phi_s: array = field(default_factory=lambda: array("d"))
     side: list[str | None] = field(default_factory=list)
-    wavelength: list[float] = field(default_factory=list)
-    value: list[float] = field(default_factory=list)
-    std: list[float] = field(default_factory=list)
-    std_relative: list[bool] = field(default_factory=list)
+    wavelength: array = field(default_factory=lambda: array("d"))
+    value: array = field(default_factory=lambda: array("d"))
+    std: array = field(default_factory=lambda: array("d"))
+    std_relative: array = field(default_factory=lambda: array("b"))
     quantity: list[str] = field(default_factory=list)
-    line: list[int] = field(default_factory=list)
+    line: array = field(default_factory=lambda: array("q"))
     column: list[str] = field(default_factory=list)
 
 
@@ -630,6 +635,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     text = _load_text(path)
     k_header, delim, columns, preamble = _find_header(text)
     refuse_cut_last_line(text.text, path, delim, expected="a row of numbers", comments=_COMMENTS)
+    text.text = ""  # the lines hold what is still needed: the whole text (1× the file) is not kept while parsing
     header_line = text.lines[k_header][0]
     meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
     data = text.lines[k_header + 1:]
@@ -705,6 +711,8 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     rows = _parse_rows(path, data, delim, columns, roles, decimal_comma, theta_i_default, phi_i_default,
                        default_side, mono_lambda, block_comments, _fields(text.lines[k_header][1], delim))
     _refuse_cut_last_block(path, rows)
+    _check_units(path, rows, roles)
+    _check_values(path, rows, rel)
     signed = "phi_s" not in roles
     ds = _assemble(path, rows, signed, rel, zeros,
                    wavelength_known=bool(np.isfinite(np.asarray(rows.wavelength, dtype=np.float64)).any()))
@@ -870,9 +878,9 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
     front_frame: list[int] = []  # lines with a polar angle beyond 90° (front-normal frame)
     back_frame: list[int] = []  # lines of transmission angles within 90° (back-normal frame)
     sideless: list[tuple[int, str]] = []  # (line, column) of values whose side nothing states
-    out_value: list[float] = []
-    out_std: list[float] = []
-    out_rel: list[bool] = []
+    out_value = array("d")
+    out_std = array("d")
+    out_rel = array("b")
     for line, text in data:
         while pending and pending[0][0] < line:
             apply_block(_metadata([pending.pop(0)]))
@@ -963,11 +971,11 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
             out_std.append(s)
             out_rel.append(s_rel)
         n_v = len(specs)
-        rows.theta_i.extend(th_i if c.incidence is None else c.incidence for c in values)
+        rows.theta_i.extend([th_i if c.incidence is None else c.incidence for c in values])
         rows.phi_i.extend([ph_i] * n_v)
         rows.theta_s.extend([th_s] * n_v)
         rows.phi_s.extend([ph_s] * n_v)
-        rows.wavelength.extend(lam if c.wavelength is None else c.wavelength for c in values)
+        rows.wavelength.extend([lam if c.wavelength is None else c.wavelength for c in values])
         rows.quantity.extend(quantities)
         rows.line.extend([line] * n_v)
         rows.column.extend(headers)
@@ -984,6 +992,127 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
         out_side = [s if s is not None else "reflection" for s in out_side]  # full sphere: up to 90° reflects
     rows.side, rows.value, rows.std, rows.std_relative = out_side, out_value, out_std, out_rel
     return rows
+
+
+#: Plausible wavelengths [nm]: 1 nm (soft X-ray) to 100 µm (far infrared); a column outside is in another unit.
+WAVELENGTH_RANGE_NM = (1.0, 1e5)
+#: Largest plausible |BSDF| [1/sr]: a perfect mirror seen by a 1e-10 sr detector; beyond, a value is not a BSDF
+#: (and its square, in every uncertainty, overflows float64 near 1e154).
+MAX_ABS_BSDF = 1e10
+#: A polar-angle column in degrees whose |values| never exceed this [deg] over at least RADIAN_MIN_DISTINCT
+#: distinct values is in radians (π/2 = 1.571 rounded up): no BSDF scan covers only 1.6° of polar angle.
+RADIAN_POLAR_MAX, RADIAN_AZIMUTH_MAX, RADIAN_MIN_DISTINCT = 1.6, 6.3, 5
+#: Negative beyond noise: at one wavelength the mean BSDF is below zero by more than this many standard errors
+#: of the mean and by more than the median stated uncertainty (dark-subtraction noise around 0 stays).
+NEGATIVE_SIGMA = 5.0
+
+
+def _unit_guess(values: NDArray[np.float64]) -> str:
+    """What unit wavelength numbers that are not nm look like."""
+    hi = float(np.nanmax(np.abs(values)))
+    if hi < 1e-4:
+        return "metres (e.g. 5.5e-07 = 550 nm)"
+    if hi < 1e-1:
+        return "millimetres or metres"
+    if hi < 1.0 or hi < 30.0:
+        return "micrometres (e.g. 0.55 = 550 nm)"
+    return "not nanometres (angstroms, picometres or wavenumbers?)"
+
+
+def _span(values: NDArray[np.float64]) -> str:
+    return f"{np.nanmin(values):g}..{np.nanmax(values):g}"
+
+
+def _lines_of(lines: NDArray[np.int64], limit: int = 5) -> str:
+    u = np.unique(lines)
+    return ", ".join(map(str, u[:limit].tolist())) + (f", … ({u.size - limit} more)" if u.size > limit else "")
+
+
+def _check_units(path: str, rows: _Rows, roles: dict[str, list[_Column]]) -> None:
+    """Refuse wavelength and angle columns whose magnitudes contradict their declared (or assumed) unit."""
+    lines = np.asarray(rows.line, dtype=np.int64)
+    if "wavelength" in roles:
+        col = roles["wavelength"][0]
+        where = f"column {col.index + 1} '{col.header}'"
+        unit = {1.0: "nm", 1000.0: "um", 1e9: "m", 0.1: "angstrom"}.get(col.scale, f"x{col.scale:g} nm")
+        lam = np.asarray(rows.wavelength, dtype=np.float64)
+        lo, hi = WAVELENGTH_RANGE_NM
+        out = (lam < lo) | (lam > hi)
+        if out.all():
+            raise ValidationError(f"wavelengths implausible in {unit}: they look like {_unit_guess(lam / col.scale)}",
+                                  file=path, line=int(lines[0]), field=where,
+                                  expected=f"{lo:g}..{hi:g} nm, or the unit in the header (e.g. "
+                                           "'wavelength [um]', 'wavelength [m]')",
+                                  got=f"{np.nanmin(lam) / col.scale:g}..{np.nanmax(lam) / col.scale:g}")
+        ratio = np.nanmax(lam) / np.nanmin(lam) if np.all(lam > 0) else np.inf
+        if out.any() or ratio > 1000.0:
+            # two units in one column (µm rows among nm rows): the rows of the smaller group are named
+            small = lam < np.sqrt(np.nanmax(lam) * np.nanmin(lam))
+            minority = small if small.sum() <= (~small).sum() else ~small
+            raise ValidationError("wavelengths in two units in one column (um and nm mixed?)", file=path,
+                                  line=int(lines[minority][0]), field=where,
+                                  expected=f"one unit: {lo:g}..{hi:g} nm after the header's unit ({unit})",
+                                  got=f"{_span(lam[minority] / col.scale)} on lines {_lines_of(lines[minority])} "
+                                      f"among {_span(lam[~minority] / col.scale)}")
+    for role, bound in (("theta_s", RADIAN_POLAR_MAX), ("theta_i", RADIAN_POLAR_MAX), ("phi_s", RADIAN_AZIMUTH_MAX)):
+        if role not in roles or roles[role][0].scale != 1.0:
+            continue
+        col = roles[role][0]
+        v = np.asarray(getattr(rows, role), dtype=np.float64)
+        distinct = np.unique(np.round(v[np.isfinite(v)], 9))
+        if distinct.size >= RADIAN_MIN_DISTINCT and np.nanmax(np.abs(v)) <= bound:
+            raise ValidationError(f"{role} angles look like radians under a degree unit", file=path,
+                                  line=int(lines[0]), field=f"column {col.index + 1} '{col.header}'",
+                                  expected=f"degrees (some |{role}| > {bound:g} over {distinct.size} distinct "
+                                           f"angles), or '{col.header.split('[')[0].strip()} [rad]' in the header",
+                                  got=f"|{role}| <= {np.nanmax(np.abs(v)):.4g} over {distinct.size} distinct values")
+
+
+def _check_values(path: str, rows: _Rows, rel: float | None) -> None:
+    """Refuse values that are no BSDF before computing with them: huge (overflow), all zero, negative beyond noise."""
+    v = np.asarray(rows.value, dtype=np.float64)
+    lines = np.asarray(rows.line, dtype=np.int64)
+    stated = np.isfinite(v)
+    if not stated.any():
+        return  # every cell a gap: refused by the assembly with its own message
+    huge = stated & (np.abs(v) > MAX_ABS_BSDF)
+    if huge.any():
+        k = int(np.argmax(huge))
+        raise ValidationError("value implausibly large for a BSDF", file=path, line=int(lines[k]),
+                              field=rows.column[k],
+                              expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=f"{v[k]:g}")
+    s = np.asarray(rows.std, dtype=np.float64)
+    if np.any(np.isfinite(s) & (s > MAX_ABS_BSDF * (1.0 + np.abs(v)))):
+        k = int(np.argmax(np.isfinite(s) & (s > MAX_ABS_BSDF * (1.0 + np.abs(v)))))
+        raise ValidationError("uncertainty implausibly large", file=path, line=int(lines[k]),
+                              field=f"uncertainty of '{rows.column[k]}'", expected=f"<= {MAX_ABS_BSDF:g}",
+                              got=f"{s[k]:g}")
+    if np.all(v[stated] == 0.0):
+        raise ValidationError("the table is all zero: every value is 0", file=path, line=int(lines[stated][0]),
+                              field=rows.column[int(np.argmax(stated))],
+                              expected="values > 0 where the sample scatters",
+                              got=f"0 in all {int(stated.sum())} cells")
+    s = np.where(np.asarray(rows.std_relative, dtype=bool), s * np.abs(v), s)
+    s = np.where(np.isfinite(s), s, (DEFAULT_RELATIVE_STD if rel is None else rel) * np.abs(v))
+    lam = np.nan_to_num(np.asarray(rows.wavelength, dtype=np.float64), nan=-1.0)
+    for w in np.unique(lam):
+        sel = stated & (lam == w)
+        n = int(sel.sum())
+        if n == 0:
+            continue
+        x, u = v[sel], s[sel]
+        mean = float(np.mean(x))
+        if mean >= 0:
+            continue
+        sem = max(float(np.std(x)) / math.sqrt(n), float(np.sqrt(np.sum(u**2))) / n)
+        if -mean > NEGATIVE_SIGMA * sem and -mean > float(np.median(u)):
+            k = int(np.flatnonzero(sel & (v < 0))[0])
+            at = "" if w < 0 else f" at {w:g} nm"
+            raise ValidationError(f"BSDF negative beyond noise{at}: {int((x < 0).sum())} of {n} values < 0",
+                                  file=path, line=int(lines[k]), field=rows.column[k],
+                                  expected=f">= 0 within the noise (mean > -{NEGATIVE_SIGMA:g} standard errors "
+                                           f"= {-NEGATIVE_SIGMA * sem:.3g})",
+                                  got=f"mean {mean:.4g} (first negative {v[k]:g})")
 
 
 def _check_angles(path: str, line: int, th_i: float, ph_i: float, th_s: float, ph_s: float, signed: bool,

@@ -46,8 +46,8 @@ def _is_spectral_distribution(spectrum: object) -> bool:
 
 def _band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
     lo, hi = band
-    if not hi > lo:
-        raise InputError("empty wavelength band", field="band", expected="(low, high) with low < high", got=band)
+    if not hi >= lo:  # [λ, λ] is the band of one wavelength (a monochrome scan); NaN edges are refused
+        raise InputError("empty wavelength band", field="band", expected="(low, high) with low <= high", got=band)
     return (wavelength >= lo - 1e-9) & (wavelength <= hi + 1e-9)
 
 
@@ -98,12 +98,14 @@ def band_integral(spectrum: SpectrumLike, band: Band) -> float:
     return band_sum(*_arrays(spectrum), band)
 
 
-def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: SpectrumLike | None = None) -> xr.Dataset:
+def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
+                       spectrum: SpectrumLike | None = None) -> xr.Dataset:
     """Spectrally weighted mean BSDF per record (eq. (5); eq. (8) for yellow), with propagated std.
 
     ``spectrum`` is the weighting spectrum E(λ) (its relative shape only); by default the measured incident
-    spectrum of ``config``. Only pixels inside ``band`` where the BSDF is defined (incident light present) are
-    used; a band without such pixels raises :class:`InputError` (a band with no signal).
+    spectrum of ``config``. Only pixels inside ``band`` [nm] (None: every measured wavelength, also an unknown
+    NaN one) where the BSDF is defined (incident light present) are used; a band without such pixels raises
+    :class:`InputError` (a band with no signal). A scan of one wavelength is its own mean (weight 1).
     """
     sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
     if sub.sizes["record"] == 0:
@@ -111,12 +113,14 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: Spectr
     lam = sub["wavelength"].values
     weight = (sub["incident_spectrum"].sel(configuration=config).values if spectrum is None
               else spectrum_on(spectrum, lam))
-    usable = _band_mask(lam, band) & sub["incident_valid"].sel(configuration=config).values & (weight > 0)
+    in_band = np.ones(lam.size, dtype=bool) if band is None else _band_mask(lam, band)
+    usable = in_band & sub["incident_valid"].sel(configuration=config).values & (weight > 0)
     if not usable.any():
         raise InputError("band with no signal: no wavelength in the band carries incident light",
                          file=ds.attrs.get("source"),
                          field="band", expected=f"overlap with the incident light of '{config}'", got=band)
-    w = weight * np.gradient(lam) * usable
+    # one wavelength has no spacing (np.gradient needs two): its weight is 1, the mean is its value
+    w = weight * (np.gradient(lam) if lam.size > 1 else np.ones(1)) * usable
     q = sub["bsdf"].values
     s = sub["bsdf_std"].values
     defined = np.isfinite(q[:, usable]).all(axis=1)
@@ -124,7 +128,8 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band, spectrum: Spectr
     with np.errstate(invalid="ignore"):
         mean = np.where(defined, np.nansum(q * w, axis=1) / norm, np.nan)
         std = np.where(defined, np.sqrt(np.nansum((s * w) ** 2, axis=1)) / norm, np.nan)
-    out = _profile(sub, mean, std, "1/sr", f"weighted mean BSDF over {band[0]:g}-{band[1]:g} nm (eq. 5)")
+    span = "the measured wavelengths" if band is None else f"{band[0]:g}-{band[1]:g} nm"
+    out = _profile(sub, mean, std, "1/sr", f"weighted mean BSDF over {span} (eq. 5)")
     if "incident_relative_std" in sub:
         # The reference beam divides every record alike: its noise is a common scale factor, which per-record
         # standard uncertainties (and fits that treat records as independent) cannot carry.
@@ -244,7 +249,10 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
     elif interaction == ELASTIC_INTERACTION:
         config = configs.get(ELASTIC_INTERACTION) or _only_configuration(ds)
         lam = ds["wavelength"].values
-        out = weighted_mean_bsdf(ds, config, bands.get(ELASTIC_INTERACTION) or (float(lam.min()), float(lam.max())))
+        # default: the measured range; None (every wavelength) where it is unknown (a NaN monochrome wavelength)
+        band = bands.get(ELASTIC_INTERACTION) or (
+            (float(lam.min()), float(lam.max())) if np.all(np.isfinite(lam)) else None)
+        out = weighted_mean_bsdf(ds, config, band)
     else:
         raise InputError("unknown interaction", file=ds.attrs.get("source"), field="interaction",
                          expected=" or ".join((*INTERACTIONS, ELASTIC_INTERACTION)), got=interaction)

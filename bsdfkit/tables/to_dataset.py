@@ -26,6 +26,7 @@ from bsdfkit.io import atomic, netcdf
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.measurement.table import (
+    MAX_ABS_BSDF,
     read_table,
 )
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
@@ -86,7 +87,7 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     if kind == "raw-scan":
         return calibrate(read_scan(path))
     if kind == "netcdf":
-        return netcdf.load(path, quantity="bsdf")
+        return _check_magnitudes(netcdf.load(path, quantity="bsdf"), path)
     if kind in VENDOR_FORMATS:
         bad = [k for k in given if k in ("incidence", "phi_i")]
         if bad:
@@ -94,6 +95,23 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
                              expected="no --incidence/--phi-i")
         return vendor_dataset(path, **given)
     return read_table(path, **given)
+
+
+def _check_magnitudes(ds: xr.Dataset, path: str | Path) -> xr.Dataset:
+    """``ds`` when its BSDF values and uncertainties are within :data:`MAX_ABS_BSDF` [1/sr]; else refused naming
+    the record (and its source line), before a reduction squares them into inf (a dataset written elsewhere)."""
+    for name in ("bsdf", "bsdf_std"):
+        if name not in ds:
+            continue
+        v = np.asarray(ds[name].values, dtype=np.float64)
+        bad = np.isfinite(v) & (np.abs(v) > MAX_ABS_BSDF)
+        if bad.any():
+            k = np.unravel_index(int(np.argmax(bad)), v.shape)
+            line = int(ds["source_line"].values[k[0]]) if "source_line" in ds.coords else 0
+            where = f"{name} of record {k[0]}" + (f" (source line {line})" if line > 0 else "")
+            raise ValidationError("value implausibly large for a BSDF", file=path, field=where,
+                                  expected=f"|{name}| <= {MAX_ABS_BSDF:g} 1/sr", got=f"{v[k]:g}")
+    return ds
 
 
 # ------------------------------------------------------------------------------------------- convert

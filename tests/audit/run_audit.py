@@ -12,8 +12,10 @@ Every case runs ``python -m bsdfkit.cli.main …`` in a subprocess and is classi
   run present, an input changed, or a file that a replaced output folder held still there (a mixed set);
 * ``silent`` — exit 0 where an error was expected (bad input accepted);
 * ``refused`` — an error where success was expected; ``cryptic`` — a failure that is not one line / exit 2;
-* ``misleading`` — a one-line error (or a success) that does not name its cause, or whose after-check fails
-  (the issue-26 cases of :func:`command_cases`, judged by :data:`CAUSES`).
+* ``misleading`` — one clean error line that lacks a word of the case's ``mentions`` (the file, line, field or
+  value that is the real cause); a success whose case has ``mentions`` must print a warning line with them; for
+  the issue-26 command cases of :func:`command_cases`, a line that does not name its cause (:data:`CAUSES`) or
+  whose after-check fails.
 
 Full disks are a 256 KiB tmpfs and read-only folders a read-only bind mount when ``mount`` works (root);
 otherwise those cases are skipped. Prints one line per non-ok/error case and a table per class.
@@ -56,6 +58,10 @@ class Case:
     cwd: Path | None = None
     absent: list[Path] = field(default_factory=list)  # must not exist afterwards (a replaced folder's old files)
     group: str = ""  # the class of the case in the summary table
+    #: words the stderr line must contain (the cause named: file, line, field, found value); an error line
+    #: without one of them is ``misleading``; on success, a warning line with them must be there (else ``silent``)
+    mentions: list[str] = field(default_factory=list)
+    quiet: bool = False  # a success that must print nothing on stderr (a fit that matches its data is not flagged)
 
 
 # ---------------------------------------------------------------------------------------------- fixtures
@@ -699,6 +705,79 @@ def verb_smoke_cases(work: Path, f: dict[str, Path]) -> list[Case]:
 
 
 # --------------------------------------------------------------------------------------------- classify
+def _long_table(path: Path, value, wavelengths=(450.0, 550.0, 650.0),
+                header: str = "theta_i,theta_s,phi_s,wavelength,brdf", thetas=range(0, 90, 5)) -> Path:
+    lines = [header]
+    for lam in wavelengths:
+        for th in thetas:
+            for ph in range(0, 360, 30):
+                lines.append(f"10,{th},{ph},{lam!r},{value(lam, th, ph)!r}")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def plausibility_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    """Issue #26: values and units a file contradicts, dark frames above the signal, physical line numbers,
+    single-wavelength and exact fits, huge values; each judged by the words its line must hold."""
+    import math
+
+    s = work / "plausibility"
+    s.mkdir()
+    lam = lambda rho: (lambda la, th, ph: rho / math.pi)  # noqa: E731
+    neg = _long_table(s / "neg.csv", lambda la, th, ph: -0.5 / math.pi)
+    metres = _long_table(s / "metres.csv", lam(0.5), wavelengths=(4.5e-7, 5.5e-7, 6.5e-7))
+    mixed = _long_table(s / "mixed.csv", lam(0.5), wavelengths=(450.0, 0.55, 650.0))
+    zero = _long_table(s / "zero.csv", lambda la, th, ph: 0.0)
+    huge = _long_table(s / "huge.csv", lambda la, th, ph: 1e308)
+    mono = _long_table(s / "mono.csv", lam(0.8), wavelengths=(550.0,))
+    white = _long_table(s / "white.csv", lam(1.0))
+    rad = s / "rad.csv"
+    rows = ["theta_i [deg],theta_s [deg],phi_s [deg],wavelength,brdf"]
+    rows += [f"0.17,{0.1 * i!r},{0.5 * j!r},550,{0.5 / math.pi!r}" for i in range(16) for j in range(12)]
+    rad.write_text("\n".join(rows) + "\n")
+    # raw export: a comment between scan rows and a bad side on physical line 6; darks too bright at 10 and 20 s
+    commented = s / "commented"
+    shutil.copytree(f["raw"], commented)
+    scan = commented / "scans" / "blue.csv.gz"
+    lines = gzip.decompress(scan.read_bytes()).decode().splitlines()
+    cells = lines[3].split(",")
+    cells[4] = "sideways"
+    lines = [lines[0], lines[1], "# operator note", "", lines[2], ",".join(cells)] + lines[4:]
+    scan.write_bytes(gzip.compress(("\n".join(lines) + "\n").encode()))
+    hot = s / "hot"
+    shutil.copytree(f["raw"], hot)
+    dark = hot / "dark.csv.gz"
+    lines = gzip.decompress(dark.read_bytes()).decode().splitlines()
+    out = [lines[0]]
+    for line in lines[1:]:
+        c = line.split(",")
+        out.append(",".join(c[:2] + [str(int(float(x)) * 3) for x in c[2:]] if c[1] in ("10", "20") else c))
+    dark.write_bytes(gzip.compress(("\n".join(out) + "\n").encode()))
+    fit = ["--interaction", "elastic", "--side", "reflection", "--model", "lambert"]
+    return [
+        Case("ingest all-negative table", ["ingest", str(neg), "-o", str(s / "neg.nc")], outputs=[s / "neg.nc"],
+             mentions=["neg.csv:2:", "'brdf'", "negative beyond noise"]),
+        Case("ingest wavelengths in metres", ["ingest", str(metres), "-o", str(s / "m.nc")], outputs=[s / "m.nc"],
+             mentions=["metres.csv:2:", "'wavelength'", "look like metres"]),
+        Case("ingest um and nm mixed", ["ingest", str(mixed), "-o", str(s / "x.nc")], outputs=[s / "x.nc"],
+             mentions=["mixed.csv:218:", "'wavelength'", "two units", "lines 218"]),
+        Case("ingest radians under deg", ["ingest", str(rad), "-o", str(s / "r.nc")], outputs=[s / "r.nc"],
+             mentions=["rad.csv:2:", "theta_s [deg]", "radians"]),
+        Case("ingest all-zero table", ["ingest", str(zero), "-o", str(s / "z.nc")], outputs=[s / "z.nc"],
+             mentions=["zero.csv:2:", "all zero"]),
+        Case("tis huge values", ["tis", str(huge)], mentions=["huge.csv:2:", "'brdf'", "1e+308"]),
+        Case("info raw comment line", ["info", str(commented)], mentions=["blue.csv.gz:6:", "sideways"]),
+        Case("ingest dark above signal", ["ingest", str(hot), "-o", str(s / "hot.nc")], "ok",
+             outputs=[s / "hot.nc"], mentions=["warning", "dark frames above the signal", "exposures 10, 20 s"]),
+        Case("tis dark above signal", ["tis", str(hot), "--incidence", "45"], "ok",
+             mentions=["bsdfkit tis: warning", "dark frames above the signal"]),
+        Case("budget dark above signal", ["budget", str(hot), "--incidence", "45", "--eta-mc", "0.5"], "ok",
+             mentions=["bsdfkit budget: warning", "dark frames above the signal"]),
+        Case("fit bsdf single wavelength", ["fit", "bsdf", str(mono), *fit], "ok", timeout=300, quiet=True),
+        Case("fit bsdf perfect white lambertian", ["fit", "bsdf", str(white), *fit], "ok", timeout=300, quiet=True),
+    ]
+
+
 def _alive(entry: Path) -> bool:
     """A temporary named after a process that still runs (another case running at the same time)."""
     for part in entry.name.split("."):
@@ -753,6 +832,10 @@ def classify(case: Case, code: int | None, err: str) -> str:
     if code == 0:
         if case.expect == "error":
             return "silent"
+        if case.mentions and not any(all(m in ln for m in case.mentions) for ln in lines):
+            return "silent"  # a success that had to say something (a warning naming the cause) and did not
+        if case.quiet and lines:
+            return "misleading"  # a warning where nothing is wrong
         missing = [p for p in case.outputs if not p.exists()]
         return "partial" if missing else "ok"
     if code == 1 and len(lines) == 1 and lines[0].startswith("bsdfkit convert: TIS check failed"):
@@ -762,6 +845,8 @@ def classify(case: Case, code: int | None, err: str) -> str:
     if code == 2 and len(lines) == 1 and ": error: " in lines[0]:
         if any(p.exists() for p in case.outputs) and case.expect == "error":
             return "partial"
+        if case.mentions and not all(m in lines[0] for m in case.mentions):
+            return "misleading"  # one clean line that does not name the real cause
         return "error" if case.expect in ("error", "either") else "refused"
     return "cryptic"
 
@@ -909,6 +994,7 @@ def main() -> int:
                                 ("options", option_cases(work, f)), ("output faults", output_cases(work, f, mounts)),
                                 ("concurrency", concurrency_cases(work, f)),
                                 ("issue 26 commands", command_cases(work, f, mounts)),
+                                ("plausibility", plausibility_cases(work, f)),
                                 ("kills", [] if args.no_kills else kill_cases(work, f))):
                 for case in made:
                     case.group = f"input {case.name.rsplit(' ', 1)[-1]}" if group == "inputs" else group
