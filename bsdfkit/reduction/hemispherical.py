@@ -1122,7 +1122,8 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     assumptions = [f"records off the in-plane and perpendicular arcs ({n_other} of {int(finite.sum())}): "
                    "interpolated over the projected disk in polar coordinates (linear in the distance from the "
                    "centre, across azimuth between records at about the same distance)"]
-    gap = _azimuth_gap(geom, finite)
+    # a polar grid about the specular point is interpolated along its spokes, not across azimuth about the normal
+    gap = None if native else _azimuth_gap(geom, finite)
     if gap is not None:
         text = (f"the records leave azimuths of up to {gap[0]:.0f} deg unmeasured at {gap[1]:.2g}-{gap[2]:.2g} "
                 "from the normal (direction cosines): the body there is interpolated across the gap at the same "
