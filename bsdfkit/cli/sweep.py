@@ -5,9 +5,6 @@ import argparse
 
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.core.errors import InputError
-from bsdfkit.plotting.figures import sweep_figure
-from bsdfkit.raytrace import load_scene
-from bsdfkit.raytrace.sweep import Cluster, run_sweep
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,6 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX, matplotlib or dask
+    from bsdfkit.plotting.figures import sweep_figure
+    from bsdfkit.raytrace import load_scene
+    from bsdfkit.raytrace.sweep import Cluster, run_sweep
 
     scene = load_scene(args.scene)
     defaults = scene.sweep

@@ -51,3 +51,7 @@ RAY_YBR_DEFINITION = ("extracted yellow-ray power / extracted blue-ray power (tw
 def band_label(band: tuple[float, float]) -> str:
     """``"380-500 nm"``: how a band is written next to every ratio that uses it."""
     return f"{band[0]:g}-{band[1]:g} nm"
+
+#: Information criteria of a spectrum fit with ``model="best"`` (:func:`bsdfkit.fit.spectrum.analyse_spectra`);
+#: here so that the command line offers them without importing the fits (JAX, colour-science)
+SPECTRUM_CRITERIA: tuple[str, str] = ("aicc", "bic")
