@@ -6,7 +6,6 @@ import sys
 from typing import Any
 
 from bsdfkit.core.errors import InputError
-from bsdfkit.io.jsonout import dumps
 
 
 def check_options(args: Any, ranges: dict[str, tuple[float, float, str]]) -> None:
@@ -22,6 +21,8 @@ def check_options(args: Any, ranges: dict[str, tuple[float, float, str]]) -> Non
 
 
 def emit_json(obj: Any) -> None:
+    from bsdfkit.io.jsonout import dumps  # numpy: not for `bsdfkit --help`
+
     sys.stdout.write(dumps(obj) + "\n")
 
 

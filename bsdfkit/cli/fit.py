@@ -25,13 +25,11 @@ from bsdfkit.cli._common import emit_json
 from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, SPECTRUM_CRITERIA, WAVELENGTH_RANGE_NM
 from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
-from bsdfkit.fit import plausibility
-from bsdfkit.io import atomic, netcdf
+from bsdfkit.io import atomic
 from bsdfkit.io.jsonout import to_jsonable
 from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
 from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
 from bsdfkit.models.registry import SPECTRUM_MODELS as REGISTERED_SPECTRUM_MODELS
-from bsdfkit.reduction.spectral import interaction_profile
 
 BSDF_MODELS = tuple(REGISTERED_BSDF_MODELS)
 # the registry's names (light): the fits themselves (JAX, colour-science) are imported by the verb that runs
@@ -172,6 +170,7 @@ def _print_spectrum(label: str, rec: dict) -> None:
 
 def _run_reflectance(args: argparse.Namespace) -> int:
     from bsdfkit.fit.lambertian import lambertian_from_reflectance
+    from bsdfkit.io import netcdf
 
     atomic.check_writable(args.output, args.force)
     wl, columns, _ = read_spectrum_table(args.file)
@@ -191,7 +190,10 @@ def _run_reflectance(args: argparse.Namespace) -> int:
 
 
 def _run_bsdf(args: argparse.Namespace) -> int:
+    from bsdfkit.fit import plausibility
     from bsdfkit.fit.least_squares import fit_bsdf
+    from bsdfkit.io import netcdf
+    from bsdfkit.reduction.spectral import interaction_profile
 
     if args.output:
         atomic.check_writable(args.output, args.force)
