@@ -27,7 +27,6 @@ from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.jsonout import to_jsonable
-from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
 from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
 from bsdfkit.models.registry import SPECTRUM_MODELS as REGISTERED_SPECTRUM_MODELS
 
@@ -99,6 +98,7 @@ def _fmt(value, spec: str = ".2f") -> str:
 def _run_spectrum(args: argparse.Namespace) -> int:
     from bsdfkit.fit.least_squares import FitOptions
     from bsdfkit.fit.spectrum import TWO_BAND_MODELS, analyse_spectra
+    from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
 
     if args.maxiter < 1:
         raise ValidationError("iteration limit must be ≥ 1", field="--maxiter", got=args.maxiter)
@@ -171,6 +171,7 @@ def _print_spectrum(label: str, rec: dict) -> None:
 def _run_reflectance(args: argparse.Namespace) -> int:
     from bsdfkit.fit.lambertian import lambertian_from_reflectance
     from bsdfkit.io import netcdf
+    from bsdfkit.io.spectrum_file import read_spectrum_table
 
     atomic.check_writable(args.output, args.force)
     wl, columns, _ = read_spectrum_table(args.file)
