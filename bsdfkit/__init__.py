@@ -8,7 +8,8 @@ The package follows the data flow (``docs/architecture.md``)::
 The public API (:mod:`bsdfkit.api`) is importable from here: ``ingest``, ``tis``, ``budget``, ``profile``, ``describe``,
 ``save``, ``fit_bsdf``, ``fit_spectrum``, ``export``, ``read``, ``load_scene``, ``trace`` and ``run``. Names
 are resolved on first use, so ``import bsdfkit`` is cheap and does not import JAX. Importing bsdfkit
-registers the ``ds.bsdf`` accessor on xarray datasets (:mod:`bsdfkit.accessor`).
+registers the ``ds.bsdf`` accessor on xarray datasets (:mod:`bsdfkit.accessor`), except in the ``bsdfkit``
+command itself, which does not use it.
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from typing import Any
 
 import bsdfkit_console as _console
 
-if _console.is_bsdfkit_command(getattr(_sys, "orig_argv", [])):
+_MODULE_COMMAND = _console.is_bsdfkit_command(getattr(_sys, "orig_argv", []))
+if _MODULE_COMMAND:
     # this process is the `python -m bsdfkit` command, importing its package before its __main__: answer
     # Ctrl-C from here on with one line (the imports below take a second); never for any other program
     _console.install_early_handlers()
@@ -42,4 +44,7 @@ def __dir__() -> list[str]:
     return sorted([*globals(), *API])
 
 
-from bsdfkit import accessor as accessor  # noqa: E402  (registers ds.bsdf on xarray datasets)
+if not (_MODULE_COMMAND or _sys.argv[0].rsplit("/", 1)[-1] == "bsdfkit"):
+    # registers ds.bsdf on xarray datasets; not in the bsdfkit command (`python -m bsdfkit`, the console script),
+    # whose verbs call the library directly: importing xarray for it was 0.5-1.5 s of every `bsdfkit --help`
+    from bsdfkit import accessor as accessor  # noqa: E402

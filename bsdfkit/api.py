@@ -11,31 +11,37 @@ Every CLI verb is a thin wrapper over one of these functions, and ``import bsdfk
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from importlib import import_module
 from pathlib import Path
-from typing import Any
-
-import numpy as np
-import xarray as xr
+from typing import TYPE_CHECKING, Any
 
 from bsdfkit.core.errors import InputError
-from bsdfkit.fit.lambertian import at_wavelength
-from bsdfkit.fit.least_squares import BsdfFitOptions
-from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
-from bsdfkit.fit.spectrum import fit_spectrum
-from bsdfkit.io import netcdf
-from bsdfkit.measurement.describe import describe
-from bsdfkit.pipeline.recipe import run
-from bsdfkit.raytrace import TraceResult, load_scene
-from bsdfkit.raytrace import trace as _trace
-from bsdfkit.raytrace.scene import Scene
-from bsdfkit.reduction.any_sample import budget as _budget_any
-from bsdfkit.reduction.any_sample import tis as _tis_any
-from bsdfkit.reduction.budget import InteractionTable
-from bsdfkit.reduction.spectral import interaction_profile
-from bsdfkit.tables.export import ExportResult, ExportSettings, FileSummary, read_any
-from bsdfkit.tables.export import export as _export
-from bsdfkit.tables.to_dataset import ingest as _ingest_any
+
+if TYPE_CHECKING:  # the names of the signatures only; each function imports its engine when called
+    import xarray as xr
+
+    from bsdfkit.fit.least_squares import BsdfFitOptions
+    from bsdfkit.fit.spectrum import fit_spectrum
+    from bsdfkit.measurement.describe import describe
+    from bsdfkit.pipeline.recipe import run
+    from bsdfkit.raytrace import TraceResult, load_scene
+    from bsdfkit.raytrace.scene import Scene
+    from bsdfkit.reduction.budget import InteractionTable
+    from bsdfkit.tables.export import ExportResult, ExportSettings, FileSummary
+
+#: public names that are another module's function, imported on first use (PEP 562) so that ``bsdfkit.ingest``
+#: loads neither JAX nor matplotlib: ``run`` pulls in the pipeline and its report, ``load_scene`` the tracer
+_REEXPORTS = {"describe": "bsdfkit.measurement.describe", "fit_spectrum": "bsdfkit.fit.spectrum",
+              "run": "bsdfkit.pipeline.recipe", "load_scene": "bsdfkit.raytrace"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _REEXPORTS:
+        value = getattr(import_module(_REEXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'bsdfkit.api' has no attribute {name!r}")
+
 
 __all__ = ["ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
            "load_scene", "trace", "run"]
@@ -60,6 +66,8 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     xarray.Dataset
         ``bsdf`` and ``bsdf_std`` [1/sr] per record and wavelength, with angles [deg] and wavelengths [nm].
     """
+    from bsdfkit.tables.to_dataset import ingest as _ingest_any
+
     return _ingest_any(path, **options)
 
 
@@ -100,6 +108,8 @@ def tis(ds: xr.Dataset, incidence: float | None = None,
     ----------
     .. [1] ``docs/references.md``, [Power-budget].
     """
+    from bsdfkit.reduction.any_sample import tis as _tis_any
+
     return _tis_any(ds, incidence, band)
 
 
@@ -125,16 +135,22 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
     ----------
     .. [1] ``docs/references.md``, [Power-budget].
     """
+    from bsdfkit.reduction.any_sample import budget as _budget_any
+
     return _budget_any(ds, incidence)
 
 
 def profile(ds: xr.Dataset, interaction: str, side: str | None = None) -> xr.Dataset:
     """The band-averaged BSDF profile [1/sr] of one interaction (bibs, biys, yiys) per record."""
+    from bsdfkit.reduction.spectral import interaction_profile
+
     return interaction_profile(ds, interaction, side)
 
 
 def save(ds: xr.Dataset, path: str | Path, force: bool = False) -> Path:
     """Write a dataset to netCDF atomically; an existing file is replaced only with ``force``."""
+    from bsdfkit.io import netcdf
+
     return netcdf.save(ds, path, force)
 
 
@@ -145,6 +161,11 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
     ``ds`` may also be a profile (a dataset on ``record`` with ``bsdf``, ``bsdf_std`` and one side), which is
     fitted as it is. Models and parameters: :mod:`bsdfkit.models.registry`.
     """
+    import numpy as np
+
+    from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
+    from bsdfkit.reduction.spectral import interaction_profile
+
     prof = ds if "wavelength" not in ds.dims else interaction_profile(ds, interaction, side)
     prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
     return _fit_bsdf_profile(prof, model, options=options, incidence_deg=incidence_deg)
@@ -159,6 +180,15 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
     measured spectral dataset (reconstructed by :mod:`bsdfkit.reduction.hemispherical`); the tables are
     monochrome. A measured elastic dataset takes ``interaction="elastic"``.
     """
+    from dataclasses import replace
+
+    import xarray as xr
+
+    from bsdfkit.fit.lambertian import at_wavelength
+    from bsdfkit.io import netcdf
+    from bsdfkit.tables.export import ExportSettings
+    from bsdfkit.tables.export import export as _export
+
     if wavelength_nm is not None:
         model = source if isinstance(source, xr.Dataset) else netcdf.load(source)
         if "model" not in model.attrs and "bsdf" in model:  # a measured dataset: the engine picks the wavelength
@@ -174,11 +204,17 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
 
 def read(path: str | Path) -> FileSummary:
     """Read a TracePro, Zemax or ASAP-style table back: its grid, stated TIS and recomputed TIS."""
+    from bsdfkit.tables.export import read_any
+
     return read_any(path)
 
 
 def trace(scene: Scene | str | Path, rays: int, seed: int = 0, **options: Any) -> TraceResult:
     """Monte Carlo of a mixing cavity with a phosphor plate (a scene object or a scene TOML path)."""
+    from bsdfkit.raytrace import load_scene
+    from bsdfkit.raytrace import trace as _trace
+    from bsdfkit.raytrace.scene import Scene
+
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     return _trace(scene, rays, seed, **options)

@@ -10,7 +10,6 @@ from typing import Any
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.io.atomic import refuse_inputs
-from bsdfkit.io.jsonout import dumps
 
 
 def check_options(args: Any, ranges: dict[str, tuple[float, float, str]]) -> None:
@@ -63,6 +62,8 @@ def refuse_replacing_inputs(args: Any) -> None:
 
 
 def emit_json(obj: Any) -> None:
+    from bsdfkit.io.jsonout import dumps  # numpy: not for `bsdfkit --help`
+
     sys.stdout.write(dumps(obj) + "\n")
 
 

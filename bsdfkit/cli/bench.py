@@ -4,8 +4,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bsdfkit.bench.run import run_bench
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="accuracy-vs-time studies; writes DIR/accuracy.md and PNG figures")
@@ -17,6 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    # here, not at the top: `bsdfkit --help` registers every verb and must not import colour, JAX or matplotlib
+    from bsdfkit.bench.run import run_bench
 
     command = "bsdfkit bench" + (" --quick" if args.quick else "")
     studies = run_bench(args.output, args.quick, args.force, command, args.only,

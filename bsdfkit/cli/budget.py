@@ -10,8 +10,6 @@ from bsdfkit.cli._common import emit_json
 from bsdfkit.cli.tis import load_scan
 from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.io.text import read_text
-from bsdfkit.reduction.any_sample import budget
-from bsdfkit.reduction.budget import MAX_ITERATIONS, module_budget, table_from_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,6 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+
+    # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
+    from bsdfkit.reduction.any_sample import budget
+    from bsdfkit.reduction.budget import MAX_ITERATIONS, module_budget, table_from_json
 
     if not (math.isfinite(args.eta_mc) and 0.0 <= args.eta_mc <= 1.0):
         raise InputError("option out of range", field="--eta-mc", expected="a mixing-chamber efficiency in [0, 1]",

@@ -6,8 +6,6 @@ import sys
 
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import BsdfkitError
-from bsdfkit.io.spectrum_file import read_spectrum
-from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,6 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    # here, not at the top: `bsdfkit --help` registers every verb and must not import colour-science
+    from bsdfkit.io.spectrum_file import read_spectrum
+    from bsdfkit.reduction.colorimetry import DUV_LIMIT, colorimetric_summary
 
     sd = read_spectrum(args.file)
     try:

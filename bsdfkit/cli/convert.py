@@ -13,10 +13,9 @@ import sys
 
 from bsdfkit.cli._common import check_options, emit_json
 from bsdfkit.cli.ingest import OPTION_RANGES
+from bsdfkit.core.conventions import EXPORT_FORMATS as FORMATS
+from bsdfkit.core.conventions import QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import ValidationError
-from bsdfkit.measurement.table import QUANTITIES, ZERO_POLICIES
-from bsdfkit.tables.export import FORMATS, ExportSettings
-from bsdfkit.tables.to_dataset import convert
 
 
 def _floats(text: str, name: str, count: int | None = None) -> tuple[float, ...]:
@@ -61,6 +60,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
+    from bsdfkit.tables.export import ExportSettings
+    from bsdfkit.tables.to_dataset import convert
+
     check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance)
     result = convert(

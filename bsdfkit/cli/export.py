@@ -13,8 +13,6 @@ from dataclasses import replace
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import ValidationError
-from bsdfkit.tables.export import ExportSettings
-from bsdfkit.tables.formats.tracepro import TraceProOptions
 
 
 def _incidences(text: str) -> tuple[float, ...]:
@@ -60,6 +58,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
+    from bsdfkit.tables.export import ExportSettings
+    from bsdfkit.tables.formats.tracepro import TraceProOptions
+
     tp = TraceProOptions()
     changes = {k: v for k, v in (("name", args.name), ("wavelength_um", args.wavelength_um),
                                  ("temperature_K", args.temperature_k), ("zero_azimuth_deg", args.zero_azimuth))

@@ -22,21 +22,17 @@ from pathlib import Path
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json, warn_dark
-from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, WAVELENGTH_RANGE_NM
+from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, SPECTRUM_CRITERIA, WAVELENGTH_RANGE_NM
 from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
-from bsdfkit.fit import plausibility
-from bsdfkit.fit.lambertian import lambertian_from_reflectance
-from bsdfkit.fit.least_squares import FitOptions, fit_bsdf
-from bsdfkit.fit.spectrum import CRITERIA, SPECTRUM_MODELS, TWO_BAND_MODELS, analyse_spectra
-from bsdfkit.io import atomic, netcdf
+from bsdfkit.io import atomic
 from bsdfkit.io.jsonout import to_jsonable
-from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
 from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
-from bsdfkit.reduction.any_sample import measured_tis
-from bsdfkit.reduction.spectral import interaction_profile
+from bsdfkit.models.registry import SPECTRUM_MODELS as REGISTERED_SPECTRUM_MODELS
 
 BSDF_MODELS = tuple(REGISTERED_BSDF_MODELS)
+# the registry's names (light): the fits themselves (JAX, colour-science) are imported by the verb that runs
+SPECTRUM_MODELS = tuple(REGISTERED_SPECTRUM_MODELS)
 INTERACTIONS = (*PHOSPHOR_INTERACTIONS, ELASTIC_INTERACTION)
 
 
@@ -53,7 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "default: every value column")
     s.add_argument("--model", choices=("best",) + SPECTRUM_MODELS, default="gaussian",
                    help="line shape; 'best' fits every single-band model and keeps the lowest --criterion")
-    s.add_argument("--criterion", choices=CRITERIA, default="aicc", help="information criterion for --model best")
+    s.add_argument("--criterion", choices=SPECTRUM_CRITERIA, default="aicc",
+                   help="information criterion for --model best")
     s.add_argument("--range", nargs=2, type=float, metavar=("LO", "HI"),
                    help="fit only wavelengths LO..HI nm (inclusive), e.g. 380 780 or the phosphor band")
     s.add_argument("--split-nm", type=float, default=None,
@@ -99,6 +96,10 @@ def _fmt(value, spec: str = ".2f") -> str:
 
 
 def _run_spectrum(args: argparse.Namespace) -> int:
+    from bsdfkit.fit.least_squares import FitOptions
+    from bsdfkit.fit.spectrum import TWO_BAND_MODELS, analyse_spectra
+    from bsdfkit.io.spectrum_file import read_spectrum_table, select_columns
+
     if args.maxiter < 1:
         raise ValidationError("iteration limit must be ≥ 1", field="--maxiter", got=args.maxiter)
     if args.split_nm is not None:
@@ -168,6 +169,10 @@ def _print_spectrum(label: str, rec: dict) -> None:
 
 
 def _run_reflectance(args: argparse.Namespace) -> int:
+    from bsdfkit.fit.lambertian import lambertian_from_reflectance
+    from bsdfkit.io import netcdf
+    from bsdfkit.io.spectrum_file import read_spectrum_table
+
     atomic.check_writable(args.output, args.force, inputs=[args.file])
     wl, columns, _ = read_spectrum_table(args.file)
     values = list(columns.values())
@@ -186,6 +191,12 @@ def _run_reflectance(args: argparse.Namespace) -> int:
 
 
 def _run_bsdf(args: argparse.Namespace) -> int:
+    from bsdfkit.fit import plausibility
+    from bsdfkit.fit.least_squares import fit_bsdf
+    from bsdfkit.io import netcdf
+    from bsdfkit.reduction.any_sample import measured_tis
+    from bsdfkit.reduction.spectral import interaction_profile
+
     if args.output:
         atomic.check_writable(args.output, args.force, inputs=[args.scan])
     ds = api.ingest(args.scan)

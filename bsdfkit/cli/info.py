@@ -6,8 +6,6 @@ from pathlib import Path
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
-from bsdfkit.io import netcdf
-from bsdfkit.measurement.raw_scan import read_scan
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,6 +17,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+
+    # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
+    from bsdfkit.io import netcdf
+    from bsdfkit.measurement.raw_scan import read_scan
 
     path = Path(args.scan)
     ds = read_scan(path) if path.is_dir() else netcdf.load(path, quantity=("bsdf", "raw_counts"))

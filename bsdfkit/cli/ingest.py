@@ -11,8 +11,8 @@ import argparse
 
 from bsdfkit import api
 from bsdfkit.cli._common import check_options, emit_json, warn_dark
+from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 from bsdfkit.io import atomic
-from bsdfkit.measurement.table import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 
 #: numeric options: finite and in these ranges
 OPTION_RANGES = {

@@ -12,9 +12,6 @@ import contextlib
 import sys
 from collections.abc import Callable, Iterator
 
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
 
@@ -49,6 +46,10 @@ def run_feedback(quiet: bool, verbose: bool = False) -> Iterator[tuple[Callable[
     if not sys.stderr.isatty():
         yield (lambda message: print(message, file=sys.stderr)), None
         return
+    # rich only for a terminal, imported here: `bsdfkit --help` registers this verb too
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True)) as bars:
         tasks: dict[str, int] = {}

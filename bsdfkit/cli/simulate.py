@@ -5,7 +5,6 @@ import argparse
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.io import atomic
-from bsdfkit.simulation import virtual_goniometer as virtual
 
 PRESETS = ("cl830-synthetic",)
 
@@ -20,6 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX
+    from bsdfkit.simulation import virtual_goniometer as virtual
 
     if not 0 <= args.seed < 2**63:
         raise InputError("option out of range", field="--seed", expected="an integer in [0, 2**63)", got=args.seed)

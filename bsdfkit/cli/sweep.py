@@ -6,9 +6,6 @@ from pathlib import Path
 
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.core.errors import InputError
-from bsdfkit.plotting.figures import sweep_figure
-from bsdfkit.raytrace import load_scene
-from bsdfkit.raytrace.sweep import Cluster, plot_paths, run_sweep
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,10 +30,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=run, extra_outputs=lambda args: [] if args.no_plots else plot_paths(Path(args.output)))
+    p.set_defaults(func=run, extra_outputs=_extra_outputs)
+
+
+def _extra_outputs(args: argparse.Namespace) -> list:
+    """The figures a sweep writes beside its output (checked against the inputs before it runs)."""
+    if args.no_plots:
+        return []
+    from bsdfkit.raytrace.sweep import plot_paths  # dask: only once the verb runs
+
+    return plot_paths(Path(args.output))
 
 
 def run(args: argparse.Namespace) -> int:
+    # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX, matplotlib or dask
+    from bsdfkit.plotting.figures import sweep_figure
+    from bsdfkit.raytrace import load_scene
+    from bsdfkit.raytrace.sweep import Cluster, run_sweep
 
     scene = load_scene(args.scene)
     defaults = scene.sweep

@@ -19,13 +19,8 @@ import argparse
 import sys
 
 from bsdfkit.cli._common import emit_json, warn_dark
+from bsdfkit.core.conventions import QUANTITIES
 from bsdfkit.core.errors import InputError
-from bsdfkit.measurement.table import QUANTITIES
-from bsdfkit.reduction.any_sample import budget, check_band, check_incidence, hemispherical_json, tis
-from bsdfkit.reduction.any_sample import refuse_band_for_interactions as refuse_band
-from bsdfkit.reduction.budget import KEYS
-from bsdfkit.reduction.hemispherical import reduction_kind
-from bsdfkit.tables.to_dataset import ingest
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -50,12 +45,18 @@ def load_scan(path: str, quantity: str | None = None, verb: str = "tis"):
     Records whose dark frames are brighter than their signal are said on stderr (one line, ``bsdfkit VERB:
     warning: …``): every reduction of them is biased low.
     """
+    # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
+    from bsdfkit.tables.to_dataset import ingest
+
     ds = ingest(path, quantity=quantity)
     warn_dark(ds, verb)
     return ds
 
 
 def _run(args: argparse.Namespace) -> int:
+    from bsdfkit.reduction.any_sample import check_band, check_incidence
+    from bsdfkit.reduction.hemispherical import reduction_kind
+
     ds = load_scan(args.scan, getattr(args, "quantity", None))
     band = check_band(args.band, "--band")
     check_incidence(ds, args.incidence, "--incidence")
@@ -66,6 +67,10 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _interactions(ds, args: argparse.Namespace, band: tuple[float, float] | None) -> int:
+    from bsdfkit.reduction.any_sample import budget
+    from bsdfkit.reduction.any_sample import refuse_band_for_interactions as refuse_band
+    from bsdfkit.reduction.budget import KEYS
+
     if args.incidence is None:
         raise InputError("the interaction table needs an incidence", file=args.scan, field="--incidence",
                          expected="a measured incidence angle in degrees")
@@ -83,6 +88,9 @@ def _interactions(ds, args: argparse.Namespace, band: tuple[float, float] | None
 
 
 def _hemispherical(ds, args: argparse.Namespace, band: tuple[float, float] | None) -> int:
+    from bsdfkit.reduction.any_sample import hemispherical_json, tis
+    from bsdfkit.reduction.hemispherical import reduction_kind
+
     # the API's function (bsdfkit.tis), so that the command line and the API give the same numbers
     out = hemispherical_json(tis(ds, args.incidence, band, mode="hemispherical"))
     if args.json:

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.io.atomic import OutputSet, write_with
-from bsdfkit.raytrace import load_scene, trace
 
 # the tracer's own entry points (what bsdfkit.api.trace calls), not bsdfkit.api: importing the whole API (fits,
 # plotting of spectra) would add time to every cold start of this verb
@@ -34,6 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX
+    from bsdfkit.raytrace import load_scene, trace
 
     scene = load_scene(args.scene)
     out = Path(args.output) if args.output else None

@@ -51,3 +51,19 @@ RAY_YBR_DEFINITION = ("extracted yellow-ray power / extracted blue-ray power (tw
 def band_label(band: tuple[float, float]) -> str:
     """``"380-500 nm"``: how a band is written next to every ratio that uses it."""
     return f"{band[0]:g}-{band[1]:g} nm"
+
+#: Information criteria of a spectrum fit with ``model="best"`` (:func:`bsdfkit.fit.spectrum.analyse_spectra`);
+#: here so that the command line offers them without importing the fits (JAX, colour-science)
+SPECTRUM_CRITERIA: tuple[str, str] = ("aicc", "bic")
+
+# Names the command line offers as choices before it imports any engine (`bsdfkit --help`, issue #25); the
+# readers and writers that give them their meaning import them from here.
+#: Quantities a measured text table may hold (:mod:`bsdfkit.measurement.table`).
+QUANTITIES: tuple[str, ...] = ("brdf", "btdf", "ccbrdf", "ccbtdf", "reflectance-factor", "transmittance-factor",
+                               "bsdf")
+#: Relative standard uncertainty assumed when a table states none (fraction of the value).
+DEFAULT_RELATIVE_STD = 0.05
+#: What a table reader does with zero values (:func:`bsdfkit.measurement.table.read_table`).
+ZERO_POLICIES: tuple[str, ...] = ("auto", "keep", "missing")
+#: Ray-tracer table formats written by :mod:`bsdfkit.tables.export`.
+EXPORT_FORMATS: tuple[str, ...] = ("tracepro", "zemax", "asap")

@@ -10,12 +10,12 @@ import contextlib
 import functools
 from collections.abc import Callable, Iterator
 
-import jax
-
 
 @contextlib.contextmanager
 def x64(enabled: bool = True) -> Iterator[None]:
     """Scoped float64 mode for JAX (``jax.enable_x64``), restored on exit."""
+    import jax  # here, not on import: light modules name these helpers without starting JAX
+
     with jax.enable_x64(enabled):
         yield
 
@@ -28,4 +28,6 @@ def jitted(fn: Callable) -> Callable:
     new process (about 25 ms per call of a TIS function, 2.2 s for two spectrum evaluations of the main job);
     jitted, it is one compiled program per argument shape, also found in the persistent compilation cache.
     """
+    import jax
+
     return jax.jit(fn)

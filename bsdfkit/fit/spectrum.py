@@ -47,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.conventions import SPECTRUM_CRITERIA
 from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalError, ValidationError
 from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.fit import lm
@@ -111,7 +112,7 @@ TWO_BAND_MODELS = ("two-band", "two-band-led", "two-band-wide")
 PUMP_SIDE_MODELS = ("two-band-led", "two-band-wide")
 SPECTRUM_MODELS = SINGLE_BAND_MODELS + TWO_BAND_MODELS
 #: Information criteria for ``model="best"``.
-CRITERIA = ("aicc", "bic")
+CRITERIA = SPECTRUM_CRITERIA
 
 #: Band limits (nm, inclusive) of the §4.2 reconstruction in the cylindrical-module paper.
 BLUE_BAND_NM: tuple[float, float] = (380.0, 500.0)

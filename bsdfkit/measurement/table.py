@@ -63,6 +63,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io.text import refuse_cut_last_line, text_and_encoding
@@ -72,18 +73,12 @@ __all__ = ["QUANTITIES", "DEFAULT_RELATIVE_STD", "CONFIG_NAME", "read_table", "g
 
 #: prefixes of comment lines
 _COMMENTS = ("#", "//", "%", "!")
-#: Quantities a table may hold, and what the reader does with them.
-QUANTITIES: tuple[str, ...] = ("brdf", "btdf", "ccbrdf", "ccbtdf", "reflectance-factor", "transmittance-factor",
-                               "bsdf")
 _QUANTITY_SIDE = {"brdf": "reflection", "ccbrdf": "reflection", "reflectance-factor": "reflection",
                   "btdf": "transmission", "ccbtdf": "transmission", "transmittance-factor": "transmission",
                   "bsdf": None}
-#: Relative standard uncertainty assumed when a table states none (fraction of the value).
-DEFAULT_RELATIVE_STD = 0.05
 #: The configuration name of datasets read from tables and vendor files (one elastic configuration).
 CONFIG_NAME = "measured"
 SIDES = ("reflection", "transmission")
-ZERO_POLICIES = ("auto", "keep", "missing")
 _MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
             "?", "#n/a", "#value!", "nv", "n.v."}
 _ANGLE_ATOL = 1e-9

@@ -21,14 +21,18 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import jitted, x64
-from bsdfkit.models import functions as f
-from bsdfkit.models import led
+from bsdfkit.core.lazy import LazyModule
+
+# the names, parameters and bounds of the models are read by light verbs (--model choices, the export's
+# plausibility gate on a vendor table): JAX and the model functions are imported when a model is evaluated
+jnp = LazyModule("jax.numpy")
+f = LazyModule("bsdfkit.models.functions")
+led = LazyModule("bsdfkit.models.led")
 
 __all__ = ["Parameter", "BsdfModel", "BSDF_MODELS", "bsdf_model", "SpectrumModel", "SPECTRUM_MODELS",
            "spectrum_model"]
@@ -140,6 +144,18 @@ def _lambert_abg(p, d):
     return f.lambert(p[0]) + f.abg(d, p[1], p[2], p[3])
 
 
+def _tis_lambert_gaussian(theta_i, rho, A, sigma):
+    return f.tis_lambert_gaussian(theta_i, rho, A, sigma)
+
+
+def _tis_abg(theta_i, A, B, g):
+    return f.tis_abg(theta_i, A, B, g)
+
+
+def _tis_lambert_abg(theta_i, rho, A, B, g):
+    return f.tis_lambert_abg(theta_i, rho, A, B, g)
+
+
 def _tis_lambert(theta_i, rho):
     return jnp.broadcast_to(f.tis_lambert(rho), jnp.broadcast_shapes(jnp.shape(theta_i), jnp.shape(rho)))
 
@@ -154,10 +170,10 @@ _G = Parameter("g", 0.0, 3.0, "1")
 BSDF_MODELS: dict[str, BsdfModel] = {
     m.name: m for m in (
         BsdfModel("lambert", (_RHO,), _lambert, _tis_lambert, "Lambertian: rho/pi"),
-        BsdfModel("lambert+gaussian", (_RHO, _A, _SIGMA), _lambert_gaussian, f.tis_lambert_gaussian,
+        BsdfModel("lambert+gaussian", (_RHO, _A, _SIGMA), _lambert_gaussian, _tis_lambert_gaussian,
                   "rho/pi + A exp(-d^2 / 2 sigma^2) (Gaussian lobe in direction cosines)"),
-        BsdfModel("abg", (_A, _B, _G), _abg, f.tis_abg, "A / (B + d^g)"),
-        BsdfModel("lambert+abg", (_RHO, _A, _B, _G), _lambert_abg, f.tis_lambert_abg, "rho/pi + A / (B + d^g)"),
+        BsdfModel("abg", (_A, _B, _G), _abg, _tis_abg, "A / (B + d^g)"),
+        BsdfModel("lambert+abg", (_RHO, _A, _B, _G), _lambert_abg, _tis_lambert_abg, "rho/pi + A / (B + d^g)"),
     )
 }
 

@@ -33,6 +33,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core import frames
+from bsdfkit.core.conventions import EXPORT_FORMATS
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.fit import plausibility
 from bsdfkit.io import atomic
@@ -55,7 +56,7 @@ __all__ = [
     "sniff_format",
 ]
 
-FORMATS: tuple[str, ...] = ("tracepro", "zemax", "asap")
+FORMATS: tuple[str, ...] = EXPORT_FORMATS
 #: Parameter names of every registered BSDF model (:mod:`bsdfkit.models.registry`).
 FIT_MODELS: dict[str, tuple[str, ...]] = {name: m.parameter_names for name, m in BSDF_MODELS.items()}
 _SIDE_CHOICES = ("reflection", "transmission", "both")
