@@ -93,7 +93,8 @@ def test_synthetic_two_arc_table_converts_to_the_exact_tis(tmp_path):
     lines = ["# quantity: BTDF", "# wavelength: 633 nm", "theta_i;theta_s;phi_s;value"]
     for ti in (0.0, 30.0):
         for a in np.arange(-89.0, 90.0, 1.0):
-            lines.append(f"{ti:g};{abs(a):g};{0 if a >= 0 else 180};{lobe_truth(ti, abs(a), 0 if a >= 0 else 180)!r}")
+            ps = 0 if a >= 0 else 180
+            lines.append(f"{ti:g};{abs(a):g};{ps};{float(lobe_truth(ti, abs(a), ps))!r}")
         t = math.radians(ti)
         for e in np.arange(-60.0, 61.0, 1.0):
             if e == 0:
@@ -102,7 +103,7 @@ def test_synthetic_two_arc_table_converts_to_the_exact_tis(tmp_path):
             d = (c * math.sin(t), sn, c * math.cos(t))
             ts = math.degrees(math.atan2(math.hypot(d[0], d[1]), d[2]))
             ps = math.degrees(math.atan2(d[1], d[0])) % 360.0
-            lines.append(f"{ti:g};{ts!r};{ps!r};{lobe_truth(ti, ts, ps)!r}")
+            lines.append(f"{ti:g};{ts!r};{ps!r};{float(lobe_truth(ti, ts, ps))!r}")
     path = tmp_path / "lobe.csv"
     path.write_text("\n".join(lines) + "\n")
     result = convert(path, "asap", tmp_path / "lobe.asap.txt")
