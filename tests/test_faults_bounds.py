@@ -148,8 +148,9 @@ def test_sweep_failing_after_the_netcdf_leaves_no_file(tmp_path, capsys, monkeyp
     def broken_figure(ds):
         raise OSError(28, "No space left on device")
 
-    import bsdfkit.cli.sweep as cli_sweep
-    monkeypatch.setattr(cli_sweep, "sweep_figure", broken_figure)
+    import bsdfkit.plotting.figures as figures  # the verb imports it when it runs
+
+    monkeypatch.setattr(figures, "sweep_figure", broken_figure)
     _one_line(main(args), capsys.readouterr().err, "no space left")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
     monkeypatch.undo()
