@@ -1,6 +1,14 @@
 """Shared fixtures: the bundled measurement (calibrated once per session) and a tiny raw export to mutate."""
 from __future__ import annotations
 
+import os
+
+# The suite's parallelism is its pytest-xdist workers (one per core): a BLAS thread pool in each worker would only
+# oversubscribe the cores (and its threads' hand-offs make every small LAPACK call slow). Set before numpy loads;
+# commands the tests start inherit it.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 import errno
 import gzip
 from pathlib import Path
