@@ -23,6 +23,29 @@ ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "measurements" / "cl830-synthetic"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def shared_compile_cache():
+    """JAX's persistent compilation cache, as the command line uses it (its folder and settings), for the tests
+    that trace or fit in this process: a kernel is compiled once for both xdist workers and every command a test
+    starts, not once per process (20 000 rays of the example scene: 61 s cold, 7.6 s warm on a loaded machine).
+    ``BSDFKIT_NO_COMPILE_CACHE=1`` runs the suite without it, as the command line would."""
+    from bsdfkit.cli.main import CACHE_SETTINGS, compile_cache_dir, compile_cache_wanted
+
+    if not compile_cache_wanted():
+        yield None
+        return
+    import jax
+
+    folder = os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(compile_cache_dir())
+    before = {k: getattr(jax.config, k) for k in ("jax_compilation_cache_dir", *CACHE_SETTINGS)}
+    jax.config.update("jax_compilation_cache_dir", folder)
+    for key, value in CACHE_SETTINGS.items():
+        jax.config.update(key, value)
+    yield Path(folder)
+    for key, value in before.items():
+        jax.config.update(key, value)
+
+
 @pytest.fixture(scope="session")
 def bundled_raw():
     return read_scan(BUNDLED)

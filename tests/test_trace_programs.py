@@ -23,8 +23,12 @@ def program_cache(monkeypatch, tmp_path):
 
 
 def test_without_a_compilation_cache_no_program_is_kept():
-    assert jax.config.jax_compilation_cache_dir is None  # the suite runs without JAX's persistent cache
-    assert programs.program_folder() is None
+    before = jax.config.jax_compilation_cache_dir  # the suite shares the command line's cache (conftest.py)
+    try:
+        jax.config.update("jax_compilation_cache_dir", None)
+        assert programs.program_folder() is None
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
 
 
 def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path, monkeypatch):
