@@ -699,6 +699,12 @@ def _events(source: _Source, after: int, skip: int | None, comments: list[tuple[
         yield "data", number, line.lstrip("\ufeff")
 
 
+def _rows_estimate(path: str, head: list[tuple[int, str]]) -> int:
+    """Data rows a table probably holds: its size over the mean length of the first data rows, plus a quarter."""
+    length = sum(len(t) + 1 for _, t in head[:200]) / max(len(head[:200]), 1)
+    return int(1.25 * Path(path).stat().st_size / max(length, 1.0)) + 1024
+
+
 def _states_incidence(events: Iterator[tuple[str, int, str]], delim: str | None) -> bool:
     """Whether a comment or a ``key: value`` line after the header states an incidence (a pass over the file)."""
     for kind, line, text in events:
@@ -840,7 +846,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     comments = [c for c in text.comments if c[0] < header_line]
     rows = _parse_rows(path, _events(source, header_line, units_line, comments), delim, columns, roles,
                        decimal_comma, theta_i_default, phi_i_default, default_side, mono_lambda,
-                       _fields(text.lines[k_header][1], delim))
+                       _fields(text.lines[k_header][1], delim), _rows_estimate(path, data))
     _refuse_cut_last_block(path, rows)
     _check_units(path, rows, roles)
     _check_values(path, rows, rel)
@@ -918,7 +924,7 @@ def _uses_decimal_comma(data: list[tuple[int, str]], delim: str | None) -> bool:
 
 
 #: Entries handled at a time by the whole-table checks (their temporaries stay a few MB).
-_SLICE = 1 << 20
+_SLICE = 1 << 18
 
 
 def _codes(x: Any, key: Any = None, n: int | None = None) -> tuple[NDArray, int]:
@@ -1014,7 +1020,6 @@ def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
     if n == 0:
         return
     block, nb = _codes(rows.theta_i, _exact)
-    block = np.array(block)
     for x, key in ((rows.phi_i, _exact), (rows.wavelength, _exact), (rows.side, None), (rows.spec, None)):
         code, nc = _codes(x, key)
         block, nb = _combine(block, nb, code, nc)
@@ -1056,40 +1061,55 @@ _SIDE_CODE = {None: -1, "reflection": 0, "transmission": 1}
 
 
 class _Store:
-    """Blocks of per-entry numbers joined once at the end; a number constant over the whole table (no φi
-    column, no uncertainty column, one side) is kept as one value, read as a broadcast array."""
+    """Per-entry numbers written block by block into one array per quantity, allocated once for the estimated
+    number of entries (pages never written cost no memory) and grown by half when the estimate falls short:
+    no list of blocks to join, no heap of small blocks between temporaries. A quantity constant over the whole
+    table (no φi column, no uncertainty column, one side) is kept as one value and read as a broadcast array."""
 
-    def __init__(self) -> None:
-        self.blocks: dict[str, list[Any]] = {}
+    def __init__(self, capacity: int, dtypes: dict[str, Any]) -> None:
+        self.capacity, self.dtypes = max(int(capacity), 1024), dtypes
+        self.size: dict[str, int] = {}
+        self.arrays: dict[str, NDArray] = {}
+        self.const: dict[str, Any] = {}
 
     def add(self, name: str, values: NDArray) -> None:
         values = np.asarray(values)
-        if values.size and (np.all(values == values.flat[0]) or (values.dtype.kind == "f"
-                                                                  and np.all(np.isnan(values)))):
-            values = (values.flat[0], values.size, values.dtype)  # one value for the block
-        self.blocks.setdefault(name, []).append(values)
+        k = values.size
+        if k == 0:
+            return
+        n0 = self.size.get(name, 0)
+        arr = self.arrays.get(name)
+        if arr is None:
+            v0 = values.flat[0]
+            constant = bool(np.all(values == v0)) or (values.dtype.kind == "f" and bool(np.all(np.isnan(values))))
+            c = self.const.get(name, v0)
+            if constant and (c == v0 or (c != c and v0 != v0)):
+                self.const[name], self.size[name] = c, n0 + k
+                return
+            arr = np.empty(max(self.capacity, n0 + k), dtype=self.dtypes[name])
+            if n0:
+                arr[:n0] = self.const.pop(name)
+            self.arrays[name] = arr
+        if n0 + k > arr.size:
+            grown = np.empty(int((n0 + k) * 1.5), dtype=arr.dtype)
+            grown[:n0] = arr[:n0]
+            self.arrays[name] = arr = grown
+        arr[n0: n0 + k] = values
+        self.size[name] = n0 + k
 
-    def take(self, name: str, dtype: Any) -> NDArray:
-        """The entries of ``name`` as one array (read-only and of no size when constant); blocks released."""
-        blocks = self.blocks.pop(name, [])
-        n = sum(b[1] if isinstance(b, tuple) else b.size for b in blocks)
-        if blocks and all(isinstance(b, tuple) for b in blocks):
-            first = blocks[0][0]
-            if all(b[0] == first or (b[0] != b[0] and first != first) for b in blocks):
-                return np.broadcast_to(np.asarray(first, dtype=dtype), (n,))
-        out = np.empty(n, dtype=dtype)
-        at = 0
-        for b in blocks:
-            size = b[1] if isinstance(b, tuple) else b.size
-            out[at: at + size] = b[0] if isinstance(b, tuple) else b
-            at += size
-        return out
+    def take(self, name: str) -> NDArray:
+        """The entries of ``name`` (read-only and of no size when constant)."""
+        n = self.size.get(name, 0)
+        if name in self.arrays:
+            return self.arrays.pop(name)[:n]
+        value = self.const.pop(name, 0)
+        return np.broadcast_to(np.asarray(value, dtype=self.dtypes[name]), (n,))
 
 
 def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | None, columns: list[_Column],
                 roles: dict[str, list[_Column]], decimal_comma: bool, theta_i_default: float | None,
                 phi_i_default: float, default_side: str | None, mono_lambda: float | None,
-                header_cells: list[str]) -> _Rows:
+                header_cells: list[str], rows_estimate: int = 0) -> _Rows:
     """Rows → one entry per value cell, streamed in blocks of :data:`_BLOCK_LINES` lines.
 
     ``events`` yields ``("data", line, text)`` for the data lines and ``("comment", line, text)`` for the
@@ -1097,7 +1117,8 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
     ``# incidence: 20`` comments or ``Incidence: 20`` lines set the incidence (wavelength, phi_i, side) of the
     rows that follow. A block of plain numbers is parsed by :func:`numpy.loadtxt` and checked as arrays; any
     other block (gaps, text, a decimal comma, a side column, angles beyond 90°, a bad value) row by row, which
-    gives the one-line error of the first bad row with its physical line.
+    gives the one-line error of the first bad row with its physical line. ``rows_estimate`` (rows expected)
+    sizes the arrays.
     """
     pending: list[tuple[int, str]] = []
     header_norm = [c.strip().strip('"').lower() for c in header_cells]
@@ -1152,7 +1173,10 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
              for c in values]
     n_v = len(specs)
     found: dict[str, Any] = {"front": None, "back": None, "sideless": None}  # first line of each
-    store = _Store()
+    store = _Store(rows_estimate * max(len(values), 1), {
+        "theta_i": np.float64, "phi_i": np.float64, "theta_s": np.float64, "phi_s": np.float64,
+        "wavelength": np.float64, "value": np.float64, "std": np.float64, "std_relative": bool, "side": np.int8,
+        "spec": np.int16, "line": np.int32 if Path(path).stat().st_size < 2**31 - 1 else np.int64})
     numeric = {"theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std"}
     plain = not decimal_comma and all(c.role in numeric for c in columns)
 
@@ -1357,7 +1381,7 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
         raise ValidationError("transmission scatter angles in two frames", file=path, line=found["back"],
                               field="theta_s", expected="all from the back normal (<= 90 deg) or all from the front "
                               "normal (> 90 deg)", got=f"line {found['front']} beyond 90 deg")
-    side = store.take("side", np.int8)
+    side = store.take("side")
     if found["sideless"] is not None:
         if found["front"] is None:
             line, where = found["sideless"]
@@ -1365,15 +1389,11 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
                              field=where, expected="--side reflection|transmission, a side column, "
                              "--quantity brdf|btdf, or polar angles up to 180 deg from the front normal")
         side = np.where(side < 0, np.int8(0), side)  # full sphere: up to 90° reflects
-    line_arr = store.take("line", np.int64)
-    if line_arr.size and int(line_arr.max()) < 2**31:
-        line_arr = line_arr.astype(np.int32)
     return _Rows(
-        theta_i=store.take("theta_i", np.float64), phi_i=store.take("phi_i", np.float64),
-        theta_s=store.take("theta_s", np.float64), phi_s=store.take("phi_s", np.float64),
-        wavelength=store.take("wavelength", np.float64), value=store.take("value", np.float64),
-        std=store.take("std", np.float64), std_relative=store.take("std_relative", bool), side=side,
-        spec=store.take("spec", np.int16), line=line_arr,
+        theta_i=store.take("theta_i"), phi_i=store.take("phi_i"), theta_s=store.take("theta_s"),
+        phi_s=store.take("phi_s"), wavelength=store.take("wavelength"), value=store.take("value"),
+        std=store.take("std"), std_relative=store.take("std_relative"), side=side, spec=store.take("spec"),
+        line=store.take("line"),
         quantities=[c.quantity for c in values], headers=[c.header for c in values])
 
 
@@ -1574,15 +1594,16 @@ def records_dataset(
         spectrum = np.ones(lam.size)
         band = [float(lam[0]), float(lam[0])]
     valid = np.ones(lam.size, dtype=bool)
-    nan2 = np.full((n, lam.size), np.nan)
+    # the quantities an elastic table does not state: one read-only NaN matrix of no size, shared
+    nan2 = np.broadcast_to(np.float64(np.nan), (n, lam.size))
     ds = xr.Dataset(
         {
             "bsdf": (("record", "wavelength"), f),
             "bsdf_std": (("record", "wavelength"), s),
-            "noise_floor": (("record", "wavelength"), nan2.copy()),
-            "bsdf_bispectral": (("record", "wavelength"), nan2.copy()),
-            "bsdf_bispectral_std": (("record", "wavelength"), nan2.copy()),
-            "noise_floor_bispectral": (("record", "wavelength"), nan2.copy()),
+            "noise_floor": (("record", "wavelength"), nan2),
+            "bsdf_bispectral": (("record", "wavelength"), nan2),
+            "bsdf_bispectral_std": (("record", "wavelength"), nan2),
+            "noise_floor_bispectral": (("record", "wavelength"), nan2),
             "saturated": (("record", "wavelength"), np.zeros((n, lam.size), dtype=bool)),
             "grazing": ("record", grazing),
             "incident_spectrum": (("configuration", "wavelength"), spectrum[None, :]),
@@ -1631,7 +1652,11 @@ def records_dataset(
         manifest_json="{}",
     )
     try:
-        ds.attrs["source_sha256"] = hashlib.sha256(Path(source).read_bytes()).hexdigest()
+        digest = hashlib.sha256()
+        with open(source, "rb") as fh:
+            while block := fh.read(1 << 22):  # in blocks: the file is not held whole
+                digest.update(block)
+        ds.attrs["source_sha256"] = digest.hexdigest()
     except OSError:
         pass
     return ds
@@ -1743,6 +1768,10 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     n_rec = first.size
     rec_line = np.asarray(rows.line[first], dtype=np.int64).tolist()
     rec_side = [SIDES[int(c)] for c in rows.side[first]]
+    rec_th_i, rec_ph_i = np.array(rows.theta_i[first]), np.array(rows.phi_i[first])
+    rec_th_s, rec_ph_s = theta_s(first), phi_norm(first)
+    for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
+        setattr(rows, name, getattr(rows, name)[:0])  # the directions are in the records now: released
     finite = [np.unique(w[np.isfinite(w)]) for w in (rows.wavelength[i: i + _SLICE] for i in range(0, n, _SLICE))]
     lam = np.unique(np.concatenate(finite)) if finite else np.zeros(0)
     if lam.size == 0:
@@ -1774,20 +1803,20 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
                                       field=rows.column(k), expected=q_names[q_first[rec_of[k]]],
                                       got=rows.quantity(k))
     quantity = np.array([q_names[c] for c in q_first], dtype=object)
-    rec_th_i, rec_ph_i = np.array(rows.theta_i[first]), np.array(rows.phi_i[first])
-    rec_th_s, rec_ph_s = theta_s(first), phi_norm(first)
+    # no uncertainty column: one read-only NaN matrix of no size instead of a matrix of NaN
+    no_std = rows.std.strides == (0,) and bool(np.isnan(rows.std[:1]).all())
     values = np.full((n_rec, lam.size), np.nan)
-    stds = np.full((n_rec, lam.size), np.nan)
+    stds = np.broadcast_to(np.float64(np.nan), values.shape) if no_std else np.full((n_rec, lam.size), np.nan)
     v_flat, s_flat = values.reshape(-1), stds.reshape(-1)
     for i in range(0, n, _SLICE):
         sl = slice(i, i + _SLICE)
         at = rec_of[sl].astype(np.int64) * lam.size + lam_idx[sl]
         v = rows.value[sl]
         v_flat[at] = v
-        s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
+        if not no_std:
+            s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
     del rec_of, lam_idx, v_flat, s_flat
-    for name in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std", "std_relative", "side",
-                 "spec", "line"):
+    for name in ("wavelength", "value", "std", "std_relative", "side", "spec", "line"):
         setattr(rows, name, getattr(rows, name)[:0])  # the entries are in the matrices now: released
     frame = "sample" if signed else _azimuth_frame(rec_th_i, rec_ph_i, rec_th_s, rec_ph_s, values)
     if frame == "specular":  # φs measured from the specular direction: into the sample frame
@@ -1801,18 +1830,27 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
         all_zero = stated.any(axis=1) & np.all(np.where(stated, values == 0.0, True), axis=1)
         zero_records = int(all_zero.sum())
         values[all_zero] = np.nan
-    has_std = np.isfinite(stds) & np.isfinite(values)
+    has_std = np.zeros(values.shape, dtype=bool) if no_std else np.isfinite(stds) & np.isfinite(values)
     # convert to BSDF
-    f = np.full_like(values, np.nan)
-    s = np.full_like(values, np.nan)
-    for q in set(quantity.tolist()):
-        sel = quantity == q
-        f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
-        s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
+    if len(set(quantity.tolist())) == 1:  # one quantity: converted whole (no copy for brdf/btdf/bsdf)
+        f = to_bsdf(values, quantity[0], rec_th_s)
+        s = None if no_std else np.abs(to_bsdf(stds, quantity[0], rec_th_s))
+    else:
+        f = np.full_like(values, np.nan)
+        s = np.full_like(values, np.nan)
+        for q in set(quantity.tolist()):
+            sel = quantity == q
+            f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
+            if not no_std:
+                s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
     del values, stds
     rel_used = DEFAULT_RELATIVE_STD if rel is None else float(rel)
-    np.copyto(s, rel_used * np.abs(f), where=~has_std)
-    s[~np.isfinite(f)] = np.nan
+    if s is None or not has_std.any():  # rel · |f| everywhere, formed in place
+        s = np.abs(f)
+        s *= rel_used
+    else:
+        np.copyto(s, rel_used * np.abs(f), where=~has_std)
+        s[~np.isfinite(f)] = np.nan
     keep = np.isfinite(f).any(axis=1)
     dropped = int((~keep).sum())
     if not keep.any():
