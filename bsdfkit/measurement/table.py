@@ -332,7 +332,7 @@ def _decode(raw: bytes, path: str) -> tuple[str, str]:
 
 
 #: Bytes read at a time when a table is checked and streamed (the text of a table is never held whole).
-_READ_BYTES = 1 << 22
+_READ_BYTES = 1 << 20
 #: Bytes at the end of a file read to check its last line (:func:`refuse_cut_last_line`).
 _TAIL_BYTES = 1 << 18
 #: Non-comment lines kept from the head of a table to find its header, metadata and decimal separator.
@@ -924,7 +924,7 @@ def _uses_decimal_comma(data: list[tuple[int, str]], delim: str | None) -> bool:
 
 
 #: Entries handled at a time by the whole-table checks (their temporaries stay a few MB).
-_SLICE = 1 << 18
+_SLICE = 1 << 16
 
 
 def _codes(x: Any, key: Any = None, n: int | None = None) -> tuple[NDArray, int]:
@@ -959,7 +959,7 @@ def _combine(a: NDArray, na: int, b: NDArray, nb: int) -> tuple[NDArray, int]:
     if na <= 1:
         return b, nb
     n = a.size
-    dense = na * nb <= max(n, 1 << 20)
+    dense = na * nb <= max(2 * n, 1 << 16)  # a remap table of at most 2n int32: less than sorting the pairs
     present = np.zeros(na * nb, dtype=bool) if dense else None
     parts = []
     for i in range(0, n, _SLICE):
@@ -969,7 +969,8 @@ def _combine(a: NDArray, na: int, b: NDArray, nb: int) -> tuple[NDArray, int]:
         else:
             parts.append(np.unique(k))
     if dense:
-        remap = np.cumsum(present, dtype=np.int64) - 1
+        remap = np.cumsum(present, dtype=np.int32 if na * nb < 2**31 else np.int64)
+        remap -= 1
         m = int(present.sum())
         del present
     else:
@@ -1056,7 +1057,7 @@ def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
 
 
 #: Data lines parsed at a time (the block's numbers in float64 arrays: 8 bytes a number).
-_BLOCK_LINES = 1 << 15
+_BLOCK_LINES = 1 << 13
 _SIDE_CODE = {None: -1, "reflection": 0, "transmission": 1}
 
 
@@ -1654,7 +1655,7 @@ def records_dataset(
     try:
         digest = hashlib.sha256()
         with open(source, "rb") as fh:
-            while block := fh.read(1 << 22):  # in blocks: the file is not held whole
+            while block := fh.read(1 << 20):  # in blocks: the file is not held whole
                 digest.update(block)
         ds.attrs["source_sha256"] = digest.hexdigest()
     except OSError:
@@ -1771,7 +1772,8 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     rec_th_i, rec_ph_i = np.array(rows.theta_i[first]), np.array(rows.phi_i[first])
     rec_th_s, rec_ph_s = theta_s(first), phi_norm(first)
     for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
-        setattr(rows, name, getattr(rows, name)[:0])  # the directions are in the records now: released
+        # the directions are in the records now: released
+        setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
     finite = [np.unique(w[np.isfinite(w)]) for w in (rows.wavelength[i: i + _SLICE] for i in range(0, n, _SLICE))]
     lam = np.unique(np.concatenate(finite)) if finite else np.zeros(0)
     if lam.size == 0:
@@ -1815,9 +1817,10 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
         v_flat[at] = v
         if not no_std:
             s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
-    del rec_of, lam_idx, v_flat, s_flat
+    del rec_of, lam_idx, v_flat, s_flat, v, at
     for name in ("wavelength", "value", "std", "std_relative", "side", "spec", "line"):
-        setattr(rows, name, getattr(rows, name)[:0])  # the entries are in the matrices now: released
+        # the entries are in the matrices now: released
+        setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
     frame = "sample" if signed else _azimuth_frame(rec_th_i, rec_ph_i, rec_th_s, rec_ph_s, values)
     if frame == "specular":  # φs measured from the specular direction: into the sample frame
         rec_ph_s = np.where(rec_th_s < 1e-12, 0.0, np.mod(rec_ph_s + rec_ph_i - 180.0, 360.0))
