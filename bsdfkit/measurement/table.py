@@ -984,6 +984,48 @@ def _combine(a: NDArray, na: int, b: NDArray, nb: int) -> tuple[NDArray, int]:
     return out, m
 
 
+def _codes_of_tuples(columns: list[tuple[Any, Any]], n: int) -> tuple[NDArray, int]:
+    """Codes 0..m-1 of the classes of equal tuples (key(x) of each column; see :func:`_codes`), numbered in the
+    order of the tuples, and m: one code array written, the per-column codes only formed slice by slice."""
+    tables = []
+    for x, key in columns:
+        get = x if callable(x) else (lambda sl, x=x: x[sl])
+        parts = [np.unique(get(slice(i, i + _SLICE))) for i in range(0, n, _SLICE)]
+        u = np.unique(np.concatenate(parts)) if parts else np.zeros(0)
+        if key is None:
+            group, m = np.arange(u.size), u.size
+        else:
+            ku, group = np.unique(np.asarray(key(u)), return_inverse=True)
+            group, m = np.asarray(group).ravel(), ku.size
+        tables.append((get, u, group, max(m, 1)))
+    size = math.prod(t[3] for t in tables)
+    if size > max(2 * n, 1 << 16):  # too many combinations for a table of them: pair by pair
+        code, m = _codes(columns[0][0], columns[0][1], n)
+        for x, key in columns[1:]:
+            more, n_more = _codes(x, key, n)
+            code, m = _combine(code, m, more, n_more)
+        return code, m
+
+    def key_of(sl: slice) -> NDArray[np.int64]:
+        k = np.zeros(len(range(*sl.indices(n))), dtype=np.int64)
+        for get, u, group, m in tables:
+            k *= m
+            k += group[np.searchsorted(u, get(sl))]
+        return k
+
+    present = np.zeros(size, dtype=bool)
+    for i in range(0, n, _SLICE):
+        present[key_of(slice(i, i + _SLICE))] = True
+    remap = np.cumsum(present, dtype=np.int32 if size < 2**31 else np.int64)
+    remap -= 1
+    m = int(present.sum())
+    del present
+    out = np.empty(n, dtype=np.int32 if m < 2**31 else np.int64)
+    for i in range(0, n, _SLICE):
+        out[i: i + _SLICE] = remap[key_of(slice(i, i + _SLICE))]
+    return out, m
+
+
 def _exact(x: NDArray) -> NDArray:
     """Angles and wavelengths as compared by the checks and the record keys: rounded to 1e-9."""
     return np.round(x, 9)
@@ -1020,11 +1062,8 @@ def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
     n = rows.line.size
     if n == 0:
         return
-    block, nb = _codes(rows.theta_i, _exact)
-    for x, key in ((rows.phi_i, _exact), (rows.wavelength, _exact), (rows.side, None), (rows.spec, None)):
-        code, nc = _codes(x, key)
-        block, nb = _combine(block, nb, code, nc)
-        del code
+    block, nb = _codes_of_tuples([(rows.theta_i, _exact), (rows.phi_i, _exact), (rows.wavelength, _exact),
+                                  (rows.side, None), (rows.spec, None)], n)
     last_line = int(rows.line.max())
     at_end = np.zeros(nb, dtype=bool)
     at_end[block[np.asarray(rows.line) == last_line]] = True
@@ -1463,7 +1502,7 @@ def _check_units(path: str, rows: _Rows, roles: dict[str, list[_Column]]) -> Non
             continue
         col = roles[role][0]
         v = np.asarray(getattr(rows, role), dtype=np.float64)
-        if np.nanmax(np.abs(v)) > bound:
+        if max(float(np.nanmax(v)), -float(np.nanmin(v))) > bound:
             continue  # degrees (the distinct values below are only counted when every angle is small)
         distinct = np.unique(np.round(v[np.isfinite(v)], 9))
         if distinct.size >= RADIAN_MIN_DISTINCT:
@@ -1475,52 +1514,61 @@ def _check_units(path: str, rows: _Rows, roles: dict[str, list[_Column]]) -> Non
 
 
 def _check_values(path: str, rows: _Rows, rel: float | None) -> None:
-    """Refuse values that are no BSDF before computing with them: huge (overflow), all zero, negative beyond noise."""
-    v = rows.value
-    lines = rows.line
-    stated = np.isfinite(v)
-    if not stated.any():
+    """Refuse values that are no BSDF before computing with them: huge (overflow), all zero, negative beyond noise.
+    Checked in slices of :data:`_SLICE` entries."""
+    v, s, lines = rows.value, rows.std, rows.line
+    n = v.size
+    lam_code, n_lam = _codes(rows.wavelength)
+    count = np.zeros(n_lam, dtype=np.int64)
+    total = np.zeros(n_lam)
+    first_stated, nonzero = -1, False
+    for i in range(0, n, _SLICE):
+        vs = v[i: i + _SLICE]
+        stated = np.isfinite(vs)
+        if first_stated < 0 and stated.any():
+            first_stated = i + int(np.argmax(stated))
+        huge = stated & (np.abs(vs) > MAX_ABS_BSDF)
+        if huge.any():
+            k = i + int(np.argmax(huge))
+            raise ValidationError("value implausibly large for a BSDF", file=path, line=int(lines[k]),
+                                  field=rows.column(k),
+                                  expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=f"{v[k]:g}")
+        nonzero = nonzero or bool(np.any(vs[stated] != 0.0))
+        codes = lam_code[i: i + _SLICE][stated]
+        count += np.bincount(codes, minlength=n_lam)
+        total += np.bincount(codes, weights=vs[stated], minlength=n_lam)
+    if first_stated < 0:
         return  # every cell a gap: refused by the assembly with its own message
-    huge = stated & (np.abs(v) > MAX_ABS_BSDF)
-    if huge.any():
-        k = int(np.argmax(huge))
-        raise ValidationError("value implausibly large for a BSDF", file=path, line=int(lines[k]),
-                              field=rows.column(k),
-                              expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=f"{v[k]:g}")
-    del huge
-    s = rows.std
-    too_big = np.isfinite(s) & (s > MAX_ABS_BSDF * (1.0 + np.abs(v)))
-    if np.any(too_big):
-        k = int(np.argmax(too_big))
-        raise ValidationError("uncertainty implausibly large", file=path, line=int(lines[k]),
-                              field=f"uncertainty of '{rows.column(k)}'", expected=f"<= {MAX_ABS_BSDF:g}",
-                              got=f"{s[k]:g}")
-    del too_big
-    if not np.any(v[stated] != 0.0):
-        k = int(np.argmax(stated))
+    no_std = s.strides == (0,) and bool(np.isnan(s[:1]).all())  # no uncertainty column: nothing to check
+    for i in range(n if no_std else 0, n, _SLICE):
+        vs, ss = v[i: i + _SLICE], s[i: i + _SLICE]
+        too_big = np.isfinite(ss) & (ss > MAX_ABS_BSDF * (1.0 + np.abs(vs)))
+        if too_big.any():
+            k = i + int(np.argmax(too_big))
+            raise ValidationError("uncertainty implausibly large", file=path, line=int(lines[k]),
+                                  field=f"uncertainty of '{rows.column(k)}'", expected=f"<= {MAX_ABS_BSDF:g}",
+                                  got=f"{s[k]:g}")
+    if not nonzero:
+        k = first_stated
         raise ValidationError("the table is all zero: every value is 0", file=path, line=int(lines[k]),
                               field=rows.column(k), expected="values > 0 where the sample scatters",
-                              got=f"0 in all {int(stated.sum())} cells")
+                              got=f"0 in all {int(count.sum())} cells")
     # the mean of the stated values at each wavelength (NaN wavelength: one group)
-    lam_code, n_lam = _codes(rows.wavelength)
-    count = np.bincount(lam_code[stated], minlength=n_lam)
-    total = np.bincount(lam_code[stated], weights=v[stated], minlength=n_lam)
-    del stated
     for w in np.flatnonzero((count > 0) & (total < 0)).tolist():
         sel = np.isfinite(v) & (lam_code == w)
-        n = int(sel.sum())
+        n_w = int(sel.sum())
         x = v[sel]
         u = np.where(rows.std_relative[sel], s[sel] * np.abs(x), s[sel])
         u = np.where(np.isfinite(u), u, (DEFAULT_RELATIVE_STD if rel is None else rel) * np.abs(x))
         mean = float(np.mean(x))
         if mean >= 0:
             continue
-        sem = max(float(np.std(x)) / math.sqrt(n), float(np.sqrt(np.sum(u**2))) / n)
+        sem = max(float(np.std(x)) / math.sqrt(n_w), float(np.sqrt(np.sum(u**2))) / n_w)
         if -mean > NEGATIVE_SIGMA * sem and -mean > float(np.median(u)):
             k = int(np.flatnonzero(sel & (v < 0))[0])
             lam_k = float(rows.wavelength[k])
             at = "" if math.isnan(lam_k) else f" at {lam_k:g} nm"
-            raise ValidationError(f"BSDF negative beyond noise{at}: {int((x < 0).sum())} of {n} values < 0",
+            raise ValidationError(f"BSDF negative beyond noise{at}: {int((x < 0).sum())} of {n_w} values < 0",
                                   file=path, line=int(lines[k]), field=rows.column(k),
                                   expected=f">= 0 within the noise (mean > -{NEGATIVE_SIGMA:g} standard errors "
                                            f"= {-NEGATIVE_SIGMA * sem:.3g})",
@@ -1737,26 +1785,23 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
         p = np.mod(ps, 360.0)
         return np.where((ts < 1e-12) | (p >= 360.0), 0.0, p)
 
-    code, nc = _codes(rows.side)
-    for x, key in ((rows.theta_i, _exact), (rows.phi_i, lambda u: _exact(np.mod(u, 360.0))), (theta_s, _exact),
-                   (phi_norm, lambda u: np.mod(_exact(u), 360.0))):
-        more, n_more = _codes(x, key, n)
-        code, nc = _combine(code, nc, more, n_more)
-        del more
+    direction = [(rows.side, None), (rows.theta_i, _exact), (rows.phi_i, lambda u: _exact(np.mod(u, 360.0))),
+                 (theta_s, _exact), (phi_norm, lambda u: np.mod(_exact(u), 360.0))]
     # a direction measured more than once (the nadir of every C-plane, a repeated point) is kept as several
     # records, one per repetition: the hemispherical engine merges them with their spread in the uncertainty
-    lam_code, n_lam_code = _codes(rows.wavelength)
-    cell, n_cell = _combine(code, nc, lam_code, n_lam_code)
-    del lam_code
+    cell, n_cell = _codes_of_tuples([*direction, (rows.wavelength, None)], n)
+    if n_cell == n:  # every (direction, wavelength) once: no repetitions
+        del cell
+    code, nc = _codes_of_tuples(direction, n)
     if n_cell < n:
         occurrence = np.empty(n, dtype=np.int64)
         seen = np.zeros(n_cell, dtype=np.int64)
         for i in range(0, n, _SLICE):
             occurrence[i: i + _SLICE] = _rank_in_group(cell[i: i + _SLICE], seen)
         del seen
+        del cell
         code, nc = _combine(code, nc, occurrence, int(occurrence.max()) + 1)
         del occurrence
-    del cell
     first = _first_index(code, nc)
     order = np.argsort(first, kind="stable")  # records in order of first appearance
     rank = np.empty_like(order)
@@ -1776,23 +1821,24 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
         setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
     finite = [np.unique(w[np.isfinite(w)]) for w in (rows.wavelength[i: i + _SLICE] for i in range(0, n, _SLICE))]
     lam = np.unique(np.concatenate(finite)) if finite else np.zeros(0)
+    stated_lam = lam.size > 0
     if lam.size == 0:
         lam = np.array([np.nan])
-        lam_idx = np.broadcast_to(np.int32(0), (n,))
-    else:
-        lam_idx = np.empty(n, dtype=np.int32 if lam.size < 2**31 else np.int64)
-        for i in range(0, n, _SLICE):
-            lam_idx[i: i + _SLICE] = np.searchsorted(lam, rows.wavelength[i: i + _SLICE])
-    if _combine(rec_of, n_rec, lam_idx, lam.size)[1] < n:  # the same record and wavelength twice
-        cell_all = rec_of.astype(np.int64) * lam.size + lam_idx
-        _, first_cell, cell_inv, counts = np.unique(cell_all, return_index=True, return_inverse=True,
-                                                    return_counts=True)
-        cell_inv = np.asarray(cell_inv).ravel()
-        dup = np.flatnonzero(counts[cell_inv] > 1)
-        second = int(next(k for k in dup if k != first_cell[cell_inv[k]]))
-        raise ValidationError("duplicate direction and wavelength", file=path, line=int(rows.line[second]),
-                              field=rows.column(second), expected="each (theta_i, phi_i, theta_s, phi_s, side, "
-                              "wavelength) once", got=f"also on line {int(rows.line[first_cell[cell_inv[second]]])}")
+
+    def lam_index(sl: slice) -> NDArray:
+        return np.searchsorted(lam, rows.wavelength[sl]) if stated_lam else np.zeros(len(range(*sl.indices(n))),
+                                                                                      dtype=np.int64)
+
+    # records are (direction, repetition) per wavelength: a (record, wavelength) pair cannot repeat, unless stated
+    # and unstated (NaN) wavelengths mix, which is refused
+    for i in range(0, n if stated_lam else 0, _SLICE):
+        unstated = np.isnan(rows.wavelength[i: i + _SLICE])
+        if unstated.any():
+            k = i + int(np.argmax(unstated))
+            raise FormatError("no wavelength for this row, where other rows state theirs", file=path,
+                              line=int(rows.line[k]), field="wavelength",
+                              expected="a wavelength column, '# wavelength: NM' before the first block, or "
+                                       "--wavelength NM", got="no wavelength")
     q_names = sorted(set(rows.quantities))
     q_of_spec = np.array([q_names.index(q) for q in rows.quantities])
     q_first = q_of_spec[rows.spec[first]]
@@ -1812,12 +1858,12 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     v_flat, s_flat = values.reshape(-1), stds.reshape(-1)
     for i in range(0, n, _SLICE):
         sl = slice(i, i + _SLICE)
-        at = rec_of[sl].astype(np.int64) * lam.size + lam_idx[sl]
+        at = rec_of[sl].astype(np.int64) * lam.size + lam_index(sl)
         v = rows.value[sl]
         v_flat[at] = v
         if not no_std:
             s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
-    del rec_of, lam_idx, v_flat, s_flat, v, at
+    del rec_of, v_flat, s_flat, v, at
     for name in ("wavelength", "value", "std", "std_relative", "side", "spec", "line"):
         # the entries are in the matrices now: released
         setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
