@@ -406,8 +406,9 @@ def test_full_sphere_polar_angles_from_the_front_normal(tmp_path):
     rows = ["theta_i,theta_s,phi_s,BSDF"]
     for ti in INCIDENCES:
         for ts, ps in two_arcs(ti):
-            rows.append(f"{ti!r},{ts!r},{ps!r},{truth(ti, ts, ps, 550.0)!r}")
-            rows.append(f"{ti!r},{180.0 - ts!r},{ps!r},{2 * truth(ti, ts, ps, 550.0)!r}")
+            f = float(truth(ti, ts, ps, 550.0))  # a number, not an np.float64 repr (refused as text)
+            rows.append(f"{ti!r},{ts!r},{ps!r},{f!r}")
+            rows.append(f"{ti!r},{180.0 - ts!r},{ps!r},{2 * f!r}")
     ds = read_table(write(tmp_path / "sphere.csv", rows), wavelength=550.0)
     refl = ds["side"].values == "reflection"
     assert refl.sum() == (~refl).sum() > 0
