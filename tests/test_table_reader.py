@@ -536,3 +536,17 @@ print(base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, ds.sizes["record
     size = path.stat().st_size
     assert size > 19e6
     assert (peak_kb - base_kb) * 1024 <= 3 * size, (peak_kb - base_kb) * 1024 / size
+
+
+def test_a_large_table_cut_inside_its_last_number_names_the_last_line(tmp_path):
+    """Beyond 512 kB only the file's tail is read for this check; the message still names the physical line."""
+    rows = ["theta_i,theta_s,phi_s,wavelength,brdf"]
+    rows += [f"10,{k // 72 % 90},{k % 72 * 5},{550 + k // 6480},{0.1 + k * 1e-7:.7e}" for k in range(24000)]
+    text = "\n".join(rows)
+    text = text[: text.rindex("e-")]  # the last value stops before its exponent (every row above has e-01)
+    path = tmp_path / "cut.csv"
+    path.write_text(text)
+    assert path.stat().st_size > 600_000
+    with pytest.raises(InputError) as info:
+        read_table(path)
+    assert str(info.value).startswith(f"{path}:{len(rows)}: the file ends inside a number")
