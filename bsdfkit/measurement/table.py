@@ -1240,7 +1240,7 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
         try:
             a = np.loadtxt([t for _, t in block], delimiter=delim, comments=None, quotechar='"',
                            dtype=np.float64, ndmin=2)
-        except ValueError:
+        except (ValueError, TypeError, OverflowError):  # anything not plain numbers: the row path says what
             return False
         n = len(block)
         if a.shape != (n, n_cols) or not np.all(np.isfinite(a)):
