@@ -1031,7 +1031,7 @@ def _exact(x: NDArray) -> NDArray:
     return np.round(x, 9)
 
 
-def _rank_in_group(ids: NDArray, seen: NDArray[np.int64]) -> NDArray[np.int64]:
+def _rank_in_group(ids: NDArray, seen: NDArray[np.integer]) -> NDArray[np.int64]:
     """Rank of each entry among the entries of its group so far (``seen``: counts before this slice, updated)."""
     order = np.argsort(ids, kind="stable")
     sorted_ids = ids[order]
@@ -1067,7 +1067,9 @@ def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
     last_line = int(rows.line.max())
     at_end = np.zeros(nb, dtype=bool)
     at_end[block[np.asarray(rows.line) == last_line]] = True
-    counts = np.bincount(block, minlength=nb)
+    counts = np.zeros(nb, dtype=np.int64)
+    for i in range(0, n, _SLICE):  # in slices: bincount would copy the codes to int64 at once
+        counts += np.bincount(block[i: i + _SLICE], minlength=nb)
     whole = np.flatnonzero(~at_end)
     if whole.size < 2 or np.any(counts[whole] != counts[whole[0]]):
         return  # blocks of their own sizes: nothing tells a shorter last block from a cut one
@@ -1794,8 +1796,8 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
         del cell
     code, nc = _codes_of_tuples(direction, n)
     if n_cell < n:
-        occurrence = np.empty(n, dtype=np.int64)
-        seen = np.zeros(n_cell, dtype=np.int64)
+        occurrence = np.empty(n, dtype=np.int32 if n < 2**31 else np.int64)
+        seen = np.zeros(n_cell, dtype=occurrence.dtype)
         for i in range(0, n, _SLICE):
             occurrence[i: i + _SLICE] = _rank_in_group(cell[i: i + _SLICE], seen)
         del seen
