@@ -19,6 +19,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json, warn_dark
@@ -30,10 +31,15 @@ from bsdfkit.io.jsonout import to_jsonable
 from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
 from bsdfkit.models.registry import SPECTRUM_MODELS as REGISTERED_SPECTRUM_MODELS
 
+if TYPE_CHECKING:
+    import xarray as xr
+
 BSDF_MODELS = tuple(REGISTERED_BSDF_MODELS)
 # the registry's names (light): the fits themselves (JAX, colour-science) are imported by the verb that runs
 SPECTRUM_MODELS = tuple(REGISTERED_SPECTRUM_MODELS)
 INTERACTIONS = (*PHOSPHOR_INTERACTIONS, ELASTIC_INTERACTION)
+#: ``fit bsdf --wavelength NM`` takes the nearest measured wavelength within this distance [nm].
+WAVELENGTH_TOLERANCE_NM = 0.5
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -66,6 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--side", choices=SIDES, required=True)
     b.add_argument("--model", choices=BSDF_MODELS, default="lambert+gaussian")
     b.add_argument("--incidence", type=float, metavar="DEG", help="fit only this incidence angle (degrees)")
+    b.add_argument("--wavelength", type=float, metavar="NM",
+                   help="elastic: fit only this measured wavelength [nm] (the nearest within "
+                        f"{WAVELENGTH_TOLERANCE_NM:g} nm); default: the whole measured range (a single-wavelength "
+                        "scan: its one wavelength)")
     b.add_argument("-o", "--output", metavar="FIT.nc", help="save the fit (netCDF) for `bsdfkit export`")
     b.add_argument("--force", action="store_true", help="overwrite an existing output")
     b.add_argument("--json", action="store_true")
@@ -190,6 +200,54 @@ def _run_reflectance(args: argparse.Namespace) -> int:
     return 0
 
 
+def _std(value: float | None) -> str:
+    """An uncertainty for the text output: ``0`` for an exact fit, ``n/a`` where none could be formed (never
+    ``nan``)."""
+    return "n/a" if value is None or not math.isfinite(value) else format(value, ".2g")
+
+
+def select_wavelength(ds: xr.Dataset, nm: float, scan: str) -> xr.Dataset:
+    """The dataset at the measured wavelength nearest ``nm`` [nm], within :data:`WAVELENGTH_TOLERANCE_NM`.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A calibrated BSDF dataset (dimension ``wavelength`` [nm]).
+    nm : float
+        The wavelength asked for [nm].
+    scan : str
+        The scan's path, for the message.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``ds`` with the one wavelength (dimension kept, size 1).
+
+    Raises
+    ------
+    InputError
+        The scan states no wavelength (NaN), or none lies within the tolerance (the message names the measured
+        ones).
+    """
+    import numpy as np
+
+    lam = np.asarray(ds["wavelength"].values, dtype=np.float64)
+    finite = np.flatnonzero(np.isfinite(lam))
+    if finite.size == 0:
+        raise InputError("the scan does not state its wavelength", file=scan, field="--wavelength",
+                         expected="a scan with a stated wavelength (ingest a monochrome table with --wavelength NM)",
+                         got=nm)
+    k = int(finite[np.argmin(np.abs(lam[finite] - nm))])
+    if not abs(lam[k] - nm) <= WAVELENGTH_TOLERANCE_NM:
+        measured = np.unique(lam[finite])
+        available = (", ".join(f"{w:g}" for w in measured.tolist()) + " nm" if measured.size <= 8 else
+                     f"one of the {measured.size} measured wavelengths {measured[0]:g}..{measured[-1]:g} nm")
+        raise InputError(f"no measured wavelength within {WAVELENGTH_TOLERANCE_NM:g} nm of --wavelength",
+                         file=scan, field="--wavelength",
+                         expected=available + (f" (nearest {lam[k]:g} nm)" if measured.size > 1 else ""), got=nm)
+    return ds.isel(wavelength=[k])
+
+
 def _run_bsdf(args: argparse.Namespace) -> int:
     from bsdfkit.fit import plausibility
     from bsdfkit.fit.least_squares import fit_bsdf
@@ -197,13 +255,25 @@ def _run_bsdf(args: argparse.Namespace) -> int:
     from bsdfkit.reduction.any_sample import measured_tis
     from bsdfkit.reduction.spectral import interaction_profile
 
+    if args.wavelength is not None:
+        if not (math.isfinite(args.wavelength) and args.wavelength > 0):
+            raise ValidationError("option out of range", field="--wavelength", expected="a wavelength > 0 nm",
+                                  got=args.wavelength)
+        if args.interaction != ELASTIC_INTERACTION:
+            raise InputError("--wavelength selects the wavelength of an elastic fit", field="--wavelength",
+                             expected=f"--interaction {ELASTIC_INTERACTION} (the phosphor interactions have "
+                                      "their own bands)", got=args.interaction)
     if args.output:
         atomic.check_writable(args.output, args.force, inputs=[args.scan])
     ds = api.ingest(args.scan)
+    if args.wavelength is not None:
+        ds = select_wavelength(ds, args.wavelength, args.scan)
     warn_dark(ds, "fit bsdf")
     profile = interaction_profile(ds, args.interaction, args.side)
     result = fit_bsdf(profile, args.model, incidence_deg=args.incidence)
     result.attrs["interaction"] = args.interaction
+    if args.wavelength is not None:
+        result.attrs["wavelength_nm"] = float(ds["wavelength"].values[0])
     warnings = json.loads(result.attrs.get("warnings", "[]"))
     if args.output:
         netcdf.save(result, args.output, args.force, inputs=[args.scan])
@@ -236,11 +306,11 @@ def _run_bsdf(args: argparse.Namespace) -> int:
         print(f"bsdfkit fit: warning: {w}", file=sys.stderr)
     print(f"{args.scan}: {args.interaction} {args.side}, model {args.model} ({result.attrs['residual']} residuals)")
     for f in fits:
-        parts = ", ".join(f"{n} = {f['params'][n]:.4g} ± {f['std'][n]:.2g}" for n in names)
+        parts = ", ".join(f"{n} = {f['params'][n]:.4g} ± {_std(f['std'][n])}" for n in names)
         gate = ("passes the plausibility gate" if f["plausible"] else
                 "FAILS the plausibility gate: " + "; ".join(f["reasons"]))
-        print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f} ± {f['tis_std']:.2g} "
-              f"(data {f['data_tis']:.4f} ± {f['data_tis_std']:.2g}); R² = {f['r2']:.4f}; "
+        print(f"  θi = {f['theta_i_deg']:g}°: {parts}; TIS = {f['tis']:.4f} ± {_std(f['tis_std'])} "
+              f"(data {f['data_tis']:.4f} ± {_std(f['data_tis_std'])}); R² = {f['r2']:.4f}; "
               f"{'converged' if f['converged'] else 'NOT converged'}, {gate}")
     if args.output:
         print(f"wrote {args.output}" + ("" if verdict.passed else

@@ -165,7 +165,8 @@ def tis_std(model: str, theta_i_deg: np.ndarray, values: np.ndarray, covariance:
     Returns
     -------
     numpy.ndarray
-        u(TIS) [1], shape (n,); NaN where the covariance gives no finite positive variance.
+        u(TIS) [1], shape (n,); 0 where the variance is exactly 0 (an exact fit: zero residual, zero
+        covariance); NaN only where the covariance gives no finite variance ≥ 0.
     """
     spec = bsdf_model(model)
     names = spec.parameter_names
@@ -182,7 +183,7 @@ def tis_std(model: str, theta_i_deg: np.ndarray, values: np.ndarray, covariance:
         grad[:, k] = (t_up - t_down) / (up[:, k] - down[:, k])
     cov = np.asarray(covariance, dtype=np.float64).reshape(values.shape[0], len(names), len(names))
     var = np.einsum("bi,bij,bj->b", grad, cov, grad)
-    return np.sqrt(np.where(np.isfinite(var) & (var > 0), var, np.nan))
+    return np.sqrt(np.where(np.isfinite(var) & (var >= 0), var, np.nan))
 
 
 def _model_of(fit: xr.Dataset) -> str:

@@ -48,14 +48,16 @@ Every problem raises a one-line :class:`~bsdfkit.core.errors.InputError` / :clas
 """
 from __future__ import annotations
 
+import codecs
 import csv
 import hashlib
+import io
 import json
 import math
 import re
 from array import array
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -66,7 +68,7 @@ from numpy.typing import NDArray
 from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.version import __version__
-from bsdfkit.io.text import refuse_cut_last_line, text_and_encoding
+from bsdfkit.io.text import _BOMS, _unmarked_utf16, refuse_cut_last_line, text_and_encoding
 
 __all__ = ["QUANTITIES", "DEFAULT_RELATIVE_STD", "CONFIG_NAME", "read_table", "guess_can_open", "records_dataset",
            "to_bsdf", "side_of_quantity", "normalise_quantity", "arc_labels"]
@@ -329,20 +331,103 @@ def _decode(raw: bytes, path: str) -> tuple[str, str]:
     return text_and_encoding(raw, path, expected="a text table", legacy="cp1252")
 
 
-def _load_text(path: str) -> _Text:
-    p = Path(path)
-    if p.is_dir():
-        raise InputError("is a folder, not a table", file=path, expected="a text table file")
-    if not p.is_file():
-        raise InputError("file not found", file=path, expected="a text table")
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
-    text, encoding = _decode(raw, path)
+#: Bytes read at a time when a table is checked and streamed (the text of a table is never held whole).
+_READ_BYTES = 1 << 20
+#: Bytes at the end of a file read to check its last line (:func:`refuse_cut_last_line`).
+_TAIL_BYTES = 1 << 18
+#: Non-comment lines kept from the head of a table to find its header, metadata and decimal separator.
+_HEAD_LINES = 280
+
+
+class _Source:
+    """The physical lines of a table file, streamed from disk for each pass.
+
+    The bytes are first checked as a whole, in blocks of :data:`_READ_BYTES`: UTF-8 (or UTF-16/32 with a
+    byte-order mark, or unmarked UTF-16) without a NUL byte is then streamed line by line, numbered as
+    ``str.splitlines`` numbers them. Any other file (Windows-1252, binary, empty) is decoded whole by
+    :func:`_decode`, which gives the one-line error or the legacy text.
+    """
+
+    def __init__(self, path: str) -> None:
+        p = Path(path)
+        if p.is_dir():
+            raise InputError("is a folder, not a table", file=path, expected="a text table file")
+        if not p.is_file():
+            raise InputError("file not found", file=path, expected="a text table")
+        self.path = path
+        self.text: str | None = None
+        try:
+            with open(p, "rb") as fh:
+                head = fh.read(4096)
+                bom, codec = next(((b, enc) for b, enc in _BOMS if head.startswith(b)), (b"", None))
+                codec = codec or _unmarked_utf16(head) or "utf-8"
+                fh.seek(len(bom))
+                decoder = codecs.getincrementaldecoder(codec)()
+                plain, blank = True, True
+                try:
+                    while chunk := fh.read(_READ_BYTES):
+                        part = decoder.decode(chunk)
+                        if "\x00" in part:
+                            plain = False
+                            break
+                        blank = blank and not part.strip()
+                    decoder.decode(b"", final=True)
+                except UnicodeDecodeError:
+                    plain = False
+            if not plain or blank:
+                self.text, self.encoding = _decode(p.read_bytes(), path)
+        except OSError as exc:
+            raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
+        if self.text is None:
+            self.codec, self.skip = codec, len(bom)
+            self.encoding = "utf-8-sig" if bom == codecs.BOM_UTF8 else codec
+
+    def lines(self) -> Iterator[tuple[int, str]]:
+        """(line number from 1, text without its line break) of every physical line."""
+        if self.text is not None:
+            yield from enumerate(self.text.splitlines(), start=1)
+            return
+        number = 0
+        with open(self.path, "rb") as raw:
+            raw.seek(self.skip)
+            with io.TextIOWrapper(raw, encoding=self.codec, newline=None) as fh:
+                for physical in fh:
+                    for piece in physical.splitlines():
+                        number += 1
+                        yield number, piece
+
+    def tail(self) -> str:
+        """The end of the text (whole lines, the last one as in the file, with or without its line break)."""
+        if self.text is not None:
+            return self.text
+        size = Path(self.path).stat().st_size
+        if self.codec == "utf-8" and size > 2 * _TAIL_BYTES:
+            with open(self.path, "rb") as fh:
+                fh.seek(size - _TAIL_BYTES)
+                block = fh.read()
+            cut = block.find(b"\n")
+            if cut >= 0:
+                return block[cut + 1:].decode("utf-8")
+        return "\n".join(line for _, line in self.lines()) + ("" if self._ends_open() else "\n")
+
+    def _ends_open(self) -> bool:
+        with open(self.path, "rb") as fh:
+            fh.seek(max(self.skip, Path(self.path).stat().st_size - 8))
+            end = fh.read()
+        return not end.replace(b"\x00", b"").endswith((b"\n", b"\r"))
+
+    def count_lines(self) -> int:
+        """How many physical lines the file has."""
+        return sum(1 for _ in self.lines())
+
+
+def _load_text(path: str, source: _Source | None = None) -> _Text:
+    """The head of a table: its first :data:`_HEAD_LINES` non-empty, non-comment lines and the comments among
+    them (the rest is streamed by :func:`read_table`)."""
+    source = source or _Source(path)
     lines, comments = [], []
-    all_lines = text.splitlines()
-    for number, line in enumerate(all_lines, start=1):
+    number = 0
+    for number, line in source.lines():
         body = line.strip().lstrip("\ufeff").strip()
         if not body or not body.strip(",;\t "):
             continue
@@ -350,7 +435,9 @@ def _load_text(path: str) -> _Text:
             comments.append((number, body.lstrip("#/%! ").strip()))
             continue
         lines.append((number, line.lstrip("\ufeff")))
-    return _Text(path, lines, comments, encoding, len(all_lines), text)
+        if len(lines) >= _HEAD_LINES:
+            break
+    return _Text(path, lines, comments, source.encoding, number)
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:
@@ -445,22 +532,34 @@ def _number(cell: str, decimal_comma: bool) -> float:
 # ------------------------------------------------------------------------------------------- the reader
 @dataclass
 class _Rows:
-    """What the parser found: one entry per (row, value column) with a finite or NaN value."""
+    """What the parser found: one entry per (row, value column) with a finite or NaN value.
 
-    # numbers in typed arrays (8 bytes an entry, not a 32-byte float object and its pointer): a table of
-    # millions of rows is held at a small multiple of its size; np.asarray reads them without a copy
-    theta_i: array = field(default_factory=lambda: array("d"))
-    phi_i: array = field(default_factory=lambda: array("d"))
-    theta_s: array = field(default_factory=lambda: array("d"))  # signed for in-plane tables
-    phi_s: array = field(default_factory=lambda: array("d"))
-    side: list[str | None] = field(default_factory=list)
-    wavelength: array = field(default_factory=lambda: array("d"))
-    value: array = field(default_factory=lambda: array("d"))
-    std: array = field(default_factory=lambda: array("d"))
-    std_relative: array = field(default_factory=lambda: array("b"))
-    quantity: list[str] = field(default_factory=list)
-    line: array = field(default_factory=lambda: array("q"))
-    column: list[str] = field(default_factory=list)
+    Numbers in float64 arrays (8 bytes an entry); a quantity constant over the table is a read-only broadcast
+    array. ``spec`` is the index of the entry's value column in ``quantities`` / ``headers``; ``side`` is 0 for
+    reflection, 1 for transmission; ``line`` the physical line of the row.
+    """
+
+    theta_i: NDArray[np.float64]
+    phi_i: NDArray[np.float64]
+    theta_s: NDArray[np.float64]  # signed for in-plane tables
+    phi_s: NDArray[np.float64]
+    wavelength: NDArray[np.float64]
+    value: NDArray[np.float64]
+    std: NDArray[np.float64]
+    std_relative: NDArray[np.bool_]
+    side: NDArray[np.int8]
+    spec: NDArray[np.int16]
+    line: NDArray[np.integer]
+    quantities: list[str]
+    headers: list[str]
+
+    def column(self, k: int) -> str:
+        """Header of the value column of entry ``k``."""
+        return self.headers[int(self.spec[k])]
+
+    def quantity(self, k: int) -> str:
+        """Quantity of entry ``k``."""
+        return self.quantities[int(self.spec[k])]
 
 
 def _find_header(text: _Text) -> tuple[int, str | None, list[_Column], list[tuple[int, str]]]:
@@ -582,6 +681,48 @@ def _pair_std(columns: list[_Column], path: str, line: int) -> None:
         s_col.pair = match.index
 
 
+def _events(source: _Source, after: int, skip: int | None, comments: list[tuple[int, str]]
+            ) -> Iterator[tuple[str, int, str]]:
+    """``("data", line, text)`` and ``("comment", line, text)`` of the lines after line ``after`` (the
+    header) but ``skip`` (a units row); blank lines left out; the comments are also appended to ``comments``."""
+    for number, line in source.lines():
+        if number <= after or number == skip:
+            continue
+        body = line.strip().lstrip("\ufeff").strip()
+        if not body or not body.strip(",;\t "):
+            continue
+        if body.startswith(_COMMENTS):
+            entry = (number, body.lstrip("#/%! ").strip())
+            comments.append(entry)
+            yield "comment", entry[0], entry[1]
+            continue
+        yield "data", number, line.lstrip("\ufeff")
+
+
+def _rows_estimate(path: str, head: list[tuple[int, str]]) -> int:
+    """Data rows a table probably holds: its size over the mean length of the first data rows, plus a quarter."""
+    length = sum(len(t) + 1 for _, t in head[:200]) / max(len(head[:200]), 1)
+    return int(1.25 * Path(path).stat().st_size / max(length, 1.0)) + 1024
+
+
+def _states_incidence(events: Iterator[tuple[str, int, str]], delim: str | None) -> bool:
+    """Whether a comment or a ``key: value`` line after the header states an incidence (a pass over the file)."""
+    for kind, line, text in events:
+        if kind == "comment" or not _is_numberlike(_fields(text, delim)[0]):
+            if "incidence" in _metadata([(line, text)]):
+                return True
+    return False
+
+
+def _refuse_cut_end(source: _Source, path: str, delim: str | None) -> None:
+    """:func:`refuse_cut_last_line` on the end of the file (read from its tail), with the file's line count."""
+    try:
+        refuse_cut_last_line(source.tail(), path, delim, expected="a row of numbers", comments=_COMMENTS)
+    except FormatError as exc:
+        raise FormatError("the file ends inside a number (truncated?)", file=path, line=source.count_lines(),
+                          expected=exc.expected, got=exc.got) from None
+
+
 def read_table(path: str | Path, quantity: str | None = None, side: str | None = None,
                relative_std: float | None = None, *, wavelength: float | None = None,
                incidence: float | None = None, phi_i: float | None = None, zeros: str = "auto",
@@ -627,14 +768,16 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
                          expected="> 0 (e.g. 0.05 for 5 %)", got=relative_std)
     if wavelength is not None and not (np.isfinite(wavelength) and wavelength > 0):
         raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
-    text = _load_text(path)
+    source = _Source(path)
+    text = _load_text(path, source)  # the head of the file; the data rows are streamed by _parse_rows
     k_header, delim, columns, preamble = _find_header(text)
-    refuse_cut_last_line(text.text, path, delim, expected="a row of numbers", comments=_COMMENTS)
-    text.text = ""  # the lines hold what is still needed: the whole text (1× the file) is not kept while parsing
+    _refuse_cut_end(source, path, delim)
     header_line = text.lines[k_header][0]
     meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
     data = text.lines[k_header + 1:]
+    units_line = None
     if data and _units_row(data[0][1], delim, columns, path, data[0][0]):
+        units_line = data[0][0]
         data = data[1:]
     if not data:
         raise FormatError("header only, no data rows", file=path, line=header_line, field="data",
@@ -683,11 +826,8 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     mono_lambda = wavelength if wavelength is not None else meta_lambda
     theta_i_default = incidence if incidence is not None else meta_inc
     phi_i_default = phi_i if phi_i is not None else (meta_phi if meta_phi is not None else 180.0)
-    block_comments = [c for c in text.comments if c[0] > header_line]
     if "theta_i" not in roles and not wide_inc and theta_i_default is None \
-            and "incidence" not in _metadata(block_comments) \
-            and not any("incidence" in _metadata([entry]) for entry in data if not _is_numberlike(
-                _fields(entry[1], delim)[0])):
+            and not _states_incidence(_events(source, header_line, units_line, []), delim):
         raise FormatError("no incidence column", file=path, line=header_line, field="header",
                           expected="a theta_i / AOI / incidence column, '# incidence: 10 deg', or --incidence",
                           got=[c.header for c in columns][:8])
@@ -703,15 +843,16 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     default_side = side or side_meta
     rel = relative_std if relative_std is not None else (meta_rel if meta_rel is not None else None)
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
-    rows = _parse_rows(path, data, delim, columns, roles, decimal_comma, theta_i_default, phi_i_default,
-                       default_side, mono_lambda, block_comments, _fields(text.lines[k_header][1], delim))
+    comments = [c for c in text.comments if c[0] < header_line]
+    rows = _parse_rows(path, _events(source, header_line, units_line, comments), delim, columns, roles,
+                       decimal_comma, theta_i_default, phi_i_default, default_side, mono_lambda,
+                       _fields(text.lines[k_header][1], delim), _rows_estimate(path, data))
     _refuse_cut_last_block(path, rows)
     _check_units(path, rows, roles)
     _check_values(path, rows, rel)
     signed = "phi_s" not in roles
-    ds = _assemble(path, rows, signed, rel, zeros,
-                   wavelength_known=bool(np.isfinite(np.asarray(rows.wavelength, dtype=np.float64)).any()))
-    stated = sorted({q for q in rows.quantity})
+    stated = sorted({rows.quantities[k] for k in np.unique(rows.spec).tolist()})
+    ds = _assemble(path, rows, signed, rel, zeros, wavelength_known=bool(np.isfinite(rows.wavelength).any()))
     provenance = {
         "format": "measured-table",
         "reader": f"bsdfkit.measurement.table {__version__}",
@@ -726,7 +867,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
                                + (f", theta_i {c.incidence:g} deg" if c.incidence is not None else "") + ")")
                     for c in columns},
         "metadata": {k: v for k, (v, _) in meta.items()},
-        "comments": [c for _, c in text.comments][:50],
+        "comments": [c for _, c in comments][:50],
         "quantity": stated,
         "signed_in_plane_angle": signed,
     }
@@ -782,64 +923,269 @@ def _uses_decimal_comma(data: list[tuple[int, str]], delim: str | None) -> bool:
     return False
 
 
+#: Entries handled at a time by the whole-table checks (their temporaries stay a few MB).
+_SLICE = 1 << 16
+
+
+def _codes(x: Any, key: Any = None, n: int | None = None) -> tuple[NDArray, int]:
+    """Integer codes 0..m-1 of the classes of equal ``key(x)`` and m, computed in slices of :data:`_SLICE`.
+
+    ``x`` is an array or a function of a slice giving the values there (then ``n`` is the length); ``key`` an
+    elementwise function applied to the distinct values only. NaN is one class. Codes follow the order of the
+    distinct values; a constant (broadcast) column gets one class without memory.
+    """
+    get = x if callable(x) else (lambda sl: x[sl])
+    n = len(x) if n is None else n
+    if not callable(x) and isinstance(x, np.ndarray) and x.ndim == 1 and x.strides == (0,):
+        return np.broadcast_to(np.int32(0), (n,)), 1 if n else 0
+    parts = [np.unique(get(slice(i, i + _SLICE))) for i in range(0, n, _SLICE)]
+    u = np.unique(np.concatenate(parts)) if parts else np.zeros(0)
+    del parts
+    group, m = None, u.size
+    if key is not None:
+        ku, group = np.unique(np.asarray(key(u)), return_inverse=True)
+        group, m = np.asarray(group).ravel(), ku.size
+    out = np.empty(n, dtype=np.int32 if u.size < 2**31 else np.int64)
+    for i in range(0, n, _SLICE):
+        idx = np.searchsorted(u, get(slice(i, i + _SLICE)))
+        out[i: i + _SLICE] = idx if group is None else group[idx]
+    return out, m
+
+
+def _combine(a: NDArray, na: int, b: NDArray, nb: int) -> tuple[NDArray, int]:
+    """Codes of the pairs (a, b), numbered in the order of (a, b), and their number (in slices)."""
+    if nb <= 1:
+        return a, na
+    if na <= 1:
+        return b, nb
+    n = a.size
+    dense = na * nb <= max(2 * n, 1 << 16)  # a remap table of at most 2n int32: less than sorting the pairs
+    present = np.zeros(na * nb, dtype=bool) if dense else None
+    parts = []
+    for i in range(0, n, _SLICE):
+        k = a[i: i + _SLICE].astype(np.int64) * nb + b[i: i + _SLICE]
+        if dense:
+            present[k] = True
+        else:
+            parts.append(np.unique(k))
+    if dense:
+        remap = np.cumsum(present, dtype=np.int32 if na * nb < 2**31 else np.int64)
+        remap -= 1
+        m = int(present.sum())
+        del present
+    else:
+        u = np.unique(np.concatenate(parts))
+        m = u.size
+        del parts
+    out = np.empty(n, dtype=np.int32 if m < 2**31 else np.int64)
+    for i in range(0, n, _SLICE):
+        k = a[i: i + _SLICE].astype(np.int64) * nb + b[i: i + _SLICE]
+        out[i: i + _SLICE] = remap[k] if dense else np.searchsorted(u, k)
+    return out, m
+
+
+def _codes_of_tuples(columns: list[tuple[Any, Any]], n: int) -> tuple[NDArray, int]:
+    """Codes 0..m-1 of the classes of equal tuples (key(x) of each column; see :func:`_codes`), numbered in the
+    order of the tuples, and m: one code array written, the per-column codes only formed slice by slice."""
+    tables = []
+    for x, key in columns:
+        get = x if callable(x) else (lambda sl, x=x: x[sl])
+        parts = [np.unique(get(slice(i, i + _SLICE))) for i in range(0, n, _SLICE)]
+        u = np.unique(np.concatenate(parts)) if parts else np.zeros(0)
+        if key is None:
+            group, m = np.arange(u.size), u.size
+        else:
+            ku, group = np.unique(np.asarray(key(u)), return_inverse=True)
+            group, m = np.asarray(group).ravel(), ku.size
+        tables.append((get, u, group, max(m, 1)))
+    size = math.prod(t[3] for t in tables)
+    if size > max(2 * n, 1 << 16):  # too many combinations for a table of them: pair by pair
+        code, m = _codes(columns[0][0], columns[0][1], n)
+        for x, key in columns[1:]:
+            more, n_more = _codes(x, key, n)
+            code, m = _combine(code, m, more, n_more)
+        return code, m
+
+    def key_of(sl: slice) -> NDArray[np.int64]:
+        k = np.zeros(len(range(*sl.indices(n))), dtype=np.int64)
+        for get, u, group, m in tables:
+            k *= m
+            k += group[np.searchsorted(u, get(sl))]
+        return k
+
+    present = np.zeros(size, dtype=bool)
+    for i in range(0, n, _SLICE):
+        present[key_of(slice(i, i + _SLICE))] = True
+    remap = np.cumsum(present, dtype=np.int32 if size < 2**31 else np.int64)
+    remap -= 1
+    m = int(present.sum())
+    del present
+    out = np.empty(n, dtype=np.int32 if m < 2**31 else np.int64)
+    for i in range(0, n, _SLICE):
+        out[i: i + _SLICE] = remap[key_of(slice(i, i + _SLICE))]
+    return out, m
+
+
+def _exact(x: NDArray) -> NDArray:
+    """Angles and wavelengths as compared by the checks and the record keys: rounded to 1e-9."""
+    return np.round(x, 9)
+
+
+def _rank_in_group(ids: NDArray, seen: NDArray[np.integer]) -> NDArray[np.int64]:
+    """Rank of each entry among the entries of its group so far (``seen``: counts before this slice, updated)."""
+    order = np.argsort(ids, kind="stable")
+    sorted_ids = ids[order]
+    starts = np.r_[0, np.flatnonzero(np.diff(sorted_ids)) + 1]
+    run = np.arange(ids.size) - np.repeat(starts, np.diff(np.r_[starts, ids.size]))
+    rank = np.empty(ids.size, dtype=np.int64)
+    rank[order] = run
+    rank += seen[ids]
+    uid, cnt = np.unique(ids, return_counts=True)
+    seen[uid] += cnt
+    return rank
+
+
+def _first_index(code: NDArray, m: int) -> NDArray[np.int64]:
+    """Index of the first entry of each class 0..m-1."""
+    first = np.full(m, -1, dtype=np.int64)
+    for i in range(0, code.size, _SLICE):
+        uid, at = np.unique(code[i: i + _SLICE], return_index=True)
+        new = first[uid] < 0
+        first[uid[new]] = at[new] + i
+    return first
+
+
 def _refuse_cut_last_block(path: str, rows: _Rows) -> None:
     """Refuse a table whose last block (one incidence, wavelength, side and value column) stops early: its
     scatter angles are a strict beginning of those of every other block, and those all agree (a file cut
-    after a whole row)."""
-
-    def exact(v: float) -> float | None:
-        return None if math.isnan(v) else round(v, 9)  # NaN (no wavelength) as one key
-
-    blocks: dict[tuple, list[tuple]] = {}
-    last_line = max(rows.line, default=0)
-    at_end = set()
-    for th_i, ph_i, lam, side, col, th_s, ph_s, line in zip(rows.theta_i, rows.phi_i, rows.wavelength, rows.side,
-                                                            rows.column, rows.theta_s, rows.phi_s, rows.line):
-        key = (exact(th_i), exact(ph_i), exact(lam), side, col)
-        blocks.setdefault(key, []).append((exact(th_s), exact(ph_s)))
-        if line == last_line:
-            at_end.add(key)
-    whole = [b for k, b in blocks.items() if k not in at_end]
-    if len(whole) < 2 or any(b != whole[0] for b in whole[1:]):
+    after a whole row). Checked in slices of :data:`_SLICE` entries."""
+    n = rows.line.size
+    if n == 0:
+        return
+    block, nb = _codes_of_tuples([(rows.theta_i, _exact), (rows.phi_i, _exact), (rows.wavelength, _exact),
+                                  (rows.side, None), (rows.spec, None)], n)
+    last_line = int(rows.line.max())
+    at_end = np.zeros(nb, dtype=bool)
+    at_end[block[np.asarray(rows.line) == last_line]] = True
+    counts = np.zeros(nb, dtype=np.int64)
+    for i in range(0, n, _SLICE):  # in slices: bincount would copy the codes to int64 at once
+        counts += np.bincount(block[i: i + _SLICE], minlength=nb)
+    whole = np.flatnonzero(~at_end)
+    if whole.size < 2 or np.any(counts[whole] != counts[whole[0]]):
         return  # blocks of their own sizes: nothing tells a shorter last block from a cut one
-    for key in at_end:
-        cut = blocks[key]
-        if len(cut) < len(whole[0]) and cut == whole[0][:len(cut)]:
+    ref = block == whole[0]
+    ref_ts, ref_ps = _exact(rows.theta_s[ref]), _exact(rows.phi_s[ref])
+    del ref
+    seen = np.zeros(nb, dtype=np.int64)
+    differs = np.zeros(nb, dtype=bool)
+    for start in range(0, n, _SLICE):
+        sl = slice(start, start + _SLICE)
+        ids = block[sl]
+        rank = _rank_in_group(ids, seen)
+        inside = rank < ref_ts.size
+        r = np.where(inside, rank, 0)
+        bad = ~inside | (_exact(rows.theta_s[sl]) != ref_ts[r]) | (_exact(rows.phi_s[sl]) != ref_ps[r])
+        differs[ids[bad]] = True
+    if differs[whole].any():
+        return
+    for b in np.flatnonzero(at_end).tolist():
+        if counts[b] < ref_ts.size and not differs[b]:
+            k = int(np.argmax(block == b))
+            th_i = float(_exact(rows.theta_i[k]))
             raise FormatError("the last block stops early (truncated?)", file=path, line=last_line,
-                              field=f"theta_i={key[0]:g}" if key[0] is not None else "last block",
-                              expected=f"{len(whole[0])} scatter angles like every other block", got=len(cut))
+                              field=f"theta_i={th_i:g}" if not math.isnan(th_i) else "last block",
+                              expected=f"{ref_ts.size} scatter angles like every other block", got=int(counts[b]))
 
 
-def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, columns: list[_Column],
+#: Data lines parsed at a time (the block's numbers in float64 arrays: 8 bytes a number).
+_BLOCK_LINES = 1 << 13
+_SIDE_CODE = {None: -1, "reflection": 0, "transmission": 1}
+
+
+class _Store:
+    """Per-entry numbers written block by block into one array per quantity, allocated once for the estimated
+    number of entries (pages never written cost no memory) and grown by half when the estimate falls short:
+    no list of blocks to join, no heap of small blocks between temporaries. A quantity constant over the whole
+    table (no φi column, no uncertainty column, one side) is kept as one value and read as a broadcast array."""
+
+    def __init__(self, capacity: int, dtypes: dict[str, Any]) -> None:
+        self.capacity, self.dtypes = max(int(capacity), 1024), dtypes
+        self.size: dict[str, int] = {}
+        self.arrays: dict[str, NDArray] = {}
+        self.const: dict[str, Any] = {}
+
+    def add(self, name: str, values: NDArray) -> None:
+        values = np.asarray(values)
+        k = values.size
+        if k == 0:
+            return
+        n0 = self.size.get(name, 0)
+        arr = self.arrays.get(name)
+        if arr is None:
+            v0 = values.flat[0]
+            constant = bool(np.all(values == v0)) or (values.dtype.kind == "f" and bool(np.all(np.isnan(values))))
+            c = self.const.get(name, v0)
+            if constant and (c == v0 or (c != c and v0 != v0)):
+                self.const[name], self.size[name] = c, n0 + k
+                return
+            arr = np.empty(max(self.capacity, n0 + k), dtype=self.dtypes[name])
+            if n0:
+                arr[:n0] = self.const.pop(name)
+            self.arrays[name] = arr
+        if n0 + k > arr.size:
+            grown = np.empty(int((n0 + k) * 1.5), dtype=arr.dtype)
+            grown[:n0] = arr[:n0]
+            self.arrays[name] = arr = grown
+        arr[n0: n0 + k] = values
+        self.size[name] = n0 + k
+
+    def take(self, name: str) -> NDArray:
+        """The entries of ``name`` (read-only and of no size when constant)."""
+        n = self.size.get(name, 0)
+        if name in self.arrays:
+            return self.arrays.pop(name)[:n]
+        value = self.const.pop(name, 0)
+        return np.broadcast_to(np.asarray(value, dtype=self.dtypes[name]), (n,))
+
+
+def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | None, columns: list[_Column],
                 roles: dict[str, list[_Column]], decimal_comma: bool, theta_i_default: float | None,
                 phi_i_default: float, default_side: str | None, mono_lambda: float | None,
-                block_comments: list[tuple[int, str]], header_cells: list[str]) -> _Rows:
-    """Rows → one entry per value cell. Between blocks, a repeated header is skipped, and ``# incidence: 20``
-    comments or ``Incidence: 20`` lines set the incidence (wavelength, phi_i, side) of the rows that follow."""
-    rows = _Rows()
-    pending = sorted(block_comments)
+                header_cells: list[str], rows_estimate: int = 0) -> _Rows:
+    """Rows → one entry per value cell, streamed in blocks of :data:`_BLOCK_LINES` lines.
+
+    ``events`` yields ``("data", line, text)`` for the data lines and ``("comment", line, text)`` for the
+    comment lines after the header, in file order. Between blocks, a repeated header is skipped, and
+    ``# incidence: 20`` comments or ``Incidence: 20`` lines set the incidence (wavelength, phi_i, side) of the
+    rows that follow. A block of plain numbers is parsed by :func:`numpy.loadtxt` and checked as arrays; any
+    other block (gaps, text, a decimal comma, a side column, angles beyond 90°, a bad value) row by row, which
+    gives the one-line error of the first bad row with its physical line. ``rows_estimate`` (rows expected)
+    sizes the arrays.
+    """
+    pending: list[tuple[int, str]] = []
     header_norm = [c.strip().strip('"').lower() for c in header_cells]
+    state = {"theta_i": theta_i_default, "phi_i": phi_i_default, "wavelength": mono_lambda, "side": default_side}
 
     def apply_block(meta: dict[str, tuple[str, int]]) -> None:
-        nonlocal theta_i_default, phi_i_default, mono_lambda, default_side
         angle = {"deg": 1.0, "rad": 180.0 / math.pi}
         if "incidence" in meta:
-            theta_i_default = _meta_number(meta, "incidence", path, angle, "deg")
+            state["theta_i"] = _meta_number(meta, "incidence", path, angle, "deg")
         if "phi_i" in meta:
-            phi_i_default = _meta_number(meta, "phi_i", path, angle, "deg")
+            state["phi_i"] = _meta_number(meta, "phi_i", path, angle, "deg")
         if "wavelength" in meta:
-            mono_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+            state["wavelength"] = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
         if "side" in meta:
             word = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
             if word is None:
                 raise InputError("unknown side", file=path, line=meta["side"][1], field="side",
                                  expected="reflection or transmission", got=meta["side"][0])
-            default_side = word
+            state["side"] = word
 
     n_cols = len(columns)
     values = roles["value"]
     std_of = {c.pair: c for c in roles.get("std", [])}
     signed = "phi_s" not in roles
+    wide_inc = any(c.incidence is not None for c in values)
 
     def num(cells: list[str], col: _Column, line: int, what: str) -> float:
         try:
@@ -867,126 +1213,230 @@ def _parse_rows(path: str, data: list[tuple[int, str]], delim: str | None, colum
     specs = [(c, std_of.get(c.index), bool(std_of.get(c.index) is not None and (
         std_of[c.index].relative or (std_of[c.index].percent and not c.percent))), side_of_quantity(c.quantity))
              for c in values]
-    quantities = [c.quantity for c in values]
-    headers = [c.header for c in values]
-    out_side: list[str | None] = []
-    front_frame: list[int] = []  # lines with a polar angle beyond 90° (front-normal frame)
-    back_frame: list[int] = []  # lines of transmission angles within 90° (back-normal frame)
-    sideless: list[tuple[int, str]] = []  # (line, column) of values whose side nothing states
-    out_value = array("d")
-    out_std = array("d")
-    out_rel = array("b")
-    for line, text in data:
-        while pending and pending[0][0] < line:
-            apply_block(_metadata([pending.pop(0)]))
-        cells = _split(text, delim)
-        if [c.strip().strip('"').lower() for c in _fields(text, delim)] == header_norm:
-            continue  # the header repeated at the start of the next block
-        if cells and not _is_numberlike(cells[0]):
-            meta = _metadata([(line, text.strip())])
-            if meta and re.match(r"^\s*[^:=]+[:=]", text):
-                apply_block(meta)
-                continue
-        while len(cells) > n_cols and not cells[-1].strip():
-            cells.pop()  # trailing separators
-        if len(cells) != n_cols:
-            raise FormatError("wrong number of fields", file=path, line=line, field="row",
-                              expected=f"{n_cols} fields like the header", got=len(cells))
-        th_i = required(cells, "theta_i", line, theta_i_default)
-        if math.isnan(th_i) and not any(c.incidence is not None for c in values):
-            raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
-                              expected="a theta_i column, or '# incidence: <deg>' before the block")
-        ph_i = required(cells, "phi_i", line, phi_i_default)
-        th_s = required(cells, "theta_s", line, None)
-        ph_s = required(cells, "phi_s", line, 0.0)
-        lam = required(cells, "wavelength", line, mono_lambda)
-        # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
-        # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
-        through = 90.0 < abs(th_s) <= 180.0
-        if through:
-            th_s = math.copysign(180.0 - abs(th_s), th_s) if signed else 180.0 - th_s
-            front_frame.append(line)
-        row_side = default_side
-        if "side" in roles:
-            col = roles["side"][0]
-            word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
-            if word is None:
-                raise FormatError("unknown side", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
-                                  expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
-            row_side = word
-        _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, signed, roles)
-        if "wavelength" in roles and not lam > 0:
-            col = roles["wavelength"][0]
-            raise FormatError("wavelength must be positive", file=path, line=line,
-                              field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm",
-                              got=cells[col.index])
-        for spec in specs:
-            col, scol = spec[0], spec[1]
-            text_v = cells[col.index]
-            try:
-                v = float(text_v)  # fast path; gaps, decimal commas and errors go through num()
-            except ValueError:
-                v = num(cells, col, line, "value")
-            else:
-                if math.isinf(v) or decimal_comma:
-                    v = num(cells, col, line, "value")
-            if col.percent:
-                v *= 0.01
-            s, s_rel = math.nan, False
+    n_v = len(specs)
+    found: dict[str, Any] = {"front": None, "back": None, "sideless": None}  # first line of each
+    store = _Store(rows_estimate * max(len(values), 1), {
+        "theta_i": np.float64, "phi_i": np.float64, "theta_s": np.float64, "phi_s": np.float64,
+        "wavelength": np.float64, "value": np.float64, "std": np.float64, "std_relative": bool, "side": np.int8,
+        "spec": np.int16, "line": np.int32 if Path(path).stat().st_size < 2**31 - 1 else np.int64})
+    numeric = {"theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std"}
+    plain = not decimal_comma and all(c.role in numeric for c in columns)
+
+    def note(key: str, value: Any) -> None:
+        if found[key] is None:
+            found[key] = value
+
+    def add(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, lam: NDArray, v: NDArray, s: NDArray,
+            rel: NDArray, side: NDArray, lines: NDArray) -> None:
+        n = lines.size
+        for name, x in (("theta_i", th_i), ("phi_i", ph_i), ("theta_s", th_s), ("phi_s", ph_s),
+                        ("wavelength", lam), ("value", v), ("std", s), ("std_relative", rel), ("side", side)):
+            store.add(name, x)
+        store.add("spec", np.tile(np.arange(n_v, dtype=np.int16), n // n_v if n_v else 0))
+        store.add("line", lines)
+
+    def fast(block: list[tuple[int, str]]) -> bool:
+        """Parse a block of plain numbers as arrays; False (nothing stored) when a row needs the row path."""
+        if not plain:
+            return False
+        try:
+            a = np.loadtxt([t for _, t in block], delimiter=delim, comments=None, quotechar='"',
+                           dtype=np.float64, ndmin=2)
+        except (ValueError, TypeError, OverflowError):  # anything not plain numbers: the row path says what
+            return False
+        n = len(block)
+        if a.shape != (n, n_cols) or not np.all(np.isfinite(a)):
+            return False
+
+        def col(role: str, default: float | None) -> NDArray:
+            if role in roles:
+                c = roles[role][0]
+                return a[:, c.index] * c.scale
+            return np.full(n, math.nan if default is None else default)
+
+        th_i, ph_i = col("theta_i", state["theta_i"]), col("phi_i", state["phi_i"])
+        th_s, ph_s, lam = col("theta_s", None), col("phi_s", 0.0), col("wavelength", state["wavelength"])
+        th_i0 = np.where(np.isnan(th_i), 0.0, th_i)
+        if (np.isnan(th_i).any() and not wide_inc) or not np.all((th_i0 >= 0.0) & (th_i0 < 90.0)) \
+                or not np.all((th_s >= (-90.0 if signed else 0.0)) & (th_s <= 90.0)) \
+                or not np.all((np.abs(ph_i) <= 360.0) & (np.abs(ph_s) <= 360.0)) \
+                or ("wavelength" in roles and not np.all(lam > 0)):
+            return False
+        lines = np.fromiter((ln for ln, _ in block), dtype=np.int64, count=n)
+        shape = (n, n_v)
+        v, s = np.empty(shape), np.full(shape, math.nan)
+        rel, side = np.zeros(shape, dtype=bool), np.empty(shape, dtype=np.int8)
+        t_i, wl = np.empty(shape), np.empty(shape)
+        for j, (c, scol, s_rel, q_side) in enumerate(specs):
+            v[:, j] = a[:, c.index] * 0.01 if c.percent else a[:, c.index]
             if scol is not None:
-                s = num(cells, scol, line, "uncertainty")
-                if not math.isnan(s) and s < 0:
-                    raise FormatError("negative uncertainty", file=path, line=line,
-                                      field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
-                                      got=cells[scol.index])
-                s_rel = spec[2]
-                if scol.percent:
-                    s *= 0.01
-            this_side = row_side
-            q_side = spec[3]
+                sj = a[:, scol.index] * scol.scale
+                if np.any(sj < 0):
+                    return False
+                s[:, j] = sj * 0.01 if scol.percent else sj
+                rel[:, j] = s_rel
+            this_side = state["side"]
             if q_side is not None:
                 if this_side is not None and this_side != q_side:
-                    raise InputError(f"side contradicts the quantity {col.quantity}", file=path, line=line,
-                                     field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
+                    return False
                 this_side = q_side
+            side[:, j] = _SIDE_CODE[this_side]
+            t_i[:, j] = th_i if c.incidence is None else c.incidence
+            wl[:, j] = lam if c.wavelength is None else c.wavelength
+        if np.any(side == 1):
+            back = (side == 1) & ((0.0 < np.abs(th_s)) & (np.abs(th_s) < 90.0))[:, None]
+            if back.any():
+                note("back", int(lines[np.argmax(back.any(axis=1))]))
+        if np.any(side == -1):
+            k = int(np.argmax(side.ravel() == -1))
+            c = specs[k % n_v][0]
+            note("sideless", (int(lines[k // n_v]), f"column {c.index + 1} '{c.header}'"))
+        add(t_i.ravel(), np.repeat(ph_i, n_v), np.repeat(th_s, n_v), np.repeat(ph_s, n_v), wl.ravel(), v.ravel(),
+            s.ravel(), rel.ravel(), side.ravel(), np.repeat(lines, n_v))
+        return True
+
+    def by_rows(block: list[tuple[int, str]]) -> None:
+        out = {k: array("d") for k in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")}
+        out_rel, out_side, out_line = array("b"), array("b"), array("q")
+        for line, text in block:
+            while pending and pending[0][0] < line:
+                apply_block(_metadata([pending.pop(0)]))
+            cells = _split(text, delim)
+            if [c.strip().strip('"').lower() for c in _fields(text, delim)] == header_norm:
+                continue  # the header repeated at the start of the next block
+            if cells and not _is_numberlike(cells[0]):
+                meta = _metadata([(line, text.strip())])
+                if meta and re.match(r"^\s*[^:=]+[:=]", text):
+                    apply_block(meta)
+                    continue
+            while len(cells) > n_cols and not cells[-1].strip():
+                cells.pop()  # trailing separators
+            if len(cells) != n_cols:
+                raise FormatError("wrong number of fields", file=path, line=line, field="row",
+                                  expected=f"{n_cols} fields like the header", got=len(cells))
+            th_i = required(cells, "theta_i", line, state["theta_i"])
+            if math.isnan(th_i) and not wide_inc:
+                raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
+                                  expected="a theta_i column, or '# incidence: <deg>' before the block")
+            ph_i = required(cells, "phi_i", line, state["phi_i"])
+            th_s = required(cells, "theta_s", line, None)
+            ph_s = required(cells, "phi_s", line, 0.0)
+            lam = required(cells, "wavelength", line, state["wavelength"])
+            # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
+            # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
+            through = 90.0 < abs(th_s) <= 180.0
             if through:
-                if this_side == "reflection":
-                    c = roles["theta_s"][0]
-                    raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
-                                          file=path, line=line, field=f"column {c.index + 1} '{c.header}'",
-                                          expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
-                                                   "transmission)", got=cells[c.index].strip())
-                this_side = "transmission"
-            elif this_side == "transmission" and 0.0 < abs(th_s) < 90.0:
-                back_frame.append(line)
-            if this_side is None:
-                sideless.append((line, f"column {col.index + 1} '{col.header}'"))
-            out_side.append(this_side)
-            out_value.append(v)
-            out_std.append(s)
-            out_rel.append(s_rel)
-        n_v = len(specs)
-        rows.theta_i.extend([th_i if c.incidence is None else c.incidence for c in values])
-        rows.phi_i.extend([ph_i] * n_v)
-        rows.theta_s.extend([th_s] * n_v)
-        rows.phi_s.extend([ph_s] * n_v)
-        rows.wavelength.extend([lam if c.wavelength is None else c.wavelength for c in values])
-        rows.quantity.extend(quantities)
-        rows.line.extend([line] * n_v)
-        rows.column.extend(headers)
-    if front_frame and back_frame:
-        raise ValidationError("transmission scatter angles in two frames", file=path, line=back_frame[0],
+                th_s = math.copysign(180.0 - abs(th_s), th_s) if signed else 180.0 - th_s
+                note("front", line)
+            row_side = state["side"]
+            if "side" in roles:
+                col = roles["side"][0]
+                word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
+                if word is None:
+                    raise FormatError("unknown side", file=path, line=line,
+                                      field=f"column {col.index + 1} '{col.header}'",
+                                      expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
+                row_side = word
+            _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, signed, roles)
+            if "wavelength" in roles and not lam > 0:
+                col = roles["wavelength"][0]
+                raise FormatError("wavelength must be positive", file=path, line=line,
+                                  field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm",
+                                  got=cells[col.index])
+            for col, scol, s_rel_spec, q_side in specs:
+                text_v = cells[col.index]
+                try:
+                    v = float(text_v)  # fast path; gaps, decimal commas and errors go through num()
+                except ValueError:
+                    v = num(cells, col, line, "value")
+                else:
+                    if math.isinf(v) or decimal_comma:
+                        v = num(cells, col, line, "value")
+                if col.percent:
+                    v *= 0.01
+                s, s_rel = math.nan, False
+                if scol is not None:
+                    s = num(cells, scol, line, "uncertainty")
+                    if not math.isnan(s) and s < 0:
+                        raise FormatError("negative uncertainty", file=path, line=line,
+                                          field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
+                                          got=cells[scol.index])
+                    s_rel = s_rel_spec
+                    if scol.percent:
+                        s *= 0.01
+                this_side = row_side
+                if q_side is not None:
+                    if this_side is not None and this_side != q_side:
+                        raise InputError(f"side contradicts the quantity {col.quantity}", file=path, line=line,
+                                         field=f"column {col.index + 1} '{col.header}'", expected=q_side,
+                                         got=this_side)
+                    this_side = q_side
+                if through:
+                    if this_side == "reflection":
+                        c = roles["theta_s"][0]
+                        raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
+                                              file=path, line=line, field=f"column {c.index + 1} '{c.header}'",
+                                              expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
+                                                       "transmission)", got=cells[c.index].strip())
+                    this_side = "transmission"
+                elif this_side == "transmission" and 0.0 < abs(th_s) < 90.0:
+                    note("back", line)
+                if this_side is None:
+                    note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
+                out_side.append(_SIDE_CODE[this_side])
+                out["value"].append(v)
+                out["std"].append(s)
+                out_rel.append(s_rel)
+                out["theta_i"].append(th_i if col.incidence is None else col.incidence)
+                out["wavelength"].append(lam if col.wavelength is None else col.wavelength)
+            out["phi_i"].extend([ph_i] * n_v)
+            out["theta_s"].extend([th_s] * n_v)
+            out["phi_s"].extend([ph_s] * n_v)
+            out_line.extend([line] * n_v)
+        if out_line:
+            add(*(np.frombuffer(out[k], dtype=np.float64) for k in ("theta_i", "phi_i", "theta_s", "phi_s",
+                                                                     "wavelength", "value", "std")),
+                np.frombuffer(out_rel, dtype=np.int8).astype(bool), np.frombuffer(out_side, dtype=np.int8),
+                np.frombuffer(out_line, dtype=np.int64))
+
+    def flush(block: list[tuple[int, str]]) -> None:
+        while pending and pending[0][0] < block[0][0]:
+            apply_block(_metadata([pending.pop(0)]))
+        if not fast(block):
+            by_rows(block)
+
+    block: list[tuple[int, str]] = []
+    for kind, line, text in events:
+        if kind == "comment":
+            if block:
+                flush(block)
+                block = []
+            pending.append((line, text))
+            continue
+        block.append((line, text))
+        if len(block) >= _BLOCK_LINES:
+            flush(block)
+            block = []
+    if block:
+        flush(block)
+    if found["front"] is not None and found["back"] is not None:
+        raise ValidationError("transmission scatter angles in two frames", file=path, line=found["back"],
                               field="theta_s", expected="all from the back normal (<= 90 deg) or all from the front "
-                              "normal (> 90 deg)", got=f"line {front_frame[0]} beyond 90 deg")
-    if sideless:
-        if not front_frame:
-            line, where = sideless[0]
+                              "normal (> 90 deg)", got=f"line {found['front']} beyond 90 deg")
+    side = store.take("side")
+    if found["sideless"] is not None:
+        if found["front"] is None:
+            line, where = found["sideless"]
             raise InputError("the table does not say which side it holds; pass --side", file=path, line=line,
                              field=where, expected="--side reflection|transmission, a side column, "
                              "--quantity brdf|btdf, or polar angles up to 180 deg from the front normal")
-        out_side = [s if s is not None else "reflection" for s in out_side]  # full sphere: up to 90° reflects
-    rows.side, rows.value, rows.std, rows.std_relative = out_side, out_value, out_std, out_rel
-    return rows
+        side = np.where(side < 0, np.int8(0), side)  # full sphere: up to 90° reflects
+    return _Rows(
+        theta_i=store.take("theta_i"), phi_i=store.take("phi_i"), theta_s=store.take("theta_s"),
+        phi_s=store.take("phi_s"), wavelength=store.take("wavelength"), value=store.take("value"),
+        std=store.take("std"), std_relative=store.take("std_relative"), side=side, spec=store.take("spec"),
+        line=store.take("line"),
+        quantities=[c.quantity for c in values], headers=[c.header for c in values])
 
 
 #: Plausible wavelengths [nm]: 1 nm (soft X-ray) to 100 µm (far infrared); a column outside is in another unit.
@@ -1054,8 +1504,10 @@ def _check_units(path: str, rows: _Rows, roles: dict[str, list[_Column]]) -> Non
             continue
         col = roles[role][0]
         v = np.asarray(getattr(rows, role), dtype=np.float64)
+        if max(float(np.nanmax(v)), -float(np.nanmin(v))) > bound:
+            continue  # degrees (the distinct values below are only counted when every angle is small)
         distinct = np.unique(np.round(v[np.isfinite(v)], 9))
-        if distinct.size >= RADIAN_MIN_DISTINCT and np.nanmax(np.abs(v)) <= bound:
+        if distinct.size >= RADIAN_MIN_DISTINCT:
             raise ValidationError(f"{role} angles look like radians under a degree unit", file=path,
                                   line=int(lines[0]), field=f"column {col.index + 1} '{col.header}'",
                                   expected=f"degrees (some |{role}| > {bound:g} over {distinct.size} distinct "
@@ -1064,47 +1516,62 @@ def _check_units(path: str, rows: _Rows, roles: dict[str, list[_Column]]) -> Non
 
 
 def _check_values(path: str, rows: _Rows, rel: float | None) -> None:
-    """Refuse values that are no BSDF before computing with them: huge (overflow), all zero, negative beyond noise."""
-    v = np.asarray(rows.value, dtype=np.float64)
-    lines = np.asarray(rows.line, dtype=np.int64)
-    stated = np.isfinite(v)
-    if not stated.any():
+    """Refuse values that are no BSDF before computing with them: huge (overflow), all zero, negative beyond noise.
+    Checked in slices of :data:`_SLICE` entries."""
+    v, s, lines = rows.value, rows.std, rows.line
+    n = v.size
+    lam_code, n_lam = _codes(rows.wavelength)
+    count = np.zeros(n_lam, dtype=np.int64)
+    total = np.zeros(n_lam)
+    first_stated, nonzero = -1, False
+    for i in range(0, n, _SLICE):
+        vs = v[i: i + _SLICE]
+        stated = np.isfinite(vs)
+        if first_stated < 0 and stated.any():
+            first_stated = i + int(np.argmax(stated))
+        huge = stated & (np.abs(vs) > MAX_ABS_BSDF)
+        if huge.any():
+            k = i + int(np.argmax(huge))
+            raise ValidationError("value implausibly large for a BSDF", file=path, line=int(lines[k]),
+                                  field=rows.column(k),
+                                  expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=f"{v[k]:g}")
+        nonzero = nonzero or bool(np.any(vs[stated] != 0.0))
+        codes = lam_code[i: i + _SLICE][stated]
+        count += np.bincount(codes, minlength=n_lam)
+        total += np.bincount(codes, weights=vs[stated], minlength=n_lam)
+    if first_stated < 0:
         return  # every cell a gap: refused by the assembly with its own message
-    huge = stated & (np.abs(v) > MAX_ABS_BSDF)
-    if huge.any():
-        k = int(np.argmax(huge))
-        raise ValidationError("value implausibly large for a BSDF", file=path, line=int(lines[k]),
-                              field=rows.column[k],
-                              expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=f"{v[k]:g}")
-    s = np.asarray(rows.std, dtype=np.float64)
-    if np.any(np.isfinite(s) & (s > MAX_ABS_BSDF * (1.0 + np.abs(v)))):
-        k = int(np.argmax(np.isfinite(s) & (s > MAX_ABS_BSDF * (1.0 + np.abs(v)))))
-        raise ValidationError("uncertainty implausibly large", file=path, line=int(lines[k]),
-                              field=f"uncertainty of '{rows.column[k]}'", expected=f"<= {MAX_ABS_BSDF:g}",
-                              got=f"{s[k]:g}")
-    if np.all(v[stated] == 0.0):
-        raise ValidationError("the table is all zero: every value is 0", file=path, line=int(lines[stated][0]),
-                              field=rows.column[int(np.argmax(stated))],
-                              expected="values > 0 where the sample scatters",
-                              got=f"0 in all {int(stated.sum())} cells")
-    s = np.where(np.asarray(rows.std_relative, dtype=bool), s * np.abs(v), s)
-    s = np.where(np.isfinite(s), s, (DEFAULT_RELATIVE_STD if rel is None else rel) * np.abs(v))
-    lam = np.nan_to_num(np.asarray(rows.wavelength, dtype=np.float64), nan=-1.0)
-    for w in np.unique(lam):
-        sel = stated & (lam == w)
-        n = int(sel.sum())
-        if n == 0:
-            continue
-        x, u = v[sel], s[sel]
+    no_std = s.strides == (0,) and bool(np.isnan(s[:1]).all())  # no uncertainty column: nothing to check
+    for i in range(n if no_std else 0, n, _SLICE):
+        vs, ss = v[i: i + _SLICE], s[i: i + _SLICE]
+        too_big = np.isfinite(ss) & (ss > MAX_ABS_BSDF * (1.0 + np.abs(vs)))
+        if too_big.any():
+            k = i + int(np.argmax(too_big))
+            raise ValidationError("uncertainty implausibly large", file=path, line=int(lines[k]),
+                                  field=f"uncertainty of '{rows.column(k)}'", expected=f"<= {MAX_ABS_BSDF:g}",
+                                  got=f"{s[k]:g}")
+    if not nonzero:
+        k = first_stated
+        raise ValidationError("the table is all zero: every value is 0", file=path, line=int(lines[k]),
+                              field=rows.column(k), expected="values > 0 where the sample scatters",
+                              got=f"0 in all {int(count.sum())} cells")
+    # the mean of the stated values at each wavelength (NaN wavelength: one group)
+    for w in np.flatnonzero((count > 0) & (total < 0)).tolist():
+        sel = np.isfinite(v) & (lam_code == w)
+        n_w = int(sel.sum())
+        x = v[sel]
+        u = np.where(rows.std_relative[sel], s[sel] * np.abs(x), s[sel])
+        u = np.where(np.isfinite(u), u, (DEFAULT_RELATIVE_STD if rel is None else rel) * np.abs(x))
         mean = float(np.mean(x))
         if mean >= 0:
             continue
-        sem = max(float(np.std(x)) / math.sqrt(n), float(np.sqrt(np.sum(u**2))) / n)
+        sem = max(float(np.std(x)) / math.sqrt(n_w), float(np.sqrt(np.sum(u**2))) / n_w)
         if -mean > NEGATIVE_SIGMA * sem and -mean > float(np.median(u)):
             k = int(np.flatnonzero(sel & (v < 0))[0])
-            at = "" if w < 0 else f" at {w:g} nm"
-            raise ValidationError(f"BSDF negative beyond noise{at}: {int((x < 0).sum())} of {n} values < 0",
-                                  file=path, line=int(lines[k]), field=rows.column[k],
+            lam_k = float(rows.wavelength[k])
+            at = "" if math.isnan(lam_k) else f" at {lam_k:g} nm"
+            raise ValidationError(f"BSDF negative beyond noise{at}: {int((x < 0).sum())} of {n_w} values < 0",
+                                  file=path, line=int(lines[k]), field=rows.column(k),
                                   expected=f">= 0 within the noise (mean > -{NEGATIVE_SIGMA:g} standard errors "
                                            f"= {-NEGATIVE_SIGMA * sem:.3g})",
                                   got=f"mean {mean:.4g} (first negative {v[k]:g})")
@@ -1178,15 +1645,16 @@ def records_dataset(
         spectrum = np.ones(lam.size)
         band = [float(lam[0]), float(lam[0])]
     valid = np.ones(lam.size, dtype=bool)
-    nan2 = np.full((n, lam.size), np.nan)
+    # the quantities an elastic table does not state: one read-only NaN matrix of no size, shared
+    nan2 = np.broadcast_to(np.float64(np.nan), (n, lam.size))
     ds = xr.Dataset(
         {
             "bsdf": (("record", "wavelength"), f),
             "bsdf_std": (("record", "wavelength"), s),
-            "noise_floor": (("record", "wavelength"), nan2.copy()),
-            "bsdf_bispectral": (("record", "wavelength"), nan2.copy()),
-            "bsdf_bispectral_std": (("record", "wavelength"), nan2.copy()),
-            "noise_floor_bispectral": (("record", "wavelength"), nan2.copy()),
+            "noise_floor": (("record", "wavelength"), nan2),
+            "bsdf_bispectral": (("record", "wavelength"), nan2),
+            "bsdf_bispectral_std": (("record", "wavelength"), nan2),
+            "noise_floor_bispectral": (("record", "wavelength"), nan2),
             "saturated": (("record", "wavelength"), np.zeros((n, lam.size), dtype=bool)),
             "grazing": ("record", grazing),
             "incident_spectrum": (("configuration", "wavelength"), spectrum[None, :]),
@@ -1235,7 +1703,11 @@ def records_dataset(
         manifest_json="{}",
     )
     try:
-        ds.attrs["source_sha256"] = hashlib.sha256(Path(source).read_bytes()).hexdigest()
+        digest = hashlib.sha256()
+        with open(source, "rb") as fh:
+            while block := fh.read(1 << 20):  # in blocks: the file is not held whole
+                digest.update(block)
+        ds.attrs["source_sha256"] = digest.hexdigest()
     except OSError:
         pass
     return ds
@@ -1295,73 +1767,108 @@ def _azimuth_frame(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, v
 
 def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str, wavelength_known: bool
               ) -> xr.Dataset:
-    th_s = np.asarray(rows.theta_s)
-    ph_s = np.asarray(rows.phi_s)
-    if signed:
-        ph_i = np.asarray(rows.phi_i)
-        spec = np.mod(ph_i - 180.0, 360.0)
-        ph_s = np.where(th_s >= 0, spec, np.mod(ph_i, 360.0))
-        th_s = np.abs(th_s)
-    th_i = np.asarray(rows.theta_i)
-    ph_i = np.asarray(rows.phi_i)
-    lam_all = np.asarray(rows.wavelength)
-    phi_norm = np.mod(ph_s, 360.0)
-    phi_norm = np.where((th_s < 1e-12) | (phi_norm >= 360.0), 0.0, phi_norm)
-    side_code = np.array([SIDES.index(x) for x in rows.side], dtype=np.float64)
-    keys = np.stack([side_code, np.round(th_i, 9), np.round(np.mod(ph_i, 360.0), 9), np.round(th_s, 9),
-                     np.mod(np.round(phi_norm, 9), 360.0)], axis=1)
+    """The dataset of the parsed entries: records keyed by (side, θi, φi, θs, φs) rounded to 1e-9, in order of
+    first appearance, one per repetition of a direction. Computed in slices of :data:`_SLICE` entries on integer
+    codes; the entries of ``rows`` are released once the value matrices are filled."""
+    n = rows.line.size
+
+    def theta_s(sl: Any) -> NDArray:
+        t = rows.theta_s[sl]
+        return np.abs(t) if signed else t
+
+    def phi_norm(sl: Any) -> NDArray:
+        ts = rows.theta_s[sl]
+        if signed:
+            pi_ = rows.phi_i[sl]
+            ps = np.where(ts >= 0, np.mod(pi_ - 180.0, 360.0), np.mod(pi_, 360.0))
+            ts = np.abs(ts)
+        else:
+            ps = rows.phi_s[sl]
+        p = np.mod(ps, 360.0)
+        return np.where((ts < 1e-12) | (p >= 360.0), 0.0, p)
+
+    direction = [(rows.side, None), (rows.theta_i, _exact), (rows.phi_i, lambda u: _exact(np.mod(u, 360.0))),
+                 (theta_s, _exact), (phi_norm, lambda u: np.mod(_exact(u), 360.0))]
     # a direction measured more than once (the nadir of every C-plane, a repeated point) is kept as several
     # records, one per repetition: the hemispherical engine merges them with their spread in the uncertainty
-    lam_key = np.nan_to_num(np.asarray(rows.wavelength, dtype=np.float64), nan=-1.0)
-    _, cell_of = np.unique(np.column_stack([keys, lam_key]), axis=0, return_inverse=True)
-    cell_of = np.asarray(cell_of).ravel()
-    order_rows = np.argsort(cell_of, kind="stable")
-    occurrence = np.empty(cell_of.size, dtype=np.float64)
-    starts = np.r_[0, np.flatnonzero(np.diff(cell_of[order_rows])) + 1]
-    run = np.arange(cell_of.size) - np.repeat(starts, np.diff(np.r_[starts, cell_of.size]))
-    occurrence[order_rows] = run
-    keys = np.column_stack([keys, occurrence])
-    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    cell, n_cell = _codes_of_tuples([*direction, (rows.wavelength, None)], n)
+    if n_cell == n:  # every (direction, wavelength) once: no repetitions
+        del cell
+    code, nc = _codes_of_tuples(direction, n)
+    if n_cell < n:
+        occurrence = np.empty(n, dtype=np.int32 if n < 2**31 else np.int64)
+        seen = np.zeros(n_cell, dtype=occurrence.dtype)
+        for i in range(0, n, _SLICE):
+            occurrence[i: i + _SLICE] = _rank_in_group(cell[i: i + _SLICE], seen)
+        del seen
+        del cell
+        code, nc = _combine(code, nc, occurrence, int(occurrence.max()) + 1)
+        del occurrence
+    first = _first_index(code, nc)
     order = np.argsort(first, kind="stable")  # records in order of first appearance
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
-    rec_of = rank[np.asarray(inverse).ravel()]
+    rec_of = np.array(code, dtype=np.int32 if nc < 2**31 else np.int64)
+    del code
+    for i in range(0, n, _SLICE):
+        rec_of[i: i + _SLICE] = rank[rec_of[i: i + _SLICE]]
     first = first[order]
     n_rec = first.size
-    lines = np.asarray(rows.line, dtype=np.int64)
-    rec_line = lines[first].tolist()
-    rec_side = [SIDES[int(c)] for c in side_code[first]]
-    if np.all(np.isnan(lam_all)):
+    rec_line = np.asarray(rows.line[first], dtype=np.int64).tolist()
+    rec_side = [SIDES[int(c)] for c in rows.side[first]]
+    rec_th_i, rec_ph_i = np.array(rows.theta_i[first]), np.array(rows.phi_i[first])
+    rec_th_s, rec_ph_s = theta_s(first), phi_norm(first)
+    for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
+        # the directions are in the records now: released
+        setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
+    finite = [np.unique(w[np.isfinite(w)]) for w in (rows.wavelength[i: i + _SLICE] for i in range(0, n, _SLICE))]
+    lam = np.unique(np.concatenate(finite)) if finite else np.zeros(0)
+    stated_lam = lam.size > 0
+    if lam.size == 0:
         lam = np.array([np.nan])
-        lam_idx = np.zeros(th_s.size, dtype=np.int64)
-    else:
-        lam = np.unique(lam_all[np.isfinite(lam_all)])
-        lam_idx = np.searchsorted(lam, lam_all)
-    cell = rec_of * lam.size + lam_idx
-    _, first_cell, cell_inv, counts = np.unique(cell, return_index=True, return_inverse=True, return_counts=True)
-    if np.any(counts > 1):
-        cell_inv = np.asarray(cell_inv).ravel()
-        dup = np.flatnonzero(counts[cell_inv] > 1)
-        second = int(next(k for k in dup if k != first_cell[cell_inv[k]]))
-        raise ValidationError("duplicate direction and wavelength", file=path, line=rows.line[second],
-                              field=rows.column[second], expected="each (theta_i, phi_i, theta_s, phi_s, side, "
-                              "wavelength) once", got=f"also on line {rows.line[first_cell[cell_inv[second]]]}")
-    q_names = sorted(set(rows.quantity))
-    q_code = np.array([q_names.index(q) for q in rows.quantity])
-    q_first = q_code[first][rec_of]
-    if np.any(q_code != q_first):
-        k = int(np.argmax(q_code != q_first))
-        raise ValidationError("one direction holds two quantities", file=path, line=rows.line[k],
-                              field=rows.column[k], expected=q_names[q_first[k]], got=rows.quantity[k])
-    quantity = np.array([q_names[c] for c in q_code[first]], dtype=object)
-    v_all = np.asarray(rows.value, dtype=np.float64)
-    s_all = np.asarray(rows.std, dtype=np.float64)
-    s_all = np.where(np.asarray(rows.std_relative, dtype=bool), s_all * np.abs(v_all), s_all)
+
+    def lam_index(sl: slice) -> NDArray:
+        return np.searchsorted(lam, rows.wavelength[sl]) if stated_lam else np.zeros(len(range(*sl.indices(n))),
+                                                                                      dtype=np.int64)
+
+    # records are (direction, repetition) per wavelength: a (record, wavelength) pair cannot repeat, unless stated
+    # and unstated (NaN) wavelengths mix, which is refused
+    for i in range(0, n if stated_lam else 0, _SLICE):
+        unstated = np.isnan(rows.wavelength[i: i + _SLICE])
+        if unstated.any():
+            k = i + int(np.argmax(unstated))
+            raise FormatError("no wavelength for this row, where other rows state theirs", file=path,
+                              line=int(rows.line[k]), field="wavelength",
+                              expected="a wavelength column, '# wavelength: NM' before the first block, or "
+                                       "--wavelength NM", got="no wavelength")
+    q_names = sorted(set(rows.quantities))
+    q_of_spec = np.array([q_names.index(q) for q in rows.quantities])
+    q_first = q_of_spec[rows.spec[first]]
+    if len(q_names) > 1:
+        for i in range(0, n, _SLICE):
+            other = q_of_spec[rows.spec[i: i + _SLICE]] != q_first[rec_of[i: i + _SLICE]]
+            if other.any():
+                k = i + int(np.argmax(other))
+                raise ValidationError("one direction holds two quantities", file=path, line=int(rows.line[k]),
+                                      field=rows.column(k), expected=q_names[q_first[rec_of[k]]],
+                                      got=rows.quantity(k))
+    quantity = np.array([q_names[c] for c in q_first], dtype=object)
+    # no uncertainty column: one read-only NaN matrix of no size instead of a matrix of NaN
+    no_std = rows.std.strides == (0,) and bool(np.isnan(rows.std[:1]).all())
     values = np.full((n_rec, lam.size), np.nan)
-    stds = np.full((n_rec, lam.size), np.nan)
-    values[rec_of, lam_idx] = v_all
-    stds[rec_of, lam_idx] = s_all
-    rec_th_i, rec_ph_i, rec_th_s, rec_ph_s = th_i[first], ph_i[first], th_s[first], phi_norm[first]
+    stds = np.broadcast_to(np.float64(np.nan), values.shape) if no_std else np.full((n_rec, lam.size), np.nan)
+    v_flat, s_flat = values.reshape(-1), stds.reshape(-1)
+    for i in range(0, n, _SLICE):
+        sl = slice(i, i + _SLICE)
+        at = rec_of[sl].astype(np.int64) * lam.size + lam_index(sl)
+        v = rows.value[sl]
+        v_flat[at] = v
+        if not no_std:
+            s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
+    del rec_of, v_flat, s_flat, v, at
+    for name in ("wavelength", "value", "std", "std_relative", "side", "spec", "line"):
+        # the entries are in the matrices now: released
+        setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
     frame = "sample" if signed else _azimuth_frame(rec_th_i, rec_ph_i, rec_th_s, rec_ph_s, values)
     if frame == "specular":  # φs measured from the specular direction: into the sample frame
         rec_ph_s = np.where(rec_th_s < 1e-12, 0.0, np.mod(rec_ph_s + rec_ph_i - 180.0, 360.0))
@@ -1374,17 +1881,27 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
         all_zero = stated.any(axis=1) & np.all(np.where(stated, values == 0.0, True), axis=1)
         zero_records = int(all_zero.sum())
         values[all_zero] = np.nan
-    has_std = np.isfinite(stds) & np.isfinite(values)
+    has_std = np.zeros(values.shape, dtype=bool) if no_std else np.isfinite(stds) & np.isfinite(values)
     # convert to BSDF
-    f = np.full_like(values, np.nan)
-    s = np.full_like(values, np.nan)
-    for q in set(quantity.tolist()):
-        sel = quantity == q
-        f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
-        s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
+    if len(set(quantity.tolist())) == 1:  # one quantity: converted whole (no copy for brdf/btdf/bsdf)
+        f = to_bsdf(values, quantity[0], rec_th_s)
+        s = None if no_std else np.abs(to_bsdf(stds, quantity[0], rec_th_s))
+    else:
+        f = np.full_like(values, np.nan)
+        s = np.full_like(values, np.nan)
+        for q in set(quantity.tolist()):
+            sel = quantity == q
+            f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
+            if not no_std:
+                s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
+    del values, stds
     rel_used = DEFAULT_RELATIVE_STD if rel is None else float(rel)
-    s = np.where(has_std, s, rel_used * np.abs(f))
-    s = np.where(np.isfinite(f), s, np.nan)
+    if s is None or not has_std.any():  # rel · |f| everywhere, formed in place
+        s = np.abs(f)
+        s *= rel_used
+    else:
+        np.copyto(s, rel_used * np.abs(f), where=~has_std)
+        s[~np.isfinite(f)] = np.nan
     keep = np.isfinite(f).any(axis=1)
     dropped = int((~keep).sum())
     if not keep.any():
@@ -1401,15 +1918,17 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     idx = np.flatnonzero(keep)
     quantities = sorted(set(quantity.tolist()))
     note = "" if wavelength_known else "not stated by the table; pass --wavelength NM (NaN = unknown)"
+    if idx.size < n_rec:  # records without any value dropped (a copy of the matrices only then)
+        f, s = f[idx], s[idx]
     ds = records_dataset(rec_th_i[idx], rec_ph_i[idx], rec_th_s[idx], rec_ph_s[idx], [rec_side[i] for i in idx],
-                         lam, f[idx], s[idx], source=path, source_line=[rec_line[i] for i in idx],
+                         lam, f, s, source=path, source_line=[rec_line[i] for i in idx],
                          std_origin=origin, wavelength_note=note,
                          description=f"measured table {Path(path).name}: {', '.join(quantities)}, elastic")
     if frame == "specular":
         ds.attrs["azimuth_note"] = ("phi_s read from the specular direction (phi_s = 0 on the specular side): the "
                                     "table's peaks sit at phi_s = 0 although phi_i is not 180 deg")
     ds.attrs.update(gap_records_dropped=dropped, zero_records_as_gaps=zero_records, zeros_policy=zeros,
-                    negative_values=int(np.sum(f[idx] < 0)), relative_std=rel_used)
+                    negative_values=int(np.sum(f < 0)), relative_std=rel_used)
     if note:
         ds.attrs["wavelength_note"] = note
     return ds
