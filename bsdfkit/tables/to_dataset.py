@@ -146,7 +146,9 @@ class ConvertResult:
                 "incidences_deg": list(self.incidences_deg), "tis_original": self.tis_original,
                 "tis_written": self.tis_written, "tis_reference_of_callable": self.export.tis_source,
                 "worst_relative_difference": self.worst_relative_difference, "tolerance": self.tolerance,
-                "ok": self.ok, "wavelength_nm": self.wavelength_nm, "notes": list(self.notes)}
+                "ok": self.ok, "wavelength_nm": self.wavelength_nm, "notes": list(self.notes),
+                "size_bytes": self.export.size_bytes, "grid": self.export.grid,
+                "peak_error": self.export.peak_error, "worst_peak_error": self.export.worst_peak_error}
 
 
 def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
