@@ -26,14 +26,17 @@ def _incidences(text: str) -> tuple[float, ...]:
     return values
 
 
-def grid_tolerance(args: argparse.Namespace):
-    """The :class:`bsdfkit.tables.grids.GridTolerance` of ``--grid-tis-tolerance`` / ``--grid-peak-tolerance``."""
+def grid_tolerance(args: argparse.Namespace, tis_default: float | None = None):
+    """The :class:`bsdfkit.tables.grids.GridTolerance` of ``--grid-tis-tolerance`` / ``--grid-peak-tolerance``
+    (``tis_default`` [1] replaces the class default of the TIS tolerance when the option is not given)."""
     from bsdfkit.tables.grids import GridTolerance
 
     given = {k: v for k, v in (("tis_rtol", args.grid_tis_tolerance), ("peak_rtol", args.grid_peak_tolerance))
              if v is not None}
     if given and args.grid != "auto":
         raise ValidationError("grid tolerances apply to --grid auto", field="--grid", expected="auto", got=args.grid)
+    if tis_default is not None and "tis_rtol" not in given:
+        given["tis_rtol"] = tis_default
     return GridTolerance(**given)
 
 

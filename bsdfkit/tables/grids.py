@@ -213,7 +213,7 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
     """
     if directions.shape[:-1] == (0,) or directions.size == 0:
         return np.zeros(directions.shape[:-1])
-    values = np.asarray(bsdf_fn(float(theta_i_deg), side, directions), dtype=np.float64)
+    values = _call_chunked(bsdf_fn, theta_i_deg, side, directions)
     where = f"BSDF callable at theta_i={theta_i_deg:g} deg, side={side}"
     if values.shape != directions.shape[:-1]:
         values = np.broadcast_to(values, directions.shape[:-1]) if values.ndim == 0 else values
@@ -231,6 +231,33 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
         raise ValidationError(f"{where} returned a negative BSDF", field="bsdf", expected=">= 0",
                               got=float(values.min()))
     return np.array(values, dtype=np.float64)
+
+
+#: Directions per call of a BSDF callable (:func:`_call_chunked`).
+CHUNK = 4096
+
+
+def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray:
+    """``bsdf_fn`` on the directions flattened, in chunks of :data:`CHUNK` (the last padded with the first
+    direction).
+
+    The auto grids evaluate the callable on arrays of ever new lengths; a JAX model compiles each operation
+    once per array shape, so every call gets the same shape. The answer is reshaped to
+    ``directions.shape[:-1]`` (a scalar answer is broadcast).
+    """
+    flat = directions.reshape(-1, 3)
+    n = flat.shape[0]
+    size = -(-n // CHUNK) * CHUNK
+    padded = np.concatenate([flat, np.broadcast_to(flat[:1], (size - n, 3))]) if size > n else flat
+    parts = []
+    for k in range(0, size, CHUNK):
+        out = np.asarray(bsdf_fn(float(theta_i_deg), side, padded[k:k + CHUNK]), dtype=np.float64)
+        if out.ndim == 0:
+            return np.broadcast_to(out, directions.shape[:-1])
+        if out.shape != (CHUNK,):
+            return out  # the shape check of evaluate_bsdf names the mismatch
+        parts.append(out)
+    return np.concatenate(parts)[:n].reshape(directions.shape[:-1])
 
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:

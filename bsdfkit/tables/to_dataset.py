@@ -32,6 +32,7 @@ from bsdfkit.measurement.table import (
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
+from bsdfkit.tables.grids import GridTolerance
 from bsdfkit.tables.vendor import sniff_format, vendor_dataset
 
 __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "ingest",
@@ -186,7 +187,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     theta_i_deg
         Incidences to write [deg] (default: all of the source).
     settings
-        Further :class:`bsdfkit.tables.export.ExportSettings` (axes, Zemax symmetry, TracePro options).
+        Further :class:`bsdfkit.tables.export.ExportSettings` (axes, grid, Zemax symmetry, TracePro options).
+        Without settings the auto grid's TIS tolerance is half of ``tolerance`` (docs/exports.md, Grid resolution).
     tolerance
         Largest accepted |TIS written / TIS original − 1| (reported in the result; default 0.01).
 
@@ -199,6 +201,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     if side is not None and side not in ("reflection", "transmission", "both"):
         raise ValidationError("unknown side", field="--side", expected="reflection | transmission | both", got=side)
     atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
+    if settings is None and 0.0 < tolerance < 2.0:  # the auto grid's TIS error: half of the check it must pass
+        settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)))
     settings = settings or ExportSettings()
     notes: list[str] = []
     engine_tis: dict[str, list[float]] | None = None
