@@ -420,6 +420,12 @@ def _plane_symmetric_grid(
 
 #: Grid mode reported when the auto grid would need more nodes than the fixed grid: the fixed grid is written.
 FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
+#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS azimuth doublings.
+FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
+#: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
+#: direct integral of the source callable; else its azimuths are doubled (at most RECHECK_ROUNDS times).
+RECHECK_FACTOR = 2.0
+RECHECK_ROUNDS = 2
 
 
 def _grid_info(mode: str, n_radial: int, n_azimuth: int, settings: ExportSettings) -> dict[str, Any]:
@@ -567,46 +573,97 @@ def export(
     comments = (f"source: {src.description}",) + tuple(settings.comments)
     deviation: float | None = None
     grid_info: dict[str, Any] = {"mode": "none (TracePro ABg property)"}
-    if to == "tracepro":
-        opts = settings.tracepro
-        if settings.tracepro_scatter == "abg":
-            if not src.abg:
-                raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
-                                      expected="table for this source", got="abg")
-            by_side = {s: _abg_rows(src.abg, s, theta) for s in sides}
-            prop = tracepro.abg_property(
-                theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
-                specular_reflectance=settings.specular_reflectance,
-                specular_transmittance=settings.specular_transmittance, scatter_excess_allowed=src.tis_excess_allowed,
-            )
+    written_axes: list[Any] = [None]
+
+    def write(settings: ExportSettings, force: bool) -> None:
+        nonlocal deviation, grid_info
+        if to == "tracepro":
+            opts = settings.tracepro
+            if settings.tracepro_scatter == "abg":
+                if not src.abg:
+                    raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
+                                          expected="table for this source", got="abg")
+                by_side = {s: _abg_rows(src.abg, s, theta) for s in sides}
+                prop = tracepro.abg_property(
+                    theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
+                    specular_reflectance=settings.specular_reflectance,
+                    specular_transmittance=settings.specular_transmittance,
+                    scatter_excess_allowed=src.tis_excess_allowed,
+                )
+            else:
+                axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, opts.zero_azimuth_deg)
+                written_axes[0] = axes
+                grid = grids.harvey_shack_grid(fn, theta, sides, axes)
+                prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
+                                               specular_transmittance=settings.specular_transmittance,
+                                               scatter_excess_allowed=src.tis_excess_allowed)
+            tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
+        elif to == "zemax":
+            axes, grid_info = _specular_axes(fn, theta, sides, settings)
+            written_axes[0] = axes
+            if settings.zemax_symmetry == "PlaneSymmetrical":
+                grid, deviation = _plane_symmetric_grid(fn, theta, side, axes, settings.symmetry_tolerance)
+            else:
+                grid = grids.specular_grid(fn, theta, side, axes)
+            bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
+            zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
         else:
-            axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, opts.zero_azimuth_deg)
+            axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, 0.0)
+            written_axes[0] = axes
             grid = grids.harvey_shack_grid(fn, theta, sides, axes)
-            prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
-                                           specular_transmittance=settings.specular_transmittance,
-                                           scatter_excess_allowed=src.tis_excess_allowed)
-        tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
-    elif to == "zemax":
-        axes, grid_info = _specular_axes(fn, theta, sides, settings)
-        if settings.zemax_symmetry == "PlaneSymmetrical":
-            grid, deviation = _plane_symmetric_grid(fn, theta, side, axes, settings.symmetry_tolerance)
-        else:
-            grid = grids.specular_grid(fn, theta, side, axes)
-        bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
-        zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
-    else:
-        axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, 0.0)
-        grid = grids.harvey_shack_grid(fn, theta, sides, axes)
-        chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
-        table = asap.asap_table(grid, abg=chosen, comments=comments)
-        asap.write_asap(path, table, force=force, generated_at=generated_at)
+            chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
+            table = asap.asap_table(grid, abg=chosen, comments=comments)
+            asap.write_asap(path, table, force=force, generated_at=generated_at)
+
+    write(settings, force)
+    reference: dict[str, list[float]] | None = None
+    if grid_info.get("mode") == "auto":
+        # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
+        # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
+        # format's quadrature the grid was chosen with, so a lobe cut by the horizon may need more azimuths
+        reference = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+        limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
+        for attempt in range(RECHECK_ROUNDS + 1):
+            computed = read_any(path).tis_computed
+            worst = max(abs(computed[s][k] / reference[s][k] - 1.0) if reference[s][k] > 0 else 0.0
+                        for s in sides for k in range(theta.size))
+            if worst <= limit:
+                break
+            axes = written_axes[0]
+            if isinstance(axes, grids.HarveyShackAxes):
+                fixed_nodes = len(grids.HarveyShackAxes.default().rho) * 72
+                doubled_nodes = len(axes.rho) * 2 * len(axes.azimuth_deg)
+            else:
+                fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
+                fixed_nodes = len(fixed.radial_deg) * len(fixed.azimuth_deg)
+                doubled_nodes = 0 if axes is None else len(axes.radial_deg) * (2 * len(axes.azimuth_deg) - 1)
+            if attempt == RECHECK_ROUNDS or axes is None or doubled_nodes > fixed_nodes:
+                # the fixed grid, as without --grid auto (never more nodes than it)
+                write(replace(settings, grid="fixed"), True)
+                grid_info["mode"] = FALLBACK_RECHECK
+                break
+            info = dict(grid_info)
+            if isinstance(axes, grids.HarveyShackAxes):
+                a = np.asarray(axes.azimuth_deg)
+                both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
+                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg)), True)
+            else:
+                a = np.asarray(axes.azimuth_deg)
+                if settings.zemax_symmetry == "PlaneSymmetrical":
+                    both = np.sort(np.concatenate([a, 0.5 * (a[:-1] + a[1:])]))
+                else:
+                    both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                write(replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist()))),
+                      True)
+            grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     if src.engine_tis is not None:
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:
-        tis_source = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+        tis_source = reference or {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
     peaks = _peak_check(fn, to, theta, sides, path, settings) if "radial" in grid_info else {}
     return ExportResult(
         format=to, path=str(path), sides=tuple(sides), incidences_deg=tuple(float(t) for t in theta),
