@@ -29,6 +29,13 @@ def _floats(text: str, name: str, count: int | None = None) -> tuple[float, ...]
     return values
 
 
+def _grid_tis_default(args: argparse.Namespace) -> float | None:
+    """The auto grid's TIS tolerance when not given: half the TIS check the written file must pass (a valid
+    ``--tis-tolerance`` only; a bad one is refused by the check itself)."""
+    t = args.tis_tolerance
+    return 0.5 * t if isinstance(t, float) and 0.0 < t < 2.0 else None
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("convert", help="convert a BSDF table or dataset to TracePro, Zemax or ASAP-style",
                        description="Convert any readable BSDF source (Zemax/Radiant .bsdf, TracePro, ASAP-style, "
@@ -55,17 +62,28 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="largest accepted |TIS written / TIS source - 1| (default 0.01)")
+    p.add_argument("--grid", default="auto", choices=("auto", "fixed"),
+                   help="table axes: auto (as fine as the source needs for the grid tolerances; default) or "
+                        "fixed (the fine default grids; docs/exports.md, Grid resolution)")
+    p.add_argument("--grid-tis-tolerance", type=float, default=None, metavar="FRACTION",
+                   help="auto grid: largest estimated relative TIS error of the table (default: half of "
+                        "--tis-tolerance, 0.005)")
+    p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
+                   help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
+                        "(default 0.01); also the limit of the peak re-check of the written file")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
+    from bsdfkit.cli.export import describe_grid, grid_tolerance
     from bsdfkit.tables.export import ExportSettings
     from bsdfkit.tables.to_dataset import convert
 
     check_options(args, OPTION_RANGES)
-    settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance)
+    settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance,
+                              grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)))
     result = convert(
         args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,
         band=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
@@ -76,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
         emit_json(result.to_dict())
     else:
         print(f"wrote {result.export.format} table {result.export.path} from {result.source_kind} {result.source}")
+        print(f"  {describe_grid(result.export)}")
+        if result.export.peak_error:
+            print(f"  peak of the lobe: largest error of the re-read table "
+                  f"{100 * result.export.worst_peak_error:.3g} % of the source's peak")
         for note in result.notes:
             print(f"  note: {note}")
         print(f"{'side':<13}{'theta_i':>8}{'TIS source':>13}{'TIS written':>13}{'diff %':>9}")

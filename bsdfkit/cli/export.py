@@ -26,6 +26,31 @@ def _incidences(text: str) -> tuple[float, ...]:
     return values
 
 
+def grid_tolerance(args: argparse.Namespace, tis_default: float | None = None):
+    """The :class:`bsdfkit.tables.grids.GridTolerance` of ``--grid-tis-tolerance`` / ``--grid-peak-tolerance``
+    (``tis_default`` [1] replaces the class default of the TIS tolerance when the option is not given)."""
+    from bsdfkit.tables.grids import GridTolerance
+
+    given = {k: v for k, v in (("tis_rtol", args.grid_tis_tolerance), ("peak_rtol", args.grid_peak_tolerance))
+             if v is not None}
+    if given and args.grid != "auto":
+        raise ValidationError("grid tolerances apply to --grid auto", field="--grid", expected="auto", got=args.grid)
+    if tis_default is not None and "tis_rtol" not in given:
+        given["tis_rtol"] = tis_default
+    return GridTolerance(**given)
+
+
+def describe_grid(result) -> str:
+    """One line: written size [bytes] and how the axes were chosen."""
+    g = result.grid
+    text = f"{result.size_bytes:,} bytes; grid {g.get('mode', '?')}"
+    if "radial" in g:
+        text += f": {g['radial']} radial x {g['azimuth']} azimuth nodes"
+    if g.get("mode") == "auto":
+        text += f" (TIS tolerance {g['tis_rtol']:g}, peak tolerance {g['peak_rtol']:g})"
+    return text
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="write a TracePro, Zemax or ASAP-style BSDF table",
                        description="Write a TracePro, Zemax or ASAP-style BSDF table from a fit result or a "
@@ -53,6 +78,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--wavelength-nm", type=float, default=None, metavar="NM",
                    help="the wavelength to export from a per-wavelength model (bsdfkit fit reflectance)")
     p.add_argument("--temperature-k", type=float, default=None, help="TracePro temperature column (K)")
+    p.add_argument("--grid", default="auto", choices=("auto", "fixed"),
+                   help="table axes: auto (as fine as the source needs for the grid tolerances; default) or "
+                        "fixed (the fine default grids; docs/exports.md, Grid resolution)")
+    p.add_argument("--grid-tis-tolerance", type=float, default=None, metavar="FRACTION",
+                   help="auto grid: largest estimated relative TIS error of the table (default 0.001)")
+    p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
+                   help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
+                        "(default 0.01); also the limit of the peak re-check of the written file")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
@@ -72,13 +105,18 @@ def run(args: argparse.Namespace) -> int:
         symmetry_tolerance=args.symmetry_tolerance,
         tracepro=replace(tp, **changes),
         tracepro_scatter=args.tracepro_scatter,
+        grid=args.grid,
+        grid_tolerance=grid_tolerance(args),
     )
     result = api.export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings,
                         wavelength_nm=args.wavelength_nm)
     if args.json:
         emit_json(result.to_dict())
         return 0
-    print(f"wrote {result.format} table {result.path}")
+    print(f"wrote {result.format} table {result.path} ({describe_grid(result)})")
+    if result.peak_error:
+        print(f"peak of the lobe: largest error of the re-read table {100 * result.worst_peak_error:.3g} % "
+              "of the source's peak")
     if result.plane_symmetry_deviation is not None:
         print(f"plane-symmetry deviation of the source: {result.plane_symmetry_deviation:.3g} of the block maximum "
               "(mirror average written)")

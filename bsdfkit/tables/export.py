@@ -63,6 +63,8 @@ _SIDE_CHOICES = ("reflection", "transmission", "both")
 _THETA_MATCH_DEG = 1e-9
 
 ExportFormat = Literal["tracepro", "zemax", "asap"]
+#: ``auto``: tolerance-driven axes (:class:`grids.GridTolerance`); ``fixed``: the fine default axes.
+GRID_MODES: tuple[str, ...] = ("auto", "fixed")
 
 
 @dataclass(frozen=True)
@@ -70,8 +72,13 @@ class ExportSettings:
     """Choices of an export beyond source, format, side and path. ``None`` means the documented default.
 
     ``theta_i_deg``: incidences to export (default: those of the fit result or scan).
-    ``harvey_shack_axes`` / ``specular_axes``: table axes (default :meth:`grids.HarveyShackAxes.default`
-    with TracePro's ``zero_azimuth_deg`` or 0 for ASAP, and :meth:`grids.SpecularAxes.default`).
+    ``grid``: ``auto`` (default: axes as fine as the source needs to meet ``grid_tolerance``,
+    :func:`grids.auto_harvey_shack_axes` / :func:`grids.auto_specular_axes`; docs/exports.md "Grid
+    resolution") or ``fixed`` (the fine default axes :meth:`grids.HarveyShackAxes.default` with TracePro's
+    ``zero_azimuth_deg`` or 0 for ASAP, and :meth:`grids.SpecularAxes.default`).
+    ``grid_tolerance``: TIS and peak tolerances of the auto grid (:class:`grids.GridTolerance`); its
+    ``peak_rtol`` is also the limit of the peak re-check of the written file (``ExportResult.peak_error``).
+    ``harvey_shack_axes`` / ``specular_axes``: explicit table axes (override ``grid``).
     ``zemax_symmetry``: ``PlaneSymmetrical`` (the mirror average of the source, refused when the source
     deviates from plane symmetry by more than ``symmetry_tolerance`` of the block maximum) or
     ``Asymmetrical``. ``tracepro_scatter``: ``table`` (Scatter 5) or ``abg`` (Scatter 1, ABg fit results
@@ -90,8 +97,13 @@ class ExportSettings:
     symmetry_tolerance: float = 0.01
     #: the wavelength [nm] to write from a spectral elastic dataset (a ray-tracer table holds one)
     wavelength_nm: float | None = None
+    grid: str = "auto"
+    grid_tolerance: grids.GridTolerance = field(default_factory=grids.GridTolerance)
 
     def __post_init__(self) -> None:
+        if self.grid not in GRID_MODES:
+            raise ValidationError("unknown grid resolution", field="grid", expected=" or ".join(GRID_MODES),
+                                  got=self.grid)
         if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
             raise ValidationError("unsupported Zemax symmetry", field="zemax_symmetry",
                                   expected="PlaneSymmetrical or Asymmetrical", got=self.zemax_symmetry)
@@ -124,11 +136,31 @@ class ExportResult:
     tis_source: dict[str, list[float]]
     tis_table: dict[str, list[float]]
     plane_symmetry_deviation: float | None = None
+    #: size of the written file [bytes]
+    size_bytes: int = 0
+    #: how the axes were chosen: ``mode`` (auto | fixed | given), ``radial`` and ``azimuth`` node counts,
+    #: and for auto the tolerances ``tis_rtol`` and ``peak_rtol``
+    grid: dict[str, Any] = field(default_factory=dict)
+    #: per side and incidence: the peak of the lobe — the largest BSDF in its core, from the specular direction
+    #: outward while the BSDF stays at least half its specular value (:func:`grids.lobe_core`) — of the source
+    #: (on the written nodes and the midpoints of their radial segments) [1/sr] and of the table as re-read
+    #: [1/sr], and the peak error |peak table / peak source − 1| [1]
+    peak_source: dict[str, list[float]] = field(default_factory=dict)
+    peak_table: dict[str, list[float]] = field(default_factory=dict)
+    peak_error: dict[str, list[float]] = field(default_factory=dict)
+
+    @property
+    def worst_peak_error(self) -> float:
+        """The largest peak error over sides and incidences [1] (0 for a table-less TracePro ABg property)."""
+        return max((v for vals in self.peak_error.values() for v in vals), default=0.0)
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": self.format, "path": self.path, "sides": list(self.sides),
                 "incidences_deg": list(self.incidences_deg), "tis_source": self.tis_source,
-                "tis_table": self.tis_table, "plane_symmetry_deviation": self.plane_symmetry_deviation}
+                "tis_table": self.tis_table, "plane_symmetry_deviation": self.plane_symmetry_deviation,
+                "size_bytes": self.size_bytes, "grid": self.grid, "peak_source": self.peak_source,
+                "peak_table": self.peak_table, "peak_error": self.peak_error,
+                "worst_peak_error": self.worst_peak_error}
 
 
 @dataclass(frozen=True)
@@ -386,6 +418,113 @@ def _plane_symmetric_grid(
     return half.copy(data=0.5 * (half.values + mirror)), worst
 
 
+#: Grid mode reported when the auto grid would need more nodes than the fixed grid: the fixed grid is written.
+FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
+#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS azimuth doublings.
+FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
+#: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
+#: direct integral of the source callable; else its azimuths are doubled (at most RECHECK_ROUNDS times).
+RECHECK_FACTOR = 2.0
+RECHECK_ROUNDS = 2
+
+
+def _grid_info(mode: str, n_radial: int, n_azimuth: int, settings: ExportSettings) -> dict[str, Any]:
+    info: dict[str, Any] = {"mode": mode, "radial": n_radial, "azimuth": n_azimuth}
+    if mode != "fixed" and mode != "given":
+        info.update(tis_rtol=settings.grid_tolerance.tis_rtol, peak_rtol=settings.grid_tolerance.peak_rtol)
+    return info
+
+
+def _harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], settings: ExportSettings,
+                       zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
+    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    if settings.harvey_shack_axes is not None:
+        axes, mode = settings.harvey_shack_axes, "given"
+    elif settings.grid == "fixed":
+        axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
+    else:
+        fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
+        auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
+                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg))
+        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
+    return axes, _grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
+
+
+def _specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
+                   settings: ExportSettings) -> tuple[grids.SpecularAxes, dict[str, Any]]:
+    """The Zemax axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    symmetric = settings.zemax_symmetry == "PlaneSymmetrical"
+    if settings.specular_axes is not None:
+        axes, mode = settings.specular_axes, "given"
+    elif settings.grid == "fixed":
+        axes, mode = grids.SpecularAxes.default(plane_symmetric=symmetric), "fixed"
+    else:
+        fixed = grids.SpecularAxes.default(plane_symmetric=symmetric)
+        auto = grids.auto_specular_axes(fn, theta, sides, settings.grid_tolerance, symmetric,
+                                        max_nodes=len(fixed.radial_deg) * len(fixed.azimuth_deg))
+        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
+    return axes, _grid_info(mode, len(axes.radial_deg), len(axes.azimuth_deg), settings)
+
+
+def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence[str], path: str | Path,
+                settings: ExportSettings) -> dict[str, dict[str, list[float]]]:
+    """Peak of the lobe of the written file against the source's (see :attr:`ExportResult.peak_error`).
+
+    The table is read back with its format's reader; the source is evaluated at the table's nodes and at the
+    midpoints of its radial segments on every written azimuth (the mirror average for a PlaneSymmetrical Zemax
+    file, which is what that file holds). Both peaks are maxima over the lobe's core
+    (:func:`bsdfkit.tables.grids.lobe_core`: from the specular direction outward while the BSDF stays at least
+    half its specular value), so a peak the table's nodes step over is seen.
+    """
+    if to == "zemax":
+        bsdf = zemax.read_zemax(path)
+        table = bsdf.table.isel(sample_rotation=0).values[None]  # (side, theta, azimuth, radial)
+        radial = np.asarray(bsdf.table["radial"].values, dtype=np.float64)
+        azimuth = tuple(float(a) for a in bsdf.table["azimuth"].values)
+        mids = 0.5 * (radial[:-1] + radial[1:])
+        probe = grids.SpecularAxes(tuple(np.sort(np.concatenate([radial, mids])).tolist()), azimuth)
+        if settings.zemax_symmetry == "PlaneSymmetrical":
+            src = np.stack([_plane_symmetric_grid(fn, theta, s, probe, 1.0)[0].values[0] for s in sides])
+        else:
+            src = grids.specular_grid(fn, theta, sides, probe).values
+        horizon = grids.horizon_radial(theta[:, None, None], np.asarray(azimuth)[None, :, None])
+        inside = np.radians(radial)[None, None, :] <= horizon
+        mid_in = np.radians(mids)[None, None, :] <= horizon
+    else:
+        if to == "tracepro":
+            prop = tracepro.read_tracepro(path)
+            if prop.table is None:
+                return {}
+            read, zero = prop.table, prop.options.zero_azimuth_deg
+        else:
+            read, zero = asap.read_asap(path).table, 0.0
+        read = read.sel(side=list(sides))
+        table = np.swapaxes(read.values, -1, -2)  # (side, theta, psi, rho)
+        radial = np.asarray(read["rho"].values, dtype=np.float64)
+        psi = np.asarray(read["psi"].values, dtype=np.float64)
+        mids = 0.5 * (radial[:-1] + radial[1:])
+        probe = grids.HarveyShackAxes(tuple(np.sort(np.concatenate([radial, mids])).tolist()), tuple(psi.tolist()),
+                                      zero)
+        src = np.swapaxes(grids.harvey_shack_grid(fn, theta, sides, probe).values, -1, -2)
+        edge = grids.rho_max(theta[:, None, None], psi[None, :, None] + zero)
+        inside, mid_in = radial[None, None, :] <= edge, mids[None, None, :] <= edge
+    # the lobe's core on the written nodes; its midpoints belong to it when both ends do
+    core = grids.lobe_core(table, np.broadcast_to(inside, table.shape))
+    core_src = np.zeros(src.shape, dtype=bool)
+    core_src[..., ::2] = core
+    core_src[..., 1::2] = core[..., :-1] & core[..., 1:] & mid_in
+    peak_src = np.max(np.where(core_src, src, 0.0), axis=(-1, -2))
+    peak_tab = np.max(np.where(core, table, 0.0), axis=(-1, -2))
+    scale = np.where(peak_src > 0, peak_src, 1.0)
+    err = np.abs(peak_tab - peak_src) / scale
+    out: dict[str, dict[str, list[float]]] = {"source": {}, "table": {}, "error": {}}
+    for k, s in enumerate(sides):
+        out["source"][s] = [float(v) for v in peak_src[k]]
+        out["table"][s] = [float(v) for v in peak_tab[k]]
+        out["error"][s] = [float(v) for v in err[k]]
+    return out
+
+
 def _abg_rows(params: Sequence[asap.AbgParameters], side: str, theta: NDArray[np.float64]) -> NDArray[np.float64]:
     """(A, B, g) per exported incidence for ``side`` from the fit's parameter list."""
     rows = []
@@ -433,52 +572,105 @@ def export(
     fn = _dispatch(src.fns)
     comments = (f"source: {src.description}",) + tuple(settings.comments)
     deviation: float | None = None
-    if to == "tracepro":
-        opts = settings.tracepro
-        if settings.tracepro_scatter == "abg":
-            if not src.abg:
-                raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
-                                      expected="table for this source", got="abg")
-            by_side = {s: _abg_rows(src.abg, s, theta) for s in sides}
-            prop = tracepro.abg_property(
-                theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
-                specular_reflectance=settings.specular_reflectance,
-                specular_transmittance=settings.specular_transmittance, scatter_excess_allowed=src.tis_excess_allowed,
-            )
+    grid_info: dict[str, Any] = {"mode": "none (TracePro ABg property)"}
+    written_axes: list[Any] = [None]
+
+    def write(settings: ExportSettings, force: bool) -> None:
+        nonlocal deviation, grid_info
+        if to == "tracepro":
+            opts = settings.tracepro
+            if settings.tracepro_scatter == "abg":
+                if not src.abg:
+                    raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
+                                          expected="table for this source", got="abg")
+                by_side = {s: _abg_rows(src.abg, s, theta) for s in sides}
+                prop = tracepro.abg_property(
+                    theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
+                    specular_reflectance=settings.specular_reflectance,
+                    specular_transmittance=settings.specular_transmittance,
+                    scatter_excess_allowed=src.tis_excess_allowed,
+                )
+            else:
+                axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, opts.zero_azimuth_deg)
+                written_axes[0] = axes
+                grid = grids.harvey_shack_grid(fn, theta, sides, axes)
+                prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
+                                               specular_transmittance=settings.specular_transmittance,
+                                               scatter_excess_allowed=src.tis_excess_allowed)
+            tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
+        elif to == "zemax":
+            axes, grid_info = _specular_axes(fn, theta, sides, settings)
+            written_axes[0] = axes
+            if settings.zemax_symmetry == "PlaneSymmetrical":
+                grid, deviation = _plane_symmetric_grid(fn, theta, side, axes, settings.symmetry_tolerance)
+            else:
+                grid = grids.specular_grid(fn, theta, side, axes)
+            bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
+            zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
         else:
-            axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=opts.zero_azimuth_deg)
+            axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, 0.0)
+            written_axes[0] = axes
             grid = grids.harvey_shack_grid(fn, theta, sides, axes)
-            prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
-                                           specular_transmittance=settings.specular_transmittance,
-                                           scatter_excess_allowed=src.tis_excess_allowed)
-        tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
-    elif to == "zemax":
-        axes = settings.specular_axes or grids.SpecularAxes.default(
-            plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
-        if settings.zemax_symmetry == "PlaneSymmetrical":
-            grid, deviation = _plane_symmetric_grid(fn, theta, side, axes, settings.symmetry_tolerance)
-        else:
-            grid = grids.specular_grid(fn, theta, side, axes)
-        bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
-        zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
-    else:
-        axes = settings.harvey_shack_axes or grids.HarveyShackAxes.default(zero_azimuth_deg=0.0)
-        grid = grids.harvey_shack_grid(fn, theta, sides, axes)
-        chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
-        table = asap.asap_table(grid, abg=chosen, comments=comments)
-        asap.write_asap(path, table, force=force, generated_at=generated_at)
+            chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
+            table = asap.asap_table(grid, abg=chosen, comments=comments)
+            asap.write_asap(path, table, force=force, generated_at=generated_at)
+
+    write(settings, force)
+    reference: dict[str, list[float]] | None = None
+    if grid_info.get("mode") == "auto":
+        # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
+        # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
+        # format's quadrature the grid was chosen with, so a lobe cut by the horizon may need more azimuths
+        reference = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+        limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
+        for attempt in range(RECHECK_ROUNDS + 1):
+            computed = read_any(path).tis_computed
+            worst = max(abs(computed[s][k] / reference[s][k] - 1.0) if reference[s][k] > 0 else 0.0
+                        for s in sides for k in range(theta.size))
+            if worst <= limit:
+                break
+            axes = written_axes[0]
+            if isinstance(axes, grids.HarveyShackAxes):
+                fixed_nodes = len(grids.HarveyShackAxes.default().rho) * 72
+                doubled_nodes = len(axes.rho) * 2 * len(axes.azimuth_deg)
+            else:
+                fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
+                fixed_nodes = len(fixed.radial_deg) * len(fixed.azimuth_deg)
+                doubled_nodes = 0 if axes is None else len(axes.radial_deg) * (2 * len(axes.azimuth_deg) - 1)
+            if attempt == RECHECK_ROUNDS or axes is None or doubled_nodes > fixed_nodes:
+                # the fixed grid, as without --grid auto (never more nodes than it)
+                write(replace(settings, grid="fixed"), True)
+                grid_info["mode"] = FALLBACK_RECHECK
+                break
+            info = dict(grid_info)
+            if isinstance(axes, grids.HarveyShackAxes):
+                a = np.asarray(axes.azimuth_deg)
+                both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
+                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg)), True)
+            else:
+                a = np.asarray(axes.azimuth_deg)
+                if settings.zemax_symmetry == "PlaneSymmetrical":
+                    both = np.sort(np.concatenate([a, 0.5 * (a[:-1] + a[1:])]))
+                else:
+                    both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                write(replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist()))),
+                      True)
+            grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     if src.engine_tis is not None:
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:
-        tis_source = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+        tis_source = reference or {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+    peaks = _peak_check(fn, to, theta, sides, path, settings) if "radial" in grid_info else {}
     return ExportResult(
         format=to, path=str(path), sides=tuple(sides), incidences_deg=tuple(float(t) for t in theta),
         tis_source={s: [float(v) for v in vals] for s, vals in tis_source.items()},
         tis_table={s: [float(v) for v in np.asarray(vals)] for s, vals in tis_table.items()},
-        plane_symmetry_deviation=deviation,
+        plane_symmetry_deviation=deviation, size_bytes=Path(path).stat().st_size, grid=grid_info,
+        peak_source=peaks.get("source", {}), peak_table=peaks.get("table", {}), peak_error=peaks.get("error", {}),
     )
 
 

@@ -56,11 +56,15 @@ from bsdfkit.core.quadrature import gauss_legendre
 
 __all__ = [
     "BsdfFn",
+    "GridTolerance",
     "HarveyShackAxes",
     "SpecularAxes",
     "evaluate_bsdf",
+    "auto_harvey_shack_axes",
+    "auto_specular_axes",
     "harvey_shack_grid",
     "horizon_radial",
+    "lobe_core",
     "rho_max",
     "specular_grid",
     "tis_harvey_shack_table",
@@ -209,7 +213,7 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
     """
     if directions.shape[:-1] == (0,) or directions.size == 0:
         return np.zeros(directions.shape[:-1])
-    values = np.asarray(bsdf_fn(float(theta_i_deg), side, directions), dtype=np.float64)
+    values = _call_chunked(bsdf_fn, theta_i_deg, side, directions)
     where = f"BSDF callable at theta_i={theta_i_deg:g} deg, side={side}"
     if values.shape != directions.shape[:-1]:
         values = np.broadcast_to(values, directions.shape[:-1]) if values.ndim == 0 else values
@@ -227,6 +231,33 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
         raise ValidationError(f"{where} returned a negative BSDF", field="bsdf", expected=">= 0",
                               got=float(values.min()))
     return np.array(values, dtype=np.float64)
+
+
+#: Directions per call of a BSDF callable (:func:`_call_chunked`).
+CHUNK = 4096
+
+
+def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray:
+    """``bsdf_fn`` on the directions flattened, in chunks of :data:`CHUNK` (the last padded with the first
+    direction).
+
+    The auto grids evaluate the callable on arrays of ever new lengths; a JAX model compiles each operation
+    once per array shape, so every call gets the same shape. The answer is reshaped to
+    ``directions.shape[:-1]`` (a scalar answer is broadcast).
+    """
+    flat = directions.reshape(-1, 3)
+    n = flat.shape[0]
+    size = -(-n // CHUNK) * CHUNK
+    padded = np.concatenate([flat, np.broadcast_to(flat[:1], (size - n, 3))]) if size > n else flat
+    parts = []
+    for k in range(0, size, CHUNK):
+        out = np.asarray(bsdf_fn(float(theta_i_deg), side, padded[k:k + CHUNK]), dtype=np.float64)
+        if out.ndim == 0:
+            return np.broadcast_to(out, directions.shape[:-1])
+        if out.shape != (CHUNK,):
+            return out  # the shape check of evaluate_bsdf names the mismatch
+        parts.append(out)
+    return np.concatenate(parts)[:n].reshape(directions.shape[:-1])
 
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:
@@ -509,3 +540,263 @@ def tis_reference(
     if not np.isfinite(total):
         raise NumericalError(f"TIS of the BSDF callable is not finite at theta_i={theta_i_deg:g} deg")
     return total
+
+
+# --------------------------------------------------------------------------------------------------
+# tolerance-driven ("auto") axes
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class GridTolerance:
+    """What an automatic (tolerance-driven) table grid must reproduce of its BSDF callable.
+
+    ``tis_rtol`` [1]: largest relative change of every block's table TIS (the format's own quadrature, per
+    side and incidence) when every radial segment is bisected, and again when the azimuth step is halved;
+    i.e. the estimated TIS error of the written grid (default 1e-3 = 0.1 %).
+    ``peak_rtol`` [1]: largest miss of the piecewise-linear table (in the radial and in the azimuthal
+    direction) at the midpoints of its cells, relative to the block's peak (the lobe maximum, at or near
+    the specular direction); this holds the lobe's peak and shape (default 1e-2 = 1 %).
+    ``max_rounds``: refinement rounds at most (each bisects flagged radial segments and/or doubles the azimuths).
+    ``max_azimuths``: cap on the number of azimuth nodes over the full circle (default 360, a 1° step).
+    """
+
+    tis_rtol: float = 1e-3
+    peak_rtol: float = 1e-2
+    max_rounds: int = 16
+    max_azimuths: int = 360
+
+    def __post_init__(self) -> None:
+        for name in ("tis_rtol", "peak_rtol"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and 0.0 < v < 1.0):
+                raise ValidationError("grid tolerance out of range", field=name,
+                                      expected="a relative tolerance in (0, 1)", got=v)
+        if not (1 <= int(self.max_rounds) <= 64):
+            raise ValidationError("refinement rounds out of range", field="max_rounds", expected="1..64",
+                                  got=self.max_rounds)
+        if not (8 <= int(self.max_azimuths) <= 4096):
+            raise ValidationError("azimuth cap out of range", field="max_azimuths", expected="8..4096",
+                                  got=self.max_azimuths)
+
+
+#: Azimuths over the full circle an auto grid starts from (15°): the hemispherical engine that re-reads a file
+#: (``bsdfkit read``) integrates a table on its own spokes from 24 spokes on
+#: (:data:`bsdfkit.reduction.hemispherical.MIN_SPOKES`); with fewer it reconstructs the nodes as scattered records,
+#: which misses narrow lobes. An even count also keeps the Harvey–Shack rule exact for a Lambertian table.
+MIN_AZIMUTHS = 24
+
+
+def _tidy(values: NDArray[np.float64]) -> tuple[float, ...]:
+    """Nodes rounded to 9 significant digits (the files print 10): what is evaluated is what is written."""
+    return tuple(float(f"{v:.9g}") for v in values)
+
+
+def _refine_polar(
+    evaluate: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]],
+    quad: Callable[[NDArray, NDArray, NDArray], NDArray],
+    measure: Callable[[NDArray], NDArray],
+    radial: NDArray[np.float64],
+    azimuth: NDArray[np.float64],
+    azimuth_midpoints: Callable[[NDArray], NDArray],
+    tolerance: GridTolerance,
+    min_step: float,
+    azimuth_cap: int,
+    max_nodes: int | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Coarse-to-fine choice of a polar table's radial and azimuth nodes (shared by both geometries).
+
+    ``evaluate(r, a)`` → (values[side, theta, a, r], inside[theta, a, r]); ``quad(values, r, a)`` → TIS
+    [side, theta] with the format's quadrature; ``measure(r)`` the radial area weight (ρ or sin r).
+    Each round evaluates the callable at the radial midpoints and at the azimuth midpoints of the current
+    grid. It stops when (i) bisecting every radial segment changes no block's TIS by more than
+    ``tis_rtol``/2, (ii) halving the azimuth step changes none by more than ``tis_rtol``/2, and (iii) the
+    linear table misses the callable at no midpoint by more than ``peak_rtol`` × the block's peak.
+    Otherwise it bisects the radial segments that miss (iii) or carry more than their share of the TIS
+    error (Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2, the quadrature of the miss), and doubles the
+    azimuths when (ii) or (iii) fails in azimuth. Deterministic; no node finer than ``min_step``.
+    Returns None as soon as the grid would hold more than ``max_nodes`` radial × azimuth nodes.
+    """
+    half = 0.5 * tolerance.tis_rtol
+    for _ in range(int(tolerance.max_rounds)):
+        mid_r = 0.5 * (radial[:-1] + radial[1:])
+        both_r = np.sort(np.concatenate([radial, mid_r]))
+        f_both, in_both = evaluate(both_r, azimuth)
+        f, inside = f_both[..., ::2], in_both[..., ::2]
+        f_mid, in_mid = f_both[..., 1::2], in_both[..., 1::2]
+        core = _lobe_core(f, inside)
+        top = np.max(np.where(core, f, 0.0), axis=(-1, -2))[..., None, None]  # the lobe's peak per (side, theta)
+        limit = (1.0 + tolerance.peak_rtol) * top
+        tis_fine = quad(f_both, both_r, azimuth)
+        tis_coarse = quad(f, radial, azimuth)
+        norm = np.where(np.abs(tis_fine) > 0, np.abs(tis_fine), 1.0)
+        err_r = np.abs(tis_fine - tis_coarse) / norm
+        # the coarse table at the radial midpoints, as the quadratures interpolate it (held at the edge)
+        lin = np.where(inside[..., 1:], 0.5 * (f[..., :-1] + f[..., 1:]), f[..., :-1])
+        miss = np.where(in_mid & inside[..., :-1], np.abs(f_mid - lin), 0.0)  # (side, theta, a, seg)
+        w_az = _azimuth_row_weights_for(azimuth, quad)
+        ind = np.einsum("ptak,a->ptk", miss, w_az) * (measure(mid_r) * 0.5 * np.diff(radial))
+        ind = np.max(ind / norm[..., None], axis=(0, 1))  # (seg,)
+        in_core = core[..., :-1] & core[..., 1:]
+        peak_r = np.any(in_core & in_mid & (f_mid > limit), axis=(0, 1, 2))  # (seg,): a higher peak in the segment
+        radial_ok = bool(np.all(err_r <= half) and not np.any(peak_r))
+        # azimuth: halve the step, compare TIS and the peak
+        mid_a = azimuth_midpoints(azimuth)
+        f_a, in_a = evaluate(radial, mid_a)
+        both_a = np.sort(np.concatenate([azimuth, mid_a]))
+        order = np.argsort(np.concatenate([azimuth, mid_a]), kind="stable")
+        tis_a = quad(np.concatenate([f, f_a], axis=-2)[..., order, :], radial, both_a)
+        err_a = np.abs(tis_a - tis_coarse) / norm
+        core_a = core[..., : mid_a.size, :] & np.roll(core, -1, axis=-2)[..., : mid_a.size, :]
+        peak_a = bool(np.any(core_a & in_a & (f_a > limit)))
+        azimuth_ok = bool(np.all(err_a <= half) and not peak_a)
+        if radial_ok and azimuth_ok:
+            break
+        before, radial_now = (radial.size, azimuth.size), radial
+        if not radial_ok:
+            long_enough = np.diff(radial) >= 2.0 * min_step
+            flag = peak_r.copy()
+            if np.any(err_r > half):  # segments carrying more than their share of the TIS error
+                by_tis = ind > half / max(radial.size - 1, 1)
+                if not np.any(by_tis & long_enough):  # the error is spread thinly: bisect the worst quarter
+                    by_tis = ind >= np.quantile(ind, 0.75)
+                flag |= by_tis
+            flag &= long_enough
+            if np.any(flag):
+                radial = np.sort(np.concatenate([radial, mid_r[flag]]))
+        if not azimuth_ok and azimuth.size < azimuth_cap:
+            # bisect the azimuth intervals that carry more than their share of the TIS change or hide a higher
+            # peak: interval k adds (Δ_k/2)·[I(f_mid) − (I(f_k) + I(f_k+1))/2] (trapezoid rule, I = row integral)
+            rows = np.stack([quad(f[..., k:k + 1, :], radial_now, azimuth[k:k + 1])
+                             for k in range(azimuth.size)], -1)
+            rows_mid = np.stack([quad(f_a[..., k:k + 1, :], radial_now, mid_a[k:k + 1])
+                                 for k in range(mid_a.size)], -1)
+            width = np.radians(np.diff(np.append(azimuth, azimuth[0] + 360.0)))[: mid_a.size]
+            change = (width / 2.0) * np.abs(rows_mid - 0.5 * (rows[..., : mid_a.size]
+                                                              + np.roll(rows, -1, axis=-1)[..., : mid_a.size]))
+            change = np.max(change / (2.0 * np.pi) / norm[..., None], axis=(0, 1))  # (interval,)
+            flag_a = np.any(core_a & in_a & (f_a > limit), axis=(0, 1, 3))
+            if np.any(err_a > half):
+                by_tis = change > half / mid_a.size
+                if not np.any(by_tis):
+                    by_tis = change >= np.quantile(change, 0.75)
+                flag_a |= by_tis
+            room = azimuth_cap - azimuth.size
+            if np.count_nonzero(flag_a) > room:  # the cap: the worst intervals first
+                flag_a &= change >= np.sort(change)[-room]
+            azimuth = np.sort(np.concatenate([azimuth, mid_a[flag_a]]))
+        if (radial.size, azimuth.size) == before:  # nothing left to refine (step floor, azimuth cap)
+            break
+        if max_nodes is not None and radial.size * azimuth.size > max_nodes:
+            return None
+    return radial, azimuth
+
+
+def lobe_core(values: ArrayLike, inside: ArrayLike) -> NDArray[np.bool_]:
+    """Nodes of a polar table ``values[..., azimuth, radial]`` (radial node 0 = the specular direction) in the
+    core of the lobe: along each azimuth row, from the specular node outward up to the first node (exclusive)
+    where the BSDF falls below half its specular value or leaves the domain (``inside``). The *peak of the lobe*
+    is the largest BSDF there (docs/exports.md, "Grid resolution")."""
+    f = np.asarray(values, dtype=np.float64)
+    half_spec = 0.5 * f[..., :1]
+    keep = (f >= half_spec) & np.asarray(inside, dtype=bool)
+    return np.cumprod(keep, axis=-1).astype(bool)
+
+
+_lobe_core = lobe_core
+
+
+def _azimuth_row_weights_for(azimuth: NDArray, quad: Callable) -> NDArray:
+    return _azimuth_row_weights(azimuth, plane_symmetric=bool(getattr(quad, "plane_symmetric", False)))
+
+
+def _coarse_radial(first: float, last: float, max_step: float) -> NDArray[np.float64]:
+    """0, then first·2^k while the step stays below ``max_step``, then even steps ≤ ``max_step`` to ``last``."""
+    return _geometric_then_linear(first, 2.0, max_step, last)
+
+
+def auto_harvey_shack_axes(
+    bsdf_fn: BsdfFn,
+    theta_i_deg: Sequence[float],
+    sides: Sequence[str] | str,
+    tolerance: GridTolerance | None = None,
+    zero_azimuth_deg: float = 0.0,
+    max_nodes: int | None = None,
+) -> HarveyShackAxes | None:
+    """Harvey–Shack axes as fine as ``bsdf_fn`` needs to meet ``tolerance`` (see :class:`GridTolerance`).
+
+    Starts from ρ = 0, 1e-3·2^k (until the step reaches 0.25), then steps ≤ 0.25 to 2, and
+    :data:`MIN_AZIMUTHS` uniform azimuths (15°), and refines
+    (:func:`_refine_polar`): radial segments are bisected where needed (down to 1e-7 in ρ), the azimuth
+    step halved. One pair of axes serves every side and incidence (as TracePro requires). None when meeting
+    the tolerance takes more than ``max_nodes`` radial × azimuth nodes.
+    """
+    tolerance = tolerance or GridTolerance()
+    thetas = _check_incidences(theta_i_deg)
+    sides = _check_sides(sides)
+
+    def evaluate(r: NDArray, a: NDArray) -> tuple[NDArray, NDArray]:
+        grid = harvey_shack_grid(bsdf_fn, thetas, sides, HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg))
+        inside = r[None, None, :] <= rho_max(thetas[:, None, None], a[None, :, None] + zero_azimuth_deg)
+        return np.swapaxes(grid.values, -1, -2), inside
+
+    def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
+        return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)
+
+    def midpoints(a: NDArray) -> NDArray:
+        return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
+
+    chosen = _refine_polar(evaluate, quad, lambda r: r, _coarse_radial(1e-3, 2.0, 0.25),
+                           np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), midpoints, tolerance, 1e-7,
+                           int(tolerance.max_azimuths), max_nodes)
+    if chosen is None:
+        return None
+    return HarveyShackAxes(_tidy(chosen[0]), _tidy(chosen[1]), zero_azimuth_deg)
+
+
+def auto_specular_axes(
+    bsdf_fn: BsdfFn,
+    theta_i_deg: Sequence[float],
+    sides: Sequence[str] | str,
+    tolerance: GridTolerance | None = None,
+    plane_symmetric: bool = True,
+    max_nodes: int | None = None,
+) -> SpecularAxes | None:
+    """Specular (Zemax) axes as fine as ``bsdf_fn`` needs to meet ``tolerance`` (see :class:`GridTolerance`).
+
+    Starts from radial = 0, 0.05°·2^k (until the step reaches 15°), then steps ≤ 15° to 180°, and azimuths
+    0…180° by 15° (plane symmetric) or 0…345° by 15° (:data:`MIN_AZIMUTHS`), and refines (:func:`_refine_polar`): radial
+    segments bisected where needed (down to 1e-5°), the azimuth step halved. For a plane-symmetric table
+    the callable is evaluated on 0…180° only (the writer averages the mirror images). None when meeting the
+    tolerance takes more than ``max_nodes`` radial × azimuth nodes.
+    """
+    tolerance = tolerance or GridTolerance()
+    thetas = _check_incidences(theta_i_deg)
+    sides = _check_sides(sides)
+
+    def evaluate(r: NDArray, a: NDArray) -> tuple[NDArray, NDArray]:
+        grid = specular_grid(bsdf_fn, thetas, sides, SpecularAxes(tuple(r), tuple(a)))
+        inside = np.radians(r)[None, None, :] <= horizon_radial(thetas[:, None, None], a[None, :, None])
+        return grid.values, inside
+
+    def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
+        return tis_specular_table(values, r, a, thetas, plane_symmetric)
+
+    quad.plane_symmetric = plane_symmetric  # type: ignore[attr-defined]
+
+    if plane_symmetric:
+        start = np.arange(MIN_AZIMUTHS // 2 + 1) * (360.0 / MIN_AZIMUTHS)
+
+        def midpoints(a: NDArray) -> NDArray:
+            return 0.5 * (a[:-1] + a[1:])
+        cap = int(tolerance.max_azimuths) // 2 + 1
+    else:
+        start = np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS)
+
+        def midpoints(a: NDArray) -> NDArray:
+            return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
+        cap = int(tolerance.max_azimuths)
+
+    chosen = _refine_polar(evaluate, quad, lambda r: np.sin(np.radians(r)) * (np.pi / 180.0),
+                           _coarse_radial(0.05, 180.0, 15.0), start, midpoints, tolerance, 1e-5, cap, max_nodes)
+    if chosen is None:
+        return None
+    return SpecularAxes(_tidy(chosen[0]), _tidy(chosen[1]))

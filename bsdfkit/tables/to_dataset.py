@@ -32,6 +32,7 @@ from bsdfkit.measurement.table import (
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
+from bsdfkit.tables.grids import GridTolerance
 from bsdfkit.tables.vendor import sniff_format, vendor_dataset
 
 __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "ingest",
@@ -146,7 +147,9 @@ class ConvertResult:
                 "incidences_deg": list(self.incidences_deg), "tis_original": self.tis_original,
                 "tis_written": self.tis_written, "tis_reference_of_callable": self.export.tis_source,
                 "worst_relative_difference": self.worst_relative_difference, "tolerance": self.tolerance,
-                "ok": self.ok, "wavelength_nm": self.wavelength_nm, "notes": list(self.notes)}
+                "ok": self.ok, "wavelength_nm": self.wavelength_nm, "notes": list(self.notes),
+                "size_bytes": self.export.size_bytes, "grid": self.export.grid,
+                "peak_error": self.export.peak_error, "worst_peak_error": self.export.worst_peak_error}
 
 
 def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
@@ -184,7 +187,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     theta_i_deg
         Incidences to write [deg] (default: all of the source).
     settings
-        Further :class:`bsdfkit.tables.export.ExportSettings` (axes, Zemax symmetry, TracePro options).
+        Further :class:`bsdfkit.tables.export.ExportSettings` (axes, grid, Zemax symmetry, TracePro options).
+        Without settings the auto grid's TIS tolerance is half of ``tolerance`` (docs/exports.md, Grid resolution).
     tolerance
         Largest accepted |TIS written / TIS original − 1| (reported in the result; default 0.01).
 
@@ -197,6 +201,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     if side is not None and side not in ("reflection", "transmission", "both"):
         raise ValidationError("unknown side", field="--side", expected="reflection | transmission | both", got=side)
     atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
+    if settings is None and 0.0 < tolerance < 2.0:  # the auto grid's TIS error: half of the check it must pass
+        settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)))
     settings = settings or ExportSettings()
     notes: list[str] = []
     engine_tis: dict[str, list[float]] | None = None
