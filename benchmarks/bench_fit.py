@@ -1,6 +1,6 @@
 """Benchmark (not a test): N split-Gaussian spectrum fits, batched bsdfkit solvers vs a scipy loop.
 
-    /tmp/venv/bin/python benchmarks/bench_fit.py [--n 1000] [--repeats 3] [--no-jaxopt]
+    .venv/bin/python benchmarks/bench_fit.py [--n 1000] [--repeats 3] [--no-jaxopt]
 
 Every solver solves the same problems: eq. (3) of the cylindrical-module paper (split Gaussian with
 amplitude) on a 380-780 nm, 1 nm grid, 1 % noise, in the same unconstrained variables (logit peak and α,
