@@ -16,25 +16,34 @@ from bsdfkit.io.atomic import write_with
 ENGINE = "netcdf4"
 
 
-def _encodable(ds: xr.Dataset) -> xr.Dataset:
+def _encodable(ds: xr.Dataset) -> tuple[xr.Dataset, list[str]]:
+    """The dataset with its encodings set, and the names of its deflated (large) data variables."""
     out = ds.copy()
+    deflated = []
     for name, var in out.variables.items():
         if var.dtype == object or var.dtype.kind == "U":
             out[name].encoding["dtype"] = str
         elif var.dtype.kind == "f" and var.ndim >= 2:
             # Lossless deflate: calibrated scans are mostly smooth spectra and NaN masks.
             out[name].encoding.update(zlib=True, complevel=4, shuffle=True)
-    return out
+            if name in out.data_vars:
+                deflated.append(name)
+    return out, deflated
 
 
 def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Path:
     """Write ``ds`` to netCDF atomically; refuse to overwrite without ``force`` (or an input, ever)."""
-    enc = _encodable(ds)
+    enc, deflated = _encodable(ds)
 
     def writer(tmp: Path) -> None:
         # a failed write of the netCDF/HDF5 library (RuntimeError "NetCDF: HDF error") is told apart by
-        # atomic_path: a full device is said as such, anything else names the library
-        enc.to_netcdf(tmp, engine=ENGINE)
+        # atomic_path: a full device is said as such, anything else names the library.
+        # The record x wavelength matrices go one at a time (mode "a"): xarray encodes every variable of a
+        # write before storing any, and each encoded copy of a matrix is as large as the matrix (a 200 MB
+        # table's dataset needed 330 MB more to be written in one call, nothing more this way).
+        enc.drop_vars(deflated).to_netcdf(tmp, engine=ENGINE)
+        for name in deflated:
+            enc[[name]].to_netcdf(tmp, mode="a", engine=ENGINE)
 
     return write_with(path, writer, force, inputs)
 
