@@ -186,10 +186,11 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
 
     from bsdfkit.fit.lambertian import at_wavelength
     from bsdfkit.io import netcdf
-    from bsdfkit.tables.export import ExportSettings
+    from bsdfkit.tables.export import ExportSettings, check_wavelength_nm
     from bsdfkit.tables.export import export as _export
 
     if wavelength_nm is not None:
+        check_wavelength_nm(wavelength_nm)
         model = source if isinstance(source, xr.Dataset) else netcdf.load(source)
         if "model" not in model.attrs and "bsdf" in model:  # a measured dataset: the engine picks the wavelength
             settings = replace(settings or ExportSettings(), wavelength_nm=float(wavelength_nm))

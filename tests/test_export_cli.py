@@ -144,6 +144,28 @@ def test_scan_source_uses_the_hemisphere_reconstruction(tmp_path, monkeypatch):
     np.testing.assert_allclose(summary.tis_computed["reflection"], [0.25, 0.25], rtol=1e-6)
 
 
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "1e12"])
+def test_wavelength_out_of_range_is_refused(tmp_path, capsys, value):
+    out = tmp_path / "w.txt"
+    code, _, err = run(capsys, "export", str(fit_result(tmp_path / "fit.nc")), "--to", "tracepro",
+                       "--interaction", "bibs", "-o", str(out), "--wavelength-nm", value)
+    assert code == 2
+    assert err.strip().startswith("bsdfkit export: error: field '--wavelength-nm': wavelength out of range"), err
+    assert "100-20000 nm" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_wavelength_is_refused_for_a_phosphor_interaction_not_ignored(tmp_path, monkeypatch):
+    import bsdfkit.tables.export as export_module
+    from bsdfkit.core.errors import InputError
+
+    monkeypatch.setattr(export_module, "reduction_kind", lambda ds: "interactions")  # a phosphor scan
+    settings = export_module.ExportSettings(wavelength_nm=550.0)
+    with pytest.raises(InputError, match="--wavelength-nm does not apply to a phosphor interaction"):
+        export_module.export(scan_dataset(), "tracepro", "yiys", "both", tmp_path / "scan.txt", settings=settings)
+    assert not (tmp_path / "scan.txt").exists()
+
+
 def test_read_real_zemax_file_text_and_json(capsys):
     code, text, err = run(capsys, "read", str(REAL))
     assert code == 0, err

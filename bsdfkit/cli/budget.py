@@ -9,7 +9,7 @@ from pathlib import Path
 from bsdfkit.cli._common import emit_json
 from bsdfkit.cli.tis import load_scan
 from bsdfkit.core.errors import FormatError, InputError
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import existing_source, read_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-
+    if args.scan is not None:
+        existing_source(args.scan)  # a mistyped path is answered before the engine is imported
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
     from bsdfkit.reduction.any_sample import budget
     from bsdfkit.reduction.budget import MAX_ITERATIONS, module_budget, table_from_json

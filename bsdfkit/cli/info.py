@@ -6,6 +6,7 @@ from pathlib import Path
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
+from bsdfkit.io.text import existing_source
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-
+    # a mistyped path is answered before the engine is imported
+    existing_source(args.scan, "a raw export folder or a netCDF dataset written by bsdfkit")
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
     from bsdfkit.io import netcdf
     from bsdfkit.measurement.raw_scan import read_scan

@@ -13,6 +13,7 @@ from bsdfkit import api
 from bsdfkit.cli._common import check_options, emit_json, warn_dark
 from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 from bsdfkit.io import atomic
+from bsdfkit.io.text import existing_source
 
 #: numeric options: finite and in these ranges
 OPTION_RANGES = {
@@ -57,6 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     check_options(args, OPTION_RANGES)
+    existing_source(args.path)  # before the engine is imported: a mistyped path is answered at once
     atomic.check_writable(args.output, args.force, inputs=[args.path])
     ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
                 wavelength=args.wavelength, incidence=args.incidence, phi_i=args.phi_i, zeros=args.zeros,

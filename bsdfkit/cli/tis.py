@@ -21,6 +21,7 @@ import sys
 from bsdfkit.cli._common import emit_json, warn_dark
 from bsdfkit.core.conventions import QUANTITIES
 from bsdfkit.core.errors import InputError
+from bsdfkit.io.text import existing_source
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -45,6 +46,7 @@ def load_scan(path: str, quantity: str | None = None, verb: str = "tis"):
     Records whose dark frames are brighter than their signal are said on stderr (one line, ``bsdfkit VERB:
     warning: …``): every reduction of them is biased low.
     """
+    existing_source(path)  # a mistyped path is answered before the engine is imported
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
     from bsdfkit.tables.to_dataset import ingest
 
@@ -54,10 +56,10 @@ def load_scan(path: str, quantity: str | None = None, verb: str = "tis"):
 
 
 def _run(args: argparse.Namespace) -> int:
+    ds = load_scan(args.scan, getattr(args, "quantity", None))
     from bsdfkit.reduction.any_sample import check_band, check_incidence
     from bsdfkit.reduction.hemispherical import reduction_kind
 
-    ds = load_scan(args.scan, getattr(args, "quantity", None))
     band = check_band(args.band, "--band")
     check_incidence(ds, args.incidence, "--incidence")
     kind = reduction_kind(ds) if args.mode == "auto" else args.mode

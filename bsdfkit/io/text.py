@@ -22,11 +22,32 @@ from pathlib import Path
 
 from bsdfkit.core.errors import FormatError, InputError
 
-__all__ = ["decode_text", "loads_toml", "read_text", "read_toml", "refuse_cut_last_line", "text_and_encoding"]
+__all__ = ["decode_text", "existing_source", "loads_toml", "read_text", "read_toml", "refuse_cut_last_line",
+           "text_and_encoding"]
 
 #: byte-order marks, longest first (the UTF-32 LE mark starts with the UTF-16 LE one)
 _BOMS = ((codecs.BOM_UTF32_LE, "utf-32-le"), (codecs.BOM_UTF32_BE, "utf-32-be"), (codecs.BOM_UTF8, "utf-8"),
          (codecs.BOM_UTF16_LE, "utf-16-le"), (codecs.BOM_UTF16_BE, "utf-16-be"))
+
+
+#: what a verb that reads measurements accepts
+SOURCES = "a raw export folder, a text table, a vendor BSDF file or a netCDF dataset"
+
+
+def existing_source(path: str | Path, expected: str = SOURCES) -> Path:
+    """``path`` if it is a file or a raw export folder (one holding ``manifest.toml``); else one clear error.
+
+    Light on purpose: the verbs call it before they import their engine, so a mistyped path is answered at once.
+    """
+    p = Path(path)
+    if p.is_dir():
+        if not (p / "manifest.toml").is_file():
+            raise InputError("folder without manifest.toml", file=p, expected=f"{expected} (a raw export folder holds "
+                             "manifest.toml: docs/raw-format.md)")
+        return p
+    if not p.is_file():
+        raise InputError("no such file or folder", file=p, expected=expected)
+    return p
 
 
 def _unmarked_utf16(raw: bytes) -> str | None:

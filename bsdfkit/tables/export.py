@@ -33,7 +33,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core import frames
-from bsdfkit.core.conventions import EXPORT_FORMATS
+from bsdfkit.core.conventions import EXPORT_FORMATS, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.fit import plausibility
 from bsdfkit.io import atomic
@@ -50,6 +50,7 @@ __all__ = [
     "ExportResult",
     "ExportSettings",
     "FileSummary",
+    "check_wavelength_nm",
     "export",
     "fit_bsdf_fn",
     "read_any",
@@ -65,6 +66,15 @@ _THETA_MATCH_DEG = 1e-9
 ExportFormat = Literal["tracepro", "zemax", "asap"]
 #: ``auto``: tolerance-driven axes (:class:`grids.GridTolerance`); ``fixed``: the fine default axes.
 GRID_MODES: tuple[str, ...] = ("auto", "fixed")
+
+
+def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
+    """``value`` [nm] if it is a wavelength an optical BSDF table can hold; else one clear error."""
+    lo, hi = WAVELENGTH_RANGE_NM
+    if not (np.isfinite(value) and lo <= value <= hi):
+        raise ValidationError("wavelength out of range", field=field, expected=f"a wavelength in {lo:g}-{hi:g} nm",
+                              got=value)
+    return float(value)
 
 
 @dataclass(frozen=True)
@@ -117,6 +127,8 @@ class ExportSettings:
             if not (np.isfinite(t) and 0.0 <= t < 90.0):
                 raise ValidationError("incidence angle out of range", field="theta_i_deg", expected="[0, 90) deg",
                                       got=t)
+        if self.wavelength_nm is not None:
+            check_wavelength_nm(self.wavelength_nm)
         for key in ("specular_reflectance", "specular_transmittance"):
             v = getattr(self, key)
             if not (np.isfinite(v) and 0.0 <= v <= 1.0):
@@ -335,6 +347,10 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
     if interaction not in CENTER:
         raise InputError("unknown interaction for a phosphor scan", file=label, field="--interaction",
                          expected=" | ".join(CENTER), got=interaction)
+    if wavelength_nm is not None:  # never ignored: each interaction of a phosphor plate has its own band
+        raise InputError("--wavelength-nm does not apply to a phosphor interaction (its band is fixed)", file=label,
+                         field="--wavelength-nm", expected="no wavelength (or an elastic dataset or a "
+                         "per-wavelength model)", got=wavelength_nm)
     fns = {s: hemisphere_bsdf_fn(ds, interaction, s) for s in sides}
     if theta_i_deg is None:
         measured = [set(np.round(np.asarray(f.incidences_deg, dtype=float), 9))

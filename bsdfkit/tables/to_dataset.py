@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic, netcdf
+from bsdfkit.io.text import existing_source
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.measurement.table import (
@@ -50,15 +51,9 @@ BsdfFn = Callable[[float, str, NDArray[np.float64]], NDArray[np.float64]]
 # ------------------------------------------------------------------------------------------- sniffing
 def source_kind(path: str | Path) -> str:
     """``raw-scan`` | ``netcdf`` | ``zemax`` | ``tracepro`` | ``asap`` | ``table`` (any other text file)."""
-    p = Path(path)
+    p = existing_source(path)
     if p.is_dir():
-        if not (p / "manifest.toml").is_file():
-            raise InputError("folder without manifest.toml", file=p,
-                             expected="a raw goniometer export (docs/raw-format.md), a text table or a vendor file")
         return "raw-scan"
-    if not p.is_file():
-        raise InputError("no such file or folder", file=p,
-                         expected="a raw export folder, a text table, a vendor BSDF file or a netCDF dataset")
     try:
         with open(p, "rb") as fh:
             head = fh.read(8)

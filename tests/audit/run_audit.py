@@ -797,7 +797,10 @@ def leftovers(paths: list[Path]) -> list[str]:
     for p in paths:
         for folder in {p.parent, p} if p.is_dir() else {p.parent}:
             with contextlib.suppress(OSError):
-                found += [str(e) for e in folder.rglob("*") if e.name.endswith(LEFTOVER) and not _alive(e)]
+                # exists() after _alive(): a case running at the same time may remove its temporary and exit
+                # between the listing and the check of its process (a false "left behind" otherwise)
+                found += [str(e) for e in folder.rglob("*")
+                          if e.name.endswith(LEFTOVER) and not _alive(e) and e.exists()]
     return sorted(set(found))
 
 
