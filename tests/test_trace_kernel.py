@@ -115,7 +115,7 @@ def test_minimal_kernel_carries_no_optional_code():
 
 
 def test_effects_follow_the_scene(tmp_path):
-    assert scene(spec=0.2).__class__ and scene_effects(scene(spec=0.2)).specular
+    assert scene_effects(scene(spec=0.2)).specular
     assert not scene_effects(scene(spec=0.2, rho=0.0)).specular  # nothing is reflected at all
     eff = scene_effects(scene('kind = "lambertian"\nreflectance = 0.3\ntransmittance = 0.6'))
     assert eff.top == "plate" and not eff.conversion and eff.irradiance_map
