@@ -283,6 +283,25 @@ def test_negative_r2_and_bounds_are_flagged(capsys):
     assert any("fitted FWHM" in w for w in rec["warnings"])
 
 
+def test_fit_spectrum_without_a_model_picks_the_best_line_shape_and_warns_on_the_gaussian(capsys):
+    """Issue #27.4: without --model the AICc-best line shape is fitted (peak within 0.5 nm, FWHM within 5 % of the
+    measured ones, no warning); the Gaussian, one option away, is warned about (its FWHM is ~29 % wide here)."""
+    files = [str(DATA / "blue_100mA.ISD"), str(DATA / "red_2.ISD")]
+    assert main(["fit", "spectrum", *files, "--json"]) == 0
+    out, err = capsys.readouterr()
+    records = [json.loads(line) for line in out.splitlines()]
+    assert len(records) == 2 and err == ""
+    for rec in records:
+        assert rec["model"] != "gaussian" and rec["criterion"] == "aicc" and rec["warnings"] == []
+        assert abs(rec["fitted"]["peak_nm"] - rec["measured"]["peak_nm"]) <= 0.5
+        assert abs(rec["fitted"]["fwhm_nm"] / rec["measured"]["fwhm_nm"] - 1) <= 0.05
+    assert main(["fit", "spectrum", files[0], "--model", "gaussian", "--json"]) == 0
+    out, err = capsys.readouterr()
+    rec = json.loads(out)
+    assert rec["fitted"]["fwhm_nm"] > 1.2 * rec["measured"]["fwhm_nm"]
+    assert "warning: blue_100mA.ISD: fitted FWHM" in err and "from the measured" in err
+
+
 # ---------------------------------------------------------------------------------------------- batch CLI
 def test_cli_fits_columns_of_a_table_and_several_files_in_one_call(tmp_path, capsys):
     wl_b, blue = load("blue_3")

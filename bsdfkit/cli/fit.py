@@ -53,8 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--column", action="append", metavar="NAME",
                    help="fit this value column (header name or 1-based column number); repeatable; "
                         "default: every value column")
-    s.add_argument("--model", choices=("best",) + SPECTRUM_MODELS, default="gaussian",
-                   help="line shape; 'best' fits every single-band model and keeps the lowest --criterion")
+    s.add_argument("--model", choices=("best",) + SPECTRUM_MODELS, default="best",
+                   help="line shape; 'best' (default) fits every single-band model and keeps the lowest "
+                        "--criterion; a fitted peak more than 0.5 nm or FWHM more than 5 %% from the measured "
+                        "one is warned about")
     s.add_argument("--criterion", choices=SPECTRUM_CRITERIA, default="aicc",
                    help="information criterion for --model best")
     s.add_argument("--range", nargs=2, type=float, metavar=("LO", "HI"),
