@@ -28,6 +28,7 @@ import contextlib
 import gzip
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -779,8 +780,9 @@ def plausibility_cases(work: Path, f: dict[str, Path]) -> list[Case]:
 
 
 def _alive(entry: Path) -> bool:
-    """A temporary named after a process that still runs (another case running at the same time)."""
-    for part in entry.name.split("."):
+    """A temporary named after a process that still runs (another case running at the same time): the process id
+    is the first all-digit part of ``.NAME.PID.HEX.staging`` or ``.bsdfkit-PID.HEX.part``."""
+    for part in re.split(r"[.-]", entry.name):
         if part.isdigit():
             try:
                 os.kill(int(part), 0)
