@@ -13,9 +13,9 @@ import sys
 
 from bsdfkit.cli._common import check_options, emit_json
 from bsdfkit.cli.ingest import OPTION_RANGES
-from bsdfkit.core.conventions import EXPORT_FORMATS as FORMATS
 from bsdfkit.core.conventions import QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.tables import registry
 
 
 def _floats(text: str, name: str, count: int | None = None) -> tuple[float, ...]:
@@ -37,12 +37,15 @@ def _grid_tis_default(args: argparse.Namespace) -> float | None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("convert", help="convert a BSDF table or dataset to TracePro, Zemax or ASAP-style",
-                       description="Convert any readable BSDF source (Zemax/Radiant .bsdf, TracePro, ASAP-style, "
-                                   "measured text table, raw export, netCDF dataset) to a TracePro, Zemax or "
-                                   "ASAP-style table and compare the TIS of the re-read file with the source's.")
+    formats = registry.names()
+    p = sub.add_parser("convert", help="convert a BSDF table or dataset to another table format "
+                                       f"({', '.join(formats)})",
+                       description="Convert any readable BSDF source (a table of a registered format: "
+                                   f"{', '.join(formats)}; a measured text table, raw export, netCDF dataset) to a "
+                                   "table of a registered format and compare the TIS of the re-read file with "
+                                   "the source's.")
     p.add_argument("source", metavar="IN", help="vendor file, text table, raw export folder or netCDF dataset")
-    p.add_argument("--to", required=True, choices=FORMATS, help="target format")
+    p.add_argument("--to", required=True, choices=formats, help="target format")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.add_argument("--side", choices=("reflection", "transmission", "both"), default=None,

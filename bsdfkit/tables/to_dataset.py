@@ -31,14 +31,17 @@ from bsdfkit.measurement.table import (
 )
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
+from bsdfkit.tables import registry
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
 from bsdfkit.tables.grids import GridTolerance
-from bsdfkit.tables.vendor import sniff_format, vendor_dataset
+from bsdfkit.tables.registry import sniff_format
+from bsdfkit.tables.vendor import vendor_dataset
 
 __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "ingest",
            "convert", "TABLE_OPTIONS"]
 
-VENDOR_FORMATS: tuple[str, ...] = ("zemax", "tracepro", "asap")
+#: the readable formats of the registry (:mod:`bsdfkit.tables.registry`)
+VENDOR_FORMATS: tuple[str, ...] = registry.names()
 #: Options :func:`ingest` passes to the text-table and vendor readers.
 TABLE_OPTIONS = ("quantity", "side", "relative_std", "wavelength", "incidence", "phi_i", "zeros", "sample")
 _NETCDF_MAGIC = (b"\x89HDF", b"CDF\x01", b"CDF\x02")
@@ -49,7 +52,8 @@ BsdfFn = Callable[[float, str, NDArray[np.float64]], NDArray[np.float64]]
 
 # ------------------------------------------------------------------------------------------- sniffing
 def source_kind(path: str | Path) -> str:
-    """``raw-scan`` | ``netcdf`` | ``zemax`` | ``tracepro`` | ``asap`` | ``table`` (any other text file)."""
+    """``raw-scan`` | ``netcdf`` | a registered table format (``zemax``, ``tracepro``, ``asap`` …,
+    :mod:`bsdfkit.tables.registry`) | ``table`` (any other text file)."""
     p = Path(path)
     if p.is_dir():
         if not (p / "manifest.toml").is_file():
@@ -268,9 +272,9 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         if s not in fns:
             raise InputError("the source holds no data for this side", file=label, field="--side",
                              expected=" or ".join(fns), got=s)
-    if to == "zemax" and len(sides) > 1:
-        raise InputError("a Zemax file holds one side; the source has both", file=label, field="--side",
-                         expected="--side reflection or --side transmission", got="both")
+    if registry.get(to).sides_per_file == 1 and len(sides) > 1:
+        raise InputError(f"a {registry.get(to).title} file holds one side; the source has both", file=label,
+                         field="--side", expected="--side reflection or --side transmission", got="both")
     if theta_i_deg is not None:
         wanted = [float(t) for t in theta_i_deg]
         missing = [t for t in wanted if not any(abs(t - u) <= _MATCH_DEG for u in thetas)]
