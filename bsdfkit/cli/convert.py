@@ -1,4 +1,4 @@
-"""``bsdfkit convert IN --to tracepro|zemax|asap -o OUT [--force]``: any readable table or dataset to a
+"""``bsdfkit convert IN --to FORMAT -o OUT [--force]``: any readable table or dataset to a
 ray-tracer table, with the TIS of the written file checked against the source.
 
 IN is a Zemax/Radiant ``.bsdf``, TracePro or ASAP-style file (converted on its own grid), a measured text

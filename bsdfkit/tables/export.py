@@ -108,11 +108,16 @@ class ExportSettings:
     wavelength_nm: float | None = None
     grid: str = "auto"
     grid_tolerance: grids.GridTolerance = field(default_factory=grids.GridTolerance)
+    #: BSDF XML: ``none`` (front blocks only) or ``mirror`` (Back blocks = Front: a sample symmetric between faces)
+    xml_back: str = "none"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
             raise ValidationError("unknown grid resolution", field="grid", expected=" or ".join(GRID_MODES),
                                   got=self.grid)
+        if self.xml_back not in ("none", "mirror"):
+            raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
+                                  got=self.xml_back)
         if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
             raise ValidationError("unsupported Zemax symmetry", field="zemax_symmetry",
                                   expected="PlaneSymmetrical or Asymmetrical", got=self.zemax_symmetry)
@@ -528,6 +533,16 @@ def export(
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
+    held = grid_info.get("klems_incidence_map_deg")
+    if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):
+        # a file on its own incidences (BSDF XML: the Klems band centres): each exported incidence is compared
+        # with the file incidence that holds it (else the nearest)
+        file_theta = np.asarray(reread.incidences_deg, dtype=np.float64)
+        index = []
+        for t in theta:
+            holding = [k for k, c in enumerate(file_theta) if held and abs(held.get(float(c), np.nan) - t) <= 1e-9]
+            index.append(holding[0] if holding else int(np.argmin(np.abs(file_theta - t))))
+        tis_table = {s: [vals[k] for k in index] for s, vals in tis_table.items()}
     if src.engine_tis is not None:
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:

@@ -3,7 +3,7 @@
 * :func:`source_kind` tells a raw-scan folder, a netCDF dataset, a vendor file and a text table apart;
   :func:`ingest` reads any of them into the calibrated dataset (``bsdfkit ingest``, :func:`bsdfkit.api.ingest`;
   vendor files by :func:`bsdfkit.tables.vendor.vendor_dataset`).
-* :func:`convert` writes any readable source as a TracePro, Zemax or ASAP-style table (``bsdfkit convert``)
+* :func:`convert` writes any readable source as a table of any registered format (``bsdfkit convert``)
   and checks the TIS of the re-read file against the source's. Elastic data — a vendor file, a text table, a
   dataset — are reconstructed once by :mod:`bsdfkit.reduction.hemispherical` (``elastic_source``): the written
   table samples that reconstruction, the source TIS is the value ``bsdfkit tis`` and ``bsdfkit read`` report,
@@ -287,6 +287,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         tp = replace(tp, wavelength_um=float(chosen_lambda) / 1000.0)
     elif to == "tracepro":
         notes.append(f"wavelength unknown: TracePro Wavelength column set to {tp.wavelength_um:g} um")
+    if chosen_lambda is not None and np.isfinite(chosen_lambda) and settings.wavelength_nm is None:
+        settings = replace(settings, wavelength_nm=float(chosen_lambda))  # the label of a one-wavelength table
     settings = replace(settings, theta_i_deg=tuple(thetas), tracepro=tp,
                        comments=tuple(settings.comments) + (f"converted by bsdfkit from {Path(label).name}",))
     result = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0], path,

@@ -45,6 +45,11 @@ def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray
     """Directions (n, 3) of the nodes of incidence k above the horizon, their values, table azimuths and the
     perpendicular-arc flag (for the two-arc reconstruction)."""
     theta = grid.theta_i[k]
+    if grid.kind == "directions":  # scattered directions as given (theta_s, phi_s in the sample frame)
+        th, ph = np.radians(np.asarray(grid.first, dtype=np.float64)), np.radians(np.asarray(grid.azimuth))
+        d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1)
+        phi_deg = np.asarray(grid.azimuth, dtype=np.float64)
+        return d, np.asarray(grid.values[k], dtype=np.float64), phi_deg, np.isclose(np.mod(phi_deg, 180.0), 90.0)
     az = grid.azimuth
     vals = grid.values[k]
     if grid.plane_symmetric:
