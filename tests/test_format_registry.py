@@ -2,6 +2,8 @@
 ingest; every file is claimed by its own format's content sniffer and by no other."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -43,3 +45,19 @@ def test_registry_names_match_the_modules_and_unknown_names_are_refused(tmp_path
     junk.write_text("hello\n1 2 3\n")
     with pytest.raises(FormatError, match="unrecognised table format"):
         registry.sniff_format(junk)
+
+
+ZEMAX = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+SPEOS = (Path(__file__).parent / "data" / "ansys-speos-anisotropicbsdf"
+         / "test_13_planesymmetric_brdf_speos_reference.anisotropicbsdf")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source", [ZEMAX, SPEOS], ids=["zemax", "speos"])
+@pytest.mark.parametrize("to", ["bsdfxml", "speos", "lighttools"])
+def test_third_party_files_convert_to_the_new_formats_within_the_tis_check(tmp_path, source, to):
+    from bsdfkit.tables.to_dataset import convert
+
+    res = convert(source, to, tmp_path / f"out.{to}")
+    assert res.ok, (res.worst_relative_difference, res.tis_original, res.tis_written)
+    assert len(res.incidences_deg) >= 8  # a Klems file holds the 8 of the 13 incidences nearest its band centres

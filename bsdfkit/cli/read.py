@@ -43,8 +43,10 @@ def run(args: argparse.Namespace) -> int:
             c = summary.tis_computed.get(k)
             s = summary.tis_stated.get(k)
             row += f"  {(f'{c[n]:.6g}' if c else '-'):>26}"
-            if s:
+            if s and s[n] == s[n]:  # a format may state the TIS at some incidences only (NaN elsewhere)
                 diff = f"{100.0 * (c[n] / s[n] - 1.0):+.2f}" if c and s[n] else "-"
                 row += f"  {s[n]:>10.6g}  {diff:>8}"
+            elif s:
+                row += f"  {'-':>10}  {'-':>8}"
         print(row)
     return 0

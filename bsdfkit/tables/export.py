@@ -1,4 +1,4 @@
-"""Export a BSDF to a ray-tracer table (TracePro, Zemax, ASAP-style) and read such tables back.
+"""Export a BSDF to a table of any registered format (bsdfkit.tables.registry) and read such tables back.
 
 The data flow is one direction::
 
@@ -543,11 +543,19 @@ def export(
             holding = [k for k, c in enumerate(file_theta) if held and abs(held.get(float(c), np.nan) - t) <= 1e-9]
             index.append(holding[0] if holding else int(np.argmin(np.abs(file_theta - t))))
         tis_table = {s: [vals[k] for k in index] for s, vals in tis_table.items()}
+    written_mask = np.ones(theta.size, dtype=bool)
+    if held:  # incidences the format's grid does not hold (a Klems band holds the source incidence nearest it)
+        written_mask = np.array([any(abs(v - t) <= 1e-9 for v in held.values()) for t in theta])
     if src.engine_tis is not None:
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:
         tis_source = reference or {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
     peaks = _peak_check(fn, to, theta, sides, path, settings) if "radial" in grid_info else {}
+    if not written_mask.all():
+        grid_info["incidences_not_held_deg"] = [float(t) for t in theta[~written_mask]]
+        tis_source = {s: [v for v, w in zip(vals, written_mask) if w] for s, vals in tis_source.items()}
+        tis_table = {s: [v for v, w in zip(vals, written_mask) if w] for s, vals in tis_table.items()}
+        theta = theta[written_mask]
     return ExportResult(
         format=to, path=str(path), sides=tuple(sides), incidences_deg=tuple(float(t) for t in theta),
         tis_source={s: [float(v) for v in vals] for s, vals in tis_source.items()},
@@ -596,7 +604,8 @@ def read_any(path: str | Path) -> FileSummary:
                 if k != "total"}
     if "total" in summary.tis_computed:
         computed["total"] = [float(sum(v)) for v in zip(*[computed[k] for k in computed])]
-    details = dict(summary.details, tis_format_quadrature=summary.tis_computed,
+    own = {} if summary.details.get("own_quadrature") is False else {"tis_format_quadrature": summary.tis_computed}
+    details = dict(summary.details, **own,
                    tis_rule="bsdfkit.reduction.hemispherical on the file's nodes (as bsdfkit tis)")
     return replace(summary, tis_computed=computed, details=details)
 

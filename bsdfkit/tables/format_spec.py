@@ -60,6 +60,9 @@ class VendorTable:
     grids: tuple[VendorGrid, ...]
     wavelength_nm: float | None
     details: dict[str, Any] = field(default_factory=dict)
+    #: side -> (theta_i [deg], TIS [1]): the format's own scale rule (Speos): every value of the side is scaled so
+    #: that the hemispherical engine's TIS at that incidence equals the stated TIS
+    normalise: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

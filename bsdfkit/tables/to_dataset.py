@@ -293,6 +293,10 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
                        comments=tuple(settings.comments) + (f"converted by bsdfkit from {Path(label).name}",))
     result = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0], path,
                     force, settings=settings)
+    dropped = [t for t in thetas if not any(abs(t - u) <= _MATCH_DEG for u in result.incidences_deg)]
+    if dropped:  # a format on its own incidences (BSDF XML: the Klems band centres) holds only some of them
+        notes.append(f"incidences not held by the {to} grid (not compared): " + ", ".join(f"{t:g}" for t in dropped))
+        thetas = [t for t in thetas if t not in dropped]
     if engine_tis is not None:  # a dataset: what bsdfkit tis reports for it, at the written wavelength
         tis_original = {s: [engine_tis[s][[round(u, 6) for u in src_t[s]].index(round(t, 6))] for t in thetas]
                         for s in sides}

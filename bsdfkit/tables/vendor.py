@@ -17,7 +17,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core import frames
-from bsdfkit.core.errors import InputError
+from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.measurement.table import (
     DEFAULT_RELATIVE_STD,
     ZERO_POLICIES,
@@ -25,6 +25,7 @@ from bsdfkit.measurement.table import (
     records_dataset,
     side_of_quantity,
 )
+from bsdfkit.reduction.hemispherical import hemispherical
 from bsdfkit.tables import grids, registry
 from bsdfkit.tables.registry import VendorGrid, VendorTable, sniff_format
 
@@ -168,7 +169,39 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
                                          "reader": "bsdfkit.tables.to_dataset"}))
     if lam is None:
         ds.attrs["wavelength_note"] = "not stated by the file; pass --wavelength NM (NaN = unknown)"
-    return ds
+    return _normalised(ds, vendor, path)
+
+
+def _normalised(ds: xr.Dataset, vendor: VendorTable, path: str) -> xr.Dataset:
+    """The format's own scale rule (``VendorTable.normalise``): each side scaled so that the hemispherical
+    engine's TIS at the stated incidence equals the stated TIS (Speos: the table is a shape, the spectrum its
+    scale)."""
+    if not vendor.normalise:
+        return ds
+    sides = np.asarray(ds["side"].values).astype(str)
+    scale = np.ones(sides.size)
+    notes = {}
+    for side, (theta, stated) in vendor.normalise.items():
+        if side not in set(sides):
+            continue
+        have = np.unique(np.asarray(ds["theta_i"].values)[sides == side])
+        if not np.any(np.abs(have - theta) <= 1e-6):
+            raise FormatError("the spectrum's incidence is not one of the table's", file=path,
+                              field=f"{side}: spectrum incidence", expected=f"one of {have.tolist()}", got=theta)
+        res = hemispherical(ds, theta_i=[float(theta)], sides=(side,), errors=False)
+        raw = float(res[0].band_average()["value"]) if res else 0.0
+        if not raw > 0:
+            raise FormatError("the table integrates to zero where the spectrum is stated", file=path,
+                              field=f"{side}: table at theta_i={theta:g}", expected="a positive integral")
+        scale[sides == side] = stated / raw
+        notes[side] = {"theta_i_deg": float(theta), "tis_stated": float(stated), "tis_table": raw,
+                       "scale": float(stated / raw)}
+    out = ds.copy()
+    for name in ("bsdf", "bsdf_std"):
+        if name in out:
+            out[name] = out[name] * xr.DataArray(scale, dims=out[name].dims[:1])
+    out.attrs["normalisation_json"] = _json(notes)
+    return out
 
 
 def _arc_of(theta_i: float, theta_s: NDArray, phi_s: NDArray, perp_line: NDArray) -> NDArray[np.object_]:

@@ -42,6 +42,7 @@ from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.tables import axes_choice, grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.formats.lighttools import is_lighttools_header
 
 __all__ = ["SYMMETRIES", "ZemaxBsdf", "read_zemax", "write_zemax", "zemax_bsdf", "zemax_text"]
 
@@ -421,6 +422,8 @@ def _vendor_table(path: str) -> VendorTable:
 
 
 def _guess_can_open(head: str, path: Path) -> bool:
+    if is_lighttools_header(head):  # the same keywords, but ScatterAzimuth before any Zemax-only one
+        return False
     for line in head.splitlines():
         body = line.split("#", 1)[0].strip()
         if body:
