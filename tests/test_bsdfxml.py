@@ -136,3 +136,20 @@ def test_ingested_xml_integrates_close_to_the_files_own_sum(written):
         engine = tis["tis"].sel(side=side).squeeze().values
         # the engine reconstructs 2 x 2 points per patch of a piecewise-constant file (docs/exports.md §2.4)
         np.testing.assert_allclose(engine, own[side], rtol=0.02)
+
+
+@pytest.mark.slow
+def test_cli_convert_writes_back_blocks_on_request_and_read_reports_them(tmp_path):
+    zemax = ROOT / "tests" / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+    out = tmp_path / "vinyl.xml"
+    done = subprocess.run([sys.executable, "-m", "bsdfkit", "convert", str(zemax), "--to", "bsdfxml", "-o", str(out),
+                           "--xml-back", "mirror", "--wavelength", "550", "--json"], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300)
+    assert done.returncode == 0, done.stderr
+    res = json.loads(done.stdout)
+    assert res["ok"] and "not held" in res["notes"][-1]
+    read = subprocess.run([sys.executable, "-m", "bsdfkit", "read", str(out), "--json"], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120, check=True)
+    summary = json.loads(read.stdout)
+    np.testing.assert_allclose(summary["tis_computed"]["reflection@back"], summary["tis_computed"]["reflection"])
+    assert summary["details"]["wavelength_nm"] == 550.0

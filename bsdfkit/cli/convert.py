@@ -61,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeros", choices=ZERO_POLICIES, default=None, help="for text tables (see bsdfkit ingest)")
     p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
                    help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
+                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
+                        "between its faces)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
@@ -86,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance,
+                              xml_back=args.xml_back,
                               grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)))
     result = convert(
         args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,

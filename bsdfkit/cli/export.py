@@ -68,6 +68,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--incidences", metavar="DEG,DEG,...", help="incidence angles to export (default: the source's)")
     p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
                    help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
+                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
+                        "between its faces)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source, as a fraction "
                         "of the block maximum (default 0.01); the mirror average is written")
@@ -105,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         theta_i_deg=_incidences(args.incidences) if args.incidences else None,
         zemax_symmetry=args.symmetry,
         symmetry_tolerance=args.symmetry_tolerance,
+        xml_back=args.xml_back,
         tracepro=replace(tp, **changes),
         tracepro_scatter=args.tracepro_scatter,
         grid=args.grid,
