@@ -63,6 +63,8 @@ class VendorTable:
     #: side -> (theta_i [deg], TIS [1]): the format's own scale rule (Speos): every value of the side is scaled so
     #: that the hemispherical engine's TIS at that incidence equals the stated TIS
     normalise: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: side -> [(theta_i [deg], TIS [1]), ...]: every incidence scaled to its own stated TIS (Speos .brdf)
+    normalise_each: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

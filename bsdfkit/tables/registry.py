@@ -27,14 +27,14 @@ from bsdfkit.tables.format_spec import (
     WriteJob,
     WriteOutcome,
 )
-from bsdfkit.tables.formats import asap, bsdfxml, lighttools, speos, tracepro, zemax
+from bsdfkit.tables.formats import asap, bsdfxml, lighttools, speos, speosbrdf, tracepro, zemax
 
 __all__ = ["FORMATS", "FileSummary", "TableFormat", "VendorGrid", "VendorTable", "WriteJob", "WriteOutcome",
            "get", "names", "sniff_format", "writable"]
 
 #: every format, in sniffing order (a format whose sniffer would also accept another's files goes later)
 FORMATS: tuple[TableFormat, ...] = (tracepro.FORMAT, zemax.FORMAT, asap.FORMAT, bsdfxml.FORMAT,
-                                     speos.FORMAT, lighttools.FORMAT)
+                                     speos.FORMAT, speosbrdf.FORMAT, lighttools.FORMAT)
 #: bytes handed to the sniffers
 SNIFF_BYTES = 4096
 

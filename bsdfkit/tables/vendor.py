@@ -176,11 +176,26 @@ def _normalised(ds: xr.Dataset, vendor: VendorTable, path: str) -> xr.Dataset:
     """The format's own scale rule (``VendorTable.normalise``): each side scaled so that the hemispherical
     engine's TIS at the stated incidence equals the stated TIS (Speos: the table is a shape, the spectrum its
     scale)."""
-    if not vendor.normalise:
+    if not vendor.normalise and not vendor.normalise_each:
         return ds
     sides = np.asarray(ds["side"].values).astype(str)
+    thetas = np.asarray(ds["theta_i"].values, dtype=np.float64)
     scale = np.ones(sides.size)
-    notes = {}
+    notes: dict[str, Any] = {}
+    for side, pairs in vendor.normalise_each.items():
+        for theta, stated in pairs:
+            rows = (sides == side) & (np.abs(thetas - theta) <= 1e-6)
+            if not rows.any():
+                continue
+            res = hemispherical(ds, theta_i=[float(theta)], sides=(side,), errors=False)
+            raw = float(res[0].band_average()["value"]) if res else 0.0
+            if not raw > 0:
+                if stated > 0:
+                    raise FormatError("the table integrates to zero but states a positive TIS", file=path,
+                                      field=f"{side}: table at theta_i={theta:g}", expected="a positive integral")
+                continue
+            scale[rows] = stated / raw
+            notes[f"{side}@{theta:g}"] = {"tis_stated": float(stated), "tis_table": raw, "scale": float(stated / raw)}
     for side, (theta, stated) in vendor.normalise.items():
         if side not in set(sides):
             continue

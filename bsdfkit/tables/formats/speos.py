@@ -30,8 +30,8 @@ its first incidence as the spectrum, so a bsdfkit file reads back at its own sca
 
 **Spectral rule.** The file holds one table per incidence for all wavelengths; the spectrum scales it. bsdfkit
 writes the BSDF at one wavelength (the exported one, in the comment) and a flat spectrum (350 and 850 nm at the
-same percentage): Speos then treats the sample as grey. A spectral sample needs one file per wavelength or the
-spectral ``.brdf`` (not written by bsdfkit).
+same percentage): Speos then treats the sample as grey. A spectral sample needs one file per wavelength (or the
+``.brdf`` of :mod:`bsdfkit.tables.formats.speosbrdf`, also one wavelength per file as bsdfkit writes it).
 """
 from __future__ import annotations
 
@@ -76,12 +76,12 @@ class SpeosBsdf:
     wavelength_nm: float | None = None
 
 
-def _axis(step: float, stop: float) -> NDArray[np.float64]:
+def speos_axis(step: float, stop: float) -> NDArray[np.float64]:
     n = int(round(stop / step))
     return np.linspace(0.0, stop, n + 1)
 
 
-def _directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+def speos_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
     t, p = np.meshgrid(np.radians(theta_deg), np.radians(phi_deg), indexing="ij")
     return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
 
@@ -91,8 +91,8 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
     """Tables of a BSDF callable on the default grid; the spectrum is the source's TIS at its first incidence
     (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral)."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
-    theta, phi = _axis(THETA_STEP_DEG, 90.0), _axis(PHI_STEP_DEG, 360.0)
-    d = _directions(theta, phi)
+    theta, phi = speos_axis(THETA_STEP_DEG, 90.0), speos_axis(PHI_STEP_DEG, 360.0)
+    d = speos_directions(theta, phi)
     d[..., 2] = np.maximum(d[..., 2], 0.0)
     tables, spectrum = {}, {}
     for side in sides:
@@ -130,7 +130,9 @@ def write_speos(path: str | Path, bsdf: SpeosBsdf, *, force: bool = False) -> Pa
 
 
 # ------------------------------------------------------------------------------------------- reader
-class _Lines:
+class Lines:
+    """Line reader of the Speos text files: FormatError names the file, line and field."""
+
     def __init__(self, text: str, path: str) -> None:
         self.lines = text.splitlines()
         self.k = 0
@@ -166,7 +168,7 @@ class _Lines:
 def read_speos(path: str | Path) -> SpeosBsdf:
     """Read a text ``*.anisotropicbsdf`` (one anisotropy angle). FormatError names the file, line and field."""
     path = str(path)
-    r = _Lines(read_text(path, expected="a Speos anisotropic BSDF file", legacy="latin-1"), path)
+    r = Lines(read_text(path, expected="a Speos anisotropic BSDF file", legacy="latin-1"), path)
     first = r.next("header").strip()
     if first != MAGIC:
         raise FormatError("not a Speos anisotropic BSDF v8.0 file", file=path, line=1, field="header",
