@@ -24,6 +24,7 @@ def written(tmp_path_factory):
                         settings=ExportSettings(theta_i_deg=THETA, wavelength_nm=550.0))
 
 
+@pytest.mark.slow
 def test_round_trip_and_stated_tis(written):
     path, res = written
     summary = read_any(path)
@@ -35,8 +36,16 @@ def test_round_trip_and_stated_tis(written):
     assert read_lighttools(path).wavelength_nm == 550.0
 
 
-def test_the_lobe_sits_at_azimuth_270(written):
-    path, _ = written
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """Reflection at 0 and 45 deg only: enough for the fast tests."""
+    path = tmp_path_factory.mktemp("lt") / "small.bsdf"
+    return path, export(truth_fn, "lighttools", "elastic", "reflection", path,
+                        settings=ExportSettings(theta_i_deg=(0.0, 45.0), wavelength_nm=550.0))
+
+
+def test_the_lobe_sits_at_azimuth_270(small):
+    path, _ = small
     bsdf = read_lighttools(path)
     theta, values, _ = bsdf.blocks[("Front", "reflection")]
     k = int(np.flatnonzero(theta == 45.0)[0])
@@ -44,8 +53,8 @@ def test_the_lobe_sits_at_azimuth_270(written):
     assert (bsdf.azimuth[a], bsdf.radial[r]) == (270.0, 45.0)
 
 
-def test_sniffed_apart_from_zemax(written, tmp_path):
-    path, _ = written
+def test_sniffed_apart_from_zemax(small, tmp_path):
+    path, _ = small
     renamed = tmp_path / "x.txt"
     renamed.write_bytes(path.read_bytes())
     assert registry.sniff_format(renamed) == "lighttools"
@@ -54,8 +63,8 @@ def test_sniffed_apart_from_zemax(written, tmp_path):
     assert [f.name for f in registry.FORMATS if f.guess_can_open(head, path)] == ["lighttools"]
 
 
-def test_bad_values_are_refused_naming_the_line(written, tmp_path):
-    path, _ = written
+def test_bad_values_are_refused_naming_the_line(small, tmp_path):
+    path, _ = small
     lines = path.read_text().splitlines()
     k = next(i for i, line in enumerate(lines) if line.startswith("TIS")) + 3
     lines[k] = lines[k].replace(lines[k].split()[2], "abc", 1)

@@ -34,6 +34,7 @@ def test_ansys_files_give_their_stated_tis_and_agree_with_the_zemax_original():
     assert np.all((ratio[10:] > 0.92) & (ratio[10:] < 1.0))
 
 
+@pytest.mark.slow
 def test_round_trip_within_half_a_percent(tmp_path):
     out = tmp_path / "rt.anisotropicbsdf"
     res = export(truth_fn, "speos", "elastic", "both", out,
