@@ -173,7 +173,8 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
 
 def export(source: Any, to: str, interaction: str, side: str, path: str | Path, force: bool = False, *,
            settings: ExportSettings | None = None, wavelength_nm: float | None = None) -> ExportResult:
-    """Write a TracePro, Zemax or ASAP-style table of a dataset or fit, with the TIS check of the written file.
+    """Write a table of a registered format (TracePro, Zemax, ASAP-style, BSDF XML …) of a dataset or fit, with the
+    TIS check of the written file.
 
     ``wavelength_nm`` [nm] picks one wavelength of a model with a wavelength dimension (e.g. the Lambertian
     model of a reflectance standard, :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance`) or of a
@@ -204,7 +205,7 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
 
 
 def read(path: str | Path) -> FileSummary:
-    """Read a TracePro, Zemax or ASAP-style table back: its grid, stated TIS and recomputed TIS."""
+    """Read a table of any registered format back (sniffed by content): its grid, stated TIS and recomputed TIS."""
     from bsdfkit.tables.export import read_any
 
     return read_any(path)

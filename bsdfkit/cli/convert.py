@@ -1,4 +1,4 @@
-"""``bsdfkit convert IN --to tracepro|zemax|asap -o OUT [--force]``: any readable table or dataset to a
+"""``bsdfkit convert IN --to FORMAT -o OUT [--force]``: any readable table or dataset to a
 ray-tracer table, with the TIS of the written file checked against the source.
 
 IN is a Zemax/Radiant ``.bsdf``, TracePro or ASAP-style file (converted on its own grid), a measured text
@@ -13,9 +13,9 @@ import sys
 
 from bsdfkit.cli._common import check_options, emit_json
 from bsdfkit.cli.ingest import OPTION_RANGES
-from bsdfkit.core.conventions import EXPORT_FORMATS as FORMATS
 from bsdfkit.core.conventions import QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.tables import registry
 
 
 def _floats(text: str, name: str, count: int | None = None) -> tuple[float, ...]:
@@ -37,12 +37,15 @@ def _grid_tis_default(args: argparse.Namespace) -> float | None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("convert", help="convert a BSDF table or dataset to TracePro, Zemax or ASAP-style",
-                       description="Convert any readable BSDF source (Zemax/Radiant .bsdf, TracePro, ASAP-style, "
-                                   "measured text table, raw export, netCDF dataset) to a TracePro, Zemax or "
-                                   "ASAP-style table and compare the TIS of the re-read file with the source's.")
+    formats = registry.names()
+    p = sub.add_parser("convert", help="convert a BSDF table or dataset to another table format "
+                                       f"({', '.join(formats)})",
+                       description="Convert any readable BSDF source (a table of a registered format: "
+                                   f"{', '.join(formats)}; a measured text table, raw export, netCDF dataset) to a "
+                                   "table of a registered format and compare the TIS of the re-read file with "
+                                   "the source's.")
     p.add_argument("source", metavar="IN", help="vendor file, text table, raw export folder or netCDF dataset")
-    p.add_argument("--to", required=True, choices=FORMATS, help="target format")
+    p.add_argument("--to", required=True, choices=formats, help="target format")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.add_argument("--side", choices=("reflection", "transmission", "both"), default=None,
@@ -58,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeros", choices=ZERO_POLICIES, default=None, help="for text tables (see bsdfkit ingest)")
     p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
                    help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
+                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
+                        "between its faces)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
@@ -83,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance,
+                              xml_back=args.xml_back,
                               grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)))
     result = convert(
         args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,

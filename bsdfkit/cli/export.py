@@ -1,4 +1,4 @@
-"""``bsdfkit export SOURCE --to tracepro|zemax|asap [--interaction I] --side S -o PATH [--force]``.
+"""``bsdfkit export SOURCE --to FORMAT [--interaction I] --side S -o PATH [--force]``.
 
 SOURCE is a fit result netCDF (attribute ``model``), a calibrated phosphor scan netCDF (an interaction, reconstructed
 by ``bsdfkit.reduction.tis.hemisphere_bsdf_fn``) or any other measured dataset (elastic scatter, reconstructed by the
@@ -13,6 +13,7 @@ from dataclasses import replace
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.tables import registry
 
 
 def _incidences(text: str) -> tuple[float, ...]:
@@ -52,11 +53,12 @@ def describe_grid(result) -> str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="write a TracePro, Zemax or ASAP-style BSDF table",
-                       description="Write a TracePro, Zemax or ASAP-style BSDF table from a fit result or a "
+    formats = registry.names()
+    p = sub.add_parser("export", help=f"write a BSDF table ({', '.join(formats)})",
+                       description=f"Write a BSDF table ({', '.join(formats)}) from a fit result or a "
                                    "calibrated scan, and report the TIS of source and table (docs/exports.md).")
     p.add_argument("source", metavar="SOURCE", help="fit result or calibrated scan (netCDF)")
-    p.add_argument("--to", required=True, choices=("tracepro", "zemax", "asap"), help="target format")
+    p.add_argument("--to", required=True, choices=formats, help="target format")
     p.add_argument("--interaction", default="", help="interaction of a phosphor scan or fit (bibs, biys, yiys); "
                                                      "'elastic' or nothing for any other sample")
     p.add_argument("--side", default="reflection", choices=("reflection", "transmission", "both"),
@@ -66,6 +68,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--incidences", metavar="DEG,DEG,...", help="incidence angles to export (default: the source's)")
     p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
                    help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
+                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
+                        "between its faces)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source, as a fraction "
                         "of the block maximum (default 0.01); the mirror average is written")
@@ -103,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         theta_i_deg=_incidences(args.incidences) if args.incidences else None,
         zemax_symmetry=args.symmetry,
         symmetry_tolerance=args.symmetry_tolerance,
+        xml_back=args.xml_back,
         tracepro=replace(tp, **changes),
         tracepro_scatter=args.tracepro_scatter,
         grid=args.grid,

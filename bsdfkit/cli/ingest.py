@@ -14,6 +14,7 @@ from bsdfkit.cli._common import check_options, emit_json, warn_dark
 from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
 from bsdfkit.io import atomic
 from bsdfkit.io.text import existing_source
+from bsdfkit.tables import registry
 
 #: numeric options: finite and in these ranges
 OPTION_RANGES = {
@@ -30,8 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "ingest", help="read a raw export, a measured text table or a vendor BSDF file into a netCDF dataset",
         description="Read a raw goniometer export (calibrated), a measured text table (wide or long; comma, "
-                    "semicolon or tab separated) or a Zemax/Radiant .bsdf, TracePro or ASAP-style file into the "
-                    "calibrated BSDF dataset (docs/raw-format.md).")
+                    "semicolon or tab separated) or a BSDF table of a registered format "
+                    f"({', '.join(registry.names())}; sniffed by content) into the calibrated BSDF dataset "
+                    "(docs/raw-format.md).")
     p.add_argument("path", metavar="PATH", help="raw export folder (manifest.toml), text table or vendor file")
     p.add_argument("-o", "--output", required=True, help="netCDF file to write")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")

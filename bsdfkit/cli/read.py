@@ -1,4 +1,5 @@
-"""``bsdfkit read FILE [--json]``: sniff a TracePro, Zemax or ASAP-style table and report its TIS.
+"""``bsdfkit read FILE [--json]``: sniff a table of any registered format (:mod:`bsdfkit.tables.registry`) by its
+content and report its TIS.
 
 JSON keys: ``format``, ``incidences_deg``, ``tis_computed`` and ``tis_stated`` (each a mapping from side
 — or ``total`` for TracePro's energy balance — to one value per incidence), plus ``path`` and ``details``.
@@ -9,11 +10,13 @@ import argparse
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
+from bsdfkit.tables import registry
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("read", help="summarise a TracePro, Zemax or ASAP-style BSDF table",
-                       description="Sniff a TracePro, Zemax or ASAP-style table and report its incidences and "
+    formats = ", ".join(registry.names())
+    p = sub.add_parser("read", help=f"summarise a BSDF table ({formats})",
+                       description=f"Sniff a BSDF table ({formats}) by its content and report its incidences and "
                                    "TIS, recomputed and as stated (docs/exports.md).")
     p.add_argument("file", metavar="FILE", help="table file")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
@@ -40,8 +43,10 @@ def run(args: argparse.Namespace) -> int:
             c = summary.tis_computed.get(k)
             s = summary.tis_stated.get(k)
             row += f"  {(f'{c[n]:.6g}' if c else '-'):>26}"
-            if s:
+            if s and s[n] == s[n]:  # a format may state the TIS at some incidences only (NaN elsewhere)
                 diff = f"{100.0 * (c[n] / s[n] - 1.0):+.2f}" if c and s[n] else "-"
                 row += f"  {s[n]:>10.6g}  {diff:>8}"
+            elif s:
+                row += f"  {'-':>10}  {'-':>8}"
         print(row)
     return 0

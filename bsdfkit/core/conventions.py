@@ -65,5 +65,3 @@ QUANTITIES: tuple[str, ...] = ("brdf", "btdf", "ccbrdf", "ccbtdf", "reflectance-
 DEFAULT_RELATIVE_STD = 0.05
 #: What a table reader does with zero values (:func:`bsdfkit.measurement.table.read_table`).
 ZERO_POLICIES: tuple[str, ...] = ("auto", "keep", "missing")
-#: Ray-tracer table formats written by :mod:`bsdfkit.tables.export`.
-EXPORT_FORMATS: tuple[str, ...] = ("tracepro", "zemax", "asap")

@@ -66,6 +66,7 @@ from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
 from bsdfkit.tables import export as exporter
+from bsdfkit.tables import registry
 
 KNOWN_SECTIONS = {
     "recipe": {"name", "measurement", "description"},
@@ -82,7 +83,9 @@ KNOWN_SECTIONS = {
 MAX_RAYS = 100_000_000
 MAX_STUDY_POINTS = 50
 MAX_ITERATIONS = 1000
-EXPORT_SUFFIX = {"tracepro": "tracepro.txt", "zemax": "zemax.bsdf", "asap": "asap.txt"}
+#: file suffix per writable format of the registry (the first three as before: tracepro.txt, zemax.bsdf, asap.txt)
+EXPORT_SUFFIX = {**{name: name + registry.get(name).extensions[0] for name in registry.writable()},
+                 "tracepro": "tracepro.txt", "zemax": "zemax.bsdf", "asap": "asap.txt"}
 
 
 @dataclass(frozen=True)
@@ -223,7 +226,7 @@ def load_recipe(path: str | Path) -> Recipe:
     exports = ExportOptions(
         interactions=tuple(_choices(exp, "interactions", ("bibs", "biys", "yiys"), path)),
         sides=tuple(_choices(exp, "sides", ("reflection", "transmission"), path)),
-        formats=tuple(_choices(exp, "formats", ("tracepro", "zemax", "asap"), path, default=("tracepro", "zemax"))),
+        formats=tuple(_choices(exp, "formats", registry.writable(), path, default=("tracepro", "zemax"))),
         tolerance=float(_typed(exp, "tolerance", (int, float), path, "exports.tolerance", 0.005)),
     )
     tr = data.get("trace")
@@ -463,10 +466,11 @@ def stage_exports(state: RunState) -> None:
     def writer(inter: str, side: str, fmt: str):
         def write(path: Path, force: bool) -> None:
             result = exporter.export(scan, fmt, inter, side, path, force)
-            summary = exporter.read_any(path)
-            for k, th in enumerate(summary.incidences_deg):
+            # the export re-read the file as bsdfkit read does (ExportResult.tis_table, per exported incidence the
+            # value of the file incidence that holds it: the same numbers as read_any for the table formats)
+            for k, th in enumerate(result.incidences_deg):
                 src = result.tis_source[side][k]
-                got = summary.tis_computed[side][k]
+                got = result.tis_table[side][k]
                 rel = abs(got - src) / src if src else abs(got)
                 checks.append({"file": f"exports/{path.name}", "interaction": inter, "side": side, "format": fmt,
                                "theta_i_deg": th, "tis_source": src, "tis_reread": got, "relative_difference": rel,

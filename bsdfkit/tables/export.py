@@ -1,4 +1,4 @@
-"""Export a BSDF to a ray-tracer table (TracePro, Zemax, ASAP-style) and read such tables back.
+"""Export a BSDF to a table of any registered format (bsdfkit.tables.registry) and read such tables back.
 
 The data flow is one direction::
 
@@ -26,23 +26,31 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core import frames
-from bsdfkit.core.conventions import EXPORT_FORMATS, WAVELENGTH_RANGE_NM
+from bsdfkit.core.conventions import WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.fit import plausibility
 from bsdfkit.io import atomic
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
 from bsdfkit.reduction.hemispherical import elastic_source, hemispherical, reduction_kind
 from bsdfkit.reduction.tis import CENTER, hemisphere_bsdf_fn
-from bsdfkit.tables import grids
-from bsdfkit.tables.formats import asap, tracepro, zemax
-from bsdfkit.tables.vendor import sniff_format, vendor_dataset
+from bsdfkit.tables import grids, registry
+from bsdfkit.tables.axes_choice import (
+    FALLBACK,  # noqa: F401  (re-exported: the grid modes ExportResult.grid reports)
+    FALLBACK_RECHECK,
+    RECHECK_FACTOR,
+    RECHECK_ROUNDS,
+    plane_symmetric_grid,
+)
+from bsdfkit.tables.formats import asap, tracepro
+from bsdfkit.tables.registry import FileSummary, WriteJob, sniff_format
+from bsdfkit.tables.vendor import vendor_dataset
 
 __all__ = [
     "FORMATS",
@@ -57,13 +65,15 @@ __all__ = [
     "sniff_format",
 ]
 
-FORMATS: tuple[str, ...] = EXPORT_FORMATS
+#: the writable formats of the registry (:mod:`bsdfkit.tables.registry`)
+FORMATS: tuple[str, ...] = registry.writable()
 #: Parameter names of every registered BSDF model (:mod:`bsdfkit.models.registry`).
 FIT_MODELS: dict[str, tuple[str, ...]] = {name: m.parameter_names for name, m in BSDF_MODELS.items()}
 _SIDE_CHOICES = ("reflection", "transmission", "both")
 _THETA_MATCH_DEG = 1e-9
 
-ExportFormat = Literal["tracepro", "zemax", "asap"]
+#: a name of :func:`bsdfkit.tables.registry.writable`
+ExportFormat = str
 #: ``auto``: tolerance-driven axes (:class:`grids.GridTolerance`); ``fixed``: the fine default axes.
 GRID_MODES: tuple[str, ...] = ("auto", "fixed")
 
@@ -109,11 +119,16 @@ class ExportSettings:
     wavelength_nm: float | None = None
     grid: str = "auto"
     grid_tolerance: grids.GridTolerance = field(default_factory=grids.GridTolerance)
+    #: BSDF XML: ``none`` (front blocks only) or ``mirror`` (Back blocks = Front: a sample symmetric between faces)
+    xml_back: str = "none"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
             raise ValidationError("unknown grid resolution", field="grid", expected=" or ".join(GRID_MODES),
                                   got=self.grid)
+        if self.xml_back not in ("none", "mirror"):
+            raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
+                                  got=self.xml_back)
         if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
             raise ValidationError("unsupported Zemax symmetry", field="zemax_symmetry",
                                   expected="PlaneSymmetrical or Asymmetrical", got=self.zemax_symmetry)
@@ -173,29 +188,6 @@ class ExportResult:
                 "size_bytes": self.size_bytes, "grid": self.grid, "peak_source": self.peak_source,
                 "peak_table": self.peak_table, "peak_error": self.peak_error,
                 "worst_peak_error": self.worst_peak_error}
-
-
-@dataclass(frozen=True)
-class FileSummary:
-    """Summary of a table file: its format, incidences and TIS (recomputed and, where stated, as stated).
-
-    ``tis_computed`` / ``tis_stated`` map a key to one value per entry of ``incidences_deg``. Keys are the
-    sides (``reflection``, ``transmission``); TracePro files state only the total scatter implied by their
-    energy balance (1 − Abso − Refl − Tran), reported under ``total`` (``tis_computed['total']`` is the
-    sum of the sides, for comparison). Several Zemax sample rotations
-    get keys ``<side>@rotation=<deg>``.
-    """
-
-    format: str
-    path: str
-    incidences_deg: list[float]
-    tis_computed: dict[str, list[float]]
-    tis_stated: dict[str, list[float]]
-    details: dict[str, Any] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"format": self.format, "path": self.path, "incidences_deg": self.incidences_deg,
-                "tis_computed": self.tis_computed, "tis_stated": self.tis_stated, "details": self.details}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -406,124 +398,45 @@ def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
 # --------------------------------------------------------------------------------------------------
 # export
 # --------------------------------------------------------------------------------------------------
-def _plane_symmetric_grid(
-    fn: BsdfFn, theta: NDArray, side: str, axes: grids.SpecularAxes, tolerance: float
-) -> tuple[xr.DataArray, float]:
-    """Specular grid for a PlaneSymmetrical file: the mirror average (f(a) + f(360° − a))/2 of the source.
-
-    Plane symmetry is a property the *source* must have; measured reconstructions hold it only to their
-    noise. The deviation max|f(a) − f(360° − a)| / max f (per incidence block) is returned; above
-    ``tolerance`` the export is refused (use Asymmetrical). The average leaves the TIS unchanged (the
-    projected solid angle is symmetric under the mirror y → −y).
-    """
-    mirrored = tuple(sorted({float(np.mod(360.0 - a, 360.0)) for a in axes.azimuth_deg}))
-    half = grids.specular_grid(fn, theta, side, axes)
-    full = grids.specular_grid(fn, theta, side, grids.SpecularAxes(axes.radial_deg, mirrored))
-    mirror = np.stack([full.sel(azimuth=float(np.mod(360.0 - a, 360.0))).values for a in axes.azimuth_deg], axis=-2)
-    scale = np.max(half.values, axis=(-1, -2), keepdims=True)
-    deviation = np.abs(half.values - mirror) / np.where(scale > 0, scale, 1.0)
-    worst = float(np.max(deviation))
-    if worst > tolerance:
-        _, t, k, _ = np.unravel_index(int(np.argmax(deviation)), deviation.shape)
-        a = axes.azimuth_deg[k]
-        raise ValidationError(
-            f"source is not plane-symmetric at theta_i={theta[t]:g} deg (azimuth {a:g} vs {np.mod(360 - a, 360):g})",
-            field="zemax_symmetry", expected=f"deviation <= {tolerance:g} of the block maximum, or Asymmetrical",
-            got=f"{worst:.3g}",
-        )
-    return half.copy(data=0.5 * (half.values + mirror)), worst
-
-
-#: Grid mode reported when the auto grid would need more nodes than the fixed grid: the fixed grid is written.
-FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
-#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS azimuth doublings.
-FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
-#: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
-#: direct integral of the source callable; else its azimuths are doubled (at most RECHECK_ROUNDS times).
-RECHECK_FACTOR = 2.0
-RECHECK_ROUNDS = 2
-
-
-def _grid_info(mode: str, n_radial: int, n_azimuth: int, settings: ExportSettings) -> dict[str, Any]:
-    info: dict[str, Any] = {"mode": mode, "radial": n_radial, "azimuth": n_azimuth}
-    if mode != "fixed" and mode != "given":
-        info.update(tis_rtol=settings.grid_tolerance.tis_rtol, peak_rtol=settings.grid_tolerance.peak_rtol)
-    return info
-
-
-def _harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], settings: ExportSettings,
-                       zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
-    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
-    if settings.harvey_shack_axes is not None:
-        axes, mode = settings.harvey_shack_axes, "given"
-    elif settings.grid == "fixed":
-        axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
-    else:
-        fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
-        auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
-                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg))
-        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
-    return axes, _grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
-
-
-def _specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
-                   settings: ExportSettings) -> tuple[grids.SpecularAxes, dict[str, Any]]:
-    """The Zemax axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
-    symmetric = settings.zemax_symmetry == "PlaneSymmetrical"
-    if settings.specular_axes is not None:
-        axes, mode = settings.specular_axes, "given"
-    elif settings.grid == "fixed":
-        axes, mode = grids.SpecularAxes.default(plane_symmetric=symmetric), "fixed"
-    else:
-        fixed = grids.SpecularAxes.default(plane_symmetric=symmetric)
-        auto = grids.auto_specular_axes(fn, theta, sides, settings.grid_tolerance, symmetric,
-                                        max_nodes=len(fixed.radial_deg) * len(fixed.azimuth_deg))
-        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
-    return axes, _grid_info(mode, len(axes.radial_deg), len(axes.azimuth_deg), settings)
-
-
 def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence[str], path: str | Path,
                 settings: ExportSettings) -> dict[str, dict[str, list[float]]]:
     """Peak of the lobe of the written file against the source's (see :attr:`ExportResult.peak_error`).
 
-    The table is read back with its format's reader; the source is evaluated at the table's nodes and at the
+    The table is read back with its format's reader (its registry ``vendor_table``); the source is evaluated at
+    the table's nodes and at the
     midpoints of its radial segments on every written azimuth (the mirror average for a PlaneSymmetrical Zemax
     file, which is what that file holds). Both peaks are maxima over the lobe's core
     (:func:`bsdfkit.tables.grids.lobe_core`: from the specular direction outward while the BSDF stays at least
     half its specular value), so a peak the table's nodes step over is seen.
     """
-    if to == "zemax":
-        bsdf = zemax.read_zemax(path)
-        table = bsdf.table.isel(sample_rotation=0).values[None]  # (side, theta, azimuth, radial)
-        radial = np.asarray(bsdf.table["radial"].values, dtype=np.float64)
-        azimuth = tuple(float(a) for a in bsdf.table["azimuth"].values)
-        mids = 0.5 * (radial[:-1] + radial[1:])
-        probe = grids.SpecularAxes(tuple(np.sort(np.concatenate([radial, mids])).tolist()), azimuth)
-        if settings.zemax_symmetry == "PlaneSymmetrical":
-            src = np.stack([_plane_symmetric_grid(fn, theta, s, probe, 1.0)[0].values[0] for s in sides])
+    vendor = registry.get(to).vendor_table(str(path))
+    by_side = {g.side: g for g in vendor.grids}
+    first = vendor.grids[0]
+    # (side, theta, azimuth, radial); a side the file leaves all zero (TracePro's other column) is zero
+    table = np.stack([np.asarray(by_side[s].values, dtype=np.float64) if s in by_side
+                      else np.zeros_like(np.asarray(first.values, dtype=np.float64)) for s in sides])
+    radial = np.asarray(first.first, dtype=np.float64)
+    mids = 0.5 * (radial[:-1] + radial[1:])
+    probe_radial = tuple(np.sort(np.concatenate([radial, mids])).tolist())
+    if first.kind == "specular":
+        azimuth = tuple(float(a) for a in first.azimuth)
+        probe = grids.SpecularAxes(probe_radial, azimuth)
+        if first.plane_symmetric:
+            src = np.stack([plane_symmetric_grid(fn, theta, s, probe, 1.0)[0].values[0] for s in sides])
         else:
             src = grids.specular_grid(fn, theta, sides, probe).values
         horizon = grids.horizon_radial(theta[:, None, None], np.asarray(azimuth)[None, :, None])
         inside = np.radians(radial)[None, None, :] <= horizon
         mid_in = np.radians(mids)[None, None, :] <= horizon
-    else:
-        if to == "tracepro":
-            prop = tracepro.read_tracepro(path)
-            if prop.table is None:
-                return {}
-            read, zero = prop.table, prop.options.zero_azimuth_deg
-        else:
-            read, zero = asap.read_asap(path).table, 0.0
-        read = read.sel(side=list(sides))
-        table = np.swapaxes(read.values, -1, -2)  # (side, theta, psi, rho)
-        radial = np.asarray(read["rho"].values, dtype=np.float64)
-        psi = np.asarray(read["psi"].values, dtype=np.float64)
-        mids = 0.5 * (radial[:-1] + radial[1:])
-        probe = grids.HarveyShackAxes(tuple(np.sort(np.concatenate([radial, mids])).tolist()), tuple(psi.tolist()),
-                                      zero)
+    elif first.kind == "harvey_shack":
+        psi = np.asarray(first.azimuth, dtype=np.float64)
+        zero = float(first.zero_azimuth_deg)
+        probe = grids.HarveyShackAxes(probe_radial, tuple(psi.tolist()), zero)
         src = np.swapaxes(grids.harvey_shack_grid(fn, theta, sides, probe).values, -1, -2)
         edge = grids.rho_max(theta[:, None, None], psi[None, :, None] + zero)
         inside, mid_in = radial[None, None, :] <= edge, mids[None, None, :] <= edge
+    else:
+        return {}
     # the lobe's core on the written nodes; its midpoints belong to it when both ends do
     core = grids.lobe_core(table, np.broadcast_to(inside, table.shape))
     core_src = np.zeros(src.shape, dtype=bool)
@@ -539,18 +452,6 @@ def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence
         out["table"][s] = [float(v) for v in peak_tab[k]]
         out["error"][s] = [float(v) for v in err[k]]
     return out
-
-
-def _abg_rows(params: Sequence[asap.AbgParameters], side: str, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(A, B, g) per exported incidence for ``side`` from the fit's parameter list."""
-    rows = []
-    for t in theta:
-        match = [p for p in params if p.side == side and abs(p.theta_i_deg - t) <= _THETA_MATCH_DEG]
-        if not match:
-            raise ValidationError("no fitted ABg parameters at this incidence", field="theta_i",
-                                  expected=f"one of {sorted({p.theta_i_deg for p in params})}", got=float(t))
-        rows.append([match[0].a, match[0].b, match[0].g])
-    return np.array(rows)
 
 
 def export(
@@ -577,8 +478,10 @@ def export(
         raise ValidationError("unknown export format", field="to", expected=" | ".join(FORMATS), got=to)
     if side not in _SIDE_CHOICES:
         raise ValidationError("unknown side", field="side", expected=" | ".join(_SIDE_CHOICES), got=side)
-    if to == "zemax" and side == "both":
-        raise ValidationError("a Zemax BSDF file holds one ScatterType; export each side to its own file",
+    fmt = registry.get(to)
+    if fmt.sides_per_file == 1 and side == "both":
+        raise ValidationError(f"a {fmt.title} file holds one side (one ScatterType); export each side to its own "
+                              "file",
                               field="side", expected="reflection or transmission", got=side)
     # before computing: existing output, output that is the source itself (refused even with force), writability
     atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
@@ -588,48 +491,19 @@ def export(
     fn = _dispatch(src.fns)
     comments = (f"source: {src.description}",) + tuple(settings.comments)
     deviation: float | None = None
-    grid_info: dict[str, Any] = {"mode": "none (TracePro ABg property)"}
+    grid_info: dict[str, Any] = {}
     written_axes: list[Any] = [None]
 
     def write(settings: ExportSettings, force: bool) -> None:
         nonlocal deviation, grid_info
-        if to == "tracepro":
-            opts = settings.tracepro
-            if settings.tracepro_scatter == "abg":
-                if not src.abg:
-                    raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
-                                          expected="table for this source", got="abg")
-                by_side = {s: _abg_rows(src.abg, s, theta) for s in sides}
-                prop = tracepro.abg_property(
-                    theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
-                    specular_reflectance=settings.specular_reflectance,
-                    specular_transmittance=settings.specular_transmittance,
-                    scatter_excess_allowed=src.tis_excess_allowed,
-                )
-            else:
-                axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, opts.zero_azimuth_deg)
-                written_axes[0] = axes
-                grid = grids.harvey_shack_grid(fn, theta, sides, axes)
-                prop = tracepro.table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
-                                               specular_transmittance=settings.specular_transmittance,
-                                               scatter_excess_allowed=src.tis_excess_allowed)
-            tracepro.write_tracepro(path, prop, force=force, generated_at=generated_at)
-        elif to == "zemax":
-            axes, grid_info = _specular_axes(fn, theta, sides, settings)
-            written_axes[0] = axes
-            if settings.zemax_symmetry == "PlaneSymmetrical":
-                grid, deviation = _plane_symmetric_grid(fn, theta, side, axes, settings.symmetry_tolerance)
-            else:
-                grid = grids.specular_grid(fn, theta, side, axes)
-            bsdf = zemax.zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=comments)
-            zemax.write_zemax(path, bsdf, force=force, generated_at=generated_at)
-        else:
-            axes, grid_info = _harvey_shack_axes(fn, theta, sides, settings, 0.0)
-            written_axes[0] = axes
-            grid = grids.harvey_shack_grid(fn, theta, sides, axes)
-            chosen = [p for p in src.abg if np.any(np.abs(theta - p.theta_i_deg) <= _THETA_MATCH_DEG)]
-            table = asap.asap_table(grid, abg=chosen, comments=comments)
-            asap.write_asap(path, table, force=force, generated_at=generated_at)
+        assert fmt.write is not None
+        outcome = fmt.write(WriteJob(fn=fn, theta=theta, side=side, sides=tuple(sides), settings=settings,
+                                     abg=src.abg, tis_excess_allowed=src.tis_excess_allowed, comments=comments,
+                                     path=path, force=force, generated_at=generated_at))
+        written_axes[0] = outcome.axes
+        grid_info = dict(outcome.grid)
+        if outcome.plane_symmetry_deviation is not None:
+            deviation = outcome.plane_symmetry_deviation
 
     write(settings, force)
     reference: dict[str, list[float]] | None = None
@@ -676,11 +550,29 @@ def export(
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
+    held = grid_info.get("klems_incidence_map_deg")
+    if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):
+        # a file on its own incidences (BSDF XML: the Klems band centres): each exported incidence is compared
+        # with the file incidence that holds it (else the nearest)
+        file_theta = np.asarray(reread.incidences_deg, dtype=np.float64)
+        index = []
+        for t in theta:
+            holding = [k for k, c in enumerate(file_theta) if held and abs(held.get(float(c), np.nan) - t) <= 1e-9]
+            index.append(holding[0] if holding else int(np.argmin(np.abs(file_theta - t))))
+        tis_table = {s: [vals[k] for k in index] for s, vals in tis_table.items()}
+    written_mask = np.ones(theta.size, dtype=bool)
+    if held:  # incidences the format's grid does not hold (a Klems band holds the source incidence nearest it)
+        written_mask = np.array([any(abs(v - t) <= 1e-9 for v in held.values()) for t in theta])
     if src.engine_tis is not None:
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:
         tis_source = reference or {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
     peaks = _peak_check(fn, to, theta, sides, path, settings) if "radial" in grid_info else {}
+    if not written_mask.all():
+        grid_info["incidences_not_held_deg"] = [float(t) for t in theta[~written_mask]]
+        tis_source = {s: [v for v, w in zip(vals, written_mask) if w] for s, vals in tis_source.items()}
+        tis_table = {s: [v for v, w in zip(vals, written_mask) if w] for s, vals in tis_table.items()}
+        theta = theta[written_mask]
     return ExportResult(
         format=to, path=str(path), sides=tuple(sides), incidences_deg=tuple(float(t) for t in theta),
         tis_source={s: [float(v) for v in vals] for s, vals in tis_source.items()},
@@ -711,7 +603,8 @@ def file_tis(path: str | Path, incidences_deg: Sequence[float]) -> dict[str, lis
 
 
 def read_any(path: str | Path) -> FileSummary:
-    """Read a TracePro, Zemax or ASAP-style table and summarise incidences and TIS (see :class:`FileSummary`).
+    """Read a table of any registered format (:mod:`bsdfkit.tables.registry`) and summarise incidences and TIS
+    (see :class:`FileSummary`).
 
     ``tis_computed`` is the engine's integral of the file's nodes (:func:`file_tis`, one number for one BSDF
     whatever the path); the format's own quadrature on its native grid is kept in
@@ -721,58 +614,19 @@ def read_any(path: str | Path) -> FileSummary:
     if any("@rotation=" in k for k in summary.tis_computed):
         summary.details["tis_rule"] = "format quadrature (several sample rotations)"
         return summary
-    if summary.format == "tracepro" and summary.details.get("scatter") != 5:
-        summary.details["tis_rule"] = "the model's own integral (a TracePro ABg property holds no table)"
+    if "tis_rule" in summary.details:  # the format's own rule (a TracePro ABg property holds no table)
         return summary
     engine = file_tis(path, summary.incidences_deg)
     computed = {k: engine.get(k, [0.0] * len(summary.incidences_deg)) for k in summary.tis_computed
                 if k != "total"}
     if "total" in summary.tis_computed:
         computed["total"] = [float(sum(v)) for v in zip(*[computed[k] for k in computed])]
-    details = dict(summary.details, tis_format_quadrature=summary.tis_computed,
+    own = {} if summary.details.get("own_quadrature") is False else {"tis_format_quadrature": summary.tis_computed}
+    details = dict(summary.details, **own,
                    tis_rule="bsdfkit.reduction.hemispherical on the file's nodes (as bsdfkit tis)")
     return replace(summary, tis_computed=computed, details=details)
 
 
 def _read_format(path: str | Path) -> FileSummary:
-    fmt = sniff_format(path)
-    path = str(path)
-    if fmt == "tracepro":
-        prop = tracepro.read_tracepro(path)
-        computed = prop.tis_computed()
-        theta = prop.theta_i_deg
-        if prop.table is not None:
-            theta = prop.table["theta_i"].values
-        return FileSummary(
-            format=fmt, path=path, incidences_deg=_floats(theta),
-            tis_computed={**{s: _floats(v) for s, v in computed.items()},
-                          "total": _floats(sum(computed.values()))},
-            tis_stated={"total": _floats(prop.tis_stated())},
-            details={"scatter": prop.scatter, "name": prop.options.name,
-                     "zero_azimuth_deg": prop.options.zero_azimuth_deg,
-                     "absorptance": _floats(prop.absorptance),
-                     "table_shape": None if prop.table is None else dict(prop.table.sizes)},
-        )
-    if fmt == "zemax":
-        bsdf = zemax.read_zemax(path)
-        computed, stated = bsdf.tis_computed(), bsdf.tis_stated
-        rotations = _floats(bsdf.table["sample_rotation"].values)
-        keys = [bsdf.side] if len(rotations) == 1 else [f"{bsdf.side}@rotation={r:g}" for r in rotations]
-        return FileSummary(
-            format=fmt, path=path, incidences_deg=_floats(bsdf.table["theta_i"].values),
-            tis_computed={k: _floats(computed.values[r]) for r, k in enumerate(keys)},
-            tis_stated={k: _floats(stated.values[r]) for r, k in enumerate(keys)},
-            details={"symmetry": bsdf.symmetry, "scatter_type": bsdf.scatter_type, "source": bsdf.source,
-                     "table_shape": dict(bsdf.table.sizes)},
-        )
-    table = asap.read_asap(path)
-    computed = table.tis_computed()
-    sides = [str(s) for s in table.table["side"].values]
-    return FileSummary(
-        format=fmt, path=path, incidences_deg=_floats(table.table["theta_i"].values),
-        tis_computed={s: _floats(computed.sel(side=s).values) for s in sides},
-        tis_stated={s: _floats(table.tis_stated.sel(side=s).values) for s in sides},
-        details={"abg": [vars(p) for p in table.abg], "harvey": [vars(p) for p in table.harvey],
-                 "table_shape": dict(table.table.sizes)},
-    )
-
+    """The summary of the file's own format (sniffed by content, :func:`bsdfkit.tables.registry.sniff_format`)."""
+    return registry.get(sniff_format(path)).summarise(str(path))

@@ -3,7 +3,7 @@
 * :func:`source_kind` tells a raw-scan folder, a netCDF dataset, a vendor file and a text table apart;
   :func:`ingest` reads any of them into the calibrated dataset (``bsdfkit ingest``, :func:`bsdfkit.api.ingest`;
   vendor files by :func:`bsdfkit.tables.vendor.vendor_dataset`).
-* :func:`convert` writes any readable source as a TracePro, Zemax or ASAP-style table (``bsdfkit convert``)
+* :func:`convert` writes any readable source as a table of any registered format (``bsdfkit convert``)
   and checks the TIS of the re-read file against the source's. Elastic data — a vendor file, a text table, a
   dataset — are reconstructed once by :mod:`bsdfkit.reduction.hemispherical` (``elastic_source``): the written
   table samples that reconstruction, the source TIS is the value ``bsdfkit tis`` and ``bsdfkit read`` report,
@@ -32,14 +32,17 @@ from bsdfkit.measurement.table import (
 )
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
+from bsdfkit.tables import registry
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
 from bsdfkit.tables.grids import GridTolerance
-from bsdfkit.tables.vendor import sniff_format, vendor_dataset
+from bsdfkit.tables.registry import sniff_format
+from bsdfkit.tables.vendor import vendor_dataset
 
 __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "ingest",
            "convert", "TABLE_OPTIONS"]
 
-VENDOR_FORMATS: tuple[str, ...] = ("zemax", "tracepro", "asap")
+#: the readable formats of the registry (:mod:`bsdfkit.tables.registry`)
+VENDOR_FORMATS: tuple[str, ...] = registry.names()
 #: Options :func:`ingest` passes to the text-table and vendor readers.
 TABLE_OPTIONS = ("quantity", "side", "relative_std", "wavelength", "incidence", "phi_i", "zeros", "sample")
 _NETCDF_MAGIC = (b"\x89HDF", b"CDF\x01", b"CDF\x02")
@@ -50,7 +53,8 @@ BsdfFn = Callable[[float, str, NDArray[np.float64]], NDArray[np.float64]]
 
 # ------------------------------------------------------------------------------------------- sniffing
 def source_kind(path: str | Path) -> str:
-    """``raw-scan`` | ``netcdf`` | ``zemax`` | ``tracepro`` | ``asap`` | ``table`` (any other text file)."""
+    """``raw-scan`` | ``netcdf`` | a registered table format (``zemax``, ``tracepro``, ``asap`` …,
+    :mod:`bsdfkit.tables.registry`) | ``table`` (any other text file)."""
     p = existing_source(path)
     if p.is_dir():
         return "raw-scan"
@@ -263,9 +267,9 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         if s not in fns:
             raise InputError("the source holds no data for this side", file=label, field="--side",
                              expected=" or ".join(fns), got=s)
-    if to == "zemax" and len(sides) > 1:
-        raise InputError("a Zemax file holds one side; the source has both", file=label, field="--side",
-                         expected="--side reflection or --side transmission", got="both")
+    if registry.get(to).sides_per_file == 1 and len(sides) > 1:
+        raise InputError(f"a {registry.get(to).title} file holds one side; the source has both", file=label,
+                         field="--side", expected="--side reflection or --side transmission", got="both")
     if theta_i_deg is not None:
         wanted = [float(t) for t in theta_i_deg]
         missing = [t for t in wanted if not any(abs(t - u) <= _MATCH_DEG for u in thetas)]
@@ -278,10 +282,16 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         tp = replace(tp, wavelength_um=float(chosen_lambda) / 1000.0)
     elif to == "tracepro":
         notes.append(f"wavelength unknown: TracePro Wavelength column set to {tp.wavelength_um:g} um")
+    if chosen_lambda is not None and np.isfinite(chosen_lambda) and settings.wavelength_nm is None:
+        settings = replace(settings, wavelength_nm=float(chosen_lambda))  # the label of a one-wavelength table
     settings = replace(settings, theta_i_deg=tuple(thetas), tracepro=tp,
                        comments=tuple(settings.comments) + (f"converted by bsdfkit from {Path(label).name}",))
     result = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0], path,
                     force, settings=settings)
+    dropped = [t for t in thetas if not any(abs(t - u) <= _MATCH_DEG for u in result.incidences_deg)]
+    if dropped:  # a format on its own incidences (BSDF XML: the Klems band centres) holds only some of them
+        notes.append(f"incidences not held by the {to} grid (not compared): " + ", ".join(f"{t:g}" for t in dropped))
+        thetas = [t for t in thetas if t not in dropped]
     if engine_tis is not None:  # a dataset: what bsdfkit tis reports for it, at the written wavelength
         tis_original = {s: [engine_tis[s][[round(u, 6) for u in src_t[s]].index(round(t, 6))] for t in thetas]
                         for s in sides}

@@ -1,15 +1,14 @@
-"""Vendor BSDF files (Zemax/Radiant ``.bsdf``, TracePro Scatter 5, bsdfkit ASAP-style) as calibrated datasets.
+"""Vendor BSDF files (any format of :mod:`bsdfkit.tables.registry`) as calibrated datasets.
 
-:func:`sniff_format` tells the formats apart by content; :func:`vendor_dataset` turns every table node above the
-horizon into one record of the calibrated-dataset schema (:func:`bsdfkit.measurement.table.records_dataset`), in
-the sample frame, so that the hemispherical engine of :mod:`bsdfkit.reduction.hemispherical` integrates a vendor
-file exactly as it integrates a measurement (``bsdfkit read``, ``ingest``, ``tis`` and the TIS checks of
-``convert`` and ``export`` all do).
+:func:`sniff_format` (the registry's) tells the formats apart by content; :func:`vendor_dataset` turns every
+table node above the horizon into one record of the calibrated-dataset schema
+(:func:`bsdfkit.measurement.table.records_dataset`), in the sample frame, so that the hemispherical engine of
+:mod:`bsdfkit.reduction.hemispherical` integrates a vendor file exactly as it integrates a measurement
+(``bsdfkit read``, ``ingest``, ``tis`` and the TIS checks of ``convert`` and ``export`` all do).
 """
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +18,6 @@ from numpy.typing import NDArray
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import FormatError, InputError
-from bsdfkit.io.text import decode_text
 from bsdfkit.measurement.table import (
     DEFAULT_RELATIVE_STD,
     ZERO_POLICIES,
@@ -27,106 +25,32 @@ from bsdfkit.measurement.table import (
     records_dataset,
     side_of_quantity,
 )
-from bsdfkit.tables import grids
-from bsdfkit.tables.formats import asap, tracepro, zemax
+from bsdfkit.reduction.hemispherical import hemispherical
+from bsdfkit.tables import grids, registry
+from bsdfkit.tables.registry import VendorGrid, VendorTable, sniff_format
 
 __all__ = ["sniff_format", "vendor_dataset"]
 
 
-def sniff_format(path: str | Path) -> str:
-    """``tracepro`` | ``zemax`` | ``asap`` from the first lines of the file (FormatError otherwise)."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            head = decode_text(fh.read(4096), path, expected="a table", legacy="latin-1")
-    except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=path) from None
-    lines = head.splitlines()
-    first = lines[0].strip() if lines else ""
-    if first == tracepro.MAGIC:
-        return "tracepro"
-    if first == asap.MAGIC:
-        return "asap"
-    for line in lines:
-        body = line.split("#", 1)[0].strip()
-        if body:
-            if body.split()[0].lower() in ("source", "symmetry", "spectralcontent", "scattertype"):
-                return "zemax"
-            break
-    raise FormatError("unrecognised table format", file=path, line=1, field="format",
-                      expected="a TracePro, Zemax BSDF or bsdfkit ASAP-style file", got=first[:60])
+#: kept under their old names for readers of this module
+_Grid = VendorGrid
+_Vendor = VendorTable
 
 
-
-# ------------------------------------------------------------------------------------------- vendor → dataset
-@dataclass(frozen=True)
-class _Grid:
-    """One side of a vendor table in its native coordinates."""
-
-    kind: str  # "specular" (Zemax) or "harvey_shack" (TracePro, ASAP)
-    side: str
-    theta_i: NDArray[np.float64]  # deg
-    first: NDArray[np.float64]  # radial [deg] or rho (ascending)
-    azimuth: NDArray[np.float64]  # table azimuth [deg] (ascending)
-    values: NDArray[np.float64]  # (theta_i, azimuth, first)
-    plane_symmetric: bool = False
-    zero_azimuth_deg: float = 0.0  # harvey_shack: sample azimuth of table azimuth 0
-
-
-@dataclass(frozen=True)
-class _Vendor:
-    format: str
-    grids: tuple[_Grid, ...]
-    wavelength_nm: float | None
-    details: dict[str, Any] = field(default_factory=dict)
-
-
-def _read_vendor(path: str | Path, fmt: str | None = None) -> _Vendor:
-    fmt = fmt or sniff_format(path)
-    if fmt == "zemax":
-        z = zemax.read_zemax(path)
-        if z.table.sizes["sample_rotation"] != 1:
-            raise FormatError("several sample rotations are not supported", file=path, field="SampleRotation",
-                              expected="1 sample rotation", got=int(z.table.sizes["sample_rotation"]))
-        t = z.table.isel(sample_rotation=0)
-        grid = _Grid("specular", z.side, np.asarray(t["theta_i"].values, dtype=np.float64),
-                     np.asarray(t["radial"].values, dtype=np.float64),
-                     np.asarray(t["azimuth"].values, dtype=np.float64), np.asarray(t.values, dtype=np.float64),
-                     plane_symmetric=z.plane_symmetric)
-        return _Vendor("zemax", (grid,), None, {"symmetry": z.symmetry, "source": z.source,
-                                                "scatter_type": z.scatter_type})
-    if fmt == "tracepro":
-        prop = tracepro.read_tracepro(path)
-        if prop.scatter != 5 or prop.table is None:
-            raise FormatError("only TracePro tables (Scatter 5) can be read as data", file=path, field="Scatter",
-                              expected="5 (asymmetric table)", got=prop.scatter)
-        table = prop.table
-        out = []
-        for side in [str(s) for s in table["side"].values]:
-            v = np.asarray(table.sel(side=side).values, dtype=np.float64)  # (theta, rho, psi)
-            if not np.any(v):
-                continue  # TracePro writes both columns; a side that is all zero was not given
-            out.append(_Grid("harvey_shack", side, np.asarray(table["theta_i"].values, dtype=np.float64),
-                             np.asarray(table["rho"].values, dtype=np.float64),
-                             np.asarray(table["psi"].values, dtype=np.float64), np.moveaxis(v, -1, -2),
-                             zero_azimuth_deg=float(prop.options.zero_azimuth_deg)))
-        if not out:
-            raise FormatError("the TracePro table is zero everywhere", file=path, field="Table_BSDF_Data",
-                              expected="some non-zero BRDF or BTDF")
-        return _Vendor("tracepro", tuple(out), 1000.0 * float(prop.options.wavelength_um),
-                       {"name": prop.options.name, "zero_azimuth_deg": prop.options.zero_azimuth_deg})
-    table = asap.read_asap(path).table
-    out = [_Grid("harvey_shack", str(side), np.asarray(table["theta_i"].values, dtype=np.float64),
-                 np.asarray(table["rho"].values, dtype=np.float64), np.asarray(table["psi"].values, dtype=np.float64),
-                 np.moveaxis(np.asarray(table.sel(side=side).values, dtype=np.float64), -1, -2))
-           for side in table["side"].values]
-    return _Vendor("asap", tuple(out), None, {})
+def _read_vendor(path: str | Path, fmt: str | None = None) -> VendorTable:
+    """The file's nodes in its native coordinates, by its format's registry hook (sniffed by content)."""
+    return registry.get(fmt or sniff_format(path)).vendor_table(str(path))
 
 
 def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Directions (n, 3) of the nodes of incidence k above the horizon, their values, table azimuths and the
     perpendicular-arc flag (for the two-arc reconstruction)."""
     theta = grid.theta_i[k]
+    if grid.kind == "directions":  # scattered directions as given (theta_s, phi_s in the sample frame)
+        th, ph = np.radians(np.asarray(grid.first, dtype=np.float64)), np.radians(np.asarray(grid.azimuth))
+        d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1)
+        phi_deg = np.asarray(grid.azimuth, dtype=np.float64)
+        return d, np.asarray(grid.values[k], dtype=np.float64), phi_deg, np.isclose(np.mod(phi_deg, 180.0), 90.0)
     az = grid.azimuth
     vals = grid.values[k]
     if grid.plane_symmetric:
@@ -245,7 +169,54 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
                                          "reader": "bsdfkit.tables.to_dataset"}))
     if lam is None:
         ds.attrs["wavelength_note"] = "not stated by the file; pass --wavelength NM (NaN = unknown)"
-    return ds
+    return _normalised(ds, vendor, path)
+
+
+def _normalised(ds: xr.Dataset, vendor: VendorTable, path: str) -> xr.Dataset:
+    """The format's own scale rule (``VendorTable.normalise``): each side scaled so that the hemispherical
+    engine's TIS at the stated incidence equals the stated TIS (Speos: the table is a shape, the spectrum its
+    scale)."""
+    if not vendor.normalise and not vendor.normalise_each:
+        return ds
+    sides = np.asarray(ds["side"].values).astype(str)
+    thetas = np.asarray(ds["theta_i"].values, dtype=np.float64)
+    scale = np.ones(sides.size)
+    notes: dict[str, Any] = {}
+    for side, pairs in vendor.normalise_each.items():
+        for theta, stated in pairs:
+            rows = (sides == side) & (np.abs(thetas - theta) <= 1e-6)
+            if not rows.any():
+                continue
+            res = hemispherical(ds, theta_i=[float(theta)], sides=(side,), errors=False)
+            raw = float(res[0].band_average()["value"]) if res else 0.0
+            if not raw > 0:
+                if stated > 0:
+                    raise FormatError("the table integrates to zero but states a positive TIS", file=path,
+                                      field=f"{side}: table at theta_i={theta:g}", expected="a positive integral")
+                continue
+            scale[rows] = stated / raw
+            notes[f"{side}@{theta:g}"] = {"tis_stated": float(stated), "tis_table": raw, "scale": float(stated / raw)}
+    for side, (theta, stated) in vendor.normalise.items():
+        if side not in set(sides):
+            continue
+        have = np.unique(np.asarray(ds["theta_i"].values)[sides == side])
+        if not np.any(np.abs(have - theta) <= 1e-6):
+            raise FormatError("the spectrum's incidence is not one of the table's", file=path,
+                              field=f"{side}: spectrum incidence", expected=f"one of {have.tolist()}", got=theta)
+        res = hemispherical(ds, theta_i=[float(theta)], sides=(side,), errors=False)
+        raw = float(res[0].band_average()["value"]) if res else 0.0
+        if not raw > 0:
+            raise FormatError("the table integrates to zero where the spectrum is stated", file=path,
+                              field=f"{side}: table at theta_i={theta:g}", expected="a positive integral")
+        scale[sides == side] = stated / raw
+        notes[side] = {"theta_i_deg": float(theta), "tis_stated": float(stated), "tis_table": raw,
+                       "scale": float(stated / raw)}
+    out = ds.copy()
+    for name in ("bsdf", "bsdf_std"):
+        if name in out:
+            out[name] = out[name] * xr.DataArray(scale, dims=out[name].dims[:1])
+    out.attrs["normalisation_json"] = _json(notes)
+    return out
 
 
 def _arc_of(theta_i: float, theta_s: NDArray, phi_s: NDArray, perp_line: NDArray) -> NDArray[np.object_]:

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -40,7 +41,8 @@ from bsdfkit.core.frames import SIDES
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
-from bsdfkit.tables import grids
+from bsdfkit.tables import axes_choice, grids
+from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 
 __all__ = ["MAGIC", "AbgParameters", "AsapTable", "HarveyParameters", "asap_table", "asap_text", "read_asap",
            "write_asap"]
@@ -325,3 +327,51 @@ def read_asap(path: str | Path) -> AsapTable:
     doc_lines = len(_DOC.splitlines())
     return AsapTable(table=table, tis_stated=tis_da, abg=tuple(abg), harvey=tuple(harvey),
                      comments=tuple(comments[doc_lines:]), path=path)
+
+
+# ------------------------------------------------------------------------------------------- registry hooks
+def _as_floats(values: Any) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def _write_job(job: WriteJob) -> WriteOutcome:
+    """The sides as rows, plus the fitted ABg parameters at the written incidences."""
+    axes, info = axes_choice.harvey_shack_axes(job.fn, job.theta, job.sides, job.settings, 0.0)
+    grid = grids.harvey_shack_grid(job.fn, job.theta, job.sides, axes)
+    chosen = [p for p in job.abg if np.any(np.abs(np.asarray(job.theta) - p.theta_i_deg) <= 1e-9)]
+    table = asap_table(grid, abg=chosen, comments=job.comments)
+    write_asap(job.path, table, force=job.force, generated_at=job.generated_at)
+    return WriteOutcome(axes, info)
+
+
+def _summarise(path: str) -> FileSummary:
+    table = read_asap(path)
+    computed = table.tis_computed()
+    sides = [str(s) for s in table.table["side"].values]
+    return FileSummary(
+        format="asap", path=path, incidences_deg=_as_floats(table.table["theta_i"].values),
+        tis_computed={s: _as_floats(computed.sel(side=s).values) for s in sides},
+        tis_stated={s: _as_floats(table.tis_stated.sel(side=s).values) for s in sides},
+        details={"abg": [vars(p) for p in table.abg], "harvey": [vars(p) for p in table.harvey],
+                 "table_shape": dict(table.table.sizes)},
+    )
+
+
+def _vendor_table(path: str) -> VendorTable:
+    table = read_asap(path).table
+    out = [VendorGrid("harvey_shack", str(side), np.asarray(table["theta_i"].values, dtype=np.float64),
+                      np.asarray(table["rho"].values, dtype=np.float64),
+                      np.asarray(table["psi"].values, dtype=np.float64),
+                      np.moveaxis(np.asarray(table.sel(side=side).values, dtype=np.float64), -1, -2))
+           for side in table["side"].values]
+    return VendorTable("asap", tuple(out), None, {})
+
+
+def _guess_can_open(head: str, path: Path) -> bool:
+    lines = head.splitlines()
+    return bool(lines) and lines[0].strip() == MAGIC
+
+
+FORMAT = TableFormat(name="asap", title="bsdfkit ASAP-style", extensions=(".txt", ".asap"),
+                     guess_can_open=_guess_can_open, summarise=_summarise, vendor_table=_vendor_table,
+                     write=_write_job, sides_per_file=2, grid_kind="harvey_shack")

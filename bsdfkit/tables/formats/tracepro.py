@@ -41,6 +41,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -51,7 +52,8 @@ from bsdfkit.core.frames import SIDES
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.models.registry import bsdf_model
-from bsdfkit.tables import grids
+from bsdfkit.tables import axes_choice, grids
+from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 
 __all__ = [
     "DEFAULT_ZERO_AZIMUTH_DEG",
@@ -649,3 +651,95 @@ def _read_table(
     )
     return table, index
 
+
+
+# ------------------------------------------------------------------------------------------- registry hooks
+def _as_floats(values: ArrayLike) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def _abg_rows(params: Sequence[Any], side: str, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(A, B, g) per exported incidence for ``side`` from the fit's ABg parameter list."""
+    rows = []
+    for t in theta:
+        match = [p for p in params if p.side == side and abs(p.theta_i_deg - t) <= 1e-9]
+        if not match:
+            raise ValidationError("no fitted ABg parameters at this incidence", field="theta_i",
+                                  expected=f"one of {sorted({p.theta_i_deg for p in params})}", got=float(t))
+        rows.append([match[0].a, match[0].b, match[0].g])
+    return np.array(rows)
+
+
+def _write_job(job: WriteJob) -> WriteOutcome:
+    """Both sides in one file (BRDF and BTDF columns; a side not exported is zero): Scatter 5 table or Scatter 1
+    ABg (ABg fit results only)."""
+    settings, opts = job.settings, job.settings.tracepro
+    axes, info = None, {"mode": "none (TracePro ABg property)"}
+    if settings.tracepro_scatter == "abg":
+        if not job.abg:
+            raise ValidationError("TracePro ABg export needs an ABg fit result", field="tracepro_scatter",
+                                  expected="table for this source", got="abg")
+        by_side = {s: _abg_rows(job.abg, s, job.theta) for s in job.sides}
+        prop = abg_property(job.theta, by_side.get("reflection"), by_side.get("transmission"), options=opts,
+                            specular_reflectance=settings.specular_reflectance,
+                            specular_transmittance=settings.specular_transmittance,
+                            scatter_excess_allowed=job.tis_excess_allowed)
+    else:
+        axes, info = axes_choice.harvey_shack_axes(job.fn, job.theta, job.sides, settings, opts.zero_azimuth_deg)
+        grid = grids.harvey_shack_grid(job.fn, job.theta, job.sides, axes)
+        prop = table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
+                              specular_transmittance=settings.specular_transmittance,
+                              scatter_excess_allowed=job.tis_excess_allowed)
+    write_tracepro(job.path, prop, force=job.force, generated_at=job.generated_at)
+    return WriteOutcome(axes, info)
+
+
+def _summarise(path: str) -> FileSummary:
+    prop = read_tracepro(path)
+    computed = prop.tis_computed()
+    theta = prop.theta_i_deg
+    if prop.table is not None:
+        theta = prop.table["theta_i"].values
+    return FileSummary(
+        format="tracepro", path=path, incidences_deg=_as_floats(theta),
+        tis_computed={**{s: _as_floats(v) for s, v in computed.items()}, "total": _as_floats(sum(computed.values()))},
+        tis_stated={"total": _as_floats(prop.tis_stated())},
+        details={"scatter": prop.scatter, "name": prop.options.name,
+                 "zero_azimuth_deg": prop.options.zero_azimuth_deg,
+                 "absorptance": _as_floats(prop.absorptance),
+                 "table_shape": None if prop.table is None else dict(prop.table.sizes),
+                 **({} if prop.scatter == 5 else
+                    {"tis_rule": "the model's own integral (a TracePro ABg property holds no table)"})},
+    )
+
+
+def _vendor_table(path: str) -> VendorTable:
+    prop = read_tracepro(path)
+    if prop.scatter != 5 or prop.table is None:
+        raise FormatError("only TracePro tables (Scatter 5) can be read as data", file=path, field="Scatter",
+                          expected="5 (asymmetric table)", got=prop.scatter)
+    table = prop.table
+    out = []
+    for side in [str(s) for s in table["side"].values]:
+        v = np.asarray(table.sel(side=side).values, dtype=np.float64)  # (theta, rho, psi)
+        if not np.any(v):
+            continue  # TracePro writes both columns; a side that is all zero was not given
+        out.append(VendorGrid("harvey_shack", side, np.asarray(table["theta_i"].values, dtype=np.float64),
+                              np.asarray(table["rho"].values, dtype=np.float64),
+                              np.asarray(table["psi"].values, dtype=np.float64), np.moveaxis(v, -1, -2),
+                              zero_azimuth_deg=float(prop.options.zero_azimuth_deg)))
+    if not out:
+        raise FormatError("the TracePro table is zero everywhere", file=path, field="Table_BSDF_Data",
+                          expected="some non-zero BRDF or BTDF")
+    return VendorTable("tracepro", tuple(out), 1000.0 * float(prop.options.wavelength_um),
+                       {"name": prop.options.name, "zero_azimuth_deg": prop.options.zero_azimuth_deg})
+
+
+def _guess_can_open(head: str, path: Path) -> bool:
+    lines = head.splitlines()
+    return bool(lines) and lines[0].strip() == MAGIC
+
+
+FORMAT = TableFormat(name="tracepro", title="TracePro", extensions=(".txt",), guess_can_open=_guess_can_open,
+                     summarise=_summarise, vendor_table=_vendor_table, write=_write_job, sides_per_file=2,
+                     grid_kind="harvey_shack")

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -39,7 +40,9 @@ from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
-from bsdfkit.tables import grids
+from bsdfkit.tables import axes_choice, grids
+from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.formats.lighttools import is_lighttools_header
 
 __all__ = ["SYMMETRIES", "ZemaxBsdf", "read_zemax", "write_zemax", "zemax_bsdf", "zemax_text"]
 
@@ -367,3 +370,67 @@ def read_zemax(path: str | Path) -> ZemaxBsdf:
         tis_stated=xr.DataArray(tis, dims=("sample_rotation", "theta_i"), coords=coords),
         source=str(header["source"]), comments=comments, path=path,
     )
+
+
+# ------------------------------------------------------------------------------------------- registry hooks
+def _as_floats(values: Any) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def _write_job(job: WriteJob) -> WriteOutcome:
+    """One ScatterType per file; PlaneSymmetrical writes the mirror average of the source (refused when the
+    source deviates from plane symmetry by more than ``settings.symmetry_tolerance``)."""
+    settings = job.settings
+    axes, info = axes_choice.specular_axes(job.fn, job.theta, job.sides, settings)
+    deviation = None
+    if settings.zemax_symmetry == "PlaneSymmetrical":
+        grid, deviation = axes_choice.plane_symmetric_grid(job.fn, job.theta, job.side, axes,
+                                                           settings.symmetry_tolerance)
+    else:
+        grid = grids.specular_grid(job.fn, job.theta, job.side, axes)
+    bsdf = zemax_bsdf(grid, symmetry=settings.zemax_symmetry, comments=job.comments)
+    write_zemax(job.path, bsdf, force=job.force, generated_at=job.generated_at)
+    return WriteOutcome(axes, info, deviation)
+
+
+def _summarise(path: str) -> FileSummary:
+    bsdf = read_zemax(path)
+    computed, stated = bsdf.tis_computed(), bsdf.tis_stated
+    rotations = _as_floats(bsdf.table["sample_rotation"].values)
+    keys = [bsdf.side] if len(rotations) == 1 else [f"{bsdf.side}@rotation={r:g}" for r in rotations]
+    return FileSummary(
+        format="zemax", path=path, incidences_deg=_as_floats(bsdf.table["theta_i"].values),
+        tis_computed={k: _as_floats(computed.values[r]) for r, k in enumerate(keys)},
+        tis_stated={k: _as_floats(stated.values[r]) for r, k in enumerate(keys)},
+        details={"symmetry": bsdf.symmetry, "scatter_type": bsdf.scatter_type, "source": bsdf.source,
+                 "table_shape": dict(bsdf.table.sizes)},
+    )
+
+
+def _vendor_table(path: str) -> VendorTable:
+    z = read_zemax(path)
+    if z.table.sizes["sample_rotation"] != 1:
+        raise FormatError("several sample rotations are not supported", file=path, field="SampleRotation",
+                          expected="1 sample rotation", got=int(z.table.sizes["sample_rotation"]))
+    t = z.table.isel(sample_rotation=0)
+    grid = VendorGrid("specular", z.side, np.asarray(t["theta_i"].values, dtype=np.float64),
+                      np.asarray(t["radial"].values, dtype=np.float64),
+                      np.asarray(t["azimuth"].values, dtype=np.float64), np.asarray(t.values, dtype=np.float64),
+                      plane_symmetric=z.plane_symmetric)
+    return VendorTable("zemax", (grid,), None, {"symmetry": z.symmetry, "source": z.source,
+                                                "scatter_type": z.scatter_type})
+
+
+def _guess_can_open(head: str, path: Path) -> bool:
+    if is_lighttools_header(head):  # the same keywords, but ScatterAzimuth before any Zemax-only one
+        return False
+    for line in head.splitlines():
+        body = line.split("#", 1)[0].strip()
+        if body:
+            return body.split()[0].lower() in ("source", "symmetry", "spectralcontent", "scattertype")
+    return False
+
+
+FORMAT = TableFormat(name="zemax", title="Zemax BSDF", extensions=(".bsdf",), guess_can_open=_guess_can_open,
+                     summarise=_summarise, vendor_table=_vendor_table, write=_write_job, sides_per_file=1,
+                     grid_kind="specular")

@@ -1,0 +1,91 @@
+"""How an export chooses its table axes (given, fixed or tolerance-driven auto), shared by the writers of
+:mod:`bsdfkit.tables.formats` (``settings`` is a :class:`bsdfkit.tables.export.ExportSettings`)."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bsdfkit.core.errors import ValidationError
+from bsdfkit.tables import grids
+
+BsdfFn = grids.BsdfFn
+
+
+def plane_symmetric_grid(
+    fn: BsdfFn, theta: NDArray, side: str, axes: grids.SpecularAxes, tolerance: float
+) -> tuple[xr.DataArray, float]:
+    """Specular grid for a PlaneSymmetrical file: the mirror average (f(a) + f(360° − a))/2 of the source.
+
+    Plane symmetry is a property the *source* must have; measured reconstructions hold it only to their
+    noise. The deviation max|f(a) − f(360° − a)| / max f (per incidence block) is returned; above
+    ``tolerance`` the export is refused (use Asymmetrical). The average leaves the TIS unchanged (the
+    projected solid angle is symmetric under the mirror y → −y).
+    """
+    mirrored = tuple(sorted({float(np.mod(360.0 - a, 360.0)) for a in axes.azimuth_deg}))
+    half = grids.specular_grid(fn, theta, side, axes)
+    full = grids.specular_grid(fn, theta, side, grids.SpecularAxes(axes.radial_deg, mirrored))
+    mirror = np.stack([full.sel(azimuth=float(np.mod(360.0 - a, 360.0))).values for a in axes.azimuth_deg], axis=-2)
+    scale = np.max(half.values, axis=(-1, -2), keepdims=True)
+    deviation = np.abs(half.values - mirror) / np.where(scale > 0, scale, 1.0)
+    worst = float(np.max(deviation))
+    if worst > tolerance:
+        _, t, k, _ = np.unravel_index(int(np.argmax(deviation)), deviation.shape)
+        a = axes.azimuth_deg[k]
+        raise ValidationError(
+            f"source is not plane-symmetric at theta_i={theta[t]:g} deg (azimuth {a:g} vs {np.mod(360 - a, 360):g})",
+            field="zemax_symmetry", expected=f"deviation <= {tolerance:g} of the block maximum, or Asymmetrical",
+            got=f"{worst:.3g}",
+        )
+    return half.copy(data=0.5 * (half.values + mirror)), worst
+
+
+#: Grid mode reported when the auto grid would need more nodes than the fixed grid: the fixed grid is written.
+FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
+#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS azimuth doublings.
+FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
+#: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
+#: direct integral of the source callable; else its azimuths are doubled (at most RECHECK_ROUNDS times).
+RECHECK_FACTOR = 2.0
+RECHECK_ROUNDS = 2
+
+
+def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[str, Any]:
+    info: dict[str, Any] = {"mode": mode, "radial": n_radial, "azimuth": n_azimuth}
+    if mode != "fixed" and mode != "given":
+        info.update(tis_rtol=settings.grid_tolerance.tis_rtol, peak_rtol=settings.grid_tolerance.peak_rtol)
+    return info
+
+
+def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], settings: Any,
+                       zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
+    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    if settings.harvey_shack_axes is not None:
+        axes, mode = settings.harvey_shack_axes, "given"
+    elif settings.grid == "fixed":
+        axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
+    else:
+        fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
+        auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
+                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg))
+        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
+    return axes, grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
+
+
+def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
+                   settings: Any) -> tuple[grids.SpecularAxes, dict[str, Any]]:
+    """The Zemax axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    symmetric = settings.zemax_symmetry == "PlaneSymmetrical"
+    if settings.specular_axes is not None:
+        axes, mode = settings.specular_axes, "given"
+    elif settings.grid == "fixed":
+        axes, mode = grids.SpecularAxes.default(plane_symmetric=symmetric), "fixed"
+    else:
+        fixed = grids.SpecularAxes.default(plane_symmetric=symmetric)
+        auto = grids.auto_specular_axes(fn, theta, sides, settings.grid_tolerance, symmetric,
+                                        max_nodes=len(fixed.radial_deg) * len(fixed.azimuth_deg))
+        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
+    return axes, grid_info(mode, len(axes.radial_deg), len(axes.azimuth_deg), settings)

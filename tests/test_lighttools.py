@@ -1,0 +1,74 @@
+"""LightTools .bsdf: bsdfkit writes, bsdfkit reads (TIS within 0.5 %, the stated TIS lines, the lobe where the
+convention puts it); told apart from Zemax files by content; bad files refused on one line."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_bsdfxml import TRUTH, truth_fn
+
+from bsdfkit.core.errors import FormatError
+from bsdfkit.tables import registry
+from bsdfkit.tables.export import ExportSettings, export, read_any
+from bsdfkit.tables.formats.lighttools import read_lighttools
+
+ZEMAX = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+THETA = (0.0, 45.0, 70.0)
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    path = tmp_path_factory.mktemp("lt") / "diffuser.bsdf"
+    return path, export(truth_fn, "lighttools", "elastic", "both", path,
+                        settings=ExportSettings(theta_i_deg=THETA, wavelength_nm=550.0))
+
+
+@pytest.mark.slow
+def test_round_trip_and_stated_tis(written):
+    path, res = written
+    summary = read_any(path)
+    assert summary.format == "lighttools" and summary.incidences_deg == list(THETA)
+    for side in ("reflection", "transmission"):
+        exact = [TRUTH[side].tis(t) for t in THETA]
+        np.testing.assert_allclose(summary.tis_stated[side], exact, rtol=1e-3)
+        np.testing.assert_allclose(summary.tis_computed[side], exact, rtol=5e-3)
+    assert read_lighttools(path).wavelength_nm == 550.0
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """Reflection at 0 and 45 deg only: enough for the fast tests."""
+    path = tmp_path_factory.mktemp("lt") / "small.bsdf"
+    return path, export(truth_fn, "lighttools", "elastic", "reflection", path,
+                        settings=ExportSettings(theta_i_deg=(0.0, 45.0), wavelength_nm=550.0))
+
+
+def test_the_lobe_sits_at_azimuth_270(small):
+    path, _ = small
+    bsdf = read_lighttools(path)
+    theta, values, _ = bsdf.blocks[("Front", "reflection")]
+    k = int(np.flatnonzero(theta == 45.0)[0])
+    a, r = np.unravel_index(int(np.argmax(values[k])), values[k].shape)
+    assert (bsdf.azimuth[a], bsdf.radial[r]) == (270.0, 45.0)
+
+
+def test_sniffed_apart_from_zemax(small, tmp_path):
+    path, _ = small
+    renamed = tmp_path / "x.txt"
+    renamed.write_bytes(path.read_bytes())
+    assert registry.sniff_format(renamed) == "lighttools"
+    assert registry.sniff_format(ZEMAX) == "zemax"
+    head = path.read_text()[:4096]
+    assert [f.name for f in registry.FORMATS if f.guess_can_open(head, path)] == ["lighttools"]
+
+
+def test_bad_values_are_refused_naming_the_line(small, tmp_path):
+    path, _ = small
+    lines = path.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith("TIS")) + 3
+    lines[k] = lines[k].replace(lines[k].split()[2], "abc", 1)
+    bad = tmp_path / "bad.bsdf"
+    bad.write_text("\n".join(lines))
+    with pytest.raises(FormatError, match=rf"bad\.bsdf:{k + 1}: field 'block AOI 0.0 values': not a number"):
+        read_lighttools(bad)
