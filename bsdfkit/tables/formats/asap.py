@@ -33,16 +33,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.frames import SIDES
+from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.tables import axes_choice, grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+
+#: xarray on first use: the verbs read this module's registration (format names) and must stay light
+xr = LazyModule("xarray")
 
 __all__ = ["MAGIC", "AbgParameters", "AsapTable", "HarveyParameters", "asap_table", "asap_text", "read_asap",
            "write_asap"]
