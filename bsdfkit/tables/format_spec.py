@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FileSummary", "TableFormat", "VendorGrid", "VendorTable", "WriteJob", "WriteOutcome"]
+__all__ = ["FileSummary", "TableFormat", "VendorGrid", "VendorTable", "WriteJob", "WriteOutcome", "first_line_is"]
 
 
 @dataclass(frozen=True)
@@ -115,3 +115,13 @@ class TableFormat:
     @property
     def can_write(self) -> bool:
         return self.write is not None
+
+
+def first_line_is(magic: str) -> Callable[[str, Path], bool]:
+    """A content sniffer (``TableFormat.guess_can_open``) for formats whose first line is a fixed header."""
+
+    def guess_can_open(head: str, path: Path) -> bool:
+        lines = head.splitlines()
+        return bool(lines) and lines[0].strip() == magic
+
+    return guess_can_open

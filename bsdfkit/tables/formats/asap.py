@@ -42,7 +42,15 @@ from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.tables import axes_choice, grids
-from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.format_spec import (
+    FileSummary,
+    TableFormat,
+    VendorGrid,
+    VendorTable,
+    WriteJob,
+    WriteOutcome,
+    first_line_is,
+)
 
 #: xarray on first use: the verbs read this module's registration (format names) and must stay light
 xr = LazyModule("xarray")
@@ -370,11 +378,6 @@ def _vendor_table(path: str) -> VendorTable:
     return VendorTable("asap", tuple(out), None, {})
 
 
-def _guess_can_open(head: str, path: Path) -> bool:
-    lines = head.splitlines()
-    return bool(lines) and lines[0].strip() == MAGIC
-
-
 FORMAT = TableFormat(name="asap", title="bsdfkit ASAP-style", extensions=(".txt", ".asap"),
-                     guess_can_open=_guess_can_open, summarise=_summarise, vendor_table=_vendor_table,
+                     guess_can_open=first_line_is(MAGIC), summarise=_summarise, vendor_table=_vendor_table,
                      write=_write_job, sides_per_file=2, grid_kind="harvey_shack")

@@ -47,7 +47,15 @@ from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.tables import grids
-from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.format_spec import (
+    FileSummary,
+    TableFormat,
+    VendorGrid,
+    VendorTable,
+    WriteJob,
+    WriteOutcome,
+    first_line_is,
+)
 
 __all__ = ["MAGIC", "SpeosBsdf", "read_speos", "speos_text", "write_speos"]
 
@@ -287,11 +295,6 @@ def _vendor_table(path: str) -> VendorTable:
                        normalise={s: (bsdf.spectrum[s][0], bsdf.spectrum[s][1] / 100.0) for s in bsdf.tables})
 
 
-def _guess_can_open(head: str, path: Path) -> bool:
-    lines = head.splitlines()
-    return bool(lines) and lines[0].strip() == MAGIC
-
-
 FORMAT = TableFormat(name="speos", title="Speos anisotropic BSDF (text)", extensions=(".anisotropicbsdf",),
-                     guess_can_open=_guess_can_open, summarise=_summarise, vendor_table=_vendor_table,
+                     guess_can_open=first_line_is(MAGIC), summarise=_summarise, vendor_table=_vendor_table,
                      write=_write_job, sides_per_file=2, grid_kind="normal")

@@ -44,7 +44,15 @@ from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.tables import grids
-from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.format_spec import (
+    FileSummary,
+    TableFormat,
+    VendorGrid,
+    VendorTable,
+    WriteJob,
+    WriteOutcome,
+    first_line_is,
+)
 from bsdfkit.tables.formats.speos import PHI_STEP_DEG, THETA_STEP_DEG, Lines, speos_axis, speos_directions
 
 __all__ = ["MAGIC", "SpeosBrdf", "read_speos_brdf", "write_speos_brdf"]
@@ -217,11 +225,6 @@ def _vendor_table(path: str) -> VendorTable:
                        normalise_each=each)
 
 
-def _guess_can_open(head: str, path: Path) -> bool:
-    lines = head.splitlines()
-    return bool(lines) and lines[0].strip() == MAGIC
-
-
 FORMAT = TableFormat(name="speosbrdf", title="Speos spectral .brdf (text)", extensions=(".brdf",),
-                     guess_can_open=_guess_can_open, summarise=_summarise, vendor_table=_vendor_table,
+                     guess_can_open=first_line_is(MAGIC), summarise=_summarise, vendor_table=_vendor_table,
                      write=_write_job, sides_per_file=2, grid_kind="normal")

@@ -53,7 +53,15 @@ from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
 from bsdfkit.models.registry import bsdf_model
 from bsdfkit.tables import axes_choice, grids
-from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.format_spec import (
+    FileSummary,
+    TableFormat,
+    VendorGrid,
+    VendorTable,
+    WriteJob,
+    WriteOutcome,
+    first_line_is,
+)
 
 #: xarray on first use: the verbs read this module's registration (format names) and must stay light
 xr = LazyModule("xarray")
@@ -738,11 +746,6 @@ def _vendor_table(path: str) -> VendorTable:
                        {"name": prop.options.name, "zero_azimuth_deg": prop.options.zero_azimuth_deg})
 
 
-def _guess_can_open(head: str, path: Path) -> bool:
-    lines = head.splitlines()
-    return bool(lines) and lines[0].strip() == MAGIC
-
-
-FORMAT = TableFormat(name="tracepro", title="TracePro", extensions=(".txt",), guess_can_open=_guess_can_open,
+FORMAT = TableFormat(name="tracepro", title="TracePro", extensions=(".txt",), guess_can_open=first_line_is(MAGIC),
                      summarise=_summarise, vendor_table=_vendor_table, write=_write_job, sides_per_file=2,
                      grid_kind="harvey_shack")
