@@ -22,7 +22,7 @@ from pathlib import Path
 
 from bsdfkit.core.errors import FormatError, InputError
 
-__all__ = ["decode_text", "existing_source", "loads_toml", "read_text", "read_toml", "refuse_cut_last_line",
+__all__ = ["decode_text", "existing_source", "is_float", "loads_toml", "read_text", "read_toml", "refuse_cut_last_line",
            "text_and_encoding"]
 
 #: byte-order marks, longest first (the UTF-32 LE mark starts with the UTF-16 LE one)
@@ -48,6 +48,15 @@ def existing_source(path: str | Path, expected: str = SOURCES) -> Path:
     if not p.is_file():
         raise InputError("no such file or folder", file=p, expected=expected)
     return p
+
+
+def is_float(token: str) -> bool:
+    """Whether ``float(token)`` accepts the token (names the first bad token of a refused row)."""
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
 
 
 def _unmarked_utf16(raw: bytes) -> str | None:

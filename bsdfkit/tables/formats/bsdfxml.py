@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import is_float, read_text
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 
@@ -354,7 +354,7 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf:
             try:
                 values = np.array([float(t) for t in tokens], dtype=np.float64)
             except ValueError:
-                bad = next(t for t in tokens if not _is_float(t))
+                bad = next(t for t in tokens if not is_float(t))
                 raise FormatError("not a number", file=path, line=_line_of(text, bad), field=where,
                                   expected="a number (1/sr)", got=bad[:40]) from None
             if not np.all(np.isfinite(values)) or np.any(values < 0):
@@ -373,14 +373,6 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf:
     mat_name = _text(None if material is None else _child(material, "Name")) or Path(path).stem
     return KlemsBsdf(basis, blocks, lam, mat_name, details={"wavelength_label": labels[0] if labels else "",
                                                              "incident_data_structure": structure})
-
-
-def _is_float(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 # ------------------------------------------------------------------------------------------- registry hooks

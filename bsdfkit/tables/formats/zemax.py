@@ -39,7 +39,7 @@ from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
-from bsdfkit.io.text import read_text
+from bsdfkit.io.text import is_float, read_text
 from bsdfkit.tables import axes_choice, grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 from bsdfkit.tables.formats.lighttools import is_lighttools_header
@@ -204,20 +204,12 @@ def _floats(tokens: list[str], path: str, line: int, name: str) -> NDArray[np.fl
     try:
         arr = np.array(tokens, dtype=np.float64)
     except ValueError:
-        bad = next(t for t in tokens if not _is_float(t))
+        bad = next(t for t in tokens if not is_float(t))
         raise FormatError("not a number", file=path, line=line, field=name, expected="numbers", got=bad) from None
     if not np.all(np.isfinite(arr)):
         raise FormatError("not a finite number", file=path, line=line, field=name, expected="finite numbers",
                           got=tokens[int(np.argmax(~np.isfinite(arr)))])
     return arr
-
-
-def _is_float(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def _check_axis(values: NDArray, name: str, lo: float, hi: float, hi_open: bool, path: str, line: int) -> None:
