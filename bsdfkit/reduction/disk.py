@@ -26,14 +26,22 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.spatial import Delaunay, QhullError
 
 from bsdfkit.core.errors import InputError
+from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.quadrature import gauss_legendre
+
+if TYPE_CHECKING:
+    from scipy.spatial import Delaunay
+
+# scipy's sparse and spatial modules (0.3-0.7 s to import) are needed only when records are triangulated; a
+# table on its own spokes (Zemax, TracePro, ASAP) is integrated without them (`bsdfkit tis`/`read` stay light)
+sp = LazyModule("scipy.sparse")
+spatial = LazyModule("scipy.spatial")
 
 #: Weight of the azimuth (radians) against the radius (direction cosines) in the triangulation metric: records
 #: at about the same distance from the centre are joined across azimuth before records along a spoke.
@@ -270,7 +278,7 @@ def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
     key = (pts.shape, hashlib.blake2b(pts.tobytes(), digest_size=16).digest())
     tri = _TRIANGULATIONS.get(key)
     if tri is None:
-        tri = Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
+        tri = spatial.Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
         if getattr(tri, "_transform", 0) is None:  # scipy computes it lazily, one LAPACK call per simplex
             tri._transform = barycentric_transforms(tri.points, tri.simplices)
         _TRIANGULATIONS[key] = tri
@@ -398,7 +406,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     pp, rr, nn = _periodic(p0, r0, n0, n)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)
-    except QhullError as exc:
+    except spatial.QhullError as exc:
         raise InputError("records are degenerate on the disk (all on one line through the centre)",
                          field="bsdf", expected="records spanning an area of the disk") from exc
     stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)
