@@ -59,3 +59,16 @@ def test_grid_study_gives_sigma_per_grid_and_the_plain_estimate_grows_with_finer
     assert interior_bins(16).sum() < interior_bins(64).sum()
     with pytest.raises(ValueError, match="seeds >= 2"):
         grid_study(maps[:1], (16,))
+
+
+def test_sigma_of_one_maps_non_uniformity_from_the_map_alone_matches_the_spread_over_seeds():
+    """σ from one map (neighbour residuals, redrawn) against the σ over 12 independent noisy maps of the field."""
+    from bsdfkit.raytrace.tallies import non_uniformity_std
+
+    coarse = rebin_map(_noisy(np.random.default_rng(11), 100.0, 12), 32)  # 5 % noise per 32-grid cell
+    spread = np.std([non_uniformity(m) for m in coarse], ddof=1)
+    from_map = np.array([non_uniformity_std(m) for m in coarse[:4]])
+    assert np.all(from_map > 0.5 * spread) and np.all(from_map < 2.0 * spread), (from_map, spread)
+    assert non_uniformity_std(coarse[0]) == non_uniformity_std(coarse[0])  # reproducible: its own generator
+    # a noise-free smooth field: the neighbour residual is the field's curvature only, far below the noise above
+    assert non_uniformity_std(_field(32)) < 0.2 * spread

@@ -327,15 +327,15 @@ def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_unif
     for label, paper in (("specular reflector", "56"), ("perfect diffuser", "36"), ("h = 10 mm", "91"),
                          ("h = 43 mm", "36"), ("FWHM 30°", "76"), ("FWHM 120° (Lambertian)", "36")):
         row = re.search(rf"<td class=\"l\">{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">"
-                        rf"([\d.]+)</td><td class=\"\">[\d.]+</td><td class=\"\">{paper}</td>", maps)
+                        rf"([\d.]+) ± [\d.]+</td><td class=\"\">[\d.]+</td><td class=\"\">{paper}</td>", maps)
         assert row is not None, label
     for label in ("diffuse-to-specular 40 %", "h = 80 mm", "FWHM 70°"):
-        assert re.search(rf"{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">[\d.]+</td>"
+        assert re.search(rf"{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">[\d.]+ ± [\d.]+</td>"
                          r"<td class=\"\">[\d.]+</td><td class=\"\">—</td>", maps), label
     # this run's value in the table is the map's own (E_max − E_min)/(E_max + E_min)
     nu = 100 * map_non_uniformity(xr.DataArray(_map(1.05, tilt=0.1), dims=("y_mm", "x_mm"), coords=_coords()))
     # the 40 % diffuse panel (k = 1), with the same map on half the cells per side beside it
-    assert re.search(rf"<td class=\"\">{nu:.1f}</td><td class=\"\">[\d.]+</td><td class=\"\">—</td>", maps)
+    assert re.search(rf"<td class=\"\">{nu:.1f} ± [\d.]+</td><td class=\"\">[\d.]+</td><td class=\"\">—</td>", maps)
 
 
 def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(tmp_path):

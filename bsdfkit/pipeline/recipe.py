@@ -62,6 +62,7 @@ from bsdfkit.raytrace import trace, with_values
 from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
+from bsdfkit.raytrace.tallies import non_uniformity_std
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -511,6 +512,11 @@ def _is_device_value(scene, study: str, value: float) -> bool:
     return scene.wall.specular_fraction == value == scene.base.specular_fraction
 
 
+def _nu_std(result) -> float | None:
+    """σ [1] of a trace's map non-uniformity from its own map (:func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
+    return None if result.irradiance is None else non_uniformity_std(result.irradiance)
+
+
 def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:
     """How the power reaching the plate splits between measured and model-extrapolated incidences.
 
@@ -554,7 +560,8 @@ def stage_trace(state: RunState) -> None:
     done = 1
     state.progress("trace", done, total)
     state.device = device
-    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured)}}
+    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured),
+                                             "non_uniformity_std": _nu_std(device)}}
     studies: dict[str, list[dict]] = {}
     datasets: dict[str, list[xr.Dataset]] = {}
     blue_on_plate: dict[str, np.ndarray] = {}
@@ -569,7 +576,8 @@ def stage_trace(state: RunState) -> None:
                 done += 1
                 state.progress("trace", done, total)
             row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
-                   "YBR_std": r.std_err["YBR"], "non_uniformity": r.non_uniformity, "ledger_error": r.ledger_error,
+                   "YBR_std": r.std_err["YBR"], "non_uniformity": r.non_uniformity,
+                   "non_uniformity_std": _nu_std(r), "ledger_error": r.ledger_error,
                    "clamped_share": r.clamped_interactions / r.plate_interactions if r.plate_interactions else 0.0,
                    "plate_incidence": incidence_shares(r, measured), "same_trace_as_device": same}
             studies.setdefault(study, []).append(row)
@@ -594,7 +602,8 @@ def stage_trace(state: RunState) -> None:
     state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity",
                                                                          "ledger_error", "rays", "elapsed_s",
                                                                          "interactions_per_s")},
-                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
+                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")}
+                              | {"non_uniformity": results["device"]["non_uniformity_std"]},
                               "YBR_definition": RAY_YBR_DEFINITION,
                               "plate": {k: results["plate"][k] for k in (
                                   "measured_incidences_deg", "extrapolated_incidences_deg", "clamped_share_max",
@@ -688,7 +697,7 @@ def _difference(a: dict | None, b: dict | None, quantity: str) -> tuple[float, f
     scale = 1.0 if quantity == "YBR" else 100.0
     same = a is b or (a.get("same_trace_as_device") and b.get("same_trace_as_device"))
     sa, sb = (_num_or_nan(a.get(f"{quantity}_std")), _num_or_nan(b.get(f"{quantity}_std")))
-    std = 0.0 if same else math.hypot(sa, sb) if quantity != "non_uniformity" else float("nan")
+    std = 0.0 if same else math.hypot(sa, sb)
     return scale * (a[quantity] - b[quantity]), scale * std
 
 

@@ -47,7 +47,7 @@ from bsdfkit.plotting.maps import (
     irradiance_maps_figure,
     map_non_uniformity,
 )
-from bsdfkit.raytrace.tallies import rebin_map
+from bsdfkit.raytrace.tallies import non_uniformity_std, rebin_map
 
 __all__ = ["REPORT_NAME", "paper_values", "write_report"]
 
@@ -387,6 +387,34 @@ def _coarser_non_uniformity(da: xr.DataArray) -> float | None:
         return None
     coords = {d: np.asarray(da[d].values, dtype=float).reshape(n // 2, 2).mean(axis=1) for d in MAP_DIMS}
     return map_non_uniformity(xr.DataArray(rebin_map(values, n // 2), dims=MAP_DIMS, coords=coords))
+
+
+def _map_nu_std(da: xr.DataArray) -> float | None:
+    """σ [1] of a square map's non-uniformity from the map itself (None for a map that is not the tracer's)."""
+    values = np.asarray(da.transpose(*MAP_DIMS).values, dtype=float)
+    if values.ndim != 2 or values.shape[0] != values.shape[1] or values.shape[0] < 4:
+        return None
+    return _num(non_uniformity_std(values))
+
+
+#: What the maps section says about the non-uniformity's grid, σ and the paper's level (issue #27).
+_MAPS_GRID_NOTE = (
+    "<p><b>This non-uniformity is not converged in the map grid</b>: the same map on half the cells per side "
+    "(column 5) gives a different value, and the max − min of a Monte Carlo map grows with the cells' noise (finer "
+    "cells, fewer rays each). Its σ (± in column 4) is estimated from the map itself (cell noise from the residual "
+    "against the neighbours, redrawn; conservative where the map has cell-scale hot spots). The grid study of "
+    "docs/tracer.md (“Non-uniformity and the map grid”: 16-128 cells per side, 40 seeds, noise-free split-half "
+    "estimate) gives the device 11 % on 16 cells and 52 % on 128 cells at 400 000 rays, and a converged 10.4 ± 0.4 % "
+    "(split-half, 32 cells): the paper prints neither its grid nor its ray count, so the level differences listed "
+    "above are differences of this estimator; they stay listed.</p>")
+
+
+def _maps_note(missing: list[str]) -> str:
+    """The maps section's text: the panels without a map, the grid and what the grid does to the value."""
+    return ("<p>Maps of the paper not in this run: " + _esc("; ".join(missing) or "none") + ". The paper prints no "
+            "non-uniformity for the 40 % diffuse, 80 mm and 70° panels; for FWHM 120° (Lambertian LEDs, the device) "
+            "it is the device's 36 % of Fig. 12. The maps are tallied on a 32 × 32 grid of the plate's square, bins "
+            "entirely inside the plate only.</p>" + _MAPS_GRID_NOTE)
 
 
 def _relative_difference(row: dict) -> str:
@@ -765,7 +793,8 @@ class _Report:
             ["YBR (1)", _pm(dev.get("YBR"), se.get("YBR"), 2),
              "extracted yellow ray power / extracted blue ray power of the two-wavelength trace; the paper's "
              f"definition: {_esc(defs['YBR'])}"],
-            ["non-uniformity (%)", _f(dev.get("non_uniformity"), 1, 100.0), _esc(defs["non_uniformity"])],
+            ["non-uniformity (%)", _pm(dev.get("non_uniformity"), se.get("non_uniformity"), 1, 100.0),
+             _esc(defs["non_uniformity"]) + " (σ from the map itself; not converged in the map grid, see the maps)"],
             ["ledger error (1)", f"{_num(dev.get('ledger_error')) or float('nan'):.1e}",
              "|emitted − extracted − absorbed − terminated| / emitted"],
             ["rays", _esc(dev.get("rays")), f"in {_f(dev.get('elapsed_s'), 1)} s"],
@@ -935,7 +964,7 @@ class _Report:
             for value, label in panels:
                 hit = self._map_panel(found, dims, value)
                 paper = nu_paper[fig_no].get(value)
-                run_nu = coarse_nu = None
+                run_nu = coarse_nu = nu_std = None
                 if hit is None:
                     missing_text.append(f"{fig_no} {label}")
                 else:
@@ -943,15 +972,16 @@ class _Report:
                     used.add(fname)
                     sources += [fname] if fname not in sources else []
                     run_nu, coarse_nu = map_non_uniformity(da), _coarser_non_uniformity(da)
+                    nu_std = _map_nu_std(da)
                     maps[f"{label} ({fname})" + (f"\npaper: {paper:g} %" if paper is not None else "")] = da
                 row_nu = [r for r in _study_rows(studies, dims[1], dims[0]) if abs(r["values"][dims[0]] - value) < 1e-9]
                 tracer_nu = _num(row_nu[0].get("non_uniformity")) if row_nu else None
                 nu = run_nu if run_nu is not None else tracer_nu
                 rows.append([fig_no, _esc(label), "yes" if hit else '<span class="absent">not in this run</span>',
-                             _f(nu, 1, 100.0), _f(coarse_nu, 1, 100.0), "—" if paper is None else f"{paper:g}",
-                             "—" if paper is None or nu is None else
-                             self.v.check(f"{fig_no} {label} irradiance non-uniformity", 100 * nu, paper, unit="%",
-                                          digits=1)])
+                             _pm(nu, nu_std, 1, 100.0), _f(coarse_nu, 1, 100.0),
+                             "—" if paper is None else f"{paper:g}", "—" if paper is None or nu is None else
+                             self.v.check(f"{fig_no} {label} irradiance non-uniformity", 100 * nu, paper,
+                                          None if nu_std is None else 100 * nu_std, unit="%", digits=1)])
             if maps:
                 emitted = _num(found[0][1].attrs.get("emitted_W")) if found else None
                 parts.append(self.drawn(irradiance_maps_figure(maps, ncols=3, emitted_W=emitted,
@@ -983,17 +1013,7 @@ class _Report:
                       "the same map on half the cells per side (%)", "non-uniformity, paper (%)", "comparison"], rows,
                      "The irradiance maps of [Cylindrical-module] and this run: (E_max − E_min)/(E_max + E_min)",
                      left=2)
-        text = ("<p>Maps of the paper not in this run: " + _esc("; ".join(missing_text) or "none") + ". The paper "
-                "prints no non-uniformity for the 40 % diffuse, 80 mm and 70° panels; for FWHM 120° "
-                "(Lambertian LEDs, the device) it is the device's 36 % of Fig. 12. The maps are tallied on a "
-                "32 × 32 grid of the plate's square, bins entirely inside the plate only.</p><p><b>This non-uniformity "
-                "is not converged in the map grid</b>: the same map on half the cells per side (column 5) gives a "
-                "different value, and the max − min of a Monte Carlo map grows with the cells' noise (finer cells, "
-                "fewer rays). The trace gives it no σ, so the criterion is the paper's half unit alone. The grid study "
-                "of docs/tracer.md (“Non-uniformity and the map grid”: 16-128 cells per side, 8 seeds, noise-free "
-                "split-half estimate) shows the device at 400 000 rays going from 11 % (16 cells) to 51 % (128 "
-                "cells): the paper, which prints neither its grid nor its ray count, cannot be matched level for "
-                "level, and the differences listed above are differences of this estimator.</p>")
+        text = _maps_note(missing_text)
         body = f'<div class="wide">{cov}</div>' + text + "".join(parts)
         return _section("maps", "Irradiance maps (Figs. 10, 12, 14 of [Cylindrical-module])", body)
 

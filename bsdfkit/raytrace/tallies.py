@@ -101,6 +101,31 @@ def rebin_map(irradiance: np.ndarray, bins: int) -> np.ndarray:
     return irradiance.reshape(shape).mean(axis=(-3, -1))
 
 
+def non_uniformity_std(irradiance: np.ndarray, draws: int = 200, seed: int = 0) -> float:
+    """σ [1] of :func:`non_uniformity` of one Monte Carlo map, from the map alone (no second trace).
+
+    The relative noise of a cell is estimated from the residual against the mean of its four neighbours
+    (s = std(residual / E) / √1.25, cells whose neighbours all lie inside the plate); the map is redrawn ``draws``
+    times with that relative Gaussian noise (generator ``seed``: reproducible) and the σ of the redrawn
+    non-uniformities is returned. Structure on the scale of a cell (hot spots of mirror walls) counts as noise, so
+    the estimate is conservative there; docs/tracer.md compares it with the spread over independent seeds.
+    """
+    e = np.asarray(irradiance, dtype=np.float64)
+    inside = interior_bins(e.shape[0])
+    ok = inside.copy()
+    for axis in (0, 1):
+        for shift in (1, -1):
+            ok &= np.roll(inside, shift, axis)
+    neighbours = sum(np.roll(e, shift, axis) for axis in (0, 1) for shift in (1, -1)) / 4.0
+    ok &= e > 0
+    if ok.sum() < 2:
+        return float("nan")
+    rel = float(np.std((e[ok] - neighbours[ok]) / e[ok]) / np.sqrt(1.25))
+    rng = np.random.default_rng(seed)
+    values = [non_uniformity(e * (1.0 + rel * rng.standard_normal(e.shape))) for _ in range(draws)]
+    return float(np.std(values, ddof=1))
+
+
 def split_half_non_uniformity(first: np.ndarray, second: np.ndarray) -> float:
     """(E_max − E_min)/(E_max + E_min) without the Monte Carlo noise maximum: two independent maps [W/mm²].
 
