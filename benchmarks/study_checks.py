@@ -1,7 +1,7 @@
 """Two checks of the main job's module trace that are too costly for the job itself (numbers in docs/tracer.md).
 
     .venv/bin/python benchmarks/study_checks.py --grid  [--seeds 8 --rays 400000]   # non-uniformity vs map grid
-    .venv/bin/python benchmarks/study_checks.py --clamp [--rays 400000]             # studies with a clamped plate
+    .venv/bin/python benchmarks/study_checks.py --clamp [--recipe fitting/cl830.toml]  # studies, clamped plate
 
 ``--grid``: the device of ``fitting/cl830.toml`` (its own plate) and the five study points for which the
 cylindrical-module paper prints a non-uniformity, traced with a 128 × 128 irradiance map for ``--seeds``
@@ -50,8 +50,8 @@ PANELS = {"device": {}, "mirror walls": {"wall.specular_fraction": 1.0, "base.sp
           "h = 10 mm": {"cavity.height_mm": 10.0}, "FWHM 30°": {"leds.fwhm_deg": 30.0}}
 
 
-def _scene(extrapolate: bool, bins: int):
-    recipe = load_recipe(RECIPE)
+def _scene(extrapolate: bool, bins: int, recipe_path: Path = RECIPE):
+    recipe = load_recipe(recipe_path)
     scan = calibrate(read_scan(recipe.measurement))
     tis = tis_table(scan)
     plate = plate_from_scan(scan, tis, name=recipe.name, extrapolate=extrapolate)
@@ -78,10 +78,10 @@ def _row(r, values: dict, measured) -> dict:
             "non_uniformity": r.non_uniformity, "plate_incidence": incidence_shares(r, measured)}
 
 
-def clamp(rays: int) -> dict:
+def clamp(rays: int | None, recipe_path: Path = RECIPE) -> dict:
     out = {}
     for label, extrapolate in (("extrapolated", True), ("clamped", False)):
-        recipe, scene, measured = _scene(extrapolate, 32)
+        recipe, scene, measured = _scene(extrapolate, 32, recipe_path)
         opts = recipe.trace
         device = trace(scene, opts.rays if rays is None else rays, opts.seed)
         studies: dict[str, list[dict]] = {}
@@ -102,15 +102,16 @@ def main() -> None:
     p.add_argument("--grid", action="store_true")
     p.add_argument("--clamp", action="store_true")
     p.add_argument("--seeds", type=int, default=8)
-    p.add_argument("--rays", type=int, default=400_000)
+    p.add_argument("--rays", type=int, default=None, help="rays per trace (default: the recipe's; --grid: 400000)")
+    p.add_argument("--recipe", type=Path, default=RECIPE, help="--clamp: the recipe whose studies are traced")
     p.add_argument("--panels", default=",".join(PANELS))
     p.add_argument("--out", type=Path)
     a = p.parse_args()
     result = {}
     if a.grid:
-        result["grid"] = grid(a.seeds, a.rays, a.panels.split(","))
+        result["grid"] = grid(a.seeds, a.rays or 400_000, a.panels.split(","))
     if a.clamp:
-        result["clamp"] = clamp(a.rays)
+        result["clamp"] = clamp(a.rays, a.recipe)
     if not result:
         sys.exit("choose --grid and/or --clamp")
     if a.out:

@@ -903,7 +903,11 @@ class _Report:
                 f"at most {_f(plate.get('extrapolated_power_share_max'), 1, 100.0)} % over the studies. The model "
                 "has no Fresnel rise of the specular reflection towards grazing incidence: a lobe that the horizon "
                 "clips loses its clipped part to absorption, so results that depend on light beyond 56° carry "
-                "this assumption.</p>")
+                "this assumption.</p><p><b>The alternative</b> — the plate on its measured incidences only, clamped by "
+                "the tracer — is traced once for every study point by <code>benchmarks/study_checks.py --clamp</code> "
+                "(too costly for this job); for the bundled cl830 recipe no trend verdict moves (docs/tracer.md, "
+                "“Trends with the plate clamped”). The trend table gives each study point's share of plate power on "
+                "model-extrapolated incidences beside its verdict.</p>")
         why = ""
         trends = (self.s.get("trace") or {}).get("trends") or {}
         height = trends.get("YBR slightly lower for short cavities (Fig. 11)")
@@ -1208,8 +1212,9 @@ class _Report:
                  "Monte Carlo of the device with this run's plate")
             card("YBR, yellow / blue ray power", _pm(dev.get("YBR"), se.get("YBR"), 2),
                  "yellow / blue extracted ray power of the two-wavelength trace")
-            card("irradiance non-uniformity", f"{_f(dev.get('non_uniformity'), 1, 100.0)} %",
-                 "(E_max − E_min)/(E_max + E_min) on the plate")
+            card("irradiance non-uniformity", f"{_pm(dev.get('non_uniformity'), se.get('non_uniformity'), 1, 100.0)} %",
+                 "(E_max − E_min)/(E_max + E_min) on the plate, 32 cells per side (not converged in the grid: see the "
+                 "maps)")
         col = (self.s.get("module_spectrum") or {}).get("colour") or {}
         if col:
             card("colour of the module", f"x {_f(col.get('x'), 4)}, y {_f(col.get('y'), 4)}",
