@@ -327,15 +327,17 @@ def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_unif
     for label, paper in (("specular reflector", "56"), ("perfect diffuser", "36"), ("h = 10 mm", "91"),
                          ("h = 43 mm", "36"), ("FWHM 30°", "76"), ("FWHM 120° (Lambertian)", "36")):
         row = re.search(rf"<td class=\"l\">{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">"
-                        rf"([\d.]+) ± [\d.]+</td><td class=\"\">[\d.]+</td><td class=\"\">{paper}</td>", maps)
+                        rf"([\d.]+) ± [\d.]+</td><td class=\"\">[\d.]+ \(Δ [^<]*converged\)</td>"
+                        rf"<td class=\"\">{paper}</td>", maps)
         assert row is not None, label
     for label in ("diffuse-to-specular 40 %", "h = 80 mm", "FWHM 70°"):
         assert re.search(rf"{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">[\d.]+ ± [\d.]+</td>"
-                         r"<td class=\"\">[\d.]+</td><td class=\"\">—</td>", maps), label
+                         r"<td class=\"\">[\d.]+ \(Δ [^<]*\)</td><td class=\"\">—</td>", maps), label
     # this run's value in the table is the map's own (E_max − E_min)/(E_max + E_min)
     nu = 100 * map_non_uniformity(xr.DataArray(_map(1.05, tilt=0.1), dims=("y_mm", "x_mm"), coords=_coords()))
     # the 40 % diffuse panel (k = 1), with the same map on half the cells per side beside it
-    assert re.search(rf"<td class=\"\">{nu:.1f} ± [\d.]+</td><td class=\"\">[\d.]+</td><td class=\"\">—</td>", maps)
+    assert re.search(rf"<td class=\"\">{nu:.1f} ± [\d.]+</td><td class=\"\">[\d.]+ \(Δ [^<]*\)</td>"
+                     r"<td class=\"\">—</td>", maps)
 
 
 def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(tmp_path):
@@ -500,3 +502,12 @@ def test_readings_of_the_papers_words_are_stated_numbers():
     m = magnitude_verdict(3.1, 0.03, 0.0, READINGS["negligible_pp"], "negligible", "pp")
     assert not m["agrees"] and m["criterion"] == pytest.approx(math.hypot(1.0, 0.06), rel=1e-12)
     assert magnitude_verdict(0.9, 0.03, 0.0, READINGS["negligible_pp"], "negligible", "pp")["agrees"]
+
+
+def test_maps_table_says_whether_halving_the_cells_moves_the_value_by_less_than_its_sigma():
+    from bsdfkit.pipeline.report import _grid_check
+
+    # the main job's device: 16.4 % on 32 cells (σ 1.2 pp), 12.3 % on 16: not converged
+    assert _grid_check(0.164, 0.123, 0.012) == "12.3 (Δ +4.1 > σ 1.2: not converged)"
+    assert _grid_check(0.464, 0.460, 0.008).endswith("< σ 0.8: converged)")
+    assert _grid_check(0.164, 0.123, None) == "12.3 (Δ +4.1)"

@@ -389,6 +389,19 @@ def _coarser_non_uniformity(da: xr.DataArray) -> float | None:
     return map_non_uniformity(xr.DataArray(rebin_map(values, n // 2), dims=MAP_DIMS, coords=coords))
 
 
+def _grid_check(fine: float | None, coarse: float | None, std: float | None) -> str:
+    """Cell of the maps table: the value on half the cells per side [%] and whether halving the cells changes the
+    value by less than the fine map's σ (the convergence rule of docs/tracer.md)."""
+    if fine is None or coarse is None:
+        return _f(coarse, 1, 100.0)
+    change = 100.0 * (fine - coarse)
+    if std is None:
+        return f"{100 * coarse:.1f} (Δ {change:+.1f})"
+    ok = abs(change) < 100.0 * std
+    return (f"{100 * coarse:.1f} (Δ {change:+.1f} {'<' if ok else '>'} σ {100 * std:.1f}: "
+            f"{'converged' if ok else 'not converged'})")
+
+
 def _map_nu_std(da: xr.DataArray) -> float | None:
     """σ [1] of a square map's non-uniformity from the map itself (None for a map that is not the tracer's)."""
     values = np.asarray(da.transpose(*MAP_DIMS).values, dtype=float)
@@ -982,7 +995,7 @@ class _Report:
                 tracer_nu = _num(row_nu[0].get("non_uniformity")) if row_nu else None
                 nu = run_nu if run_nu is not None else tracer_nu
                 rows.append([fig_no, _esc(label), "yes" if hit else '<span class="absent">not in this run</span>',
-                             _pm(nu, nu_std, 1, 100.0), _f(coarse_nu, 1, 100.0),
+                             _pm(nu, nu_std, 1, 100.0), _grid_check(run_nu, coarse_nu, nu_std),
                              "—" if paper is None else f"{paper:g}", "—" if paper is None or nu is None else
                              self.v.check(f"{fig_no} {label} irradiance non-uniformity", 100 * nu, paper,
                                           None if nu_std is None else 100 * nu_std, unit="%", digits=1)])
@@ -1013,8 +1026,9 @@ class _Report:
                                          "plate edge).", f"irradiance map {fname}"))
         if not found:
             parts.append(_missing("No trace_*.nc file with an irradiance map in the run folder."))
-        cov = _table(["paper figure", "panel", "map in this run", "non-uniformity, this run (%)",
-                      "the same map on half the cells per side (%)", "non-uniformity, paper (%)", "comparison"], rows,
+        cov = _table(["paper figure", "panel", "map in this run", "non-uniformity, this run (± 1σ, %)",
+                      "the same map on half the cells per side (%): change vs σ", "non-uniformity, paper (%)",
+                      "comparison"], rows,
                      "The irradiance maps of [Cylindrical-module] and this run: (E_max − E_min)/(E_max + E_min)",
                      left=2)
         text = _maps_note(missing_text)
