@@ -39,7 +39,7 @@ from bsdfkit.measurement.raw_scan import read_scan  # noqa: E402
 from bsdfkit.pipeline.recipe import STUDIES, _scene_with_plate, _trends, incidence_shares, load_recipe  # noqa: E402
 from bsdfkit.raytrace import trace, with_values  # noqa: E402
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan  # noqa: E402
-from bsdfkit.raytrace.tallies import grid_study  # noqa: E402
+from bsdfkit.raytrace.tallies import grid_study, non_uniformity_std  # noqa: E402
 from bsdfkit.reduction.tis import tis_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,7 +75,8 @@ def grid(seeds: int, rays: int, panels: list[str]) -> dict:
 
 def _row(r, values: dict, measured) -> dict:
     return {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR, "YBR_std": r.std_err["YBR"],
-            "non_uniformity": r.non_uniformity, "plate_incidence": incidence_shares(r, measured)}
+            "non_uniformity": r.non_uniformity, "non_uniformity_std": non_uniformity_std(r.irradiance),
+            "plate_incidence": incidence_shares(r, measured)}
 
 
 def clamp(rays: int | None, recipe_path: Path = RECIPE) -> dict:
