@@ -3,10 +3,13 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import re
 import shutil
 import subprocess
 import tomllib
+from html import escape as html_escape
+from html import unescape as html_unescape
 
 import numpy as np
 import pytest
@@ -324,14 +327,17 @@ def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_unif
     for label, paper in (("specular reflector", "56"), ("perfect diffuser", "36"), ("h = 10 mm", "91"),
                          ("h = 43 mm", "36"), ("FWHM 30°", "76"), ("FWHM 120° (Lambertian)", "36")):
         row = re.search(rf"<td class=\"l\">{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">"
-                        rf"([\d.]+)</td><td class=\"\">{paper}</td>", maps)
+                        rf"([\d.]+) ± [\d.]+</td><td class=\"\">[\d.]+ \(Δ [^<]*converged\)</td>"
+                        rf"<td class=\"\">{paper}</td>", maps)
         assert row is not None, label
     for label in ("diffuse-to-specular 40 %", "h = 80 mm", "FWHM 70°"):
-        assert re.search(rf"{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">[\d.]+</td>"
-                         r"<td class=\"\">—</td>", maps), label
+        assert re.search(rf"{re.escape(label)}</td><td class=\"\">yes</td><td class=\"\">[\d.]+ ± [\d.]+</td>"
+                         r"<td class=\"\">[\d.]+ \(Δ [^<]*\)</td><td class=\"\">—</td>", maps), label
     # this run's value in the table is the map's own (E_max − E_min)/(E_max + E_min)
     nu = 100 * map_non_uniformity(xr.DataArray(_map(1.05, tilt=0.1), dims=("y_mm", "x_mm"), coords=_coords()))
-    assert f"<td class=\"\">{nu:.1f}</td><td class=\"\">—</td>" in maps  # the 40 % diffuse panel (k = 1)
+    # the 40 % diffuse panel (k = 1), with the same map on half the cells per side beside it
+    assert re.search(rf"<td class=\"\">{nu:.1f} ± [\d.]+</td><td class=\"\">[\d.]+ \(Δ [^<]*\)</td>"
+                     r"<td class=\"\">—</td>", maps)
 
 
 def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(tmp_path):
@@ -358,14 +364,29 @@ def test_trends_follow_the_papers_direction():
     class Device:
         LER = 0.56
 
-    studies = {"reflectance": rows("wall.reflectance", [0.8, 0.98], LER=[0.30, 0.55], YBR=[6.2, 8.4],
+    # the paper's sizes: Fig. 8 30 pp and 3; 63 % at 10 mm vs 53 % at 43 mm; 91 vs 36 %; 'slightly' (YBR within
+    # 3.3 %); 'negligible' (LER span below 1 pp); 76 vs 36 %
+    studies = {"reflectance": rows("wall.reflectance", [0.8, 0.98], LER=[0.28, 0.58], YBR=[6.0, 9.0],
                                    non_uniformity=[0.2, 0.16]),
-               "height_mm": rows("cavity.height_mm", [10.0, 43.0, 80.0], LER=[0.59, 0.56, 0.52],
-                                 YBR=[8.2, 8.4, 8.5], non_uniformity=[0.9, 0.36, 0.3]),
-               "led_fwhm_deg": rows("leds.fwhm_deg", [30.0, 120.0], LER=[0.57, 0.56], YBR=[7.6, 8.4],
+               "height_mm": rows("cavity.height_mm", [10.0, 43.0, 80.0], LER=[0.63, 0.53, 0.50],
+                                 YBR=[8.3, 8.4, 8.5], non_uniformity=[0.91, 0.36, 0.3]),
+               "led_fwhm_deg": rows("leds.fwhm_deg", [30.0, 120.0], LER=[0.565, 0.56], YBR=[7.6, 8.4],
                                     non_uniformity=[0.76, 0.36])}
     t = _trends(Device, studies)
     assert all(x["holds"] for x in t.values()), {k: v for k, v in t.items() if not v["holds"]}
+    # the right direction with the wrong size does not hold: LER moved by 3.1 pp by the FWHM is not negligible,
+    # a 24.5 pp reflectance effect is not the paper's 30 pp, a YBR 20 % lower is not 'slightly' lower
+    studies["led_fwhm_deg"] = rows("leds.fwhm_deg", [30.0, 120.0], LER=[0.589, 0.558], YBR=[7.6, 8.4],
+                                   non_uniformity=[0.76, 0.36])
+    studies["reflectance"] = rows("wall.reflectance", [0.8, 0.98], LER=[0.300, 0.545], YBR=[6.0, 9.0],
+                                  non_uniformity=[0.2, 0.16])
+    studies["height_mm"] = rows("cavity.height_mm", [10.0, 43.0, 80.0], LER=[0.63, 0.53, 0.50],
+                                YBR=[6.7, 8.4, 8.5], non_uniformity=[0.91, 0.36, 0.3])
+    t = _trends(Device, studies)
+    for name in ("LER barely moves with LED FWHM (Fig. 13)", "LER rises with wall reflectance (Fig. 8)",
+                 "YBR slightly lower for short cavities (Fig. 11)"):
+        assert t[name]["direction"] and not t[name]["holds"], name
+    assert t["LER barely moves with LED FWHM (Fig. 13)"]["magnitude"]["run"] == pytest.approx(3.1, abs=1e-9)
     studies["height_mm"] = rows("cavity.height_mm", [10.0, 43.0, 80.0], LER=[0.52, 0.56, 0.59],
                                 YBR=[8.8, 8.4, 8.3], non_uniformity=[0.3, 0.36, 0.9])
     t = _trends(Device, studies)
@@ -423,3 +444,70 @@ def test_study_and_incidence_figures_label_every_axis_with_units_and_name_data_a
     _axes_read_like_engineering_figures(fig)
     labels = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
     assert any("measured ± 1σ" in x for x in labels) and "plate, model-extrapolated" in labels
+
+
+# ---- issue #27: every comparison states its criterion, and the verdicts follow it ----------------------------
+def test_every_verdict_follows_its_stated_criterion_and_every_difference_is_listed(tmp_path):
+    """Rule: a value agrees iff |run − paper| ≤ sqrt(half_unit² + (kσ)²); a trend holds iff its direction is the
+    paper's and its size agrees by the same rule; every other comparison is in the disagreement list, and no
+    verdict in the HTML says 'agrees' or 'holds' where the numbers exceed the criterion."""
+    folder, _ = _full_run(tmp_path / "run")
+    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    rep = report_module._Report(folder, summary, paper_values())
+    text = rep.build()
+    comps = rep.v.comparisons
+    kinds = {c["kind"] for c in comps}
+    assert kinds == {"value", "trend"} and len(comps) > 30
+    opening = html_unescape(text[:text.index('<section id="measurement">')])
+    for c in comps:
+        if c["criterion"] is not None:
+            within = abs(c["run"] - c["paper"]) <= c["criterion"]
+            expected = within and c.get("direction", True)
+            assert c["agrees"] == expected, c
+            assert c["criterion"] > 0
+        else:  # a trend the paper gives no size for: its direction decides
+            assert c["kind"] == "trend" and c["agrees"] == c["direction"], c
+        if not c["agrees"]:
+            assert any(c["what"] in d for d in rep.v.disagreements), c["what"]
+            assert html_escape(c["what"]) in text
+    assert len(rep.v.disagreements) == sum(not c["agrees"] for c in comps)
+    assert "device LER vs §4 of [Cylindrical-module]" in opening
+    # the HTML: one 'agrees'/'holds' mark per agreeing comparison (the spectral section's own mark aside), and each
+    # 'agrees' states |Δ| ≤ criterion with numbers that satisfy it
+    marks = re.findall(r'<span class="agree">(agrees|holds)</span>', text)
+    assert len(marks) == sum(c["agrees"] for c in comps)
+    for diff, crit in re.findall(r'<span class="agree">agrees</span> \(\|Δ\| ([\d.]+) ≤ ([\d.]+)', text):
+        assert float(diff) <= float(crit)
+
+
+def test_table3_losses_are_the_papers_100_minus_extracted(tmp_path):
+    folder, _ = _full_run(tmp_path / "run")
+    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    rep = report_module._Report(folder, summary, paper_values())
+    rep.build()
+    power = summary["module_budget"]["power"]
+    last = power["iterations"][-1]
+    losses = [c for c in rep.v.comparisons if c["what"].startswith("Table 3 losses")]
+    assert len(losses) == 1 and losses[0]["run"] == pytest.approx(100.0 - last["total"], abs=1e-12)
+    assert losses[0]["run"] != pytest.approx(last["losses"], abs=1e-3)  # the run's own line keeps in-flight power
+
+
+def test_readings_of_the_papers_words_are_stated_numbers():
+    from bsdfkit.pipeline.report import K_SIGMA, READINGS, agreement_criterion, magnitude_verdict
+
+    assert READINGS["negligible_pp"] < READINGS["slightly_pp"] == 63 - 61  # §6: 63 % 'slightly surpasses' 61 %
+    assert agreement_criterion(0.5, 0.1) == pytest.approx(math.hypot(0.5, K_SIGMA * 0.1), rel=1e-15)
+    assert agreement_criterion(0.5, None) == 0.5
+    # the LED-FWHM study of the main job moves LER by 3.1 pp: not negligible
+    m = magnitude_verdict(3.1, 0.03, 0.0, READINGS["negligible_pp"], "negligible", "pp")
+    assert not m["agrees"] and m["criterion"] == pytest.approx(math.hypot(1.0, 0.06), rel=1e-12)
+    assert magnitude_verdict(0.9, 0.03, 0.0, READINGS["negligible_pp"], "negligible", "pp")["agrees"]
+
+
+def test_maps_table_says_whether_halving_the_cells_moves_the_value_by_less_than_its_sigma():
+    from bsdfkit.pipeline.report import _grid_check
+
+    # the main job's device: 16.4 % on 32 cells (σ 1.2 pp), 12.3 % on 16: not converged
+    assert _grid_check(0.164, 0.123, 0.012) == "12.3 (Δ +4.1 > σ 1.2: not converged)"
+    assert _grid_check(0.464, 0.460, 0.008).endswith("< σ 0.8: converged)")
+    assert _grid_check(0.164, 0.123, None) == "12.3 (Δ +4.1)"

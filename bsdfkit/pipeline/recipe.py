@@ -42,7 +42,7 @@ from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
-from bsdfkit.pipeline.report import paper_values, write_report
+from bsdfkit.pipeline.report import READINGS, magnitude_verdict, paper_values, write_report
 from bsdfkit.pipeline.spectral_comparison import (
     SpectralComparisonOptions,
     compare_tracer_modes,
@@ -62,6 +62,7 @@ from bsdfkit.raytrace import trace, with_values
 from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
+from bsdfkit.raytrace.tallies import non_uniformity_std
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -511,6 +512,11 @@ def _is_device_value(scene, study: str, value: float) -> bool:
     return scene.wall.specular_fraction == value == scene.base.specular_fraction
 
 
+def _nu_std(result) -> float | None:
+    """σ [1] of a trace's map non-uniformity from its own map (:func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
+    return None if result.irradiance is None else non_uniformity_std(result.irradiance)
+
+
 def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:
     """How the power reaching the plate splits between measured and model-extrapolated incidences.
 
@@ -554,7 +560,8 @@ def stage_trace(state: RunState) -> None:
     done = 1
     state.progress("trace", done, total)
     state.device = device
-    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured)}}
+    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured),
+                                             "non_uniformity_std": _nu_std(device)}}
     studies: dict[str, list[dict]] = {}
     datasets: dict[str, list[xr.Dataset]] = {}
     blue_on_plate: dict[str, np.ndarray] = {}
@@ -569,7 +576,8 @@ def stage_trace(state: RunState) -> None:
                 done += 1
                 state.progress("trace", done, total)
             row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
-                   "YBR_std": r.std_err["YBR"], "non_uniformity": r.non_uniformity, "ledger_error": r.ledger_error,
+                   "YBR_std": r.std_err["YBR"], "non_uniformity": r.non_uniformity,
+                   "non_uniformity_std": _nu_std(r), "ledger_error": r.ledger_error,
                    "clamped_share": r.clamped_interactions / r.plate_interactions if r.plate_interactions else 0.0,
                    "plate_incidence": incidence_shares(r, measured), "same_trace_as_device": same}
             studies.setdefault(study, []).append(row)
@@ -594,7 +602,8 @@ def stage_trace(state: RunState) -> None:
     state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity",
                                                                          "ledger_error", "rays", "elapsed_s",
                                                                          "interactions_per_s")},
-                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")},
+                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")}
+                              | {"non_uniformity": results["device"]["non_uniformity_std"]},
                               "YBR_definition": RAY_YBR_DEFINITION,
                               "plate": {k: results["plate"][k] for k in (
                                   "measured_incidences_deg", "extrapolated_incidences_deg", "clamped_share_max",
@@ -625,9 +634,20 @@ def stage_trace(state: RunState) -> None:
              f"clamped {100 * worst_clamped:.1f} % of plate interactions (largest of all traces); power on "
              f"extrapolated incidences {100 * results['plate']['device_extrapolated_power_share']:.1f} % (device), "
              f"at most {100 * results['plate']['extrapolated_power_share_max']:.1f} %"]
-    lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({t['detail']})"
+    lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({_trend_size(t)}{t['detail']})"
               for name, t in results["trends"].items()]
     state.summary.setdefault("report_lines", []).extend(lines)
+
+
+def _trend_size(t: dict) -> str:
+    """'direction …, size … vs paper … (criterion …); ' of a trend for the run's printed lines."""
+    m = t.get("magnitude")
+    head = f"direction {'as' if t['direction'] else 'NOT as'} the paper's"
+    if not m or m.get("run") is None:
+        return head + "; "
+    sd = f" ± {m['run_std']:.2f}" if m.get("run_std") is not None else ""
+    unit = f" {m['unit']}" if m.get("unit") else ""
+    return f"{head}, size {m['run']:.2f}{sd}{unit} vs {m['paper']:.2f}{unit}, criterion {m['criterion']:.2f}; "
 
 
 def _paper_study_points() -> dict[tuple[str, str], list[tuple[float, float]]]:
@@ -664,76 +684,140 @@ def _sorted_rows(studies: dict[str, list[dict]], study: str) -> list[dict]:
     return sorted(studies.get(study, []), key=lambda r: r["values"][key])
 
 
-def _trend(holds: bool, paper: str, rows: list[dict], study: str, quantity: str, fmt: str, extra: str = "") -> dict:
+def _at(rows: list[dict], study: str, value: float) -> dict | None:
+    key = STUDIES[study][1]
+    hit = [r for r in rows if abs(r["values"][key] - value) < 1e-9]
+    return hit[0] if hit else None
+
+
+def _difference(a: dict | None, b: dict | None, quantity: str) -> tuple[float, float]:
+    """a − b of a quantity [LER, non-uniformity: pp; YBR: 1] and its σ (independent traces; 0 for the same one)."""
+    if a is None or b is None:
+        return float("nan"), float("nan")
+    scale = 1.0 if quantity == "YBR" else 100.0
+    same = a is b or (a.get("same_trace_as_device") and b.get("same_trace_as_device"))
+    sa, sb = (_num_or_nan(a.get(f"{quantity}_std")), _num_or_nan(b.get(f"{quantity}_std")))
+    std = 0.0 if same else math.hypot(sa, sb)
+    return scale * (a[quantity] - b[quantity]), scale * std
+
+
+def _num_or_nan(x: Any) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _trend(direction: bool, paper: str, rows: list[dict], study: str, quantity: str, fmt: str, extra: str = "",
+           magnitude: dict | None = None) -> dict:
+    """One trend: ``holds`` = the paper's direction AND (when the paper gives one) its magnitude within the
+    criterion of :func:`bsdfkit.pipeline.report.magnitude_verdict`; ``extrapolated_share`` [1] per study value."""
     key = STUDIES[study][1]
     unit = {"height_mm": " mm", "led_fwhm_deg": "°"}.get(study, "")
     scale = 100.0 if quantity in ("LER", "non_uniformity") else 1.0
     pct = " %" if scale == 100.0 else ""
     numbers = ", ".join(f"{r['values'][key]:g}{unit}: {scale * r[quantity]:{fmt}}{pct}" for r in rows)
-    return {"holds": bool(holds), "paper": paper, "quantity": quantity, "study": study,
+    holds = bool(direction) and (magnitude is None or bool(magnitude["agrees"]))
+    shares = {f"{r['values'][key]:g}": (r.get("plate_incidence") or {}).get("extrapolated") for r in rows}
+    return {"holds": holds, "direction": bool(direction), "magnitude": magnitude, "paper": paper,
+            "quantity": quantity, "study": study, "extrapolated_share": shares,
             "detail": numbers + (f"; {extra}" if extra else "")}
 
 
-def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
-    """The §5 trends of [Cylindrical-module], each checked on this run's studies in the paper's direction.
+def _magnitude(rows: list[dict], study: str, quantity: str, a: float, b: float, paper: float, half_unit: float,
+               reading: str) -> dict:
+    """This run's a − b of ``quantity`` against the paper's (or its reading's centre), with the criterion."""
+    diff, std = _difference(_at(rows, study, a), _at(rows, study, b), quantity)
+    return magnitude_verdict(diff, std, paper, half_unit, reading, "pp" if quantity != "YBR" else "")
 
-    Each entry: ``holds`` (bool), ``paper`` (what the paper finds, with its figure), ``quantity``, ``study``
-    and ``detail`` (this run's numbers). A trend needs at least two points of its study.
+
+def _trends(device, studies: dict[str, list[dict]]) -> dict[str, dict]:
+    """The §5 trends of [Cylindrical-module], each judged on this run's studies by direction AND magnitude.
+
+    Each entry: ``holds`` (direction and magnitude), ``direction``, ``magnitude`` (run difference [pp or 1] with
+    σ, the paper's difference or the numeric reading of its words, the criterion and the verdict; ``None`` where
+    the paper gives neither), ``paper``, ``quantity``, ``study``, ``extrapolated_share`` and ``detail``.
+    Readings of the paper's words: :data:`bsdfkit.pipeline.report.READINGS`. A trend needs two study points.
     """
     out: dict[str, dict] = {}
     refl = _sorted_rows(studies, "reflectance")
     if len(refl) >= 2:
         out["LER rises with wall reflectance (Fig. 8)"] = _trend(
             all(np.diff([r["LER"] for r in refl]) > 0), "LER 28 % at ρ = 0.80 to 58 % at ρ = 0.98", refl,
-            "reflectance", "LER", ".1f")
+            "reflectance", "LER", ".1f", magnitude=_magnitude(refl, "reflectance", "LER", 0.98, 0.80, 30.0,
+                                                              math.hypot(0.5, 0.5), "58 − 28 = 30 pp (Fig. 8 text)"))
         out["YBR rises with wall reflectance (Fig. 8)"] = _trend(
             refl[-1]["YBR"] > refl[0]["YBR"], "YBR 6 at ρ = 0.80 to 9 at ρ = 0.98", refl, "reflectance", "YBR",
-            ".2f")
-    height = _sorted_rows(studies, "height_mm")
-    if len(height) >= 2:
-        out["LER falls with cavity height (Fig. 11)"] = _trend(
-            all(np.diff([r["LER"] for r in height]) < 0), "LER decreases with height; best 63 % at 10 mm", height,
-            "height_mm", "LER", ".1f")
-        shortest, rest = height[0], height[1:]
-        out["YBR slightly lower for short cavities (Fig. 11)"] = _trend(
-            all(shortest["YBR"] < r["YBR"] for r in rest),
-            "YBR slightly lower for small heights: blue light meets the plate at smaller incidences, where more "
-            "blue is transmitted (bibs, Fig. 4)", height, "height_mm", "YBR", ".2f",
-            "mean incidence of the blue power on the plate: " + ", ".join(
-                f"{r['values']['cavity.height_mm']:g} mm: {r['plate_incidence']['mean_blue_incidence_deg']:.1f}°"
-                for r in height))
-        out["non-uniformity larger for short cavities (Fig. 12)"] = _trend(
-            height[0]["non_uniformity"] > height[-1]["non_uniformity"], "91 % at 10 mm vs 36 % at 42 mm", height,
-            "height_mm", "non_uniformity", ".1f")
-    fwhm = _sorted_rows(studies, "led_fwhm_deg")
-    if len(fwhm) >= 2:
-        spans = {k: max(r["LER"] for r in studies[k]) - min(r["LER"] for r in studies[k])
-                 for k in ("reflectance", "height_mm") if len(studies.get(k, [])) >= 2}
-        moves = max(r["LER"] for r in fwhm) - min(r["LER"] for r in fwhm)
-        out["LER barely moves with LED FWHM (Fig. 13)"] = _trend(
-            moves < min(spans.values(), default=math.inf), "negligible influence of the FWHM on the LER", fwhm,
-            "led_fwhm_deg", "LER", ".1f",
-            f"LER span {100 * moves:.1f} pp vs " + ", ".join(f"{100 * v:.1f} pp over {k}" for k, v in spans.items())
-            + " (criterion: the smallest LER effect)")
-        out["YBR lower for narrow LED beams (Fig. 13)"] = _trend(
-            fwhm[0]["YBR"] < fwhm[-1]["YBR"],
-            "bibs transmits more blue at small incidences, which lowers the YBR of collimated LEDs", fwhm,
-            "led_fwhm_deg", "YBR", ".2f")
-        out["non-uniformity larger for narrow LED beams (Fig. 14)"] = _trend(
-            all(np.diff([r["non_uniformity"] for r in fwhm]) < 0), "76 % at FWHM 30° (Lambertian: 36 %)", fwhm,
-            "led_fwhm_deg", "non_uniformity", ".1f")
-    spec = _sorted_rows(studies, "specular_fraction")
-    if len(spec) >= 2:
-        out["non-uniformity larger for more specular walls (Fig. 10)"] = _trend(
-            all(np.diff([r["non_uniformity"] for r in spec]) > 0), "56 % for a mirror, 36 % for a perfect diffuser",
-            spec, "specular_fraction", "non_uniformity", ".1f")
-        span = max(r["LER"] for r in spec) - min(r["LER"] for r in spec)
-        refl_span = max((r["LER"] for r in refl), default=0.0) - min((r["LER"] for r in refl), default=0.0)
-        out["LER slightly higher with more specular walls (Fig. 9)"] = _trend(
-            spec[-1]["LER"] >= spec[0]["LER"] and (not refl or span < refl_span),
-            "the wall finish has no relevant effect on LER and YBR; a more specular reflector performs slightly "
-            "better", spec, "specular_fraction", "LER", ".1f")
+            ".2f", magnitude=_magnitude(refl, "reflectance", "YBR", 0.98, 0.80, 3.0, math.hypot(0.5, 0.5),
+                                        "9 − 6 = 3 (Fig. 8 text)"))
+    _height_trends(out, _sorted_rows(studies, "height_mm"))
+    _fwhm_trends(out, studies, _sorted_rows(studies, "led_fwhm_deg"))
+    _finish_trends(out, _sorted_rows(studies, "specular_fraction"))
     return out
+
+
+def _height_trends(out: dict[str, dict], height: list[dict]) -> None:
+    if len(height) < 2:
+        return
+    out["LER falls with cavity height (Fig. 11)"] = _trend(
+        all(np.diff([r["LER"] for r in height]) < 0), "LER decreases with height; best 63 % at 10 mm", height,
+        "height_mm", "LER", ".1f", magnitude=_magnitude(
+            height, "height_mm", "LER", 10.0, 43.0, 10.0, math.hypot(0.5, 0.5),
+            "63 % at 10 mm (§6) − 53 % extracted by the 43 mm device of Fig. 11's conditions (§4) = 10 pp"))
+    shortest, rest = height[0], height[1:]
+    ybr43 = (_at(height, "height_mm", 43.0) or height[-1])["YBR"]
+    bound = READINGS["slightly_relative"] * ybr43
+    out["YBR slightly lower for short cavities (Fig. 11)"] = _trend(
+        all(shortest["YBR"] < r["YBR"] for r in rest),
+        "YBR slightly lower for small heights: blue light meets the plate at smaller incidences, where more "
+        "blue is transmitted (bibs, Fig. 4)", height, "height_mm", "YBR", ".2f",
+        "mean incidence of the blue power on the plate: " + ", ".join(
+            f"{r['values']['cavity.height_mm']:g} mm: {r['plate_incidence']['mean_blue_incidence_deg']:.1f}°"
+            for r in height),
+        magnitude=_magnitude(height, "height_mm", "YBR", 43.0, 10.0, bound / 2, bound / 2,
+                             f"'slightly' = 0 to {100 * READINGS['slightly_relative']:.1f} % of the YBR at 43 mm "
+                             f"(0 to {bound:.2f})"))
+    out["non-uniformity larger for short cavities (Fig. 12)"] = _trend(
+        height[0]["non_uniformity"] > height[-1]["non_uniformity"], "91 % at 10 mm vs 36 % at 42 mm", height,
+        "height_mm", "non_uniformity", ".1f", magnitude=_magnitude(
+            height, "height_mm", "non_uniformity", 10.0, 43.0, 55.0, math.hypot(0.5, 0.5), "91 − 36 = 55 pp (§5.3)"))
+
+
+def _fwhm_trends(out: dict[str, dict], studies: dict[str, list[dict]], fwhm: list[dict]) -> None:
+    if len(fwhm) < 2:
+        return
+    lo, hi = min(fwhm, key=lambda r: r["LER"]), max(fwhm, key=lambda r: r["LER"])
+    span, span_std = _difference(hi, lo, "LER")
+    out["LER barely moves with LED FWHM (Fig. 13)"] = _trend(
+        True, "negligible influence of the FWHM on the LER", fwhm, "led_fwhm_deg", "LER", ".1f",
+        f"LER span {span:.1f} pp over the FWHM points",
+        magnitude_verdict(span, span_std, 0.0, READINGS["negligible_pp"], f"'negligible' = LER span below "
+                          f"{READINGS['negligible_pp']:g} pp", "pp"))
+    out["YBR lower for narrow LED beams (Fig. 13)"] = _trend(
+        fwhm[0]["YBR"] < fwhm[-1]["YBR"],
+        "bibs transmits more blue at small incidences, which lowers the YBR of collimated LEDs", fwhm,
+        "led_fwhm_deg", "YBR", ".2f")
+    out["non-uniformity larger for narrow LED beams (Fig. 14)"] = _trend(
+        all(np.diff([r["non_uniformity"] for r in fwhm]) < 0), "76 % at FWHM 30° (Lambertian: 36 %)", fwhm,
+        "led_fwhm_deg", "non_uniformity", ".1f", magnitude=_magnitude(
+            fwhm, "led_fwhm_deg", "non_uniformity", 30.0, 120.0, 40.0, math.hypot(0.5, 0.5),
+            "76 − 36 = 40 pp (§5.4, Fig. 12)"))
+
+
+def _finish_trends(out: dict[str, dict], spec: list[dict]) -> None:
+    if len(spec) < 2:
+        return
+    out["non-uniformity larger for more specular walls (Fig. 10)"] = _trend(
+        all(np.diff([r["non_uniformity"] for r in spec]) > 0), "56 % for a mirror, 36 % for a perfect diffuser",
+        spec, "specular_fraction", "non_uniformity", ".1f", magnitude=_magnitude(
+            spec, "specular_fraction", "non_uniformity", 1.0, 0.0, 20.0, math.hypot(0.5, 0.5),
+            "56 − 36 = 20 pp (§5.2)"))
+    bound = READINGS["slightly_pp"]
+    out["LER slightly higher with more specular walls (Fig. 9)"] = _trend(
+        spec[-1]["LER"] >= spec[0]["LER"], "the wall finish has no relevant effect on LER and YBR; a more specular "
+        "reflector performs slightly better", spec, "specular_fraction", "LER", ".1f",
+        magnitude=_magnitude(spec, "specular_fraction", "LER", 1.0, 0.0, bound / 2, bound / 2,
+                             f"'slightly' = 0 to {bound:g} pp"))
 
 
 def stage_fits(state: RunState) -> None:

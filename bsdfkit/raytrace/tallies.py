@@ -88,6 +88,83 @@ def non_uniformity(irradiance: np.ndarray) -> float:
     return (hi - lo) / (hi + lo) if hi + lo > 0 else float("nan")
 
 
+def rebin_map(irradiance: np.ndarray, bins: int) -> np.ndarray:
+    """A square irradiance map [W/mm²] on ``bins`` cells per side: the mean of blocks of the finer cells.
+
+    Exact for the tallied power (a coarse cell is a block of fine ones); ``bins`` must divide the map's side.
+    """
+    side = irradiance.shape[-1]
+    if side % bins:
+        raise ValueError(f"{bins} cells per side do not divide a {side}-cell map")
+    k = side // bins
+    shape = irradiance.shape[:-2] + (bins, k, bins, k)
+    return irradiance.reshape(shape).mean(axis=(-3, -1))
+
+
+def non_uniformity_std(irradiance: np.ndarray, draws: int = 200, seed: int = 0) -> float:
+    """σ [1] of :func:`non_uniformity` of one Monte Carlo map, from the map alone (no second trace).
+
+    The relative noise of a cell is estimated from the residual against the mean of its four neighbours
+    (s = std(residual / E) / √1.25, cells whose neighbours all lie inside the plate); the map is redrawn ``draws``
+    times with that relative Gaussian noise (generator ``seed``: reproducible) and the σ of the redrawn
+    non-uniformities is returned. Structure on the scale of a cell (hot spots of mirror walls) counts as noise, so
+    the estimate is conservative there; docs/tracer.md compares it with the spread over independent seeds.
+    """
+    e = np.asarray(irradiance, dtype=np.float64)
+    inside = interior_bins(e.shape[0])
+    ok = inside.copy()
+    for axis in (0, 1):
+        for shift in (1, -1):
+            ok &= np.roll(inside, shift, axis)
+    neighbours = sum(np.roll(e, shift, axis) for axis in (0, 1) for shift in (1, -1)) / 4.0
+    ok &= e > 0
+    if ok.sum() < 2:
+        return float("nan")
+    rel = float(np.std((e[ok] - neighbours[ok]) / e[ok]) / np.sqrt(1.25))
+    rng = np.random.default_rng(seed)
+    values = [non_uniformity(e * (1.0 + rel * rng.standard_normal(e.shape))) for _ in range(draws)]
+    return float(np.std(values, ddof=1))
+
+
+def split_half_non_uniformity(first: np.ndarray, second: np.ndarray) -> float:
+    """(E_max − E_min)/(E_max + E_min) without the Monte Carlo noise maximum: two independent maps [W/mm²].
+
+    The cells of the largest and smallest irradiance are chosen on one map and their irradiance is read on the
+    other (and the other way round; the two estimates are averaged). A noisy cell that is extreme on one map is
+    an ordinary cell on the other, so E_max is not raised (nor E_min lowered) by the noise of the selection.
+    """
+    inside = interior_bins(first.shape[0])
+    a, b = first[inside], second[inside]
+    hi = 0.5 * (b[np.argmax(a)] + a[np.argmax(b)])
+    lo = 0.5 * (b[np.argmin(a)] + a[np.argmin(b)])
+    return float((hi - lo) / (hi + lo)) if hi + lo > 0 else float("nan")
+
+
+def grid_study(maps: np.ndarray, grids: tuple[int, ...]) -> dict[str, dict[str, float]]:
+    """Non-uniformity of independent traces' maps on several grids (cells per side), with its σ.
+
+    ``maps`` [W/mm²]: (seeds, n, n) irradiance maps of one scene traced with independent seeds (at least 2),
+    ``n`` divisible by every grid. Per grid: ``mean`` and ``std`` [1] of the non-uniformity over the seeds (σ of
+    one trace's value), ``pooled`` [1] (the map of all seeds summed), ``split_half`` [1]
+    (:func:`split_half_non_uniformity` of the even and odd seeds' mean maps) and ``split_half_std`` [1] (its σ
+    from the spread of the per-pair estimates, seeds paired 0-1, 2-3, …, divided by √pairs).
+    """
+    maps = np.asarray(maps, dtype=np.float64)
+    if maps.ndim != 3 or maps.shape[0] < 2:
+        raise ValueError("grid_study needs (seeds >= 2, n, n) maps")
+    out: dict[str, dict[str, float]] = {}
+    for bins in grids:
+        m = rebin_map(maps, bins)
+        per_seed = np.array([non_uniformity(x) for x in m])
+        pairs = np.array([split_half_non_uniformity(m[i], m[i + 1]) for i in range(0, m.shape[0] - 1, 2)])
+        out[str(bins)] = {
+            "mean": float(per_seed.mean()), "std": float(per_seed.std(ddof=1)),
+            "pooled": non_uniformity(m.mean(axis=0)),
+            "split_half": split_half_non_uniformity(m[0::2].mean(axis=0), m[1::2].mean(axis=0)),
+            "split_half_std": float(pairs.std(ddof=1) / np.sqrt(pairs.size)) if pairs.size > 1 else float("nan")}
+    return out
+
+
 POWER_LINES = ("extracted", "absorbed_wall", "absorbed_base", "absorbed_leds", "absorbed_plate", "stokes",
                "roulette", "discarded", "truncated")
 
