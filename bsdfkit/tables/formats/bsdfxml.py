@@ -1,4 +1,5 @@
-"""Radiance / LBNL WINDOW BSDF XML with the Klems full angle basis (145 patches): writer and reader.
+"""Radiance / LBNL WINDOW BSDF XML: writer (Klems full angle basis, 145 patches) and reader (any Klems-type basis,
+and Radiance's tensor trees ``TensorTree3`` / ``TensorTree4``, :mod:`bsdfkit.tables.formats.tensortree`).
 
 Layout written (the WINDOW 6 schema, ``WindowElement`` → ``Optical`` → ``Layer``)::
 
@@ -38,7 +39,11 @@ Rules (docs/exports.md, "Radiance / WINDOW BSDF XML"):
 * **Resolution (Klems rule)**: the basis resolves nothing finer than a patch (5° polar cap, 10° bands, 15° at
   grazing; azimuth 15°–45°): a lobe is smeared over its patch (its integral is kept, its shape is not), and the
   incidence is quantised to the 9 band centres. A specular lobe narrower than a patch (FWHM below ~10°) needs a
-  tensor tree (not written by bsdfkit); its TIS is still right, its angular distribution is not.
+  tensor tree: bsdfkit READS tensor trees but WRITES Klems only, so such a lobe keeps its TIS, not its angular
+  distribution.
+* **One answer**: a file in a basis is piecewise constant; its hemispherical value is the basis sum Σ f Λ
+  (:mod:`bsdfkit.reduction.basis`). ``read`` reports it; ingested records carry their cell's projected solid angle
+  (``basis_psa``) and the hemispherical engine integrates them by the same sum.
 * **Back side**: a bsdfkit source describes incidence on the front face. ``Back`` blocks are written only on
   request (``ExportSettings.xml_back = "mirror"``: the front data, for a sample symmetric between its faces).
 """
