@@ -1,5 +1,6 @@
-"""Radiance / LBNL WINDOW BSDF XML: writer (Klems full angle basis, 145 patches) and reader (any Klems-type basis,
-and Radiance's tensor trees ``TensorTree3`` / ``TensorTree4``, :mod:`bsdfkit.tables.formats.tensortree`).
+"""Radiance / LBNL WINDOW BSDF XML: writer (Klems full angle basis, 145 patches; a ``TensorTree3`` by the rule of
+:mod:`bsdfkit.tables.formats.bsdfxml_tree`) and reader (any Klems-type basis, and Radiance's tensor trees
+``TensorTree3`` / ``TensorTree4``, :mod:`bsdfkit.tables.formats.tensortree`).
 
 Layout written (the WINDOW 6 schema, ``WindowElement`` → ``Optical`` → ``Layer``)::
 
@@ -39,8 +40,9 @@ Rules (docs/exports.md, "Radiance / WINDOW BSDF XML"):
 * **Resolution (Klems rule)**: the basis resolves nothing finer than a patch (5° polar cap, 10° bands, 15° at
   grazing; azimuth 15°–45°): a lobe is smeared over its patch (its integral is kept, its shape is not), and the
   incidence is quantised to the 9 band centres. A specular lobe narrower than a patch (FWHM below ~10°) needs a
-  tensor tree: bsdfkit READS tensor trees but WRITES Klems only, so such a lobe keeps its TIS, not its angular
-  distribution.
+  tensor tree: ``ExportSettings.xml_basis`` ``auto`` writes a TensorTree3 exactly then (FWHM below 10°,
+  :mod:`bsdfkit.tables.formats.bsdfxml_tree`), ``tree`` always, ``klems`` (default: what WINDOW reads) never; in
+  Klems such a lobe keeps its TIS, not its angular distribution.
 * **One answer**: a file in a basis is piecewise constant; its hemispherical value is the basis sum Σ f Λ
   (:mod:`bsdfkit.reduction.basis`). ``read`` reports it; ingested records carry their cell's projected solid angle
   (``basis_psa``) and the hemispherical engine integrates them by the same sum.
@@ -63,8 +65,10 @@ from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import is_float, read_text
+from bsdfkit.reduction.basis import basis_sum
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.formats import bsdfxml_tree as bt
 from bsdfkit.tables.formats import tensortree
 
 __all__ = ["KLEMS_FULL", "KlemsBasis", "KlemsBsdf", "TreeBsdf", "klems_bsdf", "read_bsdfxml", "write_bsdfxml",
@@ -131,8 +135,6 @@ class KlemsBsdf:
     def hemispherical(self, direction: str) -> NDArray[np.float64]:
         """Σ_out f Λ per incident patch [1]: the file's own direct-hemispherical value (Radiance's), by the basis
         sum the hemispherical engine uses for ingested records (:func:`bsdfkit.reduction.basis.basis_sum`)."""
-        from bsdfkit.reduction.basis import basis_sum
-
         return basis_sum(self.blocks[direction], self.basis.lambdas())
 
     def band_tis(self, direction: str) -> NDArray[np.float64]:
@@ -477,11 +479,26 @@ def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
 # ------------------------------------------------------------------------------------------- registry hooks
 def _write_job(job: WriteJob) -> WriteOutcome:
     settings = job.settings
+    basis = getattr(settings, "xml_basis", "klems")
+    if basis != "klems":
+        rule = "tree: --xml-basis tree"
+        if basis == "auto":
+            width = bt.narrowest_lobe_deg(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides))
+            if width is not None and width < bt.KLEMS_PATCH_DEG:
+                rule = f"tree: the specular lobe's FWHM {width:.3g} deg < {bt.KLEMS_PATCH_DEG:g} deg (a Klems patch)"
+            else:
+                basis = "klems"
+                rule = ("klems: no specular lobe" if width is None else
+                        f"klems: the narrowest specular lobe's FWHM {width:.3g} deg >= {bt.KLEMS_PATCH_DEG:g} deg")
+        if basis != "klems":
+            return bt.write_tree_job(job, rule)
+    else:
+        rule = "klems: --xml-basis klems"
     bsdf = klems_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
                       wavelength_nm=settings.wavelength_nm, back=getattr(settings, "xml_back", "none"),
                       comments=job.comments)
     write_bsdfxml(job.path, bsdf, force=job.force, generated_at=job.generated_at)
-    return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)",
+    return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)", "basis_rule": rule,
                                "klems_incidence_map_deg": dict(zip([float(c) for c in KLEMS_FULL.centres_deg],
                                                                    bsdf.source_incidence_deg or ()))})
 
@@ -593,7 +610,7 @@ def _guess_can_open(head: str, path: Path) -> bool:
     return body.startswith("<WindowElement") or (body.startswith("<") and "<WindowElement" in head[:2048])
 
 
-FORMAT = TableFormat(name="bsdfxml", title="Radiance/WINDOW BSDF XML (Klems; tensor tree read)",
+FORMAT = TableFormat(name="bsdfxml", title="Radiance/WINDOW BSDF XML (Klems, tensor tree)",
                      extensions=(".xml",),
                      guess_can_open=_guess_can_open, summarise=_summarise, vendor_table=_vendor_table,
                      write=_write_job, sides_per_file=2, grid_kind="klems")

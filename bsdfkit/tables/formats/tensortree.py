@@ -24,10 +24,13 @@ Hemispherical value (what Radiance's direct-hemispherical query returns for the 
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from bsdfkit.reduction.basis import basis_sum
 
 __all__ = ["TensorTree", "TreeSyntaxError", "disk_to_square", "grid_directions", "incidences_deg", "parse_tree",
            "square_to_disk"]
@@ -66,8 +69,6 @@ class TensorTree:
 
     def hemispherical(self, theta_deg: float) -> float:
         """ρ = π Σ f s² [1] over the slice at the incidence [deg] (the module docstring)."""
-        from bsdfkit.reduction.basis import basis_sum
-
         _, size, value = self.slice_at(theta_deg)
         return float(basis_sum(value, np.pi * size**2))
 
@@ -215,3 +216,49 @@ def _grid_side(count: int, ndim: int, where: int) -> int:
         raise TreeSyntaxError("wrong number of values in a tensor-tree leaf grid", where,
                               f"2^({ndim}k) values (1, {2**ndim}, {4**ndim}, ...)", count)
     return n
+
+
+# ------------------------------------------------------------------------------------------- writer (TensorTree3)
+#: TT3 written: 2^LOG2_CELLS cells per dimension (64: outgoing cells of about 1.8 deg at the normal)
+LOG2_CELLS = 6
+#: sub-samples per side of an outgoing cell for its average (uniform in the square = in projected solid angle)
+SUB_SAMPLES_TREE = 6
+#: 2^D cells are merged into one leaf (their mean: the basis sum is kept) when (max - min) <= MERGE_RTOL * max
+#: (about 90 % of the cells of a smooth body, as Radiance's own bsdf2ttree culls by default)
+MERGE_RTOL = 0.05
+
+
+def cell_averages(values_at: Callable[[NDArray[np.float64]], NDArray[np.float64]], n: int,
+                  sub: int = SUB_SAMPLES_TREE) -> NDArray[np.float64]:
+    """(n, n) projected-solid-angle averages [1/sr] over the cells of the outgoing square of ``values_at(d)`` (unit
+    vectors (..., 3)): ``sub`` × ``sub`` points per cell, uniform in the square (the map preserves area)."""
+    k = (np.arange(n * sub) + 0.5) / (n * sub)
+    a, b = np.meshgrid(k, k, indexing="ij")
+    x, y = square_to_disk(a, b)
+    z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))
+    v = values_at(np.stack([x, y, z], axis=-1))
+    return v.reshape(n, sub, n, sub).mean(axis=(1, 3))
+
+
+def tree_text(grid: NDArray[np.float64], rtol: float = MERGE_RTOL) -> str:
+    """The ``{ … }`` text of a full (n, n, n) TT3 grid [1/sr] (n a power of 2), cells merged where uniform within
+    ``rtol`` (each merged leaf holds the mean of its cells, so π Σ f s² is unchanged)."""
+    out: list[str] = []
+    _emit(np.asarray(grid, dtype=np.float64), rtol, out)
+    return "\n".join(out)
+
+
+def _emit(block: NDArray[np.float64], rtol: float, out: list[str]) -> None:
+    hi, lo = float(block.max()), float(block.min())
+    if block.shape[0] == 1 or hi - lo <= rtol * hi:
+        out.append(f"{{ {float(block.mean()):.7g} }}")
+        return
+    if block.shape[0] == 2:  # a 2 x 2 x 2 grid, row-major
+        out.append("{ " + " ".join(f"{float(v):.7g}" for v in block.ravel()) + " }")
+        return
+    h = block.shape[0] // 2
+    out.append("{")
+    for n in range(8):  # child n: upper half of dimension i where bit i of n is set
+        s = [slice(h, None) if (n >> i) & 1 else slice(0, h) for i in range(3)]
+        _emit(block[tuple(s)], rtol, out)
+    out.append("}")
