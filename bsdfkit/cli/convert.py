@@ -64,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
                    help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
                         "between its faces)")
+    p.add_argument("--xml-basis", default="klems", choices=("klems", "tree", "auto"),
+                   help="BSDF XML basis: klems (default), tree (Radiance TensorTree3, isotropic) or auto (a tree when "
+                        "the source's specular lobe is narrower than a Klems patch, FWHM < 10 deg)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
@@ -89,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance,
-                              xml_back=args.xml_back,
+                              xml_back=args.xml_back, xml_basis=args.xml_basis,
                               grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)))
     result = convert(
         args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,

@@ -71,6 +71,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
                    help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
                         "between its faces)")
+    p.add_argument("--xml-basis", default="klems", choices=("klems", "tree", "auto"),
+                   help="BSDF XML basis: klems (default), tree (Radiance TensorTree3, isotropic) or auto (a tree when "
+                        "the source's specular lobe is narrower than a Klems patch, FWHM < 10 deg)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source, as a fraction "
                         "of the block maximum (default 0.01); the mirror average is written")
@@ -108,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         theta_i_deg=_incidences(args.incidences) if args.incidences else None,
         zemax_symmetry=args.symmetry,
         symmetry_tolerance=args.symmetry_tolerance,
-        xml_back=args.xml_back,
+        xml_back=args.xml_back, xml_basis=args.xml_basis,
         tracepro=replace(tp, **changes),
         tracepro_scatter=args.tracepro_scatter,
         grid=args.grid,

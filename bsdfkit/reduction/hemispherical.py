@@ -79,7 +79,7 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.core.records import incidences
-from bsdfkit.reduction import disk
+from bsdfkit.reduction import basis, disk
 from bsdfkit.reduction.tis import HALVES, Hemisphere, polar_grid
 
 #: Half-width (in direction cosines) of the window around β0 in which the lobe's peak is looked for.
@@ -106,6 +106,9 @@ class Geometry:
     phi_s: NDArray[np.float64]  # deg
     arc: NDArray[np.str_]
     side: str
+    #: projected solid angle [sr] of the basis cell each record stands for (records of a file in an angle basis,
+    #: :mod:`bsdfkit.reduction.basis`), else None
+    basis_psa: NDArray[np.float64] | None = None
 
     @property
     def n(self) -> int:
@@ -635,10 +638,15 @@ def _grown_until_symmetric(geom: Geometry, ref: NDArray[np.float64], region: Reg
 
 
 def sampling_method(geom: Geometry, finite: NDArray[np.bool_]) -> str:
-    """``arcs`` when every finite record lies on the in-plane arc or the perpendicular arc through the specular
+    """``basis`` when the records are the cells of an angle basis covering the hemisphere (a BSDF XML file: every
+    record carries its cell's projected solid angle, :mod:`bsdfkit.reduction.basis`, and the finite ones cover
+    the hemisphere): the BSDF is piecewise constant and its integral is the basis sum. Else ``arcs`` when every
+    finite record lies on the in-plane arc or the perpendicular arc through the specular
     direction (half-profiles about the normal and the specular point, with the in-plane lobe rules: under-sampled
     and unresolved lobes), else ``disk`` (polar interpolation of every record over the projected disk,
     :mod:`bsdfkit.reduction.disk`): grids, C-planes, other planes, a φs = 90/270° arc, scattered records."""
+    if geom.basis_psa is not None and basis.covers_hemisphere(geom.basis_psa[finite]):
+        return "basis"
     on_arcs = np.isin(geom.arc[finite], ("in_plane", "perpendicular"))
     return "arcs" if bool(on_arcs.all()) else "disk"
 
@@ -652,9 +660,41 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
     if not finite.any():
         raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
                          expected="finite values on an arc")
-    if sampling_method(geom, finite) == "disk":
+    method = sampling_method(geom, finite)
+    if method == "basis":
+        return _reconstruct_basis(geom, finite)
+    if method == "disk":
         return _reconstruct_disk(geom, ref, ref_std, n_psi, n_r, errors)
     return _reconstruct_arcs(geom, ref, ref_std, n_psi, n_r, errors)
+
+
+def _reconstruct_basis(geom: Geometry, finite: NDArray[np.bool_]) -> Reconstruction:
+    """Records that are the cells of an angle basis: the central weights are the cells' projected solid angles
+    (the basis sum, :func:`bsdfkit.reduction.basis.basis_sum`), exact for the piecewise-constant BSDF the file
+    defines, so no alternative reconstruction. The pointwise BSDF is the value of the nearest record in the
+    projected disk (the cell containing the direction, up to the cells' shapes)."""
+    psa = np.where(finite, geom.basis_psa, 0.0)
+    x, y = geom.frame()
+    nodes = np.stack([x[finite], y[finite]], axis=1)
+    index = np.flatnonzero(finite)
+
+    def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        from scipy.spatial import cKDTree
+
+        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        dx, dy = direction_frame(geom, directions)
+        _, k = cKDTree(nodes).query(np.stack([np.ravel(dx), np.ravel(dy)], axis=1))
+        return v[index[k]].reshape(np.shape(dx))
+
+    return Reconstruction(central=psa, alternatives={}, comparisons={}, lobe=np.zeros(geom.n),
+                          region=Region(records=np.zeros(0, dtype=np.int64), in_plane_deg=None),
+                          extrapolated_beyond_deg=None,
+                          assumptions=["the records are the cells of the file's angle basis (Klems patches or "
+                                       "tensor-tree leaves): the BSDF is constant over each cell, its hemispherical "
+                                       "value the sum of value x projected solid angle over the cells (exact for "
+                                       "the file; Radiance's value)"],
+                          method="basis: sum of f x projected solid angle over the cells of the file's angle basis",
+                          evaluate=evaluate)
 
 
 def _perpendicular_anisotropy(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
@@ -1374,8 +1414,12 @@ def _merge_duplicates(geom: Geometry, f: NDArray, u: NDArray, label: str
     for g in range(m):  # a merged direction lies on an arc if any of its records does
         labels = set(geom.arc[group == g])
         arc[g] = "in_plane" if "in_plane" in labels else "perpendicular" if "perpendicular" in labels else arc[g]
+    psa = None
+    if geom.basis_psa is not None:  # a cell's records at one direction: their parts of the cell add up
+        psa = np.zeros(m)
+        np.add.at(psa, group, geom.basis_psa)
     merged = Geometry(theta_i=geom.theta_i, phi_i=geom.phi_i, theta_s=geom.theta_s[keep], phi_s=geom.phi_s[keep],
-                      arc=arc, side=geom.side)
+                      arc=arc, side=geom.side, basis_psa=psa)
     n_dup = int(np.sum(counts > 1))
     if worst[0] > DUPLICATE_CHI2:
         g = worst[1]
@@ -1428,8 +1472,9 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
                          expected="one phi_i per incidence")
     arc = (np.asarray(ds["arc"].values[idx]).astype(str) if "arc" in ds.coords
            else np.full(idx.size, "in_plane"))
+    psa = (ds[basis.COORD].values[idx].astype(np.float64) if basis.COORD in ds.coords else None)
     geom = Geometry(theta_i=float(theta_i), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
-                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side)
+                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side, basis_psa=psa)
     label = str(ds.attrs.get("source", "dataset"))
     geom, f, u, warnings = _merge_duplicates(geom, f, u, label)
     geom, f, u, stated = _mirrored_half(geom, f, u)

@@ -121,6 +121,9 @@ class ExportSettings:
     grid_tolerance: grids.GridTolerance = field(default_factory=grids.GridTolerance)
     #: BSDF XML: ``none`` (front blocks only) or ``mirror`` (Back blocks = Front: a sample symmetric between faces)
     xml_back: str = "none"
+    #: BSDF XML basis: ``klems`` (default), ``tree`` (TensorTree3) or ``auto`` (a tree when the source's specular
+    #: lobe is narrower than a Klems patch; docs/exports.md §2.4)
+    xml_basis: str = "klems"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
@@ -129,6 +132,9 @@ class ExportSettings:
         if self.xml_back not in ("none", "mirror"):
             raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
                                   got=self.xml_back)
+        if self.xml_basis not in ("klems", "tree", "auto"):
+            raise ValidationError("unknown BSDF XML basis", field="xml_basis", expected="klems, tree or auto",
+                                  got=self.xml_basis)
         if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
             raise ValidationError("unsupported Zemax symmetry", field="zemax_symmetry",
                                   expected="PlaneSymmetrical or Asymmetrical", got=self.zemax_symmetry)

@@ -52,6 +52,10 @@ class VendorGrid:
     values: Any  # (theta_i, azimuth, first) or (theta_i, node) [1/sr]
     plane_symmetric: bool = False
     zero_azimuth_deg: float = 0.0  # harvey_shack: sample azimuth of table azimuth 0
+    #: directions in an angle basis (BSDF XML): (theta_i, node) projected solid angle [sr] of the basis cell (or
+    #: the part of it) each node stands for, summing to π per incidence; the ingested records carry it
+    #: (:mod:`bsdfkit.reduction.basis`) and the hemispherical engine integrates them by the basis sum
+    solid_angle: Any = None
 
 
 @dataclass(frozen=True)

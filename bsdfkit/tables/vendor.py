@@ -25,6 +25,7 @@ from bsdfkit.measurement.table import (
     records_dataset,
     side_of_quantity,
 )
+from bsdfkit.reduction import basis
 from bsdfkit.reduction.hemispherical import hemispherical
 from bsdfkit.tables import grids, registry
 from bsdfkit.tables.registry import VendorGrid, VendorTable, sniff_format
@@ -127,7 +128,7 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if not (np.isfinite(rel) and rel > 0):
         raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
                          expected="> 0", got=relative_std)
-    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc")}
+    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc", "psa")}
     for grid in chosen:
         for k, theta in enumerate(grid.theta_i):
             d, v, _, perp = _grid_nodes(grid, k)
@@ -135,8 +136,10 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
             th_deg = np.degrees(th)
             ph_deg = np.where(th_deg < 1e-9, 0.0, np.mod(np.round(np.degrees(ph), 9), 360.0))
             key = np.round(np.stack([th_deg, ph_deg], axis=-1), 7)
-            _, first = np.unique(key, axis=0, return_index=True)
-            first = np.sort(first)
+            _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            cols["psa"] += _merged_solid_angle(grid, k, first, np.asarray(inverse).ravel())
+            order = np.argsort(first)
+            first = first[order]
             arcs = _arc_of(theta, th_deg[first], ph_deg[first], perp[first])
             cols["theta_i"] += [float(theta)] * first.size
             cols["theta_s"] += th_deg[first].tolist()
@@ -161,6 +164,9 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
                          description=f"{vendor.format} file {Path(path).name}",
                          wavelength_note="" if lam is not None else
                          "not stated by the file; pass --wavelength NM (NaN = unknown)")
+    if all(g.solid_angle is not None for g in chosen):
+        ds = ds.assign_coords({basis.COORD: ("record", np.asarray(pick("psa"), dtype=np.float64))})
+        ds[basis.COORD].attrs.update(units="sr", long_name="projected solid angle of the basis cell of the record")
     ds.attrs.update(source_format=vendor.format, source_layout=vendor.grids[0].kind,
                     source_quantity=" ".join("brdf" if g.side == "reflection" else "btdf" for g in chosen),
                     sample_name=sample or Path(path).stem, zeros_policy=zeros, relative_std=rel,
@@ -170,6 +176,16 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if lam is None:
         ds.attrs["wavelength_note"] = "not stated by the file; pass --wavelength NM (NaN = unknown)"
     return _normalised(ds, vendor, path)
+
+
+def _merged_solid_angle(grid: _Grid, k: int, first: NDArray[np.int64], inverse: NDArray[np.int64]) -> list[float]:
+    """Basis solid angles [sr] of the unique nodes of incidence k, in the order of ``first`` once sorted: nodes at
+    one direction add their parts of the cell (NaN per node for a grid without basis)."""
+    if grid.solid_angle is None:
+        return [float("nan")] * first.size
+    merged = np.zeros(first.size)
+    np.add.at(merged, inverse, np.asarray(grid.solid_angle[k], dtype=np.float64))
+    return merged[np.argsort(first)].tolist()
 
 
 def _normalised(ds: xr.Dataset, vendor: VendorTable, path: str) -> xr.Dataset:

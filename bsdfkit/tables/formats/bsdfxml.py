@@ -1,4 +1,6 @@
-"""Radiance / LBNL WINDOW BSDF XML with the Klems full angle basis (145 patches): writer and reader.
+"""Radiance / LBNL WINDOW BSDF XML: writer (Klems full angle basis, 145 patches; a ``TensorTree3`` by the rule of
+:mod:`bsdfkit.tables.formats.bsdfxml_tree`) and reader (any Klems-type basis, and Radiance's tensor trees
+``TensorTree3`` / ``TensorTree4``, :mod:`bsdfkit.tables.formats.tensortree`).
 
 Layout written (the WINDOW 6 schema, ``WindowElement`` → ``Optical`` → ``Layer``)::
 
@@ -38,7 +40,12 @@ Rules (docs/exports.md, "Radiance / WINDOW BSDF XML"):
 * **Resolution (Klems rule)**: the basis resolves nothing finer than a patch (5° polar cap, 10° bands, 15° at
   grazing; azimuth 15°–45°): a lobe is smeared over its patch (its integral is kept, its shape is not), and the
   incidence is quantised to the 9 band centres. A specular lobe narrower than a patch (FWHM below ~10°) needs a
-  tensor tree (not written by bsdfkit); its TIS is still right, its angular distribution is not.
+  tensor tree: ``ExportSettings.xml_basis`` ``auto`` writes a TensorTree3 exactly then (FWHM below 10°,
+  :mod:`bsdfkit.tables.formats.bsdfxml_tree`), ``tree`` always, ``klems`` (default: what WINDOW reads) never; in
+  Klems such a lobe keeps its TIS, not its angular distribution.
+* **One answer**: a file in a basis is piecewise constant; its hemispherical value is the basis sum Σ f Λ
+  (:mod:`bsdfkit.reduction.basis`). ``read`` reports it; ingested records carry their cell's projected solid angle
+  (``basis_psa``) and the hemispherical engine integrates them by the same sum.
 * **Back side**: a bsdfkit source describes incidence on the front face. ``Back`` blocks are written only on
   request (``ExportSettings.xml_back = "mirror"``: the front data, for a sample symmetric between its faces).
 """
@@ -58,10 +65,14 @@ from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import is_float, read_text
+from bsdfkit.reduction.basis import basis_sum
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
+from bsdfkit.tables.formats import bsdfxml_tree as bt
+from bsdfkit.tables.formats import tensortree
 
-__all__ = ["KLEMS_FULL", "KlemsBasis", "KlemsBsdf", "klems_bsdf", "read_bsdfxml", "write_bsdfxml", "xml_text"]
+__all__ = ["KLEMS_FULL", "KlemsBasis", "KlemsBsdf", "TreeBsdf", "klems_bsdf", "read_bsdfxml", "write_bsdfxml",
+           "xml_text"]
 
 _DIRECTIONS = ("Reflection Front", "Transmission Front", "Reflection Back", "Transmission Back")
 _VALUE_FMT = ".7g"
@@ -122,13 +133,36 @@ class KlemsBsdf:
     details: dict[str, Any] = field(default_factory=dict)
 
     def hemispherical(self, direction: str) -> NDArray[np.float64]:
-        """Σ_out f Λ per incident patch [1]: the file's own direct-hemispherical value (Radiance's)."""
-        return self.basis.lambdas() @ self.blocks[direction]
+        """Σ_out f Λ per incident patch [1]: the file's own direct-hemispherical value (Radiance's), by the basis
+        sum the hemispherical engine uses for ingested records (:func:`bsdfkit.reduction.basis.basis_sum`)."""
+        return basis_sum(self.blocks[direction], self.basis.lambdas())
 
     def band_tis(self, direction: str) -> NDArray[np.float64]:
         """The hemispherical value at the first patch (azimuth 0) of every incident band [1]."""
         first = np.concatenate([[0], np.cumsum(self.basis.n_phi)[:-1]])
         return self.hemispherical(direction)[first]
+
+
+@dataclass(frozen=True, eq=False)
+class TreeBsdf:
+    """One BSDF XML holding tensor trees (``TensorTree3`` isotropic, ``TensorTree4`` anisotropic): ``trees`` maps a
+    direction (``Reflection Back`` …) to its :class:`~bsdfkit.tables.formats.tensortree.TensorTree`."""
+
+    ndim: int
+    trees: dict[str, tensortree.TensorTree]
+    wavelength_nm: float | None = None
+    name: str = "bsdfkit"
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def hemispherical(self, direction: str, theta_deg: float) -> float:
+        """π Σ f s² over the leaves at the incidence [deg] (source at azimuth 180°) [1]: Radiance's value."""
+        return self.trees[direction].hemispherical(theta_deg)
+
+    def incidences_deg(self) -> list[float]:
+        """Normal incidence and the centres of the incident cells of every tree in the plane of incidence [deg],
+        ascending (:func:`~bsdfkit.tables.formats.tensortree.incidences_deg`)."""
+        edges = np.concatenate([t.incident_edges() for t in self.trees.values()])
+        return tensortree.incidences_deg(edges, self.ndim)
 
 
 def _side_of(direction: str) -> str:
@@ -278,13 +312,8 @@ def _line_of(text: str, needle: str) -> int:
     return 0 if k < 0 else text.count("\n", 0, k) + 1
 
 
-def read_bsdfxml(path: str | Path) -> KlemsBsdf:
-    """Read a BSDF XML with a Klems-type angle basis (any basis of theta bands; the WINDOW schema).
-
-    Raises :class:`FormatError` naming the file, line and element for what cannot be read: a tensor tree, a
-    missing basis, a matrix of the wrong size, a value that is not a finite number ≥ 0.
-    """
-    path = str(path)
+def _open_layer(path: str) -> tuple[str, ET.Element]:
+    """The file's text and its ``Optical/Layer`` element (one-line :class:`FormatError` otherwise)."""
     text = read_text(path, expected="a BSDF XML file")
     try:
         root = ET.fromstring(text)
@@ -300,13 +329,37 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf:
         layer = _child(optical, "Layer")
     if layer is None:
         raise FormatError("no Optical/Layer element", file=path, field="Optical/Layer", expected="one layer")
+    return text, layer
+
+
+def read_bsdfxml(path: str | Path) -> KlemsBsdf | TreeBsdf:
+    """Read a BSDF XML: a Klems-type angle basis (any basis of theta bands; the WINDOW schema) as a
+    :class:`KlemsBsdf`, a Radiance tensor tree (``TensorTree3`` / ``TensorTree4``) as a :class:`TreeBsdf`.
+
+    Raises :class:`FormatError` naming the file, line and element for what cannot be read: a missing basis, a
+    matrix of the wrong size, a malformed tree, a value that is not a finite number ≥ 0.
+    """
+    path = str(path)
+    text, layer = _open_layer(path)
     definition = _child(layer, "DataDefinition")
+    structure = _text(None if definition is None else _child(definition, "IncidentDataStructure"))
+    if structure.lower().startswith("tensortree"):
+        if structure.lower() not in ("tensortree3", "tensortree4"):
+            raise FormatError("unknown tensor tree rank", file=path, line=_line_of(text, structure),
+                              field="IncidentDataStructure", expected="TensorTree3 or TensorTree4", got=structure)
+        return _read_tree(path, text, layer, 3 if structure.lower() == "tensortree3" else 4)
+    return _read_klems(path, text, layer, definition)
+
+
+def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element | None) -> KlemsBsdf:
+    """The Klems part of :func:`read_bsdfxml`."""
     basis_el = None if definition is None else _child(definition, "AngleBasis")
     if basis_el is None:
         kind = _text(None if definition is None else _child(definition, "IncidentDataStructure")) or "none"
-        raise FormatError("only the Klems angle bases are supported (a tensor tree or another basis was found)",
-                          file=path, line=_line_of(text, "IncidentDataStructure"), field="DataDefinition",
-                          expected="an AngleBasis of theta blocks (LBNL/Klems Full, Half, Quarter)", got=kind)
+        raise FormatError("no angle basis (an AngleBasis or a tensor tree)", file=path,
+                          line=_line_of(text, "IncidentDataStructure"), field="DataDefinition",
+                          expected="an AngleBasis of theta blocks (LBNL/Klems Full, Half, Quarter) or "
+                                   "IncidentDataStructure TensorTree3/TensorTree4", got=kind)
     structure = _text(_child(definition, "IncidentDataStructure")) or "Columns"
     if structure.lower() not in ("columns", "rows"):
         raise FormatError("unknown incident data structure", file=path, line=_line_of(text, structure),
@@ -366,23 +419,86 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf:
             labels.append(label)
     if not blocks:
         raise FormatError("no scattering data", file=path, field="WavelengthData", expected="a WavelengthDataBlock")
-    tag = _WAVELENGTH_TAG.search(text)
-    lam = float(tag.group(1)) if tag else None
-    lam = None if lam is None or not np.isfinite(lam) else lam
-    material = _child(layer, "Material")
-    mat_name = _text(None if material is None else _child(material, "Name")) or Path(path).stem
+    lam, mat_name = _wavelength_and_name(path, text, layer)
     return KlemsBsdf(basis, blocks, lam, mat_name, details={"wavelength_label": labels[0] if labels else "",
                                                              "incident_data_structure": structure})
+
+
+def _wavelength_and_name(path: str, text: str, layer: ET.Element) -> tuple[float | None, str]:
+    tag = _WAVELENGTH_TAG.search(text)
+    lam = float(tag.group(1)) if tag else None
+    material = _child(layer, "Material")
+    return (None if lam is None or not np.isfinite(lam) else lam,
+            _text(None if material is None else _child(material, "Name")) or Path(path).stem)
+
+
+#: Wavelength labels of the colour trees of a tensor-tree file (chromaticity, not BSDF values): not read
+_CHROMA = ("cie-u", "cie-v")
+
+
+def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
+    """The tensor-tree part of :func:`read_bsdfxml`: the ``Visible`` (else the first) BSDF tree of every block."""
+    data_starts = [m.end() for m in re.finditer(r"<ScatteringData\b[^>]*>", text)]
+    trees: dict[str, tensortree.TensorTree] = {}
+    labels: list[str] = []
+    k = -1
+    for wld in _children(layer, "WavelengthData"):
+        label = _text(_child(wld, "Wavelength"))
+        for block in _children(wld, "WavelengthDataBlock"):
+            k += 1
+            direction = " ".join(_text(_child(block, "WavelengthDataDirection")).split()).title()
+            if direction not in _DIRECTIONS:
+                raise FormatError("unknown data direction", file=path, line=_line_of(text, "WavelengthDataDirection"),
+                                  field="WavelengthDataDirection", expected=" | ".join(_DIRECTIONS), got=direction)
+            if label.lower() in _CHROMA or (label.lower() != "visible"
+                                            and any(lb.lower() == "visible" for lb in labels + [label])):
+                continue
+            basis_name = _text(_child(block, "AngleBasis"))
+            if basis_name.lower() != "lbnl/shirley-chiu":
+                raise FormatError("unsupported angle basis for a tensor tree", file=path,
+                                  line=_line_of(text, "AngleBasis"), field=f"AngleBasis of {direction}",
+                                  expected="LBNL/Shirley-Chiu", got=basis_name or "none")
+            data = _child(block, "ScatteringData")
+            raw = "" if data is None or data.text is None else data.text
+            try:
+                trees[direction] = tensortree.parse_tree(raw, ndim)
+            except tensortree.TreeSyntaxError as exc:
+                at = data_starts[k] + exc.offset if k < len(data_starts) else 0
+                raise FormatError(str(exc), file=path, line=text.count("\n", 0, at) + 1 if at else None,
+                                  field=f"ScatteringData of {direction} (TensorTree{ndim})", expected=exc.expected,
+                                  got=exc.got) from None
+            labels.append(label)
+    if not trees:
+        raise FormatError("no scattering data", file=path, field="WavelengthData",
+                          expected="a WavelengthDataBlock with a Visible tensor tree")
+    lam, name = _wavelength_and_name(path, text, layer)
+    return TreeBsdf(ndim, trees, lam, name, details={"wavelength_label": labels[0],
+                                                     "incident_data_structure": f"TensorTree{ndim}"})
 
 
 # ------------------------------------------------------------------------------------------- registry hooks
 def _write_job(job: WriteJob) -> WriteOutcome:
     settings = job.settings
+    basis = getattr(settings, "xml_basis", "klems")
+    if basis != "klems":
+        rule = "tree: --xml-basis tree"
+        if basis == "auto":
+            width = bt.narrowest_lobe_deg(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides))
+            if width is not None and width < bt.KLEMS_PATCH_DEG:
+                rule = f"tree: the specular lobe's FWHM {width:.3g} deg < {bt.KLEMS_PATCH_DEG:g} deg (a Klems patch)"
+            else:
+                basis = "klems"
+                rule = ("klems: no specular lobe" if width is None else
+                        f"klems: the narrowest specular lobe's FWHM {width:.3g} deg >= {bt.KLEMS_PATCH_DEG:g} deg")
+        if basis != "klems":
+            return bt.write_tree_job(job, rule)
+    else:
+        rule = "klems: --xml-basis klems"
     bsdf = klems_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
                       wavelength_nm=settings.wavelength_nm, back=getattr(settings, "xml_back", "none"),
                       comments=job.comments)
     write_bsdfxml(job.path, bsdf, force=job.force, generated_at=job.generated_at)
-    return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)",
+    return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)", "basis_rule": rule,
                                "klems_incidence_map_deg": dict(zip([float(c) for c in KLEMS_FULL.centres_deg],
                                                                    bsdf.source_incidence_deg or ()))})
 
@@ -394,6 +510,8 @@ def _key(direction: str) -> str:
 
 def _summarise(path: str) -> FileSummary:
     bsdf = read_bsdfxml(path)
+    if isinstance(bsdf, TreeBsdf):
+        return _summarise_tree(path, bsdf)
     theta = [float(t) for t in bsdf.basis.centres_deg]
     computed = {_key(d): [float(v) for v in bsdf.band_tis(d)] for d in _DIRECTIONS if d in bsdf.blocks}
     return FileSummary(
@@ -402,36 +520,89 @@ def _summarise(path: str) -> FileSummary:
                  "wavelength_nm": bsdf.wavelength_nm, **bsdf.details,
                  "tis_rule": "the file's own direct-hemispherical value sum_out f * Lambda at the azimuth-0 patch of "
                              "each incident band (as Radiance computes it): a Klems matrix holds patch averages, "
-                             "whose integral is exactly this sum"},
+                             "whose integral is exactly this sum (the basis sum `bsdfkit tis` also uses on the "
+                             "ingested file)"},
     )
 
 
-#: nodes per patch side for ingest: each patch value is placed at n × n points inside its patch (the file is
-#: piecewise constant; the engine reconstructs 580 nodes per incidence within about 1.5 % of the file's own sum,
-#: 145 patch centres alone 2-6 % below it)
+def _summarise_tree(path: str, bsdf: TreeBsdf) -> FileSummary:
+    theta = bsdf.incidences_deg()
+    computed = {_key(d): [bsdf.hemispherical(d, t) for t in theta] for d in _DIRECTIONS if d in bsdf.trees}
+    return FileSummary(
+        format="bsdfxml", path=path, incidences_deg=theta, tis_computed=computed, tis_stated={},
+        details={"basis": f"LBNL/Shirley-Chiu tensor tree (TensorTree{bsdf.ndim})", "blocks": list(bsdf.trees),
+                 "leaves": {d: int(t.value.size) for d, t in bsdf.trees.items()},
+                 "wavelength_nm": bsdf.wavelength_nm, **bsdf.details,
+                 "tis_rule": "the file's own direct-hemispherical value pi * sum f * s^2 over the tree's leaves at "
+                             "each incidence (source at azimuth 180 deg; as Radiance computes it), at the centres "
+                             "of the tree's incident cells (the basis sum `bsdfkit tis` also uses on the ingested "
+                             "file)"},
+    )
+
+
+#: nodes per patch side for ingest: each Klems patch value is placed at n × n points inside its patch, each
+#: standing for Λ/n² of the patch (coordinate ``basis_psa``): the hemispherical engine integrates them by the
+#: basis sum, exactly the file's own value
 INGEST_NODES = 2
 
 
-def _vendor_table(path: str) -> VendorTable:
-    bsdf = read_bsdfxml(path)
+def _ingest_directions(present: list[str]) -> tuple[list[str], str]:
+    """The blocks ingest reads: the front ones, or the back ones when the file holds nothing else (Radiance's own
+    tools write the back blocks, Radiance's +Z side, only)."""
+    front = [d for d in ("Reflection Front", "Transmission Front") if d in present]
+    if front:
+        return front, ""
+    back = [d for d in ("Reflection Back", "Transmission Back") if d in present]
+    return back, ("the file holds back-side blocks only (Radiance's own writers): they are read as the sample's "
+                  "face" if back else "")
+
+
+def _klems_grids(bsdf: KlemsBsdf, directions: list[str]) -> list[VendorGrid]:
     n = INGEST_NODES
     beta, _ = _patch_nodes(bsdf.basis, n)
     r = np.clip(np.hypot(beta[..., 0], beta[..., 1]).ravel(), 0.0, 1.0)
     theta_s = np.degrees(np.arcsin(r))
     phi_s = np.mod(np.degrees(np.arctan2(beta[..., 1], beta[..., 0])).ravel(), 360.0)
     first = np.concatenate([[0], np.cumsum(bsdf.basis.n_phi)[:-1]])
+    psa = np.repeat(bsdf.basis.lambdas() / (n * n), n * n)
     out = []
-    for direction in ("Reflection Front", "Transmission Front"):
-        if direction not in bsdf.blocks:
-            continue
+    for direction in directions:
         m = bsdf.blocks[direction]
         # the source at azimuth 180 in bsdfkit's frame: incident patch (theta_b, 0), outgoing patches as they are
         out.append(VendorGrid("directions", _side_of(direction), bsdf.basis.centres_deg.copy(), theta_s, phi_s,
-                              np.stack([np.repeat(m[:, j], n * n) for j in first])))
-    if not out:
-        raise FormatError("the file holds back-side data only", file=path, field="WavelengthDataDirection",
-                          expected="Reflection Front or Transmission Front")
-    return VendorTable("bsdfxml", tuple(out), bsdf.wavelength_nm, {"basis": bsdf.basis.name})
+                              np.stack([np.repeat(m[:, j], n * n) for j in first]),
+                              solid_angle=np.tile(psa, (first.size, 1))))
+    return out
+
+
+def _tree_grids(bsdf: TreeBsdf, directions: list[str]) -> list[VendorGrid]:
+    theta = np.asarray(bsdf.incidences_deg())
+    out = []
+    for direction in directions:
+        tree = bsdf.trees[direction]
+        m = tree.cells_per_side()
+        bx, by = tensortree.grid_directions(m)
+        theta_s = np.degrees(np.arcsin(np.clip(np.hypot(bx, by), 0.0, 1.0)))
+        phi_s = np.mod(np.degrees(np.arctan2(by, bx)), 360.0)
+        values = np.stack([tree.out_grid(t, m).ravel() for t in theta])
+        out.append(VendorGrid("directions", _side_of(direction), theta.copy(), theta_s, phi_s, values,
+                              solid_angle=np.full(values.shape, np.pi / (m * m))))
+    return out
+
+
+def _vendor_table(path: str) -> VendorTable:
+    bsdf = read_bsdfxml(path)
+    tree = isinstance(bsdf, TreeBsdf)
+    directions, note = _ingest_directions(list(bsdf.trees if tree else bsdf.blocks))
+    if not directions:
+        raise FormatError("the file holds no reflection or transmission block", file=path,
+                          field="WavelengthDataDirection", expected="Reflection or Transmission, Front or Back")
+    grids_ = _tree_grids(bsdf, directions) if tree else _klems_grids(bsdf, directions)
+    details = {"basis": f"LBNL/Shirley-Chiu tensor tree (TensorTree{bsdf.ndim})" if tree else bsdf.basis.name,
+               "blocks_read": directions}
+    if note:
+        details["note"] = note
+    return VendorTable("bsdfxml", tuple(grids_), bsdf.wavelength_nm, details)
 
 
 def _guess_can_open(head: str, path: Path) -> bool:
@@ -439,6 +610,7 @@ def _guess_can_open(head: str, path: Path) -> bool:
     return body.startswith("<WindowElement") or (body.startswith("<") and "<WindowElement" in head[:2048])
 
 
-FORMAT = TableFormat(name="bsdfxml", title="Radiance/WINDOW BSDF XML (Klems)", extensions=(".xml",),
+FORMAT = TableFormat(name="bsdfxml", title="Radiance/WINDOW BSDF XML (Klems, tensor tree)",
+                     extensions=(".xml",),
                      guess_can_open=_guess_can_open, summarise=_summarise, vendor_table=_vendor_table,
                      write=_write_job, sides_per_file=2, grid_kind="klems")

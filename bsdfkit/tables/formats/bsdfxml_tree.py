@@ -1,0 +1,146 @@
+"""BSDF XML with a Radiance tensor tree (``TensorTree3``, isotropic): the writer and its rule.
+
+Rule (docs/exports.md §2.4, "Writer rule")
+    ``ExportSettings.xml_basis`` (``--xml-basis``): ``klems`` (default: WINDOW and most daylighting tools read the
+    Klems basis only), ``tree`` (always a tensor tree) or ``auto``: a tensor tree when the source's specular lobe is
+    narrower than a Klems patch — its in-plane full width at half maximum above the floor of the arc is below
+    :data:`KLEMS_PATCH_DEG` (10°, the width of a Klems band) at some incidence and side — else Klems. Radiance
+    reads both; a tree keeps the lobe's shape to a cell (about 1.8° at the normal), Klems to a patch.
+
+Tree written
+    2^:data:`~bsdfkit.tables.formats.tensortree.LOG2_CELLS` (64) cells per dimension; incident cell ix holds the
+    source at the source incidence nearest its centre θ = arcsin(1 − 2 (ix + ½)/64) (an XML comment and
+    ``WriteOutcome.grid['klems_incidence_map_deg']`` give the map for the incidences a reader reports); every
+    outgoing cell holds the projected-solid-angle average of the source over it
+    (:func:`~bsdfkit.tables.formats.tensortree.cell_averages`), so π Σ f s² is the source's integral up to that
+    quadrature; 2 × 2 × 2 cells uniform within 5 % are merged into their mean (the sum is kept exactly, the
+    shape to 5 %; about 90 % of a smooth body's cells, as Radiance's own bsdf2ttree culls by default). The sample
+    is taken as isotropic about its normal (TT3), as the Klems writer does; the same blocks are written (Front,
+    Back on request).
+"""
+from __future__ import annotations
+
+from datetime import datetime
+from xml.sax.saxutils import escape
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bsdfkit.core.version import __version__
+from bsdfkit.io import atomic
+from bsdfkit.tables import grids
+from bsdfkit.tables.format_spec import WriteJob, WriteOutcome
+from bsdfkit.tables.formats import tensortree
+
+__all__ = ["KLEMS_PATCH_DEG", "lobe_fwhm_deg", "narrowest_lobe_deg", "tree_grids", "write_tree_job"]
+
+#: a lobe narrower than this (in-plane FWHM [deg]) is finer than a Klems patch: ``auto`` writes a tensor tree
+KLEMS_PATCH_DEG = 10.0
+
+
+def lobe_fwhm_deg(fn: grids.BsdfFn, theta_deg: float, side: str) -> float | None:
+    """In-plane FWHM [deg] of the specular lobe at the incidence: the contiguous arc about the highest value within
+    0.1 (direction cosines) of β0 = (sin θi, 0) where f stays above halfway between that peak and the arc's floor
+    (its minimum within 0.3 of β0); None when the peak is less than twice the floor (no lobe)."""
+    b0 = float(np.sin(np.radians(theta_deg)))
+    t = np.arange(-0.3, 0.3 + 1e-12, 0.001)
+    bx = b0 + t
+    ok = np.abs(bx) < 0.999
+    t, bx = t[ok], bx[ok]
+    d = np.stack([bx, np.zeros_like(bx), np.sqrt(1.0 - bx * bx)], axis=-1)
+    f = grids.evaluate_bsdf(fn, theta_deg, side, d)
+    near = np.flatnonzero(np.abs(t) <= 0.1)
+    p = int(near[np.argmax(f[near])])
+    peak, floor = float(f[p]), float(f.min())
+    if not peak > 2.0 * floor or peak <= 0.0:
+        return None
+    half = 0.5 * (peak + floor)
+    lo, hi = p, p
+    while lo > 0 and f[lo - 1] >= half:
+        lo -= 1
+    while hi < f.size - 1 and f[hi + 1] >= half:
+        hi += 1
+    edges = np.clip([bx[lo] - 0.0005, bx[hi] + 0.0005], -1.0, 1.0)  # half a step beyond the last samples
+    return float(np.degrees(np.arcsin(edges[1]) - np.arcsin(edges[0])))
+
+
+def narrowest_lobe_deg(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: tuple[str, ...]) -> float | None:
+    """The smallest :func:`lobe_fwhm_deg` [deg] over the incidences [deg] and sides (None: no lobe anywhere)."""
+    widths = [w for s in sides for t in theta if (w := lobe_fwhm_deg(fn, float(t), s)) is not None]
+    return min(widths) if widths else None
+
+
+def tree_grids(fn: grids.BsdfFn, theta: NDArray[np.float64], side: str, log2_cells: int = tensortree.LOG2_CELLS
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The full (n, n, n) TT3 grid [1/sr] of one side (incident cells ≥ n/2 zero: Radiance does not use them) and
+    the source incidence [deg] each incident cell holds (the nearest to its centre)."""
+    n = 2**log2_cells
+    centre = np.degrees(np.arcsin(1.0 - 2.0 * (np.arange(n // 2) + 0.5) / n))
+    held = np.array([theta[int(np.argmin(np.abs(theta - c)))] for c in centre])
+    grid = np.zeros((n, n, n))
+    cache: dict[float, NDArray[np.float64]] = {}
+    for ix, t in enumerate(held):
+        if float(t) not in cache:
+            cache[float(t)] = tensortree.cell_averages(lambda d, t=t: grids.evaluate_bsdf(fn, float(t), side, d), n)
+        grid[ix] = cache[float(t)]
+    return grid, held
+
+
+def _incidence_map(texts: list[str], held: NDArray[np.float64], n: int) -> dict[float, float]:
+    """Incidence a reader reports [deg] (:func:`~bsdfkit.tables.formats.tensortree.incidences_deg` of the written
+    trees together) -> the source incidence its incident cell holds."""
+    edges = np.concatenate([tensortree.parse_tree(t, 3).incident_edges() for t in texts])
+    out = {}
+    for t in tensortree.incidences_deg(edges, 3):
+        x0 = min(0.5 - 0.5 * np.sin(np.radians(t)), 0.5 - 1e-6)
+        out[float(t)] = float(held[min(int(x0 * n), n // 2 - 1)])
+    return out
+
+
+def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None, comments: tuple[str, ...],
+                  generated_at: datetime | None = None) -> str:
+    """The XML document of tensor-tree ``blocks`` (direction -> ScatteringData text)."""
+    when = (generated_at or datetime.now()).replace(microsecond=0).isoformat()
+    lam = "nan" if wavelength_nm is None else f"{wavelength_nm:g}"
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           '<WindowElement xmlns="http://windows.lbl.gov" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
+           'xsi:schemaLocation="http://windows.lbl.gov BSDF-v1.4.xsd">',
+           f"<!-- written by bsdfkit {__version__} on {when}; Radiance tensor tree (TensorTree3), BSDF in 1/sr -->",
+           f"<!-- bsdfkit wavelength_nm={lam} (the single wavelength held by the Visible block) -->"]
+    out += ["<!-- " + line.replace("--", "- -") + " -->" for line in comments]
+    out += ["<WindowElementType>System</WindowElementType>", "<FileType>BSDF</FileType>", "<Optical>", "<Layer>",
+            "<Material>", f"<Name>{escape(name)}</Name>", "<Manufacturer>bsdfkit</Manufacturer>",
+            '<Thickness unit="Millimeter">0</Thickness>', "<DeviceType>Other</DeviceType>", "</Material>",
+            "<DataDefinition>", "<IncidentDataStructure>TensorTree3</IncidentDataStructure>", "</DataDefinition>"]
+    for direction, tree in blocks.items():
+        out += ["<WavelengthData>", "<LayerNumber>System</LayerNumber>",
+                '<Wavelength unit="Integral">Visible</Wavelength>',
+                "<SourceSpectrum>CIE Illuminant D65 1nm.ssp</SourceSpectrum>",
+                "<DetectorSpectrum>ASTM E308 1931 Y.dsp</DetectorSpectrum>", "<WavelengthDataBlock>",
+                f"<WavelengthDataDirection>{direction}</WavelengthDataDirection>",
+                "<AngleBasis>LBNL/Shirley-Chiu</AngleBasis>",
+                f"<ScatteringDataType>{'BRDF' if direction.startswith('Reflection') else 'BTDF'}"
+                "</ScatteringDataType>",
+                "<ScatteringData>", tree, "</ScatteringData>", "</WavelengthDataBlock>", "</WavelengthData>"]
+    out += ["</Layer>", "</Optical>", "</WindowElement>", ""]
+    return "\n".join(out)
+
+
+def write_tree_job(job: WriteJob, rule: str) -> WriteOutcome:
+    """Write ``job`` as a TensorTree3 BSDF XML (module docstring); ``rule`` says why (for the outcome)."""
+    theta = np.sort(np.asarray(job.theta, dtype=np.float64))
+    n = 2**tensortree.LOG2_CELLS
+    blocks: dict[str, str] = {}
+    held = theta
+    for side in job.sides:
+        grid, held = tree_grids(job.fn, theta, side)
+        blocks[f"{side.capitalize()} Front"] = tensortree.tree_text(grid)
+    mapping = _incidence_map(list(blocks.values()), held, n)
+    if getattr(job.settings, "xml_back", "none") == "mirror":
+        blocks.update({d.replace("Front", "Back"): t for d, t in list(blocks.items())})
+    note = ", ".join(f"{c:g}<-{t:g}" for c, t in mapping.items())
+    comments = (f"bsdfkit incidence read <- source incidence [deg]: {note}", *job.comments)
+    atomic.write_text(job.path, tree_xml_text(blocks, "bsdfkit", job.settings.wavelength_nm, comments,
+                                              job.generated_at), force=job.force)
+    return WriteOutcome(None, {"mode": f"LBNL/Shirley-Chiu TensorTree3 ({n} cells per dimension)",
+                               "basis_rule": rule, "klems_incidence_map_deg": mapping})
