@@ -146,7 +146,8 @@ def test_cli_convert_writes_back_blocks_on_request_and_read_reports_them(tmp_pat
     zemax = ROOT / "tests" / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
     out = tmp_path / "vinyl.xml"
     done = subprocess.run([sys.executable, "-m", "bsdfkit", "convert", str(zemax), "--to", "bsdfxml", "-o", str(out),
-                           "--xml-back", "mirror", "--wavelength", "550", "--json"], capture_output=True, text=True,
+                           "--xml-back", "mirror", "--xml-basis", "klems", "--wavelength", "550", "--json"],
+                          capture_output=True, text=True,
                           cwd=ROOT, timeout=300)
     assert done.returncode == 0, done.stderr
     res = json.loads(done.stdout)

@@ -64,9 +64,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
                    help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
                         "between its faces)")
-    p.add_argument("--xml-basis", default="klems", choices=("klems", "tree", "auto"),
-                   help="BSDF XML basis: klems (default), tree (Radiance TensorTree3, isotropic) or auto (a tree when "
-                        "the source's specular lobe is narrower than a Klems patch, FWHM < 10 deg)")
+    p.add_argument("--xml-basis", default="auto", choices=("auto", "klems", "tree"),
+                   help="BSDF XML basis: auto (default: a Radiance TensorTree3 when the source's specular lobe is "
+                        "narrower than a Klems patch, FWHM < 10 deg, else Klems), klems (always; WINDOW reads only "
+                        "Klems) or tree (always)")
     p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",

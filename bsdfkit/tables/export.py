@@ -121,9 +121,9 @@ class ExportSettings:
     grid_tolerance: grids.GridTolerance = field(default_factory=grids.GridTolerance)
     #: BSDF XML: ``none`` (front blocks only) or ``mirror`` (Back blocks = Front: a sample symmetric between faces)
     xml_back: str = "none"
-    #: BSDF XML basis: ``klems`` (default), ``tree`` (TensorTree3) or ``auto`` (a tree when the source's specular
-    #: lobe is narrower than a Klems patch; docs/exports.md §2.4)
-    xml_basis: str = "klems"
+    #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
+    #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
+    xml_basis: str = "auto"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:

@@ -1,11 +1,11 @@
 """BSDF XML with a Radiance tensor tree (``TensorTree3``, isotropic): the writer and its rule.
 
 Rule (docs/exports.md §2.4, "Writer rule")
-    ``ExportSettings.xml_basis`` (``--xml-basis``): ``klems`` (default: WINDOW and most daylighting tools read the
-    Klems basis only), ``tree`` (always a tensor tree) or ``auto``: a tensor tree when the source's specular lobe is
-    narrower than a Klems patch — its in-plane full width at half maximum above the floor of the arc is below
-    :data:`KLEMS_PATCH_DEG` (10°, the width of a Klems band) at some incidence and side — else Klems. Radiance
-    reads both; a tree keeps the lobe's shape to a cell (about 1.8° at the normal), Klems to a patch.
+    ``ExportSettings.xml_basis`` (``--xml-basis``): ``auto`` (the default): a tensor tree when the source's specular
+    lobe is narrower than a Klems patch — its in-plane full width at half maximum above the floor of the arc is below
+    :data:`KLEMS_PATCH_DEG` (10°, the width of a Klems band) at some incidence and side — else Klems; ``klems``
+    (always: WINDOW and most daylighting tools read the Klems basis only) or ``tree`` (always a tensor tree).
+    Radiance reads both; a tree keeps the lobe's shape to a cell (about 1.8° at the normal), Klems to a patch.
 
 Tree written
     2^:data:`~bsdfkit.tables.formats.tensortree.LOG2_CELLS` (64) cells per dimension; incident cell ix holds the
