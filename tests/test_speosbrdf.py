@@ -2,6 +2,8 @@
 normalised to its stated percentage); bad files refused naming the line."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_bsdfxml import TRUTH, truth_fn
@@ -57,3 +59,22 @@ def test_bad_percentage_refused_naming_the_line(tmp_path):
     bad.write_text("\n".join(good[:10] + ["140"] + good[11:]))
     with pytest.raises(FormatError, match=r"bad\.brdf:11: field 'reflection table at theta_i=0, 550 nm: percent'"):
         read_speos_brdf(bad)
+
+
+LUMERICAL = (Path(__file__).resolve().parent / "data" / "ansys-speos-anisotropicbsdf"
+             / "test_13_brdf_one_wavelength_speos.brdf")
+
+
+@pytest.mark.slow
+def test_a_lumerical_written_brdf_reads_to_its_stated_percentages():
+    """A third-party .brdf (Ansys/Lumerical FDTD 8.28 export, vendored with provenance): sniffed by content, both
+    sides and its 4 incidences read, every table's integral equal to the percentage its header states (the format's
+    normalisation rule), and reflection + transmission ≤ 1 at every incidence (energy, independent of the rule)."""
+    assert registry.sniff_format(LUMERICAL) == "speosbrdf"
+    summary = read_any(LUMERICAL)
+    assert summary.incidences_deg == [0.0, 22.5, 45.0, 67.5]
+    stated = {"reflection": [2.3, 1.932, 13.66, 18.28], "transmission": [4.33, 5.08, 5.61, 0.91]}
+    for side, percent in stated.items():
+        np.testing.assert_allclose(summary.tis_computed[side], np.asarray(percent) / 100.0, rtol=1e-9)
+    total = np.add(summary.tis_computed["reflection"], summary.tis_computed["transmission"])
+    assert np.all((total > 0) & (total <= 1.0))
