@@ -16,7 +16,12 @@ device scene in both modes with the same LED spectrum, and compares the module s
   (:data:`~bsdfkit.core.conventions.MODULE_YELLOW_BAND_NM`) of both with the relative difference and its σ, the
   direction check of §4.2 (the two-wavelength model overestimates the power near 470 nm and underestimates the
   yellow emission), LER, YBR (with band edges) and luminous efficacy of radiation of both, and the power and
-  photon ledgers of the spectral trace (Stokes loss on its own line).
+  photon ledgers of the spectral trace (Stokes loss on its own line);
+* the same relative difference in the sub-bands :data:`SUB_BANDS_NM` (380-459 nm, the band §4.2 names
+  465-475 nm, the emission onset 480-500 nm), each with σ and the paper's direction where it states one, and
+  its causes by ablation (:func:`ablations`): conversion off, re-absorption off (spectral plate, above
+  :data:`ABLATION_ABOVE_NM`), and the two-wavelength plate's pump TIS averaged over the LED spectrum instead of
+  the blue filter. The ablations trace ``ablation_rays`` rays each (one compiled kernel per mode).
 
 Uncertainties: the spectral band powers carry the trace's per-ray standard errors (bins in quadrature); the
 two-wavelength band powers those of the extracted blue and yellow powers, each times its shape's share of the
@@ -270,10 +275,9 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
     spec_scene = replace(two_scene, top=replace(two_scene.top, spectral_model=model,
                                                 temperature_K=options.temperature_K),
                          trace=replace(scene.trace, mode="spectral"))
-    chunk = _shared_chunk(options.ablation_rays)  # the ablations reuse the main traces' compiled kernels
-    two = trace(two_scene, options.rays, options.seed, chunk=chunk)
+    two = trace(two_scene, options.rays, options.seed)
     clock.lap("trace_two_wavelength")
-    spec = trace(spec_scene, options.rays, options.seed + 1, chunk=chunk)
+    spec = trace(spec_scene, options.rays, options.seed + 1)
     clock.lap("trace_spectral")
 
     sr = spec.spectral
@@ -281,18 +285,10 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
     recon = _Reconstruction(two, led_bin_power(leds.spectrum, lam, leds.spectrum_file) / sr.step_nm,
                             emission_shape(measured, lam, options.emission_incidence_deg), lam)
     bands = _band_rows(recon, sr)
-    ablated = ablations(options, two_scene, spec_scene, model_ds, model, recon, sr, chunk, clock)
+    ablated = ablations(options, two_scene, spec_scene, model_ds, model, recon, clock)
     shares = anti_stokes_shares(model, plate, options.temperature_K)
     summary = _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, clock.seconds)
     return SpectralComparison(lam, sr.spectrum_W_per_nm, sr.spectrum_std_err, *recon.spectrum(), summary)
-
-
-def _shared_chunk(ablation_rays: int) -> int:
-    """Rays per device and kernel call of every trace of the stage: the ablations' own chunk, so the main traces
-    and the ablations run the same compiled kernel (its emission width follows the chunk)."""
-    import jax  # noqa: PLC0415 - the device count, only when the stage runs
-
-    return -(-ablation_rays // jax.local_device_count())
 
 
 def _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, seconds) -> dict:
@@ -419,32 +415,43 @@ def led_averaged_plate(plate: PhosphorPlate, model_ds: xr.Dataset, led_spectrum)
 
 
 def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset, model: SpectralPlateModel,
-              recon: _Reconstruction, sr, chunk: int, clock: _Clock) -> dict:
-    """The causes of the mode difference by ablation, each one trace of ``options.ablation_rays`` rays on the
-    main traces' compiled kernels: the spectral plate without conversion / without re-absorption above
-    :data:`ABLATION_ABOVE_NM` (against the main two-wavelength spectrum), and the two-wavelength plate with its
-    pump TIS averaged over the LED spectrum instead of the blue filter (against the main spectral spectrum).
-    Each ablation traces the first rays of the main trace it replaces (same seed: common random numbers). Its σ
-    are those of its own trace and of the main trace it is compared with."""
-    out = {}
-    seed = options.seed + 1  # the main spectral trace's: its first rays, so the shifts are the causes, not noise
+              recon: _Reconstruction, clock: _Clock) -> dict:
+    """The causes of the mode difference by ablation, all at ``options.ablation_rays`` rays with the main
+    traces' seeds, so every row traces the main traces' first rays (common random numbers): the differences
+    between a row and ``reference`` are the cause's, not noise. The rows of a mode share one compiled kernel
+    (same effects, emission width and parameter shapes; a width of its own: one kernel call per device with the
+    main traces' wider chunk is faster than several calls with the ablations').
+
+    ``reference``: both modes as in the main job; ``conversion`` / ``reabsorption``: the spectral plate without
+    conversion / without re-absorption above :data:`ABLATION_ABOVE_NM` (:func:`ablated_model`); ``led_spectrum``:
+    the two-wavelength plate with its pump TIS averaged over the LED spectrum instead of the blue filter
+    (:func:`led_averaged_plate`). The σ of a row are those of its own two traces."""
     n = options.ablation_rays
+    seeds = {"two_wavelength": options.seed, "spectral": options.seed + 1}
+
+    def spectral(model_: SpectralPlateModel):
+        sc = replace(spec_scene, top=replace(spec_scene.top, spectral_model=model_))
+        return trace(sc, n, seeds["spectral"]).spectral
+
+    def two_wavelength(plate: PhosphorPlate) -> _Reconstruction:
+        r = trace(replace(two_scene, top=replace(two_scene.top, plate=plate)), n, seeds["two_wavelength"])
+        return _Reconstruction(r, recon.led_shape, recon.yellow_shape, recon.lam)
+
+    two, spec = two_wavelength(two_scene.top.plate), spectral(model)
+    clock.lap("ablation_reference")
+    rows = {"reference": ("no ablation: the main traces' first rays", two, spec)}
     for kind, what in (("conversion", f"spectral plate: no conversion above {ABLATION_ABOVE_NM:g} nm"),
                        ("reabsorption", f"spectral plate: no re-absorption above {ABLATION_ABOVE_NM:g} nm (the "
                                         "photons it converted there scattered elastically)")):
-        sc = replace(spec_scene, top=replace(spec_scene.top, spectral_model=ablated_model(model, kind)))
-        r = trace(sc, n, seed, chunk=chunk)
-        out[kind] = {"description": what, "rays": n, "seed": seed, "bands": _band_rows(recon, r.spectral)}
+        rows[kind] = (what, two, spectral(ablated_model(model, kind)))
         clock.lap(f"ablation_{kind}")
-    seed = options.seed  # the main two-wavelength trace's
-    plate = led_averaged_plate(two_scene.top.plate, model_ds, two_scene.leds.spectrum)
-    r = trace(replace(two_scene, top=replace(two_scene.top, plate=plate)), n, seed, chunk=chunk)
-    led = _Reconstruction(r, recon.led_shape, recon.yellow_shape, recon.lam)
-    out["led_spectrum"] = {"description": "two-wavelength plate: pump TIS (bibs, biys) averaged over the LED "
-                                          "spectrum instead of the blue filter", "rays": n, "seed": seed,
-                           "bands": _band_rows(led, sr)}
+    rows["led_spectrum"] = ("two-wavelength plate: pump TIS (bibs, biys) averaged over the LED spectrum instead of "
+                            "the blue filter",
+                            two_wavelength(led_averaged_plate(two_scene.top.plate, model_ds, two_scene.leds.spectrum)),
+                            spec)
     clock.lap("ablation_led_spectrum")
-    return out
+    return {k: {"description": what, "rays": n, "seeds": seeds, "bands": _band_rows(rc, sr)}
+            for k, (what, rc, sr) in rows.items()}
 
 
 def comparison_outputs(result: SpectralComparison) -> dict[str, Callable[[Path, bool], object]]:
