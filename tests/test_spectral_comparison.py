@@ -46,6 +46,9 @@ def test_the_main_recipe_runs_the_comparison_and_lists_its_files():
     (f'measurement = "{EEM}"\nincidence_deg = [95.0]\n', ValidationError, "spectral.incidence_deg[0]"),
     (f'measurement = "{EEM}"\nscene = "none.toml"\n', InputError, "spectral.scene"),
     (f'measurement = "{EEM}"\ncolour = 1\n', FormatError, "spectral.colour"),
+    (f'measurement = "{EEM}"\ntemperature_K = "hot"\n', InputError, "spectral.temperature_K"),
+    (f'measurement = "{EEM}"\ntemperature_K = 0\n', ValidationError, "spectral.temperature_K"),
+    (f'measurement = "{EEM}"\nablation_rays = 0\n', ValidationError, "spectral.ablation_rays"),
 ])
 def test_bad_spectral_tables_are_one_line_errors(tmp_path, table, error, field):
     with pytest.raises(error) as exc:
