@@ -103,6 +103,25 @@ def test_the_data_rows_are_anti_stokes_beyond_any_thermal_tail():
     np.testing.assert_allclose(cond.sum(axis=1) * STEP, pdf.sum(axis=1) * STEP, rtol=1e-12)  # rows stay pdfs
 
 
+def test_a_cold_plate_keeps_every_row_and_emits_nothing_shorter():
+    """At 1 K the Boltzmann factors underflow (exp(−10⁴)); the rows still sum to the data's, rows with emission
+    above the excitation send nothing below it, and a row whose emission lies wholly below its excitation (700 nm
+    here, taken from the 520 nm row shifted down) keeps its photons in its longest-wavelength bin with mass."""
+    model = measured_style_model()
+    _, _, pdf = model_on_bins(model)
+    k700 = int(np.flatnonzero(EMISSION == 700.0)[0])
+    pdf = pdf.copy()
+    pdf[k700] = np.where(EMISSION < 600.0, pdf[int(np.flatnonzero(EMISSION == 520.0)[0])], 0.0)
+    pdf[k700] /= pdf[k700].sum() * STEP
+    cond = conditional_emission_pdf(pdf, EMISSION, 1.0)
+    assert np.all(np.isfinite(cond))
+    np.testing.assert_allclose(cond.sum(axis=1), pdf.sum(axis=1), rtol=1e-12)
+    share = anti_stokes_share(cond)
+    for x in (500.0, 520.0, 560.0):
+        assert share[int(np.flatnonzero(EMISSION == x)[0])] < 1e-12
+    assert cond[k700, int(np.flatnonzero(EMISSION == 598.0)[0])] * STEP == pytest.approx(1.0, rel=1e-9)
+
+
 @pytest.mark.parametrize("peak_nm, temperature_K", [(520.0, None), (540.0, 600.0)])
 def test_traced_anti_stokes_share_is_the_thermal_tail(tmp_path, peak_nm, temperature_K):
     """One excitation bin (LED FWHM 0.4 nm on 2 nm bins), no cavity reflection, conversion forward only: every

@@ -355,19 +355,33 @@ def thermal_factor(excitation_nm: np.ndarray, emission_nm: np.ndarray, temperatu
 
     B = exp(−(hc/λ_em − hc/λ_ex)/(k_B T)) where λ_em < λ_ex [nm], else 1; ``temperature_K`` [K] > 0.
     """
+    return np.exp(-_thermal_exponent(excitation_nm, emission_nm, temperature_K))
+
+
+def _thermal_exponent(excitation_nm, emission_nm, temperature_K: float) -> np.ndarray:
+    """(hc/λ_em − hc/λ_ex)/(k_B T) where λ_em < λ_ex, else 0 (excitations, emissions) [1]."""
     if not (np.isfinite(temperature_K) and temperature_K > 0):
         raise ValidationError("plate temperature must be positive", field="top.temperature_K",
                               expected="a temperature > 0 K", got=temperature_K)
     ex = np.asarray(excitation_nm, dtype=np.float64)[:, None]
     em = np.asarray(emission_nm, dtype=np.float64)[None, :]
-    gap = C2_NM_K / temperature_K * (1.0 / em - 1.0 / ex)  # (hc/λ_em − hc/λ_ex)/(k_B T)
-    return np.where(em < ex, np.exp(-np.clip(gap, 0.0, None)), 1.0)
+    return np.where(em < ex, np.clip(C2_NM_K / temperature_K * (1.0 / em - 1.0 / ex), 0.0, None), 0.0)
 
 
 def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: float) -> np.ndarray:
     """Rows of ``pdf`` (excitation bin k = row k, on the bins ``lam`` [nm]) weighted by :func:`thermal_factor`
-    and renormalised to their own sums (zero rows stay zero): the emission pdf given the excitation bin [1/nm]."""
-    weighted = pdf * thermal_factor(lam, lam, temperature_K)
+    and renormalised to their own sums (zero rows stay zero): the emission pdf given the excitation bin [1/nm].
+
+    The weights are formed in log space relative to each row's largest, so a row whose whole emission lies far
+    below its excitation (or a very cold plate) keeps its sum instead of underflowing to zero.
+    """
+    pdf = np.asarray(pdf, dtype=np.float64)
+    positive = pdf > 0
+    with np.errstate(divide="ignore"):
+        log_w = np.where(positive, np.log(np.where(positive, pdf, 1.0)), -np.inf) \
+            - _thermal_exponent(lam, lam, temperature_K)
+    top = log_w.max(axis=1, keepdims=True)
+    weighted = np.where(positive, np.exp(log_w - np.where(np.isfinite(top), top, 0.0)), 0.0)
     old, new = pdf.sum(axis=1), weighted.sum(axis=1)
     scale = np.where(new > 0, old / np.where(new > 0, new, 1.0), 0.0)
     return weighted * scale[:, None]
