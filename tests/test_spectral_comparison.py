@@ -46,6 +46,9 @@ def test_the_main_recipe_runs_the_comparison_and_lists_its_files():
     (f'measurement = "{EEM}"\nincidence_deg = [95.0]\n', ValidationError, "spectral.incidence_deg[0]"),
     (f'measurement = "{EEM}"\nscene = "none.toml"\n', InputError, "spectral.scene"),
     (f'measurement = "{EEM}"\ncolour = 1\n', FormatError, "spectral.colour"),
+    (f'measurement = "{EEM}"\ntemperature_K = "hot"\n', InputError, "spectral.temperature_K"),
+    (f'measurement = "{EEM}"\ntemperature_K = 0\n', ValidationError, "spectral.temperature_K"),
+    (f'measurement = "{EEM}"\nablation_rays = 0\n', ValidationError, "spectral.ablation_rays"),
 ])
 def test_bad_spectral_tables_are_one_line_errors(tmp_path, table, error, field):
     with pytest.raises(error) as exc:
@@ -122,6 +125,40 @@ def test_summary_keys_files_and_report_section(stage, tmp_path):
     assert "(75 %)" in text  # the stage's share of the run
 
 
+@pytest.mark.slow
+def test_ablations_show_the_causes_of_the_mode_difference(stage):
+    """The ablations on the main traces' first rays: without re-absorption above 475 nm the emission onset
+    (480-500 nm) is no longer above the spectral trace (its excess is the light the spectral plate re-absorbs);
+    without conversion above 475 nm the spectral yellow loses the re-emitted light (two-wavelength / spectral
+    rises by > 3 σ); with the two-wavelength plate's pump TIS averaged over the LED spectrum instead of the blue
+    filter the 380-459 nm difference vanishes within 2 σ (it is the averaging)."""
+    sc = stage.summary["spectral_comparison"]
+    abl = sc["ablations"]
+    assert set(abl) == {"reference", "conversion", "reabsorption", "led_spectrum"}
+    assert all(a["rays"] == 50_000 and set(a["bands"]) == set(sc["bands"]) for a in abl.values())
+
+    def rel(kind, band):
+        row = abl[kind]["bands"][band]
+        return row["relative_difference"], row["relative_difference_std"]
+
+    ref_onset, ref_onset_std = rel("reference", "onset")
+    assert ref_onset > 3 * ref_onset_std
+    assert rel("reabsorption", "onset")[0] < ref_onset - 3 * ref_onset_std
+    assert abs(rel("reabsorption", "onset")[0]) < ref_onset / 3
+    ref_y, ref_y_std = rel("reference", "yellow")
+    assert rel("conversion", "yellow")[0] > ref_y + 3 * ref_y_std
+    ref_b, ref_b_std = rel("reference", "short_blue")
+    led_b, led_b_std = rel("led_spectrum", "short_blue")
+    assert ref_b > 3 * ref_b_std and abs(led_b) < 2 * led_b_std
+    # the emission table the trace sampled: at 520 and 560 nm a thermal tail, not the data rows' share
+    shares = sc["spectral"]["anti_stokes_share"]
+    for x, data, cond in zip(shares["excitation_nm"], shares["data"], shares["conditional"]):
+        if x >= 520.0:
+            assert data > 0.05 and cond < 0.25 * data
+    conv = sc["spectral"]["ledger"]["conversions"]
+    assert 0 < conv["anti_stokes_share"] < 0.01 and conv["anti_stokes_gain_W"] > 0
+
+
 def test_figure_labels_both_spectra_and_the_difference_with_units():
     lam = np.arange(380.0, 781.0, 1.0)
     s = np.exp(-0.5 * ((lam - 560.0) / 50.0) ** 2) * 1e-3
@@ -152,3 +189,39 @@ def test_report_section_states_the_direction_check_and_lists_a_failure(tmp_path)
     assert 'id="spectral-modes"' in text and "the direction does NOT hold" in text
     assert "+8.00 ± 0.50 % (z +16.0)" in text and "−2.00" not in text and "-2.00 ± 0.50 %" in text
     assert "spectral vs two-wavelength mode: the direction of §4.2" in text and "(25 %)" in text
+
+
+def test_sub_bands_ablations_and_contradicted_bands_in_the_report(tmp_path):
+    """Fast lane: a sub-band whose sign is opposite to §4.2 beyond its σ is named among the disagreements, one
+    within its σ is not, and every ablation's relative differences appear with their σ."""
+    summary = json.loads((ROOT / "tests" / "data" / "run_summary_small.json").read_text(encoding="utf-8"))
+    band = {"two_wavelength_W": 0.44, "two_wavelength_std_W": 0.001, "spectral_W": 0.449, "spectral_std_W": 0.001}
+
+    def row(label, rel, std, direction):
+        return {**band, "label": label, "relative_difference": rel, "relative_difference_std": std,
+                "paper_direction": direction, "contradicts_paper": bool(direction and direction * rel < -std)}
+
+    bands = {"short_blue": row("380-459 nm", 0.114, 0.008, 0), "near_pump": row("460-500 nm", 0.079, 0.014, 1),
+             "near_470": row("465-475 nm", -0.133, 0.021, 1), "onset": row("480-500 nm", 0.35, 0.02, 0),
+             "yellow": row("501-780 nm", 0.004, 0.005, -1)}
+    ablated = {k: dict(r, relative_difference=r["relative_difference"] / 2) for k, r in bands.items()}
+    summary["spectral_comparison"] = {
+        "measurement": "eem", "rays": 1000, "emission_shape": "measured", "bands": bands,
+        "direction_check": {"near_pump_overestimated": True, "yellow_underestimated": False, "holds": False},
+        "ablations": {"reabsorption": {"description": "no re-absorption above 475 nm", "rays": 500,
+                                       "bands": ablated}},
+        "two_wavelength": {"LER": 0.55, "LER_std": 0.001},
+        "spectral": {"LER": 0.54, "LER_std": 0.001,
+                     "anti_stokes_share": {"excitation_nm": [520.0], "data": [0.078], "conditional": [0.016],
+                                           "temperature_K": 313.15}},
+        "stage_seconds": {"plate_spectral_model": 2.0}}
+    summary["stage_seconds"] = {"trace": 6.0, "spectral comparison": 2.0}
+    (tmp_path / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    text = write_report(tmp_path).read_text(encoding="utf-8")
+    assert "465-475 nm nm: two-wavelength -13.3 ± 2.1 % relative to spectral" not in text
+    assert "spectral vs two-wavelength mode, 465-475 nm: two-wavelength -13.3 ± 2.1 % relative to spectral, " \
+           "but §4.2 of [Cylindrical-module] has it above" in text
+    assert "mode, 501-780 nm" not in text and "mode, 480-500 nm" not in text  # within σ / no stated direction
+    assert "no re-absorption above 475 nm (500 rays)" in text
+    assert "+17.50 ± 2.00 % (z +8.8)" in text and "+35.00 ± 2.00 % (z +17.5)" in text
+    assert "520 nm 7.8 → 1.6 %" in text

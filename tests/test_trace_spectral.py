@@ -18,7 +18,7 @@ from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_re
 from bsdfkit.raytrace import PhosphorPlate, dumps_scene, kernel, loads_scene, trace
 from bsdfkit.raytrace.effects import kernel_params, scene_effects
 from bsdfkit.raytrace.oracles.spectral_budget import spectral_module_budget
-from bsdfkit.raytrace.scene import band_reflectances, surface_reflectance_table
+from bsdfkit.raytrace.scene import band_reflectances, scene_spectral_tables, surface_reflectance_table
 from bsdfkit.raytrace.spectral import (
     SpectralPlateModel,
     model_on_bins,
@@ -140,8 +140,9 @@ def test_photons_never_increase_at_a_plate_interaction():
         t = jnp.asarray(rng.random(L))
         j = jnp.zeros(L, jnp.int32)
         key = jnp.zeros(2, jnp.uint32)
-        w_out, absorbed, stokes, forward, new_k, channel, g = kernel._spectral_channel(
+        w_out, absorbed, conversions, forward, new_k, channel, g = kernel._spectral_channel(
             {"spectral": sp}, key, u, w, k, t, j)
+    stokes = conversions[0]
     lam = np.asarray(params["spectral"]["lam"])
     w, w_out, k, new_k = (np.asarray(a) for a in (w, w_out, k, new_k))
     photons_in, photons_out = w * lam[k], w_out * lam[new_k]
@@ -151,12 +152,24 @@ def test_photons_never_increase_at_a_plate_interaction():
     kept = (w - np.asarray(absorbed)) * lam[k]
     np.testing.assert_allclose(photons_out, kept, rtol=1e-14)  # the converted photon keeps its number
     np.testing.assert_allclose(np.asarray(absorbed) + np.asarray(stokes) + w_out, w, rtol=1e-14)
-    # new bins follow the emission row (all pump rows are the same photon pdf here): mean wavelength within 4 SE
-    row = np.asarray(model.emission_pdf[0]) * 5.0
+    # new bins follow the conditional emission row of their excitation bin: mean wavelength within 4 SE
+    rows = scene_spectral_tables(s).emission_pdf[k[converted]] * 5.0
     drawn = lam[new_k][converted]
-    mean, sd = (row * lam).sum(), math.sqrt((row * lam ** 2).sum() - (row * lam).sum() ** 2)
-    assert abs(drawn.mean() - mean) <= 4 * sd / math.sqrt(drawn.size)
+    means = (rows * lam).sum(axis=1)
+    var = ((rows * lam ** 2).sum(axis=1) - means ** 2).mean()
+    assert abs(drawn.mean() - means.mean()) <= 4 * math.sqrt(var / drawn.size)
     assert np.mean(np.asarray(stokes)[converted] > 0) > 0.9  # mostly down-conversion
+    # the conversion tallies: photons converted, of them to a shorter bin, and the power those created
+    ph_conv, ph_anti, gain = (np.asarray(a) for a in conversions[1:])
+    scale = lam / lam[-1]
+    kept_w = w - np.asarray(absorbed)
+    channel_converted = np.asarray(channel) == 1  # conversions, into the same bin included
+    assert np.all(channel_converted[converted])
+    np.testing.assert_allclose(ph_conv, np.where(channel_converted, kept_w * scale[k], 0.0), rtol=1e-14)
+    anti = converted & (new_k < k)
+    np.testing.assert_allclose(ph_anti, np.where(anti, kept_w * scale[k], 0.0), rtol=1e-14)
+    np.testing.assert_allclose(gain, np.where(anti, w_out - kept_w, 0.0), rtol=1e-12, atol=1e-15)
+    assert anti.any() and np.all(gain >= 0)
 
 
 def test_photon_pdf_and_two_colour_model():

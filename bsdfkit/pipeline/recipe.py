@@ -62,6 +62,7 @@ from bsdfkit.raytrace import trace, with_values
 from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
+from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
 from bsdfkit.raytrace.tallies import non_uniformity_std
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
@@ -77,7 +78,8 @@ KNOWN_SECTIONS = {
     "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
     "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
              "fallback_flux_W"},
-    "spectral": {"measurement", "scene", "rays", "seed", "incidence_deg"},
+    "spectral": {"measurement", "scene", "rays", "seed", "incidence_deg", "ablation_rays",
+                 "temperature_K"},
 }
 
 #: Upper bounds of the recipe's sizes (checked before anything is computed).
@@ -288,10 +290,15 @@ def _spectral_options(table: dict | None, path: Path, trace: TraceStudyOptions,
                    2**63 - 2)
     incidence = tuple(float(_ranged(v, path, f"spectral.incidence_deg[{k}]", 0.0, 90.0, hi_open=True))
                       for k, v in enumerate(_numbers(table, "incidence_deg", path, section="spectral")))
+    ablation_rays = _ranged(_typed(table, "ablation_rays", int, path, "spectral.ablation_rays", 50_000), path,
+                            "spectral.ablation_rays", 1, MAX_RAYS)
+    temperature = float(_ranged(_typed(table, "temperature_K", (int, float), path, "spectral.temperature_K",
+                                       PLATE_TEMPERATURE_K), path, "spectral.temperature_K", 0.0, 5000.0,
+                                lo_open=True))
     if "scene" in table:
         _scene_with_plate(scene, None)
     return SpectralComparisonOptions(measurement=measurement, scene=scene, rays=rays, seed=seed,
-                                     incidence_deg=incidence,
+                                     incidence_deg=incidence, ablation_rays=ablation_rays, temperature_K=temperature,
                                      led_peak_nm=fits.led_peak_nm, led_fwhm_nm=fits.led_fwhm_nm,
                                      emission_incidence_deg=fits.emission_incidence_deg)
 

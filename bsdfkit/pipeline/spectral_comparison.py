@@ -16,7 +16,12 @@ device scene in both modes with the same LED spectrum, and compares the module s
   (:data:`~bsdfkit.core.conventions.MODULE_YELLOW_BAND_NM`) of both with the relative difference and its σ, the
   direction check of §4.2 (the two-wavelength model overestimates the power near 470 nm and underestimates the
   yellow emission), LER, YBR (with band edges) and luminous efficacy of radiation of both, and the power and
-  photon ledgers of the spectral trace (Stokes loss on its own line).
+  photon ledgers of the spectral trace (Stokes loss on its own line);
+* the same relative difference in the sub-bands :data:`SUB_BANDS_NM` (380-459 nm, the band §4.2 names
+  465-475 nm, the emission onset 480-500 nm), each with σ and the paper's direction where it states one, and
+  its causes by ablation (:func:`ablations`): conversion off, re-absorption off (spectral plate, above
+  :data:`ABLATION_ABOVE_NM`), and the two-wavelength plate's pump TIS averaged over the LED spectrum instead of
+  the blue filter. The ablations trace ``ablation_rays`` rays each (one compiled kernel per mode).
 
 Uncertainties: the spectral band powers carry the trace's per-ray standard errors (bins in quadrature); the
 two-wavelength band powers those of the extracted blue and yellow powers, each times its shape's share of the
@@ -36,6 +41,7 @@ import xarray as xr
 from colour import SpectralDistribution
 
 from bsdfkit.core.conventions import (
+    CONVERSION_BAND_NM,
     EXCITATION_BAND_NM,
     MODULE_BLUE_BAND_NM,
     MODULE_YELLOW_BAND_NM,
@@ -53,15 +59,40 @@ from bsdfkit.raytrace import trace
 from bsdfkit.raytrace.plate import PhosphorPlate
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import Scene
-from bsdfkit.raytrace.spectral import gaussian_led_spectrum, led_bin_power, spectral_model_from_dataset
+from bsdfkit.raytrace.spectral import (
+    PLATE_TEMPERATURE_K,
+    SpectralPlateModel,
+    anti_stokes_share,
+    conditional_emission_pdf,
+    gaussian_led_spectrum,
+    led_bin_power,
+    model_on_bins,
+    spectral_model_from_dataset,
+)
 from bsdfkit.raytrace.tallies import SPECTRAL_YBR_DEFINITION
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation
-from bsdfkit.reduction.excitation_emission import plate_spectral_model
+from bsdfkit.reduction.excitation_emission import band_averaged_tis, plate_spectral_model
 
 #: Where §4.2 of [Cylindrical-module] sees the two-wavelength spectrum too high ("near 470 nm") [nm]: the pump's
 #: long-wave tail and the emission's short-wave onset, where excitation and emission overlap.
 NEAR_PUMP_BAND_NM: tuple[float, float] = (460.0, 500.0)
+
+#: Sub-bands of the comparison [nm] (issue 27): the short-wave blue, where the two plates' blue TIS differ by their
+#: averaging (blue filter vs LED spectrum); the band §4.2 names ("near 470 nm"); the emission's short-wave onset.
+SUB_BANDS_NM: dict[str, tuple[float, float]] = {"short_blue": (380.0, 459.0), "near_470": (465.0, 475.0),
+                                                "onset": (480.0, 500.0)}
+#: Every band compared, in table order.
+BANDS: dict[str, tuple[float, float]] = {"short_blue": SUB_BANDS_NM["short_blue"], "near_pump": NEAR_PUMP_BAND_NM,
+                                         "near_470": SUB_BANDS_NM["near_470"], "onset": SUB_BANDS_NM["onset"],
+                                         "yellow": MODULE_YELLOW_BAND_NM}
+#: The direction §4.2 of [Cylindrical-module] states per band: +1 two-wavelength above spectral ("overestimate …
+#: near 470 nm"), −1 below ("underestimates the yellow emission"); bands it does not name are absent (0).
+PAPER_DIRECTION: dict[str, int] = {"near_pump": 1, "near_470": 1, "yellow": -1}
+#: The ablations' wavelength [nm]: above it the spectral plate's conversion (or its absorption) is switched off.
+ABLATION_ABOVE_NM = 475.0
+#: Excitation wavelengths [nm] at which the summary gives the anti-Stokes share of the emission table.
+ANTI_STOKES_REPORTED_NM = (450.0, 480.0, 500.0, 520.0, 560.0)
 
 #: The paper's observation the direction check tests.
 PAPER_OBSERVATION = ("§4.2 of [Cylindrical-module]: the two-wavelength model overestimates the power near 470 nm and "
@@ -78,6 +109,8 @@ class SpectralComparisonOptions:
     recipe's ``[fits]``); ``emission_incidence_deg`` [deg] is where the emission shape is measured.
     ``incidence_deg`` [deg]: the measured incidences both plates are built from (all when empty); fewer make the
     reduction cheaper (its cost is proportional to the incidences), and one makes both plates angle-independent.
+    ``ablation_rays`` per ablation trace (:func:`ablations`); ``temperature_K`` [K] the plate temperature of the
+    spectral mode's thermal tail (:mod:`bsdfkit.raytrace.spectral`).
     """
 
     measurement: Path
@@ -88,6 +121,8 @@ class SpectralComparisonOptions:
     led_fwhm_nm: float = 22.9
     emission_incidence_deg: float = 45.0
     incidence_deg: tuple[float, ...] = ()
+    ablation_rays: int = 50_000
+    temperature_K: float = PLATE_TEMPERATURE_K
 
 
 @dataclass(frozen=True)
@@ -152,80 +187,125 @@ def _relative(a: float, sa: float, b: float, sb: float) -> tuple[float, float]:
     return a / b - 1.0, math.hypot(sa / b, a * sb / b**2)
 
 
-def compare_tracer_modes(options: SpectralComparisonOptions,
-                         scene_with_plate: Callable[[Path, PhosphorPlate], Scene]) -> SpectralComparison:
-    """Build both plates from ``options.measurement``, trace the device in both modes, compare the spectra.
+class _Clock:
+    """Seconds per step of the stage (``lap(name)`` books the time since the previous lap)."""
 
-    ``scene_with_plate(path, plate)`` returns the scene at ``path`` with its phosphor top's plate replaced (the
-    recipe's :func:`bsdfkit.pipeline.recipe._scene_with_plate`). See the module docstring for what is computed.
-    """
-    seconds: dict[str, float] = {}
-    clock = time.perf_counter()
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._last = time.perf_counter()
 
-    def lap(name: str) -> None:
-        nonlocal clock
+    def lap(self, name: str) -> None:
         now = time.perf_counter()
-        seconds[name] = round(now - clock, 3)
-        clock = now
+        self.seconds[name] = round(self.seconds.get(name, 0.0) + now - self._last, 3)
+        self._last = now
 
+
+def _plates(options: SpectralComparisonOptions, clock: _Clock):
+    """(all calibrated records, the records at the plates' incidences, two-wavelength plate, model dataset,
+    validated spectral model) of ``options.measurement``."""
     raw = read_scan(options.measurement)
     if options.incidence_deg:  # calibrate only the records used (the plates' and the emission shape's incidences)
         raw = _at_incidences(raw, tuple(sorted({*options.incidence_deg, options.emission_incidence_deg})),
                              options.measurement)
     measured = calibrate(raw)
     scan = _at_incidences(measured, options.incidence_deg, options.measurement) if options.incidence_deg else measured
-    lap("ingest")
+    clock.lap("ingest")
     plate = plate_from_scan(scan, name=f"{scan.attrs.get('sample_name', '')} (two-wavelength)")
-    lap("two_wavelength_plate")
-    model = spectral_model_from_dataset(plate_spectral_model(scan), source=options.measurement)
-    lap("plate_spectral_model")
+    clock.lap("two_wavelength_plate")
+    model_ds = plate_spectral_model(scan)
+    model = spectral_model_from_dataset(model_ds, source=options.measurement)
+    clock.lap("plate_spectral_model")
+    return measured, plate, model_ds, model
 
+
+class _Reconstruction:
+    """The two-wavelength module spectrum of §4.2 of [Cylindrical-module] from a two-wavelength trace: extracted
+    blue power × the LED shape + extracted yellow power × the emission shape (shapes [1/nm] on the bins)."""
+
+    def __init__(self, two, led_shape: np.ndarray, yellow_shape: np.ndarray, lam: np.ndarray) -> None:
+        self.lam, self.step = lam, float(lam[1] - lam[0])
+        self.blue, self.yellow = two.extracted["blue"], two.extracted["yellow"]
+        self.blue_se, self.yellow_se = two.std_err["blue"], two.std_err["yellow"]
+        self.led_shape, self.yellow_shape = led_shape, yellow_shape
+
+    def spectrum(self) -> tuple[np.ndarray, np.ndarray]:
+        return (self.blue * self.led_shape + self.yellow * self.yellow_shape,
+                np.hypot(self.blue_se * self.led_shape, self.yellow_se * self.yellow_shape))
+
+    def band(self, band: tuple[float, float]) -> tuple[float, float]:
+        """Band power [W] and its σ."""
+        inside = _in_band(self.lam, band)
+        fb, fy = self.led_shape[inside].sum() * self.step, self.yellow_shape[inside].sum() * self.step
+        return float(self.blue * fb + self.yellow * fy), float(math.hypot(self.blue_se * fb, self.yellow_se * fy))
+
+
+def _band_rows(recon: _Reconstruction, sr) -> dict[str, dict]:
+    """Every band of :data:`BANDS`: both powers with σ, two-wavelength / spectral − 1 with σ, z, and the paper's
+    direction (+1 two-wavelength above, −1 below, 0 not stated) with ``contradicts`` (opposite beyond 1 σ)."""
+    rows = {}
+    for name, band in BANDS.items():
+        p2, s2 = recon.band(band)
+        ps, ss = sr.band_power(band)
+        rel, rel_std = _relative(p2, s2, ps, ss)
+        direction = PAPER_DIRECTION.get(name, 0)
+        rows[name] = {"band_nm": list(band), "label": band_label(band), "two_wavelength_W": p2,
+                      "two_wavelength_std_W": s2, "spectral_W": ps, "spectral_std_W": ss,
+                      "relative_difference": rel, "relative_difference_std": rel_std,
+                      "z": rel / rel_std if rel_std > 0 else float("nan"), "paper_direction": direction,
+                      "contradicts_paper": bool(direction != 0 and direction * rel < -rel_std)}
+    return rows
+
+
+def compare_tracer_modes(options: SpectralComparisonOptions,
+                         scene_with_plate: Callable[[Path, PhosphorPlate], Scene]) -> SpectralComparison:
+    """Build both plates from ``options.measurement``, trace the device in both modes, compare the spectra and
+    trace the ablations (:func:`ablations`).
+
+    ``scene_with_plate(path, plate)`` returns the scene at ``path`` with its phosphor top's plate replaced (the
+    recipe's :func:`bsdfkit.pipeline.recipe._scene_with_plate`). See the module docstring for what is computed.
+    """
+    clock = _Clock()
+    measured, plate, model_ds, model = _plates(options, clock)
     scene = scene_with_plate(options.scene, plate)
     leds = scene.leds
     if leds.spectrum is None:  # the same LED spectrum in both modes and in the reconstruction
         leds = replace(leds, spectrum_peak_nm=options.led_peak_nm, spectrum_fwhm_nm=options.led_fwhm_nm,
                        spectrum=gaussian_led_spectrum(options.led_peak_nm, options.led_fwhm_nm))
     two_scene = replace(scene, leds=leds, trace=replace(scene.trace, mode="two-wavelength"))
-    spec_scene = replace(two_scene, top=replace(two_scene.top, spectral_model=model),
+    spec_scene = replace(two_scene, top=replace(two_scene.top, spectral_model=model,
+                                                temperature_K=options.temperature_K),
                          trace=replace(scene.trace, mode="spectral"))
     two = trace(two_scene, options.rays, options.seed)
-    lap("trace_two_wavelength")
+    clock.lap("trace_two_wavelength")
     spec = trace(spec_scene, options.rays, options.seed + 1)
-    lap("trace_spectral")
+    clock.lap("trace_spectral")
 
     sr = spec.spectral
+    lam = sr.wavelength_nm
+    recon = _Reconstruction(two, led_bin_power(leds.spectrum, lam, leds.spectrum_file) / sr.step_nm,
+                            emission_shape(measured, lam, options.emission_incidence_deg), lam)
+    bands = _band_rows(recon, sr)
+    ablated = ablations(options, two_scene, spec_scene, model_ds, model, recon, clock)
+    shares = anti_stokes_shares(model, plate, options.temperature_K)
+    summary = _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, clock.seconds)
+    return SpectralComparison(lam, sr.spectrum_W_per_nm, sr.spectrum_std_err, *recon.spectrum(), summary)
+
+
+def _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, seconds) -> dict:
+    """The stage's JSON-ready summary (see the module docstring)."""
+    sr = spec.spectral
     lam, step = sr.wavelength_nm, sr.step_nm
-    led_shape = led_bin_power(leds.spectrum, lam, leds.spectrum_file) / step
-    yellow_shape = emission_shape(measured, lam, options.emission_incidence_deg)
-    blue_W, yellow_W = two.extracted["blue"], two.extracted["yellow"]
-    blue_se, yellow_se = two.std_err["blue"], two.std_err["yellow"]
-    recon = blue_W * led_shape + yellow_W * yellow_shape
-    recon_std = np.hypot(blue_se * led_shape, yellow_se * yellow_shape)
-
-    def two_band(band: tuple[float, float]) -> tuple[float, float]:
-        inside = _in_band(lam, band)
-        fb, fy = led_shape[inside].sum() * step, yellow_shape[inside].sum() * step
-        return float(blue_W * fb + yellow_W * fy), float(math.hypot(blue_se * fb, yellow_se * fy))
-
-    bands = {}
-    for name, band in (("near_pump", NEAR_PUMP_BAND_NM), ("yellow", MODULE_YELLOW_BAND_NM)):
-        p2, s2 = two_band(band)
-        ps, ss = sr.band_power(band)
-        rel, rel_std = _relative(p2, s2, ps, ss)
-        bands[name] = {"band_nm": list(band), "label": band_label(band), "two_wavelength_W": p2,
-                       "two_wavelength_std_W": s2, "spectral_W": ps, "spectral_std_W": ss,
-                       "relative_difference": rel, "relative_difference_std": rel_std,
-                       "z": rel / rel_std if rel_std > 0 else float("nan")}
     over = bands["near_pump"]["relative_difference"] > 0
     under = bands["yellow"]["relative_difference"] < 0
-    blue2, blue2_std = two_band(MODULE_BLUE_BAND_NM)
-    yellow2, yellow2_std = two_band(MODULE_YELLOW_BAND_NM)
+    blue2, blue2_std = recon.band(MODULE_BLUE_BAND_NM)
+    yellow2, yellow2_std = recon.band(MODULE_YELLOW_BAND_NM)
+    spectrum2 = recon.spectrum()[0]
 
     def efficacy(values: np.ndarray, name: str) -> float:
         return luminous_efficacy_of_radiation(SpectralDistribution(dict(zip(lam.tolist(), values.tolist())),
                                                                    name=name))
 
-    summary = {
+    return {
         "measurement": str(options.measurement),
         "scene": str(options.scene),
         "rays": options.rays,
@@ -238,26 +318,140 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
         "plate_incidences_deg": list(plate.theta_i_deg),
         "bands": bands,
         "direction_check": {"observation": PAPER_OBSERVATION, "near_pump_overestimated": bool(over),
-                            "yellow_underestimated": bool(under), "holds": bool(over and under)},
+                            "yellow_underestimated": bool(under), "holds": bool(over and under),
+                            "contradicting_bands": [k for k, b in bands.items() if b["contradicts_paper"]]},
+        "ablations": ablated,
         "two_wavelength": {
-            "extracted_W": dict(two.extracted), "std_err_W": {"blue": blue_se, "yellow": yellow_se},
+            "extracted_W": dict(two.extracted), "std_err_W": {"blue": recon.blue_se, "yellow": recon.yellow_se},
             "LER": two.LER, "LER_std": two.std_err["LER"],
             "YBR_rays": two.YBR, "YBR_rays_std": two.std_err["YBR"], "YBR_rays_definition": RAY_YBR_DEFINITION,
             "YBR_spectrum": yellow2 / blue2,
             "YBR_spectrum_std": yellow2 / blue2 * math.hypot(yellow2_std / yellow2, blue2_std / blue2),
             "YBR_spectrum_definition": SPECTRAL_YBR_DEFINITION.replace("spectral mode", "reconstructed spectrum"),
-            "luminous_efficacy_lm_per_W": efficacy(recon, "two-wavelength module spectrum"),
-            "spectrum_integral_W": float(recon.sum() * step), "ledger_error": two.ledger_error},
+            "luminous_efficacy_lm_per_W": efficacy(spectrum2, "two-wavelength module spectrum"),
+            "spectrum_integral_W": float(spectrum2.sum() * step), "ledger_error": two.ledger_error},
         "spectral": {
             "extracted_W": dict(spec.extracted), "LER": spec.LER, "LER_std": spec.std_err["LER"],
             "YBR": spec.YBR, "YBR_std": spec.std_err["YBR"], "YBR_definition": SPECTRAL_YBR_DEFINITION,
             "luminous_efficacy_lm_per_W": efficacy(sr.spectrum_W_per_nm, "spectral-mode module spectrum"),
             "spectrum_integral_W": float(sr.spectrum_W_per_nm.sum() * step), "ledger": sr.ledger,
-            "photon_capped_cells": len(sr.capped), "extrapolated_bins_nm": sr.to_dict()["extrapolated_bins_nm"]},
+            "photon_capped_cells": len(sr.capped), "extrapolated_bins_nm": sr.to_dict()["extrapolated_bins_nm"],
+            "plate_temperature_K": options.temperature_K, "anti_stokes_share": shares},
         "LER_definition": "extracted / emitted LED power",
         "stage_seconds": seconds,
     }
-    return SpectralComparison(lam, sr.spectrum_W_per_nm, sr.spectrum_std_err, recon, recon_std, summary)
+
+
+def anti_stokes_shares(model: SpectralPlateModel, plate: PhosphorPlate | None, temperature_K: float) -> dict:
+    """Share of converted photons that leave at a shorter wavelength than they were absorbed at, per excitation
+    wavelength of :data:`ANTI_STOKES_REPORTED_NM` (nearest bin): the data's emission rows (``data``) and the
+    conditional rows the tracer samples at ``temperature_K`` [K] (``conditional``)."""
+    _, _, pdf = model_on_bins(model, plate)
+    lam = model.emission_nm
+    data, cond = anti_stokes_share(pdf), anti_stokes_share(conditional_emission_pdf(pdf, lam, temperature_K))
+    rows = [int(np.argmin(np.abs(lam - x))) for x in ANTI_STOKES_REPORTED_NM]
+    return {"excitation_nm": [float(lam[k]) for k in rows], "data": [float(data[k]) for k in rows],
+            "conditional": [float(cond[k]) for k in rows], "temperature_K": float(temperature_K)}
+
+
+def _with_excitations(model: SpectralPlateModel, points: tuple[float, ...]) -> SpectralPlateModel:
+    """The model with excitation grid points added at ``points`` [nm] (values interpolated linearly, as the
+    tracer interpolates between excitations), so a change from one point on is sharp on the bins."""
+    x = model.excitation_nm
+    new = np.union1d(x, [p for p in points if x[0] < p < x[-1]])
+    idx = np.clip(np.searchsorted(x, new, side="right") - 1, 0, x.size - 2)
+    t = np.clip((new - x[idx]) / (x[idx + 1] - x[idx]), 0.0, 1.0)
+
+    def interp(a: np.ndarray) -> np.ndarray:  # along the excitation axis (the last for TIS, the first for pdf)
+        return (1.0 - t) * a[..., idx] + t * a[..., idx + 1]
+
+    pdf = (1.0 - t)[:, None] * model.emission_pdf[idx] + t[:, None] * model.emission_pdf[idx + 1]
+    return replace(model, excitation_nm=new, elastic_tis=interp(model.elastic_tis),
+                   converted_tis=interp(model.converted_tis), emission_pdf=pdf)
+
+
+def ablated_model(model: SpectralPlateModel, kind: str, above_nm: float = ABLATION_ABOVE_NM) -> SpectralPlateModel:
+    """The spectral model with one cause switched off at excitations above ``above_nm`` [nm] (a grid point is
+    added at the bin just above it, so bins ≤ ``above_nm`` keep their values).
+
+    ``"conversion"``: nothing converts (the photons it converted are absorbed); ``"reabsorption"``: the plate
+    does not absorb its own light — the photons it converted are scattered elastically instead, on the same side
+    (its other losses are kept).
+    """
+    m = _with_excitations(model, (above_nm, above_nm + 1.0))
+    off = (m.excitation_nm > above_nm)[None, None, :]
+    converted = np.where(off, 0.0, m.converted_tis)
+    elastic = m.elastic_tis
+    if kind == "reabsorption":
+        step = m.step_nm
+        inv = (m.emission_pdf * step / m.emission_nm[None, :]).sum(axis=1)
+        photons = np.where(inv > 0, 1.0 / np.where(inv > 0, inv, 1.0), 0.0) / m.excitation_nm  # λ̃/λ per excitation
+        elastic = np.where(off, elastic + m.converted_tis * photons[None, None, :], elastic)
+    elif kind != "conversion":
+        raise ValueError(f"unknown ablation {kind!r}")
+    return replace(m, elastic_tis=elastic, converted_tis=converted, capped=())
+
+
+def led_averaged_plate(plate: PhosphorPlate, model_ds: xr.Dataset, led_spectrum) -> PhosphorPlate:
+    """The two-wavelength plate with its pump channels (bibs, biys) scaled at every incidence so that at the
+    model's incidence they equal the spectral model's TIS averaged over the LED spectrum instead of the blue
+    filter's (biys: converted light in :data:`~bsdfkit.core.conventions.CONVERSION_BAND_NM`, as measured)."""
+    wl, values = led_spectrum
+    spectrum = xr.DataArray(np.asarray(values, dtype=np.float64), dims=["wavelength"],
+                            coords={"wavelength": np.asarray(wl, dtype=np.float64)})
+    elastic = band_averaged_tis(model_ds, spectrum)["elastic_tis"]
+    converted = band_averaged_tis(model_ds, spectrum, CONVERSION_BAND_NM)["converted_tis"]
+    theta = float(model_ds["incidence"].values[0])
+    grid = np.asarray(plate.theta_i_deg, dtype=float)
+    channels = {}
+    for inter, values in (("bibs", elastic), ("biys", converted)):
+        for side in SIDES:
+            ch = plate.channel(f"{inter}_{side}")
+            tis = np.asarray(ch.tis, dtype=float)
+            target = float(values.sel(side=side).isel(incidence=0))
+            scale = target / float(np.interp(theta, grid, tis))
+            channels[f"{inter}_{side}"] = replace(ch, tis=tuple(float(v) for v in tis * scale))
+    return replace(plate, **channels)
+
+
+def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset, model: SpectralPlateModel,
+              recon: _Reconstruction, clock: _Clock) -> dict:
+    """The causes of the mode difference by ablation, all at ``options.ablation_rays`` rays with the main
+    traces' seeds, so every row traces the main traces' first rays (common random numbers): the differences
+    between a row and ``reference`` are the cause's, not noise. The rows of a mode share one compiled kernel
+    (same effects, emission width and parameter shapes; a width of its own: one kernel call per device with the
+    main traces' wider chunk is faster than several calls with the ablations').
+
+    ``reference``: both modes as in the main job; ``conversion`` / ``reabsorption``: the spectral plate without
+    conversion / without re-absorption above :data:`ABLATION_ABOVE_NM` (:func:`ablated_model`); ``led_spectrum``:
+    the two-wavelength plate with its pump TIS averaged over the LED spectrum instead of the blue filter
+    (:func:`led_averaged_plate`). The σ of a row are those of its own two traces."""
+    n = options.ablation_rays
+    seeds = {"two_wavelength": options.seed, "spectral": options.seed + 1}
+
+    def spectral(model_: SpectralPlateModel):
+        sc = replace(spec_scene, top=replace(spec_scene.top, spectral_model=model_))
+        return trace(sc, n, seeds["spectral"]).spectral
+
+    def two_wavelength(plate: PhosphorPlate) -> _Reconstruction:
+        r = trace(replace(two_scene, top=replace(two_scene.top, plate=plate)), n, seeds["two_wavelength"])
+        return _Reconstruction(r, recon.led_shape, recon.yellow_shape, recon.lam)
+
+    two, spec = two_wavelength(two_scene.top.plate), spectral(model)
+    clock.lap("ablation_reference")
+    rows = {"reference": ("no ablation: the main traces' first rays", two, spec)}
+    for kind, what in (("conversion", f"spectral plate: no conversion above {ABLATION_ABOVE_NM:g} nm"),
+                       ("reabsorption", f"spectral plate: no re-absorption above {ABLATION_ABOVE_NM:g} nm (the "
+                                        "photons it converted there scattered elastically)")):
+        rows[kind] = (what, two, spectral(ablated_model(model, kind)))
+        clock.lap(f"ablation_{kind}")
+    rows["led_spectrum"] = ("two-wavelength plate: pump TIS (bibs, biys) averaged over the LED spectrum instead of "
+                            "the blue filter",
+                            two_wavelength(led_averaged_plate(two_scene.top.plate, model_ds, two_scene.leds.spectrum)),
+                            spec)
+    clock.lap("ablation_led_spectrum")
+    return {k: {"description": what, "rays": n, "seeds": seeds, "bands": _band_rows(rc, sr)}
+            for k, (what, rc, sr) in rows.items()}
 
 
 def comparison_outputs(result: SpectralComparison) -> dict[str, Callable[[Path, bool], object]]:
@@ -285,4 +479,10 @@ def comparison_lines(summary: dict) -> list[str]:
         f"  LER {tw['LER']:.4f} (two-wavelength) vs {sp['LER']:.4f} ± {sp['LER_std']:.4f} (spectral); "
         f"spectral ledger: Stokes loss {led['stokes']:.4f} W, power error {led['error']:.1e}, photon error "
         f"{sp['ledger']['photons_per_s']['error']:.1e}; {sum(summary['stage_seconds'].values()):.1f} s",
+        "  by band: " + "; ".join(f"{r['label']} {100 * r['relative_difference']:+.1f} ± "
+                                  f"{100 * r['relative_difference_std']:.1f} %" for r in b.values())
+        + (f"; against §4.2: {', '.join(chk['contradicting_bands'])}" if chk.get("contradicting_bands") else ""),
+        *(f"  ablation, {a['description']} ({a['rays']} rays): " + "; ".join(
+            f"{r['label']} {100 * r['relative_difference']:+.1f} ± {100 * r['relative_difference_std']:.1f} %"
+            for r in a["bands"].values()) for a in summary.get("ablations", {}).values()),
     ]

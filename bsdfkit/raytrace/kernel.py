@@ -35,8 +35,11 @@ plate spectral model's grid, drawn at emission from the LED's bin powers. At the
 converted R/T) is drawn with probabilities ∝ the photons each gives out per incident photon (interpolated
 linearly in θi like the TIS above), the weight becomes wS (S their sum ≤ 1) and a conversion draws the new bin from
 the alias table of the emission row of k and scales the weight by λ_k/λ_new: the photon keeps its number, and
-wS − w_out is tallied as the Stokes loss. Every loss is also tallied in photons (weight × λ/λ_max of the bin the
-ray has at that moment); a ray's extracted weight is deposited into its bin's spectrum sums when it retires.
+wS − w_out is tallied as the Stokes loss (net: an anti-Stokes conversion, within the thermal tail of the
+emission table, adds a negative term; the photons converted, those converted to a shorter bin and the power the
+latter created are tallied on their own, outside the ledgers). Every loss is also tallied in photons (weight ×
+λ/λ_max of the bin the ray has at that moment); a ray's extracted weight is deposited into its bin's spectrum
+sums when it retires.
 Per ray 1 = extracted + absorbed + stokes + roulette + discarded + truncated in power, and the same without the
 Stokes term in photons.
 
@@ -68,10 +71,13 @@ COLUMNS = ("extracted_blue", "extracted_yellow", "absorbed_wall", "absorbed_base
            "absorbed_plate", "roulette", "discarded", "truncated",
            # spectral mode only: power extracted outside both bands, Stokes loss, and the ledger in photons
            "extracted_other", "stokes", "photons_extracted", "photons_wall", "photons_base", "photons_leds",
-           "photons_plate", "photons_roulette", "photons_discarded", "photons_truncated")
+           "photons_plate", "photons_roulette", "photons_discarded", "photons_truncated",
+           # spectral plate only, outside the ledgers: photons converted, of them to a shorter wavelength than they
+           # were absorbed at (anti-Stokes), and the power those anti-Stokes conversions created (≥ 0)
+           "photons_converted", "photons_anti_stokes", "anti_stokes_gain")
 EXT_B, EXT_Y, ABS_WALL, ABS_BASE, ABS_LED, ABS_PLATE, ROULETTE, DISCARDED, TRUNCATED = range(9)
 (EXT_O, STOKES, PH_EXT, PH_WALL, PH_BASE, PH_LED, PH_PLATE, PH_ROULETTE, PH_DISCARDED,
- PH_TRUNCATED) = range(9, len(COLUMNS))
+ PH_TRUNCATED, PH_CONVERTED, PH_ANTI_STOKES, ANTI_STOKES_GAIN) = range(9, len(COLUMNS))
 #: the power ledger's columns (the photon columns close their own ledger)
 POWER_COLUMNS = COLUMNS[:11]
 # per-ray integer counters
@@ -264,7 +270,8 @@ def _spectral_channel(params, key_words, u, w, k, t, j):
     Channels elastic R/T and converted R/T are chosen with probabilities ∝ their photon TIS (interpolated
     linearly in θi), the weight becomes wS (S their sum: photons kept per incident photon, ≤ 1); a conversion
     draws the new bin from the alias table of row k (uniforms 6 and 7) and scales the weight by λ_k/λ_new
-    (same photon, new energy). Returns (w_out, absorbed, stokes, forward, new bin, backward channel, grid point).
+    (same photon, new energy). Returns (w_out, absorbed, (stokes, photons converted, photons converted to a shorter
+    bin, power created by those), forward, new bin, backward channel, grid point).
     """
     sp = params["spectral"]
     K = sp["lam"].shape[0]
@@ -294,7 +301,10 @@ def _spectral_channel(params, key_words, u, w, k, t, j):
         g = jnp.where(u[4].astype(jnp.float64) * (q0 + q1) < q0, j, j + 1)
         w_kept, w_out, forward, new_k, channel, g = sampling.materialise(
             key_words, [w_kept, w_out, forward, new_k, channel, g])
-    return w_out, w - w_kept, w_kept - w_out, forward, new_k, channel, g
+    anti = converted & (new_k < k)
+    conversions = (w_kept - w_out, jnp.where(converted, w_kept * sp["photon_scale"][k], 0.0),
+                   jnp.where(anti, w_kept * sp["photon_scale"][k], 0.0), jnp.where(anti, w_out - w_kept, 0.0))
+    return w_out, w - w_kept, conversions, forward, new_k, channel, g
 
 
 def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
@@ -384,9 +394,12 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         plate_abs = jnp.where(top, p_abs, zero)
         add(ABS_PLATE, plate_abs)
         if effects.spectral:
-            stokes = jnp.where(top, stokes, zero)
+            stokes, ph_conv, ph_anti, gain = (jnp.where(top, v, zero) for v in stokes)
             add(STOKES, stokes)
             add(PH_PLATE, plate_abs * ph_in)
+            add(PH_CONVERTED, ph_conv)
+            add(PH_ANTI_STOKES, ph_anti)
+            add(ANTI_STOKES_GAIN, gain)
         ext_w = jnp.where(top & forward, w_out, zero)
         ext_colour = p_colour
         back = top & ~forward & (w_out > 0)
@@ -481,7 +494,8 @@ def active_columns(effects: Effects) -> tuple[bool, ...]:
           "roulette": roulette, "discarded": not roulette, "truncated": True,
           "extracted_other": sp, "stokes": sp and plate, "photons_extracted": sp, "photons_wall": sp,
           "photons_base": sp, "photons_leds": sp, "photons_plate": sp and plate, "photons_roulette": sp and roulette,
-          "photons_discarded": sp and not roulette, "photons_truncated": sp}
+          "photons_discarded": sp and not roulette, "photons_truncated": sp, "photons_converted": sp and plate,
+          "photons_anti_stokes": sp and plate, "anti_stokes_gain": sp and plate}
     return tuple(on[c] for c in COLUMNS)
 
 

@@ -49,6 +49,7 @@ from bsdfkit.io.text import loads_toml, read_text
 from bsdfkit.raytrace.plate import PhosphorPlate, load_plate
 from bsdfkit.raytrace.rayfile import RaySet, read_ray_file
 from bsdfkit.raytrace.spectral import (
+    PLATE_TEMPERATURE_K,
     SpectralPlateModel,
     SpectralTables,
     gaussian_led_spectrum,
@@ -162,6 +163,8 @@ class Top:
     ``spectral_model`` is the plate spectral model (:mod:`bsdfkit.raytrace.spectral`), from ``spectral_file``
     (netCDF; the plate is then optional and gives only the angular distributions, Lambertian without it) or built
     from the plate with a Gaussian emission spectrum ``spectral_emission`` = (peak, FWHM, start, stop, step) [nm].
+    ``temperature_K`` [K] is the plate temperature of the spectral mode's thermal (anti-Stokes) tail: emission
+    below the excitation wavelength is weighted by its Boltzmann factor (:mod:`bsdfkit.raytrace.spectral`).
     """
 
     kind: str = "exit"
@@ -173,6 +176,7 @@ class Top:
     spectral_file: str | None = None
     spectral_emission: tuple[float, float, float, float, float] | None = None
     spectral_model: SpectralPlateModel | None = field(default=None, compare=False, repr=False)
+    temperature_K: float = PLATE_TEMPERATURE_K
 
 
 @dataclass(frozen=True)
@@ -429,7 +433,12 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
     if rays is not None:
         rays.check_inside(R, cavity.height_mm, file=file, field="leds.ray_file")
 
-    r = _Reader(data["top"], "top", file, {"kind", "reflectance", "transmittance", "plate", "from", "spectral"})
+    r = _Reader(data["top"], "top", file, {"kind", "reflectance", "transmittance", "plate", "from", "spectral",
+                                           "temperature_K"})
+    if r.has("temperature_K") and not r.has("spectral"):
+        raise InputError("the plate temperature belongs to a spectral plate model", file=file,
+                         field="top.temperature_K", expected="a [top] with spectral = ...",
+                         got=r.table["temperature_K"])
     if r.has("spectral") and r.table["kind"] != "phosphor":
         raise InputError("a spectral plate model belongs to a phosphor top", file=file, field="top.spectral",
                          expected="kind = 'phosphor'", got=r.table["kind"])
@@ -487,6 +496,7 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
             top = Top("phosphor", plate=plate_from_recipe(_resolve(value, base_dir), file), plate_recipe=value)
         if r.has("spectral"):
             top = _spectral_top(top, r, base_dir, preloaded)
+            top = replace(top, temperature_K=r.number("temperature_K", PLATE_TEMPERATURE_K, lo=0, lo_open=True))
 
     trace = TraceOptions()
     if "trace" in data:
@@ -653,7 +663,7 @@ def scene_spectral_tables(scene: Scene) -> SpectralTables:
     """The spectral kernel's tables of ``scene`` (:func:`bsdfkit.raytrace.spectral.spectral_tables`)."""
     source = None if scene.path is None else str(scene.path)
     return spectral_tables(scene.top.spectral_model, scene.top.plate, spectral_grid(scene), scene.leds.spectrum,
-                           source=source)
+                           source=source, temperature_K=scene.top.temperature_K)
 
 
 def surface_reflectance_table(scene: Scene) -> np.ndarray:
@@ -758,6 +768,8 @@ def scene_to_mapping(scene: Scene) -> dict[str, Any]:
         elif top.spectral_emission is not None:
             top_map["spectral"] = dict(zip(("emission_peak_nm", "emission_fwhm_nm", "start_nm", "stop_nm", "step_nm"),
                                            top.spectral_emission))
+        if top.spectral_file is not None or top.spectral_emission is not None:
+            top_map["temperature_K"] = top.temperature_K
     t = scene.trace
     doc: dict[str, Any] = {
         "cavity": {"radius_mm": scene.cavity.radius_mm, "height_mm": scene.cavity.height_mm},

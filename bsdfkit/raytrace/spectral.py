@@ -24,6 +24,16 @@ number, its energy changes). The expected converted power is exactly converted_t
 grows (S ≤ 1 is required of the model) and the power lost at a conversion, w·S·(1 − λ_k/λ_new), is the Stokes
 loss, booked on its own ledger line.
 
+Emission conditioned on the excitation (issue 27). A converted photon cannot leave with more energy than it
+was absorbed with, beyond what the lattice lends it thermally. The pdf row at the excitation bin k (the data's
+row where the excitation scan measured one, interpolated between its excitations) is therefore weighted below
+the excitation wavelength by the Boltzmann factor B_kj = exp(−(hc/λ_j − hc/λ_k)/(k_B T)) (1 for λ_j ≥ λ_k) at
+the plate temperature T (``temperature_K`` of the scene's top, default :data:`PLATE_TEMPERATURE_K`) and
+renormalised per row: p'_kj = p_kj B_kj / Σ_j p_kj B_kj. The photon yield Y of each cell is the data's (the
+quantum yield is kept, photons are only moved to longer wavelengths), so the converted power becomes
+Y·λ_k/λ̃'_k; the anti-Stokes share of row k is Σ_{j<k} p'_kj Δλ (:func:`anti_stokes_share`). The kernel draws
+the new bin from the alias table of row k of p' (a K × K table gathered by the ray's bin: no branch, no loop).
+
 Angular distributions are those of the scene's two-wavelength plate (Lambertian without one): elastic light in
 the pump band (λ_k within :data:`~bsdfkit.core.conventions.MODULE_BLUE_BAND_NM` by default) scatters back like
 bibs, elastic light elsewhere like yiys, converted light like biys; the model's incidence grid is the kernel's,
@@ -31,6 +41,7 @@ each grid point taking the plate's distribution at the nearest plate incidence.
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -54,6 +65,11 @@ _GRID_TOL = 1e-6
 NOISE_SIGMA = 3.0
 #: Largest bin count (the alias tables hold K² entries per model).
 MAX_BINS = 1024
+#: Default plate temperature [K] of the thermal (anti-Stokes) tail: 40 °C, the upper bound of the phosphor
+#: temperature during the module measurements (§5 of "Power and photon budget of a remote phosphor LED module").
+PLATE_TEMPERATURE_K = 313.15
+#: Second radiation constant c₂ = hc/k_B [nm·K] (CODATA 2018, exact).
+C2_NM_K = 1.438776877e7
 
 
 @dataclass(frozen=True, eq=False)
@@ -264,7 +280,17 @@ def alias_table(pdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Walker's alias tables (Vose's construction) of each row of ``pdf`` (rows of K weights, any scale).
 
     Sampling: i = ⌊u₁K⌋, then i if u₂ < prob[i] else alias[i]. A zero row gets the uniform table (unused).
+    The construction (a Python loop, ~0.4 s for 200 rows of 401) is cached per process by the table's bytes:
+    a scene's tables are built for its compilation, its kernel parameters and its result.
     """
+    pdf = np.ascontiguousarray(pdf, dtype=np.float64)
+    prob, alias = _alias_rows(pdf.shape, pdf.tobytes())
+    return prob.copy(), alias.copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _alias_rows(shape: tuple[int, int], data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    pdf = np.frombuffer(data, dtype=np.float64).reshape(shape)
     rows, K = pdf.shape
     prob = np.ones((rows, K))
     alias = np.tile(np.arange(K, dtype=np.int32), (rows, 1))
@@ -324,6 +350,51 @@ def model_on_bins(model: SpectralPlateModel, plate: PhosphorPlate | None = None
     return elastic, converted, pdf
 
 
+def thermal_factor(excitation_nm: np.ndarray, emission_nm: np.ndarray, temperature_K: float) -> np.ndarray:
+    """Boltzmann weight B (excitations, emissions) [1] of emission below the excitation wavelength.
+
+    B = exp(−(hc/λ_em − hc/λ_ex)/(k_B T)) where λ_em < λ_ex [nm], else 1; ``temperature_K`` [K] > 0.
+    """
+    return np.exp(-_thermal_exponent(excitation_nm, emission_nm, temperature_K))
+
+
+def _thermal_exponent(excitation_nm, emission_nm, temperature_K: float) -> np.ndarray:
+    """(hc/λ_em − hc/λ_ex)/(k_B T) where λ_em < λ_ex, else 0 (excitations, emissions) [1]."""
+    if not (np.isfinite(temperature_K) and temperature_K > 0):
+        raise ValidationError("plate temperature must be positive", field="top.temperature_K",
+                              expected="a temperature > 0 K", got=temperature_K)
+    ex = np.asarray(excitation_nm, dtype=np.float64)[:, None]
+    em = np.asarray(emission_nm, dtype=np.float64)[None, :]
+    return np.where(em < ex, np.clip(C2_NM_K / temperature_K * (1.0 / em - 1.0 / ex), 0.0, None), 0.0)
+
+
+def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: float) -> np.ndarray:
+    """Rows of ``pdf`` (excitation bin k = row k, on the bins ``lam`` [nm]) weighted by :func:`thermal_factor`
+    and renormalised to their own sums (zero rows stay zero): the emission pdf given the excitation bin [1/nm].
+
+    The weights are formed in log space relative to each row's largest, so a row whose whole emission lies far
+    below its excitation (or a very cold plate) keeps its sum instead of underflowing to zero.
+    """
+    pdf = np.asarray(pdf, dtype=np.float64)
+    positive = pdf > 0
+    with np.errstate(divide="ignore"):
+        log_w = np.where(positive, np.log(np.where(positive, pdf, 1.0)), -np.inf) \
+            - _thermal_exponent(lam, lam, temperature_K)
+    top = log_w.max(axis=1, keepdims=True)
+    weighted = np.where(positive, np.exp(log_w - np.where(np.isfinite(top), top, 0.0)), 0.0)
+    old, new = pdf.sum(axis=1), weighted.sum(axis=1)
+    scale = np.where(new > 0, old / np.where(new > 0, new, 1.0), 0.0)
+    return weighted * scale[:, None]
+
+
+def anti_stokes_share(pdf: np.ndarray) -> np.ndarray:
+    """Per excitation bin k (rows of a pdf on its own bins), the probability that a converted photon leaves in a
+    bin shorter than k: Σ_{j<k} p_kj / Σ_j p_kj [1] (0 for zero rows)."""
+    below = np.tril(pdf, -1).sum(axis=1)
+    total = pdf.sum(axis=1)
+    return np.where(total > 0, below / np.where(total > 0, total, 1.0), 0.0)
+
+
 def shape_plate_on_grid(plate: PhosphorPlate | None, incidence_deg: np.ndarray) -> PhosphorPlate:
     """The plate whose angular distributions the spectral kernel samples, on the model's incidence grid.
 
@@ -351,7 +422,9 @@ class SpectralTables:
     backward channel whose distribution elastic light takes (0 bibs, 2 yiys); ``tis`` (G·K, 4) photons per
     incident photon: elastic R, elastic T, converted R, converted T at (incidence g, bin k) → row g·K + k;
     ``alias_prob``, ``alias_index`` (K·K,) the emission rows' alias tables; ``led_cdf`` (K,) cumulative LED
-    bin powers; ``plate`` the angular tables on the model's incidence grid (None for an exit top).
+    bin powers; ``plate`` the angular tables on the model's incidence grid (None for an exit top);
+    ``emission_pdf`` (K, K) the conditional emission pdf p' the alias tables sample (module docstring) and
+    ``temperature_K`` [K] its plate temperature.
     """
 
     lam: np.ndarray
@@ -368,6 +441,8 @@ class SpectralTables:
     extrapolated_nm: tuple[float, ...] = ()
     capped: tuple[tuple[float, float, float], ...] = ()
     yiys_nm: tuple[float, ...] = ()
+    emission_pdf: np.ndarray | None = None
+    temperature_K: float = PLATE_TEMPERATURE_K
 
 
 def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, source: str | None = None) -> np.ndarray:
@@ -390,8 +465,10 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
                     led_spectrum: tuple[np.ndarray, np.ndarray], *, source: str | None = None,
                     pump_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
                     blue_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
-                    yellow_band_nm: tuple[float, float] = MODULE_YELLOW_BAND_NM) -> SpectralTables:
-    """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top)."""
+                    yellow_band_nm: tuple[float, float] = MODULE_YELLOW_BAND_NM,
+                    temperature_K: float = PLATE_TEMPERATURE_K) -> SpectralTables:
+    """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top), the
+    emission conditioned on the excitation bin at the plate temperature ``temperature_K`` [K] (module docstring)."""
     lam = np.asarray(lam, dtype=np.float64)
     band = np.where((lam >= blue_band_nm[0]) & (lam <= blue_band_nm[1]), 0,
                     np.where((lam >= yellow_band_nm[0]) & (lam <= yellow_band_nm[1]), 1, 2)).astype(np.int32)
@@ -399,7 +476,7 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     led = led_bin_power(led_spectrum, lam, source)
     cdf = np.cumsum(led)
     cdf[-1] = 1.0
-    tis = prob = index = tabs = grid = None
+    tis = prob = index = tabs = grid = cond = None
     extrapolated: tuple[float, ...] = ()
     from_plate: tuple[float, ...] = ()
     if model is not None:
@@ -411,7 +488,8 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
         # can exceed it by rounding-level amounts (the harmonic mean of a mixed pdf row is not linear): cap
         total = tis.sum(axis=1)
         tis = tis / np.maximum(total, 1.0)[:, None]
-        p, a = alias_table(pdf * model.step_nm)
+        cond = conditional_emission_pdf(pdf, lam, temperature_K)  # the photon yields above keep the data's rows
+        p, a = alias_table(cond * model.step_nm)
         prob, index = p.reshape(-1), a.reshape(-1).astype(np.int32)
         grid = model.incidence_deg
         if grid.size == 1:  # one incidence: constant in θi (as plate_tables does)
@@ -424,7 +502,7 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     return SpectralTables(lam=lam, photon_scale=lam / lam[-1], band=band, elastic_shape=shape, tis=tis,
                           alias_prob=prob, alias_index=index, led_power=led, led_cdf=cdf, plate=tabs, grid_deg=grid,
                           extrapolated_nm=extrapolated, capped=() if model is None else model.capped,
-                          yiys_nm=from_plate)
+                          yiys_nm=from_plate, emission_pdf=cond, temperature_K=float(temperature_K))
 
 
 def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, field_name: str,

@@ -177,6 +177,11 @@ def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.nda
     discarded + truncated. Photons: the same lines without the Stokes loss (a conversion keeps the photon, the
     plate's absorption line holds the photons it does not re-emit). Photon tallies are in units of photons of a
     unit-weight ray at the longest bin λ_max: N [1/s] = tally · (P/N_rays) · λ_max / (hc).
+
+    ``conversions`` (outside both ledgers): photons converted at the plate [1/s], those converted to a shorter
+    wavelength bin than they were absorbed at (anti-Stokes, the thermal tail of the emission table), their share
+    [1], and the power those anti-Stokes conversions created [W] (the Stokes line is net of it); absent with
+    an exit top.
     """
     scale = power_W / n
     to_photons = scale * float(lam[-1]) * 1e-9 / (PLANCK_H * LIGHT_C)
@@ -193,7 +198,14 @@ def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.nda
              "error": float(abs(n - sum(p_lines.values())) / n)}
     photons = {"emitted": float(ph_emitted) * to_photons, **{k: float(v) * to_photons for k, v in ph_lines.items()},
                "error": float(abs(ph_emitted - sum(ph_lines.values())) / ph_emitted)}
-    return {"power_W": power, "photons_per_s": photons}
+    out = {"power_W": power, "photons_per_s": photons}
+    if "photons_converted" in col and col["photons_converted"] > 0:
+        conv, anti = col["photons_converted"], col["photons_anti_stokes"]
+        out["conversions"] = {"photons_per_s": float(conv) * to_photons,
+                              "anti_stokes_photons_per_s": float(anti) * to_photons,
+                              "anti_stokes_share": float(anti / conv),
+                              "anti_stokes_gain_W": float(col["anti_stokes_gain"]) * scale}
+    return out
 
 
 def _ranges(values, step: float) -> list[list[float]]:

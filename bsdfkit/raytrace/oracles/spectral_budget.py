@@ -12,7 +12,8 @@ patch discretisation, < 1e-6): with G_k the power incident on each patch in bin 
 
 where e_k is the LED power fraction of bin k, ρ_k the patches' reflectance in bin k (the plate's: elastic
 reflection TIS), C_R the backward converted TIS and f(k'→k) = (p_k'k / λ_k) / Σ_j (p_k'j / λ_j) the share of
-converted power landing in bin k (p the photon pdf: photons spread by p carry power ∝ p/λ). The system is solved
+converted power landing in bin k (p the conditional photon pdf of the kernel's tables, the thermal tail below
+the excitation included, with the data's photon yield: photons spread by p carry power ∝ p/λ). The system is solved
 by block Gauss–Seidel over the bins (each bin a dense solve), which converges geometrically because every pass
 through the plate loses power. Extracted power in bin k = elastic_T(k)·ΣG_k(top) + Σ_k' C_T(k') f(k'→k) ΣG_k'(top).
 """
@@ -62,9 +63,13 @@ def spectral_module_budget(scene: Scene, n_base: int = 48, n_wall: int = 96, n_t
                                   file=scene.path, field="top.spectral", expected="TIS constant over incidence")
         elastic, converted, pdf = model_on_bins(model, plate)
         eR, eT = elastic[0, 0], elastic[1, 0]
-        cR, cT = converted[0, 0], converted[1, 0]
-        w = pdf / lam[None, :]
+        # the conditional emission (thermal tail below the excitation) keeps the data's photon yield: the
+        # converted power scales by Σ p'/λ / Σ p/λ (photons × their energies)
+        w = tab.emission_pdf / lam[None, :]
         norm = w.sum(axis=1)
+        data = (pdf / lam[None, :]).sum(axis=1)
+        power = np.where(data > 0, norm / np.where(data > 0, data, 1.0), 0.0)
+        cR, cT = converted[0, 0] * power, converted[1, 0] * power
         share = np.where(norm[:, None] > 0, w / np.where(norm > 0, norm, 1.0)[:, None], 0.0)  # f(k' → k)
     p = cylinder_patches(scene.cavity.radius_mm, scene.cavity.height_mm, n_base, n_wall, n_top)
     F = view_factors(p)
