@@ -77,13 +77,15 @@ def test_two_wavelength_mode_overestimates_the_power_near_470_nm(stage):
 @pytest.mark.slow
 def test_two_wavelength_mode_underestimates_the_yellow_power(stage):
     """Second half: in the module yellow band the two-wavelength spectrum is below the spectral one by more than
-    3 σ (the light re-absorbed at the plate comes back at longer wavelengths), so the whole direction holds."""
+    3 σ (the light re-absorbed at the plate comes back at longer wavelengths). The whole direction holds only when
+    no sub-band with a paper direction goes against it (on the bundled plate 465-475 nm does: -13 ± 2 %)."""
     sc = stage.summary["spectral_comparison"]
     row = sc["bands"]["yellow"]
     assert row["band_nm"] == list(MODULE_YELLOW_BAND_NM)
     assert row["relative_difference"] < -3 * row["relative_difference_std"] < 0
     check = sc["direction_check"]
-    assert check["yellow_underestimated"] and check["holds"]
+    assert check["yellow_underestimated"]
+    assert check["holds"] == (check["near_pump_overestimated"] and not check["contradicting_bands"])
 
 
 @pytest.mark.slow

@@ -1094,9 +1094,11 @@ class _Report:
         above = "above" if chk.get("near_pump_overestimated") else "NOT above"
         below = "below" if chk.get("yellow_underestimated") else "NOT below"
         verdict = (f'<span class="{"agree" if holds else "differs"}">'
-                   f'{"the direction holds" if holds else "the direction does NOT hold"}</span>: near 470 nm '
-                   f'the two-wavelength spectrum is {above} the '
-                   f'spectral one, in the yellow band it is {below}.')
+                   f'{"the direction holds" if holds else "the direction does NOT hold"}</span>: in '
+                   f'{_esc((b.get("near_pump") or {}).get("label", "460-500 nm"))} the two-wavelength spectrum is '
+                   f'{above} the spectral one, in the yellow band it is {below}'
+                   + (f'; against §4.2 beyond 1 σ in {_esc(", ".join(chk["contradicting_bands"]))} (sub-band table)'
+                      if chk.get("contradicting_bands") else "") + '.')
         if not holds:
             self.v.disagreements.append("spectral vs two-wavelength mode: the direction of §4.2 of "
                                         "[Cylindrical-module] does not hold on this plate (see its section)")
