@@ -72,3 +72,32 @@ def test_bad_values_are_refused_naming_the_line(small, tmp_path):
     bad.write_text("\n".join(lines))
     with pytest.raises(FormatError, match=rf"bad\.bsdf:{k + 1}: field 'block AOI 0.0 values': not a number"):
         read_lighttools(bad)
+
+
+def test_a_plane_symmetrical_file_is_completed_by_its_mirror_images(small, tmp_path):
+    """``Symmetry PlaneSymmetrical`` (read by other LightTools readers, e.g. libbsdf's): a file holding only the
+    azimuths on one side of the plane of incidence (90°-270°, the specular side's half) reads to the same BSDF on the
+    full circle and to the same TIS as the full file (the sample is mirror-symmetric: diffuse + Gaussian lobe)."""
+    from bsdfkit.tables.formats.lighttools import LightToolsBsdf, lighttools_text
+
+    path, _ = small
+    full = read_lighttools(path)
+    half = (full.azimuth >= 90.0) & (full.azimuth <= 270.0)
+    one_side = LightToolsBsdf(full.azimuth[half], full.radial,
+                              {k: (t, v[:, half, :], tis) for k, (t, v, tis) in full.blocks.items()},
+                              full.wavelength_nm, full.spectral)
+    text = lighttools_text(one_side).replace("Symmetry Asymmetric", "Symmetry PlaneSymmetrical")
+    assert "Symmetry PlaneSymmetrical" in text
+    mirrored = tmp_path / "half.bsdf"
+    mirrored.write_text(text)
+    back = read_lighttools(mirrored)
+    keep = full.azimuth < 360.0
+    np.testing.assert_array_equal(back.azimuth, full.azimuth[keep])
+    key = ("Front", "reflection")
+    np.testing.assert_allclose(back.blocks[key][1], full.blocks[key][1][:, keep], rtol=1e-6, atol=0)
+    np.testing.assert_allclose(read_any(mirrored).tis_computed["reflection"], read_any(path).tis_computed["reflection"],
+                               rtol=1e-6)
+    with pytest.raises(FormatError, match="Asymmetric or PlaneSymmetrical"):
+        bad = tmp_path / "bad.bsdf"
+        bad.write_text(text.replace("Symmetry PlaneSymmetrical", "Symmetry Rotational"))
+        read_lighttools(bad)

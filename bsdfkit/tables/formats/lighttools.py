@@ -3,7 +3,8 @@
 Layout (whitespace-separated tokens, ``#`` starts a comment)::
 
     # comments                            bsdfkit writes "# bsdfkit <version>" and its conventions
-    Symmetry Asymmetric
+    Symmetry Asymmetric                   (read also: PlaneSymmetrical, azimuths on one side of the plane of
+                                          incidence, completed by their mirror images φ → 180° − φ)
     SpectralContent Monochrome            (or XYZ: blocks carry TristimulusValue TrisX | TrisY | TrisZ)
     ScatterAzimuth <n>  <n azimuths, deg>
     ScatterRadial <m>  <m polar angles, deg>
@@ -154,9 +155,10 @@ def read_lighttools(path: str | Path) -> LightToolsBsdf:
             raise FormatError("unknown header keyword", file=path, line=line, field="header",
                               expected="Symmetry, SpectralContent, ScatterAzimuth, ScatterRadial or DataBegin",
                               got=key[:40])
-    if str(header.get("symmetry", "")).lower() != "asymmetric":
-        raise FormatError("unsupported symmetry", file=path, field="Symmetry", expected="Asymmetric",
-                          got=str(header.get("symmetry")))
+    symmetry = str(header.get("symmetry", "")).lower()
+    if symmetry not in ("asymmetric", "planesymmetrical"):
+        raise FormatError("unsupported symmetry", file=path, field="Symmetry",
+                          expected="Asymmetric or PlaneSymmetrical", got=str(header.get("symmetry")))
     spectral = str(header.get("spectralcontent", "Monochrome"))
     if spectral.lower() not in ("monochrome", "xyz"):
         raise FormatError("unsupported spectral content", file=path, field="SpectralContent",
@@ -224,7 +226,20 @@ def read_lighttools(path: str | Path) -> LightToolsBsdf:
         blocks[key] = (np.array([e[0] for e in entries]), np.stack([e[1] for e in entries]),
                        np.array([e[2] for e in entries]))
     lam = PHOTOPIC_NM if spectral.lower() == "xyz" else (lams.pop() if len(lams) == 1 else None)
-    return LightToolsBsdf(az, rad, blocks, lam, spectral, {"wavelengths": sorted(lams)})
+    if symmetry == "planesymmetrical":
+        az, blocks = _mirrored(az, blocks)
+    return LightToolsBsdf(az, rad, blocks, lam, spectral, {"wavelengths": sorted(lams), "symmetry": symmetry})
+
+
+def _mirrored(az: NDArray[np.float64], blocks: dict) -> tuple[NDArray[np.float64], dict]:
+    """A PlaneSymmetrical file's azimuths [deg] completed by their mirror images about the plane of incidence
+    (azimuths 90°/270°: φ → 180° − φ), each mirrored azimuth holding its original's values; where a file gives both
+    an azimuth and its mirror, its own value is kept."""
+    every = np.concatenate([az, np.mod(180.0 - az, 360.0)])
+    source = np.concatenate([np.arange(az.size), np.arange(az.size)])
+    _, first = np.unique(np.round(every, 9), return_index=True)  # sorted; the file's own azimuths come first
+    take = source[first]
+    return every[first], {k: (t, v[:, take, :], tis) for k, (t, v, tis) in blocks.items()}
 
 
 # ------------------------------------------------------------------------------------------- registry hooks
