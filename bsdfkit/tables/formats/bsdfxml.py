@@ -40,8 +40,8 @@ Rules (docs/exports.md, "Radiance / WINDOW BSDF XML"):
 * **Resolution (Klems rule)**: the basis resolves nothing finer than a patch (5° polar cap, 10° bands, 15° at
   grazing; azimuth 15°–45°): a lobe is smeared over its patch (its integral is kept, its shape is not), and the
   incidence is quantised to the 9 band centres. A specular lobe narrower than a patch (FWHM below ~10°) needs a
-  tensor tree: ``ExportSettings.xml_basis`` ``auto`` writes a TensorTree3 exactly then (FWHM below 10°,
-  :mod:`bsdfkit.tables.formats.bsdfxml_tree`), ``tree`` always, ``klems`` (default: what WINDOW reads) never; in
+  tensor tree: ``ExportSettings.xml_basis`` ``auto`` (the default) writes a TensorTree3 exactly then (FWHM below
+  10°, :mod:`bsdfkit.tables.formats.bsdfxml_tree`), ``tree`` always, ``klems`` (what WINDOW reads) never; in
   Klems such a lobe keeps its TIS, not its angular distribution.
 * **One answer**: a file in a basis is piecewise constant; its hemispherical value is the basis sum Σ f Λ
   (:mod:`bsdfkit.reduction.basis`). ``read`` reports it; ingested records carry their cell's projected solid angle
@@ -62,14 +62,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bsdfkit.core.errors import FormatError, ValidationError
-from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import is_float, read_text
 from bsdfkit.reduction.basis import basis_sum
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 from bsdfkit.tables.formats import bsdfxml_tree as bt
-from bsdfkit.tables.formats import tensortree
+from bsdfkit.tables.formats import tensortree, xml_document
 
 __all__ = ["KLEMS_FULL", "KlemsBasis", "KlemsBsdf", "TreeBsdf", "klems_bsdf", "read_bsdfxml", "write_bsdfxml",
            "xml_text"]
@@ -236,49 +235,24 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
 
 def xml_text(bsdf: KlemsBsdf, generated_at: datetime | None = None) -> str:
     """The XML document of ``bsdf`` (values to 7 significant digits)."""
-    when = (generated_at or datetime.now()).replace(microsecond=0).isoformat()
-    lam = "nan" if bsdf.wavelength_nm is None else f"{bsdf.wavelength_nm:g}"
-    out = ['<?xml version="1.0" encoding="UTF-8"?>',
-           '<WindowElement xmlns="http://windows.lbl.gov" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
-           'xsi:schemaLocation="http://windows.lbl.gov BSDF-v1.4.xsd">',
-           f"<!-- written by bsdfkit {__version__} on {when}; Klems full basis, BSDF in 1/sr -->",
-           f"<!-- bsdfkit wavelength_nm={lam} (the single wavelength held by the Visible block) -->"]
+    comments = list(bsdf.comments)
     if bsdf.source_incidence_deg is not None:
         mapping = ", ".join(f"{c:g}<-{t:g}" for c, t in zip(bsdf.basis.centres_deg, bsdf.source_incidence_deg))
-        out.append(f"<!-- bsdfkit incident band centre <- source incidence [deg]: {mapping} -->")
-    for line in bsdf.comments:
-        out.append("<!-- " + line.replace("--", "- -") + " -->")
-    out += ["<WindowElementType>System</WindowElementType>", "<FileType>BSDF</FileType>", "<Optical>", "<Layer>",
-            "<Material>", f"<Name>{_escape(bsdf.name)}</Name>", "<Manufacturer>bsdfkit</Manufacturer>",
-            '<Thickness unit="Millimeter">0</Thickness>', "<DeviceType>Other</DeviceType>", "</Material>",
-            "<DataDefinition>", "<IncidentDataStructure>Columns</IncidentDataStructure>", "<AngleBasis>",
-            f"<AngleBasisName>{bsdf.basis.name}</AngleBasisName>"]
+        comments.insert(0, f"bsdfkit incident band centre <- source incidence [deg]: {mapping}")
+    out = xml_document.head("Klems full basis", bsdf.name, bsdf.wavelength_nm, "Columns", comments, generated_at)
+    out += ["<AngleBasis>", f"<AngleBasisName>{bsdf.basis.name}</AngleBasisName>"]
     for k, n in enumerate(bsdf.basis.n_phi):
         out += ["<AngleBasisBlock>", f"<Theta>{bsdf.basis.centres_deg[k]:g}</Theta>", f"<nPhis>{n}</nPhis>",
                 f"<ThetaBounds><LowerTheta>{bsdf.basis.edges_deg[k]:g}</LowerTheta>"
                 f"<UpperTheta>{bsdf.basis.edges_deg[k + 1]:g}</UpperTheta></ThetaBounds>", "</AngleBasisBlock>"]
     out += ["</AngleBasis>", "</DataDefinition>"]
+    basis_lines = (f"<ColumnAngleBasis>{bsdf.basis.name}</ColumnAngleBasis>",
+                   f"<RowAngleBasis>{bsdf.basis.name}</RowAngleBasis>")
     for direction in _DIRECTIONS:
-        if direction not in bsdf.blocks:
-            continue
-        m = bsdf.blocks[direction]
-        out += ["<WavelengthData>", "<LayerNumber>System</LayerNumber>",
-                f'<Wavelength unit="Integral">{bsdf.wavelength_label}</Wavelength>',
-                "<SourceSpectrum>CIE Illuminant D65 1nm.ssp</SourceSpectrum>",
-                "<DetectorSpectrum>ASTM E308 1931 Y.dsp</DetectorSpectrum>", "<WavelengthDataBlock>",
-                f"<WavelengthDataDirection>{direction}</WavelengthDataDirection>",
-                f"<ColumnAngleBasis>{bsdf.basis.name}</ColumnAngleBasis>",
-                f"<RowAngleBasis>{bsdf.basis.name}</RowAngleBasis>",
-                f"<ScatteringDataType>{'BRDF' if direction.startswith('Reflection') else 'BTDF'}"
-                "</ScatteringDataType>", "<ScatteringData>"]
-        out += [", ".join(format(float(v), _VALUE_FMT) for v in row) + "," for row in m]
-        out += ["</ScatteringData>", "</WavelengthDataBlock>", "</WavelengthData>"]
-    out += ["</Layer>", "</Optical>", "</WindowElement>", ""]
-    return "\n".join(out)
-
-
-def _escape(text: str) -> str:
-    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+        if direction in bsdf.blocks:
+            rows = [", ".join(format(float(v), _VALUE_FMT) for v in row) + "," for row in bsdf.blocks[direction]]
+            out += xml_document.wavelength_data(direction, bsdf.wavelength_label, basis_lines, rows)
+    return "\n".join(out + list(xml_document.TAIL))
 
 
 def write_bsdfxml(path: str | Path, bsdf: KlemsBsdf, *, force: bool = False,
@@ -477,26 +451,27 @@ def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
 
 
 # ------------------------------------------------------------------------------------------- registry hooks
+def _basis_rule(job: WriteJob) -> str:
+    """The basis to write, ``klems`` or ``tree``, as the first word of the reason (``ExportSettings.xml_basis``;
+    ``auto``: a tree for a specular lobe narrower than a Klems patch, :mod:`bsdfkit.tables.formats.bsdfxml_tree`)."""
+    basis = job.settings.xml_basis
+    if basis != "auto":
+        return f"{basis}: --xml-basis {basis}"
+    width = bt.narrowest_lobe_deg(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides))
+    if width is None:
+        return "klems: no specular lobe"
+    if width < bt.KLEMS_PATCH_DEG:
+        return f"tree: the specular lobe's FWHM {width:.3g} deg < {bt.KLEMS_PATCH_DEG:g} deg (a Klems patch)"
+    return f"klems: the narrowest specular lobe's FWHM {width:.3g} deg >= {bt.KLEMS_PATCH_DEG:g} deg"
+
+
 def _write_job(job: WriteJob) -> WriteOutcome:
     settings = job.settings
-    basis = getattr(settings, "xml_basis", "klems")
-    if basis != "klems":
-        rule = "tree: --xml-basis tree"
-        if basis == "auto":
-            width = bt.narrowest_lobe_deg(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides))
-            if width is not None and width < bt.KLEMS_PATCH_DEG:
-                rule = f"tree: the specular lobe's FWHM {width:.3g} deg < {bt.KLEMS_PATCH_DEG:g} deg (a Klems patch)"
-            else:
-                basis = "klems"
-                rule = ("klems: no specular lobe" if width is None else
-                        f"klems: the narrowest specular lobe's FWHM {width:.3g} deg >= {bt.KLEMS_PATCH_DEG:g} deg")
-        if basis != "klems":
-            return bt.write_tree_job(job, rule)
-    else:
-        rule = "klems: --xml-basis klems"
+    rule = _basis_rule(job)
+    if rule.startswith("tree"):
+        return bt.write_tree_job(job, rule)
     bsdf = klems_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
-                      wavelength_nm=settings.wavelength_nm, back=getattr(settings, "xml_back", "none"),
-                      comments=job.comments)
+                      wavelength_nm=settings.wavelength_nm, back=settings.xml_back, comments=job.comments)
     write_bsdfxml(job.path, bsdf, force=job.force, generated_at=job.generated_at)
     return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)", "basis_rule": rule,
                                "klems_incidence_map_deg": dict(zip([float(c) for c in KLEMS_FULL.centres_deg],

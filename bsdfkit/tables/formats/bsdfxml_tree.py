@@ -21,16 +21,14 @@ Tree written
 from __future__ import annotations
 
 from datetime import datetime
-from xml.sax.saxutils import escape
 
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import WriteJob, WriteOutcome
-from bsdfkit.tables.formats import tensortree
+from bsdfkit.tables.formats import tensortree, xml_document
 
 __all__ = ["KLEMS_PATCH_DEG", "lobe_fwhm_deg", "narrowest_lobe_deg", "tree_grids", "write_tree_job"]
 
@@ -100,30 +98,13 @@ def _incidence_map(texts: list[str], held: NDArray[np.float64], n: int) -> dict[
 def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None, comments: tuple[str, ...],
                   generated_at: datetime | None = None) -> str:
     """The XML document of tensor-tree ``blocks`` (direction -> ScatteringData text)."""
-    when = (generated_at or datetime.now()).replace(microsecond=0).isoformat()
-    lam = "nan" if wavelength_nm is None else f"{wavelength_nm:g}"
-    out = ['<?xml version="1.0" encoding="UTF-8"?>',
-           '<WindowElement xmlns="http://windows.lbl.gov" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
-           'xsi:schemaLocation="http://windows.lbl.gov BSDF-v1.4.xsd">',
-           f"<!-- written by bsdfkit {__version__} on {when}; Radiance tensor tree (TensorTree3), BSDF in 1/sr -->",
-           f"<!-- bsdfkit wavelength_nm={lam} (the single wavelength held by the Visible block) -->"]
-    out += ["<!-- " + line.replace("--", "- -") + " -->" for line in comments]
-    out += ["<WindowElementType>System</WindowElementType>", "<FileType>BSDF</FileType>", "<Optical>", "<Layer>",
-            "<Material>", f"<Name>{escape(name)}</Name>", "<Manufacturer>bsdfkit</Manufacturer>",
-            '<Thickness unit="Millimeter">0</Thickness>', "<DeviceType>Other</DeviceType>", "</Material>",
-            "<DataDefinition>", "<IncidentDataStructure>TensorTree3</IncidentDataStructure>", "</DataDefinition>"]
+    out = xml_document.head("Radiance tensor tree (TensorTree3)", name, wavelength_nm, "TensorTree3", comments,
+                            generated_at)
+    out.append("</DataDefinition>")
     for direction, tree in blocks.items():
-        out += ["<WavelengthData>", "<LayerNumber>System</LayerNumber>",
-                '<Wavelength unit="Integral">Visible</Wavelength>',
-                "<SourceSpectrum>CIE Illuminant D65 1nm.ssp</SourceSpectrum>",
-                "<DetectorSpectrum>ASTM E308 1931 Y.dsp</DetectorSpectrum>", "<WavelengthDataBlock>",
-                f"<WavelengthDataDirection>{direction}</WavelengthDataDirection>",
-                "<AngleBasis>LBNL/Shirley-Chiu</AngleBasis>",
-                f"<ScatteringDataType>{'BRDF' if direction.startswith('Reflection') else 'BTDF'}"
-                "</ScatteringDataType>",
-                "<ScatteringData>", tree, "</ScatteringData>", "</WavelengthDataBlock>", "</WavelengthData>"]
-    out += ["</Layer>", "</Optical>", "</WindowElement>", ""]
-    return "\n".join(out)
+        out += xml_document.wavelength_data(direction, "Visible", ("<AngleBasis>LBNL/Shirley-Chiu</AngleBasis>",),
+                                            (tree,))
+    return "\n".join(out + list(xml_document.TAIL))
 
 
 def write_tree_job(job: WriteJob, rule: str) -> WriteOutcome:
@@ -136,7 +117,7 @@ def write_tree_job(job: WriteJob, rule: str) -> WriteOutcome:
         grid, held = tree_grids(job.fn, theta, side)
         blocks[f"{side.capitalize()} Front"] = tensortree.tree_text(grid)
     mapping = _incidence_map(list(blocks.values()), held, n)
-    if getattr(job.settings, "xml_back", "none") == "mirror":
+    if job.settings.xml_back == "mirror":
         blocks.update({d.replace("Front", "Back"): t for d, t in list(blocks.items())})
     note = ", ".join(f"{c:g}<-{t:g}" for c, t in mapping.items())
     comments = (f"bsdfkit incidence read <- source incidence [deg]: {note}", *job.comments)
