@@ -677,13 +677,16 @@ def _reconstruct_basis(geom: Geometry, finite: NDArray[np.bool_]) -> Reconstruct
     x, y = geom.frame()
     nodes = np.stack([x[finite], y[finite]], axis=1)
     index = np.flatnonzero(finite)
+    trees: list = []  # the nodes' k-d tree, built on the first evaluation (writers evaluate in many chunks)
 
     def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        from scipy.spatial import cKDTree
+        if not trees:
+            from scipy.spatial import cKDTree
 
+            trees.append(cKDTree(nodes))
         v = np.nan_to_num(np.asarray(values, dtype=np.float64))
         dx, dy = direction_frame(geom, directions)
-        _, k = cKDTree(nodes).query(np.stack([np.ravel(dx), np.ravel(dy)], axis=1))
+        _, k = trees[0].query(np.stack([np.ravel(dx), np.ravel(dy)], axis=1))
         return v[index[k]].reshape(np.shape(dx))
 
     return Reconstruction(central=psa, alternatives={}, comparisons={}, lobe=np.zeros(geom.n),
