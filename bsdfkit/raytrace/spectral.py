@@ -350,16 +350,9 @@ def model_on_bins(model: SpectralPlateModel, plate: PhosphorPlate | None = None
     return elastic, converted, pdf
 
 
-def thermal_factor(excitation_nm: np.ndarray, emission_nm: np.ndarray, temperature_K: float) -> np.ndarray:
-    """Boltzmann weight B (excitations, emissions) [1] of emission below the excitation wavelength.
-
-    B = exp(−(hc/λ_em − hc/λ_ex)/(k_B T)) where λ_em < λ_ex [nm], else 1; ``temperature_K`` [K] > 0.
-    """
-    return np.exp(-_thermal_exponent(excitation_nm, emission_nm, temperature_K))
-
-
 def _thermal_exponent(excitation_nm, emission_nm, temperature_K: float) -> np.ndarray:
-    """(hc/λ_em − hc/λ_ex)/(k_B T) where λ_em < λ_ex, else 0 (excitations, emissions) [1]."""
+    """(hc/λ_em − hc/λ_ex)/(k_B T) where λ_em < λ_ex, else 0 (excitations, emissions) [1]: minus the log of the
+    Boltzmann weight B of emission below the excitation wavelength; ``temperature_K`` [K] > 0."""
     if not (np.isfinite(temperature_K) and temperature_K > 0):
         raise ValidationError("plate temperature must be positive", field="top.temperature_K",
                               expected="a temperature > 0 K", got=temperature_K)
@@ -369,8 +362,9 @@ def _thermal_exponent(excitation_nm, emission_nm, temperature_K: float) -> np.nd
 
 
 def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: float) -> np.ndarray:
-    """Rows of ``pdf`` (excitation bin k = row k, on the bins ``lam`` [nm]) weighted by :func:`thermal_factor`
-    and renormalised to their own sums (zero rows stay zero): the emission pdf given the excitation bin [1/nm].
+    """Rows of ``pdf`` (excitation bin k = row k, on the bins ``lam`` [nm]) weighted by the Boltzmann factor
+    B = exp(−(hc/λ_em − hc/λ_ex)/(k_B T)) below the excitation wavelength (1 above) and renormalised to their own
+    sums (zero rows stay zero): the emission pdf given the excitation bin [1/nm].
 
     The weights are formed in log space relative to each row's largest, so a row whose whole emission lies far
     below its excitation (or a very cold plate) keeps its sum instead of underflowing to zero.
