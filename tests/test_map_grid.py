@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bsdfkit.raytrace.tallies import grid_study, interior_bins, non_uniformity, rebin_map, split_half_non_uniformity
+from bsdfkit.raytrace.tallies import (
+    converged_non_uniformity,
+    grid_study,
+    interior_bins,
+    non_uniformity,
+    rebin_map,
+    split_half_non_uniformity,
+)
 
 N = 64
 
@@ -72,3 +79,25 @@ def test_sigma_of_one_maps_non_uniformity_from_the_map_alone_matches_the_spread_
     assert non_uniformity_std(coarse[0]) == non_uniformity_std(coarse[0])  # reproducible: its own generator
     # a noise-free smooth field: the neighbour residual is the field's curvature only, far below the noise above
     assert non_uniformity_std(_field(32)) < 0.2 * spread
+
+
+@pytest.mark.parametrize("hits, converges", [(400.0, True), (1600.0, True), (25.0, False)])
+def test_converged_non_uniformity_of_one_traces_sub_maps(hits, converges):
+    """Eight sub-maps of interleaved rays (the tracer's MAP_PARTS): the chosen grid is the coarsest whose value
+    changes by less than its σ on the next finer grid, and the value there is the field's own non-uniformity on that
+    grid within 4 σ (+ 0.01 for the residual selection bias). Too few hits per cell (25 per sub-map cell, 20 %
+    noise) converge on no grid: the finest is reported and flagged, never called converged."""
+    parts = _noisy(np.random.default_rng(int(hits)), hits, 8)
+    conv = converged_non_uniformity(parts)
+    assert sorted(conv["grids"]) == [8, 16, 32, 64]
+    g = conv["bins"]
+    assert conv["converged"] is converges
+    coarser = [k for k in conv["grids"] if k < g]
+    assert all(abs(conv["grids"][2 * k]["value"] - conv["grids"][k]["value"]) >= conv["grids"][k]["std"]
+               for k in coarser)
+    if not converges:
+        assert g == N and np.isnan(conv["finer"])
+        return
+    assert abs(conv["finer"] - conv["value"]) < conv["std"] and conv["finer"] == conv["grids"][2 * g]["value"]
+    truth = non_uniformity(rebin_map(_field(N), g))
+    assert abs(conv["value"] - truth) < 4 * conv["std"] + 0.01, (conv, truth)

@@ -85,6 +85,10 @@ def test_chunk_invariance_with_plate_map_and_budget(tmp_path):
     np.testing.assert_array_equal(a.budget, b.budget)
     assert a.ledger_error <= 1e-9
     assert 0 < a.non_uniformity < 1
+    # the sub-maps follow the ray index, not the chunk: the converged non-uniformity is chunk-invariant too
+    assert a.non_uniformity_converged == b.non_uniformity_converged
+    conv = a.non_uniformity_converged
+    assert 0 < conv["value"] < 1 and conv["std"] > 0 and conv["bins"] in conv["grids"]
 
 
 SCOPES = ("specular_reflection", "phosphor_conversion", "plate", "lobe_sampling", "table_sampling",

@@ -519,9 +519,19 @@ def _is_device_value(scene, study: str, value: float) -> bool:
     return scene.wall.specular_fraction == value == scene.base.specular_fraction
 
 
-def _nu_std(result) -> float | None:
-    """σ [1] of a trace's map non-uniformity from its own map (:func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
-    return None if result.irradiance is None else non_uniformity_std(result.irradiance)
+def _nu(result) -> dict[str, Any]:
+    """A trace's non-uniformity [1] for the summary: ``non_uniformity`` ± ``non_uniformity_std`` is the split-half
+    value on the grid it converged on (``non_uniformity_bins`` cells per side, ``non_uniformity_converged``;
+    :func:`bsdfkit.raytrace.tallies.converged_non_uniformity`), the quantity compared with the papers;
+    ``non_uniformity_map`` ± ``non_uniformity_map_std`` is the max − min of the whole map (noise included; σ from
+    the map, :func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
+    if result.irradiance is None:
+        return {"non_uniformity": None, "non_uniformity_std": None}
+    conv = result.non_uniformity_converged
+    return {"non_uniformity": conv["value"], "non_uniformity_std": conv["std"], "non_uniformity_bins": conv["bins"],
+            "non_uniformity_converged": conv["converged"], "non_uniformity_finer": conv["finer"],
+            "non_uniformity_map": result.non_uniformity,
+            "non_uniformity_map_std": non_uniformity_std(result.irradiance)}
 
 
 def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:
@@ -567,8 +577,7 @@ def stage_trace(state: RunState) -> None:
     done = 1
     state.progress("trace", done, total)
     state.device = device
-    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured),
-                                             "non_uniformity_std": _nu_std(device)}}
+    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured)} | _nu(device)}
     studies: dict[str, list[dict]] = {}
     datasets: dict[str, list[xr.Dataset]] = {}
     blue_on_plate: dict[str, np.ndarray] = {}
@@ -583,8 +592,7 @@ def stage_trace(state: RunState) -> None:
                 done += 1
                 state.progress("trace", done, total)
             row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
-                   "YBR_std": r.std_err["YBR"], "non_uniformity": r.non_uniformity,
-                   "non_uniformity_std": _nu_std(r), "ledger_error": r.ledger_error,
+                   "YBR_std": r.std_err["YBR"], **_nu(r), "ledger_error": r.ledger_error,
                    "clamped_share": r.clamped_interactions / r.plate_interactions if r.plate_interactions else 0.0,
                    "plate_incidence": incidence_shares(r, measured), "same_trace_as_device": same}
             studies.setdefault(study, []).append(row)
@@ -606,9 +614,9 @@ def stage_trace(state: RunState) -> None:
         "extrapolated_power_share_max": worst_extra["plate_incidence"]["extrapolated"],
         "extrapolated_power_share_max_at": worst_extra.get("values", "device"),
         "tis": {c: list(plate.channel(c).tis) for c in CHANNELS}}
-    state.summary["trace"] = {"device": {k: results["device"][k] for k in ("LER", "YBR", "non_uniformity",
-                                                                         "ledger_error", "rays", "elapsed_s",
-                                                                         "interactions_per_s")},
+    state.summary["trace"] = {"device": {k: results["device"][k] for k in (
+                                  "LER", "YBR", "non_uniformity", "non_uniformity_bins", "non_uniformity_converged",
+                                  "non_uniformity_map", "ledger_error", "rays", "elapsed_s", "interactions_per_s")},
                               "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")}
                               | {"non_uniformity": results["device"]["non_uniformity_std"]},
                               "YBR_definition": RAY_YBR_DEFINITION,
@@ -632,10 +640,14 @@ def stage_trace(state: RunState) -> None:
                                      plate.theta_i_deg, results["plate"]["tis"], meas,
                                      title=f"plate {plate.name}: incidences of the traces and the plate's TIS")
     state.outputs["trace_incidence.png"] = lambda p, force: save_figure(inc_fig, p, force)
+    dev = results["device"]
     lines = [f"module trace ({opts.rays} rays, plate from this run): "
              f"LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
              f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f} (yellow / blue extracted ray power), "
-             f"non-uniformity {device.non_uniformity:.3f}, "
+             f"non-uniformity {dev['non_uniformity']:.3f} ± {dev['non_uniformity_std']:.3f} "
+             f"(split-half, {dev['non_uniformity_bins']} cells per side, "
+             f"{'converged' if dev['non_uniformity_converged'] else 'NOT converged'}; whole map "
+             f"{device.non_uniformity:.3f}), "
              f"ledger error {device.ledger_error:.1e}",
              f"  plate incidences: measured {measured[0]:g}-{measured[1]:g} deg, model-extrapolated elsewhere; "
              f"clamped {100 * worst_clamped:.1f} % of plate interactions (largest of all traces); power on "

@@ -402,6 +402,30 @@ def _grid_check(fine: float | None, coarse: float | None, std: float | None) -> 
             f"{'converged' if ok else 'not converged'})")
 
 
+def _device_grid_text(dev: dict) -> str:
+    """How the device's non-uniformity was estimated (split-half on its converged grid; see the maps)."""
+    if not dev.get("non_uniformity_bins"):
+        return " (max − min of the map; see the maps)"
+    state = "converged" if dev.get("non_uniformity_converged") else "NOT converged"
+    whole = _num(dev.get("non_uniformity_map"))
+    return (f" (split-half, {dev['non_uniformity_bins']} cells per side, {state} in the grid"
+            + (f"; the whole map's max − min {100 * whole:.1f} %" if whole is not None else "") + "; see the maps)")
+
+
+def _conv_cell(row: dict) -> str:
+    """Cell of the maps table for a tracer value: the grid it converged on and the next finer grid's value [%]."""
+    bins, value, std, finer = row["non_uniformity_bins"], row["non_uniformity"], row.get("non_uniformity_std"), \
+        _num(row.get("non_uniformity_finer"))
+    whole = _num(row.get("non_uniformity_map"))
+    text = f"split-half on {bins} cells per side"
+    if finer is not None and math.isfinite(finer) and _num(std) is not None:
+        change = 100.0 * (finer - value)
+        text += (f"; {100 * finer:.1f} on {2 * bins} (Δ {change:+.1f} {'<' if abs(change) < 100 * std else '≥'} "
+                 f"σ {100 * std:.1f})")
+    text += ": converged" if row.get("non_uniformity_converged") else ": NOT converged"
+    return text + (f"; whole map {100 * whole:.1f}" if whole is not None else "")
+
+
 def _map_nu_std(da: xr.DataArray) -> float | None:
     """σ [1] of a square map's non-uniformity from the map itself (None for a map that is not the tracer's)."""
     values = np.asarray(da.transpose(*MAP_DIMS).values, dtype=float)
@@ -412,14 +436,14 @@ def _map_nu_std(da: xr.DataArray) -> float | None:
 
 #: What the maps section says about the non-uniformity's grid, σ and the paper's level (issue #27).
 _MAPS_GRID_NOTE = (
-    "<p><b>This non-uniformity is not converged in the map grid</b>: the same map on half the cells per side "
-    "(column 5) gives a different value, and the max − min of a Monte Carlo map grows with the cells' noise (finer "
-    "cells, fewer rays each). Its σ (± in column 4) is estimated from the map itself (cell noise from the residual "
-    "against the neighbours, redrawn; conservative where the map has cell-scale hot spots). The grid study of "
-    "docs/tracer.md (“Non-uniformity and the map grid”: 16-128 cells per side, 40 seeds, noise-free split-half "
-    "estimate) gives the device 11 % on 16 cells and 52 % on 128 cells at 400 000 rays, and a converged 10.4 ± 0.4 % "
-    "(split-half, 32 cells): the paper prints neither its grid nor its ray count, so the level differences listed "
-    "above are differences of this estimator; they stay listed.</p>")
+    "<p><b>Non-uniformity, converged in the map grid.</b> The max − min of one Monte Carlo map grows with the cells' "
+    "noise (finer cells, fewer rays each): the whole map's value (last part of column 5) is not a converged "
+    "quantity. The tracer therefore tallies each map as 8 sub-maps of interleaved rays; the value compared with the "
+    "paper (column 4) is the split-half estimate (extreme cells chosen on one half of the rays, read on the other), "
+    "σ from the spread of the 4 pairs of sub-maps, on the coarsest grid whose value changes by less than its σ on "
+    "the next finer grid (column 5; bsdfkit.raytrace.tallies.converged_non_uniformity). The paper prints neither its "
+    "grid nor its ray count; its values are those of a noisier estimator (docs/tracer.md, “Non-uniformity and the "
+    "map grid”), so the level differences stay listed.</p>")
 
 
 def _maps_note(missing: list[str]) -> str:
@@ -807,7 +831,7 @@ class _Report:
              "extracted yellow ray power / extracted blue ray power of the two-wavelength trace; the paper's "
              f"definition: {_esc(defs['YBR'])}"],
             ["non-uniformity (%)", _pm(dev.get("non_uniformity"), se.get("non_uniformity"), 1, 100.0),
-             _esc(defs["non_uniformity"]) + " (σ from the map itself; not converged in the map grid, see the maps)"],
+             _esc(defs["non_uniformity"]) + _esc(_device_grid_text(dev))],
             ["ledger error (1)", f"{_num(dev.get('ledger_error')) or float('nan'):.1e}",
              "|emitted − extracted − absorbed − terminated| / emitted"],
             ["rays", _esc(dev.get("rays")), f"in {_f(dev.get('elapsed_s'), 1)} s"],
@@ -992,10 +1016,14 @@ class _Report:
                     nu_std = _map_nu_std(da)
                     maps[f"{label} ({fname})" + (f"\npaper: {paper:g} %" if paper is not None else "")] = da
                 row_nu = [r for r in _study_rows(studies, dims[1], dims[0]) if abs(r["values"][dims[0]] - value) < 1e-9]
-                tracer_nu = _num(row_nu[0].get("non_uniformity")) if row_nu else None
-                nu = run_nu if run_nu is not None else tracer_nu
+                row = row_nu[0] if row_nu else {}
+                if _num(row.get("non_uniformity")) is not None and row.get("non_uniformity_bins"):
+                    # the tracer's split-half value on the grid it converged on (the quantity of the paper)
+                    nu, nu_std, grid = _num(row["non_uniformity"]), _num(row.get("non_uniformity_std")), _conv_cell(row)
+                else:  # a map without the tracer's sub-maps: its max − min, σ from the map
+                    nu, grid = run_nu, _grid_check(run_nu, coarse_nu, nu_std)
                 rows.append([fig_no, _esc(label), "yes" if hit else '<span class="absent">not in this run</span>',
-                             _pm(nu, nu_std, 1, 100.0), _grid_check(run_nu, coarse_nu, nu_std),
+                             _pm(nu, nu_std, 1, 100.0), grid,
                              "—" if paper is None else f"{paper:g}", "—" if paper is None or nu is None else
                              self.v.check(f"{fig_no} {label} irradiance non-uniformity", 100 * nu, paper,
                                           None if nu_std is None else 100 * nu_std, unit="%", digits=1)])
@@ -1027,7 +1055,7 @@ class _Report:
         if not found:
             parts.append(_missing("No trace_*.nc file with an irradiance map in the run folder."))
         cov = _table(["paper figure", "panel", "map in this run", "non-uniformity, this run (± 1σ, %)",
-                      "the same map on half the cells per side (%): change vs σ", "non-uniformity, paper (%)",
+                      "grid: value on the next finer grid (%), change vs σ", "non-uniformity, paper (%)",
                       "comparison"], rows,
                      "The irradiance maps of [Cylindrical-module] and this run: (E_max − E_min)/(E_max + E_min)",
                      left=2)
@@ -1269,8 +1297,7 @@ class _Report:
             card("YBR, yellow / blue ray power", _pm(dev.get("YBR"), se.get("YBR"), 2),
                  "yellow / blue extracted ray power of the two-wavelength trace")
             card("irradiance non-uniformity", f"{_pm(dev.get('non_uniformity'), se.get('non_uniformity'), 1, 100.0)} %",
-                 "(E_max − E_min)/(E_max + E_min) on the plate, 32 cells per side (not converged in the grid: see the "
-                 "maps)")
+                 "(E_max − E_min)/(E_max + E_min) on the plate" + _device_grid_text(dev))
         col = (self.s.get("module_spectrum") or {}).get("colour") or {}
         if col:
             card("colour of the module", f"x {_f(col.get('x'), 4)}, y {_f(col.get('y'), 4)}",

@@ -97,6 +97,10 @@ MAX_RAY_TALLY = 2.0 ** 15
 LIMB = 31
 #: rays per kernel call; keeps every per-lane limb sum below 2⁵³
 MAX_CHUNK = 2 ** 22
+#: Irradiance sub-maps: ray r (global index) is tallied on sub-map r mod MAP_PARTS, so the map comes as MAP_PARTS
+#: independent maps of interleaved rays (their sum is the map). Two halves give the split-half non-uniformity and
+#: the pairs its σ (:func:`bsdfkit.raytrace.tallies.converged_non_uniformity`); independent of chunks and devices.
+MAP_PARTS = 8
 #: interactions per iteration of the outer loop (between refill and retirement)
 SUBSTEPS = 2
 #: tail compaction: each level has 1/TAIL_SHRINK of the lanes of the previous one, at most TAIL_LEVELS levels
@@ -463,7 +467,8 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
 
     if effects.irradiance_map:
         with jax.named_scope("irradiance_map"):
-            idx = geometry.map_index(x, y, R, effects.map_bins)
+            part = (ray % jnp.uint32(MAP_PARTS)).astype(jnp.int32) * (effects.map_bins ** 2)
+            idx = geometry.map_index(x, y, R, effects.map_bins) + part
             new_map = new_map.at[jnp.where(top, idx, nmap)].add(_fixed(w), mode="drop")
     if effects.incidence_histogram:
         with jax.named_scope("incidence_histogram"):
@@ -526,7 +531,7 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
     n_valid = jnp.asarray(n_valid, jnp.int32)  # ≤ min(chunk, MAX_CHUNK) (exactness of the limb sums)
     ncol, ncnt, nsq = len(COLUMNS), len(COUNTERS), len(SQUARES)
     active = active_columns(effects)
-    nmap = effects.map_bins ** 2 if effects.irradiance_map else 0
+    nmap = MAP_PARTS * effects.map_bins ** 2 if effects.irradiance_map else 0
     nhist = 2 * effects.histogram_bins if effects.incidence_histogram else 0
     nbud = effects.budget_bins * len(BUDGET_COLUMNS) if effects.interaction_budget else 0
     # every emission of the chunk, computed once (vectorised) before the loop

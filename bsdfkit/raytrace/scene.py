@@ -683,8 +683,9 @@ def surface_reflectance_table(scene: Scene) -> np.ndarray:
     return np.concatenate(rows).astype(np.float64)
 
 
-#: Largest irradiance-map side (bins): the map is an int64 array of side², and bin indices must stay in int32.
-MAX_MAP_BINS = 2048
+#: Largest irradiance-map side (bins): the map is an int64 array of MAP_PARTS (8) × side² per device (64 MiB at
+#: 1024), and bin indices must stay in int32.
+MAX_MAP_BINS = 1024
 #: Largest incidence histogram (bins over 0-90 deg: 0.01 deg) and interaction budget (plate visits per ray).
 MAX_HISTOGRAM_BINS = 9000
 MAX_BUDGET_BINS = 10_000

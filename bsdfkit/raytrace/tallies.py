@@ -140,6 +140,38 @@ def split_half_non_uniformity(first: np.ndarray, second: np.ndarray) -> float:
     return float((hi - lo) / (hi + lo)) if hi + lo > 0 else float("nan")
 
 
+def converged_non_uniformity(parts: np.ndarray, coarsest: int = 8) -> dict[str, Any]:
+    """Non-uniformity [1] by the paper's definition, converged in the map grid, from one trace's sub-maps.
+
+    ``parts`` [W/mm²]: (P, n, n) maps of interleaved rays (P even, the tracer's ``MAP_PARTS``; their sum is the
+    map). On every grid of n, n/2, n/4, … cells per side (down to ``coarsest``; 4 cells per side hold no cell
+    entirely inside the plate's circle) the value is the split-half
+    estimate (:func:`split_half_non_uniformity` of the even and odd parts' sums: the max − min of the noise is not
+    selected) and its σ the spread of the P/2 pair estimates (parts 0-1, 2-3, …) divided by √(P/2) (as
+    :func:`grid_study` does over seeds). Rule: from the coarsest grid up, the chosen grid is the first whose value
+    changes by less than its σ on the next finer grid (a grid finer than the map cannot be checked: then the finest
+    grid is reported with ``converged`` False). Returns ``value``, ``std``, ``bins`` (the chosen grid), ``finer``
+    (the next finer grid's value), ``converged`` and ``grids`` ({cells: {value, std}}).
+    """
+    p = np.asarray(parts, dtype=np.float64)
+    n = p.shape[-1]
+    grids = [g for g in (n >> k for k in range(12)) if g >= coarsest and n % g == 0][::-1]
+    table: dict[int, dict[str, float]] = {}
+    for g in grids:
+        m = rebin_map(p, g)
+        pairs = np.array([split_half_non_uniformity(m[i], m[i + 1]) for i in range(0, m.shape[0] - 1, 2)])
+        table[g] = {"value": split_half_non_uniformity(m[0::2].sum(axis=0), m[1::2].sum(axis=0)),
+                    "std": float(pairs.std(ddof=1) / np.sqrt(pairs.size)) if pairs.size > 1 else float("nan")}
+    chosen, converged = grids[-1], False
+    for g, finer in zip(grids[:-1], grids[1:]):
+        if abs(table[finer]["value"] - table[g]["value"]) < table[g]["std"]:
+            chosen, converged = g, True
+            break
+    nxt = table.get(2 * chosen, {}).get("value", float("nan"))
+    return {"value": table[chosen]["value"], "std": table[chosen]["std"], "bins": int(chosen), "finer": nxt,
+            "converged": converged, "grids": {int(g): v for g, v in table.items()}}
+
+
 def grid_study(maps: np.ndarray, grids: tuple[int, ...]) -> dict[str, dict[str, float]]:
     """Non-uniformity of independent traces' maps on several grids (cells per side), with its σ.
 
@@ -318,6 +350,8 @@ class TraceResult:
     clamped_interactions: int
     irradiance: np.ndarray | None = field(default=None, repr=False)
     non_uniformity: float | None = None
+    #: :func:`converged_non_uniformity` of the trace's sub-maps (None without a map)
+    non_uniformity_converged: dict | None = field(default=None, repr=False)
     incidence_histogram: np.ndarray | None = field(default=None, repr=False)
     budget: np.ndarray | None = field(default=None, repr=False)
     radius_mm: float = 0.0
@@ -410,6 +444,11 @@ class TraceResult:
             data["irradiance"] = (("y_mm", "x_mm"), self.irradiance,
                                   {"units": "W/mm^2", "long_name": "irradiance on the cavity side of the top"})
             data["non_uniformity"] = ((), self.non_uniformity, {"units": "1"})
+            conv = self.non_uniformity_converged
+            if conv is not None:
+                data["non_uniformity_converged"] = ((), conv["value"], {
+                    "units": "1", "std": conv["std"], "bins": conv["bins"], "converged": int(conv["converged"]),
+                    "long_name": "split-half non-uniformity on the grid it converged on (converged_non_uniformity)"})
         if self.incidence_histogram is not None:
             hb = self.incidence_histogram.shape[1]
             coords["theta_i"] = ("theta_i", (np.arange(hb) + 0.5) * 90.0 / hb, {"units": "deg"})

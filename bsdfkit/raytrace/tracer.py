@@ -20,6 +20,7 @@ from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,
     TraceResult,
+    converged_non_uniformity,
     mean_and_se,
     non_uniformity,
     ratio_and_se,
@@ -195,13 +196,15 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
     def fixed_to_w(a):
         return np.array([float(v) for v in a], dtype=float) / fp * scale
 
-    irradiance = nu = hist = budget = None
+    irradiance = nu = nu_converged = hist = budget = None
     R = scene.cavity.radius_mm
     if arrays["map"] is not None:
         bins = eff.map_bins
         area = (2.0 * R / bins) ** 2
-        irradiance = fixed_to_w(arrays["map"]).reshape(bins, bins) / area
+        parts = fixed_to_w(arrays["map"]).reshape(kernel.MAP_PARTS, bins, bins) / area
+        irradiance = parts.sum(axis=0)
         nu = non_uniformity(irradiance)
+        nu_converged = converged_non_uniformity(parts)
     if arrays["histogram"] is not None:
         hist = fixed_to_w(arrays["histogram"]).reshape(2, eff.histogram_bins)
     if arrays["budget"] is not None:
@@ -217,7 +220,8 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         ledger_error=ledger_error, LER=ler, YBR=ybr, std_err=std_err,
         interactions=int(counts[kernel.CNT_EVENTS]), plate_interactions=int(counts[kernel.CNT_PLATE]),
         clamped_interactions=int(counts[kernel.CNT_CLAMP]),
-        irradiance=irradiance, non_uniformity=nu, incidence_histogram=hist, budget=budget, radius_mm=R,
+        irradiance=irradiance, non_uniformity=nu, non_uniformity_converged=nu_converged, incidence_histogram=hist,
+        budget=budget, radius_mm=R,
         elapsed_s=elapsed, compile_s=compile_s, effects=eff,
         spectral=spectral_result(scene, n, col, arrays) if eff.spectral else None,
     )
