@@ -16,7 +16,7 @@ import contextlib
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +63,7 @@ from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
-from bsdfkit.raytrace.tallies import non_uniformity_std
+from bsdfkit.raytrace.tallies import converged_non_uniformity, merge_maps, non_uniformity, non_uniformity_std
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -503,6 +503,9 @@ STUDIES = {
     "led_fwhm_deg": (("leds.fwhm_deg",), "leds.fwhm_deg"),
     "specular_fraction": (("wall.specular_fraction", "base.specular_fraction"), "wall.specular_fraction"),
 }
+#: Cells per side of the traces' irradiance maps: the non-uniformity's grid study runs on 8, 16, 32, 64 and 128 cells
+#: (:func:`bsdfkit.raytrace.tallies.converged_non_uniformity`; docs/tracer.md, "Non-uniformity and the map grid")
+MAP_STUDY_BINS = 128
 #: FWHM of a Lambertian emitter, I ∝ cos θ: half the peak at θ = 60° [deg]
 LAMBERTIAN_FWHM_DEG = 120.0
 
@@ -521,17 +524,52 @@ def _is_device_value(scene, study: str, value: float) -> bool:
 
 def _nu(result) -> dict[str, Any]:
     """A trace's non-uniformity [1] for the summary: ``non_uniformity`` ± ``non_uniformity_std`` is the split-half
-    value on the grid it converged on (``non_uniformity_bins`` cells per side, ``non_uniformity_converged``;
-    :func:`bsdfkit.raytrace.tallies.converged_non_uniformity`), the quantity compared with the papers;
-    ``non_uniformity_map`` ± ``non_uniformity_map_std`` is the max − min of the whole map (noise included; σ from
-    the map, :func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
+    value on the grid it converged on (``non_uniformity_bins`` cells per side, ``non_uniformity_converged``, the
+    change to the next finer grid ``non_uniformity_change`` ± ``non_uniformity_change_std``, every grid in
+    ``non_uniformity_grids``; :func:`bsdfkit.raytrace.tallies.converged_non_uniformity`), the quantity compared
+    with the papers; ``non_uniformity_map`` ± ``non_uniformity_map_std`` is the max − min of the whole map (noise
+    included; σ from the map, :func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
     if result.irradiance is None:
         return {"non_uniformity": None, "non_uniformity_std": None}
     conv = result.non_uniformity_converged
     return {"non_uniformity": conv["value"], "non_uniformity_std": conv["std"], "non_uniformity_bins": conv["bins"],
             "non_uniformity_converged": conv["converged"], "non_uniformity_finer": conv["finer"],
+            "non_uniformity_change": conv["change"], "non_uniformity_change_std": conv["change_std"],
+            "non_uniformity_symmetric": conv["symmetric"], "non_uniformity_rays": result.map_rays or result.rays,
+            "non_uniformity_grids": {str(g): v for g, v in conv["grids"].items()},
             "non_uniformity_map": result.non_uniformity,
             "non_uniformity_map_std": non_uniformity_std(result.irradiance)}
+
+
+#: A map whose non-uniformity has not converged in the grid gets more rays (more traces of the same scene with new
+#: seeds, each of the recipe's ray count) until it converges or it holds this many times the recipe's rays
+MAP_RAYS_FACTOR = 4
+#: seed offset of those extra traces (far from the seeds a recipe or sweep uses)
+MAP_SEED_OFFSET = 1_000_003
+
+
+def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FACTOR):
+    """``result`` with its irradiance map's non-uniformity converged in the grid, when more rays can do it.
+
+    While :func:`bsdfkit.raytrace.tallies.converged_non_uniformity` finds no grid whose value changes by less than
+    the change's σ on the next finer grid, the scene is traced again with ``rays`` new rays (seed ``seed`` +
+    k·:data:`MAP_SEED_OFFSET`) and the sub-maps are merged (:func:`bsdfkit.raytrace.tallies.merge_maps`), up to
+    ``factor`` × ``rays`` rays in the map. Only the map changes (``map_rays`` says how many rays it holds); LER,
+    YBR and the ledger stay those of ``result``. A result without sub-maps, or converged already, is returned as is.
+    """
+    conv = result.non_uniformity_converged
+    if result.irradiance_parts is None or conv is None or conv["converged"]:
+        return result
+    parts, n, k = result.irradiance_parts, rays, 0
+    while not conv["converged"] and n + rays <= factor * rays:
+        k += 1
+        more = trace(scene, rays, seed + k * MAP_SEED_OFFSET)
+        parts = merge_maps(parts, n, more.irradiance_parts, rays)
+        n += rays
+        conv = converged_non_uniformity(parts, symmetric=conv["symmetric"])
+    irradiance = parts.sum(axis=0)
+    return replace(result, irradiance=irradiance, irradiance_parts=parts, non_uniformity=non_uniformity(irradiance),
+                   non_uniformity_converged=conv, map_rays=n)
 
 
 def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:
@@ -569,11 +607,12 @@ def stage_trace(state: RunState) -> None:
     measured = (float(state.tis["theta_i"].values[0]), float(state.tis["theta_i"].values[-1]))
     # the report needs every trace's irradiance map and incidence histogram, whatever the scene file says
     scene = with_values(_scene_with_plate(opts.scene, plate),
-                        {"tallies.irradiance_map": True, "tallies.incidence_histogram": True})
+                        {"tallies.irradiance_map": True, "tallies.map_bins": MAP_STUDY_BINS,
+                         "tallies.incidence_histogram": True})
     points = [(study, v) for study in STUDIES for v in getattr(opts, study) if not _is_device_value(scene, study, v)]
     total = 1 + len(points)
     state.progress("trace", 0, total)
-    device = trace(scene, opts.rays, opts.seed)
+    device = converge_map(scene, trace(scene, opts.rays, opts.seed), opts.rays, opts.seed)
     done = 1
     state.progress("trace", done, total)
     state.device = device
@@ -588,7 +627,8 @@ def stage_trace(state: RunState) -> None:
             if _is_device_value(scene, study, value):
                 r, same = device, True
             else:
-                r, same = trace(with_values(scene, values), opts.rays, opts.seed), False
+                point = with_values(scene, values)
+                r, same = converge_map(point, trace(point, opts.rays, opts.seed), opts.rays, opts.seed), False
                 done += 1
                 state.progress("trace", done, total)
             row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
@@ -616,6 +656,7 @@ def stage_trace(state: RunState) -> None:
         "tis": {c: list(plate.channel(c).tis) for c in CHANNELS}}
     state.summary["trace"] = {"device": {k: results["device"][k] for k in (
                                   "LER", "YBR", "non_uniformity", "non_uniformity_bins", "non_uniformity_converged",
+                                  "non_uniformity_change", "non_uniformity_change_std", "non_uniformity_symmetric",
                                   "non_uniformity_map", "ledger_error", "rays", "elapsed_s", "interactions_per_s")},
                               "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")}
                               | {"non_uniformity": results["device"]["non_uniformity_std"]},
@@ -646,7 +687,9 @@ def stage_trace(state: RunState) -> None:
              f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f} (yellow / blue extracted ray power), "
              f"non-uniformity {dev['non_uniformity']:.3f} ± {dev['non_uniformity_std']:.3f} "
              f"(split-half, {dev['non_uniformity_bins']} cells per side, "
-             f"{'converged' if dev['non_uniformity_converged'] else 'NOT converged'}; whole map "
+             f"{'converged' if dev['non_uniformity_converged'] else 'NOT converged'}: "
+             f"{dev['non_uniformity_change']:+.3f} ± {dev['non_uniformity_change_std']:.3f} on "
+             f"{2 * dev['non_uniformity_bins']}; whole map "
              f"{device.non_uniformity:.3f}), "
              f"ledger error {device.ledger_error:.1e}",
              f"  plate incidences: measured {measured[0]:g}-{measured[1]:g} deg, model-extrapolated elsewhere; "

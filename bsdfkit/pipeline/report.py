@@ -379,14 +379,32 @@ def _study_rows(studies: dict, name: str, key: str) -> list[dict]:
 # --------------------------------------------------------------------------------------------------
 # the report
 # --------------------------------------------------------------------------------------------------
-def _coarser_non_uniformity(da: xr.DataArray) -> float | None:
-    """Non-uniformity [1] of a square map summed on half its cells per side (None for an odd or non-square map)."""
+def _rebinned(da: xr.DataArray, bins: int) -> xr.DataArray | None:
+    """A square map summed on ``bins`` cells per side (None for a map that is not square or not divisible)."""
     values = np.asarray(da.transpose(*MAP_DIMS).values, dtype=float)
     n = values.shape[-1]
-    if values.ndim != 2 or n % 2 or values.shape[0] != n or n < 4:
+    if values.ndim != 2 or values.shape[0] != n or n % bins or bins < 2:
         return None
-    coords = {d: np.asarray(da[d].values, dtype=float).reshape(n // 2, 2).mean(axis=1) for d in MAP_DIMS}
-    return map_non_uniformity(xr.DataArray(rebin_map(values, n // 2), dims=MAP_DIMS, coords=coords))
+    coords = {d: np.asarray(da[d].values, dtype=float).reshape(bins, n // bins).mean(axis=1) for d in MAP_DIMS}
+    return xr.DataArray(rebin_map(values, bins), dims=MAP_DIMS, coords=coords, attrs=da.attrs)
+
+
+def _coarser_non_uniformity(da: xr.DataArray) -> float | None:
+    """Non-uniformity [1] of a square map summed on half its cells per side (None for an odd or non-square map)."""
+    n = da.sizes[MAP_DIMS[-1]]
+    coarse = _rebinned(da, n // 2) if n % 2 == 0 and n >= 4 else None
+    return None if coarse is None else map_non_uniformity(coarse)
+
+
+#: Cells per side of the maps drawn in the report (finer tallies are summed onto this grid for the figures)
+DISPLAY_MAP_BINS = 32
+
+
+def _display_map(da: xr.DataArray) -> xr.DataArray:
+    """The map as drawn: summed onto :data:`DISPLAY_MAP_BINS` cells per side when it is finer and divisible."""
+    n = da.sizes.get(MAP_DIMS[-1], 0)
+    coarse = _rebinned(da, DISPLAY_MAP_BINS) if n > DISPLAY_MAP_BINS else None
+    return da if coarse is None else coarse
 
 
 def _grid_check(fine: float | None, coarse: float | None, std: float | None) -> str:
@@ -408,21 +426,24 @@ def _device_grid_text(dev: dict) -> str:
         return " (max − min of the map; see the maps)"
     state = "converged" if dev.get("non_uniformity_converged") else "NOT converged"
     whole = _num(dev.get("non_uniformity_map"))
-    return (f" (split-half, {dev['non_uniformity_bins']} cells per side, {state} in the grid"
+    sym = ", the map averaged over the square's 8 symmetries" if dev.get("non_uniformity_symmetric") else ""
+    return (f" (split-half{sym}, {dev['non_uniformity_bins']} cells per side, {state} in the grid"
             + (f"; the whole map's max − min {100 * whole:.1f} %" if whole is not None else "") + "; see the maps)")
 
 
 def _conv_cell(row: dict) -> str:
-    """Cell of the maps table for a tracer value: the grid it converged on and the next finer grid's value [%]."""
-    bins, value, std, finer = row["non_uniformity_bins"], row["non_uniformity"], row.get("non_uniformity_std"), \
-        _num(row.get("non_uniformity_finer"))
+    """Cell of the maps table for a tracer value: the grid it converged on, the next finer grid's value [%] and the
+    change with its σ (the convergence rule of :func:`bsdfkit.raytrace.tallies.converged_non_uniformity`)."""
+    bins, finer = row["non_uniformity_bins"], _num(row.get("non_uniformity_finer"))
+    change, change_std = _num(row.get("non_uniformity_change")), _num(row.get("non_uniformity_change_std"))
     whole = _num(row.get("non_uniformity_map"))
     text = f"split-half on {bins} cells per side"
-    if finer is not None and math.isfinite(finer) and _num(std) is not None:
-        change = 100.0 * (finer - value)
-        text += (f"; {100 * finer:.1f} on {2 * bins} (Δ {change:+.1f} {'<' if abs(change) < 100 * std else '≥'} "
-                 f"σ {100 * std:.1f})")
+    if finer is not None and math.isfinite(finer) and change is not None and change_std is not None:
+        text += (f"; {100 * finer:.1f} on {2 * bins} (Δ {100 * change:+.1f} "
+                 f"{'<' if abs(change) < change_std else '≥'} its σ {100 * change_std:.1f})")
     text += ": converged" if row.get("non_uniformity_converged") else ": NOT converged"
+    rays = _num(row.get("non_uniformity_rays"))
+    text += f"; map of {rays:.3g} rays" if rays is not None else ""
     return text + (f"; whole map {100 * whole:.1f}" if whole is not None else "")
 
 
@@ -438,19 +459,25 @@ def _map_nu_std(da: xr.DataArray) -> float | None:
 _MAPS_GRID_NOTE = (
     "<p><b>Non-uniformity, converged in the map grid.</b> The max − min of one Monte Carlo map grows with the cells' "
     "noise (finer cells, fewer rays each): the whole map's value (last part of column 5) is not a converged "
-    "quantity. The tracer therefore tallies each map as 8 sub-maps of interleaved rays; the value compared with the "
-    "paper (column 4) is the split-half estimate (extreme cells chosen on one half of the rays, read on the other), "
-    "σ from the spread of the 4 pairs of sub-maps, on the coarsest grid whose value changes by less than its σ on "
-    "the next finer grid (column 5; bsdfkit.raytrace.tallies.converged_non_uniformity). The paper prints neither its "
-    "grid nor its ray count; its values are those of a noisier estimator (docs/tracer.md, “Non-uniformity and the "
-    "map grid”), so the level differences stay listed.</p>")
+    "quantity. The tracer therefore tallies each map as 16 sub-maps of interleaved rays; where the scene has the "
+    "square's symmetries (LEDs on a grid centred on the axis, isotropic surfaces) every sub-map is averaged over its 8 "
+    "symmetric images first, which keeps the field and cuts the noise's variance up to 8-fold. The value compared "
+    "with the paper (column 4) is the split-half estimate (extreme cells chosen on one half of the rays, read on the "
+    "other), σ from the spread of the 8 pairs of sub-maps, on the coarsest grid of 8, 16, 32, 64 or 128 cells per side "
+    "whose value changes by less than the change's own σ on the next finer grid (column 5; the change's σ from the "
+    "pairs' own changes, the two grids sharing their rays; bsdfkit.raytrace.tallies.converged_non_uniformity). A "
+    "map that has not converged gets more rays (new traces of its scene, merged into its sub-maps, up to 4 × the "
+    "recipe's rays; LER and YBR stay those of the first trace), and a panel that still converges on no grid says so. "
+    "The paper prints neither its grid nor its ray count; the device's grid "
+    "study at 16 million rays and the level difference are in docs/tracer.md, “Non-uniformity and the map grid”, "
+    "and the differences stay listed.</p>")
 
 
 def _maps_note(missing: list[str]) -> str:
     """The maps section's text: the panels without a map, the grid and what the grid does to the value."""
     return ("<p>Maps of the paper not in this run: " + _esc("; ".join(missing) or "none") + ". The paper prints no "
             "non-uniformity for the 40 % diffuse, 80 mm and 70° panels; for FWHM 120° (Lambertian LEDs, the device) "
-            "it is the device's 36 % of Fig. 12. The maps are tallied on a 32 × 32 grid of the plate's square, bins "
+            "it is the device's 36 % of Fig. 12. The maps are tallied on a 128 × 128 grid of the plate's square, bins "
             "entirely inside the plate only.</p>" + _MAPS_GRID_NOTE)
 
 
@@ -1014,7 +1041,8 @@ class _Report:
                     sources += [fname] if fname not in sources else []
                     run_nu, coarse_nu = map_non_uniformity(da), _coarser_non_uniformity(da)
                     nu_std = _map_nu_std(da)
-                    maps[f"{label} ({fname})" + (f"\npaper: {paper:g} %" if paper is not None else "")] = da
+                    maps[f"{label} ({fname})" + (f"\npaper: {paper:g} %" if paper is not None else "")] = \
+                        _display_map(da)
                 row_nu = [r for r in _study_rows(studies, dims[1], dims[0]) if abs(r["values"][dims[0]] - value) < 1e-9]
                 row = row_nu[0] if row_nu else {}
                 if _num(row.get("non_uniformity")) is not None and row.get("non_uniformity_bins"):

@@ -100,7 +100,7 @@ MAX_CHUNK = 2 ** 22
 #: Irradiance sub-maps: ray r (global index) is tallied on sub-map r mod MAP_PARTS, so the map comes as MAP_PARTS
 #: independent maps of interleaved rays (their sum is the map). Two halves give the split-half non-uniformity and
 #: the pairs its σ (:func:`bsdfkit.raytrace.tallies.converged_non_uniformity`); independent of chunks and devices.
-MAP_PARTS = 8
+MAP_PARTS = 16
 #: interactions per iteration of the outer loop (between refill and retirement)
 SUBSTEPS = 2
 #: tail compaction: each level has 1/TAIL_SHRINK of the lanes of the previous one, at most TAIL_LEVELS levels

@@ -683,9 +683,9 @@ def surface_reflectance_table(scene: Scene) -> np.ndarray:
     return np.concatenate(rows).astype(np.float64)
 
 
-#: Largest irradiance-map side (bins): the map is an int64 array of MAP_PARTS (8) × side² per device (64 MiB at
-#: 1024), and bin indices must stay in int32.
-MAX_MAP_BINS = 1024
+#: Largest irradiance-map side (bins): the map is an int64 array of MAP_PARTS (16) × side² per device (32 MiB at
+#: 512), and bin indices must stay in int32.
+MAX_MAP_BINS = 512
 #: Largest incidence histogram (bins over 0-90 deg: 0.01 deg) and interaction budget (plate visits per ray).
 MAX_HISTOGRAM_BINS = 9000
 MAX_BUDGET_BINS = 10_000
@@ -803,6 +803,17 @@ def dumps_scene(scene: Scene) -> str:
 def save_scene(scene: Scene, path: str | Path, force: bool = False) -> Path:
     """Write the scene as TOML, atomically; an existing file is kept unless ``force``."""
     return write_text(path, dumps_scene(scene), force)
+
+
+def map_symmetry(scene: Scene) -> int:
+    """How many symmetries of the square map the scene's irradiance on the plate has: 8 or 1.
+
+    The cavity is a cylinder, its surfaces and the plate scatter isotropically and the analytic LEDs sit on a
+    k × k grid centred on the axis with rotation-symmetric emission: rotations by 90° and the mirrors of the square
+    map the scene onto itself, so they map the irradiance field onto itself (8). LEDs from a ray file carry their
+    own far field and positions: no symmetry is assumed (1).
+    """
+    return 1 if scene.leds.ray_file is not None else 8
 
 
 def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:

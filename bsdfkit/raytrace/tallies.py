@@ -140,36 +140,100 @@ def split_half_non_uniformity(first: np.ndarray, second: np.ndarray) -> float:
     return float((hi - lo) / (hi + lo)) if hi + lo > 0 else float("nan")
 
 
-def converged_non_uniformity(parts: np.ndarray, coarsest: int = 8) -> dict[str, Any]:
+def symmetrise_square(maps: np.ndarray) -> np.ndarray:
+    """The mean of a square map's eight images under the square's symmetries (rotations by 90°, mirrors) [W/mm²].
+
+    For a scene that the symmetry group of the square maps onto itself (LEDs on a k × k grid centred on the
+    cavity's axis, isotropic surfaces; :func:`bsdfkit.raytrace.scene.map_symmetry`), the eight images of a
+    Monte Carlo map are equally likely maps of the same field, so their mean estimates the field with up to 8×
+    fewer variance (cells on a mirror line have 4 distinct images, the central cells 1 or 4). Works on the last
+    two axes, which must be square and centred on the axis.
+    """
+    m = np.asarray(maps, dtype=np.float64)
+    images = [np.rot90(m, k, axes=(-2, -1)) for k in range(4)]
+    return np.mean(images + [im[..., ::-1] for im in images], axis=0)
+
+
+def _split_half_on_grid(parts: np.ndarray, bins: int, symmetric: bool) -> tuple[float, np.ndarray]:
+    """Split-half non-uniformity [1] on ``bins`` cells per side (even vs odd parts) and the per-pair estimates."""
+    m = rebin_map(parts, bins)
+    if symmetric:
+        m = symmetrise_square(m)
+    pairs = np.array([split_half_non_uniformity(m[i], m[i + 1]) for i in range(0, m.shape[0] - 1, 2)])
+    return split_half_non_uniformity(m[0::2].sum(axis=0), m[1::2].sum(axis=0)), pairs
+
+
+def converged_non_uniformity(parts: np.ndarray, symmetric: bool = False, coarsest: int = 8) -> dict[str, Any]:
     """Non-uniformity [1] by the paper's definition, converged in the map grid, from one trace's sub-maps.
 
-    ``parts`` [W/mm²]: (P, n, n) maps of interleaved rays (P even, the tracer's ``MAP_PARTS``; their sum is the
-    map). On every grid of n, n/2, n/4, … cells per side (down to ``coarsest``; 4 cells per side hold no cell
-    entirely inside the plate's circle) the value is the split-half
-    estimate (:func:`split_half_non_uniformity` of the even and odd parts' sums: the max − min of the noise is not
-    selected) and its σ the spread of the P/2 pair estimates (parts 0-1, 2-3, …) divided by √(P/2) (as
-    :func:`grid_study` does over seeds). Rule: from the coarsest grid up, the chosen grid is the first whose value
-    changes by less than its σ on the next finer grid (a grid finer than the map cannot be checked: then the finest
-    grid is reported with ``converged`` False). Returns ``value``, ``std``, ``bins`` (the chosen grid), ``finer``
-    (the next finer grid's value), ``converged`` and ``grids`` ({cells: {value, std}}).
+    Parameters
+    ----------
+    parts : ndarray, shape (P, n, n)
+        Irradiance maps [W/mm²] of interleaved rays (P even, the tracer's ``MAP_PARTS``; their sum is the map).
+    symmetric : bool
+        The scene is invariant under the square's symmetries (:func:`bsdfkit.raytrace.scene.map_symmetry`):
+        every part is replaced by its :func:`symmetrise_square` mean first.
+    coarsest : int
+        Coarsest grid [cells per side] of the study (4 cells per side hold no cell inside the plate's circle).
+
+    Returns
+    -------
+    dict
+        ``value`` and ``std`` [1] on the chosen grid, ``bins`` (that grid), ``finer`` [1] (the next finer grid's
+        value), ``change`` and ``change_std`` [1] (finer − chosen and its σ), ``converged`` and ``grids``
+        ({cells: {value, std, change, change_std}}).
+
+    Notes
+    -----
+    On every grid of n, n/2, n/4, … cells per side (down to ``coarsest``) the value is the split-half estimate
+    (:func:`split_half_non_uniformity` of the even and odd parts' sums: the max − min of the noise is not
+    selected), its σ the spread of the P/2 pair estimates (parts 0-1, 2-3, …) divided by √(P/2), and the change
+    to the next finer grid has its σ from the spread of the pairs' own changes (the two grids share their rays, so
+    the change is far less noisy than either value). A finer grid measures smaller cells with fewer rays each: its
+    value is about twice as noisy, so a change judged against the coarser value's σ alone would fail at random even
+    between two grids that agree. Rule: from the coarsest grid up, the chosen grid is the first whose value changes
+    by less than the change's σ on the next finer grid; when none does, the finest grid that can still be checked
+    is reported with ``converged`` False.
     """
     p = np.asarray(parts, dtype=np.float64)
     n = p.shape[-1]
-    grids = [g for g in (n >> k for k in range(12)) if g >= coarsest and n % g == 0][::-1]
+    grids = [g for g in (n >> k for k in range(12)) if g >= coarsest and g >= 1 and n % g == 0][::-1]
+    est = {g: _split_half_on_grid(p, g, symmetric) for g in grids}
     table: dict[int, dict[str, float]] = {}
     for g in grids:
-        m = rebin_map(p, g)
-        pairs = np.array([split_half_non_uniformity(m[i], m[i + 1]) for i in range(0, m.shape[0] - 1, 2)])
-        table[g] = {"value": split_half_non_uniformity(m[0::2].sum(axis=0), m[1::2].sum(axis=0)),
-                    "std": float(pairs.std(ddof=1) / np.sqrt(pairs.size)) if pairs.size > 1 else float("nan")}
-    chosen, converged = grids[-1], False
-    for g, finer in zip(grids[:-1], grids[1:]):
-        if abs(table[finer]["value"] - table[g]["value"]) < table[g]["std"]:
-            chosen, converged = g, True
-            break
-    nxt = table.get(2 * chosen, {}).get("value", float("nan"))
-    return {"value": table[chosen]["value"], "std": table[chosen]["std"], "bins": int(chosen), "finer": nxt,
-            "converged": converged, "grids": {int(g): v for g, v in table.items()}}
+        value, pairs = est[g]
+        row = {"value": value, "std": _std_of_mean(pairs)}
+        if 2 * g in est:
+            row["change"] = est[2 * g][0] - value
+            row["change_std"] = _std_of_mean(est[2 * g][1] - pairs)
+        table[g] = row
+    checked = [g for g in grids if "change" in table[g]]
+    chosen = next((g for g in checked if abs(table[g]["change"]) < table[g]["change_std"]), None)
+    converged = chosen is not None
+    if chosen is None:
+        chosen = checked[-1] if checked else grids[-1]
+    row = table[chosen]
+    return {"value": row["value"], "std": row["std"], "bins": int(chosen),
+            "finer": est[2 * chosen][0] if 2 * chosen in est else float("nan"),
+            "change": row.get("change", float("nan")), "change_std": row.get("change_std", float("nan")),
+            "converged": converged, "symmetric": bool(symmetric), "grids": {int(g): v for g, v in table.items()}}
+
+
+def _std_of_mean(samples: np.ndarray) -> float:
+    """σ of the mean of independent estimates (NaN for fewer than two)."""
+    return float(np.std(samples, ddof=1) / np.sqrt(samples.size)) if samples.size > 1 else float("nan")
+
+
+def merge_maps(parts: np.ndarray, rays: int, more_parts: np.ndarray, more_rays: int) -> np.ndarray:
+    """Sub-maps [W/mm²] of two independent traces of one scene, as the sub-maps of all their rays.
+
+    Each trace's maps are power per ray times its own ray count, so the merged part k is the ray-weighted mean
+    (rays·A_k + more_rays·B_k)/(rays + more_rays): its sum is the map of all rays, and the parts stay independent.
+    """
+    a, b = np.asarray(parts, dtype=np.float64), np.asarray(more_parts, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"sub-maps of different shapes cannot be merged: {a.shape} and {b.shape}")
+    return (rays * a + more_rays * b) / (rays + more_rays)
 
 
 def grid_study(maps: np.ndarray, grids: tuple[int, ...]) -> dict[str, dict[str, float]]:
@@ -352,6 +416,10 @@ class TraceResult:
     non_uniformity: float | None = None
     #: :func:`converged_non_uniformity` of the trace's sub-maps (None without a map)
     non_uniformity_converged: dict | None = field(default=None, repr=False)
+    #: the map as MAP_PARTS sub-maps of interleaved rays [W/mm²] (their sum is ``irradiance``)
+    irradiance_parts: np.ndarray | None = field(default=None, repr=False)
+    #: rays behind the map (more than ``rays`` when :func:`merge_maps` added other traces' rays)
+    map_rays: int | None = None
     incidence_histogram: np.ndarray | None = field(default=None, repr=False)
     budget: np.ndarray | None = field(default=None, repr=False)
     radius_mm: float = 0.0
@@ -448,6 +516,8 @@ class TraceResult:
             if conv is not None:
                 data["non_uniformity_converged"] = ((), conv["value"], {
                     "units": "1", "std": conv["std"], "bins": conv["bins"], "converged": int(conv["converged"]),
+                    "change": conv["change"], "change_std": conv["change_std"], "symmetric": int(conv["symmetric"]),
+                    "map_rays": int(self.map_rays or self.rays),
                     "long_name": "split-half non-uniformity on the grid it converged on (converged_non_uniformity)"})
         if self.incidence_histogram is not None:
             hb = self.incidence_histogram.shape[1]

@@ -15,7 +15,14 @@ from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
 from bsdfkit.raytrace.programs import cached_program
-from bsdfkit.raytrace.scene import Scene, check_termination, check_work, scene_spectral_tables, spectral_grid
+from bsdfkit.raytrace.scene import (
+    Scene,
+    check_termination,
+    check_work,
+    map_symmetry,
+    scene_spectral_tables,
+    spectral_grid,
+)
 from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,
@@ -196,7 +203,7 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
     def fixed_to_w(a):
         return np.array([float(v) for v in a], dtype=float) / fp * scale
 
-    irradiance = nu = nu_converged = hist = budget = None
+    irradiance = parts = nu = nu_converged = hist = budget = None
     R = scene.cavity.radius_mm
     if arrays["map"] is not None:
         bins = eff.map_bins
@@ -204,7 +211,7 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         parts = fixed_to_w(arrays["map"]).reshape(kernel.MAP_PARTS, bins, bins) / area
         irradiance = parts.sum(axis=0)
         nu = non_uniformity(irradiance)
-        nu_converged = converged_non_uniformity(parts)
+        nu_converged = converged_non_uniformity(parts, symmetric=map_symmetry(scene) == 8)
     if arrays["histogram"] is not None:
         hist = fixed_to_w(arrays["histogram"]).reshape(2, eff.histogram_bins)
     if arrays["budget"] is not None:
@@ -220,7 +227,8 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         ledger_error=ledger_error, LER=ler, YBR=ybr, std_err=std_err,
         interactions=int(counts[kernel.CNT_EVENTS]), plate_interactions=int(counts[kernel.CNT_PLATE]),
         clamped_interactions=int(counts[kernel.CNT_CLAMP]),
-        irradiance=irradiance, non_uniformity=nu, non_uniformity_converged=nu_converged, incidence_histogram=hist,
+        irradiance=irradiance, non_uniformity=nu, non_uniformity_converged=nu_converged, irradiance_parts=parts,
+        incidence_histogram=hist,
         budget=budget, radius_mm=R,
         elapsed_s=elapsed, compile_s=compile_s, effects=eff,
         spectral=spectral_result(scene, n, col, arrays) if eff.spectral else None,
