@@ -477,8 +477,9 @@ def _maps_note(missing: list[str]) -> str:
     """The maps section's text: the panels without a map, the grid and what the grid does to the value."""
     return ("<p>Maps of the paper not in this run: " + _esc("; ".join(missing) or "none") + ". The paper prints no "
             "non-uniformity for the 40 % diffuse, 80 mm and 70° panels; for FWHM 120° (Lambertian LEDs, the device) "
-            "it is the device's 36 % of Fig. 12. The maps are tallied on a 128 × 128 grid of the plate's square, bins "
-            "entirely inside the plate only.</p>" + _MAPS_GRID_NOTE)
+            "it is the device's 36 % of Fig. 12. The maps are tallied on a 128 × 128 grid of the plate's square and "
+            f"drawn summed onto {DISPLAY_MAP_BINS} × {DISPLAY_MAP_BINS} (each panel's title: that drawn map's max − "
+            "min); the non-uniformity counts bins entirely inside the plate only.</p>" + _MAPS_GRID_NOTE)
 
 
 def _relative_difference(row: dict) -> str:
