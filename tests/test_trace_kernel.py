@@ -27,6 +27,7 @@ from bsdfkit.raytrace import (
 from bsdfkit.raytrace.effects import kernel_params
 from bsdfkit.raytrace.oracles.radiosity import module_radiosity
 from bsdfkit.raytrace.rayfile import RaySet, format_rays
+from bsdfkit.raytrace.tallies import non_uniformity
 
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
           "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
@@ -89,6 +90,12 @@ def test_chunk_invariance_with_plate_map_and_budget(tmp_path):
     assert a.non_uniformity_converged == b.non_uniformity_converged
     conv = a.non_uniformity_converged
     assert 0 < conv["value"] < 1 and conv["std"] > 0 and conv["bins"] in conv["grids"]
+    # one quantity under one name: the result, its JSON and its dataset report the converged value; the whole
+    # map's noisy max − min is non_uniformity_map everywhere
+    ds = a.to_dataset()
+    assert a.non_uniformity == conv["value"] == a.to_dict()["non_uniformity"] == float(ds["non_uniformity"])
+    assert a.non_uniformity_map == non_uniformity(a.irradiance) == float(ds["non_uniformity_map"])
+    assert ds["non_uniformity"].attrs["bins"] == conv["bins"] and a.to_dict()["non_uniformity_std"] == conv["std"]
 
 
 SCOPES = ("specular_reflection", "phosphor_conversion", "plate", "lobe_sampling", "table_sampling",

@@ -83,8 +83,11 @@ def run(args: argparse.Namespace) -> int:
             f"photons      emitted {led['photons_per_s']['emitted']:.6g} /s, extracted "
             f"{led['photons_per_s']['extracted']:.6g} /s; photon ledger error {led['photons_per_s']['error']:.2e}",
         ]
-    if result.non_uniformity is not None:
-        lines.append(f"non-uniform. {result.non_uniformity:.4f}")
+    conv = result.non_uniformity_converged
+    if result.non_uniformity is not None and conv is not None:
+        lines.append(f"non-uniform. {result.non_uniformity:.4f} ± {conv['std']:.4f} (split-half on {conv['bins']} "
+                     f"cells per side, {'converged' if conv['converged'] else 'NOT converged'} in the map grid; "
+                     f"whole map {result.non_uniformity_map:.4f})")
     if result.clamped_interactions:
         lines.append(f"clamped      {result.clamped_interactions} plate incidences outside the measured grid")
     lines.append(f"speed        {result.rays_per_s:.3g} rays/s, {result.interactions_per_s:.3g} interactions/s "

@@ -537,7 +537,7 @@ def _nu(result) -> dict[str, Any]:
             "non_uniformity_change": conv["change"], "non_uniformity_change_std": conv["change_std"],
             "non_uniformity_symmetric": conv["symmetric"], "non_uniformity_rays": result.map_rays or result.rays,
             "non_uniformity_grids": {str(g): v for g, v in conv["grids"].items()},
-            "non_uniformity_map": result.non_uniformity,
+            "non_uniformity_map": result.non_uniformity_map,
             "non_uniformity_map_std": non_uniformity_std(result.irradiance)}
 
 
@@ -568,8 +568,8 @@ def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FAC
         n += rays
         conv = converged_non_uniformity(parts, symmetric=conv["symmetric"])
     irradiance = parts.sum(axis=0)
-    return replace(result, irradiance=irradiance, irradiance_parts=parts, non_uniformity=non_uniformity(irradiance),
-                   non_uniformity_converged=conv, map_rays=n)
+    return replace(result, irradiance=irradiance, irradiance_parts=parts, non_uniformity=conv["value"],
+                   non_uniformity_map=non_uniformity(irradiance), non_uniformity_converged=conv, map_rays=n)
 
 
 def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:
@@ -690,7 +690,7 @@ def stage_trace(state: RunState) -> None:
              f"{'converged' if dev['non_uniformity_converged'] else 'NOT converged'}: "
              f"{dev['non_uniformity_change']:+.3f} ± {dev['non_uniformity_change_std']:.3f} on "
              f"{2 * dev['non_uniformity_bins']}; whole map "
-             f"{device.non_uniformity:.3f}), "
+             f"{device.non_uniformity_map:.3f}), "
              f"ledger error {device.ledger_error:.1e}",
              f"  plate incidences: measured {measured[0]:g}-{measured[1]:g} deg, model-extrapolated elsewhere; "
              f"clamped {100 * worst_clamped:.1f} % of plate interactions (largest of all traces); power on "

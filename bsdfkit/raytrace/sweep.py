@@ -278,8 +278,11 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
         "std_err_LER": (dims, grid(lambda r: r.std_err["LER"]), {"units": "1"}),
         "std_err_YBR": (dims, grid(lambda r: r.std_err["YBR"]), {"units": "1"}),
         "ledger_error": (dims, grid(lambda r: r.ledger_error), {"units": "1"}),
-        "non_uniformity": (dims, grid(lambda r: r.non_uniformity), {"units": "1",
-                                                                    "long_name": "irradiance non-uniformity"}),
+        "non_uniformity": (dims, grid(lambda r: r.non_uniformity), {
+            "units": "1", "long_name": "irradiance non-uniformity, split-half on the grid it converged on "
+            "(converged_non_uniformity)"}),
+        "non_uniformity_map": (dims, grid(lambda r: r.non_uniformity_map), {
+            "units": "1", "long_name": "(E_max - E_min)/(E_max + E_min) of the whole map (noise included)"}),
     }
     for k in ("blue", "yellow", "total"):
         data[f"extracted_{k}"] = (dims, grid(lambda r, k=k: r.extracted[k]), {"units": "W"})

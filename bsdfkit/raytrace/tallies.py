@@ -413,9 +413,13 @@ class TraceResult:
     plate_interactions: int
     clamped_interactions: int
     irradiance: np.ndarray | None = field(default=None, repr=False)
+    #: irradiance non-uniformity [1] by the paper's definition, converged in the map grid (``value`` of
+    #: ``non_uniformity_converged``); the whole map's noisy max − min is ``non_uniformity_map``
     non_uniformity: float | None = None
     #: :func:`converged_non_uniformity` of the trace's sub-maps (None without a map)
     non_uniformity_converged: dict | None = field(default=None, repr=False)
+    #: (E_max − E_min)/(E_max + E_min) of the whole map [1] (:func:`non_uniformity`: raised by the cells' noise)
+    non_uniformity_map: float | None = None
     #: the map as MAP_PARTS sub-maps of interleaved rays [W/mm²] (their sum is ``irradiance``)
     irradiance_parts: np.ndarray | None = field(default=None, repr=False)
     #: rays behind the map (more than ``rays`` when :func:`merge_maps` added other traces' rays)
@@ -459,6 +463,10 @@ class TraceResult:
             "ledger_error": self.ledger_error,
             "std_err": dict(self.std_err),
             "non_uniformity": self.non_uniformity,
+            "non_uniformity_std": (self.non_uniformity_converged or {}).get("std"),
+            "non_uniformity_bins": (self.non_uniformity_converged or {}).get("bins"),
+            "non_uniformity_converged": (self.non_uniformity_converged or {}).get("converged"),
+            "non_uniformity_map": self.non_uniformity_map,
             "rays": self.rays,
             "elapsed_s": self.elapsed_s,
             "rays_per_s": self.rays_per_s,
@@ -511,14 +519,15 @@ class TraceResult:
             coords["x_mm"] = ("x_mm", centres, {"units": "mm"})
             data["irradiance"] = (("y_mm", "x_mm"), self.irradiance,
                                   {"units": "W/mm^2", "long_name": "irradiance on the cavity side of the top"})
-            data["non_uniformity"] = ((), self.non_uniformity, {"units": "1"})
-            conv = self.non_uniformity_converged
-            if conv is not None:
-                data["non_uniformity_converged"] = ((), conv["value"], {
-                    "units": "1", "std": conv["std"], "bins": conv["bins"], "converged": int(conv["converged"]),
-                    "change": conv["change"], "change_std": conv["change_std"], "symmetric": int(conv["symmetric"]),
-                    "map_rays": int(self.map_rays or self.rays),
-                    "long_name": "split-half non-uniformity on the grid it converged on (converged_non_uniformity)"})
+            conv = self.non_uniformity_converged or {}
+            data["non_uniformity"] = ((), self.non_uniformity, {
+                "units": "1", "long_name": "irradiance non-uniformity, split-half on the grid it converged on "
+                "(converged_non_uniformity)", "std": conv.get("std", np.nan), "bins": conv.get("bins", 0),
+                "converged": int(conv.get("converged", False)), "change": conv.get("change", np.nan),
+                "change_std": conv.get("change_std", np.nan), "symmetric": int(conv.get("symmetric", False)),
+                "map_rays": int(self.map_rays or self.rays)})
+            data["non_uniformity_map"] = ((), self.non_uniformity_map, {
+                "units": "1", "long_name": "(E_max - E_min)/(E_max + E_min) of the whole map (noise included)"})
         if self.incidence_histogram is not None:
             hb = self.incidence_histogram.shape[1]
             coords["theta_i"] = ("theta_i", (np.arange(hb) + 0.5) * 90.0 / hb, {"units": "deg"})
