@@ -123,7 +123,8 @@ def test_light_verbs_on_real_files_do_not_import_dask_or_jax(tmp_path):
         assert "xarray" in loaded and not loaded & {"dask", *HEAVY}, args
     # the same reduction in a process that has dask imported gives the same numbers
     code = ("import sys, dask.array, bsdfkit; from bsdfkit.reduction.any_sample import hemispherical_json;"
-            "from bsdfkit.io.jsonout import dumps; print(dumps(hemispherical_json(bsdfkit.tis(bsdfkit.ingest(sys.argv[1])))))")
+            "from bsdfkit.io.jsonout import dumps;"
+            "print(dumps(hemispherical_json(bsdfkit.tis(bsdfkit.ingest(sys.argv[1])))))")
     ref = subprocess.run([sys.executable, "-c", code, str(nc)], capture_output=True, text=True, env=env, cwd=tmp_path,
                          timeout=300)
     assert ref.returncode == 0, ref.stderr[-2000:]
