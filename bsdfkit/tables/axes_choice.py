@@ -65,7 +65,8 @@ def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[s
 
 def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], settings: Any,
                        zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
-    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven, for a table
+    of cell averages: :func:`harvey_shack_table`)."""
     if settings.harvey_shack_axes is not None:
         axes, mode = settings.harvey_shack_axes, "given"
     elif settings.grid == "fixed":
@@ -73,9 +74,23 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
     else:
         fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
         auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
-                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg))
+                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg), cell_average=True)
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     return axes, grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
+
+
+def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
+                       info: dict[str, Any], settings: Any) -> xr.DataArray:
+    """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes (``settings.node_values``; the
+    choice is recorded in ``info['values']``): by default cell averages on auto axes (the table's TIS is the
+    source's on any axes, :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`) and point samples on fixed or given
+    axes (as before: the fine grid resolves the source)."""
+    rule = getattr(settings, "node_values", "auto")
+    if rule == "cell" or (rule == "auto" and info.get("mode") == "auto"):
+        info["values"] = "cell averages"
+        return grids.harvey_shack_cell_grid(fn, theta, sides, axes)
+    info["values"] = "point samples"
+    return grids.harvey_shack_grid(fn, theta, sides, axes)
 
 
 def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],

@@ -124,6 +124,9 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``auto`` (cell averages on auto axes,
+    #: :func:`grids.harvey_shack_cell_grid`; point samples on fixed or given axes), ``cell`` or ``point``
+    node_values: str = "auto"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
@@ -132,6 +135,9 @@ class ExportSettings:
         if self.xml_back not in ("none", "mirror"):
             raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
                                   got=self.xml_back)
+        if self.node_values not in ("auto", "cell", "point"):
+            raise ValidationError("unknown node values", field="node_values", expected="auto, cell or point",
+                                  got=self.node_values)
         if self.xml_basis not in ("klems", "tree", "auto"):
             raise ValidationError("unknown BSDF XML basis", field="xml_basis", expected="klems, tree or auto",
                                   got=self.xml_basis)
@@ -542,8 +548,10 @@ def export(
             if isinstance(axes, grids.HarveyShackAxes):
                 a = np.asarray(axes.azimuth_deg)
                 both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                # the doubled azimuths hold what the first table held (cell averages on auto axes)
                 write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
-                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg)), True)
+                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg),
+                    node_values="cell" if info.get("values") == "cell averages" else "point"), True)
             else:
                 a = np.asarray(axes.azimuth_deg)
                 if settings.zemax_symmetry == "PlaneSymmetrical":
