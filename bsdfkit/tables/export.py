@@ -124,8 +124,9 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
-    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``auto`` (cell averages on auto axes,
-    #: :func:`grids.harvey_shack_cell_grid`; point samples on fixed or given axes), ``cell`` or ``point``
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``auto`` (point samples, or cell averages
+    #: :func:`grids.harvey_shack_cell_grid` on auto axes when point samples would need more nodes than the fixed
+    #: grid; :func:`bsdfkit.tables.axes_choice.harvey_shack_axes`), ``cell`` or ``point``
     node_values: str = "auto"
 
     def __post_init__(self) -> None:

@@ -372,12 +372,12 @@ def harvey_shack_cell_grid(
     Node (ρ_j, ψ_k) holds v = ∫∫ f φ_jk dβ / W_jk: φ_jk = hat_k(ψ) · hat_j(ρ) are the functions by which the table
     interpolates between its nodes (piecewise linear in ρ along a row, held from the row's last node inside the
     disk to its edge; linear in ψ between rows) and W_jk = ∫∫ φ_jk dβ is the node's weight in the table's TIS
-    (:func:`harvey_shack_row_weights`). The φ_jk sum to 1 over the table's domain (each row out to its own edge, as
-    the table's rule integrates it), so Σ W·v = ∫∫ f φ dβ summed is the BSDF's TIS, to the accuracy of the
-    ``order`` × ``order`` Gauss–Legendre points per cell (cells clipped to the row's edge) and of the rule's own
-    edge (a constant BSDF gives that constant at every node, and its TIS exactly on an even uniform azimuth
-    grid). Point samples (:func:`harvey_shack_grid`) reach that only when the grid resolves every
-    kink of the BSDF, which for a measured reconstruction took 7 MB (docs/exports.md, "Grid resolution"). Where the
+    (:func:`harvey_shack_row_weights`). The φ_jk sum to 1 over the disk, so Σ W·v = ∫∫_{|β|≤1} f dβ: the table's
+    TIS is the BSDF's, to the accuracy of the ``order`` × ``order`` Gauss–Legendre points per cell (cells clipped
+    to the disk's edge). A constant BSDF gives that constant at every node but the last of a row, which takes up
+    the difference between the disk's edge and the rule's (trapezoid between rows). Point samples
+    (:func:`harvey_shack_grid`) reach that only when the grid resolves every kink of the BSDF, which for a measured
+    reconstruction took 7 MB (docs/exports.md, "Grid resolution"). Where the
     BSDF is linear across a node's cells the average is the point value; a peak is smoothed over its cells,
     which the auto grid's peak criterion keeps within ``peak_rtol``. Nodes outside the disk hold 0.
     """
@@ -399,41 +399,39 @@ def harvey_shack_cell_grid(
     out = np.zeros((len(sides), thetas.size, rho.size, az.size))
     n_seg = rho.size - 1
     for t, theta in enumerate(thetas):
-        b0 = frames.beta0(np.radians(theta))
-        rmax_row = np.minimum(rho_max(theta, az + zero), rho[-1])  # each row's edge, as the table's rule has it
-        last = np.searchsorted(rho, rmax_row, side="right") - 1  # each row's last node inside the disk
+        # ρ sub-points of each sub-azimuth up to the disk's edge there: q per axis segment, clipped (p, seg, q)
+        edge_p = np.minimum(rho_max(theta, psi_p + zero), rho[-1])
+        lo = np.minimum(rho[None, :-1], edge_p[:, None])
+        hi = np.minimum(rho[None, 1:], edge_p[:, None])
+        length = hi - lo
+        r = lo[..., None] + length[..., None] * x[None, None, :]
+        keep = np.broadcast_to(length[..., None] > 0.0, r.shape)
+        p_idx = np.broadcast_to(np.arange(psi_p.size)[:, None, None], r.shape)[keep]
+        r_pts = r[keep]
+        w_pts = (length[..., None] * gw[None, None, :] * r)[keep] * w_a[p_idx]  # ρ dρ dψ
+        psi_s = np.radians(psi_p[p_idx] + zero)
+        beta = frames.beta0(np.radians(theta)) + r_pts[:, None] * np.stack([np.cos(psi_s), np.sin(psi_s)], axis=-1)
+        norm = np.hypot(beta[:, 0], beta[:, 1])  # rounding at the edge
+        beta = np.where((norm > 1.0)[:, None], beta / np.maximum(norm, 1.0)[:, None], beta)
+        directions = frames.direction_from_beta(beta)
+        # each row interpolates in ρ up to its last node inside the disk and holds it from there
+        rmax_row = np.minimum(rho_max(theta, az + zero), rho[-1])
+        last = np.searchsorted(rho, rmax_row, side="right") - 1
         weights = harvey_shack_row_weights(rho, az, float(theta), zero)  # (psi, rho)
-        num = np.zeros((len(sides), az.size * rho.size))
-        for row, share in ((row_lo, 1.0 - t_a), (row_hi, t_a)):
-            # ρ sub-points of each sub-azimuth up to the edge of the row they are given to (the table's domain, so a
-            # constant BSDF gives that constant at every node): q per axis segment, clipped (p, seg, q)
-            edge = rmax_row[row]
-            lo = np.minimum(rho[None, :-1], edge[:, None])
-            hi = np.minimum(rho[None, 1:], edge[:, None])
-            length = hi - lo
-            r = lo[..., None] + length[..., None] * x[None, None, :]
-            keep = np.broadcast_to(length[..., None] > 0.0, r.shape)
-            p_idx = np.broadcast_to(np.arange(psi_p.size)[:, None, None], r.shape)[keep]
-            r_pts = r[keep]
-            w_pts = (length[..., None] * gw[None, None, :] * r)[keep] * w_a[p_idx] * share[p_idx]  # ρ dρ dψ · hat
-            psi_s = np.radians(psi_p[p_idx] + zero)
-            beta = b0 + r_pts[:, None] * np.stack([np.cos(psi_s), np.sin(psi_s)], axis=-1)
-            norm = np.hypot(beta[:, 0], beta[:, 1])  # beyond the true edge by the row's: on the horizon
-            beta = np.where((norm > 1.0)[:, None], beta / np.maximum(norm, 1.0)[:, None], beta)
-            directions = frames.direction_from_beta(beta)
-            # the row's interpolation in ρ, held from its last node inside the disk to its edge
-            k = row[p_idx]
-            rc = np.minimum(r_pts, rho[last[k]])
+        hats = []
+        for row, share in ((row_lo[p_idx], 1.0 - t_a[p_idx]), (row_hi[p_idx], t_a[p_idx])):
+            rc = np.minimum(r_pts, rho[last[row]])
             j = np.clip(np.searchsorted(rho, rc, side="right") - 1, 0, max(n_seg - 1, 0))
             span = rho[j + 1] - rho[j] if n_seg > 0 else np.ones_like(rc)
             u = np.clip((rc - rho[j]) / span, 0.0, 1.0)
-            for s, side in enumerate(sides):
-                fw = evaluate_bsdf(bsdf_fn, theta, side, directions) * w_pts
-                num[s] += np.bincount(k * rho.size + j, weights=fw * (1.0 - u), minlength=num.shape[1])
-                num[s] += np.bincount(k * rho.size + j + 1, weights=fw * u, minlength=num.shape[1])
-        for s in range(len(sides)):
-            vals = num[s].reshape(az.size, rho.size)
-            vals = np.where(weights > 0.0, vals / np.where(weights > 0.0, weights, 1.0), 0.0)
+            hats += [(row * rho.size + j, share * (1.0 - u)), (row * rho.size + j + 1, share * u)]
+        for s, side in enumerate(sides):
+            fw = evaluate_bsdf(bsdf_fn, theta, side, directions) * w_pts
+            num = np.zeros(az.size * rho.size)
+            for node, h in hats:
+                num += np.bincount(node, weights=fw * h, minlength=num.size)
+            num = num.reshape(az.size, rho.size)
+            vals = np.where(weights > 0.0, num / np.where(weights > 0.0, weights, 1.0), 0.0)
             out[s, t] = np.maximum(vals, 0.0).T
     return xr.DataArray(
         out,
