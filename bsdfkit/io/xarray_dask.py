@@ -44,9 +44,10 @@ class DeferredDask:
     @property
     def module(self) -> Any:
         try:
-            return importlib.import_module("dask")
+            import dask
         except ImportError:
             return None
+        return dask
 
     @property
     def version(self) -> Any:

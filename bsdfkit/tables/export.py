@@ -520,6 +520,7 @@ def export(
 
     write(settings, force)
     reference: dict[str, list[float]] | None = None
+    summary = None  # the written file as read_any read it, while it is the file on disk (its re-read, 3-4 s)
     if grid_info.get("mode") == "auto":
         # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
         # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
@@ -527,7 +528,8 @@ def export(
         reference = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
         limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
         for attempt in range(RECHECK_ROUNDS + 1):
-            computed = read_any(path).tis_computed
+            summary = read_any(path)
+            computed = summary.tis_computed
             worst = max(abs(computed[s][k] / reference[s][k] - 1.0) if reference[s][k] > 0 else 0.0
                         for s in sides for k in range(theta.size))
             if worst <= limit:
@@ -544,8 +546,10 @@ def export(
                 # the fixed grid, as without --grid auto (never more nodes than it)
                 write(replace(settings, grid="fixed"), True)
                 grid_info["mode"] = FALLBACK_RECHECK
+                summary = None
                 break
             info = dict(grid_info)
+            summary = None
             if isinstance(axes, grids.HarveyShackAxes):
                 a = np.asarray(axes.azimuth_deg)
                 both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
@@ -563,7 +567,7 @@ def export(
                       True)
             grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
-    reread = read_any(path)
+    reread = summary if summary is not None else read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     held = grid_info.get("klems_incidence_map_deg")
     if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):
