@@ -87,6 +87,10 @@ def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
     return float(value)
 
 
+#: what a Harvey–Shack table holds at its nodes (:attr:`ExportSettings.node_values`)
+NODE_VALUES = ("point", "cell")
+
+
 @dataclass(frozen=True)
 class ExportSettings:
     """Choices of an export beyond source, format, side and path. ``None`` means the documented default.
@@ -124,10 +128,9 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
-    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``auto`` (point samples, or cell averages
-    #: :func:`grids.harvey_shack_cell_grid` on auto axes when point samples would need more nodes than the fixed
-    #: grid; :func:`bsdfkit.tables.axes_choice.harvey_shack_axes`), ``cell`` or ``point``
-    node_values: str = "auto"
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``point`` samples (default) or ``cell``
+    #: averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the lobe's peak only)
+    node_values: str = "point"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
@@ -136,8 +139,8 @@ class ExportSettings:
         if self.xml_back not in ("none", "mirror"):
             raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
                                   got=self.xml_back)
-        if self.node_values not in ("auto", "cell", "point"):
-            raise ValidationError("unknown node values", field="node_values", expected="auto, cell or point",
+        if self.node_values not in NODE_VALUES:
+            raise ValidationError("unknown node values", field="node_values", expected=" or ".join(NODE_VALUES),
                                   got=self.node_values)
         if self.xml_basis not in ("klems", "tree", "auto"):
             raise ValidationError("unknown BSDF XML basis", field="xml_basis", expected="klems, tree or auto",
