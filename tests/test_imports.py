@@ -71,3 +71,63 @@ def test_a_mistyped_input_path_is_answered_before_any_numerical_library(args):
     assert "bsdfkit" in loaded
     # numpy may load (the format registry, read by the verbs' help texts, imports it); the engines may not
     assert not loaded & {"xarray", "scipy", "pandas", *HEAVY}
+
+
+@pytest.mark.parametrize("args", [("--help",), ("tis", "--bogus"), ("convert", "x.bsdf", "--to", "nope", "-o", "y")],
+                         ids=lambda a: " ".join(a))
+def test_help_and_usage_errors_import_not_even_numpy(args):
+    """The verbs' help names the table formats and models from lists written out in bsdfkit.tables.registry and
+    bsdfkit.cli.fit (checked below), not by importing them: numpy and the format modules stay unloaded. Run as
+    the command runs (``python -m bsdfkit``), the imports listed by ``-X importtime``."""
+    loaded = _imported("-m", "bsdfkit", *args)[1]
+    assert "bsdfkit" in loaded
+    assert not loaded & {"numpy", "xarray", "scipy", *HEAVY}
+
+
+def _imported(*args: str, cwd: Path = ROOT) -> tuple[subprocess.CompletedProcess, set[str]]:
+    """A fresh interpreter run with ``-X importtime`` and the top-level packages it imported."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    done = subprocess.run([sys.executable, "-X", "importtime", *args], capture_output=True, text=True, env=env,
+                          cwd=cwd, timeout=300)
+    loaded = {line.split("|")[-1].strip().split(".")[0] for line in done.stderr.splitlines()
+              if line.startswith("import time:")}
+    return done, loaded
+
+
+def test_the_written_out_names_are_the_registries():
+    from bsdfkit.cli import fit
+    from bsdfkit.models.registry import BSDF_MODELS, SPECTRUM_MODELS
+    from bsdfkit.tables import registry
+
+    assert registry.names() == tuple(f.name for f in registry.FORMATS)
+    assert registry.writable() == tuple(f.name for f in registry.FORMATS if f.can_write)
+    assert fit.BSDF_MODELS == tuple(BSDF_MODELS) and fit.SPECTRUM_MODELS == tuple(SPECTRUM_MODELS)
+
+
+KLEMS = ROOT / "tests" / "data" / "radiance-bsdf2klems" / "lambertian_r030_t060_klems_full.xml"
+
+
+def test_light_verbs_on_real_files_do_not_import_dask_or_jax(tmp_path):
+    """xarray wraps arrays and decodes netCDF variables without importing dask (bsdfkit.io.xarray_dask): a
+    vendor file read and a netCDF dataset reduced by the command load neither dask nor JAX, and the numbers
+    are those of the same call with dask imported (the library's own answer)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    nc = tmp_path / "k.nc"
+    # (writing a netCDF file asks dask for its scheduler: ingest is not among the verbs checked)
+    made = subprocess.run([sys.executable, "-m", "bsdfkit", "ingest", str(KLEMS), "-o", str(nc)], env=env,
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr[-2000:]
+    for args in (("read", str(KLEMS), "--json"), ("tis", str(nc), "--json")):
+        done, loaded = _imported("-m", "bsdfkit", *args, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert "xarray" in loaded and not loaded & {"dask", *HEAVY}, args
+    # the same reduction in a process that has dask imported gives the same numbers
+    code = ("import sys, dask.array, bsdfkit; from bsdfkit.reduction.any_sample import hemispherical_json;"
+            "from bsdfkit.io.jsonout import dumps;"
+            "print(dumps(hemispherical_json(bsdfkit.tis(bsdfkit.ingest(sys.argv[1])))))")
+    ref = subprocess.run([sys.executable, "-c", code, str(nc)], capture_output=True, text=True, env=env, cwd=tmp_path,
+                         timeout=300)
+    assert ref.returncode == 0, ref.stderr[-2000:]
+    got = json.loads(done.stdout)
+    want = json.loads(ref.stdout)
+    assert [r["value"] for r in got["band_averaged"]] == [r["value"] for r in want["band_averaged"]]

@@ -81,6 +81,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
                    help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
                         "(default 0.01); also the limit of the peak re-check of the written file")
+    p.add_argument("--node-values", default="point", choices=("point", "cell"),
+                   help="TracePro, ASAP-style tables: point samples of the source (default) or cell averages "
+                        "(the table's TIS by its format's rule is the source's on any axes; --grid auto then "
+                        "refines by the lobe's peak only: smaller files; docs/exports.md, Grid resolution)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
@@ -94,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
     check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance,
                               xml_back=args.xml_back, xml_basis=args.xml_basis,
-                              grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)))
+                              grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)),
+                              node_values=args.node_values)
     result = convert(
         args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,
         band=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,

@@ -49,6 +49,8 @@ def describe_grid(result) -> str:
         text += f": {g['radial']} radial x {g['azimuth']} azimuth nodes"
     if g.get("mode") == "auto":
         text += f" (TIS tolerance {g['tis_rtol']:g}, peak tolerance {g['peak_rtol']:g})"
+    if "values" in g:
+        text += f"; {g['values']}"
     return text
 
 
@@ -95,6 +97,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
                    help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
                         "(default 0.01); also the limit of the peak re-check of the written file")
+    p.add_argument("--node-values", default="point", choices=("point", "cell"),
+                   help="TracePro, ASAP-style tables: point samples of the source (default) or cell averages "
+                        "(the table's TIS by its format's rule is the source's on any axes; --grid auto then "
+                        "refines by the lobe's peak only: smaller files; docs/exports.md, Grid resolution)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
@@ -117,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         tracepro_scatter=args.tracepro_scatter,
         grid=args.grid,
         grid_tolerance=grid_tolerance(args),
+        node_values=args.node_values,
     )
     result = api.export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings,
                         wavelength_nm=args.wavelength_nm)

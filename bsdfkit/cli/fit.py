@@ -27,16 +27,15 @@ from bsdfkit.core.conventions import ELASTIC_INTERACTION, SIDES, SPECTRUM_CRITER
 from bsdfkit.core.conventions import INTERACTIONS as PHOSPHOR_INTERACTIONS
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.io import atomic
-from bsdfkit.io.jsonout import to_jsonable
-from bsdfkit.models.registry import BSDF_MODELS as REGISTERED_BSDF_MODELS
-from bsdfkit.models.registry import SPECTRUM_MODELS as REGISTERED_SPECTRUM_MODELS
 
 if TYPE_CHECKING:
     import xarray as xr
 
-BSDF_MODELS = tuple(REGISTERED_BSDF_MODELS)
-# the registry's names (light): the fits themselves (JAX, colour-science) are imported by the verb that runs
-SPECTRUM_MODELS = tuple(REGISTERED_SPECTRUM_MODELS)
+# the model registry's names, written out: its module imports numpy (0.15 s of `bsdfkit --help`); a test checks
+# them against bsdfkit.models.registry. The fits (JAX, colour-science) are imported by the verb that runs.
+BSDF_MODELS = ("lambert", "lambert+gaussian", "abg", "lambert+abg")
+SPECTRUM_MODELS = ("gaussian", "split-gaussian", "ohno2005", "split-pseudo-voigt", "split-pearson7",
+                   "pseudo-voigt-shoulder", "pearson7-shoulder", "two-band", "two-band-led", "two-band-wide")
 INTERACTIONS = (*PHOSPHOR_INTERACTIONS, ELASTIC_INTERACTION)
 #: ``fit bsdf --wavelength NM`` takes the nearest measured wavelength within this distance [nm].
 WAVELENGTH_TOLERANCE_NM = 0.5
@@ -147,6 +146,8 @@ def _run_spectrum(args: argparse.Namespace) -> int:
             for w in rec["warnings"]:
                 print(f"bsdfkit fit: warning: {label}: {w}", file=sys.stderr)
         if args.json:  # JSON lines: one record per spectrum, one line each
+            from bsdfkit.io.jsonout import to_jsonable
+
             print(json.dumps(to_jsonable(rec)), flush=True)
         elif "error" not in rec:
             _print_spectrum(label, rec)

@@ -65,17 +65,33 @@ def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[s
 
 def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], settings: Any,
                        zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
-    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven; for a table
+    of cell averages, ``settings.node_values == "cell"``, refined by the lobe's peak only:
+    :func:`harvey_shack_table`)."""
     if settings.harvey_shack_axes is not None:
         axes, mode = settings.harvey_shack_axes, "given"
     elif settings.grid == "fixed":
         axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
     else:
         fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
+        cell = getattr(settings, "node_values", "point") == "cell"
+        # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them
         auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
-                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg))
+                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg), cell_average=cell)
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     return axes, grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
+
+
+def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
+                       info: dict[str, Any], settings: Any) -> xr.DataArray:
+    """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``:
+    point samples (default) or, with ``settings.node_values == "cell"``, cell averages (the table's TIS by its
+    format's rule is the source's on any axes, :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
+    if getattr(settings, "node_values", "point") == "cell":
+        info["values"] = "cell averages"
+        return grids.harvey_shack_cell_grid(fn, theta, sides, axes)
+    info["values"] = "point samples"
+    return grids.harvey_shack_grid(fn, theta, sides, axes)
 
 
 def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],

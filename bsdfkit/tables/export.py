@@ -87,6 +87,10 @@ def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
     return float(value)
 
 
+#: what a Harvey–Shack table holds at its nodes (:attr:`ExportSettings.node_values`)
+NODE_VALUES = ("point", "cell")
+
+
 @dataclass(frozen=True)
 class ExportSettings:
     """Choices of an export beyond source, format, side and path. ``None`` means the documented default.
@@ -124,6 +128,9 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``point`` samples (default) or ``cell``
+    #: averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the lobe's peak only)
+    node_values: str = "point"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
@@ -132,6 +139,9 @@ class ExportSettings:
         if self.xml_back not in ("none", "mirror"):
             raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
                                   got=self.xml_back)
+        if self.node_values not in NODE_VALUES:
+            raise ValidationError("unknown node values", field="node_values", expected=" or ".join(NODE_VALUES),
+                                  got=self.node_values)
         if self.xml_basis not in ("klems", "tree", "auto"):
             raise ValidationError("unknown BSDF XML basis", field="xml_basis", expected="klems, tree or auto",
                                   got=self.xml_basis)
@@ -513,6 +523,7 @@ def export(
 
     write(settings, force)
     reference: dict[str, list[float]] | None = None
+    summary = None  # the written file as read_any read it, while it is the file on disk (its re-read, 3-4 s)
     if grid_info.get("mode") == "auto":
         # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
         # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
@@ -520,7 +531,8 @@ def export(
         reference = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
         limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
         for attempt in range(RECHECK_ROUNDS + 1):
-            computed = read_any(path).tis_computed
+            summary = read_any(path)
+            computed = summary.tis_computed
             worst = max(abs(computed[s][k] / reference[s][k] - 1.0) if reference[s][k] > 0 else 0.0
                         for s in sides for k in range(theta.size))
             if worst <= limit:
@@ -537,13 +549,17 @@ def export(
                 # the fixed grid, as without --grid auto (never more nodes than it)
                 write(replace(settings, grid="fixed"), True)
                 grid_info["mode"] = FALLBACK_RECHECK
+                summary = None
                 break
             info = dict(grid_info)
+            summary = None
             if isinstance(axes, grids.HarveyShackAxes):
                 a = np.asarray(axes.azimuth_deg)
                 both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                # the doubled azimuths hold what the first table held (cell averages on auto axes)
                 write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
-                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg)), True)
+                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg),
+                    node_values="cell" if info.get("values") == "cell averages" else "point"), True)
             else:
                 a = np.asarray(axes.azimuth_deg)
                 if settings.zemax_symmetry == "PlaneSymmetrical":
@@ -554,7 +570,7 @@ def export(
                       True)
             grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
-    reread = read_any(path)
+    reread = summary if summary is not None else read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     held = grid_info.get("klems_incidence_map_deg")
     if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):

@@ -65,7 +65,9 @@ __all__ = [
     "evaluate_bsdf",
     "auto_harvey_shack_axes",
     "auto_specular_axes",
+    "harvey_shack_cell_grid",
     "harvey_shack_grid",
+    "harvey_shack_row_weights",
     "horizon_radial",
     "lobe_core",
     "rho_max",
@@ -337,6 +339,110 @@ def harvey_shack_grid(
     )
 
 
+#: Gauss–Legendre points per cell and direction of :func:`harvey_shack_cell_grid` (exact for polynomials of degree
+#: 7 in ρ and ψ on each clipped cell)
+CELL_ORDER = 4
+
+
+def harvey_shack_row_weights(rho: NDArray[np.float64], azimuth_deg: NDArray[np.float64], theta_i_deg: float,
+                             zero_azimuth_deg: float) -> NDArray[np.float64]:
+    """W[k, j] [sr, projected]: the weight of node (ρ_j, ψ_k) in :func:`tis_harvey_shack_table`, which is linear
+    in the values: TIS = Σ W·f. Row k: ∫ hat_j(ρ) ρ dρ over the segments wholly inside the disk, and for the
+    last inside node also ½(ρmax² − ρ_J²) (held to the edge); times the periodic trapezoid weight of ψ_k."""
+    w_row = _azimuth_row_weights(azimuth_deg, plane_symmetric=False)
+    rmax = np.minimum(rho_max(theta_i_deg, azimuth_deg + zero_azimuth_deg), rho[-1])  # (psi,)
+    r0, r1 = rho[:-1], rho[1:]
+    full = r1[None, :] <= rmax[:, None]
+    part = (r0[None, :] < rmax[:, None]) & ~full
+    m = np.zeros((azimuth_deg.size, rho.size))
+    m[:, :-1] += np.where(full, (r1 - r0) / 6.0 * (2.0 * r0 + r1), 0.0)
+    m[:, 1:] += np.where(full, (r1 - r0) / 6.0 * (r0 + 2.0 * r1), 0.0)
+    m[:, :-1] += np.where(part, 0.5 * (rmax[:, None] ** 2 - r0[None, :] ** 2), 0.0)
+    return m * w_row[:, None]
+
+
+def harvey_shack_cell_grid(
+    bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str, axes: HarveyShackAxes,
+    order: int = CELL_ORDER,
+) -> xr.DataArray:
+    """The BSDF's weighted averages about the Harvey–Shack table nodes, dims ``(side, theta_i, rho, psi)``: a table
+    that integrates, by its format's own rule (:func:`tis_harvey_shack_table`), to the integral of the BSDF itself
+    on any axes, however coarse.
+
+    Node (ρ_j, ψ_k) holds v = ∫∫ f φ_jk dβ / W_jk: φ_jk = hat_k(ψ) · hat_j(ρ) are the functions by which the table
+    interpolates between its nodes (piecewise linear in ρ along a row, held from the row's last node inside the
+    disk to its edge; linear in ψ between rows) and W_jk = ∫∫ φ_jk dβ is the node's weight in the table's TIS
+    (:func:`harvey_shack_row_weights`). The φ_jk sum to 1 over the disk, so Σ W·v = ∫∫_{|β|≤1} f dβ: the table's
+    TIS is the BSDF's, to the accuracy of the ``order`` × ``order`` Gauss–Legendre points per cell (cells clipped
+    to the disk's edge). A constant BSDF gives that constant at every node but the last of a row, which takes up
+    the difference between the disk's edge and the rule's (trapezoid between rows). Point samples
+    (:func:`harvey_shack_grid`) reach that only when the grid resolves every kink of the BSDF, which for a measured
+    reconstruction took 7 MB (docs/exports.md, "Grid resolution"). Where the
+    BSDF is linear across a node's cells the average is the point value; a peak is smoothed over its cells,
+    which the auto grid's peak criterion keeps within ``peak_rtol``. Nodes outside the disk hold 0.
+    """
+    thetas = _check_incidences(theta_i_deg)
+    sides = _check_sides(sides)
+    rho = np.asarray(axes.rho, dtype=np.float64)
+    az = np.asarray(axes.azimuth_deg, dtype=np.float64)
+    zero = float(axes.zero_azimuth_deg)
+    x, gw = gauss_legendre(int(order))
+    x, gw = 0.5 * (x + 1.0), 0.5 * gw
+    # azimuth sub-points: q per interval [ψ_k, ψ_k+1) of the periodic grid, with their two rows and hat weights
+    nxt = np.append(az[1:], az[0] + 360.0)
+    width = np.radians(nxt - az)  # (psi,)
+    psi_p = (az[:, None] + (nxt - az)[:, None] * x[None, :]).ravel()  # table frame [deg]
+    row_lo = np.repeat(np.arange(az.size), x.size)
+    row_hi = (row_lo + 1) % az.size
+    t_a = np.tile(x, az.size)
+    w_a = (width[:, None] * gw[None, :]).ravel()  # [rad]
+    out = np.zeros((len(sides), thetas.size, rho.size, az.size))
+    n_seg = rho.size - 1
+    for t, theta in enumerate(thetas):
+        # ρ sub-points of each sub-azimuth up to the disk's edge there: q per axis segment, clipped (p, seg, q)
+        edge_p = np.minimum(rho_max(theta, psi_p + zero), rho[-1])
+        lo = np.minimum(rho[None, :-1], edge_p[:, None])
+        hi = np.minimum(rho[None, 1:], edge_p[:, None])
+        length = hi - lo
+        r = lo[..., None] + length[..., None] * x[None, None, :]
+        keep = np.broadcast_to(length[..., None] > 0.0, r.shape)
+        p_idx = np.broadcast_to(np.arange(psi_p.size)[:, None, None], r.shape)[keep]
+        r_pts = r[keep]
+        w_pts = (length[..., None] * gw[None, None, :] * r)[keep] * w_a[p_idx]  # ρ dρ dψ
+        psi_s = np.radians(psi_p[p_idx] + zero)
+        beta = frames.beta0(np.radians(theta)) + r_pts[:, None] * np.stack([np.cos(psi_s), np.sin(psi_s)], axis=-1)
+        norm = np.hypot(beta[:, 0], beta[:, 1])  # rounding at the edge
+        beta = np.where((norm > 1.0)[:, None], beta / np.maximum(norm, 1.0)[:, None], beta)
+        directions = frames.direction_from_beta(beta)
+        # each row interpolates in ρ up to its last node inside the disk and holds it from there
+        rmax_row = np.minimum(rho_max(theta, az + zero), rho[-1])
+        last = np.searchsorted(rho, rmax_row, side="right") - 1
+        weights = harvey_shack_row_weights(rho, az, float(theta), zero)  # (psi, rho)
+        hats = []
+        for row, share in ((row_lo[p_idx], 1.0 - t_a[p_idx]), (row_hi[p_idx], t_a[p_idx])):
+            rc = np.minimum(r_pts, rho[last[row]])
+            j = np.clip(np.searchsorted(rho, rc, side="right") - 1, 0, max(n_seg - 1, 0))
+            span = rho[j + 1] - rho[j] if n_seg > 0 else np.ones_like(rc)
+            u = np.clip((rc - rho[j]) / span, 0.0, 1.0)
+            hats += [(row * rho.size + j, share * (1.0 - u)), (row * rho.size + j + 1, share * u)]
+        for s, side in enumerate(sides):
+            fw = evaluate_bsdf(bsdf_fn, theta, side, directions) * w_pts
+            num = np.zeros(az.size * rho.size)
+            for node, h in hats:
+                num += np.bincount(node, weights=fw * h, minlength=num.size)
+            num = num.reshape(az.size, rho.size)
+            vals = np.where(weights > 0.0, num / np.where(weights > 0.0, weights, 1.0), 0.0)
+            out[s, t] = np.maximum(vals, 0.0).T
+    return xr.DataArray(
+        out,
+        dims=("side", "theta_i", "rho", "psi"),
+        coords={"side": list(sides), "theta_i": thetas, "rho": rho, "psi": az},
+        name="bsdf",
+        attrs={"units": "1/sr", "quantity": "bsdf", "frame": "harvey_shack", "zero_azimuth_deg": zero,
+               "values": "cell averages"},
+    )
+
+
 def specular_grid(
     bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str, axes: SpecularAxes
 ) -> xr.DataArray:
@@ -604,6 +710,7 @@ def _refine_polar(
     min_step: float,
     azimuth_cap: int,
     max_nodes: int | None = None,
+    tis_criteria: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Coarse-to-fine choice of a polar table's radial and azimuth nodes (shared by both geometries).
 
@@ -617,8 +724,10 @@ def _refine_polar(
     error (Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2, the quadrature of the miss), and doubles the
     azimuths when (ii) or (iii) fails in azimuth. Deterministic; no node finer than ``min_step``.
     Returns None as soon as the grid would hold more than ``max_nodes`` radial × azimuth nodes.
+    ``tis_criteria=False`` drops (i) and (ii): a table of cell averages (:func:`harvey_shack_cell_grid`) integrates
+    to the callable's TIS on any axes, so its grid is as fine as the lobe's shape (iii) needs.
     """
-    half = 0.5 * tolerance.tis_rtol
+    half = 0.5 * tolerance.tis_rtol if tis_criteria else np.inf
     for _ in range(int(tolerance.max_rounds)):
         mid_r = 0.5 * (radial[:-1] + radial[1:])
         both_r = np.sort(np.concatenate([radial, mid_r]))
@@ -723,8 +832,13 @@ def auto_harvey_shack_axes(
     tolerance: GridTolerance | None = None,
     zero_azimuth_deg: float = 0.0,
     max_nodes: int | None = None,
+    cell_average: bool = False,
 ) -> HarveyShackAxes | None:
     """Harvey–Shack axes as fine as ``bsdf_fn`` needs to meet ``tolerance`` (see :class:`GridTolerance`).
+
+    ``cell_average``: the axes of a table of cell averages (:func:`harvey_shack_cell_grid`), whose TIS needs no
+    refinement: only the peak criterion of :class:`GridTolerance` refines them (the export's re-check of the
+    written file still holds its TIS to ``tis_rtol``).
 
     Starts from ρ = 0, 1e-3·2^k (until the step reaches 0.25), then steps ≤ 0.25 to 2, and
     :data:`MIN_AZIMUTHS` uniform azimuths (15°), and refines
@@ -749,7 +863,7 @@ def auto_harvey_shack_axes(
 
     chosen = _refine_polar(evaluate, quad, lambda r: r, _coarse_radial(1e-3, 2.0, 0.25),
                            np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), midpoints, tolerance, 1e-7,
-                           int(tolerance.max_azimuths), max_nodes)
+                           int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average)
     if chosen is None:
         return None
     return HarveyShackAxes(_tidy(chosen[0]), _tidy(chosen[1]), zero_azimuth_deg)

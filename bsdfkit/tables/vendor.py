@@ -26,7 +26,7 @@ from bsdfkit.measurement.table import (
     side_of_quantity,
 )
 from bsdfkit.reduction import basis
-from bsdfkit.reduction.hemispherical import hemispherical
+from bsdfkit.reduction.hemispherical import hemispherical, unique_rows
 from bsdfkit.tables import grids, registry
 from bsdfkit.tables.registry import VendorGrid, VendorTable, sniff_format
 
@@ -136,7 +136,7 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
             th_deg = np.degrees(th)
             ph_deg = np.where(th_deg < 1e-9, 0.0, np.mod(np.round(np.degrees(ph), 9), 360.0))
             key = np.round(np.stack([th_deg, ph_deg], axis=-1), 7)
-            _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            first, inverse, _ = unique_rows(key)
             cols["psa"] += _merged_solid_angle(grid, k, first, np.asarray(inverse).ravel())
             order = np.argsort(first)
             first = first[order]

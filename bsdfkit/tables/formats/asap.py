@@ -348,7 +348,7 @@ def _as_floats(values: Any) -> list[float]:
 def _write_job(job: WriteJob) -> WriteOutcome:
     """The sides as rows, plus the fitted ABg parameters at the written incidences."""
     axes, info = axes_choice.harvey_shack_axes(job.fn, job.theta, job.sides, job.settings, 0.0)
-    grid = grids.harvey_shack_grid(job.fn, job.theta, job.sides, axes)
+    grid = axes_choice.harvey_shack_table(job.fn, job.theta, job.sides, axes, info, job.settings)
     chosen = [p for p in job.abg if np.any(np.abs(np.asarray(job.theta) - p.theta_i_deg) <= 1e-9)]
     table = asap_table(grid, abg=chosen, comments=job.comments)
     write_asap(job.path, table, force=job.force, generated_at=job.generated_at)

@@ -697,7 +697,7 @@ def _write_job(job: WriteJob) -> WriteOutcome:
                             scatter_excess_allowed=job.tis_excess_allowed)
     else:
         axes, info = axes_choice.harvey_shack_axes(job.fn, job.theta, job.sides, settings, opts.zero_azimuth_deg)
-        grid = grids.harvey_shack_grid(job.fn, job.theta, job.sides, axes)
+        grid = axes_choice.harvey_shack_table(job.fn, job.theta, job.sides, axes, info, settings)
         prop = table_property(grid, options=opts, specular_reflectance=settings.specular_reflectance,
                               specular_transmittance=settings.specular_transmittance,
                               scatter_excess_allowed=job.tis_excess_allowed)
