@@ -17,6 +17,7 @@ from jax.extend.random import threefry_2x32
 from test_trace_kernel import TABLE2, scene
 
 from bsdfkit.cli.main import compile_cache, compile_cache_dir, compile_cache_wanted
+from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import PhosphorPlate, kernel, sampling, scene_effects, trace
 from bsdfkit.raytrace.effects import kernel_params
@@ -65,6 +66,8 @@ def test_lanes_and_chunks_do_not_change_a_single_bit(tmp_path):
     ref = full(trace(s, 12_000, seed=11, chunk=12_000, lanes=16384))
     for chunk, lanes in ((5_000, 256), (3_000, 1024), (12_000, 64), (7_001, 4096)):
         assert full(trace(s, 12_000, seed=11, chunk=chunk, lanes=lanes)) == ref, (chunk, lanes)
+    # a wider kernel than the chunk needs (unused emissions per call) traces the same rays
+    assert full(trace(s, 12_000, seed=11, chunk=3_000, lanes=1024, width=16384)) == ref
     assert ref["ledger_error"] <= 1e-9
 
 
@@ -138,6 +141,13 @@ def test_specular_fraction_is_a_number_for_plate_scenes(tmp_path):
 
 def test_emission_width_buckets():
     assert [emission_width(n) for n in (1, 1024, 1025, 400_000, 2 ** 20)] == [1024, 1024, 2048, 2 ** 19, 2 ** 20]
+
+
+@pytest.mark.parametrize("width", [1000, 2048, 3 * 4096, 2 ** 23, True])
+def test_emission_width_must_be_a_power_of_two_holding_the_chunk(tmp_path, width):
+    # chunk 4096 here: 2048 is too narrow, 1000 and 12288 no powers of two, 2**23 beyond MAX_CHUNK
+    with pytest.raises(ValidationError, match="emission width"):
+        trace(plate_scene(tmp_path), 8_192, seed=1, chunk=4096, width=width)
 
 
 # --- the command line's persistent compilation cache -------------------------------------------------------------

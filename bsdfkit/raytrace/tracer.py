@@ -44,6 +44,7 @@ def trace(
     *,
     chunk: int | None = None,
     lanes: int | None = None,
+    width: int | None = None,
     effects: Effects | None = None,
     full_kernel: bool = False,
     progress: Callable[[int], None] | None = None,
@@ -52,7 +53,10 @@ def trace(
 
     ``chunk`` (default ``scene.trace.chunk``, at most rays / devices) rays are emitted and traced per device
     and compiled call, ``lanes`` (default ``scene.trace.lanes``) at once; every local JAX device traces its
-    own chunk in parallel (:func:`compiled_kernel`). None of this changes the result. ``full_kernel=True``
+    own chunk in parallel (:func:`compiled_kernel`). ``width`` (default :func:`emission_width` of the chunk)
+    is the kernel's static emission count; a larger power of two lets traces of different lengths share one
+    compiled kernel (it costs the unused emissions of each call). None of this changes the result.
+    ``full_kernel=True``
     traces with every optional branch compiled in (same physics, for benchmarks and tests); ``effects``
     overrides the compiled configuration entirely. ``progress(done)`` is called after every chunk.
     """
@@ -72,7 +76,12 @@ def trace(
                               expected=f"<= MAX_CHUNK ({kernel.MAX_CHUNK})", got=chunk)
     n_dev = len(jax.local_devices())  # chunks run in parallel on every local device (CPU devices: see below)
     chunk = min(chunk, -(-rays // n_dev), kernel.MAX_CHUNK)
-    width = emission_width(chunk)  # emissions per kernel call (static): a power of two, ≥ chunk
+    if width is None:
+        width = emission_width(chunk)  # emissions per kernel call (static): a power of two, ≥ chunk
+    elif not isinstance(width, int) or isinstance(width, bool) or width < chunk or width & (width - 1) \
+            or width > kernel.MAX_CHUNK:
+        raise ValidationError("emission width must be a power of two, at least the chunk", field="width",
+                              expected=f"a power of two in [{chunk}, {kernel.MAX_CHUNK}]", got=width)
     lanes = min(lanes, width)
     check_termination(scene.wall, scene.base, scene.leds, scene.top, scene.trace, scene.path)  # replace()d scenes
     check_work(scene, rays)
