@@ -70,6 +70,7 @@ from bsdfkit.raytrace.spectral import (
     spectral_model_from_dataset,
 )
 from bsdfkit.raytrace.tallies import SPECTRAL_YBR_DEFINITION
+from bsdfkit.raytrace.tracer import emission_width
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation
 from bsdfkit.reduction.excitation_emission import band_averaged_tis, plate_spectral_model
@@ -285,7 +286,9 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
     recon = _Reconstruction(two, led_bin_power(leds.spectrum, lam, leds.spectrum_file) / sr.step_nm,
                             emission_shape(measured, lam, options.emission_incidence_deg), lam)
     bands = _band_rows(recon, sr)
-    ablated = ablations(options, two_scene, spec_scene, model_ds, model, recon, clock)
+    # the ablations run on the main traces' compiled kernels (each kernel loaded once: about 1-2 s apiece)
+    ablated = ablations(options, two_scene, spec_scene, model_ds, model, recon, clock,
+                        widths={"two_wavelength": emission_width(two.chunk), "spectral": emission_width(spec.chunk)})
     shares = anti_stokes_shares(model, plate, options.temperature_K)
     summary = _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, clock.seconds)
     return SpectralComparison(lam, sr.spectrum_W_per_nm, sr.spectrum_std_err, *recon.spectrum(), summary)
@@ -418,12 +421,13 @@ def led_averaged_plate(plate: PhosphorPlate, model_ds: xr.Dataset, led_spectrum)
 
 
 def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset, model: SpectralPlateModel,
-              recon: _Reconstruction, clock: _Clock) -> dict:
+              recon: _Reconstruction, clock: _Clock, widths: dict[str, int] | None = None) -> dict:
     """The causes of the mode difference by ablation, all at ``options.ablation_rays`` rays with the main
     traces' seeds, so every row traces the main traces' first rays (common random numbers): the differences
     between a row and ``reference`` are the cause's, not noise. The rows of a mode share one compiled kernel
-    (same effects, emission width and parameter shapes; a width of its own: one kernel call per device with the
-    main traces' wider chunk is faster than several calls with the ablations').
+    (same effects, emission width and parameter shapes); ``widths`` (mode → emission width, ``"two_wavelength"``
+    and ``"spectral"``) runs them on the main traces' kernels instead of kernels of their own width: loading a
+    kernel costs more than the unused emissions of the wider one (about 1-2 s against a few hundredths).
 
     ``reference``: both modes as in the main job; ``conversion`` / ``reabsorption``: the spectral plate without
     conversion / without re-absorption above :data:`ABLATION_ABOVE_NM` (:func:`ablated_model`); ``led_spectrum``:
@@ -431,13 +435,15 @@ def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset
     (:func:`led_averaged_plate`). The σ of a row are those of its own two traces."""
     n = options.ablation_rays
     seeds = {"two_wavelength": options.seed, "spectral": options.seed + 1}
+    widths = widths or {}
 
     def spectral(model_: SpectralPlateModel):
         sc = replace(spec_scene, top=replace(spec_scene.top, spectral_model=model_))
-        return trace(sc, n, seeds["spectral"]).spectral
+        return trace(sc, n, seeds["spectral"], width=widths.get("spectral")).spectral
 
     def two_wavelength(plate: PhosphorPlate) -> _Reconstruction:
-        r = trace(replace(two_scene, top=replace(two_scene.top, plate=plate)), n, seeds["two_wavelength"])
+        r = trace(replace(two_scene, top=replace(two_scene.top, plate=plate)), n, seeds["two_wavelength"],
+                  width=widths.get("two_wavelength"))
         return _Reconstruction(r, recon.led_shape, recon.yellow_shape, recon.lam)
 
     two, spec = two_wavelength(two_scene.top.plate), spectral(model)
