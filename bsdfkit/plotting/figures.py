@@ -2,16 +2,37 @@
 from __future__ import annotations
 
 import itertools
+import math
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
 
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
 from bsdfkit.fit.least_squares import bsdf_model_values
 from bsdfkit.io.atomic import write_with
+
+_SUPERSCRIPTS = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _decade_label(value: float, _pos: int | None = None) -> str:
+    """'10⁻²' at a power of ten, '' elsewhere: plain text (the default labels are mathtext, one parse each)."""
+    if not value > 0.0 or not math.isfinite(value):
+        return ""
+    exponent = math.log10(value)
+    if abs(exponent - round(exponent)) > 1e-9:
+        return ""
+    return "10" + str(int(round(exponent))).translate(_SUPERSCRIPTS)
+
+
+def _log_y(ax) -> None:
+    """A logarithmic y axis whose decades are labelled in plain text (half of a log figure's drawing time went
+    into mathtext for its labels)."""
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(FuncFormatter(_decade_label))
 
 
 def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
@@ -37,7 +58,7 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
             keep = np.isfinite(y) & (y > 0)
             ax.errorbar(x[order][keep], y[keep], yerr=e[keep], marker=".", ms=3, lw=1, capsize=0,
                         label=f"data, {tag}, θi = {th:g}° (± 1σ)")
-        ax.set_yscale("log")
+        _log_y(ax)
         ax.set_xlabel("in-plane θs (deg, + = specular side)")
         ax.set_title(f"{side} at {wavelength_nm:g} nm ({config})")
         ax.grid(True, which="both", alpha=0.3)
@@ -200,7 +221,7 @@ def bsdf_fits_figure(fits: dict) -> Figure:
             params = {p: float(fit[p].sel(theta_i=th)) for p in ("rho", "A", "sigma", "B", "g") if p in fit}
             y = bsdf_model_values(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
             ax.plot(grid, y, "-", color=line.get_color(), lw=1, label=f"{model} model, θi = {th:g}°")
-        ax.set_yscale("log")
+        _log_y(ax)
         ax.set_title(f"{key[0]} {key[1]} ({model}, aperture-averaged fit)", fontsize=9)
         ax.set_xlabel("in-plane θs (deg, + = specular side)")
         ax.set_ylabel("BSDF (1/sr)")
