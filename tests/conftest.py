@@ -9,9 +9,13 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import contextlib
 import errno
 import gzip
+import io
+import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -46,6 +50,31 @@ def shared_compile_cache():
         jax.config.update(key, value)
 
 
+#: A module whose tests share an expensive module-scoped fixture (a conversion, an ingest, a traced stage: 5-40 s)
+_SHARES_A_FIXTURE = re.compile(r'@pytest\.fixture\(scope="module"')
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """xdist's ``load`` distribution, except that the tests of a module with a module-scoped fixture go to one
+    worker as a whole, so that the fixture is made once per run, not once per worker. (``--dist loadgroup`` with
+    ``xdist_group`` marks would do it, but pytest-xdist 3.8 marks a group by rewriting ``item._nodeid``, which
+    pytest 9 no longer reads: the groups were silently spread over the workers.) The controller collects no
+    tests, so the modules are found in their source text."""
+    if config.getoption("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    grouped = {f"tests/{p.name}" for p in Path(__file__).parent.glob("test_*.py")
+               if _SHARES_A_FIXTURE.search(p.read_text(encoding="utf-8"))}
+
+    class SharedFixtureScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return module if module in grouped else nodeid
+
+    return SharedFixtureScheduling(config, log)
+
+
 @pytest.fixture(scope="session")
 def bundled_raw():
     return read_scan(BUNDLED)
@@ -54,6 +83,28 @@ def bundled_raw():
 @pytest.fixture(scope="session")
 def bundled_scan(bundled_raw):
     return calibrate(bundled_raw)
+
+
+def fast_lane(values, fast) -> list:
+    """``values`` as pytest parameters, those not in ``fast`` marked slow: the fast lane keeps one case of each
+    code path (the ones named), the full suite runs the whole matrix."""
+    return [v if v in fast else pytest.param(*(v if isinstance(v, tuple) else (v,)), marks=pytest.mark.slow)
+            for v in values]
+
+
+def cli(*args) -> SimpleNamespace:
+    """``bsdfkit ARGS`` run in this process, as ``subprocess.run`` would report it (``returncode``, ``stdout``,
+    ``stderr``): for the tests whose subject is the verb, not the process (no interpreter start-up and imports
+    of 1-3 s per call; the compiled kernels of this process are reused). A usage error exits argparse's way."""
+    from bsdfkit.cli.main import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 2
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 def no_staging_in(monkeypatch, parent: Path) -> None:

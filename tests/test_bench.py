@@ -1,10 +1,8 @@
 """`bsdfkit bench --quick` runs under CI conditions and its report has the committed report's structure."""
 import re
-import subprocess
-import sys
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, cli
 
 
 def _structure(text: str) -> list[str]:
@@ -16,8 +14,7 @@ def _structure(text: str) -> list[str]:
 
 @pytest.mark.slow
 def test_quick_bench_matches_committed_report(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "bsdfkit", "bench", "--quick", "-o", str(tmp_path)],
-                          capture_output=True, text=True, timeout=600)
+    proc = cli("bench", "--quick", "-o", tmp_path)
     assert proc.returncode == 0, proc.stderr
     quick = (tmp_path / "accuracy.md").read_text()
     committed = (ROOT / "docs" / "accuracy.md").read_text()

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cli
 from hemisphere_truth import Truth
 
 import bsdfkit
@@ -122,8 +123,7 @@ def test_sniffed_by_content_and_bad_files_are_refused_on_one_line(written, tmp_p
     tree = tmp_path / "tree.xml"
     tree.write_text(text.replace(text[text.index("<AngleBasis>"):text.index("</AngleBasis>") + 13], "")
                     .replace("Columns", "TensorTree3"))
-    done = subprocess.run([sys.executable, "-m", "bsdfkit", "read", str(tree)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120)
+    done = cli("read", tree)
     assert done.returncode == 2 and done.stderr.count("\n") == 1
     assert "tree.xml" in done.stderr and "tensor tree" in done.stderr
 
@@ -145,15 +145,13 @@ def test_ingested_xml_integrates_to_the_files_own_sum(written):
 def test_cli_convert_writes_back_blocks_on_request_and_read_reports_them(tmp_path):
     zemax = ROOT / "tests" / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
     out = tmp_path / "vinyl.xml"
-    done = subprocess.run([sys.executable, "-m", "bsdfkit", "convert", str(zemax), "--to", "bsdfxml", "-o", str(out),
-                           "--xml-back", "mirror", "--xml-basis", "klems", "--wavelength", "550", "--json"],
-                          capture_output=True, text=True,
-                          cwd=ROOT, timeout=300)
+    done = cli("convert", zemax, "--to", "bsdfxml", "-o", out, "--xml-back", "mirror", "--xml-basis", "klems",
+               "--wavelength", "550", "--json")
     assert done.returncode == 0, done.stderr
     res = json.loads(done.stdout)
     assert res["ok"] and "not held" in res["notes"][-1]
-    read = subprocess.run([sys.executable, "-m", "bsdfkit", "read", str(out), "--json"], capture_output=True,
-                          text=True, cwd=ROOT, timeout=120, check=True)
+    read = cli("read", out, "--json")
+    assert read.returncode == 0, read.stderr
     summary = json.loads(read.stdout)
     np.testing.assert_allclose(summary["tis_computed"]["reflection@back"], summary["tis_computed"]["reflection"])
     assert summary["details"]["wavelength_nm"] == 550.0

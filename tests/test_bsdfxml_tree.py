@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cli
 from hemisphere_truth import Truth
 
 import bsdfkit
@@ -148,13 +149,12 @@ def test_a_bsdfkit_written_xml_gives_one_answer(tmp_path):
     read, engine = pairs["reflection"]
     np.testing.assert_allclose(engine, read, rtol=0, atol=1e-12)
     nc = tmp_path / "lobe.nc"
-    run = [sys.executable, "-m", "bsdfkit"]
-    subprocess.run([*run, "ingest", str(path), "-o", str(nc)], cwd=ROOT, check=True, capture_output=True, timeout=300)
-    done = subprocess.run([*run, "tis", str(nc), "--json"], cwd=ROOT, check=True, capture_output=True, text=True,
-                          timeout=300)
-    cli = {r["incidence_deg"]: r["value"][0] for r in json.loads(done.stdout)["hemispherical"]
-           if r["side"] == "reflection"}
-    np.testing.assert_allclose([cli[t] for t in summary.incidences_deg], read, rtol=0, atol=1e-12)
+    assert cli("ingest", path, "-o", nc).returncode == 0
+    done = cli("tis", nc, "--json")
+    assert done.returncode == 0, done.stderr
+    verb = {r["incidence_deg"]: r["value"][0] for r in json.loads(done.stdout)["hemispherical"]
+            if r["side"] == "reflection"}
+    np.testing.assert_allclose([verb[t] for t in summary.incidences_deg], read, rtol=0, atol=1e-12)
 
 
 _BAD = {
@@ -184,9 +184,7 @@ def test_malformed_tree_on_the_command_line_exits_2_with_one_line(tmp_path):
     path = tmp_path / "cut.xml"
     path.write_text(_BAD["wrong number of values"](TT3_CULLED.read_text()))
     for verb in ("read", "tis", "ingest"):
-        args = [sys.executable, "-m", "bsdfkit", verb, str(path)] + (["-o", str(tmp_path / "x.nc")]
-                                                                     if verb == "ingest" else [])
-        done = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=120)
+        done = cli(verb, path, *(["-o", tmp_path / "x.nc"] if verb == "ingest" else []))
         assert done.returncode == 2 and done.stderr.count("\n") == 1, (verb, done.stderr)
         assert "cut.xml" in done.stderr and "ScatteringData of Reflection Back" in done.stderr
         assert "2^(3k) values" in done.stderr and "got 2" in done.stderr

@@ -1,11 +1,9 @@
 """Plate interaction table, EQE and the iterative module budget (power-budget paper §§5-6)."""
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import BUNDLED
+from conftest import BUNDLED, cli
 
 from bsdfkit.core.errors import InputError
 from bsdfkit.reduction import budget
@@ -85,14 +83,9 @@ def test_bundled_interaction_table(bundled_scan):
     assert all(np.isfinite(v) and v >= 0 for v in t.power_std.values())
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "bsdfkit", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
-
-
 @pytest.mark.slow
 def test_cli_tis_and_budget_json(tmp_path):
-    proc = _cli("tis", BUNDLED, "--incidence", 45, "--json")
+    proc = cli("tis", BUNDLED, "--incidence", 45, "--json")
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     keys = {"B_bibs", "F_bibs", "B_biys", "F_biys", "blue_losses", "B_yiys", "F_yiys", "yellow_losses"}
@@ -101,13 +94,13 @@ def test_cli_tis_and_budget_json(tmp_path):
     assert 0 < out["eqe"] < 1
     table = tmp_path / "t.json"
     table.write_text(json.dumps({"power": {**TABLE2_POWER, "blue_losses": 32.7, "yellow_losses": 7.2}}))
-    proc = _cli("budget", "--table", table, "--eta-mc", 0.94, "--iterations", 7, "--json")
+    proc = cli("budget", "--table", table, "--eta-mc", 0.94, "--iterations", 7, "--json")
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert len(out["iterations"]) == 7 and set(out["iterations"][0]) >= {"blue", "yellow", "total", "losses"}
     assert set(out["converged"]) == {"blue", "yellow", "total", "losses"}
     assert set(out["first_iteration"]) == {"forward", "lost", "backscattered"}
-    proc = _cli("budget", BUNDLED, "--incidence", 45, "--eta-mc", 0.94, "--json")
+    proc = cli("budget", BUNDLED, "--incidence", 45, "--eta-mc", 0.94, "--json")
     assert proc.returncode == 0, proc.stderr
     assert "photons" in json.loads(proc.stdout)
 

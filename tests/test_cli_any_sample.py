@@ -1,20 +1,14 @@
 """Any sample from the command line: a measured table fitted, saved and exported; a reflectance standard exported."""
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cli
 
 DATA = Path(__file__).parent / "data"
 ANSYS = DATA / "ansys-radiant-zemax-bsdf" / "inplane_spectral_goniometric_2D_data.csv"
 SPECTRALON = DATA / "grit-spectralon" / "Spectralon_Num4.txt"
-
-
-def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bsdfkit", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, cwd=cwd)
 
 
 @pytest.fixture(scope="module")

@@ -1,23 +1,16 @@
 """The foundation verbs through the command line: ingest, info --json, run."""
 import json
-import subprocess
-import sys
 
 import pytest
-from conftest import BUNDLED, ROOT
-
-
-def _bsdfkit(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "bsdfkit", *map(str, args)], capture_output=True, text=True,
-                          timeout=300, **kw)
+from conftest import BUNDLED, ROOT, cli
 
 
 @pytest.mark.slow
 def test_ingest_then_info_json(tmp_path):
     out = tmp_path / "scan.nc"
-    proc = _bsdfkit("ingest", BUNDLED, "-o", out)
+    proc = cli("ingest", BUNDLED, "-o", out)
     assert proc.returncode == 0, proc.stderr
-    info = json.loads(_bsdfkit("info", out, "--json").stdout)
+    info = json.loads(cli("info", out, "--json").stdout)
     assert info["incidences_deg"] == [5.0, 45.0, 56.0]
     assert info["sides"] == ["reflection", "transmission"]
     assert info["positions"]["45"]["reflection"]["in_plane"] > 30
@@ -28,13 +21,13 @@ def test_ingest_then_info_json(tmp_path):
     assert "450-470" in info["configurations"][0]["description"]
     # ingest refuses to overwrite without --force, and keeps the file
     before = out.stat().st_mtime_ns
-    proc = _bsdfkit("ingest", BUNDLED, "-o", out)
+    proc = cli("ingest", BUNDLED, "-o", out)
     assert proc.returncode != 0 and "--force" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert out.stat().st_mtime_ns == before
 
 
 def test_info_on_raw_folder():
-    proc = _bsdfkit("info", BUNDLED)
+    proc = cli("info", BUNDLED)
     assert proc.returncode == 0 and "SYNTHETIC" in proc.stdout
 
 
@@ -57,11 +50,22 @@ def _small_recipe(tmp_path):
 
 
 @pytest.mark.slow
-def test_run_writes_outputs_and_refuses_to_clobber(tmp_path):
+def test_run_writes_every_format_and_outputs_and_refuses_to_clobber(tmp_path):
+    """One small main job (in this process: the run, not the process, is under test) with every registered
+    writable table format requested (exports.formats): the default outputs, each format re-read and TIS-checked,
+    and no overwrite without --force."""
+    import tomllib
+
+    from bsdfkit.io.toml_write import dumps
+    from bsdfkit.tables import registry
+
     out = tmp_path / "out"
     recipe = _small_recipe(tmp_path)
-    proc = _bsdfkit("run", recipe, "-o", out)
-    assert proc.returncode == 0, proc.stderr
+    data = tomllib.loads(recipe.read_text())
+    data["exports"]["formats"] = list(registry.writable())
+    recipe.write_text(dumps(data))
+    proc = cli("run", recipe, "-o", out)
+    assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((out / "summary.json").read_text())
     expected = {"scan.nc", "inplane_bsdf.png", "tis.nc", "interaction_tables.json", "module_budget.png",
                 "exports/bibs_reflection.tracepro.txt", "exports/bibs_reflection.zemax.bsdf", "bsdf_fits.json",
@@ -71,12 +75,15 @@ def test_run_writes_outputs_and_refuses_to_clobber(tmp_path):
     for name in expected:
         assert (out / name).stat().st_size > 0, name
     assert (out / "inplane_bsdf.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert all(c["ok"] for c in summary["export_checks"])
+    checks = summary["export_checks"]
+    assert {c["format"] for c in checks} == set(registry.writable())
+    assert all(c["ok"] for c in checks), [c for c in checks if not c["ok"]]
+    assert (out / "exports" / "bibs_reflection.bsdfxml.xml").stat().st_size > 0
     assert summary["trace"]["device"]["ledger_error"] < 1e-9
     assert 0.3 < summary["trace"]["device"]["LER"] < 0.8
     assert set(summary["module_spectrum"]["colour"]) >= {"x", "y", "cct_K", "duv", "luminous_efficacy_lm_per_W"}
     assert summary["spectral_comparison"]["spectral"]["ledger"]["power_W"]["error"] < 1e-9
     assert (out / "spectral_comparison.png").stat().st_size > 0
     assert 'id="spectral-modes"' in (out / "report.html").read_text()
-    proc = _bsdfkit("run", recipe, "-o", out)
-    assert proc.returncode != 0 and "--force" in proc.stderr
+    proc = cli("run", recipe, "-o", out)
+    assert proc.returncode == 2 and "--force" in proc.stderr

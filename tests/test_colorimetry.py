@@ -1,12 +1,11 @@
 """bsdfkit.reduction.colorimetry and ``bsdfkit color``: CIE LED reference chromaticities/CCTs, photometry, YBR."""
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import colour
 import numpy as np
 import pytest
+from conftest import cli
 
 from bsdfkit.cli.main import main
 from bsdfkit.core.errors import InputError, NumericalError
@@ -45,8 +44,7 @@ def test_color_cli_reproduces_cie_led_b3(tmp_path):
     sd = cie_led("B3")
     path = tmp_path / "led_b3.csv"
     path.write_text("wavelength_nm,relative\n" + "".join(f"{w:g},{v!r}\n" for w, v in zip(sd.wavelengths, sd.values)))
-    proc = subprocess.run([sys.executable, "-m", "bsdfkit", "color", str(path), "--json"], capture_output=True,
-                          text=True, timeout=300)
+    proc = cli("color", path, "--json")
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     x_ref, y_ref, cct_ref = REFERENCE["B3"]

@@ -1,6 +1,8 @@
 """Vendor files into datasets (bsdfkit.tables.to_dataset) and ``bsdfkit convert`` with its TIS check."""
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 from pathlib import Path
 
@@ -10,7 +12,7 @@ import pytest
 import bsdfkit
 from bsdfkit.cli.main import main
 from bsdfkit.core.errors import BsdfkitError, InputError
-from bsdfkit.tables import grids
+from bsdfkit.tables import grids, to_dataset
 from bsdfkit.tables.export import read_any
 from bsdfkit.tables.formats import tracepro
 from bsdfkit.tables.to_dataset import convert, vendor_dataset
@@ -32,11 +34,34 @@ def radiant_tis():
     return theta, values
 
 
+@pytest.fixture(scope="module")
+def radiant_converted(tmp_path_factory):
+    """The Radiant file converted once per format (9-14 s each): ``to -> (ConvertResult, path, stdout)``. ASAP
+    through the command line, in this process (its text output, and the result it printed, caught on its way
+    from ``convert``), TracePro through the API."""
+    folder = tmp_path_factory.mktemp("radiant")
+    done = {}
+    real = to_dataset.convert
+
+    def caught(*args, **kw):
+        done["asap"] = real(*args, **kw)
+        return done["asap"]
+
+    out, err = io.StringIO(), io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        mp.setattr(to_dataset, "convert", caught)
+        code = main(["convert", str(RADIANT), "--to", "asap", "-o", str(folder / "r.txt")])
+    assert code == 0, err.getvalue()
+    converted = {"asap": (done["asap"], folder / "r.txt", out.getvalue())}
+    path = folder / "r.tracepro.txt"
+    converted["tracepro"] = (convert(RADIANT, "tracepro", path), path, "")
+    return converted
+
+
 @pytest.mark.parametrize("to", ["tracepro", "asap"])
-def test_radiant_bsdf_converted_tis_within_half_a_percent(tmp_path, radiant_tis, to):
+def test_radiant_bsdf_converted_tis_within_half_a_percent(radiant_converted, radiant_tis, to):
     theta, original = radiant_tis
-    out = tmp_path / f"radiant.{to}"
-    result = convert(RADIANT, to, out)
+    result, out, _ = radiant_converted[to]
     reread = read_any(out)
     np.testing.assert_allclose(reread.incidences_deg, theta)
     written = np.array(reread.tis_computed["reflection"])
@@ -65,20 +90,19 @@ def test_radiant_vendor_dataset_records(tmp_path):
     assert ds["theta_s"].values.max() <= 90.0 + 1e-9
 
 
-def test_cli_convert_radiant_and_force(tmp_path, capsys):
-    out = tmp_path / "r.txt"
-    assert main(["convert", str(RADIANT), "--to", "asap", "-o", str(out)]) == 0
-    text = capsys.readouterr().out
+def test_cli_convert_radiant_and_force(radiant_converted, capsys):
+    _, out, text = radiant_converted["asap"]  # written by `bsdfkit convert RADIANT --to asap -o out`
     assert "TIS source" in text and "diff %" in text and out.exists()
+    before = out.read_bytes()
     assert main(["convert", str(RADIANT), "--to", "asap", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--force" in err
+    assert out.read_bytes() == before
 
 
 @pytest.mark.slow
-def test_tracepro_round_trip_reads_back_as_data(tmp_path):
-    tp = tmp_path / "r.tracepro.txt"
-    convert(RADIANT, "tracepro", tp)
+def test_tracepro_round_trip_reads_back_as_data(tmp_path, radiant_converted):
+    _, tp, _ = radiant_converted["tracepro"]
     ds = vendor_dataset(tp)
     assert ds.attrs["source_format"] == "tracepro" and ds["wavelength"].values.tolist() == [550.0]
     assert set(ds["side"].values) == {"reflection"}  # the zero BTDF column is not data
@@ -120,7 +144,7 @@ def test_synthetic_two_arc_table_converts_to_the_exact_tis(tmp_path):
     assert result.ok and result.wavelength_nm == 633.0
 
 
-def test_convert_errors_are_one_line(tmp_path, capsys):
+def test_convert_errors_are_one_line(tmp_path, capsys, radiant_converted):
     nc = tmp_path / "a.nc"
     assert main(["ingest", str(ANSYS_CSV), "--quantity", "reflectance-factor", "-o", str(nc)]) == 0
     capsys.readouterr()
@@ -132,16 +156,9 @@ def test_convert_errors_are_one_line(tmp_path, capsys):
     assert main(["convert", str(RADIANT), "--to", "asap", "-o", str(tmp_path / "y"), "--incidences", "12"]) == 2
     assert "incidence not in the source" in capsys.readouterr().err
     with pytest.raises(InputError, match="another wavelength"):
-        vendor_dataset(_tracepro(tmp_path), wavelength=600.0)
+        vendor_dataset(radiant_converted["tracepro"][1], wavelength=600.0)
     with pytest.raises(BsdfkitError, match="no such file"):
         convert(tmp_path / "absent.csv", "asap", tmp_path / "z")
-
-
-def _tracepro(tmp_path):
-    out = tmp_path / "r.tracepro.txt"
-    if not out.exists():
-        convert(RADIANT, "tracepro", out)
-    return out
 
 
 def test_convert_spectral_table_at_one_wavelength(tmp_path):

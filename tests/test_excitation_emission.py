@@ -6,14 +6,12 @@ photon emission pdf and the photon yield against the exact values of its truth
 """
 import json
 import os
-import subprocess
-import sys
 import tomllib
 
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import ROOT
+from conftest import ROOT, cli
 
 import bsdfkit
 from bsdfkit.core.conventions import CONVERSION_BAND_NM, SIDES
@@ -66,10 +64,15 @@ def model(scan):
     return eem.plate_spectral_model(scan)
 
 
-@pytest.fixture(scope="module")
-def truth(scan):
-    manifest = json.loads(scan.attrs["manifest_json"])
+def _recorded_truth(manifest: dict) -> synthetic.ExcitationEmissionTruth:
     return synthetic.ExcitationEmissionTruth.from_dict(json.loads(manifest["truth"]["parameters_json"]))
+
+
+@pytest.fixture(scope="module")
+def truth():
+    """The truth the set's manifest records (read from the file: the fast lane's tests need no ingest of the set;
+    that the ingested scan carries the same manifest is checked by test_reader_gives_the_bispectral_matrix)."""
+    return _recorded_truth(tomllib.loads((EEM / "manifest.toml").read_text()))
 
 
 #: Band centres of the bundled scan: 10 nm steps over the absorption edge, 20 nm steps beyond.
@@ -129,7 +132,8 @@ def test_truth_is_physical(truth):
 
 # ------------------------------------------------------------------------------------------ reader
 @pytest.mark.slow
-def test_reader_gives_the_bispectral_matrix(scan):
+def test_reader_gives_the_bispectral_matrix(scan, truth):
+    assert _recorded_truth(json.loads(scan.attrs["manifest_json"])) == truth
     assert list(scan["excitation_wavelength"].values[2:]) == CENTRES
     m = eem.bispectral_matrix(scan)
     assert m["bsdf_donaldson"].dims == ("record", "wavelength_i", "wavelength")
@@ -408,7 +412,6 @@ def test_band_name_colliding_with_a_configuration_is_refused(tmp_path):
 
 def test_bad_band_series_exits_with_status_2_on_the_command_line(tmp_path):
     folder = _manifest_copy(tmp_path, lambda b: b.replace("center_step_nm = 10.0", "center_step_nm = 7.0"))
-    proc = subprocess.run([sys.executable, "-m", "bsdfkit", "info", str(folder)], capture_output=True, text=True,
-                          timeout=300)
+    proc = cli("info", folder)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     assert "band_series[0].center_step_nm" in proc.stderr and "Traceback" not in proc.stderr

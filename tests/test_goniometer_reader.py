@@ -1,11 +1,9 @@
 """Every bad-input class of the raw-scan reader gives a one-line error naming file and field."""
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from conftest import read_gz_lines, write_gz_lines
+from conftest import cli, read_gz_lines, write_gz_lines
 
 from bsdfkit.core.errors import BsdfkitError, FormatError, InputError, ValidationError
 from bsdfkit.measurement.raw_scan import read_scan
@@ -143,12 +141,10 @@ def test_valid_export_reads(tiny_export):
 
 @pytest.mark.parametrize("case", [_missing_file, _unknown_side, _manifest_wrong_type, _nan_counts],
                          ids=["missing_file", "unknown_side", "manifest_wrong_type", "nan_counts"])
-@pytest.mark.slow
 def test_cli_ingest_reports_one_line(tiny_export, tmp_path, case):
     case(tiny_export)
     out = tmp_path / "scan.nc"
-    proc = subprocess.run([sys.executable, "-m", "bsdfkit", "ingest", str(tiny_export), "-o", str(out)],
-                          capture_output=True, text=True, timeout=120)
+    proc = cli("ingest", tiny_export, "-o", out)
     assert proc.returncode != 0
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr

@@ -316,9 +316,19 @@ def _full_run(folder):
     return folder, trends
 
 
-def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_uniformity(tmp_path):
-    folder, _ = _full_run(tmp_path / "run")
-    text = write_report(folder).read_text(encoding="utf-8")
+@pytest.fixture(scope="module")
+def full_run(tmp_path_factory):
+    """The run folder of ``_full_run`` with its report written (``write_report``), and the report's comparisons
+    (``_Report.build``): ``(folder, trends, html, (report, its built text))``. The tests only read them."""
+    folder, trends = _full_run(tmp_path_factory.mktemp("full") / "run")
+    html = write_report(folder).read_text(encoding="utf-8")
+    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    rep = report_module._Report(folder, summary, paper_values())
+    return folder, trends, html, (rep, rep.build())
+
+
+def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_uniformity(full_run):
+    _, _, text, _ = full_run
     maps = text[text.index('<section id="maps">'):text.index('<section id="spectrum">')]
     assert re.search(r"Maps of the paper not in this run: none\.", maps)
     # one grid of three maps per paper figure, plus the lone device map
@@ -340,12 +350,11 @@ def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_unif
                      r"<td class=\"\">—</td>", maps)
 
 
-def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(tmp_path):
-    folder, trends = _full_run(tmp_path / "run")
+def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(full_run):
+    _, trends, text, _ = full_run
     name = "YBR slightly lower for short cavities (Fig. 11)"
     assert trends[name]["holds"] is False and "Fig. 11" in name
     assert "lower for small heights" in trends[name]["paper"]
-    text = write_report(folder).read_text(encoding="utf-8")
     opening = text[:text.index('<section id="measurement">')]
     assert f"trend of [Cylindrical-module] not reproduced: {name}" in opening
     plate = text[text.index('<section id="plate">'):text.index('<section id="maps">')]
@@ -447,14 +456,11 @@ def test_study_and_incidence_figures_label_every_axis_with_units_and_name_data_a
 
 
 # ---- issue #27: every comparison states its criterion, and the verdicts follow it ----------------------------
-def test_every_verdict_follows_its_stated_criterion_and_every_difference_is_listed(tmp_path):
+def test_every_verdict_follows_its_stated_criterion_and_every_difference_is_listed(full_run):
     """Rule: a value agrees iff |run − paper| ≤ sqrt(half_unit² + (kσ)²); a trend holds iff its direction is the
     paper's and its size agrees by the same rule; every other comparison is in the disagreement list, and no
     verdict in the HTML says 'agrees' or 'holds' where the numbers exceed the criterion."""
-    folder, _ = _full_run(tmp_path / "run")
-    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
-    rep = report_module._Report(folder, summary, paper_values())
-    text = rep.build()
+    _, _, _, (rep, text) = full_run
     comps = rep.v.comparisons
     kinds = {c["kind"] for c in comps}
     assert kinds == {"value", "trend"} and len(comps) > 30
@@ -480,11 +486,9 @@ def test_every_verdict_follows_its_stated_criterion_and_every_difference_is_list
         assert float(diff) <= float(crit)
 
 
-def test_table3_losses_are_the_papers_100_minus_extracted(tmp_path):
-    folder, _ = _full_run(tmp_path / "run")
+def test_table3_losses_are_the_papers_100_minus_extracted(full_run):
+    folder, _, _, (rep, _) = full_run
     summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
-    rep = report_module._Report(folder, summary, paper_values())
-    rep.build()
     power = summary["module_budget"]["power"]
     last = power["iterations"][-1]
     losses = [c for c in rep.v.comparisons if c["what"].startswith("Table 3 losses")]

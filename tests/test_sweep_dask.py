@@ -7,7 +7,7 @@ import pytest
 import xarray as xr
 from conftest import ROOT
 
-from bsdfkit.cli.main import main
+from bsdfkit.cli.main import CACHE_SETTINGS, main
 
 EXAMPLE = ROOT / "fitting" / "scenes" / "example.toml"
 ARGS = ["--param", "cavity.height_mm=10,43,80", "--param", "wall.reflectance=0.8,0.9", "--rays", "4000",
@@ -15,9 +15,14 @@ ARGS = ["--param", "cavity.height_mm=10,43,80", "--param", "wall.reflectance=0.8
 
 
 @pytest.fixture
-def shared_jax_cache(tmp_path, monkeypatch):
-    # the workers inherit the environment: one compilation serves both of them
-    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "jax-cache"))
+def shared_jax_cache(tmp_path, monkeypatch, shared_compile_cache):
+    # the workers inherit the environment: one compilation serves both of them, and later runs of the suite (the
+    # suite's persistent cache, conftest.py; a folder of this test's own when the suite runs without it), with
+    # the command line's settings (its size limit switches on the file lock the concurrent writers need)
+    folder = shared_compile_cache or tmp_path / "jax-cache"
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(folder))
+    for key, value in CACHE_SETTINGS.items():
+        monkeypatch.setenv(key.upper(), str(value))
     monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
 
 
