@@ -1,8 +1,10 @@
 """`bsdfkit bench --quick` runs under CI conditions and its report has the committed report's structure."""
 import re
+import subprocess
+import sys
 
 import pytest
-from conftest import ROOT, cli
+from conftest import ROOT
 
 
 def _structure(text: str) -> list[str]:
@@ -14,7 +16,10 @@ def _structure(text: str) -> list[str]:
 
 @pytest.mark.slow
 def test_quick_bench_matches_committed_report(tmp_path):
-    proc = cli("bench", "--quick", "-o", tmp_path)
+    # a subprocess, as CI runs it: in a test worker the same bench took 385 s instead of 71 s (loaded machine; cause
+    # not found: the worker's one JAX CPU device against the command's two is the likeliest)
+    proc = subprocess.run([sys.executable, "-m", "bsdfkit", "bench", "--quick", "-o", str(tmp_path)],
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     quick = (tmp_path / "accuracy.md").read_text()
     committed = (ROOT / "docs" / "accuracy.md").read_text()
