@@ -437,13 +437,18 @@ def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset
     seeds = {"two_wavelength": options.seed, "spectral": options.seed + 1}
     widths = widths or {}
 
+    def on_kernel(sc, mode: str):
+        # the main trace's kernel emits `width` rays per call: the ablation's chunks must not be larger (a run of
+        # fewer main rays than ablation rays has a narrower kernel); results do not depend on the chunk
+        width = widths.get(mode)
+        chunk = None if width is None else min(int(sc.trace.chunk), width)
+        return trace(sc, n, seeds[mode], chunk=chunk, width=width)
+
     def spectral(model_: SpectralPlateModel):
-        sc = replace(spec_scene, top=replace(spec_scene.top, spectral_model=model_))
-        return trace(sc, n, seeds["spectral"], width=widths.get("spectral")).spectral
+        return on_kernel(replace(spec_scene, top=replace(spec_scene.top, spectral_model=model_)), "spectral").spectral
 
     def two_wavelength(plate: PhosphorPlate) -> _Reconstruction:
-        r = trace(replace(two_scene, top=replace(two_scene.top, plate=plate)), n, seeds["two_wavelength"],
-                  width=widths.get("two_wavelength"))
+        r = on_kernel(replace(two_scene, top=replace(two_scene.top, plate=plate)), "two_wavelength")
         return _Reconstruction(r, recon.led_shape, recon.yellow_shape, recon.lam)
 
     two, spec = two_wavelength(two_scene.top.plate), spectral(model)
