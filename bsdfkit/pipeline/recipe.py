@@ -63,7 +63,7 @@ from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
-from bsdfkit.raytrace.tallies import converged_non_uniformity, merge_maps, non_uniformity, non_uniformity_std
+from bsdfkit.raytrace.tallies import map_fields, merge_maps, non_uniformity_std
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -560,16 +560,14 @@ def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FAC
     conv = result.non_uniformity_converged
     if result.irradiance_parts is None or conv is None or conv["converged"]:
         return result
-    parts, n, k = result.irradiance_parts, rays, 0
+    fields, n, k = {"irradiance_parts": result.irradiance_parts}, rays, 0
     while not conv["converged"] and n + rays <= factor * rays:
         k += 1
         more = trace(scene, rays, seed + k * MAP_SEED_OFFSET)
-        parts = merge_maps(parts, n, more.irradiance_parts, rays)
+        fields = map_fields(merge_maps(fields["irradiance_parts"], n, more.irradiance_parts, rays), conv["symmetric"])
+        conv = fields["non_uniformity_converged"]
         n += rays
-        conv = converged_non_uniformity(parts, symmetric=conv["symmetric"])
-    irradiance = parts.sum(axis=0)
-    return replace(result, irradiance=irradiance, irradiance_parts=parts, non_uniformity=conv["value"],
-                   non_uniformity_map=non_uniformity(irradiance), non_uniformity_converged=conv, map_rays=n)
+    return replace(result, **fields, map_rays=n)
 
 
 def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, float]:

@@ -224,6 +224,19 @@ def _std_of_mean(samples: np.ndarray) -> float:
     return float(np.std(samples, ddof=1) / np.sqrt(samples.size)) if samples.size > 1 else float("nan")
 
 
+def map_fields(parts: np.ndarray, symmetric: bool) -> dict[str, Any]:
+    """The map fields of a :class:`TraceResult` from its sub-maps [W/mm²] (the tracer's, or merged ones).
+
+    ``irradiance`` (their sum), ``irradiance_parts``, ``non_uniformity`` (the converged value of
+    :func:`converged_non_uniformity`, whose dict is ``non_uniformity_converged``) and ``non_uniformity_map`` (the
+    whole map's :func:`non_uniformity`).
+    """
+    irradiance = parts.sum(axis=0)
+    conv = converged_non_uniformity(parts, symmetric=symmetric)
+    return {"irradiance": irradiance, "irradiance_parts": parts, "non_uniformity": conv["value"],
+            "non_uniformity_map": non_uniformity(irradiance), "non_uniformity_converged": conv}
+
+
 def merge_maps(parts: np.ndarray, rays: int, more_parts: np.ndarray, more_rays: int) -> np.ndarray:
     """Sub-maps [W/mm²] of two independent traces of one scene, as the sub-maps of all their rays.
 

@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from fractions import Fraction
+from typing import Any
 
 import jax
 import numpy as np
@@ -27,9 +28,8 @@ from bsdfkit.raytrace.tallies import (
     FixedSum,
     SpectralResult,
     TraceResult,
-    converged_non_uniformity,
+    map_fields,
     mean_and_se,
-    non_uniformity,
     ratio_and_se,
     spectral_ledger,
 )
@@ -212,16 +212,14 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
     def fixed_to_w(a):
         return np.array([float(v) for v in a], dtype=float) / fp * scale
 
-    irradiance = parts = nu = nu_map = nu_converged = hist = budget = None
+    hist = budget = None
+    maps: dict[str, Any] = {}
     R = scene.cavity.radius_mm
     if arrays["map"] is not None:
         bins = eff.map_bins
         area = (2.0 * R / bins) ** 2
         parts = fixed_to_w(arrays["map"]).reshape(kernel.MAP_PARTS, bins, bins) / area
-        irradiance = parts.sum(axis=0)
-        nu_map = non_uniformity(irradiance)
-        nu_converged = converged_non_uniformity(parts, symmetric=map_symmetry(scene) == 8)
-        nu = nu_converged["value"]
+        maps = map_fields(parts, symmetric=map_symmetry(scene) == 8)
     if arrays["histogram"] is not None:
         hist = fixed_to_w(arrays["histogram"]).reshape(2, eff.histogram_bins)
     if arrays["budget"] is not None:
@@ -237,10 +235,7 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         ledger_error=ledger_error, LER=ler, YBR=ybr, std_err=std_err,
         interactions=int(counts[kernel.CNT_EVENTS]), plate_interactions=int(counts[kernel.CNT_PLATE]),
         clamped_interactions=int(counts[kernel.CNT_CLAMP]),
-        irradiance=irradiance, non_uniformity=nu, non_uniformity_converged=nu_converged, non_uniformity_map=nu_map,
-        irradiance_parts=parts,
-        incidence_histogram=hist,
-        budget=budget, radius_mm=R,
+        **maps, incidence_histogram=hist, budget=budget, radius_mm=R,
         elapsed_s=elapsed, compile_s=compile_s, effects=eff,
         spectral=spectral_result(scene, n, col, arrays) if eff.spectral else None,
     )
