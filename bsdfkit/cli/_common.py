@@ -106,3 +106,20 @@ class Progress:
         if self.enabled:
             sys.stderr.write("\n")
             sys.stderr.flush()
+
+
+def add_grid_arguments(p: Any, tis_tolerance_help: str) -> None:
+    """The exported table's grid options of ``export`` and ``convert``: ``--grid``, ``--grid-tis-tolerance`` (its
+    default differs by verb: ``tis_tolerance_help``), ``--grid-peak-tolerance`` and ``--node-values``."""
+    p.add_argument("--grid", default="auto", choices=("auto", "fixed"),
+                   help="table axes: auto (as fine as the source needs for the grid tolerances; default) or "
+                        "fixed (the fine default grids; docs/exports.md, Grid resolution)")
+    p.add_argument("--grid-tis-tolerance", type=float, default=None, metavar="FRACTION", help=tis_tolerance_help)
+    p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
+                   help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
+                        "(default 0.01); also the limit of the peak re-check of the written file")
+    # the choices are bsdfkit.tables.export.NODE_VALUES (not imported here: that module loads numpy)
+    p.add_argument("--node-values", default="point", choices=("point", "cell"),
+                   help="TracePro, ASAP-style tables: point samples of the source (default) or cell averages "
+                        "(the table's TIS by its format's rule is the source's on any axes; --grid auto then "
+                        "refines by the lobe's peak only: smaller files; docs/exports.md, Grid resolution)")

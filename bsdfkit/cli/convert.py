@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bsdfkit.cli._common import check_options, emit_json
+from bsdfkit.cli._common import add_grid_arguments, check_options, emit_json
 from bsdfkit.cli.ingest import OPTION_RANGES
 from bsdfkit.core.conventions import QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import ValidationError
@@ -72,19 +72,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="largest accepted |TIS written / TIS source - 1| (default 0.01)")
-    p.add_argument("--grid", default="auto", choices=("auto", "fixed"),
-                   help="table axes: auto (as fine as the source needs for the grid tolerances; default) or "
-                        "fixed (the fine default grids; docs/exports.md, Grid resolution)")
-    p.add_argument("--grid-tis-tolerance", type=float, default=None, metavar="FRACTION",
-                   help="auto grid: largest estimated relative TIS error of the table (default: half of "
-                        "--tis-tolerance, 0.005)")
-    p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
-                   help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
-                        "(default 0.01); also the limit of the peak re-check of the written file")
-    p.add_argument("--node-values", default="point", choices=("point", "cell"),
-                   help="TracePro, ASAP-style tables: point samples of the source (default) or cell averages "
-                        "(the table's TIS by its format's rule is the source's on any axes; --grid auto then "
-                        "refines by the lobe's peak only: smaller files; docs/exports.md, Grid resolution)")
+    add_grid_arguments(p, "auto grid: largest estimated relative TIS error of the table (default: half of "
+                            "--tis-tolerance, 0.005)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 

@@ -11,7 +11,7 @@ import argparse
 from dataclasses import replace
 
 from bsdfkit import api
-from bsdfkit.cli._common import emit_json
+from bsdfkit.cli._common import add_grid_arguments, emit_json
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.tables import registry
 
@@ -89,18 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--wavelength-nm", type=float, default=None, metavar="NM",
                    help="the wavelength to export from a per-wavelength model (bsdfkit fit reflectance)")
     p.add_argument("--temperature-k", type=float, default=None, help="TracePro temperature column (K)")
-    p.add_argument("--grid", default="auto", choices=("auto", "fixed"),
-                   help="table axes: auto (as fine as the source needs for the grid tolerances; default) or "
-                        "fixed (the fine default grids; docs/exports.md, Grid resolution)")
-    p.add_argument("--grid-tis-tolerance", type=float, default=None, metavar="FRACTION",
-                   help="auto grid: largest estimated relative TIS error of the table (default 0.001)")
-    p.add_argument("--grid-peak-tolerance", type=float, default=None, metavar="FRACTION",
-                   help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
-                        "(default 0.01); also the limit of the peak re-check of the written file")
-    p.add_argument("--node-values", default="point", choices=("point", "cell"),
-                   help="TracePro, ASAP-style tables: point samples of the source (default) or cell averages "
-                        "(the table's TIS by its format's rule is the source's on any axes; --grid auto then "
-                        "refines by the lobe's peak only: smaller files; docs/exports.md, Grid resolution)")
+    add_grid_arguments(p, "auto grid: largest estimated relative TIS error of the table (default 0.001)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
