@@ -1033,15 +1033,12 @@ class _Report:
             for value, label in panels:
                 hit = self._map_panel(found, dims, value)
                 paper = nu_paper[fig_no].get(value)
-                run_nu = coarse_nu = nu_std = None
                 if hit is None:
                     missing_text.append(f"{fig_no} {label}")
                 else:
                     da, fname = hit
                     used.add(fname)
                     sources += [fname] if fname not in sources else []
-                    run_nu, coarse_nu = map_non_uniformity(da), _coarser_non_uniformity(da)
-                    nu_std = _map_nu_std(da)
                     maps[f"{label} ({fname})" + (f"\npaper: {paper:g} %" if paper is not None else "")] = \
                         _display_map(da)
                 row_nu = [r for r in _study_rows(studies, dims[1], dims[0]) if abs(r["values"][dims[0]] - value) < 1e-9]
@@ -1049,8 +1046,12 @@ class _Report:
                 if _num(row.get("non_uniformity")) is not None and row.get("non_uniformity_bins"):
                     # the tracer's split-half value on the grid it converged on (the quantity of the paper)
                     nu, nu_std, grid = _num(row["non_uniformity"]), _num(row.get("non_uniformity_std")), _conv_cell(row)
-                else:  # a map without the tracer's sub-maps: its max − min, σ from the map
-                    nu, grid = run_nu, _grid_check(run_nu, coarse_nu, nu_std)
+                elif hit is not None:  # a map without the tracer's sub-maps: its max − min, σ from the map
+                    nu, nu_std = map_non_uniformity(hit[0]), _map_nu_std(hit[0])
+                    grid = _grid_check(nu, _coarser_non_uniformity(hit[0]), nu_std)
+                else:
+                    nu = nu_std = None
+                    grid = _grid_check(None, None, None)
                 rows.append([fig_no, _esc(label), "yes" if hit else '<span class="absent">not in this run</span>',
                              _pm(nu, nu_std, 1, 100.0), grid,
                              "—" if paper is None else f"{paper:g}", "—" if paper is None or nu is None else
