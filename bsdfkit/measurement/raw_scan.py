@@ -61,12 +61,15 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
     """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
     text = _open_text(path)
     refuse_cut_last_line(text, path, ",", expected="a row of counts")
-    try:
-        reader = csv.reader(io.StringIO(text))
-        # the reader's physical line (a quoted cell may span lines: a row's index is not its line)
-        rows = [(reader.line_num, r) for r in reader]
-    except csv.Error as exc:
-        raise FormatError(f"not valid CSV ({exc})", file=path) from None
+    if '"' not in text and "\r" not in text:  # no quoting, one row per line: what csv.reader gives, 3× faster
+        rows = [(k, line.split(",")) for k, line in enumerate(text.split("\n"), start=1) if line]
+    else:
+        try:
+            reader = csv.reader(io.StringIO(text))
+            # the reader's physical line (a quoted cell may span lines: a row's index is not its line)
+            rows = [(reader.line_num, r) for r in reader]
+        except csv.Error as exc:
+            raise FormatError(f"not valid CSV ({exc})", file=path) from None
     # Skip blank and '#' comment lines but keep 1-based physical line numbers for messages.
     numbered = [(k, r) for k, r in rows
                 if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
@@ -113,26 +116,29 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
                               got=wavelength[bad])
     n_named = len(names)
     width = n_named + wavelength.size
-    columns: dict[str, list[str]] = {n: [] for n in names}
-    counts = np.empty((len(data), wavelength.size))
-    for r, (line, row) in enumerate(data):
-        if len(row) != width:
-            raise FormatError("wrong number of fields", file=path, line=line, expected=f"{width} fields", got=len(row))
-        for n, cell in zip(names, row[:n_named]):
-            columns[n].append(cell.strip())
-        try:
-            counts[r] = np.asarray(row[n_named:], dtype=np.float64)
-        except ValueError:
+    # checks in file order, as a row-by-row reader would make them: the first faulty row is the one reported
+    n_ok = next((r for r, (_, row) in enumerate(data) if len(row) != width), len(data))
+    try:  # one conversion of every count cell (a per-row conversion was most of the time of a 62-file scan)
+        counts = np.array([row[n_named:] for _, row in data[:n_ok]], dtype=np.float64).reshape(n_ok, wavelength.size)
+    except ValueError:  # find the first bad cell for the message
+        for line, row in data[:n_ok]:
             for k, cell in enumerate(row[n_named:]):
                 try:
                     float(cell)
                 except ValueError:
                     raise FormatError("count is not a number", file=path, line=line, field=header[n_named + k],
                                       expected="a number", got=cell) from None
-        if not np.all(np.isfinite(counts[r])):
-            k = int(np.argmax(~np.isfinite(counts[r])))
-            raise ValidationError("count is not finite", file=path, line=line, field=header[n_named + k],
-                                  expected="a finite number", got=row[n_named + k])
+        raise FormatError("counts are not numbers", file=path, expected="a number in every count cell") from None
+    bad = ~np.isfinite(counts)
+    if bad.any():
+        r, k = np.argwhere(bad)[0]
+        line, row = data[r]
+        raise ValidationError("count is not finite", file=path, line=line, field=header[n_named + k],
+                              expected="a finite number", got=row[n_named + k])
+    if n_ok < len(data):
+        line, row = data[n_ok]
+        raise FormatError("wrong number of fields", file=path, line=line, expected=f"{width} fields", got=len(row))
+    columns = {n: [row[j].strip() for _, row in data] for j, n in enumerate(names)}
     return SpectraTable(path=path, columns=columns, wavelength=wavelength, counts=counts, first_data_line=data[0][0],
                         lines=tuple(line for line, _ in data))
 
@@ -242,9 +248,11 @@ def read_scan(folder: str | Path) -> xr.Dataset:
                                       expected=" or ".join(ARCS), got=a)
         # Duplicate positions: identical directions (to 1e-6°, φ modulo 360, and φ irrelevant at θ = 0).
         seen: dict[tuple, int] = {}
-        for k in range(len(side)):
-            ps = 0.0 if theta_s[k] < 1e-9 else round(phi_s[k] % 360.0, 6) % 360.0
-            key = (round(theta_i[k], 6), round(phi_i[k] % 360.0, 6) % 360.0, round(theta_s[k], 6), ps, side[k])
+        # on Python floats: rounding NumPy scalars one by one was a tenth of a 62-file scan's reading time
+        for k, (ti, pi, ts, phs, sd) in enumerate(zip(theta_i.tolist(), phi_i.tolist(), theta_s.tolist(),
+                                                      phi_s.tolist(), side)):
+            ps = 0.0 if ts < 1e-9 else round(phs % 360.0, 6) % 360.0
+            key = (round(ti, 6), round(pi % 360.0, 6) % 360.0, round(ts, 6), ps, sd)
             if key in seen:
                 raise ValidationError("duplicate detector position", file=table.path, line=_line_of(table, k),
                                       field="theta_s_deg/phi_s_deg",
