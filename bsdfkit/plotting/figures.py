@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter
+from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
 
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
 from bsdfkit.fit.least_squares import bsdf_model_values
@@ -28,11 +29,29 @@ def _decade_label(value: float, _pos: int | None = None) -> str:
     return "10" + str(int(round(exponent))).translate(_SUPERSCRIPTS)
 
 
+_MATHTEXT = re.compile(r"^\$\\mathdefault\{(?:(-?[0-9.e+-]+)\\times)?([0-9.]+)\^\{(-?\d+)\}\}\$$")
+
+
+class _PlainLogFormatter(LogFormatterSciNotation):
+    """matplotlib's minor-tick labels of a log axis ('3×10⁻²' where it labels one), in plain text: each
+    mathtext label is parsed once per figure, a sixth of the drawing time of a figure with six log axes."""
+
+    def __call__(self, x: float, pos: int | None = None) -> str:
+        label = super().__call__(x, pos)
+        match = _MATHTEXT.match(label)
+        if match is None:
+            return label
+        coeff, base, exponent = match.groups()
+        power = base + exponent.translate(_SUPERSCRIPTS)
+        return f"{coeff}×{power}" if coeff else power
+
+
 def _log_y(ax) -> None:
-    """A logarithmic y axis whose decades are labelled in plain text (half of a log figure's drawing time went
-    into mathtext for its labels)."""
+    """A logarithmic y axis labelled in plain text (the default labels are mathtext: half of a log figure's
+    drawing time went into parsing them)."""
     ax.set_yscale("log")
     ax.yaxis.set_major_formatter(FuncFormatter(_decade_label))
+    ax.yaxis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False))
 
 
 def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
