@@ -85,3 +85,67 @@ def test_walks_and_edges_equal_the_reference():
             for step in (-1, 1):
                 for fall in (0.0, 0.5 * (g[p] - g.min())):
                     assert hs._walk(x, g, s, p, step, 0.02, fall) == walk_reference(x, g, s, p, step, 0.02, fall)
+
+
+def clip_reference(poly, bound, sign):
+    """The former one-polygon Sutherland–Hodgman step."""
+    out = []
+    n = len(poly)
+    for k in range(n):
+        (p, b), (q, c) = poly[k], poly[(k + 1) % n]
+        dp, dq = sign * (p[0] - bound), sign * (q[0] - bound)
+        if dp >= 0:
+            out.append((p, b))
+        if (dp >= 0) != (dq >= 0):
+            t = dp / (dp - dq)
+            out.append((p + t * (q - p), b + t * (c - b)))
+    return out
+
+
+def cells_reference(itp):
+    """The former triangle-by-triangle clipping of an interpolant's triangles to one period."""
+    simp = itp.tri.simplices
+    pts = itp.tri.points[simp].copy()
+    pts[:, :, 0] /= itp.azimuth_weight
+    nodes = itp.point_node[simp]
+    psi_c, r_c = pts[:, :, 0].mean(axis=1), pts[:, :, 1].mean(axis=1)
+    on_rim = (nodes > itp.n_records).all(axis=1)
+    outside = on_rim & (r_c > itp._top(psi_c) * (1.0 + 1e-12))
+    lo, hi = pts[:, :, 0].min(axis=1), pts[:, :, 0].max(axis=1)
+    inner = ~outside & (lo >= -np.pi) & (hi <= np.pi)
+    eye = np.broadcast_to(np.eye(3), (int(inner.sum()), 3, 3))
+    out_nodes, out_bary, out_pts = [nodes[inner]], [eye], [pts[inner]]
+    for t in np.flatnonzero(~outside & ~inner & (hi > -np.pi) & (lo < np.pi)):
+        poly = [(pts[t, k], np.eye(3)[k]) for k in range(3)]
+        for bound, sign in ((-np.pi, 1.0), (np.pi, -1.0)):
+            poly = clip_reference(poly, bound, sign)
+            if len(poly) < 3:
+                break
+        for k in range(1, len(poly) - 1):
+            tri = (poly[0], poly[k], poly[k + 1])
+            out_nodes.append(nodes[t][None, :])
+            out_bary.append(np.stack([v[1] for v in tri])[None])
+            out_pts.append(np.stack([v[0] for v in tri])[None])
+    p = np.concatenate(out_pts)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return np.concatenate(out_nodes), np.concatenate(out_bary), area, p[:, :, 1]
+
+
+def test_batched_clipping_equals_the_triangle_loop_bit_for_bit():
+    from bsdfkit.reduction import disk
+
+    rng = np.random.default_rng(11)
+    cases = []
+    for n, weight in ((40, disk.AZIMUTH_WEIGHT), (300, disk.AZIMUTH_WEIGHT), (300, 0.5)):
+        r = np.sqrt(rng.uniform(0.0, 0.8, n))
+        a = rng.uniform(-np.pi, np.pi, n)
+        cases.append(disk.build(r * np.cos(a), r * np.sin(a), (0.0, 0.0), azimuth_weight=weight))
+    psi, rr = np.meshgrid(np.radians(np.arange(0.0, 360.0, 15.0)), np.linspace(0.05, 0.9, 12))
+    cases.append(disk.build((rr * np.cos(psi)).ravel(), (rr * np.sin(psi)).ravel(), (0.0, 0.0)))
+    for itp in cases:
+        new, old = itp._cells(), cells_reference(itp)
+        psi_t = itp.tri.points[itp.tri.simplices][:, :, 0] / itp.azimuth_weight
+        assert np.any((psi_t.min(axis=1) < -np.pi) & (psi_t.max(axis=1) > -np.pi))  # the seam is crossed
+        for a, b in zip(new, old):
+            np.testing.assert_array_equal(a, b)

@@ -1148,9 +1148,9 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
     def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64], k: float = 1.0) -> NDArray:
         v = np.nan_to_num(np.asarray(values, dtype=np.float64))
         dx, dy = direction_frame(geom, directions)
-        out = body.matrix(dx, dy) @ v[outside]
+        out = body.evaluate(v[outside], dx, dy)
         if lobe is not None and k != 0.0:
-            out = out + k * (lobe.matrix(dx, dy) @ (resid @ v))
+            out = out + k * lobe.evaluate(resid @ v, dx, dy)
         return out
 
     return c_body, c_lobe, ratio, body.extrapolated_beyond, evaluate, region
