@@ -100,16 +100,26 @@ class PolarInterpolant:
         bary, nodes, _ = self._located(psi, r)
         return bary, nodes
 
-    def _located(self, psi: NDArray[np.float64], r: NDArray[np.float64]
+    def _located(self, psi: NDArray[np.float64], r: NDArray[np.float64], repeats: int = 1
                  ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
-        """:meth:`_barycentric` and whether each point lies inside the domain (a lobe is zero beyond it)."""
-        psi = np.mod(psi + np.pi, 2.0 * np.pi) - np.pi
-        top = self._top(psi)  # once for the clip and the domain test (it was computed twice per call)
+        """:meth:`_barycentric` and whether each point lies inside the domain (a lobe is zero beyond it).
+        ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the polar quadrature grid, ψ repeated
+        over the radii): what depends on ψ alone is computed once per block (the same numbers)."""
+        psi_u = np.mod(psi[::repeats] + np.pi, 2.0 * np.pi) - np.pi
+        top_u = self._top(psi_u)  # once for the clip and the domain test (it was computed twice per call)
+        sin_u = np.sin(psi_u)
+        cos_u = np.cos(psi_u) if self.direction_polar is not None else None
+        if repeats > 1:
+            psi, top, sin_psi = (np.repeat(a, repeats) for a in (psi_u, top_u, sin_u))
+            cos_psi = None if cos_u is None else np.repeat(cos_u, repeats)
+        else:
+            psi, top, sin_psi, cos_psi = psi_u, top_u, sin_u, cos_u
         inside = ~(r > top * (1.0 + 1e-9) + 1e-12)
         r = np.clip(r, 0.0, top * (1.0 - 1e-12))
         if self.direction_polar is not None:
-            psi, r = direction_polar(self.center, psi, r, self.direction_polar)
-        q = _coords(psi, r, self.azimuth_weight)
+            psi, r = direction_polar(self.center, psi, r, self.direction_polar, (cos_psi, sin_psi))
+            sin_psi = None
+        q = _coords(psi, r, self.azimuth_weight, sin_psi)
         q, simplex = _locate(self.tri, q)
         t = self.tri.transform[simplex]
         b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
@@ -211,7 +221,7 @@ class PolarInterpolant:
         if not self._flat_top:
             psi, r, w = self._grid()
             # wᵀM = ((w on the domain)ᵀ B) N, B the points' barycentrics: no m × n matrix (equal up to rounding)
-            bary, cols, inside = self._located(psi, r)
+            bary, cols, inside = self._located(psi, r, QUAD_R)
             w_nodes = np.bincount(cols.ravel(), weights=(bary * np.where(inside, w, 0.0)[:, None]).ravel(),
                                   minlength=self.nodes.shape[0])
             return np.asarray(self.nodes.T @ w_nodes).ravel()
@@ -228,7 +238,7 @@ class PolarInterpolant:
             return float(self.weights() @ values)
         if not self._flat_top:
             psi, r, w = self._grid()
-            bary, nodes = self._barycentric(psi, r)
+            bary, nodes, _ = self._located(psi, r, QUAD_R)
             v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]
             pos = (v > 0).all(axis=1)
             out = np.sum(bary * v, axis=1)
@@ -314,9 +324,10 @@ def _locate(tri: Delaunay, q: NDArray[np.float64]) -> tuple[NDArray[np.float64],
 TIE_SHEAR = 1e-7
 
 
-def _coords(psi: NDArray, r: NDArray, s: float) -> NDArray[np.float64]:
-    """Triangulation coordinates (s·ψ + shear, r) of polar points."""
-    return np.stack([s * psi + TIE_SHEAR * np.sign(np.sin(psi)) * r, r], axis=1)
+def _coords(psi: NDArray, r: NDArray, s: float, sin_psi: NDArray | None = None) -> NDArray[np.float64]:
+    """Triangulation coordinates (s·ψ + shear, r) of polar points (``sin_psi``: sin ψ when already known)."""
+    sin_psi = np.sin(psi) if sin_psi is None else sin_psi
+    return np.stack([s * psi + TIE_SHEAR * np.sign(sin_psi) * r, r], axis=1)
 
 
 def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
@@ -562,12 +573,14 @@ def _with_spokes(center: tuple[float, float], psi: NDArray, r: NDArray, off: NDA
     return PolarInterpolant(center, tri, nn.astype(np.int64), base, n, None, None, s, about_direction)
 
 
-def direction_polar(center: tuple[float, float], psi: NDArray, r: NDArray, theta_i_deg: float
-                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def direction_polar(center: tuple[float, float], psi: NDArray, r: NDArray, theta_i_deg: float,
+                    cos_sin: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(azimuth about the specular direction, angle from it) [rad] of the points at polar (ψ, r) about
-    ``center`` in β (the frame of the incidence: +x toward the specular side)."""
-    x = center[0] + r * np.cos(psi)
-    y = center[1] + r * np.sin(psi)
+    ``center`` in β (the frame of the incidence: +x toward the specular side); ``cos_sin``: (cos ψ, sin ψ) when
+    already known."""
+    cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
+    x = center[0] + r * cos_psi
+    y = center[1] + r * sin_psi
     z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))
     ti = np.radians(theta_i_deg)
     along = x * np.cos(ti) - z * np.sin(ti)  # on e1 = (cos θi, 0, −sin θi)

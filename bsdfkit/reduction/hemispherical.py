@@ -69,6 +69,7 @@ that the body is rotationally symmetric about the normal and the lobe about the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -115,11 +116,19 @@ class Geometry:
         return self.theta_s.size
 
     def frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(x, y): direction cosines along +α (toward the specular side) and perpendicular to it."""
+        """(x, y): direction cosines along +α (toward the specular side) and perpendicular to it (read-only)."""
+        return self._frame
+
+    @functools.cached_property
+    def _frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        # once per geometry: a reduction asked for it 9 times per profile (0.4 s of a 12 800-record table's read)
         ts, ps = np.radians(self.theta_s), np.radians(self.phi_s)
         u = np.radians(self.phi_i) - np.pi
         a, b = np.sin(ts) * np.cos(ps), np.sin(ts) * np.sin(ps)
-        return a * np.cos(u) + b * np.sin(u), -a * np.sin(u) + b * np.cos(u)
+        x, y = a * np.cos(u) + b * np.sin(u), -a * np.sin(u) + b * np.cos(u)
+        x.setflags(write=False)
+        y.setflags(write=False)
+        return x, y
 
     def dataset(self, keep: NDArray[np.int64], values: NDArray[np.float64] | None = None,
                 extra: list[tuple[float, float]] = (), theta_i: float | None = None) -> xr.Dataset:
