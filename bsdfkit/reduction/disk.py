@@ -24,6 +24,7 @@ number and for the table.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -86,36 +87,53 @@ class PolarInterpolant:
 
     def matrix(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> sp.csr_matrix:
         """M (m × n, sparse) such that the interpolant at β = (x, y) is M @ values."""
-        dx, dy = np.ravel(x) - self.center[0], np.ravel(y) - self.center[1]
-        r = np.hypot(dx, dy)
-        psi = np.arctan2(dy, dx)
+        psi, r = self._polar(x, y)
         return self._matrix_polar(psi, r)
+
+    def _polar(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+        dx, dy = np.ravel(x) - self.center[0], np.ravel(y) - self.center[1]
+        return np.arctan2(dy, dx), np.hypot(dx, dy)
 
     def _barycentric(self, psi: NDArray[np.float64], r: NDArray[np.float64]
                      ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Barycentric coordinates (m, 3) and node indices (m, 3) of polar points (clipped to the domain)."""
-        psi = np.mod(psi + np.pi, 2.0 * np.pi) - np.pi
-        top = self._top(psi)
+        bary, nodes, _ = self._located(psi, r)
+        return bary, nodes
+
+    def _located(self, psi: NDArray[np.float64], r: NDArray[np.float64], repeats: int = 1
+                 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
+        """:meth:`_barycentric` and whether each point lies inside the domain (a lobe is zero beyond it).
+        ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the polar quadrature grid, ψ repeated
+        over the radii): what depends on ψ alone is computed once per block (the same numbers)."""
+        psi_u = np.mod(psi[::repeats] + np.pi, 2.0 * np.pi) - np.pi
+        top_u = self._top(psi_u)  # once for the clip and the domain test (it was computed twice per call)
+        sin_u = np.sin(psi_u)
+        cos_u = np.cos(psi_u) if self.direction_polar is not None else None
+        if repeats > 1:
+            psi, top, sin_psi = (np.repeat(a, repeats) for a in (psi_u, top_u, sin_u))
+            cos_psi = None if cos_u is None else np.repeat(cos_u, repeats)
+        else:
+            psi, top, sin_psi, cos_psi = psi_u, top_u, sin_u, cos_u
+        inside = ~(r > top * (1.0 + 1e-9) + 1e-12)
         r = np.clip(r, 0.0, top * (1.0 - 1e-12))
         if self.direction_polar is not None:
-            psi, r = direction_polar(self.center, psi, r, self.direction_polar)
-        q = _coords(psi, r, self.azimuth_weight)
+            psi, r = direction_polar(self.center, psi, r, self.direction_polar, (cos_psi, sin_psi))
+            sin_psi = None
+        q = _coords(psi, r, self.azimuth_weight, sin_psi)
         q, simplex = _locate(self.tri, q)
         t = self.tri.transform[simplex]
         b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
         bary = np.concatenate([b, 1.0 - b.sum(axis=1, keepdims=True)], axis=1)
-        return bary, self.point_node[self.tri.simplices[simplex]]
+        return bary, self.point_node[self.tri.simplices[simplex]], inside
 
     def _matrix_polar(self, psi: NDArray[np.float64], r: NDArray[np.float64]) -> sp.csr_matrix:
-        bary, cols = self._barycentric(psi, r)
-        top = self._top(np.mod(psi + np.pi, 2.0 * np.pi) - np.pi)
+        bary, cols, inside = self._located(psi, r)
         m = r.size
         rows = np.repeat(np.arange(m), 3)
         bmat = sp.csr_matrix((bary.ravel(), (rows, cols.ravel())), shape=(m, self.nodes.shape[0]))
         out = bmat @ self.nodes
-        outside = r > top * (1.0 + 1e-9) + 1e-12
-        if outside.any():  # beyond the domain of a lobe: zero
-            out = sp.diags((~outside).astype(float)) @ out
+        if not inside.all():  # beyond the domain of a lobe: zero
+            out = sp.diags(inside.astype(float)) @ out
         return out.tocsr()
 
     def _top(self, psi: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -124,14 +142,26 @@ class PolarInterpolant:
 
     def evaluate(self, values: NDArray[np.float64], x: NDArray[np.float64],
                  y: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The (linear) interpolant of ``values`` (per record) at β = (x, y)."""
-        return self.matrix(x, y) @ values
+        """The (linear) interpolant of ``values`` (per record) at β = (x, y).
+
+        The node values first, then each point's three (N·v at the triangle's nodes): the same number as
+        ``matrix(x, y) @ values`` up to rounding, without building the m × n matrix (an exported table evaluates
+        hundreds of chunks of directions)."""
+        psi, r = self._polar(x, y)
+        bary, cols, inside = self._located(psi, r)
+        at_nodes = self.nodes @ np.asarray(values, dtype=np.float64)
+        return np.where(inside, np.sum(bary * at_nodes[cols], axis=1), 0.0)
 
     def _cells(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """The triangles clipped to one period ψ ∈ [−π, π) and to the domain, as sub-triangles: parent nodes
         (K, 3), the parents' barycentric coordinates at the sub-triangle's vertices (K, 3, 3), areas in (ψ, r)
         [rad × direction cosines] and vertex radii (K, 3). Clipping (not a centroid rule) keeps the integral
-        exactly that of the evaluated interpolant: ring interpolation makes triangles that span wide azimuths."""
+        exactly that of the evaluated interpolant: ring interpolation makes triangles that span wide azimuths.
+        Computed once per interpolant (its weights and its ln-f integral both need it)."""
+        return self._clipped
+
+    @functools.cached_property
+    def _clipped(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         simp = self.tri.simplices
         pts = self.tri.points[simp].copy()  # (T, 3, 2) in (s·ψ, r)
         pts[:, :, 0] /= self.azimuth_weight
@@ -143,21 +173,24 @@ class PolarInterpolant:
         lo, hi = pts[:, :, 0].min(axis=1), pts[:, :, 0].max(axis=1)
         inner = ~outside & (lo >= -np.pi) & (hi <= np.pi)
         eye = np.broadcast_to(np.eye(3), (int(inner.sum()), 3, 3))
-        out_nodes, out_bary, out_pts = [nodes[inner]], [eye], [pts[inner]]
-        for t in np.flatnonzero(~outside & ~inner & (hi > -np.pi) & (lo < np.pi)):
-            poly = [(pts[t, k], np.eye(3)[k]) for k in range(3)]
-            for bound, sign in ((-np.pi, 1.0), (np.pi, -1.0)):
-                poly = _clip(poly, bound, sign)
-                if len(poly) < 3:
-                    break
-            for k in range(1, len(poly) - 1):  # fan
-                tri = (poly[0], poly[k], poly[k + 1])
-                out_nodes.append(nodes[t][None, :])
-                out_bary.append(np.stack([v[1] for v in tri])[None])
-                out_pts.append(np.stack([v[0] for v in tri])[None])
-        n_ = np.concatenate(out_nodes)
-        bary = np.concatenate(out_bary)
-        p = np.concatenate(out_pts)
+        # the triangles across the seam, all at once: clipped to ψ ≥ −π, then (if three vertices are left) ψ ≤ π
+        cut = np.flatnonzero(~outside & ~inner & (hi > -np.pi) & (lo < np.pi))
+        poly = pts[cut]
+        bary = np.broadcast_to(np.eye(3), (cut.size, 3, 3))
+        count = np.full(cut.size, 3)
+        for bound, sign in ((-np.pi, 1.0), (np.pi, -1.0)):
+            poly, bary, count = _clip_batch(poly, bary, count, bound, sign)
+            count = np.where(count < 3, 0, count)
+        # fans (0, k, k + 1), polygon by polygon in order
+        n_fan = np.maximum(count - 2, 0)
+        owner = np.repeat(np.arange(cut.size), n_fan)
+        k = np.arange(owner.size) - np.repeat(np.cumsum(n_fan) - n_fan, n_fan) + 1
+        corner = np.stack([np.zeros_like(k), k, k + 1], axis=1)
+        fan_pts = poly[owner[:, None], corner]
+        fan_bary = bary[owner[:, None], corner]
+        n_ = np.concatenate([nodes[inner], nodes[cut[owner]]])
+        bary = np.concatenate([eye, fan_bary])
+        p = np.concatenate([pts[inner], fan_pts])
         e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
         area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
         return n_, bary, area, p[:, :, 1]
@@ -187,7 +220,11 @@ class PolarInterpolant:
         normal), else on a polar grid of :data:`QUAD_PSI` × :data:`QUAD_R` nodes clipped to the domain."""
         if not self._flat_top:
             psi, r, w = self._grid()
-            return np.asarray(self._matrix_polar(psi, r).T @ w).ravel()
+            # wᵀM = ((w on the domain)ᵀ B) N, B the points' barycentrics: no m × n matrix (equal up to rounding)
+            bary, cols, inside = self._located(psi, r, QUAD_R)
+            w_nodes = np.bincount(cols.ravel(), weights=(bary * np.where(inside, w, 0.0)[:, None]).ravel(),
+                                  minlength=self.nodes.shape[0])
+            return np.asarray(self.nodes.T @ w_nodes).ravel()
         nodes, bary, area, r = self._cells()
         # per parent node i: g = λ_i, its values at the sub-triangle's vertices bary[:, k, i]
         per = area[:, None] / 12.0 * (np.einsum("kvi,kv->ki", bary, r) + bary.sum(axis=1) * r.sum(axis=1)[:, None])
@@ -201,7 +238,7 @@ class PolarInterpolant:
             return float(self.weights() @ values)
         if not self._flat_top:
             psi, r, w = self._grid()
-            bary, nodes = self._barycentric(psi, r)
+            bary, nodes, _ = self._located(psi, r, QUAD_R)
             v = (self.nodes @ np.asarray(values, dtype=np.float64))[nodes]
             pos = (v > 0).all(axis=1)
             out = np.sum(bary * v, axis=1)
@@ -219,20 +256,40 @@ class PolarInterpolant:
 
 
 
-def _clip(poly: list, bound: float, sign: float) -> list:
-    """Sutherland–Hodgman: the part of a polygon (vertices (point (ψ, r), barycentrics)) with sign·(ψ − bound)
-    ≥ 0 (ψ ≥ −π, or ψ ≤ π)."""
-    out = []
-    n = len(poly)
-    for k in range(n):
-        (p, b), (q, c) = poly[k], poly[(k + 1) % n]
-        dp, dq = sign * (p[0] - bound), sign * (q[0] - bound)
-        if dp >= 0:
-            out.append((p, b))
-        if (dp >= 0) != (dq >= 0):
-            t = dp / (dp - dq)
-            out.append((p + t * (q - p), b + t * (c - b)))
-    return out
+def _clip_batch(poly: NDArray[np.float64], bary: NDArray[np.float64], count: NDArray[np.int64], bound: float,
+                sign: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Sutherland–Hodgman on many polygons at once: the part of each polygon (vertices (ψ, r) ``poly`` (P, V, 2)
+    with barycentrics ``bary`` (P, V, 3), the first ``count`` of V in use) with sign·(ψ − bound) ≥ 0 (ψ ≥ −π,
+    or ψ ≤ π). Vertex by vertex as the one-polygon rule: a vertex kept where it is inside, then the crossing of
+    its edge to the next vertex where the edge crosses the bound (one polygon at a time made 9 000 calls on the
+    Radiant file). Returns the clipped polygons (P, 2V, ·) and their vertex counts."""
+    n_p, n_v = poly.shape[:2]
+    out_p = np.zeros((n_p, 2 * n_v, 2))
+    out_b = np.zeros((n_p, 2 * n_v, 3))
+    if n_p == 0:
+        return out_p, out_b, np.zeros(0, dtype=np.int64)
+    rows = np.arange(n_p)
+    emit = np.zeros((n_p, 2 * n_v), dtype=bool)
+    cand_p = np.zeros((n_p, 2 * n_v, 2))
+    cand_b = np.zeros((n_p, 2 * n_v, 3))
+    for k in range(n_v):
+        used = k < count
+        nxt = np.where(used, (k + 1) % np.maximum(count, 1), 0)
+        p, q = poly[:, k], poly[rows, nxt]
+        b, c = bary[:, k], bary[rows, nxt]
+        dp, dq = sign * (p[:, 0] - bound), sign * (q[:, 0] - bound)
+        cross = used & ((dp >= 0) != (dq >= 0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.where(cross, dp / np.where(cross, dp - dq, 1.0), 0.0)[:, None]
+        emit[:, 2 * k] = used & (dp >= 0)
+        emit[:, 2 * k + 1] = cross
+        cand_p[:, 2 * k], cand_b[:, 2 * k] = p, b
+        cand_p[:, 2 * k + 1], cand_b[:, 2 * k + 1] = p + t * (q - p), b + t * (c - b)
+    slot = np.cumsum(emit, axis=1) - 1
+    r, col = np.nonzero(emit)
+    out_p[r, slot[r, col]] = cand_p[r, col]
+    out_b[r, slot[r, col]] = cand_b[r, col]
+    return out_p, out_b, emit.sum(axis=1)
 
 
 #: Dunavant's 7-point rule on a triangle (degree 5): barycentric points and weights summing to 1.
@@ -267,9 +324,10 @@ def _locate(tri: Delaunay, q: NDArray[np.float64]) -> tuple[NDArray[np.float64],
 TIE_SHEAR = 1e-7
 
 
-def _coords(psi: NDArray, r: NDArray, s: float) -> NDArray[np.float64]:
-    """Triangulation coordinates (s·ψ + shear, r) of polar points."""
-    return np.stack([s * psi + TIE_SHEAR * np.sign(np.sin(psi)) * r, r], axis=1)
+def _coords(psi: NDArray, r: NDArray, s: float, sin_psi: NDArray | None = None) -> NDArray[np.float64]:
+    """Triangulation coordinates (s·ψ + shear, r) of polar points (``sin_psi``: sin ψ when already known)."""
+    sin_psi = np.sin(psi) if sin_psi is None else sin_psi
+    return np.stack([s * psi + TIE_SHEAR * np.sign(sin_psi) * r, r], axis=1)
 
 
 def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
@@ -515,12 +573,14 @@ def _with_spokes(center: tuple[float, float], psi: NDArray, r: NDArray, off: NDA
     return PolarInterpolant(center, tri, nn.astype(np.int64), base, n, None, None, s, about_direction)
 
 
-def direction_polar(center: tuple[float, float], psi: NDArray, r: NDArray, theta_i_deg: float
-                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def direction_polar(center: tuple[float, float], psi: NDArray, r: NDArray, theta_i_deg: float,
+                    cos_sin: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(azimuth about the specular direction, angle from it) [rad] of the points at polar (ψ, r) about
-    ``center`` in β (the frame of the incidence: +x toward the specular side)."""
-    x = center[0] + r * np.cos(psi)
-    y = center[1] + r * np.sin(psi)
+    ``center`` in β (the frame of the incidence: +x toward the specular side); ``cos_sin``: (cos ψ, sin ψ) when
+    already known."""
+    cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
+    x = center[0] + r * cos_psi
+    y = center[1] + r * sin_psi
     z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))
     ti = np.radians(theta_i_deg)
     along = x * np.cos(ti) - z * np.sin(ti)  # on e1 = (cos θi, 0, −sin θi)
