@@ -53,8 +53,8 @@ def walk_reference(x, g, s, start, step, tail_excess, min_fall=0.0):
 def profiles(seed: int = 3):
     """Gaussian and power-law lobes on a floor, fine and coarse, uniform and non-uniform sampling, with noise."""
     rng = np.random.default_rng(seed)
-    for k in range(36):
-        n = int(rng.integers(4, 300))
+    for k in range(20):
+        n = int(rng.integers(4, 200))
         x = np.sort(rng.uniform(-1.0, 1.0, n)) if k % 3 == 0 else np.linspace(-0.99, 0.99, n)
         if k % 5 == 0:
             x = np.sort(np.concatenate([x, rng.uniform(0.3, 0.5, 50)]))
