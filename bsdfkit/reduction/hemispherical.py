@@ -206,7 +206,9 @@ def _line_at(x: NDArray, g: NDArray, idx: NDArray[np.int64], use: NDArray[np.boo
         slope = np.sum(dx * (g[idx] - gm[:, None]) * w, axis=1) / sxx
         pred = gm + slope * (at - xm)
     pred[cnt < 2] = np.nan
-    for j in np.flatnonzero((cnt >= 2) & ~(sxx > 0)):
+    # samples at one x (their mean may round off it, leaving a spurious Σ dx² > 0): polyfit's answer, as before
+    one_x = np.where(use, x[idx], np.inf).min(axis=1) == np.where(use, x[idx], -np.inf).max(axis=1)
+    for j in np.flatnonzero((cnt >= 2) & (one_x | ~(sxx > 0))):
         k = idx[j, use[j]]
         pred[j] = np.polyval(np.polyfit(x[k], g[k], 1), at[j])
     return pred
