@@ -74,24 +74,35 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
         axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
     else:
         fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
-        cell = getattr(settings, "node_values", "point") == "cell"
-        # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them
+        values = getattr(settings, "node_values", "edge")
+        # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them; edge values: the
+        # TIS compared is that of each candidate table with its own edge values
         auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
-                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg), cell_average=cell)
+                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg),
+                                            cell_average=values == "cell", edge_values=values == "edge")
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     return axes, grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
 
 
 def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
                        info: dict[str, Any], settings: Any) -> xr.DataArray:
-    """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``:
-    point samples (default) or, with ``settings.node_values == "cell"``, cell averages (the table's TIS by its
-    format's rule is the source's on any axes, :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
-    if getattr(settings, "node_values", "point") == "cell":
-        info["values"] = "cell averages"
+    """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``
+    (:data:`VALUES_LABEL`): ``settings.node_values`` ``edge`` (default: point samples, each row's last node inside
+    the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`), ``point`` (point samples
+    only) or ``cell`` (cell averages: the table's TIS by its format's rule is the source's on any axes,
+    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
+    values = getattr(settings, "node_values", "edge")
+    info["values"] = VALUES_LABEL[values]
+    if values == "cell":
         return grids.harvey_shack_cell_grid(fn, theta, sides, axes)
-    info["values"] = "point samples"
+    if values == "edge":
+        return grids.harvey_shack_edge_grid(fn, theta, sides, axes)
     return grids.harvey_shack_grid(fn, theta, sides, axes)
+
+
+#: ``grid['values']`` of an export by ``node_values`` (and back: the re-check rewrites with the same values)
+VALUES_LABEL = {"point": "point samples", "edge": "point samples, edge values at the disk's edge",
+                "cell": "cell averages"}
 
 
 def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],

@@ -46,6 +46,7 @@ from bsdfkit.tables.axes_choice import (
     FALLBACK_RECHECK,
     RECHECK_FACTOR,
     RECHECK_ROUNDS,
+    VALUES_LABEL,
     plane_symmetric_grid,
 )
 from bsdfkit.tables.formats import asap, tracepro
@@ -88,7 +89,7 @@ def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
 
 
 #: what a Harvey–Shack table holds at its nodes (:attr:`ExportSettings.node_values`)
-NODE_VALUES = ("point", "cell")
+NODE_VALUES = ("edge", "point", "cell")
 
 
 @dataclass(frozen=True)
@@ -128,9 +129,11 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
-    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``point`` samples (default) or ``cell``
-    #: averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the lobe's peak only)
-    node_values: str = "point"
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``edge`` (default: point samples, each
+    #: row's last node inside the disk holding its edge value, :func:`grids.harvey_shack_edge_values`), ``point``
+    #: samples only, or ``cell`` averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the
+    #: lobe's peak only)
+    node_values: str = "edge"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
@@ -455,6 +458,12 @@ def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence
         return {}
     # the lobe's core on the written nodes; its midpoints belong to it when both ends do
     core = grids.lobe_core(table, np.broadcast_to(inside, table.shape))
+    if first.kind == "harvey_shack" and settings.node_values == "edge":
+        # a row's last node inside the disk holds its edge value (the strip up to the edge integrated as the
+        # source does, grids.harvey_shack_edge_values), not a sample of the source: the peak is compared on the
+        # point samples
+        last = np.cumsum(np.broadcast_to(inside, table.shape), axis=-1) == np.sum(inside, axis=-1, keepdims=True)
+        core = core & ~(last & np.broadcast_to(inside, table.shape))
     core_src = np.zeros(src.shape, dtype=bool)
     core_src[..., ::2] = core
     core_src[..., 1::2] = core[..., :-1] & core[..., 1:] & mid_in
@@ -559,7 +568,7 @@ def export(
                 # the doubled azimuths hold what the first table held (cell averages on auto axes)
                 write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
                     axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg),
-                    node_values="cell" if info.get("values") == "cell averages" else "point"), True)
+                    node_values={v: k for k, v in VALUES_LABEL.items()}.get(info.get("values"), "point")), True)
             else:
                 a = np.asarray(axes.azimuth_deg)
                 if settings.zemax_symmetry == "PlaneSymmetrical":
