@@ -48,12 +48,14 @@ def plane_symmetric_grid(
 
 #: Grid mode reported when the auto grid would need more nodes than the fixed grid: the fixed grid is written.
 FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
-#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS azimuth doublings.
+#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS re-choices.
 FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
 #: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
-#: direct integral of the source callable; else its azimuths are doubled (at most RECHECK_ROUNDS times).
-RECHECK_FACTOR = 2.0
+#: direct integral of the source callable; else its axes are chosen again with tis_rtol × RECHECK_TIGHTEN^k
+#: (k = 1, 2, …; cell averages: the azimuths doubled), at most RECHECK_ROUNDS times, then the fixed grid.
+RECHECK_FACTOR = 1.0
 RECHECK_ROUNDS = 2
+RECHECK_TIGHTEN = 0.7
 
 
 def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[str, Any]:

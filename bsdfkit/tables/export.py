@@ -46,6 +46,7 @@ from bsdfkit.tables.axes_choice import (
     FALLBACK_RECHECK,
     RECHECK_FACTOR,
     RECHECK_ROUNDS,
+    RECHECK_TIGHTEN,
     VALUES_LABEL,
     plane_symmetric_grid,
 )
@@ -547,14 +548,8 @@ def export(
             if worst <= limit:
                 break
             axes = written_axes[0]
-            if isinstance(axes, grids.HarveyShackAxes):
-                fixed_nodes = len(grids.HarveyShackAxes.default().rho) * 72
-                doubled_nodes = len(axes.rho) * 2 * len(axes.azimuth_deg)
-            else:
-                fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
-                fixed_nodes = len(fixed.radial_deg) * len(fixed.azimuth_deg)
-                doubled_nodes = 0 if axes is None else len(axes.radial_deg) * (2 * len(axes.azimuth_deg) - 1)
-            if attempt == RECHECK_ROUNDS or axes is None or doubled_nodes > fixed_nodes:
+            cell = grid_info.get("values") == VALUES_LABEL["cell"]
+            if attempt == RECHECK_ROUNDS or (cell and not isinstance(axes, grids.HarveyShackAxes)):
                 # the fixed grid, as without --grid auto (never more nodes than it)
                 write(replace(settings, grid="fixed"), True)
                 grid_info["mode"] = FALLBACK_RECHECK
@@ -562,22 +557,25 @@ def export(
                 break
             info = dict(grid_info)
             summary = None
-            if isinstance(axes, grids.HarveyShackAxes):
+            if cell:  # cell averages hold the format's TIS on any axes: more azimuths for the engine's reading
                 a = np.asarray(axes.azimuth_deg)
                 both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
-                # the doubled azimuths hold what the first table held (cell averages on auto axes)
+                if len(axes.rho) * both.size > len(grids.HarveyShackAxes.default().rho) * 72:
+                    write(replace(settings, grid="fixed"), True)
+                    grid_info["mode"] = FALLBACK_RECHECK
+                    break
                 write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
-                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg),
-                    node_values={v: k for k, v in VALUES_LABEL.items()}.get(info.get("values"), "point")), True)
-            else:
-                a = np.asarray(axes.azimuth_deg)
-                if settings.zemax_symmetry == "PlaneSymmetrical":
-                    both = np.sort(np.concatenate([a, 0.5 * (a[:-1] + a[1:])]))
-                else:
-                    both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
-                write(replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist()))),
-                      True)
-            grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
+                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg)), True)
+                grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
+                continue
+            # the axes chosen again for a tighter TIS tolerance (the criteria the grid was refined by, with less
+            # room: the engine reads a table within about 0.3 % of its format's rule, docs/exports.md)
+            tighter = replace(settings.grid_tolerance,
+                              tis_rtol=settings.grid_tolerance.tis_rtol * RECHECK_TIGHTEN ** (attempt + 1))
+            write(replace(settings, grid_tolerance=tighter), True)
+            grid_info = dict(grid_info, rechecks=attempt + 1, tis_rtol=tighter.tis_rtol)
+            if grid_info.get("mode") != "auto":  # the tighter tolerance needs more nodes than the fixed grid
+                break
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = summary if summary is not None else read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
