@@ -52,7 +52,8 @@ FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
 FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
 #: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
 #: direct integral of the source callable; else its axes are chosen again with tis_rtol × RECHECK_TIGHTEN^k
-#: (k = 1, 2, …; cell averages: the azimuths doubled), at most RECHECK_ROUNDS times, then the fixed grid.
+#: (k = 1, 2, …), at most RECHECK_ROUNDS times, and the written table closest to the source kept (cell averages: the
+#: azimuths doubled, then the fixed grid).
 RECHECK_FACTOR = 1.0
 RECHECK_ROUNDS = 2
 RECHECK_TIGHTEN = 0.7
