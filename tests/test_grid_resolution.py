@@ -74,7 +74,7 @@ def test_fixed_option_writes_the_old_grid(tmp_path):
     np.testing.assert_allclose(table["rho"].values, old.rho, rtol=1e-9, atol=0)
     np.testing.assert_allclose(table["psi"].values, old.azimuth_deg, rtol=0, atol=1e-9)
     assert tp.grid == {"mode": "fixed", "radial": len(old.rho), "azimuth": len(old.azimuth_deg),
-                       "values": "point samples, edge values at the disk's edge"}
+                       "values": "point samples"}
     zx = export(lambertian, "zemax", "", "reflection", tmp_path / "z",
                 settings=ExportSettings(theta_i_deg=THETA, grid="fixed"))
     read = zemax.read_zemax(tmp_path / "z").table

@@ -779,7 +779,7 @@ def _tidy(values: NDArray[np.float64]) -> tuple[float, ...]:
 
 
 #: Share of a block's estimated TIS error that one refinement round marks (:func:`bulk_marking`)
-BULK_SHARE = 0.15
+BULK_SHARE = 0.5
 #: Indicators within this relative difference of the last marked one are marked with it (:func:`bulk_marking`)
 TIE_RTOL = 1e-6
 
