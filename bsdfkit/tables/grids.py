@@ -842,7 +842,7 @@ def _refine_polar(
     ``tis_rtol``/2, (ii) halving the azimuth step changes none by more than ``tis_rtol``/2, and (iii) the
     linear table misses the callable at no midpoint by more than ``peak_rtol`` × the block's peak.
     Otherwise it bisects the radial segments that miss (iii) and, in each block that misses (i), the segments that
-    carry 15 % of its estimated TIS error (:func:`bulk_marking` of Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2,
+    carry half its estimated TIS error (:func:`bulk_marking` of Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2,
     the quadrature of the miss), and likewise the azimuth intervals when (ii) or (iii) fails in azimuth.
     Deterministic; no node finer than ``min_step``. ``finish(values, r, a)``, if given, turns the point samples
     of a candidate grid into the values the table would hold (edge values: :func:`harvey_shack_edge_values`);
