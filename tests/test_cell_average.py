@@ -71,7 +71,7 @@ def test_cell_averages_on_given_axes_pass_the_tis_check_where_point_samples_fail
     cell = export(gaussian, to, "", "reflection", tmp_path / "cell",
                   settings=ExportSettings(theta_i_deg=(0.0, 30.0), harvey_shack_axes=axes, node_values="cell"))
     point = export(gaussian, to, "", "reflection", tmp_path / "point",
-                   settings=ExportSettings(theta_i_deg=(0.0, 30.0), harvey_shack_axes=axes))
+                   settings=ExportSettings(theta_i_deg=(0.0, 30.0), harvey_shack_axes=axes, node_values="point"))
     assert cell.grid["values"] == "cell averages" and point.grid["values"] == "point samples"
     np.testing.assert_allclose(cell.tis_table["reflection"], GAUSS_TIS, rtol=5e-3)
     assert np.all(np.abs(np.asarray(point.tis_table["reflection"]) / GAUSS_TIS - 1.0) > 0.1)

@@ -193,7 +193,10 @@ def _lobe_dir(theta_i, d, rho=0.4, amp=3.0, sigma=0.2):
 @pytest.mark.parametrize("half", [False, True], ids=["full_circle", "half_plane_mirrored"])
 def test_full_hemisphere_long_table_converts_as_scattered_data(tmp_path, half):
     """θs × φs grids (5° × 15°) are interpolated over the projected disk, not reduced to two arcs; a half-plane
-    grid is mirrored. TIS against the direct integral of the truth: measured +0.2 % (0°), −0.8 % (30°)."""
+    grid is mirrored. The reconstruction's TIS against the direct integral of the truth: +0.78 % (0°), −0.40 %
+    (30°); the written table within its grid tolerance of the reconstruction (+0.26 %, +0.27 %), so within 1.1 % of
+    the truth (+1.04 %, −0.14 %; before issue #25's grids +0.2 %, −0.8 %, the table's error partly cancelling the
+    reconstruction's)."""
     lines = ["theta_i,phi_i,theta_s,phi_s,BRDF"]
     for ti in (0.0, 30.0):
         for ts in np.arange(0.0, 90.0, 5.0):
@@ -208,7 +211,10 @@ def test_full_hemisphere_long_table_converts_as_scattered_data(tmp_path, half):
     result = convert(path, "asap", tmp_path / "full.asap.txt", wavelength=550.0)
     exact = [grids.tis_reference(lambda t, s, d: _lobe_dir(t, d), t, "reflection") for t in (0.0, 30.0)]
     rel = np.array(result.tis_written["reflection"]) / np.array(exact) - 1.0
-    assert np.all(np.abs(rel) < 0.01), rel
+    assert np.all(np.abs(rel) < 0.011), rel
+    source = np.array(result.tis_original["reflection"]) / np.array(exact) - 1.0
+    assert np.all(np.abs(source) < 0.01), source  # the reconstruction
+    assert result.ok and result.worst_relative_difference < 0.005  # the table against it: the grid's tolerance
     assert any("disk" in n for n in result.notes)  # every record over the projected disk, not two arcs
     from bsdfkit.reduction.hemispherical import hemispherical
     from bsdfkit.tables.to_dataset import ingest

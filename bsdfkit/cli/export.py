@@ -47,6 +47,10 @@ def describe_grid(result) -> str:
     text = f"{result.size_bytes:,} bytes; grid {g.get('mode', '?')}"
     if "radial" in g:
         text += f": {g['radial']} radial x {g['azimuth']} azimuth nodes"
+    elif "theta" in g and "phi" in g:
+        text += f": {g['theta']} theta x {g['phi']} phi nodes (normal frame)"
+    elif "radial_nodes" in g and "azimuth" in g:
+        text += f": {g['radial_nodes']} radial x {g['azimuth']} azimuth nodes (normal frame)"
     if g.get("mode") == "auto":
         text += f" (TIS tolerance {g['tis_rtol']:g}, peak tolerance {g['peak_rtol']:g})"
     if "values" in g:

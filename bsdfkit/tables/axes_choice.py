@@ -48,12 +48,15 @@ def plane_symmetric_grid(
 
 #: Grid mode reported when the auto grid would need more nodes than the fixed grid: the fixed grid is written.
 FALLBACK = "fixed (the tolerance needs more nodes than the fixed grid)"
-#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS azimuth doublings.
+#: Grid mode reported when the written auto table failed its re-check after RECHECK_ROUNDS re-choices.
 FALLBACK_RECHECK = "fixed (the auto table failed its re-read TIS check)"
 #: The written auto table's TIS (as bsdfkit read integrates it) must be within RECHECK_FACTOR × tis_rtol of the
-#: direct integral of the source callable; else its azimuths are doubled (at most RECHECK_ROUNDS times).
-RECHECK_FACTOR = 2.0
+#: direct integral of the source callable; else its axes are chosen again with tis_rtol × RECHECK_TIGHTEN^k
+#: (k = 1, 2, …), at most RECHECK_ROUNDS times, and the written table closest to the source kept (cell averages: the
+#: azimuths doubled, then the fixed grid).
+RECHECK_FACTOR = 1.0
 RECHECK_ROUNDS = 2
+RECHECK_TIGHTEN = 0.7
 
 
 def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[str, Any]:
@@ -74,24 +77,35 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
         axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
     else:
         fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
-        cell = getattr(settings, "node_values", "point") == "cell"
-        # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them
+        values = getattr(settings, "node_values", "point")
+        # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them; edge values: the
+        # TIS compared is that of each candidate table with its own edge values
         auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
-                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg), cell_average=cell)
+                                            max_nodes=len(fixed.rho) * len(fixed.azimuth_deg),
+                                            cell_average=values == "cell", edge_values=values == "edge")
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     return axes, grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
 
 
 def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
                        info: dict[str, Any], settings: Any) -> xr.DataArray:
-    """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``:
-    point samples (default) or, with ``settings.node_values == "cell"``, cell averages (the table's TIS by its
-    format's rule is the source's on any axes, :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
-    if getattr(settings, "node_values", "point") == "cell":
-        info["values"] = "cell averages"
+    """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``
+    (:data:`VALUES_LABEL`): ``settings.node_values`` ``point`` (default: point samples), ``edge`` (point samples,
+    each row's last node inside the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`) or
+    ``cell`` (cell averages: the table's TIS by its format's rule is the source's on any axes,
+    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
+    values = getattr(settings, "node_values", "point")
+    info["values"] = VALUES_LABEL[values]
+    if values == "cell":
         return grids.harvey_shack_cell_grid(fn, theta, sides, axes)
-    info["values"] = "point samples"
+    if values == "edge":
+        return grids.harvey_shack_edge_grid(fn, theta, sides, axes)
     return grids.harvey_shack_grid(fn, theta, sides, axes)
+
+
+#: ``grid['values']`` of an export by ``node_values`` (and back: the re-check rewrites with the same values)
+VALUES_LABEL = {"point": "point samples", "edge": "point samples, edge values at the disk's edge",
+                "cell": "cell averages"}
 
 
 def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],

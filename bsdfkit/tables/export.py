@@ -46,6 +46,8 @@ from bsdfkit.tables.axes_choice import (
     FALLBACK_RECHECK,
     RECHECK_FACTOR,
     RECHECK_ROUNDS,
+    RECHECK_TIGHTEN,
+    VALUES_LABEL,
     plane_symmetric_grid,
 )
 from bsdfkit.tables.formats import asap, tracepro
@@ -88,7 +90,7 @@ def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
 
 
 #: what a Harvey–Shack table holds at its nodes (:attr:`ExportSettings.node_values`)
-NODE_VALUES = ("point", "cell")
+NODE_VALUES = ("point", "edge", "cell")
 
 
 @dataclass(frozen=True)
@@ -128,8 +130,10 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
-    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``point`` samples (default) or ``cell``
-    #: averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the lobe's peak only)
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``point`` samples (default), ``edge``
+    #: (point samples, each row's last node inside the disk holding its edge value,
+    #: :func:`grids.harvey_shack_edge_values`) or ``cell`` averages (:func:`grids.harvey_shack_cell_grid`; auto axes
+    #: then refined by the lobe's peak only)
     node_values: str = "point"
 
     def __post_init__(self) -> None:
@@ -455,6 +459,12 @@ def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence
         return {}
     # the lobe's core on the written nodes; its midpoints belong to it when both ends do
     core = grids.lobe_core(table, np.broadcast_to(inside, table.shape))
+    if first.kind == "harvey_shack" and settings.node_values == "edge":
+        # a row's last node inside the disk holds its edge value (the strip up to the edge integrated as the
+        # source does, grids.harvey_shack_edge_values), not a sample of the source: the peak is compared on the
+        # point samples
+        last = np.cumsum(np.broadcast_to(inside, table.shape), axis=-1) == np.sum(inside, axis=-1, keepdims=True)
+        core = core & ~(last & np.broadcast_to(inside, table.shape))
     core_src = np.zeros(src.shape, dtype=bool)
     core_src[..., ::2] = core
     core_src[..., 1::2] = core[..., :-1] & core[..., 1:] & mid_in
@@ -530,45 +540,76 @@ def export(
         # format's quadrature the grid was chosen with, so a lobe cut by the horizon may need more azimuths
         reference = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
         limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
-        for attempt in range(RECHECK_ROUNDS + 1):
-            summary = read_any(path)
-            computed = summary.tis_computed
-            worst = max(abs(computed[s][k] / reference[s][k] - 1.0) if reference[s][k] > 0 else 0.0
-                        for s in sides for k in range(theta.size))
-            if worst <= limit:
-                break
-            axes = written_axes[0]
+        cell = grid_info.get("values") == VALUES_LABEL["cell"]
+        first_axes = written_axes[0]
+
+        def doubled() -> ExportSettings | None:
+            """The first auto axes with every azimuth interval bisected (None: no polar axes, or more nodes than
+            the fixed grid)."""
+            axes = first_axes
+            a = np.asarray(getattr(axes, "azimuth_deg", ()), dtype=np.float64)
             if isinstance(axes, grids.HarveyShackAxes):
-                fixed_nodes = len(grids.HarveyShackAxes.default().rho) * 72
-                doubled_nodes = len(axes.rho) * 2 * len(axes.azimuth_deg)
-            else:
-                fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
-                fixed_nodes = len(fixed.radial_deg) * len(fixed.azimuth_deg)
-                doubled_nodes = 0 if axes is None else len(axes.radial_deg) * (2 * len(axes.azimuth_deg) - 1)
-            if attempt == RECHECK_ROUNDS or axes is None or doubled_nodes > fixed_nodes:
-                # the fixed grid, as without --grid auto (never more nodes than it)
-                write(replace(settings, grid="fixed"), True)
-                grid_info["mode"] = FALLBACK_RECHECK
-                summary = None
-                break
-            info = dict(grid_info)
-            summary = None
-            if isinstance(axes, grids.HarveyShackAxes):
-                a = np.asarray(axes.azimuth_deg)
                 both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
-                # the doubled azimuths hold what the first table held (cell averages on auto axes)
-                write(replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
-                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg),
-                    node_values="cell" if info.get("values") == "cell averages" else "point"), True)
-            else:
-                a = np.asarray(axes.azimuth_deg)
+                if len(axes.rho) * both.size > len(grids.HarveyShackAxes.default().rho) * 72:
+                    return None
+                return replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
+                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg))
+            if isinstance(axes, grids.SpecularAxes):
                 if settings.zemax_symmetry == "PlaneSymmetrical":
                     both = np.sort(np.concatenate([a, 0.5 * (a[:-1] + a[1:])]))
                 else:
                     both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
-                write(replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist()))),
-                      True)
-            grid_info = dict(info, azimuth=int(both.size), rechecks=attempt + 1)
+                fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
+                if len(axes.radial_deg) * both.size > len(fixed.radial_deg) * len(fixed.azimuth_deg):
+                    return None
+                return replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist())))
+            return None
+
+        # candidates after the first auto table, in order, until one passes: the axes chosen again for a tighter TIS
+        # tolerance (not for cell averages, whose TIS needs no refinement), the first axes with doubled azimuths
+        # (the engine interpolates between spokes), the fixed grid; the table closest to the source is kept
+        steps: list[tuple[str, Any]] = []
+        if not cell:
+            steps += [("tighter", k) for k in range(1, RECHECK_ROUNDS)]
+        steps += [("doubled", None), ("fixed", None)]
+        tried = []  # (worst, settings written, grid info) of each table written
+        current = settings
+        for step, k in [("auto", None)] + steps:
+            if step == "tighter":
+                tighter = replace(settings.grid_tolerance, tis_rtol=settings.grid_tolerance.tis_rtol
+                                  * RECHECK_TIGHTEN ** k)
+                current = replace(settings, grid_tolerance=tighter)
+                write(current, True)
+                if grid_info.get("mode") != "auto":  # needs more nodes than the fixed grid: the fixed grid
+                    continue
+                grid_info = dict(grid_info, tis_rtol=tighter.tis_rtol)
+            elif step == "doubled":
+                candidate = doubled()
+                if candidate is None:
+                    continue
+                info = dict(tried[0][2])
+                current = candidate
+                write(current, True)
+                grid_info = dict(info, azimuth=int(grid_info.get("azimuth", 0)))
+            elif step == "fixed":
+                current = replace(settings, grid="fixed")
+                write(current, True)
+                grid_info["mode"] = FALLBACK_RECHECK
+            summary = read_any(path)
+            computed = summary.tis_computed
+            worst = max(abs(computed[s][k_] / reference[s][k_] - 1.0) if reference[s][k_] > 0 else 0.0
+                        for s in sides for k_ in range(theta.size))
+            tried.append((worst, current, dict(grid_info, rechecks=len(tried))))
+            if worst <= limit:
+                break
+        best = min(range(len(tried)), key=lambda i: tried[i][0])
+        grid_info = dict(tried[best][2])
+        if len(tried) > 1:
+            grid_info["recheck_worst"] = float(tried[best][0])
+        if best != len(tried) - 1:  # an earlier table was closer to the source: written again
+            write(tried[best][1], True)
+            grid_info = dict(tried[best][2], recheck_worst=float(tried[best][0]))
+            summary = None
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = summary if summary is not None else read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}

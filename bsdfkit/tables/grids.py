@@ -443,6 +443,85 @@ def harvey_shack_cell_grid(
     )
 
 
+#: Gauss–Legendre points along a row's edge strip of :func:`harvey_shack_edge_values`
+EDGE_ORDER = 16
+
+
+def harvey_shack_edge_values(
+    values: ArrayLike, bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str,
+    axes: HarveyShackAxes, order: int = EDGE_ORDER,
+) -> NDArray[np.float64]:
+    """Point samples of a Harvey–Shack table with each row's last node inside the disk replaced by its *edge value*.
+
+    Parameters
+    ----------
+    values
+        The table ``[side, theta_i, rho, psi]`` [1/sr] as :func:`harvey_shack_grid` samples it.
+    bsdf_fn, theta_i_deg, sides, axes
+        The source [1/sr], incidences [deg], sides and axes the table was sampled with.
+    order
+        Gauss–Legendre points along each row's edge strip.
+
+    Returns
+    -------
+    numpy.ndarray
+        The table [1/sr]: every node the point sample, but node (ρ_J, ψ_k), the last of row k with ρ_J ≤ ρmax(ψ_k),
+        which holds the value v ≥ 0 for which the row integrates the strip [ρ_{J−1}, ρmax] as the source does::
+
+            ∫_{ρ_{J−1}}^{ρ_J} lin(f_{J−1}, v) ρ dρ + v (ρmax² − ρ_J²)/2 = ∫_{ρ_{J−1}}^{ρmax} f ρ dρ
+
+    Notes
+    -----
+    A table reader cannot follow the disk's edge between the nodes of one ρ list shared by every azimuth and
+    incidence: the format's rule (:func:`tis_harvey_shack_table`) and the hemispherical engine behind ``bsdfkit
+    read`` both hold a row's last node inside the disk out to the edge. A point sample held across a strip up to
+    one radial step wide misses the source's slope there — for a source that rises or falls toward the horizon
+    (a lobe at grazing incidence, a reconstruction held beyond its last measured angle) that strip carried most of
+    the table's TIS error (docs/exports.md, "Grid resolution"). The edge value makes the held strip integrate as
+    the source does, row by row, on any axes; a constant source keeps its constant. Rows whose edge falls on a
+    node, and rows with one node inside, keep their point samples.
+    """
+    thetas = _check_incidences(theta_i_deg)
+    sides = _check_sides(sides)
+    out = np.array(values, dtype=np.float64, copy=True)
+    rho = np.asarray(axes.rho, dtype=np.float64)
+    az = np.asarray(axes.azimuth_deg, dtype=np.float64)
+    zero = float(axes.zero_azimuth_deg)
+    x, w = gauss_legendre(int(order))
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    for t, theta in enumerate(thetas):
+        rmax = np.minimum(rho_max(theta, az + zero), rho[-1])
+        last = np.searchsorted(rho, rmax, side="right") - 1  # the reader's "inside" (ρ ≤ ρmax), as the quadrature
+        rows = np.flatnonzero((last >= 1) & (rho[np.maximum(last, 0)] < rmax))
+        if rows.size == 0:
+            continue
+        j = last[rows]
+        a, b, r_j = rho[j - 1], rmax[rows], rho[j]
+        r = a[:, None] + (b - a)[:, None] * x[None, :]
+        psi_s = np.radians(az[rows] + zero)
+        beta = frames.beta0(np.radians(theta)) + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None]
+        norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
+        beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
+        directions = frames.direction_from_beta(beta.reshape(-1, 2))
+        c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
+        c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
+        for s, side in enumerate(sides):
+            f = evaluate_bsdf(bsdf_fn, float(theta), side, directions).reshape(r.shape)
+            strip = (b - a) * np.sum(f * r * w[None, :], axis=1)
+            out[s, t, j, rows] = np.maximum((strip - out[s, t, j - 1, rows] * c_prev) / c_last, 0.0)
+    return out
+
+
+def harvey_shack_edge_grid(
+    bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str, axes: HarveyShackAxes
+) -> xr.DataArray:
+    """:func:`harvey_shack_grid` with each row's last node inside the disk holding its edge value
+    (:func:`harvey_shack_edge_values`), dims ``(side, theta_i, rho, psi)`` [1/sr]."""
+    grid = harvey_shack_grid(bsdf_fn, theta_i_deg, sides, axes)
+    values = harvey_shack_edge_values(grid.values, bsdf_fn, grid["theta_i"].values, tuple(grid["side"].values), axes)
+    return grid.copy(data=values).assign_attrs(values="point samples, edge values at the disk's edge")
+
+
 def specular_grid(
     bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str, axes: SpecularAxes
 ) -> xr.DataArray:
@@ -699,6 +778,47 @@ def _tidy(values: NDArray[np.float64]) -> tuple[float, ...]:
     return tuple(float(f"{v:.9g}") for v in values)
 
 
+#: Share of a block's estimated TIS error that one refinement round marks (:func:`bulk_marking`)
+BULK_SHARE = 0.5
+#: Indicators within this relative difference of the last marked one are marked with it (:func:`bulk_marking`)
+TIE_RTOL = 1e-6
+
+
+def bulk_marking(indicators: ArrayLike, share: float = BULK_SHARE) -> NDArray[np.bool_]:
+    """Intervals to refine so that each block's refinement addresses ``share`` of its estimated error.
+
+    Parameters
+    ----------
+    indicators
+        ``[block, interval]`` [1]: each interval's share of a block's TIS error (relative to the block's TIS),
+        for the blocks that miss their tolerance.
+    share
+        Fraction of each block's summed indicators the marked intervals must hold.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``[interval]`` bool: the union over blocks of the fewest intervals, largest indicator first, whose
+        indicators add up to ``share`` of the block's sum (Dörfler's bulk criterion of adaptive quadrature and
+        finite elements), and the intervals tied with the last of them (within :data:`TIE_RTOL`). Refining where
+        the error is, block by block, rather than every interval above an average share: a grid shared by many
+        incidences grows only where one of them needs it.
+    """
+    ind = np.atleast_2d(np.asarray(indicators, dtype=np.float64))
+    flag = np.zeros(ind.shape[-1], dtype=bool)
+    for row in ind.reshape(-1, ind.shape[-1]):
+        total = float(np.sum(row))
+        if not total > 0.0:
+            continue
+        order = np.argsort(-row, kind="stable")
+        count = int(np.searchsorted(np.cumsum(row[order]), share * total)) + 1
+        cut = row[order[min(count, row.size) - 1]]
+        # ties with the last marked interval are marked too (to rounding): a source symmetric about the plane of
+        # incidence keeps symmetric axes
+        flag |= row >= cut * (1.0 - TIE_RTOL)
+    return flag
+
+
 def _refine_polar(
     evaluate: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]],
     quad: Callable[[NDArray, NDArray, NDArray], NDArray],
@@ -711,6 +831,7 @@ def _refine_polar(
     azimuth_cap: int,
     max_nodes: int | None = None,
     tis_criteria: bool = True,
+    finish: Callable[[NDArray, NDArray, NDArray], NDArray] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Coarse-to-fine choice of a polar table's radial and azimuth nodes (shared by both geometries).
 
@@ -720,9 +841,12 @@ def _refine_polar(
     grid. It stops when (i) bisecting every radial segment changes no block's TIS by more than
     ``tis_rtol``/2, (ii) halving the azimuth step changes none by more than ``tis_rtol``/2, and (iii) the
     linear table misses the callable at no midpoint by more than ``peak_rtol`` × the block's peak.
-    Otherwise it bisects the radial segments that miss (iii) or carry more than their share of the TIS
-    error (Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2, the quadrature of the miss), and doubles the
-    azimuths when (ii) or (iii) fails in azimuth. Deterministic; no node finer than ``min_step``.
+    Otherwise it bisects the radial segments that miss (iii) and, in each block that misses (i), the segments that
+    carry half its estimated TIS error (:func:`bulk_marking` of Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2,
+    the quadrature of the miss), and likewise the azimuth intervals when (ii) or (iii) fails in azimuth.
+    Deterministic; no node finer than ``min_step``. ``finish(values, r, a)``, if given, turns the point samples
+    of a candidate grid into the values the table would hold (edge values: :func:`harvey_shack_edge_values`);
+    the TIS criteria compare finished tables, each grid finished on its own axes.
     Returns None as soon as the grid would hold more than ``max_nodes`` radial × azimuth nodes.
     ``tis_criteria=False`` drops (i) and (ii): a table of cell averages (:func:`harvey_shack_cell_grid`) integrates
     to the callable's TIS on any axes, so its grid is as fine as the lobe's shape (iii) needs.
@@ -737,60 +861,59 @@ def _refine_polar(
         core = _lobe_core(f, inside)
         top = np.max(np.where(core, f, 0.0), axis=(-1, -2))[..., None, None]  # the lobe's peak per (side, theta)
         limit = (1.0 + tolerance.peak_rtol) * top
-        tis_fine = quad(f_both, both_r, azimuth)
-        tis_coarse = quad(f, radial, azimuth)
+        done = finish or (lambda values, r, a: values)
+        f_done = done(f, radial, azimuth)  # the coarse table as written (its own edge values)
+        tis_fine = quad(done(f_both, both_r, azimuth), both_r, azimuth)
+        tis_coarse = quad(f_done, radial, azimuth)
         norm = np.where(np.abs(tis_fine) > 0, np.abs(tis_fine), 1.0)
         err_r = np.abs(tis_fine - tis_coarse) / norm
         # the coarse table at the radial midpoints, as the quadratures interpolate it (held at the edge)
         lin = np.where(inside[..., 1:], 0.5 * (f[..., :-1] + f[..., 1:]), f[..., :-1])
         miss = np.where(in_mid & inside[..., :-1], np.abs(f_mid - lin), 0.0)  # (side, theta, a, seg)
         w_az = _azimuth_row_weights_for(azimuth, quad)
-        ind = np.einsum("ptak,a->ptk", miss, w_az) * (measure(mid_r) * 0.5 * np.diff(radial))
-        ind = np.max(ind / norm[..., None], axis=(0, 1))  # (seg,)
+        ind_block = np.einsum("ptak,a->ptk", miss, w_az) * (measure(mid_r) * 0.5 * np.diff(radial)) / norm[..., None]
         in_core = core[..., :-1] & core[..., 1:]
         peak_r = np.any(in_core & in_mid & (f_mid > limit), axis=(0, 1, 2))  # (seg,): a higher peak in the segment
-        radial_ok = bool(np.all(err_r <= half) and not np.any(peak_r))
+        radial_ok = not np.any(peak_r)
         # azimuth: halve the step, compare TIS and the peak
         mid_a = azimuth_midpoints(azimuth)
         f_a, in_a = evaluate(radial, mid_a)
         both_a = np.sort(np.concatenate([azimuth, mid_a]))
         order = np.argsort(np.concatenate([azimuth, mid_a]), kind="stable")
-        tis_a = quad(np.concatenate([f, f_a], axis=-2)[..., order, :], radial, both_a)
+        f_a_done = done(f_a, radial, mid_a)
+        tis_a = quad(np.concatenate([f_done, f_a_done], axis=-2)[..., order, :], radial, both_a)
         err_a = np.abs(tis_a - tis_coarse) / norm
         core_a = core[..., : mid_a.size, :] & np.roll(core, -1, axis=-2)[..., : mid_a.size, :]
         peak_a = bool(np.any(core_a & in_a & (f_a > limit)))
-        azimuth_ok = bool(np.all(err_a <= half) and not peak_a)
+        fix_r, fix_a = err_r > half, err_a > half  # the blocks whose TIS changes by more than tis_rtol/2
+        radial_ok = radial_ok and not np.any(fix_r)
+        azimuth_ok = not peak_a and not np.any(fix_a)
         if radial_ok and azimuth_ok:
             break
         before, radial_now = (radial.size, azimuth.size), radial
         if not radial_ok:
             long_enough = np.diff(radial) >= 2.0 * min_step
             flag = peak_r.copy()
-            if np.any(err_r > half):  # segments carrying more than their share of the TIS error
-                by_tis = ind > half / max(radial.size - 1, 1)
-                if not np.any(by_tis & long_enough):  # the error is spread thinly: bisect the worst quarter
-                    by_tis = ind >= np.quantile(ind, 0.75)
-                flag |= by_tis
+            if np.any(fix_r):  # the segments that carry the error of the blocks that miss the tolerance
+                flag |= bulk_marking(np.where(long_enough, ind_block[fix_r], 0.0))
             flag &= long_enough
             if np.any(flag):
                 radial = np.sort(np.concatenate([radial, mid_r[flag]]))
         if not azimuth_ok and azimuth.size < azimuth_cap:
             # bisect the azimuth intervals that carry more than their share of the TIS change or hide a higher
             # peak: interval k adds (Δ_k/2)·[I(f_mid) − (I(f_k) + I(f_k+1))/2] (trapezoid rule, I = row integral)
-            rows = np.stack([quad(f[..., k:k + 1, :], radial_now, azimuth[k:k + 1])
+            rows = np.stack([quad(f_done[..., k:k + 1, :], radial_now, azimuth[k:k + 1])
                              for k in range(azimuth.size)], -1)
-            rows_mid = np.stack([quad(f_a[..., k:k + 1, :], radial_now, mid_a[k:k + 1])
+            rows_mid = np.stack([quad(f_a_done[..., k:k + 1, :], radial_now, mid_a[k:k + 1])
                                  for k in range(mid_a.size)], -1)
             width = np.radians(np.diff(np.append(azimuth, azimuth[0] + 360.0)))[: mid_a.size]
             change = (width / 2.0) * np.abs(rows_mid - 0.5 * (rows[..., : mid_a.size]
                                                               + np.roll(rows, -1, axis=-1)[..., : mid_a.size]))
-            change = np.max(change / (2.0 * np.pi) / norm[..., None], axis=(0, 1))  # (interval,)
+            change_block = change / (2.0 * np.pi) / norm[..., None]  # (side, theta, interval)
+            change = np.max(change_block, axis=(0, 1))  # (interval,)
             flag_a = np.any(core_a & in_a & (f_a > limit), axis=(0, 1, 3))
-            if np.any(err_a > half):
-                by_tis = change > half / mid_a.size
-                if not np.any(by_tis):
-                    by_tis = change >= np.quantile(change, 0.75)
-                flag_a |= by_tis
+            if np.any(fix_a):
+                flag_a |= bulk_marking(change_block[fix_a])
             room = azimuth_cap - azimuth.size
             if np.count_nonzero(flag_a) > room:  # the cap: the worst intervals first
                 flag_a &= change >= np.sort(change)[-room]
@@ -825,6 +948,19 @@ def _coarse_radial(first: float, last: float, max_step: float) -> NDArray[np.flo
     return _geometric_then_linear(first, 2.0, max_step, last)
 
 
+def _coarse_radial_round(first: float, last: float, max_step: float) -> NDArray[np.float64]:
+    """0, then first·2^k below ``max_step``, then the multiples of ``max_step`` up to ``last`` (when ``last`` is
+    one; else :func:`_coarse_radial`). Round nodes, and their bisections, print in few digits: a Harvey–Shack
+    table (TracePro, ASAP-style) repeats its radial node on every row, so its length is part of the file's size."""
+    nodes = [0.0, first]
+    while nodes[-1] * 2.0 < max_step:
+        nodes.append(nodes[-1] * 2.0)
+    count = last / max_step
+    if abs(count - round(count)) > 1e-9 or nodes[-1] >= last:
+        return _coarse_radial(first, last, max_step)
+    return np.concatenate([nodes, max_step * np.arange(1, int(round(count)) + 1)])
+
+
 def auto_harvey_shack_axes(
     bsdf_fn: BsdfFn,
     theta_i_deg: Sequence[float],
@@ -833,14 +969,17 @@ def auto_harvey_shack_axes(
     zero_azimuth_deg: float = 0.0,
     max_nodes: int | None = None,
     cell_average: bool = False,
+    edge_values: bool = False,
 ) -> HarveyShackAxes | None:
     """Harvey–Shack axes as fine as ``bsdf_fn`` needs to meet ``tolerance`` (see :class:`GridTolerance`).
 
     ``cell_average``: the axes of a table of cell averages (:func:`harvey_shack_cell_grid`), whose TIS needs no
     refinement: only the peak criterion of :class:`GridTolerance` refines them (the export's re-check of the
-    written file still holds its TIS to ``tis_rtol``).
+    written file still holds its TIS to ``tis_rtol``). ``edge_values``: the axes of a table whose rows end in
+    their edge values (:func:`harvey_shack_edge_values`): every TIS the refinement compares is that of such a
+    table (each candidate grid with its own edge values).
 
-    Starts from ρ = 0, 1e-3·2^k (until the step reaches 0.25), then steps ≤ 0.25 to 2, and
+    Starts from ρ = 0, 1e-3·2^k (below 0.25), then 0.25, 0.5, … 2, and
     :data:`MIN_AZIMUTHS` uniform azimuths (15°), and refines
     (:func:`_refine_polar`): radial segments are bisected where needed (down to 1e-7 in ρ), the azimuth
     step halved. One pair of axes serves every side and incidence (as TracePro requires). None when meeting
@@ -858,12 +997,18 @@ def auto_harvey_shack_axes(
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)
 
+    def edges(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
+        table = harvey_shack_edge_values(np.swapaxes(values, -1, -2), bsdf_fn, thetas, sides,
+                                         HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg))
+        return np.swapaxes(table, -1, -2)
+
     def midpoints(a: NDArray) -> NDArray:
         return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
 
-    chosen = _refine_polar(evaluate, quad, lambda r: r, _coarse_radial(1e-3, 2.0, 0.25),
+    chosen = _refine_polar(evaluate, quad, lambda r: r, _coarse_radial_round(1e-3, 2.0, 0.25),
                            np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), midpoints, tolerance, 1e-7,
-                           int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average)
+                           int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average,
+                           finish=edges if edge_values else None)
     if chosen is None:
         return None
     return HarveyShackAxes(_tidy(chosen[0]), _tidy(chosen[1]), zero_azimuth_deg)

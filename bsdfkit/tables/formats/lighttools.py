@@ -40,7 +40,7 @@ from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
-from bsdfkit.tables import grids
+from bsdfkit.tables import grids, normal_axes
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 
 __all__ = ["LightToolsBsdf", "read_lighttools", "write_lighttools"]
@@ -69,10 +69,16 @@ class LightToolsBsdf:
 
 
 def lighttools_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[str, ...],
-                    wavelength_nm: float | None = None) -> LightToolsBsdf:
+                    wavelength_nm: float | None = None,
+                    axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> LightToolsBsdf:
+    """Blocks of a BSDF callable on ``axes`` (θs, φs [deg], bsdfkit's frame: specular at φs = 0; default: the fixed
+    grid), written in the LightTools frame (azimuth φs − 90°)."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
     az = np.arange(0.0, 360.0, AZIMUTH_STEP_DEG)
     rad = np.linspace(0.0, 90.0, int(round(90.0 / RADIAL_STEP_DEG)) + 1)
+    if axes is not None:
+        rad = np.asarray(axes[0], dtype=np.float64)
+        az = np.sort(np.mod(np.round(np.asarray(axes[1], dtype=np.float64) - 90.0, 9), 360.0))
     a, r = np.meshgrid(np.radians(az + 90.0), np.radians(rad), indexing="ij")  # bsdfkit azimuth
     d = np.stack([np.sin(r) * np.cos(a), np.sin(r) * np.sin(a), np.cos(r)], axis=-1)
     d[..., 2] = np.maximum(d[..., 2], 0.0)
@@ -244,12 +250,12 @@ def _mirrored(az: NDArray[np.float64], blocks: dict) -> tuple[NDArray[np.float64
 
 # ------------------------------------------------------------------------------------------- registry hooks
 def _write_job(job: WriteJob) -> WriteOutcome:
-    bsdf = lighttools_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
-                           job.settings.wavelength_nm)
+    theta_i = np.asarray(job.theta, dtype=np.float64)
+    theta, phi, info = normal_axes.normal_axes(job.fn, theta_i, job.sides, job.settings)
+    bsdf = lighttools_bsdf(job.fn, theta_i, tuple(job.sides), job.settings.wavelength_nm, axes=(theta, phi))
     write_lighttools(job.path, bsdf, force=job.force)
-    return WriteOutcome(None, {"mode": f"azimuth {AZIMUTH_STEP_DEG:g} deg x radial {RADIAL_STEP_DEG:g} deg "
-                                       "(normal frame)", "azimuth": int(bsdf.azimuth.size),
-                               "radial_nodes": int(bsdf.radial.size)})
+    info = normal_axes.describe(info, bsdf.radial.size, bsdf.azimuth.size)
+    return WriteOutcome(None, dict(info, azimuth=info.pop("phi"), radial_nodes=info.pop("theta")))
 
 
 def _key(face: str, side: str) -> str:

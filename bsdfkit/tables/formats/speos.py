@@ -46,7 +46,7 @@ from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
-from bsdfkit.tables import grids
+from bsdfkit.tables import grids, normal_axes
 from bsdfkit.tables.format_spec import (
     FileSummary,
     TableFormat,
@@ -95,11 +95,15 @@ def speos_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64
 
 
 def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[str, ...], *,
-               wavelength_nm: float | None = None, description: str = "bsdfkit export") -> SpeosBsdf:
-    """Tables of a BSDF callable on the default grid; the spectrum is the source's TIS at its first incidence
+               wavelength_nm: float | None = None, description: str = "bsdfkit export",
+               axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> SpeosBsdf:
+    """Tables of a BSDF callable on ``axes`` (θs, φs [deg] in [0, 360); default: the fixed grid; the φ = 360° column
+    repeating 0° is added); the spectrum is the source's TIS at its first incidence
     (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral)."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
     theta, phi = speos_axis(THETA_STEP_DEG, 90.0), speos_axis(PHI_STEP_DEG, 360.0)
+    if axes is not None:
+        theta, phi = np.asarray(axes[0], dtype=np.float64), np.append(np.asarray(axes[1], dtype=np.float64), 360.0)
     d = speos_directions(theta, phi)
     d[..., 2] = np.maximum(d[..., 2], 0.0)
     tables, spectrum = {}, {}
@@ -256,13 +260,13 @@ def read_speos(path: str | Path) -> SpeosBsdf:
 
 # ------------------------------------------------------------------------------------------- registry hooks
 def _write_job(job: WriteJob) -> WriteOutcome:
-    bsdf = speos_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
-                      wavelength_nm=job.settings.wavelength_nm,
-                      description=(job.comments[0] if job.comments else "bsdfkit export")[:200])
+    theta_i = np.asarray(job.theta, dtype=np.float64)
+    theta, phi, info = normal_axes.normal_axes(job.fn, theta_i, job.sides, job.settings)
+    bsdf = speos_bsdf(job.fn, theta_i, tuple(job.sides), wavelength_nm=job.settings.wavelength_nm,
+                      description=(job.comments[0] if job.comments else "bsdfkit export")[:200], axes=(theta, phi))
     write_speos(job.path, bsdf, force=job.force)
-    theta = bsdf.theta[job.sides[0]]
-    return WriteOutcome(None, {"mode": f"theta {THETA_STEP_DEG:g} deg x phi {PHI_STEP_DEG:g} deg (normal frame)",
-                               "theta": int(theta.size), "phi": int(bsdf.phi[job.sides[0]].size)})
+    return WriteOutcome(None, normal_axes.describe(info, bsdf.theta[job.sides[0]].size,
+                                                   bsdf.phi[job.sides[0]].size))
 
 
 def _incidences(bsdf: SpeosBsdf) -> list[float]:

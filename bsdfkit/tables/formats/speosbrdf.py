@@ -43,7 +43,7 @@ from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
-from bsdfkit.tables import grids
+from bsdfkit.tables import grids, normal_axes
 from bsdfkit.tables.format_spec import (
     FileSummary,
     TableFormat,
@@ -79,10 +79,14 @@ class SpeosBrdf:
 
 
 def speos_brdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[str, ...],
-               wavelength_nm: float | None) -> SpeosBrdf:
-    """One-wavelength tables of a BSDF callable; the percentages are the source's direct integrals."""
+               wavelength_nm: float | None,
+               axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> SpeosBrdf:
+    """One-wavelength tables of a BSDF callable on ``axes`` (θs, φs [deg] in [0, 360); default: the fixed grid; the
+    φ = 360° column repeating 0° is added); the percentages are the source's direct integrals."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
     theta, phi = speos_axis(THETA_STEP_DEG, 90.0), speos_axis(PHI_STEP_DEG, 360.0)
+    if axes is not None:
+        theta, phi = np.asarray(axes[0], dtype=np.float64), np.append(np.asarray(axes[1], dtype=np.float64), 360.0)
     d = speos_directions(theta, phi)
     d[..., 2] = np.maximum(d[..., 2], 0.0)
     tables, percent = {}, {}
@@ -189,10 +193,11 @@ def read_speos_brdf(path: str | Path) -> SpeosBrdf:
 
 # ------------------------------------------------------------------------------------------- registry hooks
 def _write_job(job: WriteJob) -> WriteOutcome:
-    b = speos_brdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides), job.settings.wavelength_nm)
+    theta_i = np.asarray(job.theta, dtype=np.float64)
+    theta, phi, info = normal_axes.normal_axes(job.fn, theta_i, job.sides, job.settings)
+    b = speos_brdf(job.fn, theta_i, tuple(job.sides), job.settings.wavelength_nm, axes=(theta, phi))
     write_speos_brdf(job.path, b, force=job.force)
-    return WriteOutcome(None, {"mode": f"theta {THETA_STEP_DEG:g} deg x phi {PHI_STEP_DEG:g} deg (normal frame)",
-                               "theta": int(b.theta.size), "phi": int(b.phi.size)})
+    return WriteOutcome(None, normal_axes.describe(info, b.theta.size, b.phi.size))
 
 
 def _chosen(b: SpeosBrdf) -> int:

@@ -1,0 +1,151 @@
+"""Axes of the tables written about the surface normal (Speos, Speos ``.brdf``, LightTools): polar angle θs from the
+normal and azimuth φs, one list of each for every incidence of a file.
+
+The fixed grid (θs every 1°, φs every 2°) cannot hold a lobe narrower than its azimuth step: a specular lobe at
+grazing incidence (the ansys in-plane scan at 80°: full width about 2° in θs, peak 57/sr) falls between two
+azimuth columns, and the hemispherical engine behind ``bsdfkit read``, which interpolates records across azimuth,
+then integrated the table 6.3 % above the source. :func:`auto_normal_axes` keeps the 1° θs rows and chooses the
+azimuths as the polar tables' auto grids do (:func:`bsdfkit.tables.grids._refine_polar`): from 24 (15°), an
+azimuth interval is bisected where that changes the table's TIS or uncovers a higher peak, until the estimated TIS
+error is within the tolerance: fine where the lobe is, coarse over the smooth body (docs/exports.md, "Grid
+resolution"). Coarser θs rows were tried and left alone: the engine's reconstruction of records about the normal
+(a lobe about its peak, with its log/linear correction) then missed the source by 0.5-1.3 % at 10-40° on the
+ansys scan even where the table's own TIS had converged.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bsdfkit.tables import grids
+
+__all__ = ["FIXED_PHI_STEP_DEG", "FIXED_THETA_STEP_DEG", "auto_normal_axes", "describe", "fixed_normal_axes",
+           "normal_axes", "normal_directions", "tis_normal_table"]
+
+#: the fixed grid: θs 0…90° every 1°, φs 0…360° every 2°
+FIXED_THETA_STEP_DEG = 1.0
+FIXED_PHI_STEP_DEG = 2.0
+
+
+def normal_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Unit vectors (φ, θ, 3) of the nodes θs = ``theta_deg``, φs = ``phi_deg`` [deg] (bsdfkit's sample frame:
+    specular at φs = 0); the horizon row exactly at z = 0."""
+    a, t = np.meshgrid(np.radians(phi_deg), np.radians(theta_deg), indexing="ij")
+    d = np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)], axis=-1)
+    d[..., 2] = np.maximum(d[..., 2], 0.0)
+    return d
+
+
+def tis_normal_table(values: NDArray[np.float64], theta_deg: NDArray[np.float64],
+                     phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """TIS [1] of tables ``values[..., phi, theta]`` [1/sr] about the normal: per azimuth row the piecewise-linear
+    interpolant in the distance from the normal in direction cosines, ρ = sin θs, against ρ dρ (exact per segment;
+    the hemispherical engine behind ``bsdfkit read`` interpolates records about the normal linearly in that
+    distance), then periodic trapezoid weights in φs (a row at 360° repeating 0° counts once).
+
+    This is the refinement's yardstick only (the formats state no quadrature of their own; ``bsdfkit read``
+    integrates them with the hemispherical engine, which the export re-checks on the written file)."""
+    f = np.asarray(values, dtype=np.float64)
+    rho = np.sin(np.radians(np.asarray(theta_deg, dtype=np.float64)))
+    seg = grids._segment_rho_moment(rho[:-1], rho[1:], f[..., :-1], f[..., 1:]).sum(axis=-1)  # (..., phi)
+    row_w = grids._azimuth_row_weights(np.asarray(phi_deg, dtype=np.float64), plane_symmetric=False)
+    return np.sum(seg * row_w, axis=-1)
+
+
+def fixed_normal_axes() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The fixed grid: θs [deg] 0…90 every 1°, φs [deg] 0…358 every 2°."""
+    theta = np.linspace(0.0, 90.0, int(round(90.0 / FIXED_THETA_STEP_DEG)) + 1)
+    return theta, np.arange(0.0, 360.0, FIXED_PHI_STEP_DEG)
+
+
+def auto_normal_axes(
+    bsdf_fn: grids.BsdfFn,
+    theta_i_deg: Sequence[float],
+    sides: Sequence[str] | str,
+    tolerance: grids.GridTolerance | None = None,
+    max_nodes: int | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """θs and φs axes [deg] (φs in [0, 360), bsdfkit's frame): the θs rows of the fixed grid and the azimuths
+    ``bsdf_fn`` needs to meet ``tolerance``.
+
+    Parameters
+    ----------
+    bsdf_fn
+        The source, ``bsdf_fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta_i_deg, sides
+        Incidences [deg] and sides the axes serve (one pair of axes for all, as a LightTools file requires).
+    tolerance
+        TIS and peak tolerances (:class:`bsdfkit.tables.grids.GridTolerance`); the TIS compared is
+        :func:`tis_normal_table`.
+    max_nodes
+        None when meeting the tolerance takes more θs × φs nodes than this.
+
+    Returns
+    -------
+    tuple of numpy.ndarray or None
+        The θs axis (0 … 90) and the φs axis [deg], or None.
+
+    Notes
+    -----
+    θs every :data:`FIXED_THETA_STEP_DEG` (not refined); azimuths from
+    :data:`bsdfkit.tables.grids.MIN_AZIMUTHS` refined with :func:`bsdfkit.tables.grids._refine_polar` (θs in the
+    role of the radial axis, area weight sin θ cos θ; the peak criterion over the rows' core, from the normal
+    outward while the BSDF stays at least half its value there).
+    """
+    tolerance = tolerance or grids.GridTolerance()
+    thetas = grids._check_incidences(theta_i_deg)
+    sides = grids._check_sides(sides)
+
+    def evaluate(r: NDArray, a: NDArray) -> tuple[NDArray, NDArray]:
+        d = normal_directions(r, a)
+        out = np.stack([np.stack([grids.evaluate_bsdf(bsdf_fn, float(t), s, d) for t in thetas]) for s in sides])
+        return out, np.ones((thetas.size, a.size, r.size), dtype=bool)
+
+    def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
+        return tis_normal_table(values, r, a)
+
+    def midpoints(a: NDArray) -> NDArray:
+        return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
+
+    theta = fixed_normal_axes()[0]
+    start_phi = np.arange(grids.MIN_AZIMUTHS) * (360.0 / grids.MIN_AZIMUTHS)
+    # min_step = the θs step: no θs segment is long enough to bisect, the rows stay
+    chosen = grids._refine_polar(evaluate, quad, lambda r: np.sin(np.radians(r)) * np.cos(np.radians(r))
+                                 * (np.pi / 180.0), theta, start_phi, midpoints, tolerance,
+                                 FIXED_THETA_STEP_DEG, int(tolerance.max_azimuths), max_nodes)
+    if chosen is None:
+        return None
+    return np.asarray(grids._tidy(chosen[0])), np.asarray(grids._tidy(chosen[1]))
+
+
+def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
+                settings: object) -> tuple[NDArray[np.float64], NDArray[np.float64], dict]:
+    """The θs and φs axes [deg] of an export about the normal (``settings`` an ``ExportSettings``): ``grid`` fixed,
+    or auto (:func:`auto_normal_axes`; the fixed grid when the tolerance needs more nodes than it), and the
+    ``grid`` entry of the export's result (``mode``, ``theta``, ``phi`` node counts, tolerances)."""
+    from bsdfkit.tables.axes_choice import FALLBACK
+
+    fixed = fixed_normal_axes()
+    mode = "fixed"
+    axes = fixed
+    if getattr(settings, "grid", "auto") == "auto":
+        tol = getattr(settings, "grid_tolerance", None) or grids.GridTolerance()
+        auto = auto_normal_axes(fn, theta, sides, tol, max_nodes=fixed[0].size * fixed[1].size)
+        axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
+    info: dict = {"mode": mode, "theta": int(axes[0].size), "phi": int(axes[1].size)}
+    if mode != "fixed":
+        tol = getattr(settings, "grid_tolerance", None) or grids.GridTolerance()
+        info.update(tis_rtol=tol.tis_rtol, peak_rtol=tol.peak_rtol)
+    return axes[0], axes[1], info
+
+
+def describe(info: dict, n_theta: int, n_phi: int) -> dict:
+    """The ``grid`` entry of a written table about the normal: ``info`` of :func:`normal_axes` with the written node
+    counts (``theta``; ``phi`` with a repeated 360° column where the format writes one) and, for the fixed grid,
+    the steps in ``mode``."""
+    out = dict(info, theta=int(n_theta), phi=int(n_phi))
+    if out["mode"] == "fixed":
+        out["mode"] = f"fixed: theta {FIXED_THETA_STEP_DEG:g} deg x phi {FIXED_PHI_STEP_DEG:g} deg (normal frame)"
+    return out
