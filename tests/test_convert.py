@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import fast_lane
 
 import bsdfkit
 from bsdfkit.cli.main import main
@@ -34,31 +35,56 @@ def radiant_tis():
     return theta, values
 
 
+class _Once(dict):
+    """A value per key, made on first use by its maker and kept: a fixture whose parts only some tests need."""
+
+    def __init__(self, makers):
+        super().__init__()
+        self._makers = makers
+
+    def __missing__(self, key):
+        self[key] = self._makers[key]()
+        return self[key]
+
+
 @pytest.fixture(scope="module")
 def radiant_converted(tmp_path_factory):
-    """The Radiant file converted once per format (9-14 s each): ``to -> (ConvertResult, path, stdout)``. ASAP
-    through the command line, in this process (its text output, and the result it printed, caught on its way
-    from ``convert``), TracePro through the API."""
+    """The Radiant file converted once per format (9-14 s each), when a test first asks for it: ``to ->
+    (ConvertResult, path, stdout)``. ASAP through the command line, in this process (its text output, and the
+    result it printed, caught on its way from ``convert``), TracePro through the API (only the full suite's tests
+    ask for it: the fast lane's TracePro writer is test_convert_spectral_table_at_one_wavelength's)."""
     folder = tmp_path_factory.mktemp("radiant")
-    done = {}
-    real = to_dataset.convert
 
-    def caught(*args, **kw):
-        done["asap"] = real(*args, **kw)
-        return done["asap"]
+    def asap():
+        done = {}
+        real = to_dataset.convert
 
-    out, err = io.StringIO(), io.StringIO()
-    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        mp.setattr(to_dataset, "convert", caught)
-        code = main(["convert", str(RADIANT), "--to", "asap", "-o", str(folder / "r.txt")])
-    assert code == 0, err.getvalue()
-    converted = {"asap": (done["asap"], folder / "r.txt", out.getvalue())}
-    path = folder / "r.tracepro.txt"
-    converted["tracepro"] = (convert(RADIANT, "tracepro", path), path, "")
-    return converted
+        def caught(*args, **kw):
+            done["asap"] = real(*args, **kw)
+            return done["asap"]
+
+        out, err = io.StringIO(), io.StringIO()
+        with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            mp.setattr(to_dataset, "convert", caught)
+            code = main(["convert", str(RADIANT), "--to", "asap", "-o", str(folder / "r.txt")])
+        assert code == 0, err.getvalue()
+        return done["asap"], folder / "r.txt", out.getvalue()
+
+    def tracepro():
+        path = folder / "r.tracepro.txt"
+        return convert(RADIANT, "tracepro", path), path, ""
+
+    return _Once({"asap": asap, "tracepro": tracepro})
 
 
-@pytest.mark.parametrize("to", ["tracepro", "asap"])
+@pytest.fixture(scope="module")
+def ansys_tracepro(tmp_path_factory):
+    """The ansys scan at 550 nm written as TracePro: ``(ConvertResult, path)``."""
+    path = tmp_path_factory.mktemp("ansys") / "a.txt"
+    return convert(ANSYS_CSV, "tracepro", path, wavelength=550.0, quantity="reflectance-factor"), path
+
+
+@pytest.mark.parametrize("to", fast_lane(["tracepro", "asap"], {"asap"}))
 def test_radiant_bsdf_converted_tis_within_half_a_percent(radiant_converted, radiant_tis, to):
     theta, original = radiant_tis
     result, out, _ = radiant_converted[to]
@@ -144,7 +170,7 @@ def test_synthetic_two_arc_table_converts_to_the_exact_tis(tmp_path):
     assert result.ok and result.wavelength_nm == 633.0
 
 
-def test_convert_errors_are_one_line(tmp_path, capsys, radiant_converted):
+def test_convert_errors_are_one_line(tmp_path, capsys, ansys_tracepro):
     nc = tmp_path / "a.nc"
     assert main(["ingest", str(ANSYS_CSV), "--quantity", "reflectance-factor", "-o", str(nc)]) == 0
     capsys.readouterr()
@@ -156,21 +182,21 @@ def test_convert_errors_are_one_line(tmp_path, capsys, radiant_converted):
     assert main(["convert", str(RADIANT), "--to", "asap", "-o", str(tmp_path / "y"), "--incidences", "12"]) == 2
     assert "incidence not in the source" in capsys.readouterr().err
     with pytest.raises(InputError, match="another wavelength"):
-        vendor_dataset(radiant_converted["tracepro"][1], wavelength=600.0)
+        vendor_dataset(ansys_tracepro[1], wavelength=600.0)  # a TracePro table at 550 nm
     with pytest.raises(BsdfkitError, match="no such file"):
         convert(tmp_path / "absent.csv", "asap", tmp_path / "z")
 
 
-def test_convert_spectral_table_at_one_wavelength(tmp_path):
-    result = convert(ANSYS_CSV, "tracepro", tmp_path / "a.txt", wavelength=550.0, quantity="reflectance-factor")
+def test_convert_spectral_table_at_one_wavelength(ansys_tracepro):
+    result, path = ansys_tracepro
     assert result.ok and result.wavelength_nm == 550.0
-    prop = tracepro.read_tracepro(tmp_path / "a.txt")
+    prop = tracepro.read_tracepro(path)
     assert prop.options.wavelength_um == pytest.approx(0.55)
     assert list(result.incidences_deg) == [10.0, 25.0, 40.0, 60.0, 80.0]
     # the written table integrates to what `tis` reports for the scan at 550 nm (issue #23: one answer)
     table = bsdfkit.tis(bsdfkit.ingest(ANSYS_CSV, quantity="reflectance-factor")).isel(config=0)
     at_550 = table["tis"].sel(side="reflection", wavelength=550.0).values
-    written = np.array(read_any(tmp_path / "a.txt").tis_computed["reflection"])
+    written = np.array(read_any(path).tis_computed["reflection"])
     np.testing.assert_allclose(written, at_550, rtol=0.005)
     # a white diffuser (body about 0.92) with a Fresnel-like lobe (0.035-0.05) at 10, 25 and 40 deg
     assert np.all((at_550[:3] > 0.935) & (at_550[:3] < 0.98)), at_550

@@ -4,12 +4,22 @@ from __future__ import annotations
 
 import jax
 import pytest
+from conftest import fast_lane
 from test_trace_batch import full, plate_scene
+from test_trace_kernel import scene
 
 from bsdfkit.raytrace import programs, trace
 from bsdfkit.raytrace.tracer import compiled_kernel
 
 RAYS = 3000
+#: The scenes whose programs are kept: the fast lane's the minimal kernel (a diffuse cavity, exit top; the program
+#: file's handling does not depend on what the kernel holds), the full suite's also the phosphor plate's (an
+#: interaction budget, the conversion and its while loops: 5-10 times the tracing and compilation)
+SCENES = fast_lane(["cavity", "plate"], {"cavity"})
+
+
+def make_scene(kind, tmp_path):
+    return scene() if kind == "cavity" else plate_scene(tmp_path)
 
 
 @pytest.fixture
@@ -31,8 +41,9 @@ def test_without_a_compilation_cache_no_program_is_kept():
         jax.config.update("jax_compilation_cache_dir", before)
 
 
-def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path, monkeypatch):
-    sc = plate_scene(tmp_path)
+@pytest.mark.parametrize("kind", SCENES)
+def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path, monkeypatch, kind):
+    sc = make_scene(kind, tmp_path)
     compiled_kernel.cache_clear()
     with monkeypatch.context() as m:
         m.setattr(programs, "program_folder", lambda: None)
@@ -51,8 +62,9 @@ def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path
     assert traced == first == again
 
 
-def test_damaged_program_file_is_traced_again_and_replaced(program_cache, tmp_path):
-    sc = plate_scene(tmp_path)
+@pytest.mark.parametrize("kind", SCENES)
+def test_damaged_program_file_is_traced_again_and_replaced(program_cache, tmp_path, kind):
+    sc = make_scene(kind, tmp_path)
     reference = full(trace(sc, RAYS, seed=5))
     (path,) = program_cache.glob("*" + programs.SUFFIX)
     path.write_bytes(path.read_bytes()[:100])  # a cut file

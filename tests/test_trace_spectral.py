@@ -3,6 +3,7 @@ budget with re-absorption at every 10 nm, ledgers in power and photons, photons 
 surfaces (the Spectralon standard of tests/data/grit-spectralon) and the scene's errors."""
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import replace
@@ -298,11 +299,29 @@ def test_example_spectral_scene_runs_from_the_command_line(tmp_path, capsys):
     assert sp["bands"]["blue"]["label"] == "380-500 nm"
 
 
-def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel(tmp_path):
+def _overlap_scene():
+    return loads_scene(scene_text(PLATE_TOP + "[top.spectral]\nemission_peak_nm = 540.0\nemission_fwhm_nm = 130.0\n",
+                                  wall=f'reflectance_spectrum = "{SPECTRALON}"'))
+
+
+@functools.cache
+def _overlap_traced():
+    """12 000 rays of the re-absorbing plate in chunks of 3 000 (traced once per process: two tests read it)."""
+    return trace(_overlap_scene(), 12_000, 9, chunk=3_000, lanes=512)
+
+
+def test_spectral_budget_books_the_stokes_loss_with_the_plate():
+    """The interaction budget books the Stokes loss with the plate: nothing is left in flight."""
+    a = _overlap_traced()
+    assert a.cumulative_budget()["in_flight"][-1] == pytest.approx(0.0, abs=1e-9)
+    assert a.cumulative_budget()["extracted"][-1] == pytest.approx(a.extracted["total"], abs=1e-9)
+
+
+@pytest.mark.slow  # two more compilations; the fast lane's chunk invariance: test_trace_kernel.py (1e4 and 1e5)
+def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel():
     """Exact fixed-point sums: chunking and compiling every optional branch change nothing, bit for bit."""
-    s = loads_scene(scene_text(PLATE_TOP + "[top.spectral]\nemission_peak_nm = 540.0\nemission_fwhm_nm = 130.0\n",
-                               wall=f'reflectance_spectrum = "{SPECTRALON}"'))
-    a = trace(s, 12_000, 9, chunk=3_000, lanes=512)
+    s = _overlap_scene()
+    a = _overlap_traced()
     b = trace(s, 12_000, 9, chunk=12_000, lanes=256)
     c = trace(s, 12_000, 9, chunk=12_000, lanes=512, full_kernel=True)
     for r in (b, c):
@@ -310,9 +329,6 @@ def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel(tmp_path):
         np.testing.assert_array_equal(r.spectral.spectrum_W_per_nm, a.spectral.spectrum_W_per_nm)
         np.testing.assert_array_equal(r.spectral.spectrum_std_err, a.spectral.spectrum_std_err)
         assert r.spectral.ledger == a.spectral.ledger
-    # the interaction budget books the Stokes loss with the plate: nothing is left in flight
-    assert a.cumulative_budget()["in_flight"][-1] == pytest.approx(0.0, abs=1e-9)
-    assert a.cumulative_budget()["extracted"][-1] == pytest.approx(a.extracted["total"], abs=1e-9)
 
 
 def test_spectral_scene_round_trips_through_toml(tmp_path):
