@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bsdfkit.tables import grids
+from bsdfkit.tables.axes_choice import FALLBACK
 
 __all__ = ["FIXED_PHI_STEP_DEG", "FIXED_THETA_STEP_DEG", "auto_normal_axes", "describe", "fixed_normal_axes",
            "normal_axes", "normal_directions", "tis_normal_table"]
@@ -125,8 +126,6 @@ def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
     """The θs and φs axes [deg] of an export about the normal (``settings`` an ``ExportSettings``): ``grid`` fixed,
     or auto (:func:`auto_normal_axes`; the fixed grid when the tolerance needs more nodes than it), and the
     ``grid`` entry of the export's result (``mode``, ``theta``, ``phi`` node counts, tolerances)."""
-    from bsdfkit.tables.axes_choice import FALLBACK
-
     fixed = fixed_normal_axes()
     mode = "fixed"
     axes = fixed
