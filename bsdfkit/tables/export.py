@@ -549,16 +549,14 @@ def export(
             axes = first_axes
             a = np.asarray(getattr(axes, "azimuth_deg", ()), dtype=np.float64)
             if isinstance(axes, grids.HarveyShackAxes):
-                both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a)]))
                 if len(axes.rho) * both.size > len(grids.HarveyShackAxes.default().rho) * 72:
                     return None
                 return replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
                     axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg))
             if isinstance(axes, grids.SpecularAxes):
-                if settings.zemax_symmetry == "PlaneSymmetrical":
-                    both = np.sort(np.concatenate([a, 0.5 * (a[:-1] + a[1:])]))
-                else:
-                    both = np.sort(np.concatenate([a, 0.5 * (a + np.append(a[1:], 360.0))]))
+                plane = settings.zemax_symmetry == "PlaneSymmetrical"
+                both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a, periodic=not plane)]))
                 fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
                 if len(axes.radial_deg) * both.size > len(fixed.radial_deg) * len(fixed.azimuth_deg):
                     return None

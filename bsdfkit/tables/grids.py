@@ -65,6 +65,7 @@ __all__ = [
     "evaluate_bsdf",
     "auto_harvey_shack_axes",
     "auto_specular_axes",
+    "azimuth_midpoints_deg",
     "harvey_shack_cell_grid",
     "harvey_shack_grid",
     "harvey_shack_row_weights",
@@ -819,6 +820,14 @@ def bulk_marking(indicators: ArrayLike, share: float = BULK_SHARE) -> NDArray[np
     return flag
 
 
+def azimuth_midpoints_deg(azimuth_deg: ArrayLike, periodic: bool = True) -> NDArray[np.float64]:
+    """Midpoints [deg] of consecutive azimuths ``azimuth_deg`` [deg] (increasing from 0); ``periodic``: the last one
+    between the last azimuth and 360° (full circle), else only between neighbours (a half plane, 0…180°)."""
+    a = np.asarray(azimuth_deg, dtype=np.float64)
+    inner = 0.5 * (a[:-1] + a[1:])
+    return np.append(inner, 0.5 * (a[-1] + 360.0)) if periodic else inner
+
+
 def _refine_polar(
     evaluate: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]],
     quad: Callable[[NDArray, NDArray, NDArray], NDArray],
@@ -1002,11 +1011,8 @@ def auto_harvey_shack_axes(
                                          HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg))
         return np.swapaxes(table, -1, -2)
 
-    def midpoints(a: NDArray) -> NDArray:
-        return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
-
     chosen = _refine_polar(evaluate, quad, lambda r: r, _coarse_radial_round(1e-3, 2.0, 0.25),
-                           np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), midpoints, tolerance, 1e-7,
+                           np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), azimuth_midpoints_deg, tolerance, 1e-7,
                            int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average,
                            finish=edges if edge_values else None)
     if chosen is None:
@@ -1046,19 +1052,15 @@ def auto_specular_axes(
 
     if plane_symmetric:
         start = np.arange(MIN_AZIMUTHS // 2 + 1) * (360.0 / MIN_AZIMUTHS)
-
-        def midpoints(a: NDArray) -> NDArray:
-            return 0.5 * (a[:-1] + a[1:])
         cap = int(tolerance.max_azimuths) // 2 + 1
     else:
         start = np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS)
-
-        def midpoints(a: NDArray) -> NDArray:
-            return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
         cap = int(tolerance.max_azimuths)
 
     chosen = _refine_polar(evaluate, quad, lambda r: np.sin(np.radians(r)) * (np.pi / 180.0),
-                           _coarse_radial(0.05, 180.0, 15.0), start, midpoints, tolerance, 1e-5, cap, max_nodes)
+                           _coarse_radial(0.05, 180.0, 15.0), start,
+                           lambda a: azimuth_midpoints_deg(a, periodic=not plane_symmetric), tolerance, 1e-5, cap,
+                           max_nodes)
     if chosen is None:
         return None
     return SpecularAxes(_tidy(chosen[0]), _tidy(chosen[1]))

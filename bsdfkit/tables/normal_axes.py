@@ -107,14 +107,11 @@ def auto_normal_axes(
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_normal_table(values, r, a)
 
-    def midpoints(a: NDArray) -> NDArray:
-        return np.append(0.5 * (a[:-1] + a[1:]), 0.5 * (a[-1] + 360.0))
-
     theta = fixed_normal_axes()[0]
     start_phi = np.arange(grids.MIN_AZIMUTHS) * (360.0 / grids.MIN_AZIMUTHS)
     # min_step = the θs step: no θs segment is long enough to bisect, the rows stay
     chosen = grids._refine_polar(evaluate, quad, lambda r: np.sin(np.radians(r)) * np.cos(np.radians(r))
-                                 * (np.pi / 180.0), theta, start_phi, midpoints, tolerance,
+                                 * (np.pi / 180.0), theta, start_phi, grids.azimuth_midpoints_deg, tolerance,
                                  FIXED_THETA_STEP_DEG, int(tolerance.max_azimuths), max_nodes)
     if chosen is None:
         return None
