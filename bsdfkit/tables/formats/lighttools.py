@@ -45,9 +45,6 @@ from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, Ven
 
 __all__ = ["LightToolsBsdf", "read_lighttools", "write_lighttools"]
 
-#: written axes: azimuth 0..358 every 2 deg, radial 0..90 every 1 deg (5 deg azimuths miss 1-2 % of a grazing lobe)
-AZIMUTH_STEP_DEG = 2.0
-RADIAL_STEP_DEG = 1.0
 _VALUE_FMT = ".7g"
 _TYPE = {"reflection": "BRDF", "transmission": "BTDF"}
 _SIDE = {v: k for k, v in _TYPE.items()}
@@ -74,14 +71,10 @@ def lighttools_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: t
     """Blocks of a BSDF callable on ``axes`` (θs, φs [deg], bsdfkit's frame: specular at φs = 0; default: the fixed
     grid), written in the LightTools frame (azimuth φs − 90°)."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
-    az = np.arange(0.0, 360.0, AZIMUTH_STEP_DEG)
-    rad = np.linspace(0.0, 90.0, int(round(90.0 / RADIAL_STEP_DEG)) + 1)
-    if axes is not None:
-        rad = np.asarray(axes[0], dtype=np.float64)
-        az = np.sort(np.mod(np.round(np.asarray(axes[1], dtype=np.float64) - 90.0, 9), 360.0))
-    a, r = np.meshgrid(np.radians(az + 90.0), np.radians(rad), indexing="ij")  # bsdfkit azimuth
-    d = np.stack([np.sin(r) * np.cos(a), np.sin(r) * np.sin(a), np.cos(r)], axis=-1)
-    d[..., 2] = np.maximum(d[..., 2], 0.0)
+    rad, az = axes if axes is not None else normal_axes.fixed_normal_axes()
+    rad = np.asarray(rad, dtype=np.float64)
+    az = np.sort(np.mod(np.round(np.asarray(az, dtype=np.float64) - 90.0, 9), 360.0))  # the LightTools frame
+    d = normal_axes.normal_directions(rad, az + 90.0)  # (azimuth, radial, 3), bsdfkit's azimuth
     blocks = {}
     for side in sides:
         values = np.stack([grids.evaluate_bsdf(fn, float(t), side, d) for t in theta_i])

@@ -61,9 +61,6 @@ __all__ = ["MAGIC", "SpeosBsdf", "read_speos", "speos_text", "write_speos"]
 
 MAGIC = "OPTIS - Anisotropic BSDF surface file v8.0"
 _WAVELENGTH_TAG = re.compile(r"wavelength_nm=([-+0-9.eE]+)")
-#: default written grid: theta 0..90 every 1 deg, phi 0..360 every 2 deg (5 deg azimuths miss 1-2 % of a grazing lobe)
-THETA_STEP_DEG = 1.0
-PHI_STEP_DEG = 2.0
 _VALUE_FMT = ".7g"
 
 
@@ -84,14 +81,14 @@ class SpeosBsdf:
     wavelength_nm: float | None = None
 
 
-def speos_axis(step: float, stop: float) -> NDArray[np.float64]:
-    n = int(round(stop / step))
-    return np.linspace(0.0, stop, n + 1)
-
-
-def speos_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
-    t, p = np.meshgrid(np.radians(theta_deg), np.radians(phi_deg), indexing="ij")
-    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+def speos_nodes(axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """θs, φs [deg] written (``axes``, default the fixed grid :func:`bsdfkit.tables.normal_axes.fixed_normal_axes`,
+    with the φ = 360° column repeating 0° that both Speos formats write) and their directions (θ, φ, 3)."""
+    theta, phi = axes if axes is not None else normal_axes.fixed_normal_axes()
+    theta = np.asarray(theta, dtype=np.float64)
+    phi = np.append(np.asarray(phi, dtype=np.float64), 360.0)
+    return theta, phi, normal_axes.normal_directions(theta, phi).swapaxes(0, 1)
 
 
 def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[str, ...], *,
@@ -101,11 +98,7 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
     repeating 0° is added); the spectrum is the source's TIS at its first incidence
     (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral)."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
-    theta, phi = speos_axis(THETA_STEP_DEG, 90.0), speos_axis(PHI_STEP_DEG, 360.0)
-    if axes is not None:
-        theta, phi = np.asarray(axes[0], dtype=np.float64), np.append(np.asarray(axes[1], dtype=np.float64), 360.0)
-    d = speos_directions(theta, phi)
-    d[..., 2] = np.maximum(d[..., 2], 0.0)
+    theta, phi, d = speos_nodes(axes)
     tables, spectrum = {}, {}
     for side in sides:
         tables[side] = np.stack([grids.evaluate_bsdf(fn, float(t), side, d) for t in theta_i])

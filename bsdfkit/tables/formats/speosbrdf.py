@@ -53,7 +53,7 @@ from bsdfkit.tables.format_spec import (
     WriteOutcome,
     first_line_is,
 )
-from bsdfkit.tables.formats.speos import PHI_STEP_DEG, THETA_STEP_DEG, Lines, speos_axis, speos_directions
+from bsdfkit.tables.formats.speos import Lines, speos_nodes
 
 __all__ = ["MAGIC", "SpeosBrdf", "read_speos_brdf", "write_speos_brdf"]
 
@@ -84,11 +84,7 @@ def speos_brdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
     """One-wavelength tables of a BSDF callable on ``axes`` (θs, φs [deg] in [0, 360); default: the fixed grid; the
     φ = 360° column repeating 0° is added); the percentages are the source's direct integrals."""
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
-    theta, phi = speos_axis(THETA_STEP_DEG, 90.0), speos_axis(PHI_STEP_DEG, 360.0)
-    if axes is not None:
-        theta, phi = np.asarray(axes[0], dtype=np.float64), np.append(np.asarray(axes[1], dtype=np.float64), 360.0)
-    d = speos_directions(theta, phi)
-    d[..., 2] = np.maximum(d[..., 2], 0.0)
+    theta, phi, d = speos_nodes(axes)
     tables, percent = {}, {}
     for side in sides:
         tables[side] = np.stack([grids.evaluate_bsdf(fn, float(t), side, d) for t in theta_i])[:, None]
