@@ -77,7 +77,7 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
         axes, mode = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg), "fixed"
     else:
         fixed = grids.HarveyShackAxes.default(zero_azimuth_deg=zero_azimuth_deg)
-        values = getattr(settings, "node_values", "point")
+        values = settings.node_values
         # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them; edge values: the
         # TIS compared is that of each candidate table with its own edge values
         auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
@@ -94,7 +94,7 @@ def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[s
     each row's last node inside the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`) or
     ``cell`` (cell averages: the table's TIS by its format's rule is the source's on any axes,
     :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
-    values = getattr(settings, "node_values", "point")
+    values = settings.node_values
     info["values"] = VALUES_LABEL[values]
     if values == "cell":
         return grids.harvey_shack_cell_grid(fn, theta, sides, axes)

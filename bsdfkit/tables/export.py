@@ -601,13 +601,12 @@ def export(
             if worst <= limit:
                 break
         best = min(range(len(tried)), key=lambda i: tried[i][0])
+        if best != len(tried) - 1:  # an earlier table was closer to the source: written again
+            write(tried[best][1], True)
+            summary = None
         grid_info = dict(tried[best][2])
         if len(tried) > 1:
             grid_info["recheck_worst"] = float(tried[best][0])
-        if best != len(tried) - 1:  # an earlier table was closer to the source: written again
-            write(tried[best][1], True)
-            grid_info = dict(tried[best][2], recheck_worst=float(tried[best][0]))
-            summary = None
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread = summary if summary is not None else read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}

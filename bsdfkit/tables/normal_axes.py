@@ -15,6 +15,7 @@ ansys scan even where the table's own TIS had converged.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -104,13 +105,10 @@ def auto_normal_axes(
         out = np.stack([np.stack([grids.evaluate_bsdf(bsdf_fn, float(t), s, d) for t in thetas]) for s in sides])
         return out, np.ones((thetas.size, a.size, r.size), dtype=bool)
 
-    def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
-        return tis_normal_table(values, r, a)
-
     theta = fixed_normal_axes()[0]
     start_phi = np.arange(grids.MIN_AZIMUTHS) * (360.0 / grids.MIN_AZIMUTHS)
     # min_step = the θs step: no θs segment is long enough to bisect, the rows stay
-    chosen = grids._refine_polar(evaluate, quad, lambda r: np.sin(np.radians(r)) * np.cos(np.radians(r))
+    chosen = grids._refine_polar(evaluate, tis_normal_table, lambda r: np.sin(np.radians(r)) * np.cos(np.radians(r))
                                  * (np.pi / 180.0), theta, start_phi, grids.azimuth_midpoints_deg, tolerance,
                                  FIXED_THETA_STEP_DEG, int(tolerance.max_azimuths), max_nodes)
     if chosen is None:
@@ -119,20 +117,18 @@ def auto_normal_axes(
 
 
 def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
-                settings: object) -> tuple[NDArray[np.float64], NDArray[np.float64], dict]:
+                settings: Any) -> tuple[NDArray[np.float64], NDArray[np.float64], dict]:
     """The θs and φs axes [deg] of an export about the normal (``settings`` an ``ExportSettings``): ``grid`` fixed,
     or auto (:func:`auto_normal_axes`; the fixed grid when the tolerance needs more nodes than it), and the
     ``grid`` entry of the export's result (``mode``, ``theta``, ``phi`` node counts, tolerances)."""
     fixed = fixed_normal_axes()
-    mode = "fixed"
-    axes = fixed
-    if getattr(settings, "grid", "auto") == "auto":
-        tol = getattr(settings, "grid_tolerance", None) or grids.GridTolerance()
+    axes, mode = fixed, "fixed"
+    tol = settings.grid_tolerance
+    if settings.grid == "auto":
         auto = auto_normal_axes(fn, theta, sides, tol, max_nodes=fixed[0].size * fixed[1].size)
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     info: dict = {"mode": mode, "theta": int(axes[0].size), "phi": int(axes[1].size)}
     if mode != "fixed":
-        tol = getattr(settings, "grid_tolerance", None) or grids.GridTolerance()
         info.update(tis_rtol=tol.tis_rtol, peak_rtol=tol.peak_rtol)
     return axes[0], axes[1], info
 
