@@ -367,7 +367,7 @@ def main() -> None:
     p.add_argument("--spectral", action="store_true")
     p.add_argument("--ab", default=None, metavar="REV", help="interleaved timing against the kernel of REV")
     p.add_argument("--all", action="store_true")
-    p.add_argument("--tmp", default="/tmp/bsdfkit_bench")
+    p.add_argument("--tmp", default=str(Path(tempfile.gettempdir()) / "bsdfkit_bench"))
     a = p.parse_args()
     tmp = Path(a.tmp)
     tmp.mkdir(parents=True, exist_ok=True)

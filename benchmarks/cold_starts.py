@@ -1,7 +1,7 @@
 """Cold starts and the main job against a baseline revision, in alternating new processes (not a test).
 
-    git worktree add /tmp/base REV
-    .venv/bin/python benchmarks/cold_starts.py --baseline /tmp/base --trace 8 --run 3
+    git worktree add "$TMPDIR/base" REV
+    .venv/bin/python benchmarks/cold_starts.py --baseline "$TMPDIR/base" --trace 8 --run 3
 
 Each round runs the baseline and then this checkout: ``bsdfkit trace fitting/scenes/example.toml --rays 2097152``
 (``--trace`` rounds) and ``bsdfkit run fitting/cl830.toml`` (``--run`` rounds), after one warm-up run of each
