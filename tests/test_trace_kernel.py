@@ -102,8 +102,8 @@ SCOPES = ("specular_reflection", "phosphor_conversion", "plate", "lobe_sampling"
           "irradiance_map", "incidence_histogram", "interaction_budget")
 
 
-def lowered_text(s, full):
-    eff = scene_effects(s, full=full)
+def lowered_text(s, full=False, effects=None):
+    eff = scene_effects(s, full=full) if effects is None else effects
     with x64():
         params = kernel_params(s, eff)
         low = kernel.trace_chunk_jit.lower(params, np.zeros(2, np.uint32), np.uint32(0), np.int32(256),
@@ -114,12 +114,15 @@ def lowered_text(s, full):
 def test_minimal_kernel_carries_no_optional_code():
     s = scene()  # diffuse cavity, exit top
     eff, minimal = lowered_text(s, full=False)
-    assert not (eff.specular or eff.conversion or eff.irradiance_map or eff.incidence_histogram
-                or eff.interaction_budget or eff.top != "exit")
     _, full = lowered_text(s, full=True)
     for scope in SCOPES:
         assert scope not in minimal, scope
         assert scope in full, scope
+    # each switch of this scene's kernel brings in its own code and no other optional code
+    for flag, scope in (("specular", "specular_reflection"), ("irradiance_map", "irradiance_map"),
+                        ("incidence_histogram", "incidence_histogram"), ("interaction_budget", "interaction_budget")):
+        _, one = lowered_text(s, effects=replace(eff, **{flag: True}))
+        assert [name for name in SCOPES if name in one] == [scope], flag
     assert minimal.count("stablehlo.while") < full.count("stablehlo.while")  # lobe rejection loop
     assert minimal.count("stablehlo.scatter") == 0 < full.count("stablehlo.scatter")
     assert len(minimal) < 0.6 * len(full)
