@@ -49,7 +49,18 @@ RAY_YBR_DEFINITION = ("extracted yellow-ray power / extracted blue-ray power (tw
 
 
 def band_label(band: tuple[float, float]) -> str:
-    """``"380-500 nm"``: how a band is written next to every ratio that uses it."""
+    """``"380-500 nm"``: how a band is written next to every ratio that uses it.
+
+    Parameters
+    ----------
+    band : tuple of float
+        Lower and upper wavelength of the band [nm].
+
+    Returns
+    -------
+    str
+        The band as text, e.g. ``"380-500 nm"``.
+    """
     return f"{band[0]:g}-{band[1]:g} nm"
 
 #: Information criteria of a spectrum fit with ``model="best"`` (:func:`bsdfkit.fit.spectrum.analyse_spectra`);

@@ -127,7 +127,20 @@ def _check_side(side: str) -> str:
 # sample (θ, φ) <-> unit vectors
 # --------------------------------------------------------------------------------------------------
 def direction_from_angles(theta: ArrayLike, phi: ArrayLike) -> NDArray[np.float64]:
-    """Unit vector ω = (sin θ cos φ, sin θ sin φ, cos θ), eq. (1); θ ∈ [0, π] covers both hemispheres."""
+    """Unit vector ω = (sin θ cos φ, sin θ sin φ, cos θ), eq. (1); θ ∈ [0, π] covers both hemispheres.
+
+    Parameters
+    ----------
+    theta : float or ndarray
+        Polar angle from the +z normal, in [0, π] [rad].
+    phi : float or ndarray
+        Azimuth from the +x axis, counter-clockwise [rad].
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Unit vector ω [-].
+    """
     theta, phi = np.broadcast_arrays(_f64(theta), _f64(phi))
     sin_t = np.sin(theta)
     return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=-1)
@@ -139,6 +152,18 @@ def angles_from_direction(direction: ArrayLike) -> tuple[NDArray[np.float64], ND
     θ = atan2(√(x² + y²), z) (the clamped ``acos`` without its precision loss at the poles);
     φ = atan2(y, x) mod 2π, set to 0 at the pole and the antipode where it is undefined.
     The input need not be normalised.
+
+    Parameters
+    ----------
+    direction : array_like, shape (..., 3)
+        Vector, not necessarily normalised [-].
+
+    Returns
+    -------
+    theta : ndarray
+        Polar angle from +z, in [0, π] [rad].
+    phi : ndarray
+        Azimuth, in [0, 2π) [rad].
     """
     v = _f64(direction)
     x, y, z = v[..., 0], v[..., 1], v[..., 2]
@@ -153,6 +178,18 @@ def to_side_frame(direction: ArrayLike, side: str) -> NDArray[np.float64]:
 
     Reflection: unchanged. Transmission: (x, y, z) → (x, y, −z), the mirrored back frame of the module
     docstring, in which transmitted light has z ≥ 0 and θ is measured from the back normal.
+
+    Parameters
+    ----------
+    direction : array_like, shape (..., 3)
+        Vector in the front sample frame (or in the frame of ``side``) [-].
+    side : {"reflection", "transmission"}
+        Scattering side whose frame is wanted.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        The vector in the other frame [-].
     """
     v = _f64(direction).copy()
     if _check_side(side) == "transmission":
@@ -187,6 +224,20 @@ def sample_from_instrument(theta_r: ArrayLike, gamma: ArrayLike, epsilon: ArrayL
     Instrument frame: θi = θr, φi = π, d = (cos ε sin(γ − θr), sin ε, cos ε cos(γ − θr)) (eq. 2).
     ``transmission`` is d_z < 0 (the grazing plane d_z = 0 counts as reflection); θs, φs are then the
     angles of (d_x, d_y, |d_z|) in the transmission frame (θs from the back normal).
+
+    Parameters
+    ----------
+    theta_r : float or ndarray
+        Sample-stage rotation, equal to the angle of incidence [rad].
+    gamma : float or ndarray
+        Detector azimuth of the goniometer arm [rad].
+    epsilon : float or ndarray
+        Detector elevation above the plane of incidence [rad].
+
+    Returns
+    -------
+    SampleGeometry
+        θi, φi, θs, φs [rad] and the transmission flag (broadcast shape).
     """
     theta_r, gamma, epsilon = np.broadcast_arrays(_f64(theta_r), _f64(gamma), _f64(epsilon))
     delta = gamma - theta_r
@@ -206,6 +257,22 @@ def instrument_from_sample(
     With d the front-frame scatter vector (z negated for transmission):
     θr = θi, ε = atan2(d_y, √(d_x² + d_z²)) ∈ [−π/2, π/2], γ = θr + atan2(d_x, d_z) wrapped to (−π, π].
     At ε = ±π/2 (detector at the zenith of the arm) γ is undefined and returned as θr.
+
+    Parameters
+    ----------
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    theta_s : float or ndarray
+        Scatter polar angle from the normal of its side [rad].
+    phi_s : float or ndarray
+        Scatter azimuth in the sample frame [rad].
+    transmission : bool or ndarray of bool, optional
+        True where the scatter direction is on the transmission side.
+
+    Returns
+    -------
+    InstrumentGeometry
+        θr, γ and ε [rad] (broadcast shape).
     """
     theta_i, theta_s, phi_s, transmission = np.broadcast_arrays(
         _f64(theta_i), _f64(theta_s), _f64(phi_s), np.asarray(transmission, dtype=bool)
@@ -225,6 +292,18 @@ def specular_direction(theta_i: ArrayLike, phi_i: ArrayLike = np.pi) -> NDArray[
 
     For a source at (θi, φi) the specular direction is (θi, φi + π) in the frame of either side:
     r0 = (sin θi cos(φi + π), sin θi sin(φi + π), cos θi) = (sin θi, 0, cos θi) for φi = π.
+
+    Parameters
+    ----------
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Unit vector r0 [-].
     """
     theta_i, phi_i = np.broadcast_arrays(_f64(theta_i), _f64(phi_i))
     # φi − π rather than φi + π: the same direction, and exactly 0 for the default φi = π
@@ -232,12 +311,36 @@ def specular_direction(theta_i: ArrayLike, phi_i: ArrayLike = np.pi) -> NDArray[
 
 
 def beta0(theta_i: ArrayLike, phi_i: ArrayLike = np.pi) -> NDArray[np.float64]:
-    """β0 = tangential projection of the specular direction = sin θi (cos(φi + π), sin(φi + π))."""
+    """β0 = tangential projection of the specular direction = sin θi (cos(φi + π), sin(φi + π)).
+
+    Parameters
+    ----------
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        Direction cosines β0 of the specular direction [-].
+    """
     return specular_direction(theta_i, phi_i)[..., :2]
 
 
 def beta_from_direction(direction: ArrayLike) -> NDArray[np.float64]:
-    """β = (ω_x, ω_y) for a unit vector in the frame of its side (Harvey–Shack frame, eq. (3))."""
+    """β = (ω_x, ω_y) for a unit vector in the frame of its side (Harvey–Shack frame, eq. (3)).
+
+    Parameters
+    ----------
+    direction : array_like, shape (..., 3)
+        Unit vector in the frame of its side [-].
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        Direction cosines β [-].
+    """
     return _f64(direction)[..., :2].copy()
 
 
@@ -246,6 +349,16 @@ def direction_from_beta(beta: ArrayLike) -> NDArray[np.float64]:
 
     Raises :class:`~bsdfkit.core.errors.ValidationError` where |β| > 1 + :data:`BETA_TOLERANCE` (no direction);
     smaller excursions are rounding and are put on the horizon.
+
+    Parameters
+    ----------
+    beta : array_like, shape (..., 2)
+        Direction cosines (β_x, β_y) with |β| ≤ 1 [-].
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Unit vector with z ≥ 0 [-].
     """
     b = _f64(beta)
     norm2 = b[..., 0] ** 2 + b[..., 1] ** 2
@@ -268,6 +381,22 @@ def harvey_shack_from_direction(
 
     ψ is measured from the sample +x axis, counter-clockwise; it is 0 where ρ = 0 (the specular point).
     Valid for reflection and for transmission through a plate in air (same β0).
+
+    Parameters
+    ----------
+    direction : array_like, shape (..., 3)
+        Unit vector in the frame of its side [-].
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    rho : ndarray
+        Distance |β − β0| in direction-cosine space [-].
+    psi : ndarray
+        Azimuth of β − β0 from the sample +x axis, in [0, 2π) [rad].
     """
     d = beta_from_direction(direction) - beta0(theta_i, phi_i)
     rho = np.hypot(d[..., 0], d[..., 1])
@@ -279,7 +408,24 @@ def direction_from_harvey_shack(
     rho: ArrayLike, psi: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike = np.pi
 ) -> NDArray[np.float64]:
     """Inverse of :func:`harvey_shack_from_direction`: β = β0 + ρ(cos ψ, sin ψ), then
-    :func:`direction_from_beta` (raises where |β| > 1)."""
+    :func:`direction_from_beta` (raises where |β| > 1).
+
+    Parameters
+    ----------
+    rho : float or ndarray
+        Distance |β − β0| in direction-cosine space [-].
+    psi : float or ndarray
+        Azimuth of β − β0 from the sample +x axis [rad].
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Unit vector with z ≥ 0 [-].
+    """
     rho, psi = _f64(rho), _f64(psi)
     b0 = beta0(theta_i, phi_i)
     beta = b0 + np.stack([rho * np.cos(psi), rho * np.sin(psi)], axis=-1)
@@ -296,6 +442,18 @@ def specular_axes(
 
     e1 = unit(n − (n·r0) r0) = (−cos θi cos(φi + π), −cos θi sin(φi + π), sin θi) for θi > 0;
     e1 = x and e2 = y where sin θi = 0 (normal incidence, the convention of the module docstring); e2 = r0 × e1.
+
+    Parameters
+    ----------
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    e1, e2, r0 : ndarray, shape (..., 3)
+        Orthonormal axes of the specular-centred frame [-].
     """
     theta_i, phi_i = np.broadcast_arrays(_f64(theta_i), _f64(phi_i))
     r0 = specular_direction(theta_i, phi_i)
@@ -317,6 +475,22 @@ def specular_from_direction(
     radial = atan2(|(ω·e1, ω·e2)|, ω·r0) (the angle between ω and r0, accurate at 0 and π);
     azimuth = atan2(ω·e2, ω·e1) mod 2π, 0 where radial is 0 or π. Azimuth 0 points from the specular
     direction toward the surface normal ([Zemax-BSDF]).
+
+    Parameters
+    ----------
+    direction : array_like, shape (..., 3)
+        Unit vector in the frame of its side [-].
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    radial : ndarray
+        Angle between the vector and the specular direction, in [0, π] [rad].
+    azimuth : ndarray
+        Azimuth about the specular direction, in [0, 2π) [rad].
     """
     v = _f64(direction)
     e1, e2, r0 = specular_axes(theta_i, phi_i)
@@ -337,6 +511,22 @@ def direction_from_specular(
 
     The result may lie below the horizon (ω_z < 0) for large radial angles; callers that need the
     scattering hemisphere test ω_z themselves.
+
+    Parameters
+    ----------
+    radial : float or ndarray
+        Angle from the specular direction [rad].
+    azimuth : float or ndarray
+        Azimuth about the specular direction, 0 toward the normal [rad].
+    theta_i : float or ndarray
+        Angle of incidence from the sample normal [rad].
+    phi_i : float or ndarray, optional
+        Azimuth of the source in the sample frame [rad]; π (the instrument's) by default.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Unit vector in the frame of its side [-].
     """
     radial, azimuth = _f64(radial), _f64(azimuth)
     e1, e2, r0 = specular_axes(theta_i, phi_i)

@@ -13,7 +13,13 @@ from collections.abc import Callable, Iterator
 
 @contextlib.contextmanager
 def x64(enabled: bool = True) -> Iterator[None]:
-    """Scoped float64 mode for JAX (``jax.enable_x64``), restored on exit."""
+    """Scoped float64 mode for JAX (``jax.enable_x64``), restored on exit.
+
+    Parameters
+    ----------
+    enabled : bool, optional
+        True for float64 inside the block, False for float32.
+    """
     import jax  # here, not on import: light modules name these helpers without starting JAX
 
     with jax.enable_x64(enabled):
@@ -27,6 +33,16 @@ def jitted(fn: Callable) -> Callable:
     A model function called op by op compiles each of its primitives for every new argument shape, in every
     new process (about 25 ms per call of a TIS function, 2.2 s for two spectrum evaluations of the main job);
     jitted, it is one compiled program per argument shape, also found in the persistent compilation cache.
+
+    Parameters
+    ----------
+    fn : callable
+        A JAX-traceable function (hashable: the cache key).
+
+    Returns
+    -------
+    callable
+        The compiled function, the same object for every call with ``fn``.
     """
     import jax
 

@@ -23,6 +23,18 @@ def gauss_legendre(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Nodes x ∈ (−1, 1) and weights of the n-point Gauss–Legendre rule (exact for degree ≤ 2n − 1).
 
     The arrays are cached and read-only; copy them before changing them in place.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes, ≥ 1.
+
+    Returns
+    -------
+    nodes : ndarray, shape (n,)
+        Abscissae in (−1, 1) [-].
+    weights : ndarray, shape (n,)
+        Weights, summing to 2 [-].
     """
     if int(n) != n or n < 1:
         raise ValueError(f"Gauss-Legendre order must be a positive integer, got {n!r}")
