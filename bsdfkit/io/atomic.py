@@ -116,7 +116,18 @@ def _beside_name(name: str, suffix: str) -> str:
 
 
 def describe_os_error(exc: BaseException) -> str:
-    """A short, stable description of an OS error: 'no space left on the device [ENOSPC]'."""
+    """A short, stable description of an OS error: 'no space left on the device [ENOSPC]'.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The error, usually an :class:`OSError` with an ``errno``.
+
+    Returns
+    -------
+    str
+        Reason and errno name, or the error's text when it has no errno.
+    """
     code = getattr(exc, "errno", None)
     if code is None:
         return str(exc) or type(exc).__name__
@@ -191,6 +202,13 @@ def refuse_inputs(output: PathLike, inputs: Iterable[PathLike | None]) -> None:
     """Raise if writing ``output`` would replace one of ``inputs`` (a file, or a file inside an input folder).
 
     Refused even with ``force``: compares resolved paths and, for existing files, ``os.path.samefile``.
+
+    Parameters
+    ----------
+    output : str or Path
+        Output file or folder.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
     """
     out = Path(output)
     out_resolved = out.resolve()
@@ -305,6 +323,20 @@ def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None
 
     Raises :class:`OutputExistsError` if it exists and not ``force``, and :class:`OutputError` if it is a
     folder, a parent is a file, it is one of ``inputs`` (even with ``force``) or its folder cannot be written.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    force : bool, optional
+        Replace an existing output.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     path = Path(path)
     if path.is_dir():
@@ -349,6 +381,20 @@ def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike
     Raises :class:`OutputError` if it is a file, a parent is a file, it cannot be created or written, or (with
     ``force``) it is or holds one of ``inputs`` or the current folder; :class:`OutputExistsError` if it exists,
     is not empty and ``force`` is not given.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Output folder.
+    force : bool
+        Replace an existing, non-empty folder as a whole.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+
+    Returns
+    -------
+    Path
+        ``folder``.
     """
     folder = Path(folder)
     anchor = _folder_anchor(folder)
@@ -423,6 +469,20 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
 
         with atomic_path("out.nc", force) as tmp:
             ds.to_netcdf(tmp)
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    force : bool, optional
+        Replace an existing output.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+
+    Yields
+    ------
+    Path
+        Temporary file beside ``path`` to write to.
     """
     path = check_writable(path, force, inputs)
     tmp: Path | None = None
@@ -455,7 +515,24 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
 
 
 def write_bytes(path: PathLike, data: bytes, force: bool = False, inputs: Iterable[PathLike | None] = ()) -> Path:
-    """Atomically write ``data`` to ``path``."""
+    """Atomically write ``data`` to ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    data : bytes
+        File content.
+    force : bool, optional
+        Replace an existing output.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     with atomic_path(path, force, inputs) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(data)
@@ -464,14 +541,50 @@ def write_bytes(path: PathLike, data: bytes, force: bool = False, inputs: Iterab
 
 def write_text(path: PathLike, text: str, force: bool = False, newline: str | None = "\n",
                inputs: Iterable[PathLike | None] = ()) -> Path:
-    """Atomically write ``text`` (UTF-8) to ``path``. ``newline="\\r\\n"`` gives CRLF line ends."""
+    """Atomically write ``text`` (UTF-8) to ``path``. ``newline="\\r\\n"`` gives CRLF line ends.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    text : str
+        File content, lines ended by ``"\\n"``.
+    force : bool, optional
+        Replace an existing output.
+    newline : str or None, optional
+        Line end written for each ``"\\n"``; None keeps ``"\\n"``.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     data = text if newline in (None, "\n") else text.replace("\n", newline)
     return write_bytes(path, data.encode("utf-8"), force, inputs)
 
 
 def write_with(path: PathLike, writer: Callable[[Path], object], force: bool = False,
                inputs: Iterable[PathLike | None] = ()) -> Path:
-    """Atomically create ``path`` by calling ``writer(tmp_path)``."""
+    """Atomically create ``path`` by calling ``writer(tmp_path)``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    writer : callable
+        ``writer(tmp_path)`` writes the whole file at the temporary path it is given.
+    force : bool, optional
+        Replace an existing output.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     with atomic_path(path, force, inputs) as tmp:
         writer(tmp)
     return Path(path)
@@ -590,7 +703,18 @@ class OutputSet:
 
     # -- use ---------------------------------------------------------------------------------------
     def path(self, name: str) -> Path:
-        """Where to write output ``name`` (inside the staging folder; write it with ``force=True``)."""
+        """Where to write output ``name`` (inside the staging folder; write it with ``force=True``).
+
+        Parameters
+        ----------
+        name : str
+            Output path relative to the set's folder, e.g. ``"exports/bibs.zemax.bsdf"``.
+
+        Returns
+        -------
+        Path
+            Where to write it in the staging folder.
+        """
         if self.staging is None:
             raise RuntimeError("output set already committed or aborted")
         if name not in self.names:
@@ -603,6 +727,7 @@ class OutputSet:
         return target
 
     def abort(self) -> None:
+        """Remove the staging folder and what it holds; the target folder is left untouched."""
         if self.staging is not None:
             _rmtree(self.staging)
             _PARTIAL.discard(self.staging)

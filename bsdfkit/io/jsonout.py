@@ -12,6 +12,16 @@ def to_jsonable(obj: Any) -> Any:
     """Convert numpy scalars/arrays (and nested containers of them) to plain JSON types.
 
     Non-finite floats become ``None`` so the JSON stays valid; callers that can produce them should say so.
+
+    Parameters
+    ----------
+    obj : object
+        A value, possibly a dict, list or tuple nesting numpy scalars and arrays.
+
+    Returns
+    -------
+    object
+        The same structure in plain Python types (dict keys as str, tuples as lists).
     """
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
@@ -30,4 +40,16 @@ def to_jsonable(obj: Any) -> Any:
 
 
 def dumps(obj: Any) -> str:
+    """JSON text of ``obj`` (:func:`to_jsonable`), indented by two spaces, keys in their order.
+
+    Parameters
+    ----------
+    obj : object
+        A value :func:`to_jsonable` converts.
+
+    Returns
+    -------
+    str
+        JSON text.
+    """
     return json.dumps(to_jsonable(obj), indent=2, sort_keys=False)

@@ -32,7 +32,24 @@ def _encodable(ds: xr.Dataset) -> tuple[xr.Dataset, list[str]]:
 
 
 def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Path:
-    """Write ``ds`` to netCDF atomically; refuse to overwrite without ``force`` (or an input, ever)."""
+    """Write ``ds`` to netCDF atomically; refuse to overwrite without ``force`` (or an input, ever).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Dataset to write.
+    path : str or Path
+        Output netCDF file.
+    force : bool, optional
+        Replace an existing file.
+    inputs : iterable of (str or Path or None), optional
+        Input files the output must not replace.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     enc, deflated = _encodable(ds)
 
     def writer(tmp: Path) -> None:
@@ -49,7 +66,20 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Pa
 
 
 def load(path: str | Path, quantity: str | tuple[str, ...] | None = None) -> xr.Dataset:
-    """Read a bsdfkit netCDF file fully into memory; optionally require ``attrs['quantity']``."""
+    """Read a bsdfkit netCDF file fully into memory; optionally require ``attrs['quantity']``.
+
+    Parameters
+    ----------
+    path : str or Path
+        netCDF file written by bsdfkit.
+    quantity : str or tuple of str, optional
+        Accepted values of ``attrs['quantity']``; None accepts any.
+
+    Returns
+    -------
+    xarray.Dataset
+        The dataset, loaded into memory.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError("file not found", file=path, expected="a netCDF file written by bsdfkit")

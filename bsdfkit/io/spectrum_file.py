@@ -123,7 +123,22 @@ def _parse(path: str | Path, columns: int | None) -> tuple[np.ndarray, np.ndarra
 
 
 def read_spectrum_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray, str | None]:
-    """Read a two-column spectrum file → (wavelength nm, values, header line or None)."""
+    """Read a two-column spectrum file → (wavelength nm, values, header line or None).
+
+    Parameters
+    ----------
+    path : str or Path
+        Text file: a wavelength column [nm] and value columns.
+
+    Returns
+    -------
+    wavelength : ndarray
+        Wavelengths as in the file [nm].
+    values : ndarray
+        Values of the second column, in the file's unit.
+    header : str or None
+        The header line, if any.
+    """
     wl, values, header, _ = _parse(path, 2)
     return wl, values[0], header
 
@@ -135,6 +150,20 @@ def read_spectrum_table(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndar
     any number ≥ 2 of columns, the same on every row. Returns (wavelength, {column name: values}, header):
     names are the header's fields when the header has one per column, else "column 2", "column 3", ...
     (the 1-based column number in the file). A two-column file gives one column.
+
+    Parameters
+    ----------
+    path : str or Path
+        Text file: a wavelength column [nm] and value columns.
+
+    Returns
+    -------
+    wavelength : ndarray
+        Wavelengths as in the file [nm].
+    columns : dict of str to ndarray
+        Values of each value column, in the file's unit.
+    header : str or None
+        The header line, if any.
     """
     wl, values, header, fields = _parse(path, None)
     k = values.shape[0]
@@ -148,7 +177,22 @@ def read_spectrum_table(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndar
 def select_columns(path: str | Path, table: dict[str, np.ndarray], wanted: list[str] | None) -> list[str]:
     """Names of ``table`` picked by ``wanted`` (header names, or 1-based file column numbers ≥ 2); all if None.
 
-    Raises :class:`ValidationError` naming the file and the available columns for an unknown name."""
+    Raises :class:`ValidationError` naming the file and the available columns for an unknown name.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file the table was read from (named in the error).
+    table : dict of str to ndarray
+        Columns of :func:`read_spectrum_table`.
+    wanted : list of str or None
+        Column names or 1-based column numbers ≥ 2 as text; None or empty selects all.
+
+    Returns
+    -------
+    list of str
+        The selected column names, in the order asked.
+    """
     names = list(table)
     if not wanted:
         return names
@@ -169,6 +213,16 @@ def read_spectrum(path: str | Path) -> SpectralDistribution:
 
     The distribution is named after the file stem; values keep the file's unit. Irregular grids are kept
     as they are (colorimetry resamples when it must, see :mod:`bsdfkit.reduction.colorimetry`).
+
+    Parameters
+    ----------
+    path : str or Path
+        Text file: a wavelength column [nm] and value columns.
+
+    Returns
+    -------
+    colour.SpectralDistribution
+        Values on the file's wavelengths [nm], named after the file stem.
     """
     import colour
 

@@ -38,6 +38,18 @@ def existing_source(path: str | Path, expected: str = SOURCES) -> Path:
     """``path`` if it is a file or a raw export folder (one holding ``manifest.toml``); else one clear error.
 
     Light on purpose: the verbs call it before they import their engine, so a mistyped path is answered at once.
+
+    Parameters
+    ----------
+    path : str or Path
+        File or raw export folder.
+    expected : str, optional
+        What the file should be, for the error message.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     p = Path(path)
     if p.is_dir():
@@ -51,7 +63,18 @@ def existing_source(path: str | Path, expected: str = SOURCES) -> Path:
 
 
 def is_float(token: str) -> bool:
-    """Whether ``float(token)`` accepts the token (names the first bad token of a refused row)."""
+    """Whether ``float(token)`` accepts the token (names the first bad token of a refused row).
+
+    Parameters
+    ----------
+    token : str
+        One cell of a row.
+
+    Returns
+    -------
+    bool
+        True when ``float(token)`` succeeds.
+    """
     try:
         float(token)
     except ValueError:
@@ -129,14 +152,50 @@ def text_and_encoding(raw: bytes, path: str | Path, *, expected: str = "a text f
 
 def decode_text(raw: bytes, path: str | Path, *, expected: str = "a text file", legacy: str | None = None,
                 allow_empty: bool = False) -> str:
-    """The text of a file's bytes (:func:`text_and_encoding` without the encoding)."""
+    """The text of a file's bytes (:func:`text_and_encoding` without the encoding).
+
+    Parameters
+    ----------
+    raw : bytes
+        The file's bytes.
+    path : str or Path
+        The file (named in errors).
+    expected : str, optional
+        What the file should be, for the error message.
+    legacy : str, optional
+        Codec tried when the bytes are not UTF-8 (e.g. ``"cp1252"``); None refuses them.
+    allow_empty : bool, optional
+        Accept an empty file.
+
+    Returns
+    -------
+    str
+        The decoded text.
+    """
     return text_and_encoding(raw, path, expected=expected, legacy=legacy, allow_empty=allow_empty)[0]
 
 
 def read_text(path: str | Path, *, expected: str = "a text file", legacy: str | None = None,
               allow_empty: bool = False) -> str:
     """Read and decode a text file (:func:`decode_text`); a missing file, a folder or an unreadable file is an
-    :class:`InputError` naming ``path``."""
+    :class:`InputError` naming ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Text file.
+    expected : str, optional
+        What the file should be, for the error message.
+    legacy : str, optional
+        Codec tried when the bytes are not UTF-8 (e.g. ``"cp1252"``); None refuses them.
+    allow_empty : bool, optional
+        Accept an empty file.
+
+    Returns
+    -------
+    str
+        The decoded text.
+    """
     p = Path(path)
     if p.is_dir():
         raise InputError("a folder, not a file", file=path, expected=expected)
@@ -150,7 +209,20 @@ def read_text(path: str | Path, *, expected: str = "a text file", legacy: str | 
 
 
 def loads_toml(text: str, path: str | Path | None) -> dict:
-    """Parse TOML text; invalid TOML is a :class:`FormatError` naming ``path`` and the parser's line."""
+    """Parse TOML text; invalid TOML is a :class:`FormatError` naming ``path`` and the parser's line.
+
+    Parameters
+    ----------
+    text : str
+        TOML text.
+    path : str or Path or None
+        The file it came from (named in errors), None for text of no file.
+
+    Returns
+    -------
+    dict
+        The parsed document.
+    """
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -158,7 +230,20 @@ def loads_toml(text: str, path: str | Path | None) -> dict:
 
 
 def read_toml(path: str | Path, *, expected: str = "a TOML file") -> dict:
-    """Read, decode (:func:`read_text`) and parse a TOML file (:func:`loads_toml`)."""
+    """Read, decode (:func:`read_text`) and parse a TOML file (:func:`loads_toml`).
+
+    Parameters
+    ----------
+    path : str or Path
+        TOML file.
+    expected : str, optional
+        What the file should be, for the error message.
+
+    Returns
+    -------
+    dict
+        The parsed document.
+    """
     return loads_toml(read_text(path, expected=expected), path)
 
 

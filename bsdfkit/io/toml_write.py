@@ -83,7 +83,18 @@ def _emit(data: Mapping, prefix: list[str], out: list[str]) -> None:
 
 
 def dumps(data: Mapping) -> str:
-    """Serialise a mapping to TOML text; ``None`` values are omitted (TOML has no null)."""
+    """Serialise a mapping to TOML text; ``None`` values are omitted (TOML has no null).
+
+    Parameters
+    ----------
+    data : Mapping
+        Nested mapping of TOML values (str, int, float, bool, dates, lists, tables).
+
+    Returns
+    -------
+    str
+        TOML text, checked to parse.
+    """
     out: list[str] = []
     _emit(data, [], out)
     text = "\n".join(out).lstrip("\n") + "\n"

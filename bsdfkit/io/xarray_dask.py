@@ -63,7 +63,18 @@ class DeferredDask:
 
 def deferred_is_dask_collection(original: Any) -> Any:
     """xarray's ``is_dask_collection`` that answers False while dask is not imported (nothing can be a dask
-    collection then) and asks dask (``original``) once it is."""
+    collection then) and asks dask (``original``) once it is.
+
+    Parameters
+    ----------
+    original : callable
+        xarray's own ``is_dask_collection``.
+
+    Returns
+    -------
+    callable
+        The replacement, with the original's docstring.
+    """
 
     def is_dask_collection(x: object) -> bool:
         return "dask" in sys.modules and original(x)
