@@ -39,13 +39,41 @@ Side = Literal["reflection", "transmission"]
 # --------------------------------------------------------------------------------------------- spectra
 def split_gaussian(wavelength: ArrayLike, peak: float, fwhm: float, alpha: float = 0.0) -> NDArray[np.float64]:
     """Eqs. (2)-(3) of [Cylindrical-module]: the registry's split Gaussian
-    (:func:`bsdfkit.models.functions.split_gaussian_spectrum`) in float64 NumPy."""
+    (:func:`bsdfkit.models.functions.split_gaussian_spectrum`) in float64 NumPy.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength [nm].
+    peak : float
+        Peak wavelength [nm].
+    fwhm : float
+        Full width at half maximum [nm].
+    alpha : float, optional
+        Asymmetry of the two halves [-].
+
+    Returns
+    -------
+    ndarray
+        Relative spectral power, 1 at the peak [-].
+    """
     with x64():
         return np.asarray(split_gaussian_spectrum(jnp.asarray(wavelength, dtype=jnp.float64), peak, fwhm, alpha))
 
 
 def smoothstep(x: ArrayLike) -> NDArray[np.float64]:
-    """C¹ ramp: 0 for x ≤ 0, 3x² − 2x³ on [0, 1], 1 for x ≥ 1."""
+    """C¹ ramp: 0 for x ≤ 0, 3x² − 2x³ on [0, 1], 1 for x ≥ 1.
+
+    Parameters
+    ----------
+    x : array_like
+        Position on the ramp [-].
+
+    Returns
+    -------
+    ndarray
+        Ramp value in [0, 1] [-].
+    """
     x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
@@ -54,6 +82,16 @@ def xenon_lamp(wavelength: ArrayLike) -> NDArray[np.float64]:
     """Relative spectral power of a collimated Xe arc: a 6000 K Planck shape, 1 at 560 nm.
 
     A smooth stand-in for a real lamp; real Xe lines lie mostly above 800 nm, outside the 380–780 nm grid.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength [nm].
+
+    Returns
+    -------
+    ndarray
+        Relative spectral power, 1 at 560 nm [-].
     """
     lam = np.asarray(wavelength, dtype=np.float64) * 1e-9
     c2 = 1.438776877e-2  # second radiation constant, m·K
@@ -63,27 +101,95 @@ def xenon_lamp(wavelength: ArrayLike) -> NDArray[np.float64]:
 
 
 def bandpass_filter(wavelength: ArrayLike, low: float, high: float, edge: float = 3.0) -> NDArray[np.float64]:
-    """Interference filter transmittance: flat 0.9 inside, smooth edges of width ``edge`` nm, exactly 0 outside."""
+    """Interference filter transmittance: flat 0.9 inside, smooth edges of width ``edge`` nm, exactly 0 outside.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength [nm].
+    low : float
+        Lower edge of the pass band [nm].
+    high : float
+        Upper edge of the pass band [nm].
+    edge : float, optional
+        Width of each smooth edge [nm].
+
+    Returns
+    -------
+    ndarray
+        Transmittance in [0, 0.9] [-].
+    """
     lam = np.asarray(wavelength, dtype=np.float64)
     return 0.9 * smoothstep((lam - low) / edge) * smoothstep((high - lam) / edge)
 
 
 def longpass_filter(wavelength: ArrayLike, cut_on: float, edge: float = 5.0) -> NDArray[np.float64]:
-    """Cut-on filter transmittance: exactly 0 below ``cut_on`` nm, 0.92 above ``cut_on + edge``."""
+    """Cut-on filter transmittance: exactly 0 below ``cut_on`` nm, 0.92 above ``cut_on + edge``.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength [nm].
+    cut_on : float
+        Wavelength below which nothing passes [nm].
+    edge : float, optional
+        Width of the rising edge [nm].
+
+    Returns
+    -------
+    ndarray
+        Transmittance in [0, 0.92] [-].
+    """
     lam = np.asarray(wavelength, dtype=np.float64)
     return 0.92 * smoothstep((lam - cut_on) / edge)
 
 
 def monochromator_slit(wavelength: ArrayLike, center: float, fwhm: float, peak: float = 0.5) -> NDArray[np.float64]:
     """Slit function of a grating monochromator with equal entrance and exit slits: a triangle of full width
-    at half maximum ``fwhm`` nm about ``center``, exactly 0 beyond ±fwhm; ``peak`` is its throughput."""
+    at half maximum ``fwhm`` nm about ``center``, exactly 0 beyond ±fwhm; ``peak`` is its throughput.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength [nm].
+    center : float
+        Centre wavelength [nm].
+    fwhm : float
+        Full width at half maximum of the triangle [nm].
+    peak : float, optional
+        Throughput at the centre [-].
+
+    Returns
+    -------
+    ndarray
+        Throughput [-].
+    """
     lam = np.asarray(wavelength, dtype=np.float64)
     return peak * np.clip(1.0 - np.abs(lam - center) / fwhm, 0.0, None)
 
 
 def emission_shape(wavelength: ArrayLike, peak: float = 596.7, fwhm: float = 154.3, alpha: float = -0.12,
                    onset_nm: tuple[float, float] = (470.0, 500.0)) -> NDArray[np.float64]:
-    """Unnormalised phosphor emission: eq. (3) split Gaussian × smooth onset (0 below onset_nm[0])."""
+    """Unnormalised phosphor emission: eq. (3) split Gaussian × smooth onset (0 below onset_nm[0]).
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength [nm].
+    peak : float, optional
+        Peak wavelength of the split Gaussian [nm].
+    fwhm : float, optional
+        Its full width at half maximum [nm].
+    alpha : float, optional
+        Its asymmetry [-].
+    onset_nm : tuple of float, optional
+        Start and end of the smooth onset [nm].
+
+    Returns
+    -------
+    ndarray
+        Unnormalised relative spectral power [-].
+    """
     lam = np.asarray(wavelength, dtype=np.float64)
     onset = smoothstep((lam - onset_nm[0]) / (onset_nm[1] - onset_nm[0]))
     return split_gaussian(lam, peak, fwhm, alpha) * onset
@@ -121,7 +227,22 @@ def _interp_table(theta_i_deg: tuple[float, ...], table: tuple, theta_i: float, 
 
 
 def lobe_bsdf(p: LobeParams, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-    """ρ/π + A·exp(−|β − β0|²/(2σ²)) [1/sr] for unit ``directions`` (..., 3), β0 = (sin θi, 0), θi in radians."""
+    """ρ/π + A·exp(−|β − β0|²/(2σ²)) [1/sr] for unit ``directions`` (..., 3), β0 = (sin θi, 0), θi in radians.
+
+    Parameters
+    ----------
+    p : LobeParams
+        Lambertian ρ [-], lobe height A [1/sr] and width σ [-] (direction cosines).
+    theta_i : float
+        Angle of incidence from the sample normal [rad].
+    directions : ndarray, shape (..., 3)
+        Unit scatter vectors, z ≥ 0 [-].
+
+    Returns
+    -------
+    ndarray
+        BSDF [1/sr].
+    """
     dbeta2 = (directions[..., 0] - np.sin(theta_i)) ** 2 + directions[..., 1] ** 2
     return p.rho / np.pi + p.A * np.exp(-dbeta2 / (2 * p.sigma**2))
 
@@ -149,15 +270,55 @@ class PhosphorPlateTruth:
 
     # -- parameters --------------------------------------------------------------------------------
     def lobe(self, interaction: str, side: str, theta_i: float) -> LobeParams:
-        """Elastic parameters of ``interaction`` ("bibs"|"yiys") at incidence θi (radians)."""
+        """Elastic parameters of ``interaction`` ("bibs"|"yiys") at incidence θi (radians).
+
+        Parameters
+        ----------
+        interaction : {"bibs", "yiys"}
+            Elastic interaction: blue in, blue out or yellow in, yellow out.
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+
+        Returns
+        -------
+        LobeParams
+            Parameters interpolated at θi (clamped at the table's ends).
+        """
         return _interp_table(self.theta_i_deg, getattr(self, interaction)[side], theta_i, LobeParams, LOBE_FIELDS)
 
     def conversion(self, side: str, theta_i: float) -> ConversionParams:
+        """Converted (biys) parameters T and ε at incidence θi.
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+
+        Returns
+        -------
+        ConversionParams
+            Parameters interpolated at θi (clamped at the table's ends).
+        """
         return _interp_table(self.theta_i_deg, self.biys[side], theta_i, ConversionParams, CONVERSION_FIELDS)
 
     # -- spectral factors --------------------------------------------------------------------------
     def emission_density(self, wavelength: ArrayLike) -> NDArray[np.float64]:
-        """e(λ) in 1/nm, normalised to ∫ e dλ = 1 over the yellow band 470–740 nm (fine grid)."""
+        """e(λ) in 1/nm, normalised to ∫ e dλ = 1 over the yellow band 470–740 nm (fine grid).
+
+        Parameters
+        ----------
+        wavelength : array_like
+            Wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            Emission density e(λ) [1/nm].
+        """
         em = self.emission
         fine = np.linspace(*CONVERSION_BAND_NM, 27001)
         shape = lambda lam: emission_shape(lam, em["peak"], em["fwhm"], em["alpha"],  # noqa: E731
@@ -166,7 +327,18 @@ class PhosphorPlateTruth:
         return shape(wavelength) / norm
 
     def excitation(self, wavelength: ArrayLike) -> NDArray[np.float64]:
-        """Relative conversion efficiency g(λi): 1 inside the excitation band, 0 outside."""
+        """Relative conversion efficiency g(λi): 1 inside the excitation band, 0 outside.
+
+        Parameters
+        ----------
+        wavelength : array_like
+            Incident (excitation) wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            g(λi), 0 or 1 [-].
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         lo, hi = self.excitation_band_nm
         return ((lam >= lo) & (lam <= hi)).astype(np.float64)
@@ -174,16 +346,66 @@ class PhosphorPlateTruth:
     # -- angular parts -----------------------------------------------------------------------------
     def elastic_angular(self, interaction: str, side: str, theta_i: float,
                         directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Wavelength-independent part of the elastic BSDF (1/sr) for unit ``directions`` (..., 3), z ≥ 0."""
+        """Wavelength-independent part of the elastic BSDF (1/sr) for unit ``directions`` (..., 3), z ≥ 0.
+
+        Parameters
+        ----------
+        interaction : {"bibs", "yiys"}
+            Elastic interaction: blue in, blue out or yellow in, yellow out.
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (..., 3)
+            Unit scatter vectors in the frame of ``side``, z ≥ 0 [-].
+
+        Returns
+        -------
+        ndarray
+            BSDF [1/sr].
+        """
         return lobe_bsdf(self.lobe(interaction, side, theta_i), theta_i, directions)
 
     def elastic_spectral(self, interaction: str, side: str, theta_i: float,
                          wavelength: ArrayLike) -> NDArray[np.float64]:
+        """Wavelength factor m(λ) = 1 + κ(λ − λref)/100 nm of the elastic BSDF.
+
+        Parameters
+        ----------
+        interaction : {"bibs", "yiys"}
+            Elastic interaction: blue in, blue out or yellow in, yellow out.
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        wavelength : array_like
+            Wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            m(λ) [-].
+        """
         p = self.lobe(interaction, side, theta_i)
         return 1.0 + p.kappa * (np.asarray(wavelength, dtype=np.float64) - p.lambda_ref) / 100.0
 
     def conversion_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        """T/π · (1 + ε(cos θs − 2/3)) in 1/sr (multiply by e(λs) for the bi-spectral BSDF in 1/(sr nm))."""
+        """T/π · (1 + ε(cos θs − 2/3)) in 1/sr (multiply by e(λs) for the bi-spectral BSDF in 1/(sr nm)).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (..., 3)
+            Unit scatter vectors in the frame of ``side``, z ≥ 0 [-].
+
+        Returns
+        -------
+        ndarray
+            Angular factor [1/sr].
+        """
         p = self.conversion(side, theta_i)
         return p.T / np.pi * (1.0 + p.epsilon * (directions[..., 2] - 2.0 / 3.0))
 
@@ -193,6 +415,24 @@ class PhosphorPlateTruth:
 
         Converted part g(λi)·f_conv·e(λs); the elastic part sits on the diagonal as f(λ)/Δλ, the discrete form
         of f(λ)·δ(λi − λs), so that Σ_λi q_λ E Δλi reproduces f(λs) E(λs) (eq. (2) of the power-budget paper).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (..., 3)
+            Unit scatter vectors in the frame of ``side``, z ≥ 0 [-].
+        wavelength_i : ndarray, shape (n_λi,)
+            Incident wavelength grid [nm].
+        wavelength : ndarray, shape (n_λs,)
+            Scattered wavelength grid [nm].
+
+        Returns
+        -------
+        ndarray
+            Bi-spectral BSDF, shape (..., n_λi, n_λs) [1/(sr nm)].
         """
         lam_i = np.asarray(wavelength_i, dtype=np.float64)
         lam = np.asarray(wavelength, dtype=np.float64)
@@ -215,6 +455,26 @@ class PhosphorPlateTruth:
 
         ``directions``/``weights`` are the aperture quadrature (weights include cos θs), θi in radians: the
         elastic part P_i(λ)·m(λ)·∫f, the converted part Φ_exc·e(λ)·∫f_conv with Φ_exc the excited power.
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (n_pos, n_dir, 3)
+            Quadrature directions over each aperture, unit vectors in the frame of ``side`` [-].
+        weights : ndarray, shape (n_pos, n_dir)
+            Projected-solid-angle weights of the directions (cos θs included) [sr].
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        incident : ndarray, shape (n_λ,)
+            Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
+
+        Returns
+        -------
+        ndarray
+            Scattered spectral power, shape (n_pos, n_λ), in the unit of ``incident``.
         """
         lam = wavelength
         s_b = (self.elastic_angular("bibs", side, theta_i, directions) * weights).sum(-1)
@@ -229,7 +489,18 @@ class PhosphorPlateTruth:
         return elastic + converted
 
     def elastic_interaction(self, wavelength: ArrayLike) -> NDArray[np.str_]:
-        """Which elastic parameter set applies at each wavelength: "bibs" below the split, "yiys" above."""
+        """Which elastic parameter set applies at each wavelength: "bibs" below the split, "yiys" above.
+
+        Parameters
+        ----------
+        wavelength : array_like
+            Wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            Interaction name per wavelength, ``"bibs"`` or ``"yiys"``.
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         return np.where(lam < self.elastic_split_nm, "bibs", "yiys")
 
@@ -240,12 +511,43 @@ class PhosphorPlateTruth:
         In polar coordinates (t, ψ) centred on β0 the radial integral is analytic:
         ∫₀^{t_max} A e^{−t²/2σ²} t dt = Aσ²(1 − e^{−t_max²/2σ²}), t_max(ψ) = −b·u + √((b·u)² + 1 − |b|²).
         The remaining ψ integral is periodic and smooth, so the midpoint rule converges exponentially.
+
+        Parameters
+        ----------
+        interaction : {"bibs", "yiys"}
+            Elastic interaction: blue in, blue out or yellow in, yellow out.
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        n_psi : int, optional
+            Number of azimuth nodes of the midpoint rule.
+
+        Returns
+        -------
+        float
+            Lobe TIS [-] (fraction of the incident power).
         """
         p = self.lobe(interaction, side, theta_i)
         return clipped_gaussian_lobe_tis(p.A, p.sigma, theta_i, n_psi)
 
     def elastic_tis(self, interaction: str, side: str, theta_i: float) -> float:
-        """TIS of the wavelength-independent elastic part: ρ + lobe (fraction of incident power)."""
+        """TIS of the wavelength-independent elastic part: ρ + lobe (fraction of incident power).
+
+        Parameters
+        ----------
+        interaction : {"bibs", "yiys"}
+            Elastic interaction: blue in, blue out or yellow in, yellow out.
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+
+        Returns
+        -------
+        float
+            TIS [-] (fraction of the incident power).
+        """
         return self.lobe(interaction, side, theta_i).rho + self.lobe_tis(interaction, side, theta_i)
 
     def to_dict(self) -> dict:
@@ -256,6 +558,17 @@ class PhosphorPlateTruth:
 
     @classmethod
     def from_dict(cls, data: dict) -> "PhosphorPlateTruth":
+        """The truth from :meth:`to_dict`'s form (e.g. read from JSON).
+
+        Parameters
+        ----------
+        data : dict
+            Fields of the dataclass, parameters as dicts.
+
+        Returns
+        -------
+        PhosphorPlateTruth
+        """
         try:
             return cls(
                 name=data["name"],
@@ -274,14 +587,48 @@ class PhosphorPlateTruth:
 
 def clipped_gaussian_lobe_tis(A: float, sigma: float, theta_i: float, n_psi: int = 4096) -> float:
     """TIS of a Gaussian lobe clipped by the unit disk (θi in radians): the registry's formula
-    (:func:`bsdfkit.models.functions.tis_gaussian_lobe`) in float64, as a Python float."""
+    (:func:`bsdfkit.models.functions.tis_gaussian_lobe`) in float64, as a Python float.
+
+    Parameters
+    ----------
+    A : float
+        Lobe height [1/sr].
+    sigma : float
+        Lobe width in direction cosines [-].
+    theta_i : float
+        Angle of incidence from the sample normal [rad].
+    n_psi : int, optional
+        Number of azimuth nodes of the midpoint rule.
+
+    Returns
+    -------
+    float
+        TIS of the lobe [-] (fraction of the incident power).
+    """
     with x64():
         return float(tis_gaussian_lobe(theta_i, A, sigma, n_psi))
 
 
 def weighted_mean(wavelength: NDArray[np.float64], values: NDArray[np.float64], weight: NDArray[np.float64],
                   band: tuple[float, float]) -> float:
-    """⟨values⟩ weighted by ``weight`` over ``band`` (eq. (5) of the power-budget paper, trapezoid rule)."""
+    """⟨values⟩ weighted by ``weight`` over ``band`` (eq. (5) of the power-budget paper, trapezoid rule).
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Wavelength grid [nm].
+    values : ndarray
+        Values on the grid.
+    weight : ndarray
+        Weights on the grid (e.g. an incident spectrum, any scale).
+    band : tuple of float
+        Lower and upper wavelength of the band [nm].
+
+    Returns
+    -------
+    float
+        Weighted mean, in the unit of ``values``.
+    """
     # the band sum of the reductions, so that the truth and the measurement integrate the same way
     return band_sum(wavelength, values * weight, band) / band_sum(wavelength, weight, band)
 
@@ -293,6 +640,24 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
     Uses the paper's definitions: bibs = ⟨q⟩ over the blue band weighted by the blue incident spectrum
     (eqs. 5, 7); yiys the same over 470–740 nm with the yellow incident spectrum (eq. 8); biys = the bi-spectral
     BSDF averaged over the excitation spectrum and integrated over 470–740 nm (eqs. 10–13). Keys as in Table 2.
+
+    Parameters
+    ----------
+    truth : PhosphorPlateTruth
+        The plate.
+    theta_i_deg : float
+        Angle of incidence [deg].
+    wavelength : ndarray, shape (n_λ,)
+        Wavelength grid [nm].
+    blue_incident : ndarray, shape (n_λ,)
+        Blue incident spectral power [W/nm] (any scale).
+    yellow_incident : ndarray, shape (n_λ,)
+        Yellow incident spectral power [W/nm] (any scale).
+
+    Returns
+    -------
+    dict of str to float
+        TIS in percent of the incident power [%], keys of Table 2 and the blue and yellow losses.
     """
     th = np.radians(theta_i_deg)
     out: dict[str, float] = {}
@@ -367,7 +732,18 @@ class ExcitationEmissionTruth:
 
     # -- spectral factors --------------------------------------------------------------------------
     def absorption(self, wavelength: ArrayLike) -> NDArray[np.float64]:
-        """a(λ): probability that an incident photon at λ is absorbed by the phosphor [1]."""
+        """a(λ): probability that an incident photon at λ is absorbed by the phosphor [1].
+
+        Parameters
+        ----------
+        wavelength : array_like
+            Wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            Absorption probability a(λ) [-].
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         return self.absorption_max / (1.0 + np.exp((lam - self.absorption_edge_nm) / self.absorption_width_nm))
 
@@ -380,30 +756,110 @@ class ExcitationEmissionTruth:
                                                      (em["onset_start"], em["onset_end"])), 0.0)
 
     def emission_pdf(self, wavelength: ArrayLike) -> NDArray[np.float64]:
-        """e(λ) [1/nm]: photon-number pdf of the converted light, ∫ e dλ = 1 over ``emission_range_nm``."""
+        """e(λ) [1/nm]: photon-number pdf of the converted light, ∫ e dλ = 1 over ``emission_range_nm``.
+
+        Parameters
+        ----------
+        wavelength : array_like
+            Wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            Photon-number pdf e(λ) [1/nm].
+        """
         fine = np.linspace(*self.emission_range_nm, 40001)
         return self._emission_shape(wavelength) / band_sum(fine, self._emission_shape(fine), self.emission_range_nm)
 
     # -- angular parts -----------------------------------------------------------------------------
     def lobe(self, side: str, theta_i: float) -> LobeParams:
-        """Elastic parameters at zero absorption, at incidence θi (radians)."""
+        """Elastic parameters at zero absorption, at incidence θi (radians).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+
+        Returns
+        -------
+        LobeParams
+            Parameters interpolated at θi (clamped at the table's ends).
+        """
         return _interp_table(self.theta_i_deg, self.elastic[side], theta_i, LobeParams, LOBE_FIELDS)
 
     def share(self, side: str, theta_i: float) -> ConversionParams:
-        """Share T of the converted photons leaving into ``side`` and its shape factor ε, at θi (radians)."""
+        """Share T of the converted photons leaving into ``side`` and its shape factor ε, at θi (radians).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+
+        Returns
+        -------
+        ConversionParams
+            Parameters interpolated at θi (clamped at the table's ends).
+        """
         return _interp_table(self.theta_i_deg, self.conversion[side], theta_i, ConversionParams, CONVERSION_FIELDS)
 
     def elastic_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        """f_0 [1/sr]: the elastic BSDF at zero absorption for unit ``directions`` (..., 3)."""
+        """f_0 [1/sr]: the elastic BSDF at zero absorption for unit ``directions`` (..., 3).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (..., 3)
+            Unit scatter vectors in the frame of ``side``, z ≥ 0 [-].
+
+        Returns
+        -------
+        ndarray
+            BSDF f_0 [1/sr].
+        """
         return lobe_bsdf(self.lobe(side, theta_i), theta_i, directions)
 
     def conversion_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
-        """T/π·(1 + ε(cos θs − 2/3)) [1/sr]: angular density of the converted photons (integrates to T)."""
+        """T/π·(1 + ε(cos θs − 2/3)) [1/sr]: angular density of the converted photons (integrates to T).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (..., 3)
+            Unit scatter vectors in the frame of ``side``, z ≥ 0 [-].
+
+        Returns
+        -------
+        ndarray
+            Angular density [1/sr].
+        """
         p = self.share(side, theta_i)
         return p.T / np.pi * (1.0 + p.epsilon * (directions[..., 2] - 2.0 / 3.0))
 
     def elastic_tis_at_zero_absorption(self, side: str, theta_i: float) -> float:
-        """ρ + clipped lobe TIS of f_0 [1]."""
+        """ρ + clipped lobe TIS of f_0 [1].
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+
+        Returns
+        -------
+        float
+            TIS [-] (fraction of the incident power).
+        """
         p = self.lobe(side, theta_i)
         return p.rho + clipped_gaussian_lobe_tis(p.A, p.sigma, theta_i)
 
@@ -414,6 +870,26 @@ class ExcitationEmissionTruth:
 
         ``directions``/``weights`` are the aperture quadrature (weights include cos θs), θi in radians.
         Elastic: P_i(λ)(1 − a(λ))·∫f_0; converted: η Σ_λi P_i a λi Δλi · e(λs)/λs · ∫g, in the same units.
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        directions : ndarray, shape (n_pos, n_dir, 3)
+            Quadrature directions over each aperture, unit vectors in the frame of ``side`` [-].
+        weights : ndarray, shape (n_pos, n_dir)
+            Projected-solid-angle weights of the directions (cos θs included) [sr].
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        incident : ndarray, shape (n_λ,)
+            Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
+
+        Returns
+        -------
+        ndarray
+            Scattered spectral power, shape (n_pos, n_λ), in the unit of ``incident``.
         """
         lam = np.asarray(wavelength, dtype=np.float64)
         s_el = (self.elastic_angular(side, theta_i, directions) * weights).sum(-1)
@@ -426,7 +902,24 @@ class ExcitationEmissionTruth:
     # -- exact values for an incident spectrum -----------------------------------------------------
     def elastic_tis(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
                     incident: NDArray[np.float64]) -> float:
-        """Elastic TIS [1] for the incident spectrum (any scale): ⟨1 − a⟩·(ρ + lobe TIS)."""
+        """Elastic TIS [1] for the incident spectrum (any scale): ⟨1 − a⟩·(ρ + lobe TIS).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        incident : ndarray, shape (n_λ,)
+            Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
+
+        Returns
+        -------
+        float
+            TIS [-] (fraction of the incident power).
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         band = (float(lam[0]), float(lam[-1]))
         mean = band_sum(lam, incident * (1.0 - self.absorption(lam)), band) / band_sum(lam, incident, band)
@@ -434,7 +927,24 @@ class ExcitationEmissionTruth:
 
     def converted_density(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
                           incident: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Converted spectral power leaving into ``side`` per unit incident power [1/nm], on ``wavelength``."""
+        """Converted spectral power leaving into ``side`` per unit incident power [1/nm], on ``wavelength``.
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        incident : ndarray, shape (n_λ,)
+            Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
+
+        Returns
+        -------
+        ndarray
+            Converted spectral power per incident power [1/nm].
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         band = (float(lam[0]), float(lam[-1]))
         absorbed = band_sum(lam, incident * self.absorption(lam) * lam, band) / band_sum(lam, incident, band)
@@ -442,13 +952,45 @@ class ExcitationEmissionTruth:
 
     def converted_tis(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
                       incident: NDArray[np.float64], band: tuple[float, float] | None = None) -> float:
-        """Converted power leaving into ``side`` per incident power [1] (within ``band``, default all)."""
+        """Converted power leaving into ``side`` per incident power [1] (within ``band``, default all).
+
+        Parameters
+        ----------
+        side : {"reflection", "transmission"}
+            Scattering side.
+        theta_i : float
+            Angle of incidence from the sample normal [rad].
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        incident : ndarray, shape (n_λ,)
+            Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
+        band : tuple of float, optional
+            Lower and upper wavelength of the band [nm]; the whole grid by default.
+
+        Returns
+        -------
+        float
+            Converted power per incident power [-].
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         band = band or (float(lam[0]), float(lam[-1]))
         return band_sum(lam, self.converted_density(side, theta_i, lam, incident), band)
 
     def photon_yield(self, wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> float:
-        """Converted photons (both sides) per incident photon [1]: η⟨a⟩ with photon weights, ≤ η."""
+        """Converted photons (both sides) per incident photon [1]: η⟨a⟩ with photon weights, ≤ η.
+
+        Parameters
+        ----------
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        incident : ndarray, shape (n_λ,)
+            Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
+
+        Returns
+        -------
+        float
+            Converted photons per incident photon [-].
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         band = (float(lam[0]), float(lam[-1]))
         return (self.quantum_yield * band_sum(lam, incident * lam * self.absorption(lam), band)
@@ -460,7 +1002,24 @@ class ExcitationEmissionTruth:
         blue and yellow incident spectra, as the measurement equation defines them: bibs the blue-weighted mean
         of P_s/P_i over 450-470 nm (eq. 5); biys the converted power in 470-740 nm (eq. 13); yiys the
         yellow-weighted mean of P_s/P_i over the pixels of 470-740 nm that carry yellow light (eq. 8), which
-        includes the light the yellow beam's short-wave part converts."""
+        includes the light the yellow beam's short-wave part converts.
+
+        Parameters
+        ----------
+        theta_i_deg : float
+            Angle of incidence [deg].
+        wavelength : ndarray, shape (n_λ,)
+            Wavelength grid [nm].
+        blue : ndarray, shape (n_λ,)
+            Blue incident spectral power [W/nm] (any scale).
+        yellow : ndarray, shape (n_λ,)
+            Yellow incident spectral power [W/nm] (any scale).
+
+        Returns
+        -------
+        dict of str to float
+            TIS in percent of the incident power [%], keys of Table 2 and the blue and yellow losses.
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         th = np.radians(theta_i_deg)
         whole = (float(lam[0]), float(lam[-1]))
@@ -486,6 +1045,17 @@ class ExcitationEmissionTruth:
 
     @classmethod
     def from_dict(cls, data: dict) -> "ExcitationEmissionTruth":
+        """The truth from :meth:`to_dict`'s form (e.g. read from JSON).
+
+        Parameters
+        ----------
+        data : dict
+            Fields of the dataclass, parameters as dicts.
+
+        Returns
+        -------
+        ExcitationEmissionTruth
+        """
         try:
             return cls(
                 name=data["name"], theta_i_deg=tuple(float(t) for t in data["theta_i_deg"]),
