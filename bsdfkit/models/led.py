@@ -80,7 +80,22 @@ def ohno2005_spectrum(wavelength: ArrayLike, peak: ArrayLike, half_spectral_widt
 
 
 def ohno2005_fwhm_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -> jnp.ndarray:
-    """:func:`ohno2005_spectrum` parameterised by its true FWHM Δλ [nm] (w = Δλ / OHNO2005_FWHM_PER_WIDTH)."""
+    """:func:`ohno2005_spectrum` parameterised by its true FWHM Δλ [nm] (w = Δλ / OHNO2005_FWHM_PER_WIDTH).
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelength λ [nm].
+    peak : array_like
+        Peak wavelength λp [nm].
+    fwhm : array_like
+        Full width at half maximum Δλ [nm].
+
+    Returns
+    -------
+    jax.Array
+        Relative spectral value, 1 at the peak [-].
+    """
     return ohno2005_spectrum(wavelength, peak, jnp.asarray(fwhm) / OHNO2005_FWHM_PER_WIDTH)
 
 

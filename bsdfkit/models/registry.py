@@ -96,12 +96,36 @@ class BsdfModel:
         return tuple(p.name for p in self.parameters)
 
     def function(self, p: jnp.ndarray, x: Mapping[str, jnp.ndarray]) -> jnp.ndarray:
-        """JAX model at angles ``x`` = {theta_i, theta_s, phi_s} [rad] (source at φi = π), in 1/sr."""
+        """JAX model at angles ``x`` = {theta_i, theta_s, phi_s} [rad] (source at φi = π), in 1/sr.
+
+        Parameters
+        ----------
+        p : jax.Array
+            Parameter vector in the order of ``parameters`` (ρ [-], A [1/sr], σ, B, g [-]).
+        x : Mapping of str to jax.Array
+            ``theta_i``, ``theta_s`` and ``phi_s`` [rad].
+
+        Returns
+        -------
+        jax.Array
+            BSDF [1/sr].
+        """
         d = f.delta_beta(x["theta_i"], x["theta_s"], x["phi_s"])
         return self.radial(p, d)
 
     def vector(self, params: Mapping[str, float]) -> NDArray[np.float64]:
-        """The parameter vector of a name → value mapping (raises naming a missing parameter)."""
+        """The parameter vector of a name → value mapping (raises naming a missing parameter).
+
+        Parameters
+        ----------
+        params : Mapping of str to float
+            Parameter name → value (ρ [-], A [1/sr], σ, B, g [-]).
+
+        Returns
+        -------
+        ndarray
+            Parameter vector in the order of ``parameters``.
+        """
         missing = [n for n in self.parameter_names if n not in params]
         if missing:
             raise ValidationError(f"model {self.name} lacks parameters", field=", ".join(missing),
@@ -109,20 +133,63 @@ class BsdfModel:
         return np.array([float(params[n]) for n in self.parameter_names], dtype=np.float64)
 
     def values_at_distance(self, params: Mapping[str, float], d: ArrayLike) -> NDArray[np.float64]:
-        """NumPy evaluator: the BSDF [1/sr] at Harvey–Shack distances d = |β − β0| (float64)."""
+        """NumPy evaluator: the BSDF [1/sr] at Harvey–Shack distances d = |β − β0| (float64).
+
+        Parameters
+        ----------
+        params : Mapping of str to float
+            Parameter name → value (ρ [-], A [1/sr], σ, B, g [-]).
+        d : array_like
+            Harvey–Shack distance |β − β0| in direction cosines [-].
+
+        Returns
+        -------
+        ndarray
+            BSDF [1/sr].
+        """
         with x64():
             return np.asarray(self.radial(jnp.asarray(self.vector(params)), jnp.asarray(d, dtype=jnp.float64)))
 
     def values(self, params: Mapping[str, float], theta_i_deg: ArrayLike, theta_s_deg: ArrayLike,
                phi_s_deg: ArrayLike) -> NDArray[np.float64]:
-        """NumPy evaluator: the BSDF [1/sr] at angles in degrees (source at φi = 180°)."""
+        """NumPy evaluator: the BSDF [1/sr] at angles in degrees (source at φi = 180°).
+
+        Parameters
+        ----------
+        params : Mapping of str to float
+            Parameter name → value (ρ [-], A [1/sr], σ, B, g [-]).
+        theta_i_deg : array_like
+            Angle of incidence [deg].
+        theta_s_deg : array_like
+            Scatter polar angle [deg].
+        phi_s_deg : array_like
+            Scatter azimuth [deg].
+
+        Returns
+        -------
+        ndarray
+            BSDF [1/sr] (broadcast shape of the angles).
+        """
         with x64():
             d = f.delta_beta(*(jnp.radians(jnp.asarray(a, dtype=jnp.float64))
                                for a in (theta_i_deg, theta_s_deg, phi_s_deg)))
             return np.asarray(self.radial(jnp.asarray(self.vector(params)), d))
 
     def total_integrated_scatter(self, params: Mapping[str, ArrayLike], theta_i_deg: ArrayLike) -> NDArray:
-        """TIS [1] over the unit disk at incidences [deg]; parameters may be arrays over the incidences."""
+        """TIS [1] over the unit disk at incidences [deg]; parameters may be arrays over the incidences.
+
+        Parameters
+        ----------
+        params : Mapping of str to array_like
+            Parameter name → value or values, one per incidence (ρ [-], A [1/sr], σ, B, g [-]).
+        theta_i_deg : array_like
+            Angle of incidence [deg].
+
+        Returns
+        -------
+        ndarray
+            TIS [-] (fraction of the incident power).
+        """
         with x64():
             args = [jnp.asarray(params[n], dtype=jnp.float64) for n in self.parameter_names]
             return np.asarray(jitted(self.tis)(jnp.radians(jnp.asarray(theta_i_deg, dtype=jnp.float64)), *args))
@@ -179,7 +246,17 @@ BSDF_MODELS: dict[str, BsdfModel] = {
 
 
 def bsdf_model(name: str) -> BsdfModel:
-    """The registered BSDF model ``name`` (raises naming the known models otherwise)."""
+    """The registered BSDF model ``name`` (raises naming the known models otherwise).
+
+    Parameters
+    ----------
+    name : str
+        Registry key, e.g. ``"lambert+gaussian"``.
+
+    Returns
+    -------
+    BsdfModel
+    """
     try:
         return BSDF_MODELS[name]
     except KeyError:
@@ -255,12 +332,40 @@ def _two_band(theta, wavelength):
 
 
 def pump_two_band(theta, wavelength):
-    """The pump (blue) component of ``two-band``: a Gaussian."""
+    """The pump (blue) component of ``two-band``: a Gaussian.
+
+    Parameters
+    ----------
+    theta : jax.Array
+        Parameter vector of the model: peaks, widths and offsets [nm], asymmetries [-], amplitudes in the
+        unit of the spectrum.
+    wavelength : jax.Array
+        Wavelength [nm].
+
+    Returns
+    -------
+    jax.Array
+        Spectral value, in the unit of the amplitudes.
+    """
     return theta[2] * f.gaussian_spectrum(wavelength, theta[0], theta[1])
 
 
 def pump_two_band_led(theta, wavelength):
-    """The pump component of ``two-band-led``: a Gaussian line plus its Gaussian side band."""
+    """The pump component of ``two-band-led``: a Gaussian line plus its Gaussian side band.
+
+    Parameters
+    ----------
+    theta : jax.Array
+        Parameter vector of the model: peaks, widths and offsets [nm], asymmetries [-], amplitudes in the
+        unit of the spectrum.
+    wavelength : jax.Array
+        Wavelength [nm].
+
+    Returns
+    -------
+    jax.Array
+        Spectral value, in the unit of the amplitudes.
+    """
     return pump_two_band(theta, wavelength) + theta[5] * f.gaussian_spectrum(wavelength, theta[0] + theta[3], theta[4])
 
 
@@ -271,7 +376,21 @@ def _two_band_led(theta, wavelength):
 
 def phosphor_two_band_wide(theta, wavelength):
     """The phosphor component of ``two-band-wide``: a split Gaussian plus a Gaussian at an offset from it (a
-    second phosphor, or the long tail of one)."""
+    second phosphor, or the long tail of one).
+
+    Parameters
+    ----------
+    theta : jax.Array
+        Parameter vector of the model: peaks, widths and offsets [nm], asymmetries [-], amplitudes in the
+        unit of the spectrum.
+    wavelength : jax.Array
+        Wavelength [nm].
+
+    Returns
+    -------
+    jax.Array
+        Spectral value, in the unit of the amplitudes.
+    """
     return theta[9] * f.split_gaussian_spectrum(wavelength, theta[6], theta[7], theta[8]) + theta[12] * (
         f.gaussian_spectrum(wavelength, theta[6] + theta[10], theta[11]))
 
@@ -316,7 +435,17 @@ SPECTRUM_MODELS: dict[str, SpectrumModel] = {
 
 
 def spectrum_model(name: str) -> SpectrumModel:
-    """The registered spectrum model ``name`` (raises naming the known models otherwise)."""
+    """The registered spectrum model ``name`` (raises naming the known models otherwise).
+
+    Parameters
+    ----------
+    name : str
+        Registry key, e.g. ``"split-gaussian"``.
+
+    Returns
+    -------
+    SpectrumModel
+    """
     try:
         return SPECTRUM_MODELS[name]
     except KeyError:
