@@ -50,7 +50,20 @@ MODES = ("auto", "interactions", "hemispherical")
 
 
 def check_band(band: Sequence[float] | None, field: str = "band") -> tuple[float, float] | None:
-    """A wavelength band (low, high) [nm] with finite limits, 0 < low < high ≤ 1e6, or ``None``."""
+    """A wavelength band (low, high) [nm] with finite limits, 0 < low < high ≤ 1e6, or ``None``.
+
+    Parameters
+    ----------
+    band : sequence of float or None
+        (low, high) wavelengths [nm].
+    field : str, optional
+        Option named in the error.
+
+    Returns
+    -------
+    tuple of float or None
+        (low, high) [nm], or None.
+    """
     if band is None:
         return None
     try:
@@ -64,7 +77,22 @@ def check_band(band: Sequence[float] | None, field: str = "band") -> tuple[float
 
 
 def check_incidence(ds: xr.Dataset, incidence: float | None, field: str = "incidence") -> float | None:
-    """The measured incidence [deg] matching ``incidence`` (within 1e-6 deg), ``None`` for ``None``."""
+    """The measured incidence [deg] matching ``incidence`` (within 1e-6 deg), ``None`` for ``None``.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated dataset (:func:`bsdfkit.ingest`).
+    incidence : float or None
+        Requested angle of incidence [deg].
+    field : str, optional
+        Option named in the error.
+
+    Returns
+    -------
+    float or None
+        The measured angle of incidence [deg], or None.
+    """
     if incidence is None:
         return None
     measured = incidences(ds)
@@ -80,7 +108,15 @@ def check_incidence(ds: xr.Dataset, incidence: float | None, field: str = "incid
 
 
 def refuse_band_for_interactions(band: tuple[float, float] | None, field: str = "band") -> None:
-    """Refuse a user band for the interaction table (one line): each interaction has its own band."""
+    """Refuse a user band for the interaction table (one line): each interaction has its own band.
+
+    Parameters
+    ----------
+    band : tuple of float or None
+        (low, high) wavelengths [nm] the user asked for; None passes.
+    field : str, optional
+        Option named in the error.
+    """
     if band is not None:
         raise InputError("a band does not apply to a phosphor plate's interaction table, whose interactions each "
                          f"have their own band (bibs {band_label(EXCITATION_BAND_NM)}, biys and yiys "
@@ -132,7 +168,26 @@ def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | 
 def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence: float) -> tuple[float, float]:
     """The data's TIS [fraction] and its standard uncertainty beside a fit of one interaction profile: what
     :func:`tis` reports for that interaction (phosphor plate) or the band average over the measured range of
-    the dataset's only configuration (``elastic``), at one measured incidence [deg] and side."""
+    the dataset's only configuration (``elastic``), at one measured incidence [deg] and side.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated dataset (:func:`bsdfkit.ingest`).
+    interaction : {"bibs", "biys", "yiys"}
+        Interaction of a phosphor plate (ignored for elastic data).
+    side : {"reflection", "transmission"}
+        Scattering side.
+    incidence : float
+        A measured angle of incidence [deg].
+
+    Returns
+    -------
+    tis : float
+        TIS [-] (fraction of the incident power).
+    std : float
+        Its standard uncertainty [-].
+    """
     table = tis(ds, incidence)
     if table.attrs.get("reduction") == "interactions":
         row = table.sel(interaction=interaction, side=side)
@@ -145,6 +200,18 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
     """Table 2 of the power-budget paper at one measured incidence [deg] (a phosphor scan only).
 
     Elastic data is refused with one line saying why (:func:`bsdfkit.reduction.budget.require_phosphor_scan`).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated phosphor scan (configurations ``blue`` and ``yellow``).
+    incidence : float
+        A measured angle of incidence [deg].
+
+    Returns
+    -------
+    InteractionTable
+        Power and photon TIS of every interaction and side [%].
     """
     require_phosphor_scan(ds)
     return interaction_table(ds, check_incidence(ds, incidence))
@@ -239,6 +306,11 @@ def _json(obj: Any) -> str:
 
 def hemispherical_json(table: xr.Dataset) -> dict:
     """The records of ``bsdfkit tis --json`` from a :func:`hemispherical_table` (with or without ``theta_i``).
+
+    Parameters
+    ----------
+    table : xarray.Dataset
+        Result of :func:`hemispherical_table`.
 
     Returns
     -------

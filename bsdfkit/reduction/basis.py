@@ -22,12 +22,35 @@ COVERAGE_RTOL = 1e-6
 
 
 def basis_sum(values: NDArray[np.float64], psa: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Σ_k f_k Λ_k [1] over the first axis of ``values`` (cells × ...) [1/sr], ``psa`` (cells,) [sr]."""
+    """Σ_k f_k Λ_k [1] over the first axis of ``values`` (cells × ...) [1/sr], ``psa`` (cells,) [sr].
+
+    Parameters
+    ----------
+    values : ndarray, shape (cells, ...)
+        BSDF of each cell [1/sr].
+    psa : ndarray, shape (cells,)
+        Projected solid angle of each cell [sr].
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Directional-hemispherical value [-].
+    """
     return np.asarray(psa, dtype=np.float64) @ np.asarray(values, dtype=np.float64)
 
 
 def covers_hemisphere(psa: NDArray[np.float64]) -> bool:
-    """True when the cells' projected solid angles [sr] are finite, positive and sum to π (the whole hemisphere)."""
+    """True when the cells' projected solid angles [sr] are finite, positive and sum to π (the whole hemisphere).
+
+    Parameters
+    ----------
+    psa : ndarray, shape (cells,)
+        Projected solid angle of each cell [sr].
+
+    Returns
+    -------
+    bool
+    """
     p = np.asarray(psa, dtype=np.float64)
     return bool(p.size and np.all(np.isfinite(p)) and np.all(p > 0)
                 and abs(float(p.sum()) - np.pi) <= COVERAGE_RTOL * np.pi)
