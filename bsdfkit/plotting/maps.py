@@ -38,6 +38,15 @@ def find_map_variable(ds: xr.Dataset) -> str | None:
     """The name of the irradiance-map variable of ``ds`` (``irradiance`` first), or None.
 
     A map-like variable is a float variable having both dims ``y_mm`` and ``x_mm``.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Trace or sweep dataset.
+
+    Returns
+    -------
+    str or None
     """
     candidates = [name for name, var in ds.data_vars.items()
                   if all(d in var.dims for d in MAP_DIMS) and var.dtype.kind == "f"]
@@ -63,7 +72,18 @@ def _plate_radius_mm(da: xr.DataArray) -> float:
 
 
 def map_non_uniformity(da: xr.DataArray) -> float:
-    """(E_max − E_min)/(E_max + E_min) of one 2-D map over the bins entirely inside the plate."""
+    """(E_max − E_min)/(E_max + E_min) of one 2-D map over the bins entirely inside the plate.
+
+    Parameters
+    ----------
+    da : xarray.DataArray
+        Irradiance map on dims ``(y_mm, x_mm)``, bin centres [mm], values in its ``units`` attribute (e.g. [W/mm^2]).
+
+    Returns
+    -------
+    float
+        Non-uniformity [-]; NaN without finite positive values.
+    """
     values = np.asarray(da.transpose(*MAP_DIMS).values, dtype=float)[_interior(da)]
     values = values[np.isfinite(values)]
     if values.size == 0:
@@ -73,7 +93,20 @@ def map_non_uniformity(da: xr.DataArray) -> float:
 
 
 def map_display(da: xr.DataArray) -> tuple[np.ndarray, str]:
-    """The 2-D map in display units (bins outside the plate masked as NaN) and the unit text."""
+    """The 2-D map in display units (bins outside the plate masked as NaN) and the unit text.
+
+    Parameters
+    ----------
+    da : xarray.DataArray
+        Irradiance map on dims ``(y_mm, x_mm)``, bin centres [mm], values in its ``units`` attribute (e.g. [W/mm^2]).
+
+    Returns
+    -------
+    values : ndarray, shape (ny, nx)
+        The map in display units (W/m² for irradiance), NaN outside the plate.
+    units : str
+        The display unit.
+    """
     units = str(da.attrs.get("units", ""))
     label, factor = _UNITS.get(units.replace(" ", ""), (units or "arbitrary units", 1.0))
     values = np.asarray(da.transpose(*MAP_DIMS).values, dtype=float) * factor
@@ -115,6 +148,21 @@ def irradiance_map_figure(da: xr.DataArray, title: str = "irradiance on the cavi
 
     ``da`` has dims ``(y_mm, x_mm)``; ``non_uniformity`` (fraction) defaults to the value computed from the map
     (the same definition as the tracer's). The dashed circle is the plate's edge.
+
+    Parameters
+    ----------
+    da : xarray.DataArray
+        Irradiance map on dims ``(y_mm, x_mm)``, bin centres [mm], values in its ``units`` attribute (e.g. [W/mm^2]).
+    title : str, optional
+        First title line.
+    non_uniformity : float, optional
+        Non-uniformity to show [-]; computed from the map when None.
+    emitted_W : float, optional
+        LED power of the scene, named in the colour-bar label [W].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     if set(da.dims) != set(MAP_DIMS):
         raise ValueError(f"an irradiance map has dims {MAP_DIMS}, got {da.dims}")
@@ -133,7 +181,18 @@ def irradiance_map_figure(da: xr.DataArray, title: str = "irradiance on the cavi
 
 
 def map_panels(da: xr.DataArray) -> list[tuple[str, xr.DataArray]]:
-    """Split a map with extra dims (a sweep) into titled 2-D panels, in the order of the extra dims."""
+    """Split a map with extra dims (a sweep) into titled 2-D panels, in the order of the extra dims.
+
+    Parameters
+    ----------
+    da : xarray.DataArray
+        Map with dims ``(y_mm, x_mm)`` and any extra dims.
+
+    Returns
+    -------
+    list of (str, xarray.DataArray)
+        Panel title and 2-D map, one per combination of the extra dims' indices.
+    """
     extra = [d for d in da.dims if d not in MAP_DIMS]
     if not extra:
         return [("", da)]
@@ -156,6 +215,23 @@ def irradiance_maps_figure(maps: Mapping[str, xr.DataArray] | xr.DataArray, ncol
     ``maps`` is either {panel title: 2-D map} or one DataArray with extra dims (a sweep dataset's map), whose
     first extra dimension gives the rows and the second the columns. With ``shared_scale`` all panels share
     one colour bar (so panels compare directly); each panel's title carries its own non-uniformity.
+
+    Parameters
+    ----------
+    maps : Mapping of str to xarray.DataArray, or xarray.DataArray
+        Panel title → 2-D map, or one map with extra dims; values as in :func:`map_display`.
+    ncols : int, optional
+        Number of columns of the grid.
+    shared_scale : bool, optional
+        One colour bar for all panels.
+    emitted_W : float, optional
+        LED power of the scene, named in the colour-bar label [W].
+    title : str, optional
+        Figure title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     if isinstance(maps, xr.DataArray):
         extra = [d for d in maps.dims if d not in MAP_DIMS]

@@ -12,6 +12,25 @@ def mode_spectra_figure(wavelength_nm, spectral, spectral_std, two_wavelength, t
     """Both module spectra (top, mW/nm, ±1σ bands) and their difference two-wavelength − spectral (bottom).
 
     ``bands`` (label → (start, stop) nm) are shaded in both panels.
+
+    Parameters
+    ----------
+    wavelength_nm : array_like, shape (n,)
+        Wavelength [nm].
+    spectral : array_like, shape (n,)
+        Extracted spectral power of the spectral mode [W/nm].
+    spectral_std : array_like, shape (n,)
+        Its standard uncertainty [W/nm].
+    two_wavelength : array_like, shape (n,)
+        Extracted spectral power of the two-wavelength mode [W/nm].
+    two_wavelength_std : array_like, shape (n,)
+        Its standard uncertainty [W/nm].
+    bands : Mapping of str to tuple of float, optional
+        Label → (start, stop) wavelength of a shaded band [nm].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     lam = np.asarray(wavelength_nm, dtype=float)
     s, ss = 1e3 * np.asarray(spectral), 1e3 * np.asarray(spectral_std)
