@@ -141,14 +141,44 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
 
 
 def profile(ds: xr.Dataset, interaction: str, side: str | None = None) -> xr.Dataset:
-    """The band-averaged BSDF profile [1/sr] of one interaction (bibs, biys, yiys) per record."""
+    """The band-averaged BSDF profile [1/sr] of one interaction (bibs, biys, yiys) per record.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated dataset (:func:`ingest`).
+    interaction : {"bibs", "biys", "yiys", "elastic"}
+        Interaction of a phosphor plate, or ``"elastic"`` for any other sample.
+    side : {"reflection", "transmission"}, optional
+        Keep only this side; both by default.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf`` and ``bsdf_std`` [1/sr] on ``record``, with the records' angles [deg].
+    """
     from bsdfkit.reduction.spectral import interaction_profile
 
     return interaction_profile(ds, interaction, side)
 
 
 def save(ds: xr.Dataset, path: str | Path, force: bool = False) -> Path:
-    """Write a dataset to netCDF atomically; an existing file is replaced only with ``force``."""
+    """Write a dataset to netCDF atomically; an existing file is replaced only with ``force``.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Dataset to write.
+    path : str or Path
+        Output netCDF file.
+    force : bool, optional
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     from bsdfkit.io import netcdf
 
     return netcdf.save(ds, path, force)
@@ -160,6 +190,27 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
 
     ``ds`` may also be a profile (a dataset on ``record`` with ``bsdf``, ``bsdf_std`` and one side), which is
     fitted as it is. Models and parameters: :mod:`bsdfkit.models.registry`.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated dataset, or a profile of one side (:func:`profile`).
+    interaction : {"bibs", "biys", "yiys", "elastic"}
+        Interaction to fit (ignored for a profile).
+    side : {"reflection", "transmission"}
+        Scattering side.
+    model : str, optional
+        Registered BSDF model, e.g. ``"lambert+gaussian"`` or ``"abg"``.
+    options : BsdfFitOptions, optional
+        Masks and weights of the fit (:class:`bsdfkit.fit.least_squares.BsdfFitOptions`).
+    incidence_deg : float, optional
+        Fit only the records at this angle of incidence [deg]; all incidences by default.
+
+    Returns
+    -------
+    xarray.Dataset
+        On ``theta_i`` [deg]: each parameter and its ``_std`` (ρ [-], A [1/sr], σ, B, g [-]), fit statistics,
+        ``tis`` and ``tis_std`` [-] and the plausibility verdict.
     """
     import numpy as np
 
@@ -180,6 +231,30 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
     model of a reflectance standard, :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance`) or of a
     measured spectral dataset (reconstructed by :mod:`bsdfkit.reduction.hemispherical`); the tables are
     monochrome. A measured elastic dataset takes ``interaction="elastic"``.
+
+    Parameters
+    ----------
+    source : xarray.Dataset or str or Path
+        A calibrated dataset, a fit (:func:`fit_bsdf`) or a netCDF file of either.
+    to : str
+        Registered format, e.g. ``"tracepro"``, ``"zemax"``, ``"asap"``, ``"bsdfxml"``, ``"speos"``.
+    interaction : {"bibs", "biys", "yiys", "elastic"}
+        Interaction written.
+    side : {"reflection", "transmission"}
+        Scattering side written.
+    path : str or Path
+        Output file.
+    force : bool, optional
+        Replace an existing file.
+    settings : ExportSettings, optional
+        Grid and options of the table (:class:`bsdfkit.tables.export.ExportSettings`).
+    wavelength_nm : float, optional
+        Wavelength picked from a per-wavelength model or a measured spectral dataset [nm].
+
+    Returns
+    -------
+    ExportResult
+        The written file with its grid and the TIS of the table against the source's [-].
     """
     from dataclasses import replace
 
@@ -205,14 +280,42 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
 
 
 def read(path: str | Path) -> FileSummary:
-    """Read a table of any registered format back (sniffed by content): its grid, stated TIS and recomputed TIS."""
+    """Read a table of any registered format back (sniffed by content): its grid, stated TIS and recomputed TIS.
+
+    Parameters
+    ----------
+    path : str or Path
+        Table of a registered format.
+
+    Returns
+    -------
+    FileSummary
+        Format, grid, stated TIS and TIS recomputed from the values [-].
+    """
     from bsdfkit.tables.export import read_any
 
     return read_any(path)
 
 
 def trace(scene: Scene | str | Path, rays: int, seed: int = 0, **options: Any) -> TraceResult:
-    """Monte Carlo of a mixing cavity with a phosphor plate (a scene object or a scene TOML path)."""
+    """Monte Carlo of a mixing cavity with a phosphor plate (a scene object or a scene TOML path).
+
+    Parameters
+    ----------
+    scene : Scene or str or Path
+        Scene object, or a scene TOML file.
+    rays : int
+        Number of rays, ≥ 1.
+    seed : int, optional
+        Key of the random numbers, in [0, 2**63).
+    **options
+        Keyword arguments of :func:`bsdfkit.raytrace.trace` (``chunk``, ``lanes``, ``progress`` …).
+
+    Returns
+    -------
+    TraceResult
+        Extracted power [W], budget, tallies and timings.
+    """
     from bsdfkit.raytrace import load_scene
     from bsdfkit.raytrace import trace as _trace
     from bsdfkit.raytrace.scene import Scene
