@@ -36,12 +36,37 @@ class Study:
     groups: tuple[str, ...] = ()  # optional: rows are tagged by extra["group"] (e.g. two methods compared)
 
     def cheapest(self, target: float, group: str | None = None) -> Row | None:
+        """The lowest-cost row whose error is ≤ ``target``, among the rows of ``group`` if given.
+
+        Parameters
+        ----------
+        target : float
+            Largest relative error accepted [-].
+        group : str, optional
+            Consider only rows tagged with this group.
+
+        Returns
+        -------
+        Row or None
+        """
         return cheapest(self.rows if group is None else tuple(r for r in self.rows if r.extra.get("group") == group),
                         target)
 
 
 def cheapest(rows: tuple[Row, ...], target: float) -> Row | None:
-    """The lowest-cost row whose error is ≤ target (None if no setting reaches it)."""
+    """The lowest-cost row whose error is ≤ target (None if no setting reaches it).
+
+    Parameters
+    ----------
+    rows : tuple of Row
+        Settings of a study.
+    target : float
+        Largest relative error accepted [-].
+
+    Returns
+    -------
+    Row or None
+    """
     ok = [r for r in rows if np.isfinite(r.error) and r.error <= target]
     return min(ok, key=lambda r: (r.cost, r.wall_s)) if ok else None
 
@@ -53,6 +78,19 @@ def _fmt(x: float) -> str:
 
 
 def study_markdown(study: Study, figure_name: str | None) -> str:
+    """The markdown section of one study: its table and the cheapest settings reaching 1 % and 0.1 %.
+
+    Parameters
+    ----------
+    study : Study
+        The study.
+    figure_name : str or None
+        File name of its figure, linked below the table; None links none.
+
+    Returns
+    -------
+    str
+    """
     lines = [f"## {study.title}", "", f"Error: {study.truth}. Cost: {study.cost_label}.", ""]
     if study.notes:
         lines += [study.notes, ""]
@@ -82,6 +120,17 @@ def study_markdown(study: Study, figure_name: str | None) -> str:
 
 
 def study_figure(study: Study) -> Figure:
+    """Log-log plot of a study's error against its cost, with the 1 % and 0.1 % lines.
+
+    Parameters
+    ----------
+    study : Study
+        The study.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     fig = Figure(figsize=(6, 3.6))
     ax = fig.subplots()
     groups = study.groups or ("",)
@@ -103,6 +152,21 @@ def study_figure(study: Study) -> Figure:
 
 
 def report_header(command: str, quick: bool, elapsed_s: float) -> str:
+    """The title and preamble of accuracy.md: command, date, machine and mode.
+
+    Parameters
+    ----------
+    command : str
+        Command line that made the report.
+    quick : bool
+        Whether the studies ran in quick mode.
+    elapsed_s : float
+        Wall time of all studies [s].
+
+    Returns
+    -------
+    str
+    """
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     cpu = platform.processor() or platform.machine()
     return "\n".join([
@@ -119,12 +183,46 @@ def report_header(command: str, quick: bool, elapsed_s: float) -> str:
 
 
 def figure_name(study_name: str) -> str:
+    """File name of a study's figure.
+
+    Parameters
+    ----------
+    study_name : str
+        ``Study.name``.
+
+    Returns
+    -------
+    str
+    """
     return f"accuracy_{study_name}.png"
 
 
 def write_report(studies: list[Study], folder: Path, command: str, quick: bool, elapsed_s: float,
                  force: bool = False, out: OutputSet | None = None) -> Path:
-    """Write accuracy.md and one figure per study into ``folder`` as one atomic output set (or into ``out``)."""
+    """Write accuracy.md and one figure per study into ``folder`` as one atomic output set (or into ``out``).
+
+    Parameters
+    ----------
+    studies : list of Study
+        Studies in report order.
+    folder : Path
+        Output folder.
+    command : str
+        Command line named in the report.
+    quick : bool
+        Whether the studies ran in quick mode.
+    elapsed_s : float
+        Wall time of all studies [s].
+    force : bool, optional
+        Replace an existing, non-empty folder.
+    out : OutputSet, optional
+        An open output set to write into (the caller commits it); a new one on ``folder`` by default.
+
+    Returns
+    -------
+    Path
+        The written ``accuracy.md``.
+    """
     names = [figure_name(s.name) for s in studies] + ["accuracy.md"]
     own = out is None
     out = out if out is not None else OutputSet(folder, names, force)

@@ -27,7 +27,18 @@ def _parameter_error(ds) -> float:
 
 
 def fit_tolerance(quick: bool) -> Study:
-    """Split-Gaussian fits (Table 2 yellow, 0.1 % noise): error vs the solver's step tolerance (xtol = gtol)."""
+    """Split-Gaussian fits (Table 2 yellow, 0.1 % noise): error vs the solver's step tolerance (xtol = gtol).
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer, cheaper settings (``bsdfkit bench --quick``).
+
+    Returns
+    -------
+    Study
+        One row per setting: error against the truth [-], wall time [s] and cost.
+    """
     lam, y = _spectra(32 if quick else 128, seed=1, noise=0.001)
     rows = []
     for tol in ((1e-2, 1e-4, 1e-8) if quick else (1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8, 1e-10)):
@@ -45,7 +56,18 @@ def fit_tolerance(quick: bool) -> Study:
 
 
 def batched_vs_loop(quick: bool) -> Study:
-    """The same fits one call per spectrum vs one batched (vmapped) call, compile included in both."""
+    """The same fits one call per spectrum vs one batched (vmapped) call, compile included in both.
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer, cheaper settings (``bsdfkit bench --quick``).
+
+    Returns
+    -------
+    Study
+        One row per setting: error against the truth [-], wall time [s] and cost.
+    """
     n = 32 if quick else 200
     lam, y = _spectra(n, seed=2)
     rows = []

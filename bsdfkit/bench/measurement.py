@@ -40,7 +40,18 @@ def _measure_tis(truth, plan, gonio, seed: int, theta_i: float) -> tuple[float, 
 
 
 def tis_vs_step(quick: bool) -> Study:
-    """TIS error against the goniometer's angular step (uniform steps on both arcs, 45° incidence)."""
+    """TIS error against the goniometer's angular step (uniform steps on both arcs, 45° incidence).
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer, cheaper settings (``bsdfkit bench --quick``).
+
+    Returns
+    -------
+    Study
+        One row per setting: error against the truth [-], wall time [s] and cost.
+    """
     gonio = virtual.VirtualGoniometer(spectrometer=virtual.Spectrometer(wavelength_step_nm=2.5 if quick else 1.0))
     truth = virtual.cl830_truth(gonio)
     rows = []
@@ -58,7 +69,18 @@ def tis_vs_step(quick: bool) -> Study:
 
 
 def tis_vs_exposure(quick: bool) -> Study:
-    """TIS error against total measurement time (exposure budget), default scan plan at 45°."""
+    """TIS error against total measurement time (exposure budget), default scan plan at 45°.
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer, cheaper settings (``bsdfkit bench --quick``).
+
+    Returns
+    -------
+    Study
+        One row per setting: error against the truth [-], wall time [s] and cost.
+    """
     base = virtual.default_plan()
     plan = virtual.ScanPlan(theta_i_deg=(45.0,), in_plane_deg=base.in_plane_deg,
                             perpendicular_deg=base.perpendicular_deg)
@@ -76,7 +98,18 @@ def tis_vs_exposure(quick: bool) -> Study:
 
 
 def quadrature(quick: bool) -> Study:
-    """Eq. (7) rectangle sum vs the projected-solid-angle rule on the exact truth (no measurement)."""
+    """Eq. (7) rectangle sum vs the projected-solid-angle rule on the exact truth (no measurement).
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer, cheaper settings (``bsdfkit bench --quick``).
+
+    Returns
+    -------
+    Study
+        One row per setting: error against the truth [-], wall time [s] and cost.
+    """
     truth = virtual.cl830_truth()
     th = np.radians(45.0)
     exact = truth.elastic_tis("bibs", "reflection", th)
@@ -110,7 +143,18 @@ def quadrature(quick: bool) -> Study:
 
 
 def spectral_resolution(quick: bool) -> Study:
-    """Weighted means and photon conversions on coarser spectrometer grids, against a 0.05 nm reference."""
+    """Weighted means and photon conversions on coarser spectrometer grids, against a 0.05 nm reference.
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer, cheaper settings (``bsdfkit bench --quick``).
+
+    Returns
+    -------
+    Study
+        One row per setting: error against the truth [-], wall time [s] and cost.
+    """
     truth = virtual.cl830_truth()
 
     def quantities(step: float) -> dict[str, float]:

@@ -32,7 +32,27 @@ def study_functions() -> list[tuple[str, Callable[[bool], Study]]]:
 
 def run_bench(folder: str | Path, quick: bool = False, force: bool = False, command: str = "bsdfkit bench",
               only: list[str] | None = None, log: Callable[[str], None] = lambda m: None) -> list[Study]:
-    """Run every study (or ``only`` those named) and write accuracy.md + figures into ``folder``."""
+    """Run every study (or ``only`` those named) and write accuracy.md + figures into ``folder``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Output folder.
+    quick : bool, optional
+        Fewer, cheaper settings per study.
+    force : bool, optional
+        Replace an existing, non-empty folder.
+    command : str, optional
+        Command line named in the report.
+    only : list of str, optional
+        Keys of the studies to run (:func:`study_functions`); all by default.
+    log : callable, optional
+        ``log(message)`` receives a line before and after each study.
+
+    Returns
+    -------
+    list of Study
+    """
 
     folder = Path(folder)
     known = [name for name, _ in study_functions()]
