@@ -6,6 +6,13 @@ import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``bench`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("bench", help="accuracy-vs-time studies; writes DIR/accuracy.md and PNG figures")
     p.add_argument("--quick", action="store_true", help="fewer settings (under 2 minutes)")
     p.add_argument("-o", "--output", default="docs", help="folder for accuracy.md and figures (default: docs)")

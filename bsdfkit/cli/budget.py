@@ -13,6 +13,13 @@ from bsdfkit.io.text import existing_source, read_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``budget`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("budget", help="iterative module power budget (Figs. 9-10, Table 3 of the power-budget paper)")
     p.add_argument("scan", nargs="?", help="calibrated scan or raw measurement folder (with --incidence)")
     p.add_argument("--incidence", type=float, help="incidence angle of the scan's interaction table, deg")

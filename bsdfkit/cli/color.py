@@ -9,6 +9,13 @@ from bsdfkit.core.errors import BsdfkitError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``color`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("color", help="CIE 1931 x, y, CCT and Duv (Ohno 2013), luminous efficacy and YBR of a spectrum")
     p.add_argument("file", help="two-column text spectrum: wavelength (nm), value")
     p.add_argument("--json", action="store_true",

@@ -42,6 +42,13 @@ WAVELENGTH_TOLERANCE_NM = 0.5
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``fit`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("fit", help="fit spectrum or BSDF models (Levenberg-Marquardt, float64)")
     p.set_defaults(func=lambda args: _help(p))
     fit_sub = p.add_subparsers(dest="fit_verb", metavar="{spectrum,bsdf,reflectance}")

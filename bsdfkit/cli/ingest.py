@@ -28,6 +28,13 @@ OPTION_RANGES = {
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``ingest`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser(
         "ingest", help="read a raw export, a measured text table or a vendor BSDF file into a netCDF dataset",
         description="Read a raw goniometer export (calibrated), a measured text table (wide or long; comma, "

@@ -61,7 +61,17 @@ def compile_cache_dir() -> Path:
 
 
 def compile_cache_wanted(flag_off: bool = False) -> bool:
-    """False with ``--no-compile-cache`` or ``BSDFKIT_NO_COMPILE_CACHE`` set to anything but "" or "0"."""
+    """False with ``--no-compile-cache`` or ``BSDFKIT_NO_COMPILE_CACHE`` set to anything but "" or "0".
+
+    Parameters
+    ----------
+    flag_off : bool, optional
+        Whether ``--no-compile-cache`` was given.
+
+    Returns
+    -------
+    bool
+    """
     return not flag_off and os.environ.get(NO_CACHE_ENV, "").strip() in ("", "0")
 
 
@@ -73,6 +83,16 @@ def compile_cache(enabled: bool) -> Iterator[Path | None]:
     after this point; dask workers started by a verb inherit them). If JAX was already imported by the calling
     process (``main`` called from Python), its configuration is left alone and None is returned. The
     environment is restored on exit; an explicit ``JAX_COMPILATION_CACHE_DIR`` of the user is respected.
+
+    Parameters
+    ----------
+    enabled : bool
+        Use the cache (:func:`compile_cache_wanted`); False leaves JAX's settings alone.
+
+    Yields
+    ------
+    Path or None
+        The cache folder, or None when nothing was set.
     """
     if not enabled or "jax" in sys.modules:
         yield None
@@ -161,7 +181,17 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
-    """The parser with the given verbs registered (all by default; `main` registers only the one it runs)."""
+    """The parser with the given verbs registered (all by default; `main` registers only the one it runs).
+
+    Parameters
+    ----------
+    verbs : sequence of str, optional
+        Verbs to register (modules of :mod:`bsdfkit.cli`).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = _Parser(
         prog="bsdfkit",
         description="Goniometer scans to calibrated BSDFs, fits, ray-tracer tables and module budgets.",
@@ -179,6 +209,18 @@ def build_parser(verbs: Sequence[str] = VERBS) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one ``bsdfkit`` command: one line on stderr for any error, never a traceback.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments after the program name; ``sys.argv[1:]`` by default.
+
+    Returns
+    -------
+    int
+        Exit status: 0 on success, 2 for an error, 130 when interrupted.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     no_cache = NO_CACHE_FLAG in argv  # accepted before or after the verb
     argv = [a for a in argv if a != NO_CACHE_FLAG]
@@ -233,6 +275,11 @@ def exit_process(code: int) -> NoReturn:
     end, 0.04 s with this). The ``atexit`` handlers still run (logging, multiprocessing), and stdout and
     stderr are flushed; a stdout that cannot be flushed (a closed pipe) turns status 0 into 1, as Python's
     own shutdown does. Only for the console command and ``python -m bsdfkit``, never on import.
+
+    Parameters
+    ----------
+    code : int
+        Exit status.
     """
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
@@ -252,6 +299,11 @@ def exit_now(signum: int) -> None:
     """Remove this process's unfinished outputs and end it with status 128 + ``signum``, skipping shutdown.
 
     Interpreter shutdown would wait for (or crash on) a compiled call still running in XLA's threads.
+
+    Parameters
+    ----------
+    signum : int
+        Number of the signal that ends the process.
     """
     remove_partial_outputs()
     # worker processes this process started (a sweep's dask LocalCluster) must not outlive it; os._exit below
@@ -289,6 +341,11 @@ def prompt_signals(grace_s: float = SIGNAL_GRACE_S) -> Iterator[None]:
     unfinished outputs and exits with status 128 + signal (:func:`exit_now`). A KeyboardInterrupt leaving the
     block ends the process too, so ``main`` called from Python exits on Ctrl-C like the command does. Outside
     the main thread nothing is installed.
+
+    Parameters
+    ----------
+    grace_s : float, optional
+        Time the main thread gets to stop by itself after a signal [s].
     """
     try:
         read_fd, write_fd = os.pipe()

@@ -20,6 +20,13 @@ TASKS = {"stages": "stages of the run", "trace": "module traces (device + studie
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``run`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("run", help="run a fit/run recipe (fitting/*.toml) and write its outputs")
     p.add_argument("recipe")
     p.add_argument("-o", "--output", required=True, help="output folder")
@@ -39,6 +46,20 @@ def run_feedback(quiet: bool, verbose: bool = False) -> Iterator[tuple[Callable[
 
     Both only when stderr is a terminal; a log file or a pipe gets the stage lines with ``verbose`` and nothing
     otherwise (a failed run's stderr is then its one error line); nothing at all with ``quiet``.
+
+    Parameters
+    ----------
+    quiet : bool
+        No stage lines and no progress bars.
+    verbose : bool, optional
+        Stage lines also when stderr is not a terminal.
+
+    Yields
+    ------
+    log : callable
+        ``log(message)`` for a stage line.
+    progress : callable or None
+        ``progress(task, done, total)`` for the progress bars; None without a terminal.
     """
     if quiet or (not sys.stderr.isatty() and not verbose):
         yield (lambda message: None), None

@@ -10,6 +10,13 @@ PRESETS = ("cl830-synthetic",)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``simulate`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("simulate", help="simulate a raw goniometer export with the virtual goniometer")
     p.add_argument("--preset", choices=PRESETS, default="cl830-synthetic")
     p.add_argument("--seed", type=int, default=830)

@@ -9,6 +9,13 @@ from bsdfkit.core.errors import InputError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``sweep`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("sweep", help="trace a scene over a grid of parameters (netCDF + PNG)",
                        description="Sweep scene keys, e.g. --param wall.reflectance,base.reflectance=0.80:0.98:5 "
                                    "or --param cavity.height_mm=10,43,80; without --param the scene's [sweep] "
@@ -44,6 +51,18 @@ def _extra_outputs(args: argparse.Namespace) -> list:
 
 def run(args: argparse.Namespace) -> int:
     # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX, matplotlib or dask
+    """Run ``bsdfkit sweep`` with the parsed options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of the verb.
+
+    Returns
+    -------
+    int
+        Exit status: 0 on success.
+    """
     from bsdfkit.plotting.figures import sweep_figure
     from bsdfkit.raytrace import load_scene
     from bsdfkit.raytrace.sweep import Cluster, run_sweep

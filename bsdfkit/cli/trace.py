@@ -18,6 +18,13 @@ TRUNCATION_WARNING = 1e-3
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``trace`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("trace", help="trace a scene (LER, YBR, absorption, non-uniformity, energy ledger)",
                        description="Trace SCENE.toml with the JAX Monte Carlo tracer (docs/tracer.md).")
     p.add_argument("scene", help="scene TOML file")
@@ -34,6 +41,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX
+    """Run ``bsdfkit trace`` with the parsed options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of the verb.
+
+    Returns
+    -------
+    int
+        Exit status: 0 on success.
+    """
     from bsdfkit.raytrace import load_scene, trace
 
     scene = load_scene(args.scene)
