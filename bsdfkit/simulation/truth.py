@@ -551,9 +551,11 @@ class PhosphorPlateTruth:
         return self.lobe(interaction, side, theta_i).rho + self.lobe_tis(interaction, side, theta_i)
 
     def to_dict(self) -> dict:
+        """The fields as plain dicts, tuples and numbers (:meth:`from_dict` reads them back)."""
         return asdict(self)
 
     def to_json(self) -> str:
+        """:meth:`to_dict` as JSON text, keys sorted."""
         return json.dumps(self.to_dict(), sort_keys=True)
 
     @classmethod
@@ -1038,9 +1040,11 @@ class ExcitationEmissionTruth:
         return out
 
     def to_dict(self) -> dict:
+        """The fields as plain dicts, tuples and numbers (:meth:`from_dict` reads them back)."""
         return asdict(self)
 
     def to_json(self) -> str:
+        """:meth:`to_dict` as JSON text, keys sorted."""
         return json.dumps(self.to_dict(), sort_keys=True)
 
     @classmethod
