@@ -142,6 +142,21 @@ def test_nothing_points_outside_the_repository():
     assert offenders == []
 
 
+def test_no_machine_path_in_code_or_docs():
+    """Docs, benchmarks and the package name no folder of one machine (a temporary folder, a home, a checkout)."""
+    pattern = re.compile(r"(?<![\w.$~-])/(tmp|work|home|root|Users|private/var)(/|\b)")
+    offenders = []
+    files = [*PACKAGE.rglob("*.py"), *(ROOT / "docs").glob("*.md"), *(ROOT / "benchmarks").glob("*.py"),
+             ROOT / "README.md"]
+    for path in files:
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            if pattern.search(line):
+                offenders.append(f"{path.relative_to(ROOT)}:{number}")
+    assert offenders == []
+    assert pattern.search("cd /tmp") and pattern.search("`/work/main/.venv/bin/python`")
+    assert not pattern.search("git worktree add \"$TMPDIR/base\"") and not pattern.search("W/mm^2 /tmpfs")
+
+
 def test_every_module_imports():
     """The fast lane (-m "not slow") touches every module at least through its import."""
     import importlib
