@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from bsdfkit.plotting.figures import sweep_figure
     from bsdfkit.raytrace import load_scene
-    from bsdfkit.raytrace.sweep import Cluster, run_sweep
+    from bsdfkit.raytrace.sweep import Cluster, run_sweep, sweep_spec
 
     scene = load_scene(args.scene)
     defaults = scene.sweep
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         bar.update(done)
 
     try:
-        ds = run_sweep(scene, params, args.output, rays=rays, seed=seed, chunk=args.chunk, force=args.force,
+        ds = run_sweep(scene, sweep_spec(params, rays, seed, args.chunk), args.output, force=args.force,
                        figure=None if args.no_plots else sweep_figure, progress=progress, cluster=cluster)
     finally:
         bar.close()

@@ -477,27 +477,55 @@ def least_squares(
     """
     options = options or FitOptions()
     parameters = tuple(parameters)
-    n_par = len(parameters)
     names = [p.name for p in parameters]
-    if len(set(names)) != n_par:
+    if len(set(names)) != len(parameters):
         raise ValidationError("parameter names must be unique", field="parameters", got=names)
+    single = np.ndim(y) == 1
+    x2, y2, p0, m = _as_batches(x, y, p0, len(parameters), mask)
+    where = _labeller(single, batch_labels)
+    y_t, w = _residual_space(y2, sigma, m, single, options)
+    n_used = _check_enough_data(y2, m, len(parameters), where)
+    out = _solve(model, x2, y_t, w, m, _to_unconstrained(p0, parameters), parameters, options)
+    _check_solution(out, names, p0, where)
+    cov = _covariance(out, names, n_used - len(parameters), where, options)
+    r2, rms = _goodness_of_fit(out["plain"], y2, y_t, m, n_used, options)
+    ds = _fit_dataset(out, parameters, cov, r2, rms, n_used, options, batch_dim)
+    ds.attrs = {"model": model_name or getattr(model, "__name__", repr(model)), **ds.attrs}
+    return ds.isel({batch_dim: 0}) if single else ds
 
+
+def _as_batches(x, y, p0, n_par: int, mask) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    """``x``, ``y``, ``p0`` and the mask with the fits on axis 0 (one fit: a batch of one), checked in shape."""
     y = np.asarray(y, dtype=float)
-    single = y.ndim == 1
     if y.ndim not in (1, 2):
         raise InputError("data must be 1-D (one fit) or 2-D (batch, n)", field="y", got=y.shape)
-    y2 = y[None, :] if single else y
-    shape = y2.shape
-    n_batch, n = shape
+    y2 = y[None, :] if y.ndim == 1 else y
     p0 = np.asarray(p0, dtype=float)
     if p0.shape[-1:] != (n_par,):
         raise InputError("initial values do not match the parameters", field="p0",
                          expected=f"last dimension {n_par}", got=p0.shape)
-    p0 = np.broadcast_to(p0, (n_batch, n_par))
-    m = np.ones(shape, bool) if mask is None else np.broadcast_to(np.asarray(mask, bool), shape)
-    x2 = jax.tree_util.tree_map(lambda leaf: _as_batch("x", leaf, shape), x)
+    p0 = np.broadcast_to(p0, (y2.shape[0], n_par))
+    m = np.ones(y2.shape, bool) if mask is None else np.broadcast_to(np.asarray(mask, bool), y2.shape)
+    x2 = jax.tree_util.tree_map(lambda leaf: _as_batch("x", leaf, y2.shape), x)
+    return x2, y2, p0, m
 
-    # Data-side transform and weights.
+
+def _labeller(single: bool, batch_labels: Sequence[str] | None) -> Callable[[int], str]:
+    """How messages name fit ``b`` of a batch: "" for a single fit, else its label or "fit b", then ": "."""
+    def where(b: int) -> str:
+        if single:
+            return ""
+        if batch_labels is not None:
+            return f"{batch_labels[b]}: " if batch_labels[b] else ""
+        return f"fit {b}: "
+    return where
+
+
+def _residual_space(y2: np.ndarray, sigma, m: np.ndarray, single: bool,
+                    options: FitOptions) -> tuple[np.ndarray, np.ndarray]:
+    """The data in residual space and the weights of their residuals (module docstring), after checking that the
+    unmasked data and uncertainties are finite (and the uncertainties positive)."""
+    shape = y2.shape
     used_y = np.where(m, y2, 1.0)
     if not np.all(np.isfinite(used_y)):
         i, j = np.argwhere(~np.isfinite(used_y))[0]
@@ -531,14 +559,11 @@ def least_squares(
                            "mask non-positive points or raise log_epsilon")
         y_t = np.log(np.where(m, shifted, 1.0))
         w = np.ones(shape) if sigma is None else np.where(m, shifted, 1.0) / np.where(m, s, 1.0)
+    return y_t, w
 
-    def where(b: int) -> str:
-        if single:
-            return ""
-        if batch_labels is not None:
-            return f"{batch_labels[b]}: " if batch_labels[b] else ""
-        return f"fit {b}: "
 
+def _check_enough_data(y2: np.ndarray, m: np.ndarray, n_par: int, where: Callable[[int], str]) -> np.ndarray:
+    """The unmasked points per fit, after checking that every fit has more than ``n_par`` and some non-zero."""
     n_used = m.sum(axis=1)
     too_few = n_used <= n_par
     bad = too_few | ~np.any(m & (y2 != 0), axis=1)
@@ -548,33 +573,36 @@ def least_squares(
             raise FitError(f"{where(b)}{int(n_used[b])} unmasked points for {n_par} parameters; "
                            f"need at least {n_par + 1}")
         raise FitError(f"{where(b)}all unmasked data are zero; nothing to fit")
+    return n_used
 
-    u0 = _to_unconstrained(p0, parameters)
-    spec = _Spec(
-        transforms=tuple(p.transform for p in parameters),
-        # Only what the solver loop uses: post-processing options must not force a recompilation.
-        options=dataclasses.replace(options, absolute_sigma=False, max_condition=1e12),
-    )
+
+def _solve(model, x2, y_t: np.ndarray, w: np.ndarray, m: np.ndarray, u0: np.ndarray,
+           parameters: Sequence[Parameter], options: FitOptions) -> dict[str, np.ndarray]:
+    """Run the solver of ``options.solver`` on the batch (fits on axis 0) from unconstrained start ``u0``; the
+    result dict of :func:`_solve_lm` with ``plain`` cut back to the data's points."""
+    n_batch, n = y_t.shape
     # Pad the point and batch axes to buckets (masked points; copies of fit 0) so that problems of
     # similar size share one compiled solver instead of compiling once per exact shape.
     n_pad, b_pad = _bucket(n), _bucket(n_batch)
 
-    def pad(a: np.ndarray, value: float | None) -> np.ndarray:
-        a = np.concatenate([a, np.repeat(a[:1], b_pad - n_batch, axis=0)], axis=0)
+    def pad(a: np.ndarray, value: float | None, batch: bool = True) -> np.ndarray:
+        if batch:
+            a = np.concatenate([a, np.repeat(a[:1], b_pad - n_batch, axis=0)], axis=0)
         width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
         return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
 
     if options.solver == "lm":
         # Only the points are padded: bsdfkit.fit.lm gathers the fits it evaluates into fixed-size chunks.
-        def pad_points(a: np.ndarray, value: float | None) -> np.ndarray:
-            width = ((0, 0), (0, n_pad - n)) + ((0, 0),) * (a.ndim - 2)  # trailing per-point axes unpadded
-            return np.pad(a, width, mode="edge") if value is None else np.pad(a, width, constant_values=value)
-
         with x64():
-            out = _solve_lm(u0, jax.tree_util.tree_map(lambda leaf: pad_points(leaf, None), x2),
-                            pad_points(np.asarray(y_t, float), 0.0), pad_points(np.asarray(w, float), 0.0),
-                            pad_points(m, False), parameters, model=model, options=options)
+            out = _solve_lm(u0, jax.tree_util.tree_map(lambda leaf: pad(leaf, None, False), x2),
+                            pad(np.asarray(y_t, float), 0.0, False), pad(np.asarray(w, float), 0.0, False),
+                            pad(m, False, False), parameters, model=model, options=options)
     else:
+        spec = _Spec(
+            transforms=tuple(p.transform for p in parameters),
+            # Only what the solver loop uses: post-processing options must not force a recompilation.
+            options=dataclasses.replace(options, absolute_sigma=False, max_condition=1e12),
+        )
         u0_pad = np.concatenate([u0, np.repeat(u0[:1], b_pad - n_batch, axis=0)], axis=0)
         with x64():
             solve = _solve_batch_small if b_pad * n_pad <= _SMALL_PROBLEM else _solve_batch
@@ -592,22 +620,31 @@ def least_squares(
         # jaxopt reports no stopping reason: a fit that used all maxiter steps counts as not converged.
         out["converged"] = out["iterations"] < options.maxiter
     out["plain"] = out["plain"][:, :n]
+    return out
 
-    theta = out["theta"]
-    jtj = out["jtj"]
-    dof = n_used - n_par
+
+def _check_solution(out: dict[str, np.ndarray], names: Sequence[str], p0: np.ndarray,
+                    where: Callable[[int], str]) -> None:
+    """FitError for the first fit whose model was not finite at the start or whose parameters went non-finite."""
     bad_start = ~out["r0_finite"]
     if bad_start.any():
         b = int(np.argmax(bad_start))
         raise FitError(f"{where(b)}model is not finite at the initial parameters "
                        f"{dict(zip(names, p0[b].tolist()))}")
-    diverged = ~np.isfinite(theta).all(axis=1)
+    diverged = ~np.isfinite(out["theta"]).all(axis=1)
     if diverged.any():
         b = int(np.argmax(diverged))
         raise FitError(f"{where(b)}the solver produced non-finite parameters "
                        "(singular normal equations during the iterations); the data do not determine "
                        f"{', '.join(names)}")
-    # Covariance C = s²(JᵀJ)⁻¹, computed on the column-equilibrated matrix (all fits at once).
+
+
+def _covariance(out: dict[str, np.ndarray], names: Sequence[str], dof: np.ndarray, where: Callable[[int], str],
+                options: FitOptions) -> np.ndarray:
+    """Covariance C = s²(JᵀJ)⁻¹ of every fit, computed on the column-equilibrated matrix (all fits at once);
+    FitError for the first fit whose JᵀJ is singular or worse conditioned than ``options.max_condition``."""
+    jtj = out["jtj"]
+    n_par = len(names)
     d = np.sqrt(np.abs(np.diagonal(jtj, axis1=1, axis2=2)))
     unconstrained = ~np.isfinite(jtj).all(axis=(1, 2)) | ~(d > 0).all(axis=1)
     if unconstrained.any():
@@ -628,10 +665,13 @@ def least_squares(
         raise FitError(f"{where(b)}singular JᵀJ (condition number {cond[b]:.3g} > "
                        f"{options.max_condition:.3g}): {', '.join(weak)} not separately determined by these "
                        "data; fix the model (fewer parameters) or the data (masks, range)")
-    s2 = np.ones(n_batch) if options.absolute_sigma else out["sum_sq"] / dof
-    cov = s2[:, None, None] * np.linalg.inv(corr) / outer
+    s2 = np.ones(jtj.shape[0]) if options.absolute_sigma else out["sum_sq"] / dof
+    return s2[:, None, None] * np.linalg.inv(corr) / outer
 
-    plain = out["plain"]
+
+def _goodness_of_fit(plain: np.ndarray, y2: np.ndarray, y_t: np.ndarray, m: np.ndarray, n_used: np.ndarray,
+                     options: FitOptions) -> tuple[np.ndarray, np.ndarray]:
+    """R² and RMS of every fit from its plain residuals ``plain`` (module docstring, "R² and RMS")."""
     ss_res = np.sum(plain**2, axis=1)
     if options.residual == "relative":
         # R² on the data themselves; the RMS is the relative one.
@@ -654,11 +694,15 @@ def least_squares(
     # scores R² ≈ 1, one further off scores R² ≪ 0 (worse than the constant that fits exactly), never NaN
     ss_ref = np.maximum(ss_tot, (_CONSTANT_DATA * scale) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        r2 = np.where(exact, 1.0, np.where(ss_ref > 0, 1.0 - ss_for_r2 / ss_ref, np.nan))
+        return np.where(exact, 1.0, np.where(ss_ref > 0, 1.0 - ss_for_r2 / ss_ref, np.nan)), rms
 
-    iterations = out["iterations"].astype(int)
+
+def _fit_dataset(out: dict[str, np.ndarray], parameters: Sequence[Parameter], cov: np.ndarray, r2: np.ndarray,
+                 rms: np.ndarray, n_used: np.ndarray, options: FitOptions, batch_dim: str) -> xr.Dataset:
+    """The result of :func:`least_squares` over ``batch_dim`` (its ``model`` attribute set by the caller)."""
+    theta = out["theta"]
+    names = [p.name for p in parameters]
     converged = out["converged"] & np.all(np.isfinite(theta), axis=1) & np.isfinite(out["sum_sq"])
-
     std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     at_bound = np.stack([plausibility.at_bound(theta[:, k], p) for k, p in enumerate(parameters)], axis=-1)
     data_vars: dict[str, Any] = {}
@@ -675,14 +719,13 @@ def least_squares(
     data_vars["rms"] = ((batch_dim,), rms, {"long_name": f"RMS of the unweighted {options.residual} residuals"})
     data_vars["cost"] = ((batch_dim,), 0.5 * out["sum_sq"], {"long_name": "final cost ½Σr̃²"})
     data_vars["n_points"] = ((batch_dim,), n_used.astype(int))
-    data_vars["dof"] = ((batch_dim,), dof.astype(int))
-    data_vars["iterations"] = ((batch_dim,), iterations)
+    data_vars["dof"] = ((batch_dim,), (n_used - len(parameters)).astype(int))
+    data_vars["iterations"] = ((batch_dim,), out["iterations"].astype(int))
     data_vars["converged"] = ((batch_dim,), converged)
-    ds = xr.Dataset(
+    return xr.Dataset(
         data_vars,
         coords={"parameter": names, "parameter_2": names},
         attrs={
-            "model": model_name or getattr(model, "__name__", repr(model)),
             "solver": ("bsdfkit.fit.lm Levenberg–Marquardt (Marquardt scaling, Nielsen damping, madsen-nielsen "
                        "stop), float64" if options.solver == "lm" else
                        "jaxopt.LevenbergMarquardt (madsen-nielsen stop), float64"),
@@ -694,7 +737,6 @@ def least_squares(
             "maxiter": options.maxiter,
         },
     )
-    return ds.isel({batch_dim: 0}) if single else ds
 
 
 # ------------------------------------------------------------------------------------------------
@@ -821,6 +863,52 @@ def fit_bsdf(
     """
     options = options or BsdfFitOptions()
     spec = bsdf_model(model)
+    fields, side = _profile_fields(profile)
+    ti_all = np.round(fields["theta_i"], 6)
+    incidences = np.unique(ti_all)
+    if incidence_deg is not None:
+        sel = np.isclose(incidences, incidence_deg, atol=1e-6)
+        if not sel.any():
+            raise InputError("no records at the requested incidence", field="incidence",
+                             expected=f"one of {incidences.tolist()}", got=incidence_deg)
+        incidences = incidences[sel]
+    x, f, s, m, p0 = _incidence_batch(fields, [np.flatnonzero(ti_all == t) for t in incidences], incidences, model,
+                                      options)
+    function = spec.function
+    geometry = ("detector_distance_mm", "aperture_diameter_mm")
+    # tables from other instruments may not state the geometry (NaN): then the point model is fitted
+    with_aperture = options.aperture and all(
+        k in profile.attrs and math.isfinite(float(profile.attrs[k])) for k in geometry)
+    if with_aperture:
+        x.update(_aperture_nodes(profile, x["theta_s"], x["phi_s"]))
+        function = _APERTURE_FUNCTIONS[spec.name]
+    ds = least_squares(function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
+                       batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
+                       model_name=model)
+    ds = ds.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
+    tis = spec.total_integrated_scatter({p.name: np.atleast_1d(ds[p.name].values) for p in spec.parameters},
+                                        incidences.astype(float))
+    ds["tis"] = ("theta_i", tis, {"long_name": "total integrated scatter of the fitted model "
+                                                            "(hemisphere, lobe clipped by the unit disk)"})
+    ds.attrs["side"] = side
+    ds.attrs["max_theta_s_deg"] = options.max_theta_s_deg
+    ds.attrs["noise_floor_k"] = options.noise_floor_k
+    ds.attrs["specular_core_deg"] = options.specular_core_deg
+    ds.attrs["aperture_averaged"] = int(with_aperture)
+    common = float(profile.attrs.get("common_relative_std", 0.0))
+    if common > 0:
+        # A common scale error of the data (the reference beam) moves every amplitude-like parameter by the
+        # same fraction; shape parameters (σ, B, g) are scale-free. Add it to their standard errors.
+        for name in ("rho", "A"):
+            if name in ds and f"{name}_std" in ds:
+                ds[f"{name}_std"] = np.hypot(ds[f"{name}_std"], common * np.abs(ds[name]))
+        ds.attrs["common_relative_std"] = common
+    return _with_plausibility(ds, model, incidences.astype(float))
+
+
+def _profile_fields(profile: xr.Dataset) -> tuple[dict[str, np.ndarray], str]:
+    """The record variables of a profile (angles in degrees, as float) and its side, checked: finite, one side,
+    positive uncertainties, not all zero, angles in range."""
     names = ("bsdf", "bsdf_std", "theta_i", "phi_i", "theta_s", "phi_s", "side")
     fields = {n: _profile_field(profile, n) for n in names}
     sides = np.unique(fields["side"].astype(str))
@@ -858,26 +946,22 @@ def fit_bsdf(
         k = int(np.argmax((fields["theta_i"] < 0) | (fields["theta_i"] >= 90)))
         raise InputError("incidence angle out of range", field=f"theta_i[record={k}]",
                          expected="0..<90 degrees", got=float(fields["theta_i"][k]))
+    return fields, str(sides[0])
 
-    ti_all = np.round(fields["theta_i"], 6)
-    incidences = np.unique(ti_all)
-    if incidence_deg is not None:
-        sel = np.isclose(incidences, incidence_deg, atol=1e-6)
-        if not sel.any():
-            raise InputError("no records at the requested incidence", field="incidence",
-                             expected=f"one of {incidences.tolist()}", got=incidence_deg)
-        incidences = incidences[sel]
 
-    groups = [np.flatnonzero(ti_all == t) for t in incidences]
-    n_max = max(g.size for g in groups)
-    shape = (len(groups), n_max)
+def _incidence_batch(fields: dict[str, np.ndarray], groups: list[np.ndarray], incidences: np.ndarray, model: str,
+                     options: BsdfFitOptions):
+    """One fit per incidence (the records of ``groups``): angles in radians (source at φi = 180°), BSDF,
+    uncertainty, the mask of usable points and start values, padded to the longest group."""
+    n_par = len(bsdf_model(model).parameters)
+    shape = (len(groups), max(g.size for g in groups))
     f = np.ones(shape)
     s = np.ones(shape)
     ti = np.zeros(shape)
     ts = np.zeros(shape)
     ps = np.zeros(shape)
     m = np.zeros(shape, bool)
-    p0 = np.zeros((len(groups), len(spec.parameters)))
+    p0 = np.zeros((len(groups), n_par))
     for b, idx in enumerate(groups):
         k = idx.size
         f[b, :k] = fields["bsdf"][idx]
@@ -897,51 +981,24 @@ def fit_bsdf(
             cos_dev = sx * np.sin(ti[b, :k]) + sz * np.cos(ti[b, :k])
             use &= np.degrees(np.arccos(np.clip(cos_dev, -1, 1))) > options.specular_core_deg
         m[b, :k] = use
-        if use.sum() <= len(spec.parameters):
+        if use.sum() <= n_par:
             raise FitError(f"incidence {incidences[b]:g}°: {int(use.sum())} usable points after masking "
                            f"(θs ≤ {options.max_theta_s_deg:g}°, bsdf ≥ {options.noise_floor_k:g}·bsdf_std) "
-                           f"for {len(spec.parameters)} parameters")
+                           f"for {n_par} parameters")
         p0[b] = _initial_bsdf_parameters(model, dbeta[use], f[b, :k][use])
+    return {"theta_i": ti, "theta_s": ts, "phi_s": ps}, f, s, m, p0
 
-    x = {"theta_i": ti, "theta_s": ts, "phi_s": ps}
-    function = spec.function
-    geometry = ("detector_distance_mm", "aperture_diameter_mm")
-    # tables from other instruments may not state the geometry (NaN): then the point model is fitted
-    with_aperture = options.aperture and all(
-        k in profile.attrs and math.isfinite(float(profile.attrs[k])) for k in geometry)
-    if with_aperture:
 
-        inst = Instrument(float(profile.attrs["detector_distance_mm"]), float(profile.attrs["aperture_diameter_mm"]),
-                          float(profile.attrs.get("beam_diameter_mm", 1.0)))
-        quad = aperture_quadrature(ts, ps, inst)
-        d = quad.directions
-        cos_nodes = np.clip(d[..., 2], 0.0, None)
-        x["theta_s_nodes"] = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
-        x["phi_s_nodes"] = np.arctan2(d[..., 1], d[..., 0])
-        x["weight"] = quad.weights * cos_nodes / (inst.solid_angle_sr * np.cos(ts)[..., None])
-        function = _APERTURE_FUNCTIONS[spec.name]
-    ds = least_squares(function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
-                       batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
-                       model_name=model)
-    ds = ds.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
-    tis = spec.total_integrated_scatter({p.name: np.atleast_1d(ds[p.name].values) for p in spec.parameters},
-                                        incidences.astype(float))
-    ds["tis"] = ("theta_i", tis, {"long_name": "total integrated scatter of the fitted model "
-                                                            "(hemisphere, lobe clipped by the unit disk)"})
-    ds.attrs["side"] = str(sides[0])
-    ds.attrs["max_theta_s_deg"] = options.max_theta_s_deg
-    ds.attrs["noise_floor_k"] = options.noise_floor_k
-    ds.attrs["specular_core_deg"] = options.specular_core_deg
-    ds.attrs["aperture_averaged"] = int(with_aperture)
-    common = float(profile.attrs.get("common_relative_std", 0.0))
-    if common > 0:
-        # A common scale error of the data (the reference beam) moves every amplitude-like parameter by the
-        # same fraction; shape parameters (σ, B, g) are scale-free. Add it to their standard errors.
-        for name in ("rho", "A"):
-            if name in ds and f"{name}_std" in ds:
-                ds[f"{name}_std"] = np.hypot(ds[f"{name}_std"], common * np.abs(ds[name]))
-        ds.attrs["common_relative_std"] = common
-    return _with_plausibility(ds, model, incidences.astype(float))
+def _aperture_nodes(profile: xr.Dataset, ts: np.ndarray, ps: np.ndarray) -> dict[str, np.ndarray]:
+    """The detector-aperture quadrature of every point (θs, φs in radians) for :func:`_aperture_average`, from the
+    instrument geometry the profile states."""
+    inst = Instrument(float(profile.attrs["detector_distance_mm"]), float(profile.attrs["aperture_diameter_mm"]),
+                      float(profile.attrs.get("beam_diameter_mm", 1.0)))
+    quad = aperture_quadrature(ts, ps, inst)
+    d = quad.directions
+    cos_nodes = np.clip(d[..., 2], 0.0, None)
+    return {"theta_s_nodes": np.arccos(np.clip(d[..., 2], -1.0, 1.0)), "phi_s_nodes": np.arctan2(d[..., 1], d[..., 0]),
+            "weight": quad.weights * cos_nodes / (inst.solid_angle_sr * np.cos(ts)[..., None])}
 
 
 def _with_plausibility(ds: xr.Dataset, model: str, theta_i_deg: np.ndarray) -> xr.Dataset:

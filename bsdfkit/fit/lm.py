@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import jax
@@ -220,92 +221,32 @@ def levenberg_marquardt(
     _check("gtol", math.isfinite(gtol) and gtol >= 0, "a finite number ≥ 0", gtol)
     _check("maxiter", isinstance(maxiter, int) and maxiter >= 1, "a positive integer", maxiter)
     _check("chunk", chunk is None or (isinstance(chunk, int) and chunk >= 1), "None or a positive integer", chunk)
-    n_fit, p = u0.shape
+    n_fit = u0.shape[0]
 
     def evaluate(u: np.ndarray, rows: np.ndarray) -> Linearization:
-        k = rows.size
-        bounds = [(0, k)] if chunk is None else [(lo, min(lo + chunk, k)) for lo in range(0, k, chunk)]
-        # Call linearize for every chunk before reading any result back: a JAX kernel dispatches
-        # asynchronously, so preparing the next chunk overlaps with computing the previous one.
-        pending = []
-        for lo, hi in bounds:
-            uu, rr = u[lo:hi], rows[lo:hi]
-            if chunk is not None and hi - lo < chunk:
-                fill = chunk - (hi - lo)
-                uu = np.concatenate([uu, np.repeat(uu[:1], fill, axis=0)])
-                rr = np.concatenate([rr, np.repeat(rr[:1], fill)])
-            pending.append((hi - lo, rr.size, linearize(uu, rr)))
-        outs = []
-        for m, q, lin in pending:
-            cost, grad, jtj = (np.asarray(a, dtype=float) for a in (lin.cost, lin.grad, lin.jtj))
-            _check("linearize", cost.shape == (q,) and grad.shape == (q, p) and jtj.shape == (q, p, p),
-                   f"cost ({q},), grad ({q}, {p}), jtj ({q}, {p}, {p})", (cost.shape, grad.shape, jtj.shape))
-            cost, grad, jtj = cost[:m], grad[:m], jtj[:m]
-            outs.append(Linearization(cost, grad, jtj,
-                                      jax.tree_util.tree_map(lambda a, m=m: np.asarray(a)[:m], lin.extra)))
-        if len(outs) == 1:
-            return outs[0]
-        return jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *outs)
+        return _evaluate(linearize, u, rows, chunk)
 
-    def finite(lin: Linearization) -> np.ndarray:
-        return (np.isfinite(lin.cost) & np.all(np.isfinite(lin.grad), axis=1)
-                & np.all(np.isfinite(lin.jtj), axis=(1, 2)))
-
-    all_rows = np.arange(n_fit)
-    first = evaluate(u0, all_rows)
-    initial_cost = first.cost.copy()
-    ok0 = finite(first)
+    first = evaluate(u0, np.arange(n_fit))
+    ok0 = _finite(first)
     two_c = 2.0 * first.cost
     big = ok0 & (two_c > _TINY)
     scale2 = np.where(big, 1.0 / np.where(big, two_c, 1.0), 1.0)  # residuals / ‖r(u0)‖, squared
-
-    u = u0.copy()
-    cost_raw = first.cost.copy()
-    c = scale2 * first.cost
-    g = scale2[:, None] * first.grad
-    a = scale2[:, None, None] * first.jtj
-    jtj_raw = first.jtj.copy()
-    extra = jax.tree_util.tree_map(np.array, first.extra)  # writable copies (kernel outputs are read-only)
+    it = _Iterate(u=u0.copy(), c=scale2 * first.cost, g=scale2[:, None] * first.grad,
+                  a=scale2[:, None, None] * first.jtj, cost_raw=first.cost.copy(), jtj_raw=first.jtj.copy(),
+                  extra=jax.tree_util.tree_map(np.array, first.extra))  # writable copies (kernel outputs: read-only)
     lam = np.full(n_fit, _LAMBDA_0)
     nu = np.full(n_fit, 2.0)
     iterations = np.zeros(n_fit, dtype=int)
     with np.errstate(invalid="ignore"):
-        converged = ok0 & (np.max(np.abs(g), axis=1) <= gtol)
+        converged = ok0 & (np.max(np.abs(it.g), axis=1) <= gtol)
     active = ok0 & ~converged
 
     while active.any():
         rows = np.flatnonzero(active)
         with np.errstate(all="ignore"):
-            step = _solve_damped(a[rows], g[rows], lam[rows])
+            step = _solve_damped(it.a[rows], it.g[rows], lam[rows])
         solved = np.all(np.isfinite(step), axis=1)
-        tried = rows[solved]
-        accept = np.zeros(rows.size, bool)
-        rho = np.zeros(rows.size)
-        if tried.size:
-            st = step[solved]
-            ut = u[tried] + st
-            lin = evaluate(ut, tried)
-            s2 = scale2[tried]
-            ct = s2 * lin.cost
-            with np.errstate(all="ignore"):
-                pred = -np.sum(g[tried] * st, axis=1) - 0.5 * np.einsum("ki,kij,kj->k", st, a[tried], st)
-                r = (c[tried] - ct) / np.where(pred > 0, pred, 1.0)
-            ok = finite(lin) & (pred > 0) & (r > _ACCEPT_RHO)
-            accept[solved] = ok
-            rho[solved] = r
-            acc = tried[ok]
-            u[acc] = ut[ok]
-            c[acc] = ct[ok]
-            cost_raw[acc] = lin.cost[ok]
-            g[acc] = s2[ok, None] * lin.grad[ok]
-            a[acc] = s2[ok, None, None] * lin.jtj[ok]
-            jtj_raw[acc] = lin.jtj[ok]
-
-            def keep(store: np.ndarray, new: np.ndarray, acc=acc, ok=ok) -> np.ndarray:
-                store[acc] = new[ok]
-                return store
-
-            extra = jax.tree_util.tree_map(keep, extra, lin.extra)
+        accept, rho = _try_steps(evaluate, it, rows, step, solved, scale2)
         # Damping (Nielsen): shrink after a good step, grow geometrically after rejections.
         lr, nr = lam[rows], nu[rows]
         with np.errstate(all="ignore"):  # ρ of rejected steps may be huge or NaN; only accepted ones are used
@@ -314,11 +255,97 @@ def levenberg_marquardt(
         nu[rows] = np.where(accept, 2.0, np.minimum(2.0 * nr, _NU_MAX))
         iterations[rows] += 1
         with np.errstate(invalid="ignore"):
-            g_small = np.max(np.abs(g[rows]), axis=1) <= gtol
+            g_small = np.max(np.abs(it.g[rows]), axis=1) <= gtol
             step_norm = np.sqrt(np.sum(np.where(solved[:, None], step, 0.0) ** 2, axis=1))
-            x_small = solved & (step_norm <= xtol * (np.sqrt(np.sum(u[rows] ** 2, axis=1)) + xtol))
+            x_small = solved & (step_norm <= xtol * (np.sqrt(np.sum(it.u[rows] ** 2, axis=1)) + xtol))
         converged[rows] = g_small | x_small
         active[rows] = ~converged[rows] & (iterations[rows] < maxiter)
 
-    return LMResult(u=u, cost=cost_raw, initial_cost=initial_cost, iterations=iterations, converged=converged,
-                    jtj=jtj_raw, extra=extra)
+    return LMResult(u=it.u, cost=it.cost_raw, initial_cost=first.cost.copy(), iterations=iterations,
+                    converged=converged, jtj=it.jtj_raw, extra=it.extra)
+
+
+@dataclass
+class _Iterate:
+    """The current point of every fit, updated in place where a step is accepted: ``u``, its scaled cost ``c``,
+    gradient ``g`` and Gauss–Newton matrix ``a`` (residuals / ‖r(u0)‖), and the unscaled cost, JᵀJ and the
+    linearisation's ``extra`` there."""
+
+    u: np.ndarray
+    c: np.ndarray
+    g: np.ndarray
+    a: np.ndarray
+    cost_raw: np.ndarray
+    jtj_raw: np.ndarray
+    extra: Any
+
+
+def _try_steps(evaluate: Callable[[np.ndarray, np.ndarray], Linearization], it: _Iterate, rows: np.ndarray,
+               step: np.ndarray, solved: np.ndarray, scale2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate the ``solved`` steps of fits ``rows`` and move ``it`` to the trial points that lower the cost by
+    more than :data:`_ACCEPT_RHO` of the predicted decrease. Returns (accepted, gain ratio ρ) per row."""
+    tried = rows[solved]
+    accept = np.zeros(rows.size, bool)
+    rho = np.zeros(rows.size)
+    if not tried.size:
+        return accept, rho
+    st = step[solved]
+    ut = it.u[tried] + st
+    lin = evaluate(ut, tried)
+    s2 = scale2[tried]
+    ct = s2 * lin.cost
+    with np.errstate(all="ignore"):
+        pred = -np.sum(it.g[tried] * st, axis=1) - 0.5 * np.einsum("ki,kij,kj->k", st, it.a[tried], st)
+        r = (it.c[tried] - ct) / np.where(pred > 0, pred, 1.0)
+    ok = _finite(lin) & (pred > 0) & (r > _ACCEPT_RHO)
+    accept[solved] = ok
+    rho[solved] = r
+    acc = tried[ok]
+    it.u[acc] = ut[ok]
+    it.c[acc] = ct[ok]
+    it.cost_raw[acc] = lin.cost[ok]
+    it.g[acc] = s2[ok, None] * lin.grad[ok]
+    it.a[acc] = s2[ok, None, None] * lin.jtj[ok]
+    it.jtj_raw[acc] = lin.jtj[ok]
+
+    def keep(store: np.ndarray, new: np.ndarray) -> np.ndarray:
+        store[acc] = new[ok]
+        return store
+
+    it.extra = jax.tree_util.tree_map(keep, it.extra, lin.extra)
+    return accept, rho
+
+
+def _evaluate(linearize: Callable[[np.ndarray, np.ndarray], Linearization], u: np.ndarray, rows: np.ndarray,
+              chunk: int | None) -> Linearization:
+    """``linearize`` at points ``u`` of fits ``rows``, in calls of ``chunk`` rows (the last padded by repeating
+    its first row, whose results are dropped), results checked in shape and concatenated."""
+    k, p = rows.size, u.shape[1]
+    bounds = [(0, k)] if chunk is None else [(lo, min(lo + chunk, k)) for lo in range(0, k, chunk)]
+    # Call linearize for every chunk before reading any result back: a JAX kernel dispatches
+    # asynchronously, so preparing the next chunk overlaps with computing the previous one.
+    pending = []
+    for lo, hi in bounds:
+        uu, rr = u[lo:hi], rows[lo:hi]
+        if chunk is not None and hi - lo < chunk:
+            fill = chunk - (hi - lo)
+            uu = np.concatenate([uu, np.repeat(uu[:1], fill, axis=0)])
+            rr = np.concatenate([rr, np.repeat(rr[:1], fill)])
+        pending.append((hi - lo, rr.size, linearize(uu, rr)))
+    outs = []
+    for m, q, lin in pending:
+        cost, grad, jtj = (np.asarray(a, dtype=float) for a in (lin.cost, lin.grad, lin.jtj))
+        _check("linearize", cost.shape == (q,) and grad.shape == (q, p) and jtj.shape == (q, p, p),
+               f"cost ({q},), grad ({q}, {p}), jtj ({q}, {p}, {p})", (cost.shape, grad.shape, jtj.shape))
+        cost, grad, jtj = cost[:m], grad[:m], jtj[:m]
+        outs.append(Linearization(cost, grad, jtj,
+                                  jax.tree_util.tree_map(lambda a, m=m: np.asarray(a)[:m], lin.extra)))
+    if len(outs) == 1:
+        return outs[0]
+    return jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *outs)
+
+
+def _finite(lin: Linearization) -> np.ndarray:
+    """Fits whose cost, gradient and JᵀJ are all finite."""
+    return (np.isfinite(lin.cost) & np.all(np.isfinite(lin.grad), axis=1)
+            & np.all(np.isfinite(lin.jtj), axis=(1, 2)))

@@ -58,6 +58,7 @@ likewise exact. Magnitudes: |x| ≤ 1 + τ·max_events (roulette adds at most τ
 from __future__ import annotations
 
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -65,6 +66,18 @@ from jax import lax
 
 from bsdfkit.raytrace import geometry, sampling
 from bsdfkit.raytrace.effects import Effects
+from bsdfkit.raytrace.plate import (
+    BACK_BIBS,
+    BACK_BIYS,
+    BACK_YIYS,
+    BIBS_R,
+    BIBS_T,
+    BIYS_R,
+    BIYS_T,
+    TABULATED,
+    YIYS_R,
+    YIYS_T,
+)
 
 # per-ray float64 tallies, accumulated in lanes and summed when the ray retires
 COLUMNS = ("extracted_blue", "extracted_yellow", "absorbed_wall", "absorbed_base", "absorbed_leds",
@@ -80,6 +93,8 @@ EXT_B, EXT_Y, ABS_WALL, ABS_BASE, ABS_LED, ABS_PLATE, ROULETTE, DISCARDED, TRUNC
  PH_TRUNCATED, PH_CONVERTED, PH_ANTI_STOKES, ANTI_STOKES_GAIN) = range(9, len(COLUMNS))
 #: the power ledger's columns (the photon columns close their own ledger)
 POWER_COLUMNS = COLUMNS[:11]
+#: ray colours of the two-wavelength mode (the spectral mode's colour is a wavelength bin)
+BLUE, YELLOW = 0, 1
 # per-ray integer counters
 COUNTERS = ("interactions", "plate_interactions", "clamped")
 CNT_EVENTS, CNT_PLATE, CNT_CLAMP = range(len(COUNTERS))
@@ -168,81 +183,156 @@ def _pick(table, idx):
     return out
 
 
-def _plate_interaction(params, key_words, ray, event, u, x, y, dx, dy, dz, w, colour, live, effects: Effects):
-    """Plate interaction of rays hitting the top: returns weights, colours, directions, clamping and the Stokes
-    loss (spectral mode; None otherwise)."""
+class _Hit(NamedTuple):
+    """Every lane's next surface: the ray's counter and event, the event's uniforms ``u``, the point hit and
+    masks (live lanes only) of the surface it lies on."""
+
+    ray: jax.Array
+    event: jax.Array
+    u: list
+    x: jax.Array
+    y: jax.Array
+    z: jax.Array
+    top: jax.Array
+    wall: jax.Array
+    base: jax.Array  # the base outside the LEDs
+    led: jax.Array
+    cav: jax.Array  # wall or base (LEDs included)
+
+
+class _Cavity(NamedTuple):
+    """A cavity reflection of every lane: the weight reflected and absorbed, and the new direction."""
+
+    w_ref: jax.Array
+    absorbed: jax.Array
+    dx: jax.Array
+    dy: jax.Array
+    dz: jax.Array
+
+
+class _Outcome(NamedTuple):
+    """What the surface hit did to every lane, before termination: the weight extracted and the bin (colour) it
+    left in, the ray's new weight, liveness, colour and direction, and the plate's absorption and Stokes loss."""
+
+    ext_w: jax.Array
+    ext_colour: jax.Array
+    new_w: jax.Array
+    alive: jax.Array
+    new_colour: jax.Array
+    dx: jax.Array
+    dy: jax.Array
+    dz: jax.Array
+    plate_abs: jax.Array
+    stokes: jax.Array | None
+
+
+class _Tallies:
+    """The per-ray tallies of the lanes during one interaction, added to in place: ``acc`` (:data:`COLUMNS`; a
+    column the effects do not fill is None and ignores additions) and ``cnt`` (:data:`COUNTERS`)."""
+
+    def __init__(self, lane):
+        self.acc, self.cnt = list(lane["acc"]), list(lane["cnt"])
+        self.zero = jnp.zeros_like(lane["w"])
+
+    def add(self, col: int, value) -> None:
+        if self.acc[col] is not None:
+            self.acc[col] = self.acc[col] + value
+
+    def count(self, counter: int, mask) -> None:
+        self.cnt[counter] = self.cnt[counter] + mask.astype(jnp.int32)
+
+
+def _plate_interaction(params, key_words, hit: _Hit, lane, effects: Effects):
+    """Plate interaction of rays hitting the top (``hit.top``): returns weights, absorbed weights, forward,
+    colours, directions, clamping and the Stokes loss (spectral mode; None otherwise)."""
     P = params["plate"]
+    w, colour = lane["w"], lane["colour"]
+    with jax.named_scope("plate"):
+        t, j, clamped = _plate_incidence(P, key_words, lane["dz"], hit.top, effects)
+        if effects.spectral:
+            w_out, absorbed, stokes, forward, new_colour, channel, g = _spectral_channel(params, key_words, hit.u, w,
+                                                                                          colour, t, j)
+        else:
+            w_out, forward, new_colour, channel, g = _plate_channel(P, key_words, hit.u, w, colour, t, j, effects)
+            absorbed = w - w_out
+            stokes = None
+        nx, ny, nz = _backward_direction(P, key_words, hit, lane, hit.top & ~forward, channel, g, effects)
+    return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped, stokes
+
+
+def _plate_incidence(P, key_words, dz, live, effects: Effects):
+    """θi of rays meeting the plate on its incidence grid: interval j and weight t (linear in θi, θi clamped to
+    the grid), and the lanes outside the measured range (None unless ``effects.plate_clamp``)."""
     grid = P["grid"]
     G = grid.shape[0]
-    with jax.named_scope("plate"):
-        theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
-        lo, hi = P["range"][0], P["range"][1]
-        clamped = live & ((theta < lo) | (theta > hi)) if effects.plate_clamp else None
-        th = jnp.clip(theta, grid[0], grid[G - 1])
-        j = jnp.zeros(th.shape, jnp.int32)
-        for g in range(1, G - 1):
-            j = j + (th >= grid[g]).astype(jnp.int32)
-        g0, g1 = _pick(grid, j), _pick(grid, j + 1)
-        t, j = sampling.materialise(key_words, [((th - g0) / (g1 - g0)).astype(jnp.float64), j])
-        if effects.spectral:
-            w_out, absorbed, stokes, forward, new_colour, channel, g = _spectral_channel(params, key_words, u, w,
-                                                                                          colour, t, j)
-            nx, ny, nz = _backward_direction(P, key_words, ray, event, u, dx, dy, live & ~forward, channel, g,
-                                             effects)
-            return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped, stokes
-        T0 = [_pick(P["tis"][:, c], j) for c in range(6)]
-        T1 = [_pick(P["tis"][:, c], j + 1) for c in range(6)]
-        tis = [(1.0 - t) * a + t * b for a, b in zip(T0, T1)]
-        if effects.conversion:
-            with jax.named_scope("phosphor_conversion"):
-                yellow = colour == 1
-                zero = jnp.zeros_like(t)
-                probs = [jnp.where(yellow, tis[4], tis[0]), jnp.where(yellow, tis[5], tis[1]),
-                         jnp.where(yellow, zero, tis[2]), jnp.where(yellow, zero, tis[3])]
-        else:
-            probs = [tis[0], tis[1]]
-        S = sum(probs)
-        w_out = w * S
-        v = u[0].astype(jnp.float64) * S
-        edges = []
-        acc = jnp.zeros_like(S)
-        for pr in probs[:-1]:
-            acc = acc + pr
-            edges.append(acc)
-        outcome = sum((v >= e).astype(jnp.int32) for e in edges)
-        forward = (outcome % 2) == 1
-        if effects.conversion:
-            new_colour = jnp.where((colour == 1) | (outcome >= 2), 1, 0).astype(jnp.int32)
-            channel = jnp.where(colour == 1, 2, jnp.where(outcome >= 2, 1, 0))
-            q0 = jnp.where(channel == 0, T0[0], jnp.where(channel == 1, T0[2], T0[4]))
-            q1 = jnp.where(channel == 0, T1[0], jnp.where(channel == 1, T1[2], T1[4]))
-        else:
-            new_colour = colour
-            channel = jnp.zeros_like(outcome)
-            q0, q1 = T0[0], T1[0]
-        # grid point whose angular distribution is used (linear interpolation of the BSDF in θi)
-        q0 = (1.0 - t) * q0
-        q1 = t * q1
-        g = jnp.where(u[4].astype(jnp.float64) * (q0 + q1) < q0, j, j + 1)
-        # computed once (see sampling.materialise): every later plate quantity depends on these
-        w_out, forward, new_colour, channel, g = sampling.materialise(
-            key_words, [w_out, forward, new_colour.astype(jnp.int32), channel.astype(jnp.int32), g])
-        absorbed = w - w_out
-        nx, ny, nz = _backward_direction(P, key_words, ray, event, u, dx, dy, live & ~forward, channel, g,
-                                         effects)
-    return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped, None
+    theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
+    lo, hi = P["range"][0], P["range"][1]
+    clamped = live & ((theta < lo) | (theta > hi)) if effects.plate_clamp else None
+    th = jnp.clip(theta, grid[0], grid[G - 1])
+    j = jnp.zeros(th.shape, jnp.int32)
+    for g in range(1, G - 1):
+        j = j + (th >= grid[g]).astype(jnp.int32)
+    g0, g1 = _pick(grid, j), _pick(grid, j + 1)
+    t, j = sampling.materialise(key_words, [((th - g0) / (g1 - g0)).astype(jnp.float64), j])
+    return t, j, clamped
 
 
-def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, g, effects: Effects):
-    """Direction of a backward-scattered ray: the distribution of backward channel ``channel`` (0 bibs, 1 biys,
-    2 yiys) at grid point ``g`` (Lambertian, tabulated or Lambert + lobe; uniforms 1, 2 and 5)."""
+def _plate_channel(P, key_words, u, w, colour, t, j, effects: Effects):
+    """Two-wavelength plate: weight, forward, new colour, backward channel and grid point of rays of ``colour``
+    at grid interval j (weight t); the channel drawn with probabilities TIS_c/S (uniform 0) and the grid point
+    whose distribution is used with the channel's TIS share (uniform 4)."""
+    T0 = [_pick(P["tis"][:, c], j) for c in range(6)]
+    T1 = [_pick(P["tis"][:, c], j + 1) for c in range(6)]
+    tis = [(1.0 - t) * a + t * b for a, b in zip(T0, T1)]
+    if effects.conversion:  # outcomes: R and T of the ray's elastic channel, then biys R and T (blue rays only)
+        with jax.named_scope("phosphor_conversion"):
+            yellow = colour == YELLOW
+            zero = jnp.zeros_like(t)
+            probs = [jnp.where(yellow, tis[YIYS_R], tis[BIBS_R]), jnp.where(yellow, tis[YIYS_T], tis[BIBS_T]),
+                     jnp.where(yellow, zero, tis[BIYS_R]), jnp.where(yellow, zero, tis[BIYS_T])]
+    else:
+        probs = [tis[BIBS_R], tis[BIBS_T]]
+    S = sum(probs)
+    w_out = w * S
+    v = u[0].astype(jnp.float64) * S
+    edges = []
+    acc = jnp.zeros_like(S)
+    for pr in probs[:-1]:
+        acc = acc + pr
+        edges.append(acc)
+    outcome = sum((v >= e).astype(jnp.int32) for e in edges)
+    forward = (outcome % 2) == 1
+    if effects.conversion:
+        new_colour = jnp.where((colour == YELLOW) | (outcome >= 2), YELLOW, BLUE).astype(jnp.int32)
+        channel = jnp.where(colour == YELLOW, BACK_YIYS, jnp.where(outcome >= 2, BACK_BIYS, BACK_BIBS))
+        q0 = jnp.where(channel == BACK_BIBS, T0[BIBS_R], jnp.where(channel == BACK_BIYS, T0[BIYS_R], T0[YIYS_R]))
+        q1 = jnp.where(channel == BACK_BIBS, T1[BIBS_R], jnp.where(channel == BACK_BIYS, T1[BIYS_R], T1[YIYS_R]))
+    else:
+        new_colour = colour
+        channel = jnp.zeros_like(outcome)  # BACK_BIBS
+        q0, q1 = T0[BIBS_R], T1[BIBS_R]
+    # grid point whose angular distribution is used (linear interpolation of the BSDF in θi)
+    q0 = (1.0 - t) * q0
+    q1 = t * q1
+    g = jnp.where(u[4].astype(jnp.float64) * (q0 + q1) < q0, j, j + 1)
+    # computed once (see sampling.materialise): every later plate quantity depends on these
+    return sampling.materialise(
+        key_words, [w_out, forward, new_colour.astype(jnp.int32), channel.astype(jnp.int32), g])
+
+
+def _backward_direction(P, key_words, hit: _Hit, lane, backward, channel, g, effects: Effects):
+    """Direction of a backward-scattered ray: the distribution of backward channel ``channel`` (:data:`BACK_BIBS`,
+    :data:`BACK_BIYS` or :data:`BACK_YIYS`) at grid point ``g`` (Lambertian, tabulated or Lambert + lobe;
+    uniforms 1, 2 and 5)."""
     dt = effects.dtype
+    u = hit.u
     with jax.named_scope("plate"):
         def per_channel(table):  # table (G, 3, ...) → value at (g, channel) per lane
             rows = _pick(table, g)  # (L, 3, ...)
             shape = channel.shape + (1,) * (rows.ndim - 2)
-            return jnp.where((channel == 0).reshape(shape), rows[:, 0],
-                             jnp.where((channel == 1).reshape(shape), rows[:, 1], rows[:, 2]))
+            return jnp.where((channel == BACK_BIBS).reshape(shape), rows[:, BACK_BIBS],
+                             jnp.where((channel == BACK_BIYS).reshape(shape), rows[:, BACK_BIYS],
+                                       rows[:, BACK_YIYS]))
 
         sin_t, cos_t, c_phi, s_phi = sampling.lambertian_angles(u[1], u[2])
         nx = sin_t * c_phi
@@ -250,7 +340,7 @@ def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, 
         nz = -cos_t
         if effects.plate_table:
             with jax.named_scope("table_sampling"):
-                is_table = per_channel(P["kind"]) == 2
+                is_table = per_channel(P["kind"]) == TABULATED
                 s = sampling.table_s(u[1].astype(jnp.float64), per_channel(P["s_nodes"]),
                                      per_channel(P["f_nodes"]), per_channel(P["cdf"])).astype(dt)
                 ts, tc = jnp.sqrt(s), jnp.sqrt(1.0 - s)
@@ -260,7 +350,8 @@ def _backward_direction(P, key_words, ray, event, u, dx, dy, backward, channel, 
         if effects.plate_lobe:
             with jax.named_scope("lobe_sampling"):
                 use_lobe = backward & (u[5].astype(jnp.float64) < per_channel(P["lobe_share"]))
-                bx, by, ok = sampling.lobe_beta(key_words, ray, event, use_lobe, dx, dy, per_channel(P["sigma"]), dt)
+                bx, by, ok = sampling.lobe_beta(key_words, hit.ray, hit.event, use_lobe, lane["dx"], lane["dy"],
+                                                per_channel(P["sigma"]), dt)
                 bz = -jnp.sqrt(jnp.maximum(1.0 - bx * bx - by * by, 0.0))
                 nx = jnp.where(ok, bx, nx)
                 ny = jnp.where(ok, by, ny)
@@ -295,7 +386,7 @@ def _spectral_channel(params, key_words, u, w, k, t, j):
         new_k = jnp.where(converted, drawn, k).astype(jnp.int32)
         w_kept = w * S
         w_out = jnp.where(converted, w_kept * (sp["lam"][k] / sp["lam"][new_k]), w_kept)
-        channel = jnp.where(converted, 1, sp["elastic_shape"][k]).astype(jnp.int32)
+        channel = jnp.where(converted, BACK_BIYS, sp["elastic_shape"][k]).astype(jnp.int32)
         q0 = jnp.where(outcome == 0, T0[:, 0], jnp.where(outcome == 1, T0[:, 1],
                                                          jnp.where(outcome == 2, T0[:, 2], T0[:, 3])))
         q1 = jnp.where(outcome == 0, T1[:, 0], jnp.where(outcome == 1, T1[:, 1],
@@ -318,31 +409,58 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     budget) int64 tallies. Returns the updated (lane, arrays); lanes not live are left unchanged.
     """
     dt = effects.dtype
-    R, H = params["radius"], params["height"]
+    hit = _next_hit(params, key_words, start_u, lane, effects)
+    cavity = _cavity(params, key_words, hit, lane, effects)
+    tallies = _Tallies(lane)
+    ph_in = _tally_cavity(params, hit, lane["colour"], cavity.absorbed, tallies, effects)
+    budget_cav = jnp.where(hit.cav, cavity.absorbed, tallies.zero)
+    n_plate = tallies.cnt[CNT_PLATE]
+    if effects.top == "exit":
+        out = _Outcome(jnp.where(hit.top, lane["w"], tallies.zero), lane["colour"],
+                       jnp.where(hit.cav, cavity.w_ref, tallies.zero), hit.cav, lane["colour"], cavity.dx, cavity.dy,
+                       cavity.dz, tallies.zero, None)
+    else:
+        out = _plate_top(params, key_words, hit, lane, cavity, tallies, ph_in, effects)
+    ext_b, ext_y, ext_o, ph_out = _extracted(params, out, tallies, effects)
+    new_w, alive, other = _terminate(params, hit.u, lane["live"], out.alive & (out.new_w > 0), out.new_w, ph_out,
+                                     tallies, effects)
     new_map, new_hist, new_budget = arrays
-    nmap, nhist, nbud = new_map.shape[0], new_hist.shape[0], new_budget.shape[0]
-    ids, live, px, py, pz, dx, dy, dz, w, colour = (lane[k] for k in ("ids", "live", "px", "py", "pz", "dx",
-                                                                       "dy", "dz", "w", "colour"))
-    acc, cnt = list(lane["acc"]), list(lane["cnt"])
+    if effects.irradiance_map:
+        new_map = _map_tally(params, hit, lane["w"], new_map, effects)
+    if effects.incidence_histogram:
+        new_hist = _histogram_tally(params, hit.top, lane, new_hist, effects)
+    if effects.interaction_budget:
+        new_budget = _budget_tally(new_budget, n_plate, lane["live"], (ext_b, ext_y, budget_cav, out.plate_abs, other),
+                                   ext_o, out.stokes, effects)
+    lane = dict(ids=lane["ids"], live=alive, px=hit.x, py=hit.y, pz=hit.z, dx=out.dx.astype(dt),
+                dy=out.dy.astype(dt), dz=out.dz.astype(dt), w=new_w, colour=out.new_colour.astype(jnp.int32),
+                acc=tallies.acc, cnt=tallies.cnt)
+    return lane, (new_map, new_hist, new_budget)
 
-    def add(col, value):
-        if acc[col] is not None:
-            acc[col] = acc[col] + value
 
-    ray = start_u + jnp.where(live, ids, 0).astype(jnp.uint32)
-    event = cnt[CNT_EVENTS] + 1
+def _next_hit(params, key_words, start_u, lane, effects: Effects) -> _Hit:
+    """The surface every lane's ray meets next, and the uniforms of this event."""
+    dt = effects.dtype
+    R, H = params["radius"], params["height"]
+    live = lane["live"]
+    ray = start_u + jnp.where(live, lane["ids"], 0).astype(jnp.uint32)
+    event = lane["cnt"][CNT_EVENTS] + 1
     n_u = (8 if effects.spectral else 6) if effects.top == "plate" else 4
     u = sampling.event_uniforms(key_words, ray, event, dt, n_u)
-    surf, x, y, z = sampling.materialise(key_words, geometry.next_hit(px, py, pz, dx, dy, dz, R, H))
+    surf, x, y, z = sampling.materialise(key_words, geometry.next_hit(*(lane[k] for k in ("px", "py", "pz", "dx",
+                                                                                            "dy", "dz")), R, H))
     top = live & (surf == geometry.TOP)
     wall = live & (surf == geometry.WALL)
     base_any = live & (surf == geometry.BASE)
     led = base_any & geometry.on_led(x, y, params["led_grid"].astype(dt), params["pitch"],
                                      params["emitter_radius"])
-    base = base_any & ~led
-    cav = wall | base_any
+    return _Hit(ray, event, u, x, y, z, top, wall, base_any & ~led, led, wall | base_any)
 
-    # cavity surfaces
+
+def _cavity(params, key_words, hit: _Hit, lane, effects: Effects) -> _Cavity:
+    """Reflection at the cavity surfaces (wall, base, LEDs): weight wρ, Lambertian or mirror direction."""
+    dt = effects.dtype
+    wall, led, u, colour = hit.wall, hit.led, hit.u, lane["colour"]
     if effects.surface_spectra:  # reflectance per colour (two-wavelength) or per bin (spectral): row s·C + colour
         with jax.named_scope("surface_spectra"):
             C = params["rho_table"].shape[0] // 3
@@ -350,11 +468,11 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
             rho = params["rho_table"][s_idx * C + colour]
     else:
         rho = jnp.where(wall, params["rho"][0], jnp.where(led, params["rho"][2], params["rho"][1]))
-    w_ref = w * rho
-    absorbed = w - w_ref
-    inv_r = 1.0 / R
-    nx = jnp.where(wall, -x * inv_r, 0.0).astype(dt)
-    ny = jnp.where(wall, -y * inv_r, 0.0).astype(dt)
+    w_ref = lane["w"] * rho
+    absorbed = lane["w"] - w_ref
+    inv_r = 1.0 / params["radius"]
+    nx = jnp.where(wall, -hit.x * inv_r, 0.0).astype(dt)
+    ny = jnp.where(wall, -hit.y * inv_r, 0.0).astype(dt)
     nz = jnp.where(wall, 0.0, 1.0).astype(dt)
     sin_t, cos_t, c_phi, s_phi = sampling.materialise(key_words, list(sampling.lambertian_angles(u[1], u[2])))
     # materialised: XLA contracts a·b + c into FMAs within a fusion, so the rounding of the direction must not
@@ -365,75 +483,85 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         with jax.named_scope("specular_reflection"):
             spec = jnp.where(wall, params["spec"][0], jnp.where(led, params["spec"][2], params["spec"][1]))
             mirror = u[0].astype(jnp.float64) < spec
-            mdx, mdy, mdz = sampling.mirror(dx, dy, dz, nx, ny, nz)
+            mdx, mdy, mdz = sampling.mirror(lane["dx"], lane["dy"], lane["dz"], nx, ny, nz)
             cdx = jnp.where(mirror, mdx, cdx)
             cdy = jnp.where(mirror, mdy, cdy)
             cdz = jnp.where(mirror, mdz, cdz)
+    return _Cavity(w_ref, absorbed, cdx, cdy, cdz)
 
-    zero = jnp.zeros_like(w)
-    add(ABS_WALL, jnp.where(wall, absorbed, zero))
-    add(ABS_BASE, jnp.where(base, absorbed, zero))
-    add(ABS_LED, jnp.where(led, absorbed, zero))
-    if effects.spectral:  # photons of the bin the ray had when it arrived
-        ph_in = params["spectral"]["photon_scale"][colour]
-        add(PH_WALL, jnp.where(wall, absorbed * ph_in, zero))
-        add(PH_BASE, jnp.where(base, absorbed * ph_in, zero))
-        add(PH_LED, jnp.where(led, absorbed * ph_in, zero))
-    budget_cav = jnp.where(cav, absorbed, zero)
 
-    # top
-    n_plate = cnt[CNT_PLATE]
-    if effects.top == "exit":
-        ext_w = jnp.where(top, w, zero)
-        ext_colour = colour
-        new_w = jnp.where(cav, w_ref, zero)
-        alive = cav
-        new_colour = colour
-        ndx, ndy, ndz = cdx, cdy, cdz
-        plate_abs = zero
-        stokes = None
-    else:
-        w_out, p_abs, forward, p_colour, pdx, pdy, pdz, clamped, stokes = _plate_interaction(
-            params, key_words, ray, event, u, x, y, dx, dy, dz, w, colour, top, effects)
-        plate_abs = jnp.where(top, p_abs, zero)
-        add(ABS_PLATE, plate_abs)
-        if effects.spectral:
-            stokes, ph_conv, ph_anti, gain = (jnp.where(top, v, zero) for v in stokes)
-            add(STOKES, stokes)
-            add(PH_PLATE, plate_abs * ph_in)
-            add(PH_CONVERTED, ph_conv)
-            add(PH_ANTI_STOKES, ph_anti)
-            add(ANTI_STOKES_GAIN, gain)
-        ext_w = jnp.where(top & forward, w_out, zero)
-        ext_colour = p_colour
-        back = top & ~forward & (w_out > 0)
-        new_w = jnp.where(cav, w_ref, jnp.where(back, w_out, zero))
-        alive = cav | back
-        new_colour = jnp.where(top, p_colour, colour)
-        ndx = jnp.where(top, pdx, cdx)
-        ndy = jnp.where(top, pdy, cdy)
-        ndz = jnp.where(top, pdz, cdz)
-        cnt[CNT_PLATE] = cnt[CNT_PLATE] + top.astype(jnp.int32)
-        if effects.plate_clamp:
-            cnt[CNT_CLAMP] = cnt[CNT_CLAMP] + clamped.astype(jnp.int32)
+def _tally_cavity(params, hit: _Hit, colour, absorbed, tallies: _Tallies, effects: Effects):
+    """Tally the weight the cavity surfaces absorbed; returns the photons per unit weight of the bin each ray
+    arrived in (spectral mode; None otherwise)."""
+    zero = tallies.zero
+    tallies.add(ABS_WALL, jnp.where(hit.wall, absorbed, zero))
+    tallies.add(ABS_BASE, jnp.where(hit.base, absorbed, zero))
+    tallies.add(ABS_LED, jnp.where(hit.led, absorbed, zero))
+    if not effects.spectral:
+        return None
+    ph_in = params["spectral"]["photon_scale"][colour]
+    tallies.add(PH_WALL, jnp.where(hit.wall, absorbed * ph_in, zero))
+    tallies.add(PH_BASE, jnp.where(hit.base, absorbed * ph_in, zero))
+    tallies.add(PH_LED, jnp.where(hit.led, absorbed * ph_in, zero))
+    return ph_in
+
+
+def _plate_top(params, key_words, hit: _Hit, lane, cavity: _Cavity, tallies: _Tallies, ph_in,
+               effects: Effects) -> _Outcome:
+    """The plate on top: rays meeting it are extracted (forward) or scattered back (or absorbed); the others
+    keep their cavity reflection."""
+    top, zero = hit.top, tallies.zero
+    w_out, p_abs, forward, p_colour, pdx, pdy, pdz, clamped, stokes = _plate_interaction(params, key_words, hit,
+                                                                                         lane, effects)
+    plate_abs = jnp.where(top, p_abs, zero)
+    tallies.add(ABS_PLATE, plate_abs)
+    if effects.spectral:
+        stokes, ph_conv, ph_anti, gain = (jnp.where(top, v, zero) for v in stokes)
+        tallies.add(STOKES, stokes)
+        tallies.add(PH_PLATE, plate_abs * ph_in)
+        tallies.add(PH_CONVERTED, ph_conv)
+        tallies.add(PH_ANTI_STOKES, ph_anti)
+        tallies.add(ANTI_STOKES_GAIN, gain)
+    ext_w = jnp.where(top & forward, w_out, zero)
+    back = top & ~forward & (w_out > 0)
+    new_w = jnp.where(hit.cav, cavity.w_ref, jnp.where(back, w_out, zero))
+    alive = hit.cav | back
+    new_colour = jnp.where(top, p_colour, lane["colour"])
+    ndx = jnp.where(top, pdx, cavity.dx)
+    ndy = jnp.where(top, pdy, cavity.dy)
+    ndz = jnp.where(top, pdz, cavity.dz)
+    tallies.count(CNT_PLATE, top)
+    if effects.plate_clamp:
+        tallies.count(CNT_CLAMP, clamped)
+    return _Outcome(ext_w, p_colour, new_w, alive, new_colour, ndx, ndy, ndz, plate_abs, stokes)
+
+
+def _extracted(params, out: _Outcome, tallies: _Tallies, effects: Effects):
+    """Tally the extracted weight by band: returns (blue, yellow, outside both bands or None, photons per unit
+    weight of the ray's new bin from here on or None)."""
+    zero, ext_w, ext_colour = tallies.zero, out.ext_w, out.ext_colour
+    ext_o = ph_out = None
     if effects.spectral:  # bands of the bin extracted in; photons of the ray's (new) bin from here on
         band = params["spectral"]["band"][ext_colour]
-        ph_out = params["spectral"]["photon_scale"][new_colour]
+        ph_out = params["spectral"]["photon_scale"][out.new_colour]
         ext_b = jnp.where(band == 0, ext_w, zero)
         ext_y = jnp.where(band == 1, ext_w, zero)
         ext_o = jnp.where(band == 2, ext_w, zero)
-        add(EXT_O, ext_o)
-        add(PH_EXT, ext_w * params["spectral"]["photon_scale"][ext_colour])
+        tallies.add(EXT_O, ext_o)
+        tallies.add(PH_EXT, ext_w * params["spectral"]["photon_scale"][ext_colour])
     elif effects.conversion:
-        ext_b = jnp.where(ext_colour == 0, ext_w, zero)
-        ext_y = jnp.where(ext_colour == 0, zero, ext_w)
+        ext_b = jnp.where(ext_colour == BLUE, ext_w, zero)
+        ext_y = jnp.where(ext_colour == BLUE, zero, ext_w)
     else:
         ext_b, ext_y = ext_w, zero
-    add(EXT_B, ext_b)
-    add(EXT_Y, ext_y)
-    alive = alive & (new_w > 0)
+    tallies.add(EXT_B, ext_b)
+    tallies.add(EXT_Y, ext_y)
+    return ext_b, ext_y, ext_o, ph_out
 
-    # termination
+
+def _terminate(params, u, live, alive, new_w, ph_out, tallies: _Tallies, effects: Effects):
+    """Roulette or threshold on the new weights, then the event cap: returns (weight, alive, weight removed)."""
+    zero = tallies.zero
     other = zero
     if effects.termination == "roulette":
         tau = params["roulette_threshold"]
@@ -441,54 +569,63 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
         survive = u[3].astype(jnp.float64) * tau < new_w
         killed = low & ~survive
         rr = jnp.where(killed, new_w, jnp.where(low, new_w - tau, zero))
-        add(ROULETTE, rr)
+        tallies.add(ROULETTE, rr)
         if effects.spectral:
-            add(PH_ROULETTE, rr * ph_out)
+            tallies.add(PH_ROULETTE, rr * ph_out)
         other = other + rr
         new_w = jnp.where(low, jnp.where(survive, tau, zero), new_w)
         alive = alive & ~killed
     else:
         low = alive & (new_w < params["threshold"])
         dropped = jnp.where(low, new_w, zero)
-        add(DISCARDED, dropped)
+        tallies.add(DISCARDED, dropped)
         if effects.spectral:
-            add(PH_DISCARDED, dropped * ph_out)
+            tallies.add(PH_DISCARDED, dropped * ph_out)
         other = other + dropped
         new_w = jnp.where(low, zero, new_w)
         alive = alive & ~low
-    cnt[CNT_EVENTS] = cnt[CNT_EVENTS] + live.astype(jnp.int32)
-    capped = alive & (cnt[CNT_EVENTS] >= params["max_events"])
+    tallies.count(CNT_EVENTS, live)
+    capped = alive & (tallies.cnt[CNT_EVENTS] >= params["max_events"])
     trunc = jnp.where(capped, new_w, zero)
-    add(TRUNCATED, trunc)
+    tallies.add(TRUNCATED, trunc)
     if effects.spectral:
-        add(PH_TRUNCATED, trunc * ph_out)
+        tallies.add(PH_TRUNCATED, trunc * ph_out)
     other = other + trunc
-    alive = alive & ~capped
+    return new_w, alive & ~capped, other
 
-    if effects.irradiance_map:
-        with jax.named_scope("irradiance_map"):
-            part = (ray % jnp.uint32(MAP_PARTS)).astype(jnp.int32) * (effects.map_bins ** 2)
-            idx = geometry.map_index(x, y, R, effects.map_bins) + part
-            new_map = new_map.at[jnp.where(top, idx, nmap)].add(_fixed(w), mode="drop")
-    if effects.incidence_histogram:
-        with jax.named_scope("incidence_histogram"):
-            theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
-            hb = effects.histogram_bins
-            hue = jnp.minimum(params["spectral"]["band"][colour], 1) if effects.spectral else colour
-            b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + hue * hb
-            new_hist = new_hist.at[jnp.where(top, b, nhist)].add(_fixed(w), mode="drop")
-    if effects.interaction_budget:
-        with jax.named_scope("interaction_budget"):
-            k = jnp.minimum(n_plate, effects.budget_bins - 1) * len(BUDGET_COLUMNS)
-            sink = jnp.where(live, 0, nbud)
-            if effects.spectral:  # light outside both bands with yellow, the Stokes loss with the plate's
-                ext_y = ext_y + ext_o
-                plate_abs = plate_abs if stokes is None else plate_abs + stokes
-            for c, val in enumerate((ext_b, ext_y, budget_cav, plate_abs, other)):
-                new_budget = new_budget.at[k + c + sink].add(_fixed(val), mode="drop")
-    lane = dict(ids=ids, live=alive, px=x, py=y, pz=z, dx=ndx.astype(dt), dy=ndy.astype(dt), dz=ndz.astype(dt),
-                w=new_w, colour=new_colour.astype(jnp.int32), acc=acc, cnt=cnt)
-    return lane, (new_map, new_hist, new_budget)
+
+def _map_tally(params, hit: _Hit, w, new_map, effects: Effects):
+    """Deposit the weight of the rays meeting the top into the irradiance sub-map of each ray."""
+    with jax.named_scope("irradiance_map"):
+        part = (hit.ray % jnp.uint32(MAP_PARTS)).astype(jnp.int32) * (effects.map_bins ** 2)
+        idx = geometry.map_index(hit.x, hit.y, params["radius"], effects.map_bins) + part
+        return new_map.at[jnp.where(hit.top, idx, new_map.shape[0])].add(_fixed(w), mode="drop")
+
+
+def _histogram_tally(params, top, lane, new_hist, effects: Effects):
+    """Deposit the weight of the rays meeting the top into the histogram of their incidence (per band)."""
+    with jax.named_scope("incidence_histogram"):
+        theta = jnp.arccos(jnp.clip(lane["dz"], 0.0, 1.0))
+        hb = effects.histogram_bins
+        colour = lane["colour"]
+        hue = jnp.minimum(params["spectral"]["band"][colour], 1) if effects.spectral else colour
+        b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + hue * hb
+        return new_hist.at[jnp.where(top, b, new_hist.shape[0])].add(_fixed(lane["w"]), mode="drop")
+
+
+def _budget_tally(new_budget, n_plate, live, parts, ext_o, stokes, effects: Effects):
+    """Deposit this interaction's :data:`BUDGET_COLUMNS` ``parts`` into the row of the plate interactions the ray
+    had before it (the last row collects the rest)."""
+    with jax.named_scope("interaction_budget"):
+        k = jnp.minimum(n_plate, effects.budget_bins - 1) * len(BUDGET_COLUMNS)
+        sink = jnp.where(live, 0, new_budget.shape[0])
+        ext_b, ext_y, cav, plate_abs, other = parts
+        if effects.spectral:  # light outside both bands with yellow, the Stokes loss with the plate's
+            ext_y = ext_y + ext_o
+            plate_abs = plate_abs if stokes is None else plate_abs + stokes
+        for c, val in enumerate((ext_b, ext_y, cav, plate_abs, other)):
+            new_budget = new_budget.at[k + c + sink].add(_fixed(val), mode="drop")
+        return new_budget
 
 
 def active_columns(effects: Effects) -> tuple[bool, ...]:
@@ -524,16 +661,9 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
     most once, in one bin, so the per-bin sums of squares give exact per-ray variances), and ``emitted`` (K,)
     rays emitted per bin (counts); and ``iterations`` of the loop.
     """
-    dt = effects.dtype
-    W = lanes
     C = int(chunk or lanes)
     start_u = jnp.asarray(start, jnp.uint32)
     n_valid = jnp.asarray(n_valid, jnp.int32)  # ≤ min(chunk, MAX_CHUNK) (exactness of the limb sums)
-    ncol, ncnt, nsq = len(COLUMNS), len(COUNTERS), len(SQUARES)
-    active = active_columns(effects)
-    nmap = MAP_PARTS * effects.map_bins ** 2 if effects.irradiance_map else 0
-    nhist = 2 * effects.histogram_bins if effects.incidence_histogram else 0
-    nbud = effects.budget_bins * len(BUDGET_COLUMNS) if effects.interaction_budget else 0
     # every emission of the chunk, computed once (vectorised) before the loop
     with jax.named_scope("emission"):
         emitted = emission(params, key_words, start_u + jnp.arange(C, dtype=jnp.uint32), effects)
@@ -545,100 +675,25 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
         K = 0
         emitted_bins = jnp.zeros(0, jnp.int64)
 
-    zf = jnp.zeros(W, dt)
-    state = dict(
-        next=jnp.int32(0), it=jnp.int32(0),
-        lanes=dict(ray=jnp.full(W, -1, jnp.int32), px=zf, py=zf, pz=zf, dx=zf, dy=zf, dz=zf,
-                   w=jnp.zeros(W, jnp.float64), colour=jnp.zeros(W, jnp.int32),
-                   acc=[jnp.zeros(W, jnp.float64) if a else None for a in active],
-                   cnt=[jnp.zeros(W, jnp.int32) for _ in range(ncnt)]),
-        hi=jnp.zeros(ncol + nsq, jnp.int64), lo=jnp.zeros(ncol + nsq, jnp.int64),
-        counts=jnp.zeros(ncnt, jnp.int64),
-        map=jnp.zeros(nmap, jnp.int64), hist=jnp.zeros(nhist, jnp.int64), budget=jnp.zeros(nbud, jnp.int64),
-        spectrum=jnp.zeros(2 * K, jnp.int64),
-    )
-
-    def step(lane, arrays):
-        return interaction(params, key_words, start_u, lane, arrays, effects)
-
-    def substep(_, carry):
-        lane, arrays = carry
-        return step(lane, arrays)
-
-    def retire_sums(acc, cnt, retire):
-        """Exact sums over the retiring lanes: integer-valued float64 limbs (all partial sums < 2⁵³)."""
-        zero = None
-        total = acc[EXT_B] if acc[EXT_Y] is None else acc[EXT_B] + acc[EXT_Y]
-        if acc[EXT_O] is not None:
-            total = total + acc[EXT_O]
-        sq = {"total": total, "blue": acc[EXT_B] if acc[EXT_Y] is not None else None,
-              "yellow": acc[EXT_Y], "blue_yellow": None if acc[EXT_Y] is None else acc[EXT_B] * acc[EXT_Y],
-              "absorbed_wall": acc[ABS_WALL], "absorbed_base": acc[ABS_BASE], "absorbed_leds": acc[ABS_LED],
-              "absorbed_plate": acc[ABS_PLATE]}
-        values = [(a, SCALE_SUM) for a in acc]
-        for name in SQUARES:
-            v = sq[name]
-            if name in ("yellow", "absorbed_wall", "absorbed_base", "absorbed_leds", "absorbed_plate", "total",
-                        "blue") and v is not None:
-                v = v * v
-            values.append((v, SCALE_SQUARE))
-        his, los = [], []
-        for v, scale in values:
-            if v is None:
-                his.append(zero)
-                los.append(zero)
-                continue
-            X = jnp.where(retire, jnp.rint(v * scale), 0.0)  # integer-valued doubles, |X| < 2⁶²
-            h = jnp.floor(X * 2.0 ** -LIMB)  # |h| < 2³¹
-            his.append(jnp.sum(h))
-            los.append(jnp.sum(X - h * 2.0 ** LIMB))  # in [0, 2³¹)
-        if acc[EXT_Y] is None:  # no yellow: the blue square is the total's
-            i_total, i_blue = ncol + SQUARES.index("total"), ncol + SQUARES.index("blue")
-            his[i_blue], los[i_blue] = his[i_total], los[i_total]
-        f0 = jnp.zeros((), jnp.float64)
-        hi = jnp.stack([f0 if v is None else v for v in his]).astype(jnp.int64)
-        lo = jnp.stack([f0 if v is None else v for v in los]).astype(jnp.int64)
-        counts = jnp.stack([jnp.sum(jnp.where(retire, c, 0)) for c in cnt]).astype(jnp.int64)
-        return hi, lo, counts
-
     def body(s):
         # (1) refill empty lanes with the next rays of the chunk
-        ln = s["lanes"]
-        empty = ln["ray"] < 0
-        rank = jnp.cumsum(empty, dtype=jnp.int32) - 1
-        new_id = s["next"] + rank
-        take = empty & (new_id < n_valid)
-        src = jnp.clip(new_id, 0, C - 1)
-        ids = jnp.where(take, new_id, ln["ray"])
-        live = ids >= 0
-        px, py, pz, dx, dy, dz = (jnp.where(take, e[src], ln[k]) for e, k in zip(emitted, ("px", "py", "pz", "dx",
-                                                                                            "dy", "dz")))
-        w = jnp.where(take, 1.0, ln["w"])
-        colour = jnp.where(take, emitted[6][src] if effects.spectral else 0, ln["colour"])
-        acc = [None if a is None else jnp.where(take, 0.0, a) for a in ln["acc"]]
-        cnt = [jnp.where(take, 0, c) for c in ln["cnt"]]
-        nxt = jnp.minimum(s["next"] + jnp.sum(empty, dtype=jnp.int32), n_valid)
-        lane = dict(ids=ids, live=live, px=px, py=py, pz=pz, dx=dx, dy=dy, dz=dz, w=w, colour=colour, acc=acc,
-                    cnt=cnt)
+        lane, nxt = _refill(s, emitted, n_valid, C, effects)
+        live, ids = lane["live"], lane["ids"]
         arrays = (s["map"], s["hist"], s["budget"])
         # (2) several interactions of every lane per iteration
         if substeps == 1:
-            lane, arrays = step(lane, arrays)
+            lane, arrays = interaction(params, key_words, start_u, lane, arrays, effects)
         else:
-            lane, arrays = lax.fori_loop(0, substeps, substep, (lane, arrays))
+            lane, arrays = lax.fori_loop(0, substeps, lambda _, carry: interaction(params, key_words, start_u, *carry,
+                                                                                   effects), (lane, arrays))
         new_map, new_hist, new_budget = arrays
         alive, acc, cnt = lane["live"], lane["acc"], lane["cnt"]
         # (3) retire finished rays
         with jax.named_scope("retire"):
             retire = live & ~alive
-            hi, lo, counts = retire_sums(acc, cnt, retire)
-            spectrum = s["spectrum"]
-            if effects.spectral:
-                with jax.named_scope("extracted_spectrum"):
-                    ext = acc[EXT_B] + acc[EXT_Y] + acc[EXT_O]
-                    b = jnp.where(retire & (ext != 0), lane["colour"], 2 * K)
-                    spectrum = spectrum.at[b].add(_fixed(ext), mode="drop").at[b + K].add(_fixed(ext * ext),
-                                                                                          mode="drop")
+            hi, lo, counts = _retire_sums(acc, cnt, retire)
+            spectrum = _retire_spectrum(s["spectrum"], acc, lane["colour"], retire) if effects.spectral \
+                else s["spectrum"]
         return dict(
             next=nxt, it=s["it"] + 1,
             lanes=dict(ray=jnp.where(alive, ids, -1), px=lane["px"], py=lane["py"], pz=lane["pz"], dx=lane["dx"],
@@ -647,24 +702,12 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
             budget=new_budget, spectrum=spectrum,
         )
 
-    def compact(s, L):
-        """The live lanes of ``s`` moved into a state of ``L`` lanes (all live rays fit)."""
-        ln = s["lanes"]
-        live = ln["ray"] >= 0
-        (idx,) = jnp.nonzero(live, size=L, fill_value=0)
-        keep = jnp.arange(L) < jnp.sum(live, dtype=jnp.int32)
-        new = jax.tree_util.tree_map(lambda a: a[idx], ln)
-        new["ray"] = jnp.where(keep, new["ray"], -1)
-        return dict(s, lanes=new)
-
     # the widths the tail is compacted into (each level is its own loop over the same body)
-    widths = [W]
-    while widths[-1] // TAIL_SHRINK >= MIN_TAIL_LANES and len(widths) < TAIL_LEVELS:
-        widths.append(widths[-1] // TAIL_SHRINK)
-    final = state
+    widths = _tail_widths(lanes)
+    final = _initial_state(lanes, K, effects)
     for level, width in enumerate(widths):
         if level:
-            final = compact(final, width)
+            final = _compact(final, width)
         narrower = widths[level + 1] if level + 1 < len(widths) else 0
 
         def cond(s, narrower=narrower):
@@ -675,6 +718,117 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
     return {"hi": final["hi"], "lo": final["lo"], "counts": final["counts"], "map": final["map"],
             "histogram": final["hist"], "budget": final["budget"], "spectrum": final["spectrum"],
             "emitted": emitted_bins, "iterations": final["it"]}
+
+
+def _tail_widths(lanes: int) -> list[int]:
+    """The lane counts of the loop levels of :func:`trace_chunk`: ``lanes``, then each 1/:data:`TAIL_SHRINK` of
+    the previous while at least :data:`MIN_TAIL_LANES`, at most :data:`TAIL_LEVELS` levels."""
+    widths = [lanes]
+    while widths[-1] // TAIL_SHRINK >= MIN_TAIL_LANES and len(widths) < TAIL_LEVELS:
+        widths.append(widths[-1] // TAIL_SHRINK)
+    return widths
+
+
+def _retire_spectrum(spectrum, acc, colour, retire):
+    """Deposit the extracted weight of the retiring rays (and its square) into their bins' spectrum sums."""
+    K = spectrum.shape[0] // 2
+    with jax.named_scope("extracted_spectrum"):
+        ext = acc[EXT_B] + acc[EXT_Y] + acc[EXT_O]
+        b = jnp.where(retire & (ext != 0), colour, 2 * K)
+        return spectrum.at[b].add(_fixed(ext), mode="drop").at[b + K].add(_fixed(ext * ext), mode="drop")
+
+
+def _initial_state(lanes: int, K: int, effects: Effects) -> dict:
+    """The loop state of :func:`trace_chunk` before the first ray: ``lanes`` empty lanes, zero sums and tallies
+    (``K`` wavelength bins)."""
+    W, dt = lanes, effects.dtype
+    ncol, ncnt, nsq = len(COLUMNS), len(COUNTERS), len(SQUARES)
+    nmap = MAP_PARTS * effects.map_bins ** 2 if effects.irradiance_map else 0
+    nhist = 2 * effects.histogram_bins if effects.incidence_histogram else 0
+    nbud = effects.budget_bins * len(BUDGET_COLUMNS) if effects.interaction_budget else 0
+    zf = jnp.zeros(W, dt)
+    return dict(
+        next=jnp.int32(0), it=jnp.int32(0),
+        lanes=dict(ray=jnp.full(W, -1, jnp.int32), px=zf, py=zf, pz=zf, dx=zf, dy=zf, dz=zf,
+                   w=jnp.zeros(W, jnp.float64), colour=jnp.zeros(W, jnp.int32),
+                   acc=[jnp.zeros(W, jnp.float64) if a else None for a in active_columns(effects)],
+                   cnt=[jnp.zeros(W, jnp.int32) for _ in range(ncnt)]),
+        hi=jnp.zeros(ncol + nsq, jnp.int64), lo=jnp.zeros(ncol + nsq, jnp.int64),
+        counts=jnp.zeros(ncnt, jnp.int64),
+        map=jnp.zeros(nmap, jnp.int64), hist=jnp.zeros(nhist, jnp.int64), budget=jnp.zeros(nbud, jnp.int64),
+        spectrum=jnp.zeros(2 * K, jnp.int64),
+    )
+
+
+def _refill(s, emitted, n_valid, C: int, effects: Effects):
+    """The lanes of loop state ``s`` with the empty ones refilled by the next of the ``C`` emitted rays (of which
+    ``n_valid`` are traced): returns the lane dict of :func:`interaction` and the next ray to emit."""
+    ln = s["lanes"]
+    empty = ln["ray"] < 0
+    rank = jnp.cumsum(empty, dtype=jnp.int32) - 1
+    new_id = s["next"] + rank
+    take = empty & (new_id < n_valid)
+    src = jnp.clip(new_id, 0, C - 1)
+    ids = jnp.where(take, new_id, ln["ray"])
+    live = ids >= 0
+    px, py, pz, dx, dy, dz = (jnp.where(take, e[src], ln[k]) for e, k in zip(emitted, ("px", "py", "pz", "dx",
+                                                                                        "dy", "dz")))
+    w = jnp.where(take, 1.0, ln["w"])
+    colour = jnp.where(take, emitted[6][src] if effects.spectral else 0, ln["colour"])
+    acc = [None if a is None else jnp.where(take, 0.0, a) for a in ln["acc"]]
+    cnt = [jnp.where(take, 0, c) for c in ln["cnt"]]
+    nxt = jnp.minimum(s["next"] + jnp.sum(empty, dtype=jnp.int32), n_valid)
+    lane = dict(ids=ids, live=live, px=px, py=py, pz=pz, dx=dx, dy=dy, dz=dz, w=w, colour=colour, acc=acc, cnt=cnt)
+    return lane, nxt
+
+
+def _retire_sums(acc, cnt, retire):
+    """Exact sums over the retiring lanes: integer-valued float64 limbs (all partial sums < 2⁵³)."""
+    ncol = len(COLUMNS)
+    zero = None
+    total = acc[EXT_B] if acc[EXT_Y] is None else acc[EXT_B] + acc[EXT_Y]
+    if acc[EXT_O] is not None:
+        total = total + acc[EXT_O]
+    sq = {"total": total, "blue": acc[EXT_B] if acc[EXT_Y] is not None else None,
+          "yellow": acc[EXT_Y], "blue_yellow": None if acc[EXT_Y] is None else acc[EXT_B] * acc[EXT_Y],
+          "absorbed_wall": acc[ABS_WALL], "absorbed_base": acc[ABS_BASE], "absorbed_leds": acc[ABS_LED],
+          "absorbed_plate": acc[ABS_PLATE]}
+    values = [(a, SCALE_SUM) for a in acc]
+    for name in SQUARES:
+        v = sq[name]
+        if name in ("yellow", "absorbed_wall", "absorbed_base", "absorbed_leds", "absorbed_plate", "total",
+                    "blue") and v is not None:
+            v = v * v
+        values.append((v, SCALE_SQUARE))
+    his, los = [], []
+    for v, scale in values:
+        if v is None:
+            his.append(zero)
+            los.append(zero)
+            continue
+        X = jnp.where(retire, jnp.rint(v * scale), 0.0)  # integer-valued doubles, |X| < 2⁶²
+        h = jnp.floor(X * 2.0 ** -LIMB)  # |h| < 2³¹
+        his.append(jnp.sum(h))
+        los.append(jnp.sum(X - h * 2.0 ** LIMB))  # in [0, 2³¹)
+    if acc[EXT_Y] is None:  # no yellow: the blue square is the total's
+        i_total, i_blue = ncol + SQUARES.index("total"), ncol + SQUARES.index("blue")
+        his[i_blue], los[i_blue] = his[i_total], los[i_total]
+    f0 = jnp.zeros((), jnp.float64)
+    hi = jnp.stack([f0 if v is None else v for v in his]).astype(jnp.int64)
+    lo = jnp.stack([f0 if v is None else v for v in los]).astype(jnp.int64)
+    counts = jnp.stack([jnp.sum(jnp.where(retire, c, 0)) for c in cnt]).astype(jnp.int64)
+    return hi, lo, counts
+
+
+def _compact(s, L: int):
+    """The live lanes of loop state ``s`` moved into a state of ``L`` lanes (all live rays fit)."""
+    ln = s["lanes"]
+    live = ln["ray"] >= 0
+    (idx,) = jnp.nonzero(live, size=L, fill_value=0)
+    keep = jnp.arange(L) < jnp.sum(live, dtype=jnp.int32)
+    new = jax.tree_util.tree_map(lambda a: a[idx], ln)
+    new["ray"] = jnp.where(keep, new["ray"], -1)
+    return dict(s, lanes=new)
 
 
 trace_chunk_jit = partial(jax.jit, static_argnames=("effects", "lanes", "chunk", "substeps"),

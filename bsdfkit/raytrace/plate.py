@@ -54,6 +54,14 @@ VERSION = 1
 CHANNELS = tuple(f"{i}_{s}" for i in INTERACTIONS for s in SIDES)
 #: The three backward (reflection) channels whose directions the tracer samples, in kernel order.
 BACKWARD = ("bibs_reflection", "biys_reflection", "yiys_reflection")
+#: Column of each channel in :attr:`PlateTables.tis`.
+BIBS_R, BIBS_T, BIYS_R, BIYS_T, YIYS_R, YIYS_T = (CHANNELS.index(c) for c in (
+    "bibs_reflection", "bibs_transmission", "biys_reflection", "biys_transmission", "yiys_reflection",
+    "yiys_transmission"))
+#: Index of each backward channel in the (G, 3) tables of :class:`PlateTables`.
+BACK_BIBS, BACK_BIYS, BACK_YIYS = (BACKWARD.index(c) for c in BACKWARD)
+#: The kinds of backward distribution in :attr:`PlateTables.kind`.
+LAMBERTIAN, LAMBERT_GAUSSIAN, TABULATED = 0, 1, 2
 #: Tolerance on "TIS sums may not exceed one".
 _SUM_TOL = 1e-9
 
@@ -408,8 +416,8 @@ class PlateTables:
     """Numeric tables the kernel reads (NumPy; converted to JAX arrays by the tracer).
 
     ``grid`` (G,) incidence in radians (G ≥ 2; a one-angle plate is duplicated), ``tis`` (G, 6) in
-    :data:`CHANNELS` order, and for the three :data:`BACKWARD` channels: ``kind`` (G, 3) 0 Lambertian /
-    1 Lambert+Gaussian / 2 tabulated, ``lobe_share`` and ``sigma`` (G, 3), tabulated sampling tables
+    :data:`CHANNELS` order, and for the three :data:`BACKWARD` channels: ``kind`` (G, 3) :data:`LAMBERTIAN`,
+    :data:`LAMBERT_GAUSSIAN` or :data:`TABULATED`, ``lobe_share`` and ``sigma`` (G, 3), tabulated sampling tables
     ``s_nodes``, ``f_nodes``, ``cdf`` (G, 3, T) in s = sin²θs. ``theta_range`` is the measured range in
     radians used by the clamping rule.
     """
@@ -439,7 +447,7 @@ def plate_tables(plate: PhosphorPlate) -> PlateTables:
         tis = np.concatenate([tis, tis])
         dists = dists * 2
     G = grid_deg.size
-    kinds = {Lambertian: 0, LambertGaussian: 1, Tabulated: 2}
+    kinds = {Lambertian: LAMBERTIAN, LambertGaussian: LAMBERT_GAUSSIAN, Tabulated: TABULATED}
     kind = np.array([[kinds[type(d)] for d in row] for row in dists], dtype=np.int32)
     share = np.array([[lobe_share(d, min(grid_deg[g], 90.0)) for d in row] for g, row in enumerate(dists)])
     sigma = np.array([[d.sigma if isinstance(d, LambertGaussian) else 1.0 for d in row] for row in dists])
@@ -468,6 +476,6 @@ def plate_tables(plate: PhosphorPlate) -> PlateTables:
     return PlateTables(
         grid=np.radians(grid_deg), tis=tis, kind=kind, lobe_share=share, sigma=sigma, s_nodes=s_nodes,
         f_nodes=f_nodes, cdf=cdf, theta_range=(math.radians(lo), math.radians(hi)),
-        has_lobe=bool(np.any(share > 0)), has_table=bool(np.any(kind == 2)), conversion=conversion,
+        has_lobe=bool(np.any(share > 0)), has_table=bool(np.any(kind == TABULATED)), conversion=conversion,
         covers_hemisphere=(lo <= 0.0 and hi >= 90.0),
     )

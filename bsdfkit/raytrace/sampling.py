@@ -36,6 +36,8 @@ _COS64 = (-1.13585365213876817300e-11, 2.08757008419747316778e-9, -2.75573141792
 LOBE_STREAM = 2 ** 31
 #: lobe retries run on 1/LOBE_NARROW of the lanes (see :func:`lobe_beta`)
 LOBE_NARROW = 32
+#: lobe attempts per ray and event (the counter of attempt a is event·LOBE_ATTEMPTS + a)
+LOBE_ATTEMPTS = 1024
 
 
 _ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
@@ -189,11 +191,11 @@ def mirror(dx, dy, dz, nx, ny, nz):
     return dx - k * nx, dy - k * ny, dz - k * nz
 
 
-def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype, max_attempts: int = 1024):
+def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype):
     """Harvey–Shack lobe sample β ~ N(β0, σ²I) conditioned on |β| < 1, by rejection.
 
     Lanes with ``pending`` false are untouched. Attempt ``a`` of a ray uses the counter pair
-    (ray + 2³¹, event·1024 + a). Returns (βx, βy, accepted); a lane not accepted after ``max_attempts``
+    (ray + 2³¹, event·1024 + a). Returns (βx, βy, accepted); a lane not accepted after :data:`LOBE_ATTEMPTS`
     (probability < (1 − p_acc)^1024, p_acc ≳ 0.1 for σ ≤ 2) reports accepted = False and the caller
     falls back to a Lambertian direction.
 
@@ -204,7 +206,7 @@ def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype, max_
     """
     n = ray.shape[0]
     ray_lobe = ray + jnp.uint32(LOBE_STREAM)
-    base = event.astype(jnp.uint32) * jnp.uint32(1024)
+    base = event.astype(jnp.uint32) * jnp.uint32(LOBE_ATTEMPTS)
     zero = jnp.zeros_like(beta0x)
 
     def attempt(a, rl, bs, b0x, b0y, sg):
@@ -226,7 +228,7 @@ def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype, max_
     narrow = max(n // LOBE_NARROW, 1)
 
     def cond_full(state):
-        return (jnp.sum(state[1], dtype=jnp.int32) > narrow) & (state[0] < max_attempts)
+        return (jnp.sum(state[1], dtype=jnp.int32) > narrow) & (state[0] < LOBE_ATTEMPTS)
 
     a, todo, bx, by = lax.while_loop(cond_full, body_full, (a, todo, bx, by))
     # the remaining rays, compacted
@@ -236,7 +238,7 @@ def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype, max_
     sub = (ray_lobe[idx], base[idx], beta0x[idx], beta0y[idx], sigma[idx])
 
     def cond_narrow(state):
-        return jnp.any(state[1]) & (state[0] < max_attempts)
+        return jnp.any(state[1]) & (state[0] < LOBE_ATTEMPTS)
 
     def body_narrow(state):
         a, t, sx, sy = state

@@ -370,25 +370,47 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
     r = _Reader(data["cavity"], "cavity", file, {"radius_mm", "height_mm"})
     cavity = Cavity(r.number("radius_mm", lo=0, lo_open=True, required=True),
                     r.number("height_mm", lo=0, lo_open=True, required=True))
+    wall, base = (_surface(data[name], name, file, base_dir) for name in ("wall", "base"))
+    leds = _leds(data["leds"], cavity, file, base_dir, preloaded)
+    top = _top(data["top"], file, base_dir, preloaded)
+    trace = _trace_options(data["trace"], file) if "trace" in data else TraceOptions()
+    tallies = _tallies(data["tallies"], file) if "tallies" in data else Tallies()
+    sweep = None
+    if "sweep" in data:
+        r = _Reader(data["sweep"], "sweep", file, {"params", "rays", "seed"})
+        params = r.table.get("params", [])
+        if not isinstance(params, list) or not all(isinstance(p, str) for p in params):
+            raise InputError("wrong type", file=file, field="sweep.params",
+                             expected="a list of strings like 'wall.reflectance=0.80:0.98:5'", got=params)
+        sweep = SweepDefaults(tuple(params), r.integer("rays", None, lo=1), r.integer("seed", None, lo=0))
+    _check_sizes(cavity, leds, trace, tallies, file)
+    _check_spectral(trace, leds, top, file)
+    wall, base = (_with_blue_reflectance(sf, leds) for sf in (wall, base))
+    check_termination(wall, base, leds, top, trace, file)
+    return Scene(cavity, wall, base, leds, top, trace, tallies, sweep, Path(file) if file is not None else None)
 
-    def surface(name: str) -> Surface:
-        s = _Reader(data[name], name, file, {"reflectance", "specular_fraction", "reflectance_spectrum"})
-        spec = s.string("reflectance_spectrum", None)
-        if spec is None:
-            return Surface(s.number("reflectance", lo=0, hi=1, required=True),
-                           s.number("specular_fraction", 0.0, lo=0, hi=1))
-        if s.has("reflectance"):
-            raise InputError("conflicting keys: a reflectance spectrum sets the reflectance", file=file,
-                             field=f"{name}.reflectance", expected="reflectance or reflectance_spectrum, not both",
-                             got=s.table["reflectance"])
-        return Surface(math.nan, s.number("specular_fraction", 0.0, lo=0, hi=1), spectrum_file=spec,
-                       spectrum=read_reflectance_spectrum(_resolve(spec, base_dir), f"{name}.reflectance_spectrum"))
 
-    wall, base = surface("wall"), surface("base")
+def _surface(table: Any, name: str, file: str | Path | None, base_dir: Path | None) -> Surface:
+    """The [wall] or [base] section: a reflectance (and its specular share) or a reflectance spectrum file."""
+    s = _Reader(table, name, file, {"reflectance", "specular_fraction", "reflectance_spectrum"})
+    spec = s.string("reflectance_spectrum", None)
+    if spec is None:
+        return Surface(s.number("reflectance", lo=0, hi=1, required=True),
+                       s.number("specular_fraction", 0.0, lo=0, hi=1))
+    if s.has("reflectance"):
+        raise InputError("conflicting keys: a reflectance spectrum sets the reflectance", file=file,
+                         field=f"{name}.reflectance", expected="reflectance or reflectance_spectrum, not both",
+                         got=s.table["reflectance"])
+    return Surface(math.nan, s.number("specular_fraction", 0.0, lo=0, hi=1), spectrum_file=spec,
+                   spectrum=read_reflectance_spectrum(_resolve(spec, base_dir), f"{name}.reflectance_spectrum"))
 
-    r = _Reader(data["leds"], "leds", file, {"count", "pitch_mm", "emitter_radius_mm", "distribution", "fwhm_deg",
-                                             "power_W", "led_reflectance", "led_specular_fraction", "ray_file",
-                                             "spectrum", "spectrum_peak_nm", "spectrum_fwhm_nm"})
+
+def _leds(table: Any, cavity: Cavity, file: str | Path | None, base_dir: Path | None,
+          preloaded: Mapping[str, Any]) -> Leds:
+    """The [leds] section (a ray file from ``preloaded`` when unchanged), checked to fit on the cavity's base."""
+    r = _Reader(table, "leds", file, {"count", "pitch_mm", "emitter_radius_mm", "distribution", "fwhm_deg",
+                                      "power_W", "led_reflectance", "led_specular_fraction", "ray_file",
+                                      "spectrum", "spectrum_peak_nm", "spectrum_fwhm_nm"})
     count = r.integer("count", 4, lo=1)
     if math.isqrt(count) ** 2 != count:
         raise ValidationError("LEDs sit on a k x k grid", file=file, field="leds.count",
@@ -432,9 +454,13 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                               got=leds.pitch_mm)
     if rays is not None:
         rays.check_inside(R, cavity.height_mm, file=file, field="leds.ray_file")
+    return leds
 
-    r = _Reader(data["top"], "top", file, {"kind", "reflectance", "transmittance", "plate", "from", "spectral",
-                                           "temperature_K"})
+
+def _top(table: Any, file: str | Path | None, base_dir: Path | None, preloaded: Mapping[str, Any]) -> Top:
+    """The [top] section: an exit, a Lambertian diffuser or a phosphor plate (:func:`_phosphor_top`)."""
+    r = _Reader(table, "top", file, {"kind", "reflectance", "transmittance", "plate", "from", "spectral",
+                                     "temperature_K"})
     if r.has("temperature_K") and not r.has("spectral"):
         raise InputError("the plate temperature belongs to a spectral plate model", file=file,
                          field="top.temperature_K", expected="a [top] with spectral = ...",
@@ -461,86 +487,87 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                                   expected=f"<= {1 - rho:g}", got=tau)
         top = Top("lambertian", reflectance=rho, transmittance=tau)
     else:
-        for key in ("reflectance", "transmittance"):
-            if r.has(key):
-                raise InputError("a phosphor top takes its TIS from the plate", file=file, field=f"top.{key}",
-                                 expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]",
-                                 got=r.table[key])
-        given = [k for k in ("plate", "from") if r.has(k)]
-        if not given and isinstance(r.table.get("spectral"), str):  # a spectral model alone: Lambertian shapes
-            given = ["spectral"]
-        if len(given) != 1:
-            raise InputError("a phosphor top needs exactly one plate source", file=file, field="top.plate",
-                             expected="one of plate = 'file.json' | from = 'fitting/<recipe>.toml' | [top.plate]",
-                             got=given or None)
-        key = given[0]
-        value = r.table[key]
-        pre = preloaded.get("plate")
-        if key == "spectral":
-            top = Top("phosphor")
-        elif isinstance(value, Mapping):
-            if key != "plate":
-                raise InputError("wrong type", file=file, field="top.from", expected="a recipe path", got=value)
-            plate = PhosphorPlate.from_mapping(value, file, prefix="top.plate.")
-            top = Top("phosphor", plate=plate)
-        elif not isinstance(value, str):
-            raise InputError("wrong type", file=file, field=f"top.{key}", expected="a path string or a table",
-                             got=value)
-        elif pre is not None and pre[0] == (key, value):
-            plate = pre[1]
-            top = Top("phosphor", plate=plate, plate_file=value if key == "plate" else None,
-                      plate_recipe=value if key == "from" else None)
-        elif key == "plate":
-            top = Top("phosphor", plate=load_plate(_resolve(value, base_dir)), plate_file=value)
-        else:
-            top = Top("phosphor", plate=plate_from_recipe(_resolve(value, base_dir), file), plate_recipe=value)
-        if r.has("spectral"):
-            top = _spectral_top(top, r, base_dir, preloaded)
-            top = replace(top, temperature_K=r.number("temperature_K", PLATE_TEMPERATURE_K, lo=0, lo_open=True))
+        top = _phosphor_top(r, file, base_dir, preloaded)
+    return top
 
-    trace = TraceOptions()
-    if "trace" in data:
-        r = _Reader(data["trace"], "trace", file, {"termination", "roulette_threshold", "threshold", "max_events",
-                                                   "precision", "lanes", "chunk", "mode", "spectral_grid_nm"})
-        trace = TraceOptions(
-            termination=r.string("termination", trace.termination, choices=TERMINATIONS),
-            roulette_threshold=r.number("roulette_threshold", trace.roulette_threshold, lo=0, hi=1, lo_open=True),
-            threshold=r.number("threshold", trace.threshold, lo=0, hi=1, lo_open=True, hi_open=True),
-            max_events=r.integer("max_events", trace.max_events, lo=1),
-            precision=r.string("precision", trace.precision, choices=PRECISIONS),
-            lanes=r.integer("lanes", trace.lanes, lo=1),
-            chunk=r.integer("chunk", trace.chunk, lo=1),
-            mode=r.string("mode", trace.mode, choices=MODES),
-            spectral_grid_nm=_grid(r, trace.spectral_grid_nm),
-        )
-        if trace.max_events >= 2 ** 29:
-            raise ValidationError("too many events per ray for the random-number counter", file=file,
-                                  field="trace.max_events", expected="< 2**29", got=trace.max_events)
-    tallies = Tallies()
-    if "tallies" in data:
-        r = _Reader(data["tallies"], "tallies", file, {"irradiance_map", "map_bins", "incidence_histogram",
-                                                       "histogram_bins", "interaction_budget", "budget_bins"})
-        tallies = Tallies(
-            irradiance_map=r.boolean("irradiance_map"),
-            map_bins=r.integer("map_bins", tallies.map_bins, lo=2),
-            incidence_histogram=r.boolean("incidence_histogram"),
-            histogram_bins=r.integer("histogram_bins", tallies.histogram_bins, lo=1),
-            interaction_budget=r.boolean("interaction_budget"),
-            budget_bins=r.integer("budget_bins", tallies.budget_bins, lo=1),
-        )
-    sweep = None
-    if "sweep" in data:
-        r = _Reader(data["sweep"], "sweep", file, {"params", "rays", "seed"})
-        params = r.table.get("params", [])
-        if not isinstance(params, list) or not all(isinstance(p, str) for p in params):
-            raise InputError("wrong type", file=file, field="sweep.params",
-                             expected="a list of strings like 'wall.reflectance=0.80:0.98:5'", got=params)
-        sweep = SweepDefaults(tuple(params), r.integer("rays", None, lo=1), r.integer("seed", None, lo=0))
-    _check_sizes(cavity, leds, trace, tallies, file)
-    _check_spectral(trace, leds, top, file)
-    wall, base = (_with_blue_reflectance(sf, leds) for sf in (wall, base))
-    check_termination(wall, base, leds, top, trace, file)
-    return Scene(cavity, wall, base, leds, top, trace, tallies, sweep, Path(file) if file is not None else None)
+
+def _phosphor_top(r: _Reader, file: str | Path | None, base_dir: Path | None, preloaded: Mapping[str, Any]) -> Top:
+    """A phosphor top: its plate from exactly one of a plate file, a recipe, an inline [top.plate] (or a spectral
+    model alone), reused from ``preloaded`` when unchanged; and the spectral plate model if given."""
+    for key in ("reflectance", "transmittance"):
+        if r.has(key):
+            raise InputError("a phosphor top takes its TIS from the plate", file=file, field=f"top.{key}",
+                             expected="plate = 'file.json', from = 'recipe.toml' or [top.plate]",
+                             got=r.table[key])
+    given = [k for k in ("plate", "from") if r.has(k)]
+    if not given and isinstance(r.table.get("spectral"), str):  # a spectral model alone: Lambertian shapes
+        given = ["spectral"]
+    if len(given) != 1:
+        raise InputError("a phosphor top needs exactly one plate source", file=file, field="top.plate",
+                         expected="one of plate = 'file.json' | from = 'fitting/<recipe>.toml' | [top.plate]",
+                         got=given or None)
+    key = given[0]
+    value = r.table[key]
+    pre = preloaded.get("plate")
+    if key == "spectral":
+        top = Top("phosphor")
+    elif isinstance(value, Mapping):
+        if key != "plate":
+            raise InputError("wrong type", file=file, field="top.from", expected="a recipe path", got=value)
+        plate = PhosphorPlate.from_mapping(value, file, prefix="top.plate.")
+        top = Top("phosphor", plate=plate)
+    elif not isinstance(value, str):
+        raise InputError("wrong type", file=file, field=f"top.{key}", expected="a path string or a table",
+                         got=value)
+    elif pre is not None and pre[0] == (key, value):
+        plate = pre[1]
+        top = Top("phosphor", plate=plate, plate_file=value if key == "plate" else None,
+                  plate_recipe=value if key == "from" else None)
+    elif key == "plate":
+        top = Top("phosphor", plate=load_plate(_resolve(value, base_dir)), plate_file=value)
+    else:
+        top = Top("phosphor", plate=plate_from_recipe(_resolve(value, base_dir), file), plate_recipe=value)
+    if r.has("spectral"):
+        top = _spectral_top(top, r, base_dir, preloaded)
+        top = replace(top, temperature_K=r.number("temperature_K", PLATE_TEMPERATURE_K, lo=0, lo_open=True))
+    return top
+
+
+def _trace_options(table: Any, file: str | Path | None) -> TraceOptions:
+    """The [trace] section (defaults: :class:`TraceOptions`)."""
+    default = TraceOptions()
+    r = _Reader(table, "trace", file, {"termination", "roulette_threshold", "threshold", "max_events",
+                                       "precision", "lanes", "chunk", "mode", "spectral_grid_nm"})
+    trace = TraceOptions(
+        termination=r.string("termination", default.termination, choices=TERMINATIONS),
+        roulette_threshold=r.number("roulette_threshold", default.roulette_threshold, lo=0, hi=1, lo_open=True),
+        threshold=r.number("threshold", default.threshold, lo=0, hi=1, lo_open=True, hi_open=True),
+        max_events=r.integer("max_events", default.max_events, lo=1),
+        precision=r.string("precision", default.precision, choices=PRECISIONS),
+        lanes=r.integer("lanes", default.lanes, lo=1),
+        chunk=r.integer("chunk", default.chunk, lo=1),
+        mode=r.string("mode", default.mode, choices=MODES),
+        spectral_grid_nm=_grid(r, default.spectral_grid_nm),
+    )
+    if trace.max_events >= 2 ** 29:
+        raise ValidationError("too many events per ray for the random-number counter", file=file,
+                              field="trace.max_events", expected="< 2**29", got=trace.max_events)
+    return trace
+
+
+def _tallies(table: Any, file: str | Path | None) -> Tallies:
+    """The [tallies] section (defaults: :class:`Tallies`)."""
+    default = Tallies()
+    r = _Reader(table, "tallies", file, {"irradiance_map", "map_bins", "incidence_histogram",
+                                         "histogram_bins", "interaction_budget", "budget_bins"})
+    return Tallies(
+        irradiance_map=r.boolean("irradiance_map"),
+        map_bins=r.integer("map_bins", default.map_bins, lo=2),
+        incidence_histogram=r.boolean("incidence_histogram"),
+        histogram_bins=r.integer("histogram_bins", default.histogram_bins, lo=1),
+        interaction_budget=r.boolean("interaction_budget"),
+        budget_bins=r.integer("budget_bins", default.budget_bins, lo=1),
+    )
 
 
 def read_reflectance_spectrum(path: Path, field_name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -457,16 +457,17 @@ def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, sour
 
 def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | None, lam: np.ndarray,
                     led_spectrum: tuple[np.ndarray, np.ndarray], *, source: str | None = None,
-                    pump_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
-                    blue_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
-                    yellow_band_nm: tuple[float, float] = MODULE_YELLOW_BAND_NM,
                     temperature_K: float = PLATE_TEMPERATURE_K) -> SpectralTables:
     """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top), the
-    emission conditioned on the excitation bin at the plate temperature ``temperature_K`` [K] (module docstring)."""
+    emission conditioned on the excitation bin at the plate temperature ``temperature_K`` [K] (module docstring).
+
+    Bins in the module's blue band (:data:`MODULE_BLUE_BAND_NM`, also the pump band whose elastic light takes the
+    bibs distribution) count as blue, those in :data:`MODULE_YELLOW_BAND_NM` as yellow."""
     lam = np.asarray(lam, dtype=np.float64)
-    band = np.where((lam >= blue_band_nm[0]) & (lam <= blue_band_nm[1]), 0,
-                    np.where((lam >= yellow_band_nm[0]) & (lam <= yellow_band_nm[1]), 1, 2)).astype(np.int32)
-    shape = np.where((lam >= pump_band_nm[0]) & (lam <= pump_band_nm[1]), 0, 2).astype(np.int32)
+    blue, yellow = MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
+    band = np.where((lam >= blue[0]) & (lam <= blue[1]), 0,
+                    np.where((lam >= yellow[0]) & (lam <= yellow[1]), 1, 2)).astype(np.int32)
+    shape = np.where((lam >= blue[0]) & (lam <= blue[1]), 0, 2).astype(np.int32)  # plate.BACK_BIBS, BACK_YIYS
     led = led_bin_power(led_spectrum, lam, source)
     cdf = np.cumsum(led)
     cdf[-1] = 1.0

@@ -235,20 +235,8 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
     if len(set(names)) != len(names):
         raise ValidationError("two sweep parameters start with the same key", field="--param",
                               expected="distinct first keys", got=names)
-    shape = tuple(len(p.values) for p in spec.parameters)
     total = check_point_count(spec.parameters)
-    points = []
-    for index in itertools.product(*[range(s) for s in shape]):
-        values = {}
-        for p, i in zip(spec.parameters, index):
-            for key in p.keys:
-                values[key] = p.values[i]
-        points.append((index, values))
-    for _, values in points:
-        # every point's scene is checked here, before anything is traced: a value out of range is one error
-        # line naming the key, the same with or without a cluster (not a failed task and a NaN point)
-        if values:
-            with_values(scene, values)
+    points = _points(scene, spec.parameters)
     failures: list[str] = []
     if cluster is None:
         results = {}
@@ -260,7 +248,37 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
         results, failures = _run_distributed(scene, spec, points, cluster, progress)
         if not results:
             raise SweepPointsFailed(f"all {total} sweep points failed; first: {failures[0]}")
+    ds = _results_dataset(results, spec.parameters, scene.cavity.radius_mm)
+    ds.attrs.update(rays=spec.rays, seed=spec.seed, scene_toml=dumps_scene(scene),
+                    parameters=";".join(",".join(p.keys) + "=" + ",".join(str(v) for v in p.values)
+                                        for p in spec.parameters),
+                    source="bsdfkit sweep")
+    if failures:
+        ds.attrs["failed_points"] = "\n".join(failures)  # one line per failed point
+    return ds
 
+
+def _points(scene: Scene, parameters: Sequence[SweepParameter]) -> list[tuple[tuple[int, ...], dict]]:
+    """Every grid point: its index and the values it sets, each point's scene checked before anything is traced."""
+    points = []
+    for index in itertools.product(*[range(len(p.values)) for p in parameters]):
+        values = {}
+        for p, i in zip(parameters, index):
+            for key in p.keys:
+                values[key] = p.values[i]
+        points.append((index, values))
+    for _, values in points:
+        # every point's scene is checked here, before anything is traced: a value out of range is one error
+        # line naming the key, the same with or without a cluster (not a failed task and a NaN point)
+        if values:
+            with_values(scene, values)
+    return points
+
+
+def _results_dataset(results: dict, parameters: Sequence[SweepParameter], radius_mm: float) -> xr.Dataset:
+    """The traced points' results on the parameter grid (points not in ``results``: NaN), maps on a cavity of
+    ``radius_mm``."""
+    shape = tuple(len(p.values) for p in parameters)
     first = next(iter(results.values()))
 
     def grid(getter) -> np.ndarray:
@@ -270,7 +288,7 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
             out[idx] = np.nan if v is None else v
         return out
 
-    dims = tuple(names)
+    dims = tuple(p.name for p in parameters)
     data = {
         "LER": (dims, grid(lambda r: r.LER), {"units": "1", "long_name": "light extraction ratio"}),
         "YBR": (dims, grid(lambda r: r.YBR), {"units": "1", "long_name": "yellow-to-blue ratio",
@@ -290,7 +308,7 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
     for k in ("wall", "base", "leds", "plate"):
         data[f"absorbed_{k}"] = (dims, grid(lambda r, k=k: r.absorbed[k]), {"units": "W"})
     coords = {}
-    for p in spec.parameters:
+    for p in parameters:
         vals = np.asarray(p.values) if not any(isinstance(v, str) for v in p.values) else np.asarray(
             [str(v) for v in p.values])
         coords[p.name] = (p.name, vals, {"keys": ",".join(p.keys)})
@@ -299,20 +317,12 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
         maps = np.full(shape + (bins, bins), np.nan)
         for idx, r in results.items():
             maps[idx] = r.irradiance
-        R = scene.cavity.radius_mm
-        centres = (np.arange(bins) + 0.5) / bins * 2 * R - R
+        centres = (np.arange(bins) + 0.5) / bins * 2 * radius_mm - radius_mm
         coords["y_mm"] = ("y_mm", centres, {"units": "mm"})
         coords["x_mm"] = ("x_mm", centres, {"units": "mm"})
         data["irradiance"] = (dims + ("y_mm", "x_mm"), maps, {"units": "W/mm^2"})
-    ds = xr.Dataset({k: xr.Variable(*v) for k, v in data.items()},
-                    coords={k: xr.Variable(*v) for k, v in coords.items()})
-    ds.attrs.update(rays=spec.rays, seed=spec.seed, scene_toml=dumps_scene(scene),
-                    parameters=";".join(",".join(p.keys) + "=" + ",".join(str(v) for v in p.values)
-                                        for p in spec.parameters),
-                    source="bsdfkit sweep")
-    if failures:
-        ds.attrs["failed_points"] = "\n".join(failures)  # one line per failed point
-    return ds
+    return xr.Dataset({k: xr.Variable(*v) for k, v in data.items()},
+                      coords={k: xr.Variable(*v) for k, v in coords.items()})
 
 
 def check_point_count(parameters: Sequence[SweepParameter]) -> int:
@@ -332,10 +342,19 @@ def plot_paths(out: Path) -> list[Path]:
     return [out.with_name(out.stem + "_LER_YBR.png")]
 
 
-def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays: int, seed: int,
-              chunk: int | None = None, force: bool = False, figure: Callable[[xr.Dataset], Any] | None = None,
-              progress: Callable[[int, int], None] | None = None, cluster: Cluster | None = None):
-    """Sweep ``scene`` over ``parameters`` (specs), write ``out`` (netCDF) and, with ``figure``, a PNG beside it.
+def sweep_spec(parameters: Sequence[str], rays: int, seed: int, chunk: int | None = None) -> SweepSpec:
+    """The sweep of parameter specs ``parameters`` (``KEYS=VALUES``, :func:`parse_parameter`) with ``rays`` rays
+    per point, checked to have at most :data:`MAX_SWEEP_POINTS` points."""
+    params = tuple(parse_parameter(p) for p in parameters)
+    check_point_count(params)
+    return SweepSpec(params, rays, seed, chunk)
+
+
+def run_sweep(scene: Scene, spec: SweepSpec, out: str | Path, *, force: bool = False,
+              figure: Callable[[xr.Dataset], Any] | None = None, progress: Callable[[int, int], None] | None = None,
+              cluster: Cluster | None = None):
+    """Sweep ``scene`` as ``spec`` says (:func:`sweep_spec`), write ``out`` (netCDF) and, with ``figure``, a PNG
+    beside it.
 
     ``figure(ds)`` returns a matplotlib figure (e.g. :func:`bsdfkit.plotting.figures.sweep_figure`); the tracer
     itself draws nothing. Existing outputs are kept unless ``force`` and the scene file is never replaced; this
@@ -345,11 +364,9 @@ def run_sweep(scene: Scene, parameters: Sequence[str], out: str | Path, *, rays:
     """
     out = Path(out)
     names = [out.name] + ([p.name for p in plot_paths(out)] if figure is not None else [])
-    params = tuple(parse_parameter(p) for p in parameters)
-    check_point_count(params)
     # the netCDF file and its plots are one output set: a kill or a fault leaves all of them or none
     with OutputSet(out.parent, names, force, inputs=[scene.path]) as outputs:
-        ds = sweep_dataset(scene, SweepSpec(params, rays, seed, chunk), progress, cluster)
+        ds = sweep_dataset(scene, spec, progress, cluster)
         write_with(outputs.path(out.name), lambda tmp: ds.to_netcdf(tmp, format="NETCDF4"), True)
         if figure is not None:
             fig = figure(ds)

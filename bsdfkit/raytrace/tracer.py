@@ -6,7 +6,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from fractions import Fraction
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
@@ -60,47 +60,11 @@ def trace(
     traces with every optional branch compiled in (same physics, for benchmarks and tests); ``effects``
     overrides the compiled configuration entirely. ``progress(done)`` is called after every chunk.
     """
-    if not isinstance(rays, int) or isinstance(rays, bool) or not 1 <= rays < MAX_RAYS:
-        raise ValidationError("ray count out of range", field="rays", expected=f"an integer in [1, {MAX_RAYS})",
-                              got=rays)
-    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2 ** 63:
-        raise ValidationError("seed out of range", field="seed", expected="an integer in [0, 2**63)", got=seed)
-    # None means the scene's value; 0 or a negative number is an error, never silently the default
-    chunk = int(scene.trace.chunk if chunk is None else chunk)
-    lanes = int(scene.trace.lanes if lanes is None else lanes)
-    for name, value in (("chunk", chunk), ("lanes", lanes)):
-        if value < 1:
-            raise ValidationError(f"{name} must be positive", field=name, expected=">= 1", got=value)
-    if chunk > kernel.MAX_CHUNK:
-        raise ValidationError("chunk too large for the kernel's counters", field="chunk",
-                              expected=f"<= MAX_CHUNK ({kernel.MAX_CHUNK})", got=chunk)
-    n_dev = len(jax.local_devices())  # chunks run in parallel on every local device (CPU devices: see below)
-    chunk = min(chunk, -(-rays // n_dev), kernel.MAX_CHUNK)
-    if width is None:
-        width = emission_width(chunk)  # emissions per kernel call (static): a power of two, ≥ chunk
-    elif not isinstance(width, int) or isinstance(width, bool) or width < chunk or width & (width - 1) \
-            or width > kernel.MAX_CHUNK:
-        raise ValidationError("emission width must be a power of two, at least the chunk", field="width",
-                              expected=f"a power of two in [{chunk}, {kernel.MAX_CHUNK}]", got=width)
-    lanes = min(lanes, width)
+    chunk, lanes, width, n_dev = _sizes(scene, rays, seed, chunk, lanes, width)
     check_termination(scene.wall, scene.base, scene.leds, scene.top, scene.trace, scene.path)  # replace()d scenes
     check_work(scene, rays)
     eff = effects or scene_effects(scene, full=full_kernel)
-    if eff.plate_lobe and scene.trace.max_events >= 2 ** 22:
-        raise ValidationError("lobe sampling needs fewer events per ray for its random-number counter",
-                              file=scene.path, field="trace.max_events", expected="< 2**22",
-                              got=scene.trace.max_events)
-
-    # a spectral ray's power weight can grow by λ_max/λ_min at anti-Stokes conversions (its photons cannot)
-    lam = spectral_grid(scene) if eff.spectral else None
-    growth = float(lam[-1] / lam[0]) if eff.spectral else 1.0
-    if eff.termination == "roulette" and growth * (1.0 + scene.trace.roulette_threshold * scene.trace.max_events) \
-            >= kernel.MAX_RAY_TALLY:
-        raise ValidationError("roulette threshold x max_events too large for the exact tallies",
-                              file=scene.path, field="trace.max_events",
-                              expected=f"roulette_threshold * max_events < {kernel.MAX_RAY_TALLY - 1:g}",
-                              got=scene.trace.roulette_threshold * scene.trace.max_events)
-
+    _check_effects(scene, eff)
     t0 = time.perf_counter()
     ncol, nsq = len(kernel.COLUMNS), len(kernel.SQUARES)
     sums = [FixedSum(kernel.SCALE_SUM, kernel.LIMB) for _ in range(ncol)] + \
@@ -138,8 +102,64 @@ def trace(
                 absorb(*pending.pop(0))
         for item in pending:
             absorb(*item)
-    elapsed = time.perf_counter() - t0
-    return _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed, compile_s)
+    run = _Run(rays, seed, chunk, lanes, time.perf_counter() - t0, compile_s)
+    return _result(scene, run, eff, sums, counts, arrays)
+
+
+def _sizes(scene: Scene, rays: int, seed: int, chunk: int | None, lanes: int | None,
+           width: int | None) -> tuple[int, int, int, int]:
+    """The checked sizes of a trace: rays per chunk, lanes, emission width and local devices (:func:`trace`)."""
+    if not isinstance(rays, int) or isinstance(rays, bool) or not 1 <= rays < MAX_RAYS:
+        raise ValidationError("ray count out of range", field="rays", expected=f"an integer in [1, {MAX_RAYS})",
+                              got=rays)
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2 ** 63:
+        raise ValidationError("seed out of range", field="seed", expected="an integer in [0, 2**63)", got=seed)
+    # None means the scene's value; 0 or a negative number is an error, never silently the default
+    chunk = int(scene.trace.chunk if chunk is None else chunk)
+    lanes = int(scene.trace.lanes if lanes is None else lanes)
+    for name, value in (("chunk", chunk), ("lanes", lanes)):
+        if value < 1:
+            raise ValidationError(f"{name} must be positive", field=name, expected=">= 1", got=value)
+    if chunk > kernel.MAX_CHUNK:
+        raise ValidationError("chunk too large for the kernel's counters", field="chunk",
+                              expected=f"<= MAX_CHUNK ({kernel.MAX_CHUNK})", got=chunk)
+    n_dev = len(jax.local_devices())  # chunks run in parallel on every local device (CPU devices: see below)
+    chunk = min(chunk, -(-rays // n_dev), kernel.MAX_CHUNK)
+    if width is None:
+        width = emission_width(chunk)  # emissions per kernel call (static): a power of two, ≥ chunk
+    elif not isinstance(width, int) or isinstance(width, bool) or width < chunk or width & (width - 1) \
+            or width > kernel.MAX_CHUNK:
+        raise ValidationError("emission width must be a power of two, at least the chunk", field="width",
+                              expected=f"a power of two in [{chunk}, {kernel.MAX_CHUNK}]", got=width)
+    return chunk, min(lanes, width), width, n_dev
+
+
+def _check_effects(scene: Scene, eff: Effects) -> None:
+    """The limits the compiled effects set on the scene: lobe sampling's counter, the exact tallies' magnitude."""
+    if eff.plate_lobe and scene.trace.max_events >= 2 ** 22:
+        raise ValidationError("lobe sampling needs fewer events per ray for its random-number counter",
+                              file=scene.path, field="trace.max_events", expected="< 2**22",
+                              got=scene.trace.max_events)
+    # a spectral ray's power weight can grow by λ_max/λ_min at anti-Stokes conversions (its photons cannot)
+    lam = spectral_grid(scene) if eff.spectral else None
+    growth = float(lam[-1] / lam[0]) if eff.spectral else 1.0
+    if eff.termination == "roulette" and growth * (1.0 + scene.trace.roulette_threshold * scene.trace.max_events) \
+            >= kernel.MAX_RAY_TALLY:
+        raise ValidationError("roulette threshold x max_events too large for the exact tallies",
+                              file=scene.path, field="trace.max_events",
+                              expected=f"roulette_threshold * max_events < {kernel.MAX_RAY_TALLY - 1:g}",
+                              got=scene.trace.roulette_threshold * scene.trace.max_events)
+
+
+class _Run(NamedTuple):
+    """How a trace ran: its rays, seed, chunk and lanes, and its wall-clock and compile times [s]."""
+
+    rays: int
+    seed: int
+    chunk: int
+    lanes: int
+    elapsed: float
+    compile_s: float
 
 
 def emission_width(chunk: int) -> int:
@@ -188,8 +208,8 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
     return program.lower(*args).compile(kernel.COMPILER_OPTIONS)
 
 
-def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed, compile_s) -> TraceResult:
-    n = rays
+def _result(scene: Scene, run: _Run, eff: Effects, sums: list, counts: list, arrays: dict) -> TraceResult:
+    n = rays = run.rays
     scale = scene.leds.power_W / n  # W per unit ray weight
     ncol = len(kernel.COLUMNS)
     col = {name: sums[i].fraction for i, name in enumerate(kernel.COLUMNS)}
@@ -225,7 +245,7 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
     if arrays["budget"] is not None:
         budget = fixed_to_w(arrays["budget"]).reshape(eff.budget_bins, len(kernel.BUDGET_COLUMNS))
     return TraceResult(
-        rays=rays, seed=seed, chunk=chunk, lanes=lanes,
+        rays=rays, seed=run.seed, chunk=run.chunk, lanes=run.lanes,
         emitted=power,
         extracted={"blue": float(ext_b) * scale, "yellow": float(ext_y) * scale,
                    "total": float(ext_b + ext_y + col["extracted_other"]) * scale},
@@ -236,7 +256,7 @@ def _result(scene, rays, seed, chunk, lanes, eff, sums, counts, arrays, elapsed,
         interactions=int(counts[kernel.CNT_EVENTS]), plate_interactions=int(counts[kernel.CNT_PLATE]),
         clamped_interactions=int(counts[kernel.CNT_CLAMP]),
         **maps, incidence_histogram=hist, budget=budget, radius_mm=R,
-        elapsed_s=elapsed, compile_s=compile_s, effects=eff,
+        elapsed_s=run.elapsed, compile_s=run.compile_s, effects=eff,
         spectral=spectral_result(scene, n, col, arrays) if eff.spectral else None,
     )
 

@@ -231,7 +231,20 @@ def read_asap(path: str | Path) -> AsapTable:
     if not lines or lines[0].strip() != MAGIC:
         raise FormatError("not a bsdfkit ASAP-style table", file=path, line=1, field="magic", expected=repr(MAGIC),
                           got=lines[0].strip() if lines else "")
-    comments, tis, abg, harvey = [], {}, [], []
+    comments, tis, abg, harvey, rows = _read_lines(lines, path)
+    table, tis_da = _tables(rows, _data(rows, path), tis, path)
+    doc_lines = len(_DOC.splitlines())
+    return AsapTable(table=table, tis_stated=tis_da, abg=tuple(abg), harvey=tuple(harvey),
+                     comments=tuple(comments[doc_lines:]), path=path)
+
+
+def _read_lines(lines: list[str], path: str):
+    """The comments, stated TIS by (side, θi), ABg and Harvey parameters and the data rows (line, side code,
+    tokens) of a table's lines, checked in order: parameter lines, the column header, R/T rows, 'end'."""
+    comments: list[str] = []
+    tis: dict[tuple[str, float], float] = {}
+    abg: list[AbgParameters] = []
+    harvey: list[HarveyParameters] = []
     rows: list[tuple[int, str, list[str]]] = []
     header_seen = ended = False
     for number, line in enumerate(lines, start=1):
@@ -250,24 +263,7 @@ def read_asap(path: str | Path) -> AsapTable:
         if key == "end":
             ended = True
         elif key in ("tis", "abg", "harvey") and not header_seen:
-            n = {"tis": 4, "abg": 6, "harvey": 6}[key]
-            if len(tokens) != n:
-                raise FormatError(f"'{key}' line needs {n - 1} fields", file=path, line=number, field=key,
-                                  expected=f"{n - 1} fields", got=len(tokens) - 1)
-            side = _side(tokens[1], path, number)
-            nums = [_number(t, path, number, f"{key} field {k + 3}") for k, t in enumerate(tokens[2:])]
-            if key == "tis":
-                tis[(side, nums[0])] = nums[1]
-                continue
-            try:
-                if key == "abg":
-                    abg.append(AbgParameters(side, *nums))
-                else:
-                    harvey.append(HarveyParameters(side, *nums))
-            except ValidationError as exc:
-                raise FormatError(f"invalid {key} parameters", file=path, line=number, field=key,
-                                  expected="A >= 0, B > 0" if key == "abg" else "b0 >= 0, L > 0",
-                                  got=" ".join(tokens[2:])) from exc
+            _parameter_line(tokens, path, number, tis, abg, harvey)
         elif key == "side" and not header_seen:
             if tokens != ["side", "theta_i_deg", "rho", "psi_deg", "bsdf"]:
                 raise FormatError("wrong column header", file=path, line=number, field="header",
@@ -288,8 +284,35 @@ def read_asap(path: str | Path) -> AsapTable:
                           got=lines[-1].strip()[:60] if lines else "")
     if not rows:
         raise FormatError("no data rows", file=path, line=last, field="data", expected="R/T rows", got="none")
+    return comments, tis, abg, harvey, rows
+
+
+def _parameter_line(tokens: list[str], path: str, number: int, tis: dict, abg: list, harvey: list) -> None:
+    """Add a 'tis', 'abg' or 'harvey' line (``tokens``, on line ``number``) to ``tis``, ``abg`` or ``harvey``."""
+    key = tokens[0]
+    n = {"tis": 4, "abg": 6, "harvey": 6}[key]
+    if len(tokens) != n:
+        raise FormatError(f"'{key}' line needs {n - 1} fields", file=path, line=number, field=key,
+                          expected=f"{n - 1} fields", got=len(tokens) - 1)
+    side = _side(tokens[1], path, number)
+    nums = [_number(t, path, number, f"{key} field {k + 3}") for k, t in enumerate(tokens[2:])]
+    if key == "tis":
+        tis[(side, nums[0])] = nums[1]
+        return
+    try:
+        if key == "abg":
+            abg.append(AbgParameters(side, *nums))
+        else:
+            harvey.append(HarveyParameters(side, *nums))
+    except ValidationError as exc:
+        raise FormatError(f"invalid {key} parameters", file=path, line=number, field=key,
+                          expected="A >= 0, B > 0" if key == "abg" else "b0 >= 0, L > 0",
+                          got=" ".join(tokens[2:])) from exc
+
+
+def _data(rows: list[tuple[int, str, list[str]]], path: str) -> NDArray[np.float64]:
+    """The numbers of the data rows, (rows, 4): θi, ρ, ψ, BSDF; a bad cell or a negative BSDF named by its line."""
     names = ("side", "theta_i_deg", "rho", "psi_deg", "bsdf")
-    codes = [code for _, code, _ in rows]
     data = None
     if all(len(tokens) == 5 for _, _, tokens in rows):
         try:
@@ -307,6 +330,13 @@ def read_asap(path: str | Path) -> AsapTable:
     if np.any(data[:, 3] < 0):
         k = int(np.argmax(data[:, 3] < 0))
         raise FormatError("negative BSDF", file=path, line=rows[k][0], field="bsdf", expected=">= 0", got=data[k, 3])
+    return data
+
+
+def _tables(rows: list[tuple[int, str, list[str]]], data: NDArray[np.float64], tis: dict,
+            path: str) -> tuple[xr.DataArray, xr.DataArray]:
+    """The rectangular BSDF table (side, theta_i, rho, psi) of the data rows and the stated TIS (side, theta_i)."""
+    codes = [code for _, code, _ in rows]
     sides = [s for s in SIDES if _CODE[s] in codes]
     theta, rho, psi = np.unique(data[:, 0]), np.unique(data[:, 1]), np.unique(data[:, 2])
     shape = (len(sides), theta.size, rho.size, psi.size)
@@ -334,10 +364,7 @@ def read_asap(path: str | Path) -> AsapTable:
     table = xr.DataArray(values.reshape(shape), dims=("side", "theta_i", "rho", "psi"),
                          coords={"side": sides, "theta_i": theta, "rho": rho, "psi": psi}, name="bsdf",
                          attrs={"units": "1/sr", "frame": "harvey_shack", "zero_azimuth_deg": 0.0})
-    tis_da = xr.DataArray(tis_arr, dims=("side", "theta_i"), coords={"side": sides, "theta_i": theta})
-    doc_lines = len(_DOC.splitlines())
-    return AsapTable(table=table, tis_stated=tis_da, abg=tuple(abg), harvey=tuple(harvey),
-                     comments=tuple(comments[doc_lines:]), path=path)
+    return table, xr.DataArray(tis_arr, dims=("side", "theta_i"), coords={"side": sides, "theta_i": theta})
 
 
 # ------------------------------------------------------------------------------------------- registry hooks

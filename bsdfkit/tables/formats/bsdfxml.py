@@ -193,8 +193,9 @@ def _direction(beta: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[str, ...], *,
                basis: KlemsBasis = KLEMS_FULL, wavelength_nm: float | None = None, back: str = "none",
-               name: str = "bsdfkit", comments: tuple[str, ...] = (), sub_samples: int = SUB_SAMPLES) -> KlemsBsdf:
-    """Klems matrices of a BSDF callable (see the module docstring for the rules).
+               comments: tuple[str, ...] = ()) -> KlemsBsdf:
+    """Klems matrices of a BSDF callable (see the module docstring for the rules), each patch averaged over its
+    :data:`SUB_SAMPLES` × :data:`SUB_SAMPLES` sub-samples.
 
     Parameters
     ----------
@@ -214,7 +215,7 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
         raise ValidationError("unknown back-side rule", field="xml_back", expected="none or mirror", got=back)
     centres = basis.centres_deg
     chosen = np.array([theta[int(np.argmin(np.abs(theta - c)))] for c in centres])
-    beta, weights = _patch_nodes(basis, sub_samples)
+    beta, weights = _patch_nodes(basis, SUB_SAMPLES)
     band, phi_c = basis.patches()
     blocks: dict[str, NDArray[np.float64]] = {}
     for side in sides:
@@ -230,7 +231,7 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
     if back == "mirror":
         for side in sides:
             blocks[f"{side.capitalize()} Back"] = blocks[f"{side.capitalize()} Front"].copy()
-    return KlemsBsdf(basis, blocks, wavelength_nm, name, tuple(comments), tuple(float(t) for t in chosen))
+    return KlemsBsdf(basis, blocks, wavelength_nm, "bsdfkit", tuple(comments), tuple(float(t) for t in chosen))
 
 
 def xml_text(bsdf: KlemsBsdf, generated_at: datetime | None = None) -> str:

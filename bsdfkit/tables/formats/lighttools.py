@@ -115,45 +115,8 @@ def _tokens(text: str) -> list[tuple[int, str]]:
 def read_lighttools(path: str | Path) -> LightToolsBsdf:
     """Read a LightTools ``.bsdf``; FormatError names the file, line and keyword."""
     path = str(path)
-    toks = _tokens(read_text(path, expected="a LightTools BSDF file", legacy="latin-1"))
-    k = 0
-
-    def take(what: str) -> tuple[int, str]:
-        nonlocal k
-        if k >= len(toks):
-            raise FormatError("file ends early", file=path, line=toks[-1][0] if toks else 1, field=what,
-                              expected=what, got="end of file")
-        k += 1
-        return toks[k - 1]
-
-    def number(what: str) -> float:
-        line, tok = take(what)
-        try:
-            v = float(tok)
-        except ValueError:
-            raise FormatError("not a number", file=path, line=line, field=what, expected="a number",
-                              got=tok[:40]) from None
-        if not np.isfinite(v):
-            raise FormatError("not a finite number", file=path, line=line, field=what, expected="finite", got=tok)
-        return v
-
-    header: dict[str, object] = {}
-    while True:
-        line, key = take("header keyword")
-        low = key.lower()
-        if low == "databegin":
-            break
-        if low in ("symmetry", "spectralcontent"):
-            header[low] = take(key)[1]
-        elif low in ("scatterazimuth", "scatterradial"):
-            n = number(f"{key} count")
-            if n != int(n) or n < 1:
-                raise FormatError("bad count", file=path, line=line, field=key, expected="an integer >= 1", got=n)
-            header[low] = np.array([number(f"{key} values") for _ in range(int(n))])
-        else:
-            raise FormatError("unknown header keyword", file=path, line=line, field="header",
-                              expected="Symmetry, SpectralContent, ScatterAzimuth, ScatterRadial or DataBegin",
-                              got=key[:40])
+    cursor = _Cursor(_tokens(read_text(path, expected="a LightTools BSDF file", legacy="latin-1")), path)
+    header = _read_header(cursor)
     symmetry = str(header.get("symmetry", "")).lower()
     if symmetry not in ("asymmetric", "planesymmetrical"):
         raise FormatError("unsupported symmetry", file=path, field="Symmetry",
@@ -169,54 +132,7 @@ def read_lighttools(path: str | Path) -> LightToolsBsdf:
             or rad[-1] > 90:
         raise FormatError("axes must increase within azimuth [0, 360] and radial [0, 90] deg", file=path,
                           field="ScatterAzimuth/ScatterRadial", expected="increasing angles")
-    rows: dict[tuple[str, str], list[tuple[float, NDArray[np.float64], float]]] = {}
-    lams: set[float] = set()
-    block: dict[str, str | float] = {}
-    while True:
-        line, key = take("block keyword or DataEnd")
-        low = key.lower()
-        if low == "dataend":
-            break
-        if low in ("aoi", "poi", "wavelength"):
-            block[low] = number(key)
-        elif low in ("side", "scattertype", "tristimulusvalue"):
-            block[low] = take(key)[1]
-        elif low == "tis":
-            stated = number("TIS")
-            where = f"block AOI {block.get('aoi', '?')}"
-            for need in ("aoi", "scattertype"):
-                if need not in block:
-                    raise FormatError("block without " + need.upper(), file=path, line=line, field=where,
-                                      expected=f"{need} before TIS")
-            if float(block.get("poi", 0.0)) != 0.0:
-                raise FormatError("POI other than 0 is not supported (its meaning is not documented)", file=path,
-                                  line=line, field=where, expected="POI 0", got=block["poi"])
-            stype = str(block["scattertype"]).upper()
-            if stype not in _SIDE:
-                raise FormatError("unknown scatter type", file=path, line=line, field=where, expected="BRDF or BTDF",
-                                  got=stype)
-            face = str(block.get("side", "Front")).capitalize()
-            if face not in ("Front", "Back"):
-                raise FormatError("unknown side", file=path, line=line, field=where, expected="Front or Back", got=face)
-            values = np.array([number(f"{where} values") for _ in range(az.size * rad.size)]).reshape(az.size, rad.size)
-            if np.any(values < 0):
-                raise FormatError("negative BSDF value", file=path, line=line, field=where, expected=">= 0",
-                                  got=float(values.min()))
-            tri = str(block.get("tristimulusvalue", "")).lower()
-            if spectral.lower() == "xyz" and tri != "trisy":
-                block = {}
-                continue  # the photopic (TrisY) blocks only
-            t = float(block["aoi"])
-            if not 0 <= t < 90:
-                raise FormatError("AOI out of range", file=path, line=line, field=where, expected="[0, 90) deg", got=t)
-            if "wavelength" in block:
-                lams.add(float(block["wavelength"]))
-            rows.setdefault((face, _SIDE[stype]), []).append((t, values, stated))
-            block = {}
-        else:
-            raise FormatError("unknown block keyword", file=path, line=line, field="data block",
-                              expected="AOI, POI, Side, Wavelength, ScatterType, TristimulusValue, TIS or DataEnd",
-                              got=key[:40])
+    rows, lams = _read_blocks(cursor, (az.size, rad.size), spectral.lower() == "xyz")
     if not rows:
         raise FormatError("no data block", file=path, field="DataBegin", expected="at least one block")
     blocks = {}
@@ -228,6 +144,116 @@ def read_lighttools(path: str | Path) -> LightToolsBsdf:
     if symmetry == "planesymmetrical":
         az, blocks = _mirrored(az, blocks)
     return LightToolsBsdf(az, rad, blocks, lam, spectral, {"wavelengths": sorted(lams), "symmetry": symmetry})
+
+
+class _Cursor:
+    """The tokens of a file read one at a time; running out or a bad number is a FormatError on its line."""
+
+    def __init__(self, toks: list[tuple[int, str]], path: str):
+        self.toks, self.path, self.k = toks, path, 0
+
+    def take(self, what: str) -> tuple[int, str]:
+        if self.k >= len(self.toks):
+            raise FormatError("file ends early", file=self.path, line=self.toks[-1][0] if self.toks else 1,
+                              field=what, expected=what, got="end of file")
+        self.k += 1
+        return self.toks[self.k - 1]
+
+    def number(self, what: str) -> float:
+        line, tok = self.take(what)
+        try:
+            v = float(tok)
+        except ValueError:
+            raise FormatError("not a number", file=self.path, line=line, field=what, expected="a number",
+                              got=tok[:40]) from None
+        if not np.isfinite(v):
+            raise FormatError("not a finite number", file=self.path, line=line, field=what, expected="finite",
+                              got=tok)
+        return v
+
+
+def _read_header(cursor: _Cursor) -> dict[str, object]:
+    """The keywords up to DataBegin, by lower-case keyword (the axes as arrays of degrees)."""
+    header: dict[str, object] = {}
+    while True:
+        line, key = cursor.take("header keyword")
+        low = key.lower()
+        if low == "databegin":
+            return header
+        if low in ("symmetry", "spectralcontent"):
+            header[low] = cursor.take(key)[1]
+        elif low in ("scatterazimuth", "scatterradial"):
+            n = cursor.number(f"{key} count")
+            if n != int(n) or n < 1:
+                raise FormatError("bad count", file=cursor.path, line=line, field=key, expected="an integer >= 1",
+                                  got=n)
+            header[low] = np.array([cursor.number(f"{key} values") for _ in range(int(n))])
+        else:
+            raise FormatError("unknown header keyword", file=cursor.path, line=line, field="header",
+                              expected="Symmetry, SpectralContent, ScatterAzimuth, ScatterRadial or DataBegin",
+                              got=key[:40])
+
+
+def _read_blocks(cursor: _Cursor, shape: tuple[int, int], xyz: bool):
+    """The data blocks up to DataEnd: rows (AOI, values (azimuth, radial) of ``shape``, stated TIS) per (face,
+    side), and the wavelengths stated; of an XYZ file only the photopic (TrisY) blocks."""
+    rows: dict[tuple[str, str], list[tuple[float, NDArray[np.float64], float]]] = {}
+    lams: set[float] = set()
+    block: dict[str, str | float] = {}
+    while True:
+        line, key = cursor.take("block keyword or DataEnd")
+        low = key.lower()
+        if low == "dataend":
+            return rows, lams
+        if low in ("aoi", "poi", "wavelength"):
+            block[low] = cursor.number(key)
+        elif low in ("side", "scattertype", "tristimulusvalue"):
+            block[low] = cursor.take(key)[1]
+        elif low == "tis":
+            face, side, values, stated = _block(cursor, block, line, shape)
+            tri = str(block.get("tristimulusvalue", "")).lower()
+            if xyz and tri != "trisy":
+                block = {}
+                continue  # the photopic (TrisY) blocks only
+            t = float(block["aoi"])
+            if not 0 <= t < 90:
+                raise FormatError("AOI out of range", file=cursor.path, line=line, field=f"block AOI {t}",
+                                  expected="[0, 90) deg", got=t)
+            if "wavelength" in block:
+                lams.add(float(block["wavelength"]))
+            rows.setdefault((face, side), []).append((t, values, stated))
+            block = {}
+        else:
+            raise FormatError("unknown block keyword", file=cursor.path, line=line, field="data block",
+                              expected="AOI, POI, Side, Wavelength, ScatterType, TristimulusValue, TIS or DataEnd",
+                              got=key[:40])
+
+
+def _block(cursor: _Cursor, block: dict[str, str | float], line: int, shape: tuple[int, int]):
+    """The TIS and values of the block whose keywords are ``block`` (TIS keyword on ``line``), checked: returns
+    (face, side, values, stated TIS)."""
+    path = cursor.path
+    stated = cursor.number("TIS")
+    where = f"block AOI {block.get('aoi', '?')}"
+    for need in ("aoi", "scattertype"):
+        if need not in block:
+            raise FormatError("block without " + need.upper(), file=path, line=line, field=where,
+                              expected=f"{need} before TIS")
+    if float(block.get("poi", 0.0)) != 0.0:
+        raise FormatError("POI other than 0 is not supported (its meaning is not documented)", file=path,
+                          line=line, field=where, expected="POI 0", got=block["poi"])
+    stype = str(block["scattertype"]).upper()
+    if stype not in _SIDE:
+        raise FormatError("unknown scatter type", file=path, line=line, field=where, expected="BRDF or BTDF",
+                          got=stype)
+    face = str(block.get("side", "Front")).capitalize()
+    if face not in ("Front", "Back"):
+        raise FormatError("unknown side", file=path, line=line, field=where, expected="Front or Back", got=face)
+    values = np.array([cursor.number(f"{where} values") for _ in range(shape[0] * shape[1])]).reshape(shape)
+    if np.any(values < 0):
+        raise FormatError("negative BSDF value", file=path, line=line, field=where, expected=">= 0",
+                          got=float(values.min()))
+    return face, _SIDE[stype], values, stated
 
 
 def _mirrored(az: NDArray[np.float64], blocks: dict) -> tuple[NDArray[np.float64], dict]:

@@ -463,6 +463,48 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
     path = str(path)
     text = read_text(path, expected="a TracePro surface property file", legacy="latin-1")
     lines = text.splitlines()
+    header, index = _read_header(lines, path)
+    coating = _int_value(header["Coating"], "Coating", path, int(header["Coating@line"]), range(0, 8))
+    scatter = _int_value(header["Scatter"], "Scatter", path, int(header["Scatter@line"]), range(0, 9))
+    if scatter not in (0, 1, 5):
+        raise FormatError("scatter model not supported by bsdfkit", file=path, line=int(header["Scatter@line"]),
+                          field="Scatter", expected="0 (none), 1 (ABg) or 5 (asymmetric table)", got=scatter)
+    polarization = _int_value(header["Polarization"], "Polarization", path, int(header["Polarization@line"]),
+                              range(0, 2))
+    _int_value(header["Interaction"], "Interaction", path, int(header["Interaction@line"]), range(0, 2))
+    _int_value(header["User_Data"], "User_Data", path, int(header["User_Data@line"]), range(0, 2))
+    rows, surface_lines, index = _surface_rows(lines, index, path)
+    temperature, wavelength, theta = rows[0, 0], rows[0, 1], rows[:, 2]
+    if polarization == 0:
+        absorptance, refl, tran = rows[:, 4], rows[:, 6], rows[:, 8]
+    else:
+        absorptance, refl, tran = rows[:, 4:6].mean(axis=1), rows[:, 6:8].mean(axis=1), rows[:, 8:10].mean(axis=1)
+    tag = _ZERO_TAG.search(header["Description"])
+    zero = float(tag.group(1)) if tag else (DEFAULT_ZERO_AZIMUTH_DEG if zero_azimuth_deg is None else zero_azimuth_deg)
+    options = _options(header, lines, (temperature, wavelength, zero), surface_lines[0], path)
+    abg = _abg(rows, surface_lines, path) if scatter == 1 else None
+    table = None
+    rest_start = index
+    if index < len(lines) and lines[index].strip().startswith("GratingData"):
+        raise FormatError("grating data are not supported", file=path, line=index + 1, field="GratingData",
+                          expected="Table_BSDF_Data or SAVE-DATA", got=lines[index].strip())
+    if index < len(lines) and lines[index].strip() == "Table_BSDF_Data":
+        table, index = _read_table(lines, index + 1, path, temperature, wavelength, theta, surface_lines, zero)
+    elif scatter == 5:
+        raise FormatError("Scatter 5 needs a Table_BSDF_Data section", file=path, line=min(rest_start + 1, len(lines)),
+                          field="Table_BSDF_Data", expected="'Table_BSDF_Data'",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    _check_save_data(lines, index, path)
+    return TraceProProperty(
+        options=options, scatter=scatter, theta_i_deg=theta, absorptance=absorptance,
+        specular_reflectance=refl, specular_transmittance=tran, table=table, abg=abg, coating=coating,
+        solve=header["Solve"], path=path,
+    )
+
+
+def _read_header(lines: list[str], path: str) -> tuple[dict[str, str], int]:
+    """The magic line, the four header lines and the keyword lines: keyword values (and ``key@line``, their
+    1-based line) and the index of the line after them."""
     if not lines or lines[0].strip() != MAGIC:
         raise FormatError("not a TracePro surface property file", file=path, line=1, field="magic",
                           expected=repr(MAGIC), got=lines[0].strip() if lines else "")
@@ -480,15 +522,12 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
         header[key] = _keyword_value(lines, index, key, path)
         header[key + "@line"] = str(index + 1)
         index += 1
-    coating = _int_value(header["Coating"], "Coating", path, int(header["Coating@line"]), range(0, 8))
-    scatter = _int_value(header["Scatter"], "Scatter", path, int(header["Scatter@line"]), range(0, 9))
-    if scatter not in (0, 1, 5):
-        raise FormatError("scatter model not supported by bsdfkit", file=path, line=int(header["Scatter@line"]),
-                          field="Scatter", expected="0 (none), 1 (ABg) or 5 (asymmetric table)", got=scatter)
-    polarization = _int_value(header["Polarization"], "Polarization", path, int(header["Polarization@line"]),
-                              range(0, 2))
-    _int_value(header["Interaction"], "Interaction", path, int(header["Interaction@line"]), range(0, 2))
-    _int_value(header["User_Data"], "User_Data", path, int(header["User_Data@line"]), range(0, 2))
+    return header, index
+
+
+def _surface_rows(lines: list[str], index: int, path: str) -> tuple[NDArray[np.float64], list[int], int]:
+    """The surface-data rows from line ``index`` on (one Temperature/Wavelength, IncAngle strictly increasing in
+    [0, 90)), their 1-based lines and the index of the line after them."""
     while index < len(lines) and not lines[index].strip():
         index += 1
     if index < len(lines) and lines[index].strip().startswith(("Side1_Data", "Side2_Data")):
@@ -519,50 +558,48 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
         k = int(np.argmax((theta < 0) | (theta >= 90)))
         raise FormatError("incidence angle out of range", file=path, line=surface_lines[k], field="IncAngle",
                           expected="0 <= IncAngle < 90", got=theta[k])
-    if polarization == 0:
-        absorptance, refl, tran = rows[:, 4], rows[:, 6], rows[:, 8]
-    else:
-        absorptance, refl, tran = rows[:, 4:6].mean(axis=1), rows[:, 6:8].mean(axis=1), rows[:, 8:10].mean(axis=1)
-    description = header["Description"]
-    tag = _ZERO_TAG.search(description)
-    zero = float(tag.group(1)) if tag else (DEFAULT_ZERO_AZIMUTH_DEG if zero_azimuth_deg is None else zero_azimuth_deg)
+    return rows, surface_lines, index
+
+
+def _options(header: dict[str, str], lines: list[str], conditions: tuple[float, float, float], first_row_line: int,
+             path: str) -> TraceProOptions:
+    """The property's options from its header and ``conditions`` = (temperature [K], wavelength [µm], zero
+    azimuth [deg]); an invalid value is reported on its keyword's line (else the first surface-data row's)."""
+    temperature, wavelength, zero = conditions
     try:
-        options = TraceProOptions(
-            name=header["Name"], catalog=header["Catalog"], description=_ZERO_TAG.sub("", description).strip(),
+        return TraceProOptions(
+            name=header["Name"], catalog=header["Catalog"],
+            description=_ZERO_TAG.sub("", header["Description"]).strip(),
             temperature_K=temperature, wavelength_um=wavelength, zero_azimuth_deg=zero,
             release=lines[2].split(":", 1)[1].strip(), database_version=lines[3].split(":", 1)[1].strip(),
             db_file_name=lines[1].strip()[len("File Name"):].strip(),
         )
     except ValidationError as exc:
         key = {"name": "Name", "catalog": "Catalog", "description": "Description"}.get(exc.field or "")
-        line = int(header[key + "@line"]) if key else surface_lines[0]
+        line = int(header[key + "@line"]) if key else first_row_line
         raise FormatError("invalid header value", file=path, line=line, field=key or exc.field,
                           expected=exc.expected, got=exc.got) from None
-    abg = None
-    if scatter == 1:
-        for col_a, col_b, col_g in ((12, 13, 15), (17, 18, 20)):
-            bad = (rows[:, col_a] < 0) | (rows[:, col_b] < 0) | ((rows[:, col_b] == 0) & (rows[:, col_g] != 0)
-                                                                   & (rows[:, col_a] > 0))
-            if np.any(bad):
-                k = int(np.argmax(bad))
-                raise FormatError("invalid ABg parameters", file=path, line=surface_lines[k],
-                                  field=f"{SURFACE_COLUMNS[col_a]}/{SURFACE_COLUMNS[col_b]}",
-                                  expected="A >= 0 and B > 0 (B = 0 only with g = 0)",
-                                  got=f"A={rows[k, col_a]:g}, B={rows[k, col_b]:g}, g={rows[k, col_g]:g}")
-        params = np.stack([rows[:, [12, 13, 15]], rows[:, [17, 18, 20]]])
-        abg = xr.DataArray(params, dims=("side", "theta_i", "param"),
-                           coords={"side": list(SIDES), "theta_i": theta, "param": ["A", "B", "g"]})
-    table = None
-    rest_start = index
-    if index < len(lines) and lines[index].strip().startswith("GratingData"):
-        raise FormatError("grating data are not supported", file=path, line=index + 1, field="GratingData",
-                          expected="Table_BSDF_Data or SAVE-DATA", got=lines[index].strip())
-    if index < len(lines) and lines[index].strip() == "Table_BSDF_Data":
-        table, index = _read_table(lines, index + 1, path, temperature, wavelength, theta, surface_lines, zero)
-    elif scatter == 5:
-        raise FormatError("Scatter 5 needs a Table_BSDF_Data section", file=path, line=min(rest_start + 1, len(lines)),
-                          field="Table_BSDF_Data", expected="'Table_BSDF_Data'",
-                          got=lines[index].strip() if index < len(lines) else "end of file")
+
+
+def _abg(rows: NDArray[np.float64], surface_lines: list[int], path: str) -> xr.DataArray:
+    """The ABg parameters (side, theta_i, param) of Scatter 1 surface-data rows, checked (A ≥ 0, B > 0 or B = g
+    = 0)."""
+    for col_a, col_b, col_g in ((12, 13, 15), (17, 18, 20)):
+        bad = (rows[:, col_a] < 0) | (rows[:, col_b] < 0) | ((rows[:, col_b] == 0) & (rows[:, col_g] != 0)
+                                                               & (rows[:, col_a] > 0))
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise FormatError("invalid ABg parameters", file=path, line=surface_lines[k],
+                              field=f"{SURFACE_COLUMNS[col_a]}/{SURFACE_COLUMNS[col_b]}",
+                              expected="A >= 0 and B > 0 (B = 0 only with g = 0)",
+                              got=f"A={rows[k, col_a]:g}, B={rows[k, col_b]:g}, g={rows[k, col_g]:g}")
+    params = np.stack([rows[:, [12, 13, 15]], rows[:, [17, 18, 20]]])
+    return xr.DataArray(params, dims=("side", "theta_i", "param"),
+                        coords={"side": list(SIDES), "theta_i": rows[:, 2], "param": ["A", "B", "g"]})
+
+
+def _check_save_data(lines: list[str], index: int, path: str) -> None:
+    """The property ends with SAVE-DATA at line ``index`` (after blank lines) and nothing follows."""
     while index < len(lines) and not lines[index].strip():
         index += 1
     # TracePro ends every property with SAVE-DATA: a file that stops before it is cut (its last rows may be lost)
@@ -576,11 +613,6 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
         if lines[extra].strip():
             raise FormatError("several properties in one file are not supported", file=path, line=extra + 1,
                               field="SAVE-DATA", expected="end of file after SAVE-DATA", got=lines[extra].strip())
-    return TraceProProperty(
-        options=options, scatter=scatter, theta_i_deg=theta, absorptance=absorptance,
-        specular_reflectance=refl, specular_transmittance=tran, table=table, abg=abg, coating=coating,
-        solve=header["Solve"], path=path,
-    )
 
 
 def _read_table(

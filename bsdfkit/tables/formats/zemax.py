@@ -230,6 +230,47 @@ def read_zemax(path: str | Path) -> ZemaxBsdf:
     comments = tuple(line.strip()[1:].strip() for line in text.splitlines() if line.strip().startswith("#"))
     entries = _entries(text)
     last_line = text.count("\n") + (0 if text.endswith("\n") else 1)
+    header, header_lines, k = _read_header(entries, path, last_line)
+    symmetry = str(header["symmetry"])
+    rotation = np.asarray(header["samplerotation"])
+    theta = np.asarray(header["angleofincidence"])
+    azimuth = np.asarray(header["scatterazimuth"])
+    radial = np.asarray(header["scatterradial"])
+    if rotation.size != 1 and symmetry != "Asymmetrical4D":
+        raise FormatError("several sample rotations need Symmetry Asymmetrical4D", file=path,
+                          line=header_lines["samplerotation"], field="SampleRotation", expected="1",
+                          got=rotation.size)
+    _check_axis(theta, "AngleOfIncidence", 0.0, 90.0, True, path, header_lines["angleofincidence@list"])
+    az_hi = 180.0 if symmetry == "PlaneSymmetrical" else 360.0
+    _check_axis(azimuth, "ScatterAzimuth", 0.0, az_hi, False, path, header_lines["scatterazimuth@list"])
+    _check_axis(radial, "ScatterRadial", 0.0, 180.0, False, path, header_lines["scatterradial@list"])
+    data, tis, k = _read_blocks(entries, k + 1, (rotation, theta, azimuth, radial), path, last_line)
+    if k >= len(entries):
+        raise FormatError("missing DataEnd", file=path, line=last_line, field="DataEnd", expected="'DataEnd'",
+                          got="end of file")
+    number, tokens = entries[k]
+    if tokens[0].lower() != "dataend":
+        raise FormatError("more data than announced, or missing DataEnd", file=path, line=number, field="DataEnd",
+                          expected="'DataEnd'", got=" ".join(tokens)[:60])
+    if k + 1 < len(entries):
+        number, tokens = entries[k + 1]
+        raise FormatError("unexpected content after DataEnd", file=path, line=number, field="DataEnd",
+                          expected="end of file", got=" ".join(tokens)[:60])
+    coords = {"sample_rotation": rotation, "theta_i": theta}
+    table = xr.DataArray(data, dims=("sample_rotation", "theta_i", "azimuth", "radial"),
+                         coords={**coords, "azimuth": azimuth, "radial": radial}, name="bsdf",
+                         attrs={"units": "1/sr", "frame": "specular"})
+    return ZemaxBsdf(
+        scatter_type=str(header["scattertype"]), symmetry=symmetry, table=table,
+        tis_stated=xr.DataArray(tis, dims=("sample_rotation", "theta_i"), coords=coords),
+        source=str(header["source"]), comments=comments, path=path,
+    )
+
+
+def _read_header(entries: list[tuple[int, list[str]]], path: str,
+                 last_line: int) -> tuple[dict[str, object], dict[str, int], int]:
+    """The keywords before DataBegin: values by lower-case keyword, the line of each (lists: ``key@list`` too)
+    and the index of the DataBegin entry; every required keyword checked present."""
     header: dict[str, object] = {}
     header_lines: dict[str, int] = {}
     k = 0
@@ -246,26 +287,7 @@ def read_zemax(path: str | Path) -> ZemaxBsdf:
                               expected="each keyword once", got=f"also on line {header_lines[key]}")
         header_lines[key] = number
         if key in ("source", "symmetry", "spectralcontent", "scattertype"):
-            if len(tokens) != 2:
-                raise FormatError("keyword needs one value", file=path, line=number, field=tokens[0],
-                                  expected=f"'{tokens[0]} <value>'", got=" ".join(tokens))
-            value = tokens[1]
-            if key == "symmetry":
-                if value.lower() not in _SYMMETRY_BY_LOWER:
-                    raise FormatError("unknown symmetry", file=path, line=number, field="Symmetry",
-                                      expected=" or ".join(SYMMETRIES), got=value)
-                value = _SYMMETRY_BY_LOWER[value.lower()]
-            elif key == "spectralcontent":
-                if value.lower() != "monochrome":
-                    raise FormatError("spectral content not supported", file=path, line=number,
-                                      field="SpectralContent", expected="Monochrome", got=value)
-                value = "Monochrome"
-            elif key == "scattertype":
-                if value.lower() not in _SCATTER_TYPES:
-                    raise FormatError("unknown scatter type", file=path, line=number, field="ScatterType",
-                                      expected="BRDF or BTDF", got=value)
-                value = _SCATTER_TYPES[value.lower()]
-            header[key] = value
+            header[key] = _header_value(key, tokens, path, number)
             k += 1
         elif key in _LISTS:
             name = _LIST_NAMES[key]
@@ -294,30 +316,48 @@ def read_zemax(path: str | Path) -> ZemaxBsdf:
                               expected="Source, Symmetry, SpectralContent, ScatterType, SampleRotation, "
                                        "AngleOfIncidence, ScatterAzimuth, ScatterRadial, Monochrome or DataBegin",
                               got=tokens[0])
-    begin_line = entries[k][0]
     required = {"source": "Source", "symmetry": "Symmetry", "spectralcontent": "SpectralContent",
                 "scattertype": "ScatterType",
                 **_LIST_NAMES, "indicator": "Monochrome"}
     for key, name in required.items():
         if key not in header:
-            raise FormatError("missing keyword", file=path, line=begin_line, field=name,
+            raise FormatError("missing keyword", file=path, line=entries[k][0], field=name,
                               expected=f"'{name}' before DataBegin", got="DataBegin")
-    symmetry = str(header["symmetry"])
-    rotation = np.asarray(header["samplerotation"])
-    theta = np.asarray(header["angleofincidence"])
-    azimuth = np.asarray(header["scatterazimuth"])
-    radial = np.asarray(header["scatterradial"])
-    if rotation.size != 1 and symmetry != "Asymmetrical4D":
-        raise FormatError("several sample rotations need Symmetry Asymmetrical4D", file=path,
-                          line=header_lines["samplerotation"], field="SampleRotation", expected="1",
-                          got=rotation.size)
-    _check_axis(theta, "AngleOfIncidence", 0.0, 90.0, True, path, header_lines["angleofincidence@list"])
-    az_hi = 180.0 if symmetry == "PlaneSymmetrical" else 360.0
-    _check_axis(azimuth, "ScatterAzimuth", 0.0, az_hi, False, path, header_lines["scatterazimuth@list"])
-    _check_axis(radial, "ScatterRadial", 0.0, 180.0, False, path, header_lines["scatterradial@list"])
+    return header, header_lines, k
+
+
+def _header_value(key: str, tokens: list[str], path: str, number: int) -> str:
+    """The value of a one-value keyword (Source, Symmetry, SpectralContent, ScatterType), in its canonical
+    spelling."""
+    if len(tokens) != 2:
+        raise FormatError("keyword needs one value", file=path, line=number, field=tokens[0],
+                          expected=f"'{tokens[0]} <value>'", got=" ".join(tokens))
+    value = tokens[1]
+    if key == "symmetry":
+        if value.lower() not in _SYMMETRY_BY_LOWER:
+            raise FormatError("unknown symmetry", file=path, line=number, field="Symmetry",
+                              expected=" or ".join(SYMMETRIES), got=value)
+        return _SYMMETRY_BY_LOWER[value.lower()]
+    if key == "spectralcontent":
+        if value.lower() != "monochrome":
+            raise FormatError("spectral content not supported", file=path, line=number,
+                              field="SpectralContent", expected="Monochrome", got=value)
+        return "Monochrome"
+    if key == "scattertype":
+        if value.lower() not in _SCATTER_TYPES:
+            raise FormatError("unknown scatter type", file=path, line=number, field="ScatterType",
+                              expected="BRDF or BTDF", got=value)
+        return _SCATTER_TYPES[value.lower()]
+    return value
+
+
+def _read_blocks(entries: list[tuple[int, list[str]]], k: int, axes: tuple[NDArray, ...], path: str,
+                 last_line: int) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """The data blocks from entry ``k`` on (one per sample rotation and incidence of ``axes`` = (rotation,
+    incidence, azimuth, radial)): the BSDF table, the stated TIS and the index of the entry after the last block."""
+    rotation, theta, azimuth, radial = axes
     data = np.zeros((rotation.size, theta.size, azimuth.size, radial.size))
     tis = np.zeros((rotation.size, theta.size))
-    k += 1
     for r in range(rotation.size):
         for i in range(theta.size):
             where = f"block SampleRotation {rotation[r]:g}, AngleOfIncidence {theta[i]:g}"
@@ -345,26 +385,7 @@ def read_zemax(path: str | Path) -> ZemaxBsdf:
                                       got=float(row.min()))
                 data[r, i, a] = row
             k += 1
-    if k >= len(entries):
-        raise FormatError("missing DataEnd", file=path, line=last_line, field="DataEnd", expected="'DataEnd'",
-                          got="end of file")
-    number, tokens = entries[k]
-    if tokens[0].lower() != "dataend":
-        raise FormatError("more data than announced, or missing DataEnd", file=path, line=number, field="DataEnd",
-                          expected="'DataEnd'", got=" ".join(tokens)[:60])
-    if k + 1 < len(entries):
-        number, tokens = entries[k + 1]
-        raise FormatError("unexpected content after DataEnd", file=path, line=number, field="DataEnd",
-                          expected="end of file", got=" ".join(tokens)[:60])
-    coords = {"sample_rotation": rotation, "theta_i": theta}
-    table = xr.DataArray(data, dims=("sample_rotation", "theta_i", "azimuth", "radial"),
-                         coords={**coords, "azimuth": azimuth, "radial": radial}, name="bsdf",
-                         attrs={"units": "1/sr", "frame": "specular"})
-    return ZemaxBsdf(
-        scatter_type=str(header["scattertype"]), symmetry=symmetry, table=table,
-        tis_stated=xr.DataArray(tis, dims=("sample_rotation", "theta_i"), coords=coords),
-        source=str(header["source"]), comments=comments, path=path,
-    )
+    return data, tis, k
 
 
 # ------------------------------------------------------------------------------------------- registry hooks
