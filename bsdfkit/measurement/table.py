@@ -62,15 +62,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
+from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, SIDES, ZERO_POLICIES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io.text import _BOMS, _unmarked_utf16, refuse_cut_last_line, text_and_encoding
+from bsdfkit.measurement.schema import new_bsdf_dataset
 
 __all__ = ["QUANTITIES", "DEFAULT_RELATIVE_STD", "CONFIG_NAME", "read_table", "guess_can_open", "records_dataset",
+           "RecordDirections", "RecordsOrigin",
            "to_bsdf", "side_of_quantity", "normalise_quantity", "arc_labels"]
 
 #: prefixes of comment lines
@@ -80,7 +83,6 @@ _QUANTITY_SIDE = {"brdf": "reflection", "ccbrdf": "reflection", "reflectance-fac
                   "bsdf": None}
 #: The configuration name of datasets read from tables and vendor files (one elastic configuration).
 CONFIG_NAME = "measured"
-SIDES = ("reflection", "transmission")
 _MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
             "?", "#n/a", "#value!", "nv", "n.v."}
 _ANGLE_ATOL = 1e-9
@@ -1615,102 +1617,145 @@ def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArra
     return np.where(in_plane, "in_plane", np.where(perp, "perpendicular", "other")).astype(object)
 
 
-def records_dataset(
-    theta_i: Sequence[float], phi_i: Sequence[float], theta_s: Sequence[float], phi_s: Sequence[float],
-    side: Sequence[str], wavelength: Sequence[float], bsdf: NDArray[np.float64], bsdf_std: NDArray[np.float64],
-    *, source: str, source_line: Sequence[int] | None = None, arc: Sequence[str] | None = None,
-    std_origin: str = "", description: str = "", wavelength_note: str = "",
-) -> xr.Dataset:
-    """The calibrated-dataset schema of :func:`bsdfkit.measurement.calibrate.calibrate` from per-record angles
-    [deg], sides and BSDF values [1/sr] (records × wavelengths, NaN = gap).
+@dataclass(frozen=True)
+class RecordDirections:
+    """Where each record of a table or vendor file was measured.
+
+    Attributes
+    ----------
+    theta_i, phi_i, theta_s, phi_s
+        Per-record incidence and scatter angles [deg], sample frame.
+    side
+        ``reflection`` or ``transmission`` per record.
+    arc
+        ``in_plane`` / ``perpendicular`` / ``other`` per record (default: from the angles, :func:`arc_labels`).
+    source_line
+        Line of each record in its file (default 0).
+    """
+
+    theta_i: Sequence[float]
+    phi_i: Sequence[float]
+    theta_s: Sequence[float]
+    phi_s: Sequence[float]
+    side: Sequence[str]
+    arc: Sequence[str] | None = None
+    source_line: Sequence[int] | None = None
+
+
+@dataclass(frozen=True)
+class RecordsOrigin:
+    """What a dataset of records says about its source.
+
+    Attributes
+    ----------
+    source
+        The file read.
+    std_origin
+        Where ``bsdf_std`` comes from (the ``origin`` of ``bsdf_std`` and ``attrs['bsdf_std_origin']``).
+    description
+        The configuration's description (default ``"measured table"``).
+    wavelength_note
+        Why the wavelength is NaN, when it is (the ``note`` of ``wavelength``).
+    """
+
+    source: str
+    std_origin: str = ""
+    description: str = ""
+    wavelength_note: str = ""
+
+
+def _flat_incident(lam: NDArray[np.float64]) -> tuple[NDArray[np.float64], list[float]]:
+    """The incident spectrum of elastic data [1/nm] (flat, unit integral when there are several wavelengths)
+    and its band (low, high) [nm]."""
+    if lam.size > 1 and np.all(np.isfinite(lam)):
+        return np.full(lam.size, 1.0 / float(np.sum(np.gradient(lam)))), [float(lam.min()), float(lam.max())]
+    return np.ones(lam.size), [float(lam[0]), float(lam[0])]
+
+
+def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf: NDArray[np.float64],
+                    bsdf_std: NDArray[np.float64], origin: RecordsOrigin) -> xr.Dataset:
+    """The BSDF dataset (:mod:`bsdfkit.measurement.schema`) of per-record directions and BSDF values [1/sr]
+    (records × wavelengths [nm], NaN = gap).
 
     One configuration (:data:`CONFIG_NAME`) with a flat incident spectrum over the wavelengths (elastic data:
     each wavelength is scattered at itself); no bi-spectral values (NaN), no noise floor (NaN), no instrument
-    geometry (NaN attributes). Used by the table reader and by :mod:`bsdfkit.tables.to_dataset`.
+    geometry (NaN attributes). Used by the table reader and by :mod:`bsdfkit.tables.vendor`.
     """
-    n = len(theta_i)
+    n = len(records.theta_i)
     lam = np.asarray(wavelength, dtype=np.float64)
-    f = np.asarray(bsdf, dtype=np.float64).reshape(n, lam.size)
-    s = np.asarray(bsdf_std, dtype=np.float64).reshape(n, lam.size)
-    th_i = np.asarray(theta_i, dtype=np.float64)
-    ph_i = np.asarray(phi_i, dtype=np.float64)
-    th_s = np.asarray(theta_s, dtype=np.float64)
-    ph_s = np.asarray(phi_s, dtype=np.float64)
-    arcs = np.asarray(arc, dtype=object) if arc is not None else arc_labels(th_i, ph_i, th_s, ph_s)
-    grazing = th_s >= 90.0 - 1e-9
-    if lam.size > 1 and np.all(np.isfinite(lam)):
-        spectrum = np.full(lam.size, 1.0 / float(np.sum(np.gradient(lam))))
-        band = [float(lam.min()), float(lam.max())]
-    else:
-        spectrum = np.ones(lam.size)
-        band = [float(lam[0]), float(lam[0])]
-    valid = np.ones(lam.size, dtype=bool)
+    th_i, ph_i, th_s, ph_s = (np.asarray(a, dtype=np.float64) for a in (records.theta_i, records.phi_i,
+                                                                        records.theta_s, records.phi_s))
+    arcs = np.asarray(records.arc, dtype=object) if records.arc is not None else arc_labels(th_i, ph_i, th_s, ph_s)
+    spectrum, band = _flat_incident(lam)
     # the quantities an elastic table does not state: one read-only NaN matrix of no size, shared
     nan2 = np.broadcast_to(np.float64(np.nan), (n, lam.size))
-    ds = xr.Dataset(
-        {
-            "bsdf": (("record", "wavelength"), f),
-            "bsdf_std": (("record", "wavelength"), s),
-            "noise_floor": (("record", "wavelength"), nan2),
-            "bsdf_bispectral": (("record", "wavelength"), nan2),
-            "bsdf_bispectral_std": (("record", "wavelength"), nan2),
-            "noise_floor_bispectral": (("record", "wavelength"), nan2),
-            "saturated": (("record", "wavelength"), np.zeros((n, lam.size), dtype=bool)),
-            "grazing": ("record", grazing),
-            "incident_spectrum": (("configuration", "wavelength"), spectrum[None, :]),
-            "incident_relative_std": (("configuration", "wavelength"), np.zeros((1, lam.size))),
-            "incident_valid": (("configuration", "wavelength"), valid[None, :]),
-            "incident_power_relative_std": ("configuration", np.zeros(1)),
-            "incident_band": (("configuration", "band_edge"), np.array([band])),
-            "configuration_description": ("configuration", np.array([description or "measured table"], dtype=object)),
-        },
-        coords={
-            "config": ("record", np.full(n, CONFIG_NAME, dtype=object)),
-            "theta_i": ("record", th_i), "phi_i": ("record", ph_i), "theta_s": ("record", th_s),
-            "phi_s": ("record", ph_s), "side": ("record", np.asarray(side, dtype=object)),
-            "arc": ("record", arcs),
-            "exposure": ("record", np.full(n, np.nan)),
-            "source_line": ("record", np.asarray(source_line if source_line is not None else np.zeros(n),
-                                                 dtype=np.int64)),
-            "wavelength": lam,
-            "configuration": np.array([CONFIG_NAME], dtype=object),
-            "band_edge": np.array(["low", "high"], dtype=object),
-        },
-    )
-    for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
-        ds[name].attrs["units"] = "deg"
-    ds["wavelength"].attrs["units"] = "nm"
-    if wavelength_note:
-        ds["wavelength"].attrs["note"] = wavelength_note
-    ds["bsdf"].attrs.update(units="1/sr", long_name="BSDF", note="NaN where the table has no value (gap)")
-    ds["bsdf_std"].attrs.update(units="1/sr", long_name="standard uncertainty of bsdf", origin=std_origin)
-    ds["noise_floor"].attrs.update(units="1/sr", long_name="noise-equivalent BSDF (not stated by the source: NaN)")
-    ds["bsdf_bispectral"].attrs.update(units="1/(sr nm)", note="elastic data: no wavelength conversion measured (NaN)")
-    ds["bsdf_bispectral_std"].attrs["units"] = "1/(sr nm)"
-    ds["noise_floor_bispectral"].attrs["units"] = "1/(sr nm)"
-    ds["incident_spectrum"].attrs.update(units="1/nm", long_name="flat (equal-energy) weighting over the measured "
-                                         "wavelengths: the source states no incident spectrum")
-    ds["grazing"].attrs["long_name"] = "theta_s = 90 deg (no finite BSDF from a cosine-corrected value)"
-    sides = sorted(set(map(str, side)))
-    ds.attrs.update(
-        quantity="bsdf", frame="sample", side=" ".join(s for s in SIDES if s in sides), units="1/sr",
+    data = {
+        "bsdf": np.asarray(bsdf, dtype=np.float64).reshape(n, lam.size),
+        "bsdf_std": np.asarray(bsdf_std, dtype=np.float64).reshape(n, lam.size),
+        "noise_floor": nan2, "bsdf_bispectral": nan2, "bsdf_bispectral_std": nan2, "noise_floor_bispectral": nan2,
+        "saturated": np.zeros((n, lam.size), dtype=bool),
+        "grazing": th_s >= 90.0 - 1e-9,
+        "incident_spectrum": spectrum[None, :],
+        "incident_relative_std": np.zeros((1, lam.size)),
+        "incident_valid": np.ones((1, lam.size), dtype=bool),
+        "incident_power_relative_std": np.zeros(1),
+        "incident_band": np.array([band]),
+        "configuration_description": np.array([origin.description or "measured table"], dtype=object),
+    }
+    lines = records.source_line
+    coords = {
+        "config": np.full(n, CONFIG_NAME, dtype=object), "theta_i": th_i, "phi_i": ph_i, "theta_s": th_s,
+        "phi_s": ph_s, "side": np.asarray(records.side, dtype=object), "arc": arcs, "exposure": np.full(n, np.nan),
+        "source_line": np.asarray(lines if lines is not None else np.zeros(n), dtype=np.int64),
+        "wavelength": lam, "configuration": np.array([CONFIG_NAME], dtype=object),
+        "band_edge": np.array(["low", "high"], dtype=object),
+    }
+    sides = set(pd.unique(coords["side"]).tolist())
+    ds = new_bsdf_dataset(data, coords, _records_attributes(origin, [s for s in SIDES if s in sides]))
+    _describe_records(ds, origin)
+    digest = _sha256(origin.source)
+    if digest is not None:
+        ds.attrs["source_sha256"] = digest
+    return ds
+
+
+def _records_attributes(origin: RecordsOrigin, sides: list[str]) -> dict[str, Any]:
+    """The dataset attributes of elastic records: the schema's, with NaN instrument geometry."""
+    return dict(
+        quantity="bsdf", frame="sample", side=" ".join(sides), units="1/sr",
         angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
                          "transmission angles from the back normal",
-        sample_name="", synthetic=0, source=str(source), elastic=1,
-        bsdf_std_origin=std_origin,
+        sample_name="", synthetic=0, source=str(origin.source), elastic=1,
+        bsdf_std_origin=origin.std_origin,
         solid_angle_sr=np.nan, aperture_half_angle_deg=np.nan, gain_e_per_count=np.nan,
         detector_distance_mm=np.nan, aperture_diameter_mm=np.nan, beam_diameter_mm=np.nan,
         manifest_json="{}",
     )
+
+
+def _describe_records(ds: xr.Dataset, origin: RecordsOrigin) -> None:
+    """Long names and notes of the variables of elastic records (units come from the schema)."""
+    if origin.wavelength_note:
+        ds["wavelength"].attrs["note"] = origin.wavelength_note
+    ds["bsdf"].attrs.update(long_name="BSDF", note="NaN where the table has no value (gap)")
+    ds["bsdf_std"].attrs.update(long_name="standard uncertainty of bsdf", origin=origin.std_origin)
+    ds["noise_floor"].attrs.update(long_name="noise-equivalent BSDF (not stated by the source: NaN)")
+    ds["bsdf_bispectral"].attrs.update(note="elastic data: no wavelength conversion measured (NaN)")
+    ds["incident_spectrum"].attrs.update(long_name="flat (equal-energy) weighting over the measured "
+                                         "wavelengths: the source states no incident spectrum")
+    ds["grazing"].attrs["long_name"] = "theta_s = 90 deg (no finite BSDF from a cosine-corrected value)"
+
+
+def _sha256(path: str) -> str | None:
+    """SHA-256 of a file read in blocks (the file is not held whole), or None when it cannot be read."""
     try:
         digest = hashlib.sha256()
-        with open(source, "rb") as fh:
-            while block := fh.read(1 << 20):  # in blocks: the file is not held whole
+        with open(path, "rb") as fh:
+            while block := fh.read(1 << 20):
                 digest.update(block)
-        ds.attrs["source_sha256"] = digest.hexdigest()
     except OSError:
-        pass
-    return ds
+        return None
+    return digest.hexdigest()
 
 
 #: A peak counts when it stands this many times above the profile's median and above the mirrored position.
@@ -1920,10 +1965,11 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     note = "" if wavelength_known else "not stated by the table; pass --wavelength NM (NaN = unknown)"
     if idx.size < n_rec:  # records without any value dropped (a copy of the matrices only then)
         f, s = f[idx], s[idx]
-    ds = records_dataset(rec_th_i[idx], rec_ph_i[idx], rec_th_s[idx], rec_ph_s[idx], [rec_side[i] for i in idx],
-                         lam, f, s, source=path, source_line=[rec_line[i] for i in idx],
-                         std_origin=origin, wavelength_note=note,
-                         description=f"measured table {Path(path).name}: {', '.join(quantities)}, elastic")
+    ds = records_dataset(RecordDirections(rec_th_i[idx], rec_ph_i[idx], rec_th_s[idx], rec_ph_s[idx],
+                                          [rec_side[i] for i in idx], source_line=[rec_line[i] for i in idx]),
+                         lam, f, s, RecordsOrigin(path, std_origin=origin, wavelength_note=note,
+                                                  description=f"measured table {Path(path).name}: "
+                                                              f"{', '.join(quantities)}, elastic"))
     if frame == "specular":
         ds.attrs["azimuth_note"] = ("phi_s read from the specular direction (phi_s = 0 on the specular side): the "
                                     "table's peaks sit at phi_s = 0 although phi_i is not 180 deg")
