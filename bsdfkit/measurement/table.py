@@ -56,8 +56,9 @@ import json
 import math
 import re
 from array import array
+from collections import deque
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -846,9 +847,10 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     rel = relative_std if relative_std is not None else (meta_rel if meta_rel is not None else None)
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
     comments = [c for c in text.comments if c[0] < header_line]
-    rows = _parse_rows(path, _events(source, header_line, units_line, comments), delim, columns, roles,
-                       decimal_comma, theta_i_default, phi_i_default, default_side, mono_lambda,
-                       _fields(text.lines[k_header][1], delim), _rows_estimate(path, data))
+    layout = _layout(path, delim, columns, roles, decimal_comma, _fields(text.lines[k_header][1], delim))
+    rows = _parse_rows(_events(source, header_line, units_line, comments), layout,
+                       _RowDefaults(theta_i_default, phi_i_default, mono_lambda, default_side),
+                       _rows_estimate(path, data))
     _refuse_cut_last_block(path, rows)
     _check_units(path, rows, roles)
     _check_values(path, rows, rel)
@@ -1150,285 +1152,429 @@ class _Store:
         return np.broadcast_to(np.asarray(value, dtype=self.dtypes[name]), (n,))
 
 
-def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | None, columns: list[_Column],
-                roles: dict[str, list[_Column]], decimal_comma: bool, theta_i_default: float | None,
-                phi_i_default: float, default_side: str | None, mono_lambda: float | None,
-                header_cells: list[str], rows_estimate: int = 0) -> _Rows:
+@dataclass(frozen=True)
+class _Layout:
+    """What every data row of a table shares: the file, its delimiter and columns, and what they hold.
+
+    ``specs`` has one entry per value column: (the column, its uncertainty column or None, whether that
+    uncertainty is relative to the value, the side the column's quantity fixes or None).
+    """
+
+    path: str
+    delim: str | None
+    columns: list[_Column]
+    roles: dict[str, list[_Column]]
+    decimal_comma: bool
+    header_norm: list[str]
+    specs: list[tuple[_Column, _Column | None, bool, str | None]]
+
+    @property
+    def signed(self) -> bool:
+        """No φs column: θs is a signed in-plane angle."""
+        return "phi_s" not in self.roles
+
+    @property
+    def wide_inc(self) -> bool:
+        """One value column per incidence."""
+        return any(c.incidence is not None for c, *_ in self.specs)
+
+    @property
+    def plain(self) -> bool:
+        """Every column numeric and no decimal comma: blocks may be parsed as arrays."""
+        numeric = {"theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std"}
+        return not self.decimal_comma and all(c.role in numeric for c in self.columns)
+
+
+def _layout(path: str, delim: str | None, columns: list[_Column], roles: dict[str, list[_Column]],
+            decimal_comma: bool, header_cells: list[str]) -> _Layout:
+    """The :class:`_Layout` of a table: its value columns paired with their uncertainty columns."""
+    std_of = {c.pair: c for c in roles.get("std", [])}
+    specs = []
+    for c in roles["value"]:
+        s_col = std_of.get(c.index)
+        relative = bool(s_col is not None and (s_col.relative or (s_col.percent and not c.percent)))
+        specs.append((c, s_col, relative, side_of_quantity(c.quantity)))
+    return _Layout(path, delim, columns, roles, decimal_comma,
+                   [c.strip().strip('"').lower() for c in header_cells], specs)
+
+
+@dataclass(frozen=True)
+class _RowDefaults:
+    """Values of the rows that follow where the table has no column: set before the header, changed by
+    ``# incidence: 20`` comments or ``Incidence: 20`` lines between blocks (θi, φi [deg], wavelength [nm])."""
+
+    theta_i: float | None
+    phi_i: float
+    wavelength: float | None
+    side: str | None
+
+
+def _with_metadata(defaults: _RowDefaults, meta: dict[str, tuple[str, int]], path: str) -> _RowDefaults:
+    """``defaults`` changed by the metadata of a comment or ``key: value`` line."""
+    angle = {"deg": 1.0, "rad": 180.0 / math.pi}
+    changes: dict[str, Any] = {}
+    if "incidence" in meta:
+        changes["theta_i"] = _meta_number(meta, "incidence", path, angle, "deg")
+    if "phi_i" in meta:
+        changes["phi_i"] = _meta_number(meta, "phi_i", path, angle, "deg")
+    if "wavelength" in meta:
+        changes["wavelength"] = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+    if "side" in meta:
+        word = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
+        if word is None:
+            raise InputError("unknown side", file=path, line=meta["side"][1], field="side",
+                             expected="reflection or transmission", got=meta["side"][0])
+        changes["side"] = word
+    return replace(defaults, **changes) if changes else defaults
+
+
+@dataclass
+class _Firsts:
+    """The first line of what decides the frame and side of a whole table, noted while its blocks are parsed:
+    a polar angle beyond 90° (``front``), a transmitted angle within 0..90° (``back``), a value without a side
+    (``sideless``: line and column)."""
+
+    front: int | None = None
+    back: int | None = None
+    sideless: tuple[int, str] | None = None
+
+    def note(self, key: str, value: Any) -> None:
+        """Keep ``value`` as the first ``key`` unless one is already kept."""
+        if getattr(self, key) is None:
+            setattr(self, key, value)
+
+
+def _cell_number(cells: list[str], col: _Column, line: int, what: str, layout: _Layout) -> float:
+    """The number of a cell in the column's unit (scaled); NaN for a gap; one-line errors for text and ±inf."""
+    try:
+        v = _number(cells[col.index], layout.decimal_comma)
+    except ValueError:
+        raise FormatError(f"not a number in the {what} column", file=layout.path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'", expected="a number or an empty cell",
+                          got=cells[col.index]) from None
+    if math.isinf(v):
+        raise FormatError(f"infinite number in the {what} column", file=layout.path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'", expected="a finite number",
+                          got=cells[col.index])
+    return v * col.scale
+
+
+def _required(cells: list[str], role: str, line: int, default: float | None, layout: _Layout) -> float:
+    """The number of the row's ``role`` column (never a gap), or ``default`` (NaN for None) without one."""
+    if role not in layout.roles:
+        return math.nan if default is None else default
+    col = layout.roles[role][0]
+    v = _cell_number(cells, col, line, role, layout)
+    if math.isnan(v):
+        raise FormatError(f"missing {role}", file=layout.path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'",
+                          expected="a number (angles and wavelengths cannot be gaps)", got=cells[col.index])
+    return v
+
+
+#: Entry arrays of a parsed block, in the order of :class:`_Rows`.
+_ENTRY_NAMES = ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std", "std_relative", "side", "line")
+
+
+def _store_entries(store: _Store, entries: dict[str, NDArray], n_v: int) -> None:
+    """Append a block's entries (``n_v`` per row, one per value column) to the store, with their column index."""
+    n = entries["line"].size
+    for name in _ENTRY_NAMES[:-1]:
+        store.add(name, entries[name])
+    store.add("spec", np.tile(np.arange(n_v, dtype=np.int16), n // n_v if n_v else 0))
+    store.add("line", entries["line"])
+
+
+def _fast_columns(a: NDArray, layout: _Layout, state: _RowDefaults) -> dict[str, NDArray] | None:
+    """The direction columns (θi, φi, θs, φs [deg], wavelength [nm]) of a block of numbers; None when a row
+    is out of range (the row path then says which)."""
+    n = a.shape[0]
+
+    def col(role: str, default: float | None) -> NDArray:
+        if role in layout.roles:
+            c = layout.roles[role][0]
+            return a[:, c.index] * c.scale
+        return np.full(n, math.nan if default is None else default)
+
+    out = {"theta_i": col("theta_i", state.theta_i), "phi_i": col("phi_i", state.phi_i),
+           "theta_s": col("theta_s", None), "phi_s": col("phi_s", 0.0),
+           "wavelength": col("wavelength", state.wavelength)}
+    th_i, th_s = out["theta_i"], out["theta_s"]
+    th_i0 = np.where(np.isnan(th_i), 0.0, th_i)
+    if (np.isnan(th_i).any() and not layout.wide_inc) or not np.all((th_i0 >= 0.0) & (th_i0 < 90.0)) \
+            or not np.all((th_s >= (-90.0 if layout.signed else 0.0)) & (th_s <= 90.0)) \
+            or not np.all((np.abs(out["phi_i"]) <= 360.0) & (np.abs(out["phi_s"]) <= 360.0)) \
+            or ("wavelength" in layout.roles and not np.all(out["wavelength"] > 0)):
+        return None
+    return out
+
+
+def _parse_fast(block: list[tuple[int, str]], layout: _Layout, state: _RowDefaults, firsts: _Firsts
+                ) -> dict[str, NDArray] | None:
+    """The entries of a block of plain numbers, parsed as arrays; None (nothing noted) when a row needs the
+    row path."""
+    if not layout.plain:
+        return None
+    try:
+        a = np.loadtxt([t for _, t in block], delimiter=layout.delim, comments=None, quotechar='"',
+                       dtype=np.float64, ndmin=2)
+    except (ValueError, TypeError, OverflowError):  # anything not plain numbers: the row path says what
+        return None
+    n, n_v = len(block), len(layout.specs)
+    if a.shape != (n, len(layout.columns)) or not np.all(np.isfinite(a)):
+        return None
+    cols = _fast_columns(a, layout, state)
+    if cols is None:
+        return None
+    shape = (n, n_v)
+    v, s = np.empty(shape), np.full(shape, math.nan)
+    rel, side = np.zeros(shape, dtype=bool), np.empty(shape, dtype=np.int8)
+    t_i, wl = np.empty(shape), np.empty(shape)
+    for j, (c, scol, s_rel, q_side) in enumerate(layout.specs):
+        v[:, j] = a[:, c.index] * 0.01 if c.percent else a[:, c.index]
+        if scol is not None:
+            sj = a[:, scol.index] * scol.scale
+            if np.any(sj < 0):
+                return None
+            s[:, j] = sj * 0.01 if scol.percent else sj
+            rel[:, j] = s_rel
+        this_side = state.side
+        if q_side is not None:
+            if this_side is not None and this_side != q_side:
+                return None
+            this_side = q_side
+        side[:, j] = _SIDE_CODE[this_side]
+        t_i[:, j] = cols["theta_i"] if c.incidence is None else c.incidence
+        wl[:, j] = cols["wavelength"] if c.wavelength is None else c.wavelength
+    lines = np.fromiter((ln for ln, _ in block), dtype=np.int64, count=n)
+    _note_fast_sides(side, cols["theta_s"], lines, layout, firsts)
+    return {"theta_i": t_i.ravel(), "phi_i": np.repeat(cols["phi_i"], n_v),
+            "theta_s": np.repeat(cols["theta_s"], n_v), "phi_s": np.repeat(cols["phi_s"], n_v),
+            "wavelength": wl.ravel(), "value": v.ravel(), "std": s.ravel(), "std_relative": rel.ravel(),
+            "side": side.ravel(), "line": np.repeat(lines, n_v)}
+
+
+def _note_fast_sides(side: NDArray[np.int8], th_s: NDArray, lines: NDArray, layout: _Layout,
+                     firsts: _Firsts) -> None:
+    """Note the first transmitted angle from the back normal and the first value without a side of a block."""
+    n_v = len(layout.specs)
+    if np.any(side == 1):
+        back = (side == 1) & ((0.0 < np.abs(th_s)) & (np.abs(th_s) < 90.0))[:, None]
+        if back.any():
+            firsts.note("back", int(lines[np.argmax(back.any(axis=1))]))
+    if np.any(side == -1):
+        k = int(np.argmax(side.ravel() == -1))
+        c = layout.specs[k % n_v][0]
+        firsts.note("sideless", (int(lines[k // n_v]), f"column {c.index + 1} '{c.header}'"))
+
+
+@dataclass(frozen=True)
+class _RowDirection:
+    """One data row's direction: θi, φi, θs, φs [deg], wavelength [nm], whether θs was given from the front
+    normal beyond 90° (``through``: a transmitted direction) and the side its side column or defaults give."""
+
+    theta_i: float
+    phi_i: float
+    theta_s: float
+    phi_s: float
+    wavelength: float
+    through: bool
+    side: str | None
+
+
+def _row_direction(cells: list[str], line: int, layout: _Layout, state: _RowDefaults, firsts: _Firsts
+                   ) -> _RowDirection:
+    """The direction of one data row, checked (one-line errors naming the line and column)."""
+    path, roles = layout.path, layout.roles
+    th_i = _required(cells, "theta_i", line, state.theta_i, layout)
+    if math.isnan(th_i) and not layout.wide_inc:
+        raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
+                          expected="a theta_i column, or '# incidence: <deg>' before the block")
+    ph_i = _required(cells, "phi_i", line, state.phi_i, layout)
+    th_s = _required(cells, "theta_s", line, None, layout)
+    ph_s = _required(cells, "phi_s", line, 0.0, layout)
+    lam = _required(cells, "wavelength", line, state.wavelength, layout)
+    # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
+    # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
+    through = 90.0 < abs(th_s) <= 180.0
+    if through:
+        th_s = math.copysign(180.0 - abs(th_s), th_s) if layout.signed else 180.0 - th_s
+        firsts.note("front", line)
+    row_side = state.side
+    if "side" in roles:
+        col = roles["side"][0]
+        word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
+        if word is None:
+            raise FormatError("unknown side", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
+                              expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
+        row_side = word
+    _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, layout.signed, roles)
+    if "wavelength" in roles and not lam > 0:
+        col = roles["wavelength"][0]
+        raise FormatError("wavelength must be positive", file=path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm", got=cells[col.index])
+    return _RowDirection(th_i, ph_i, th_s, ph_s, lam, through, row_side)
+
+
+def _row_value(cells: list[str], line: int, spec: tuple[_Column, _Column | None, bool, str | None],
+               d: _RowDirection, layout: _Layout, firsts: _Firsts) -> tuple[float, float, bool, int]:
+    """Value, uncertainty, whether it is relative, and side code of one value cell of a row."""
+    col, scol, s_rel_spec, q_side = spec
+    try:
+        v = float(cells[col.index])  # fast path; gaps, decimal commas and errors go through _cell_number()
+    except ValueError:
+        v = _cell_number(cells, col, line, "value", layout)
+    else:
+        if math.isinf(v) or layout.decimal_comma:
+            v = _cell_number(cells, col, line, "value", layout)
+    if col.percent:
+        v *= 0.01
+    s, s_rel = math.nan, False
+    if scol is not None:
+        s = _cell_number(cells, scol, line, "uncertainty", layout)
+        if not math.isnan(s) and s < 0:
+            raise FormatError("negative uncertainty", file=layout.path, line=line,
+                              field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0", got=cells[scol.index])
+        s_rel = s_rel_spec
+        if scol.percent:
+            s *= 0.01
+    return v, s, s_rel, _SIDE_CODE[_value_side(line, col, q_side, d, layout, firsts, cells)]
+
+
+def _value_side(line: int, col: _Column, q_side: str | None, d: _RowDirection, layout: _Layout,
+                firsts: _Firsts, cells: list[str]) -> str | None:
+    """The side of one value cell: the row's, the one its quantity fixes, transmission beyond 90°."""
+    this_side = d.side
+    if q_side is not None:
+        if this_side is not None and this_side != q_side:
+            raise InputError(f"side contradicts the quantity {col.quantity}", file=layout.path, line=line,
+                             field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
+        this_side = q_side
+    if d.through:
+        if this_side == "reflection":
+            c = layout.roles["theta_s"][0]
+            raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
+                                  file=layout.path, line=line, field=f"column {c.index + 1} '{c.header}'",
+                                  expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
+                                           "transmission)", got=cells[c.index].strip())
+        this_side = "transmission"
+    elif this_side == "transmission" and 0.0 < abs(d.theta_s) < 90.0:
+        firsts.note("back", line)
+    if this_side is None:
+        firsts.note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
+    return this_side
+
+
+def _row_cells(text: str, line: int, layout: _Layout) -> list[str] | None:
+    """The cells of a data line, or None for the header repeated at the start of a block."""
+    cells = _split(text, layout.delim)
+    if [c.strip().strip('"').lower() for c in _fields(text, layout.delim)] == layout.header_norm:
+        return None
+    return cells
+
+
+def _parse_by_rows(block: list[tuple[int, str]], layout: _Layout, state: _RowDefaults,
+                   pending: deque[tuple[int, str]], firsts: _Firsts) -> tuple[dict[str, NDArray], _RowDefaults]:
+    """The entries of a block parsed row by row, and the row defaults after it (comments in ``pending`` and
+    ``key: value`` lines between its rows change them)."""
+    out = {k: array("d") for k in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")}
+    out_rel, out_side, out_line = array("b"), array("b"), array("q")
+    n_cols, n_v = len(layout.columns), len(layout.specs)
+    for line, text in block:
+        while pending and pending[0][0] < line:
+            state = _with_metadata(state, _metadata([pending.popleft()]), layout.path)
+        cells = _row_cells(text, line, layout)
+        if cells is None:
+            continue  # the header repeated at the start of the next block
+        if cells and not _is_numberlike(cells[0]):
+            meta = _metadata([(line, text.strip())])
+            if meta and re.match(r"^\s*[^:=]+[:=]", text):
+                state = _with_metadata(state, meta, layout.path)
+                continue
+        while len(cells) > n_cols and not cells[-1].strip():
+            cells.pop()  # trailing separators
+        if len(cells) != n_cols:
+            raise FormatError("wrong number of fields", file=layout.path, line=line, field="row",
+                              expected=f"{n_cols} fields like the header", got=len(cells))
+        d = _row_direction(cells, line, layout, state, firsts)
+        for spec in layout.specs:
+            v, s, s_rel, side_code = _row_value(cells, line, spec, d, layout, firsts)
+            out_side.append(side_code)
+            out["value"].append(v)
+            out["std"].append(s)
+            out_rel.append(s_rel)
+            out["theta_i"].append(d.theta_i if spec[0].incidence is None else spec[0].incidence)
+            out["wavelength"].append(d.wavelength if spec[0].wavelength is None else spec[0].wavelength)
+        out["phi_i"].extend([d.phi_i] * n_v)
+        out["theta_s"].extend([d.theta_s] * n_v)
+        out["phi_s"].extend([d.phi_s] * n_v)
+        out_line.extend([line] * n_v)
+    entries = {k: np.frombuffer(x, dtype=np.float64) for k, x in out.items()}
+    entries.update(std_relative=np.frombuffer(out_rel, dtype=np.int8).astype(bool),
+                   side=np.frombuffer(out_side, dtype=np.int8), line=np.frombuffer(out_line, dtype=np.int64))
+    return entries, state
+
+
+def _parse_rows(events: Iterator[tuple[str, int, str]], layout: _Layout, state: _RowDefaults,
+                rows_estimate: int = 0) -> _Rows:
     """Rows → one entry per value cell, streamed in blocks of :data:`_BLOCK_LINES` lines.
 
     ``events`` yields ``("data", line, text)`` for the data lines and ``("comment", line, text)`` for the
     comment lines after the header, in file order. Between blocks, a repeated header is skipped, and
     ``# incidence: 20`` comments or ``Incidence: 20`` lines set the incidence (wavelength, phi_i, side) of the
-    rows that follow. A block of plain numbers is parsed by :func:`numpy.loadtxt` and checked as arrays; any
-    other block (gaps, text, a decimal comma, a side column, angles beyond 90°, a bad value) row by row, which
-    gives the one-line error of the first bad row with its physical line. ``rows_estimate`` (rows expected)
-    sizes the arrays.
+    rows that follow (``state``: the defaults before the first row). A block of plain numbers is parsed by
+    :func:`numpy.loadtxt` and checked as arrays; any other block (gaps, text, a decimal comma, a side column,
+    angles beyond 90°, a bad value) row by row, which gives the one-line error of the first bad row with its
+    physical line. ``rows_estimate`` (rows expected) sizes the arrays.
     """
-    pending: list[tuple[int, str]] = []
-    header_norm = [c.strip().strip('"').lower() for c in header_cells]
-    state = {"theta_i": theta_i_default, "phi_i": phi_i_default, "wavelength": mono_lambda, "side": default_side}
-
-    def apply_block(meta: dict[str, tuple[str, int]]) -> None:
-        angle = {"deg": 1.0, "rad": 180.0 / math.pi}
-        if "incidence" in meta:
-            state["theta_i"] = _meta_number(meta, "incidence", path, angle, "deg")
-        if "phi_i" in meta:
-            state["phi_i"] = _meta_number(meta, "phi_i", path, angle, "deg")
-        if "wavelength" in meta:
-            state["wavelength"] = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
-        if "side" in meta:
-            word = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
-            if word is None:
-                raise InputError("unknown side", file=path, line=meta["side"][1], field="side",
-                                 expected="reflection or transmission", got=meta["side"][0])
-            state["side"] = word
-
-    n_cols = len(columns)
-    values = roles["value"]
-    std_of = {c.pair: c for c in roles.get("std", [])}
-    signed = "phi_s" not in roles
-    wide_inc = any(c.incidence is not None for c in values)
-
-    def num(cells: list[str], col: _Column, line: int, what: str) -> float:
-        try:
-            v = _number(cells[col.index], decimal_comma)
-        except ValueError:
-            raise FormatError(f"not a number in the {what} column", file=path, line=line,
-                              field=f"column {col.index + 1} '{col.header}'", expected="a number or an empty cell",
-                              got=cells[col.index]) from None
-        if math.isinf(v):
-            raise FormatError(f"infinite number in the {what} column", file=path, line=line,
-                              field=f"column {col.index + 1} '{col.header}'", expected="a finite number",
-                              got=cells[col.index])
-        return v * col.scale
-
-    def required(cells: list[str], role: str, line: int, default: float | None) -> float:
-        if role not in roles:
-            return math.nan if default is None else default
-        col = roles[role][0]
-        v = num(cells, col, line, role)
-        if math.isnan(v):
-            raise FormatError(f"missing {role}", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
-                              expected="a number (angles and wavelengths cannot be gaps)", got=cells[col.index])
-        return v
-
-    specs = [(c, std_of.get(c.index), bool(std_of.get(c.index) is not None and (
-        std_of[c.index].relative or (std_of[c.index].percent and not c.percent))), side_of_quantity(c.quantity))
-             for c in values]
-    n_v = len(specs)
-    found: dict[str, Any] = {"front": None, "back": None, "sideless": None}  # first line of each
-    store = _Store(rows_estimate * max(len(values), 1), {
+    pending: deque[tuple[int, str]] = deque()
+    firsts = _Firsts()
+    store = _Store(rows_estimate * max(len(layout.specs), 1), {
         "theta_i": np.float64, "phi_i": np.float64, "theta_s": np.float64, "phi_s": np.float64,
         "wavelength": np.float64, "value": np.float64, "std": np.float64, "std_relative": bool, "side": np.int8,
-        "spec": np.int16, "line": np.int32 if Path(path).stat().st_size < 2**31 - 1 else np.int64})
-    numeric = {"theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std"}
-    plain = not decimal_comma and all(c.role in numeric for c in columns)
-
-    def note(key: str, value: Any) -> None:
-        if found[key] is None:
-            found[key] = value
-
-    def add(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, lam: NDArray, v: NDArray, s: NDArray,
-            rel: NDArray, side: NDArray, lines: NDArray) -> None:
-        n = lines.size
-        for name, x in (("theta_i", th_i), ("phi_i", ph_i), ("theta_s", th_s), ("phi_s", ph_s),
-                        ("wavelength", lam), ("value", v), ("std", s), ("std_relative", rel), ("side", side)):
-            store.add(name, x)
-        store.add("spec", np.tile(np.arange(n_v, dtype=np.int16), n // n_v if n_v else 0))
-        store.add("line", lines)
-
-    def fast(block: list[tuple[int, str]]) -> bool:
-        """Parse a block of plain numbers as arrays; False (nothing stored) when a row needs the row path."""
-        if not plain:
-            return False
-        try:
-            a = np.loadtxt([t for _, t in block], delimiter=delim, comments=None, quotechar='"',
-                           dtype=np.float64, ndmin=2)
-        except (ValueError, TypeError, OverflowError):  # anything not plain numbers: the row path says what
-            return False
-        n = len(block)
-        if a.shape != (n, n_cols) or not np.all(np.isfinite(a)):
-            return False
-
-        def col(role: str, default: float | None) -> NDArray:
-            if role in roles:
-                c = roles[role][0]
-                return a[:, c.index] * c.scale
-            return np.full(n, math.nan if default is None else default)
-
-        th_i, ph_i = col("theta_i", state["theta_i"]), col("phi_i", state["phi_i"])
-        th_s, ph_s, lam = col("theta_s", None), col("phi_s", 0.0), col("wavelength", state["wavelength"])
-        th_i0 = np.where(np.isnan(th_i), 0.0, th_i)
-        if (np.isnan(th_i).any() and not wide_inc) or not np.all((th_i0 >= 0.0) & (th_i0 < 90.0)) \
-                or not np.all((th_s >= (-90.0 if signed else 0.0)) & (th_s <= 90.0)) \
-                or not np.all((np.abs(ph_i) <= 360.0) & (np.abs(ph_s) <= 360.0)) \
-                or ("wavelength" in roles and not np.all(lam > 0)):
-            return False
-        lines = np.fromiter((ln for ln, _ in block), dtype=np.int64, count=n)
-        shape = (n, n_v)
-        v, s = np.empty(shape), np.full(shape, math.nan)
-        rel, side = np.zeros(shape, dtype=bool), np.empty(shape, dtype=np.int8)
-        t_i, wl = np.empty(shape), np.empty(shape)
-        for j, (c, scol, s_rel, q_side) in enumerate(specs):
-            v[:, j] = a[:, c.index] * 0.01 if c.percent else a[:, c.index]
-            if scol is not None:
-                sj = a[:, scol.index] * scol.scale
-                if np.any(sj < 0):
-                    return False
-                s[:, j] = sj * 0.01 if scol.percent else sj
-                rel[:, j] = s_rel
-            this_side = state["side"]
-            if q_side is not None:
-                if this_side is not None and this_side != q_side:
-                    return False
-                this_side = q_side
-            side[:, j] = _SIDE_CODE[this_side]
-            t_i[:, j] = th_i if c.incidence is None else c.incidence
-            wl[:, j] = lam if c.wavelength is None else c.wavelength
-        if np.any(side == 1):
-            back = (side == 1) & ((0.0 < np.abs(th_s)) & (np.abs(th_s) < 90.0))[:, None]
-            if back.any():
-                note("back", int(lines[np.argmax(back.any(axis=1))]))
-        if np.any(side == -1):
-            k = int(np.argmax(side.ravel() == -1))
-            c = specs[k % n_v][0]
-            note("sideless", (int(lines[k // n_v]), f"column {c.index + 1} '{c.header}'"))
-        add(t_i.ravel(), np.repeat(ph_i, n_v), np.repeat(th_s, n_v), np.repeat(ph_s, n_v), wl.ravel(), v.ravel(),
-            s.ravel(), rel.ravel(), side.ravel(), np.repeat(lines, n_v))
-        return True
-
-    def by_rows(block: list[tuple[int, str]]) -> None:
-        out = {k: array("d") for k in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")}
-        out_rel, out_side, out_line = array("b"), array("b"), array("q")
-        for line, text in block:
-            while pending and pending[0][0] < line:
-                apply_block(_metadata([pending.pop(0)]))
-            cells = _split(text, delim)
-            if [c.strip().strip('"').lower() for c in _fields(text, delim)] == header_norm:
-                continue  # the header repeated at the start of the next block
-            if cells and not _is_numberlike(cells[0]):
-                meta = _metadata([(line, text.strip())])
-                if meta and re.match(r"^\s*[^:=]+[:=]", text):
-                    apply_block(meta)
-                    continue
-            while len(cells) > n_cols and not cells[-1].strip():
-                cells.pop()  # trailing separators
-            if len(cells) != n_cols:
-                raise FormatError("wrong number of fields", file=path, line=line, field="row",
-                                  expected=f"{n_cols} fields like the header", got=len(cells))
-            th_i = required(cells, "theta_i", line, state["theta_i"])
-            if math.isnan(th_i) and not wide_inc:
-                raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
-                                  expected="a theta_i column, or '# incidence: <deg>' before the block")
-            ph_i = required(cells, "phi_i", line, state["phi_i"])
-            th_s = required(cells, "theta_s", line, None)
-            ph_s = required(cells, "phi_s", line, 0.0)
-            lam = required(cells, "wavelength", line, state["wavelength"])
-            # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
-            # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
-            through = 90.0 < abs(th_s) <= 180.0
-            if through:
-                th_s = math.copysign(180.0 - abs(th_s), th_s) if signed else 180.0 - th_s
-                note("front", line)
-            row_side = state["side"]
-            if "side" in roles:
-                col = roles["side"][0]
-                word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
-                if word is None:
-                    raise FormatError("unknown side", file=path, line=line,
-                                      field=f"column {col.index + 1} '{col.header}'",
-                                      expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
-                row_side = word
-            _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, signed, roles)
-            if "wavelength" in roles and not lam > 0:
-                col = roles["wavelength"][0]
-                raise FormatError("wavelength must be positive", file=path, line=line,
-                                  field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm",
-                                  got=cells[col.index])
-            for col, scol, s_rel_spec, q_side in specs:
-                text_v = cells[col.index]
-                try:
-                    v = float(text_v)  # fast path; gaps, decimal commas and errors go through num()
-                except ValueError:
-                    v = num(cells, col, line, "value")
-                else:
-                    if math.isinf(v) or decimal_comma:
-                        v = num(cells, col, line, "value")
-                if col.percent:
-                    v *= 0.01
-                s, s_rel = math.nan, False
-                if scol is not None:
-                    s = num(cells, scol, line, "uncertainty")
-                    if not math.isnan(s) and s < 0:
-                        raise FormatError("negative uncertainty", file=path, line=line,
-                                          field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
-                                          got=cells[scol.index])
-                    s_rel = s_rel_spec
-                    if scol.percent:
-                        s *= 0.01
-                this_side = row_side
-                if q_side is not None:
-                    if this_side is not None and this_side != q_side:
-                        raise InputError(f"side contradicts the quantity {col.quantity}", file=path, line=line,
-                                         field=f"column {col.index + 1} '{col.header}'", expected=q_side,
-                                         got=this_side)
-                    this_side = q_side
-                if through:
-                    if this_side == "reflection":
-                        c = roles["theta_s"][0]
-                        raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
-                                              file=path, line=line, field=f"column {c.index + 1} '{c.header}'",
-                                              expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
-                                                       "transmission)", got=cells[c.index].strip())
-                    this_side = "transmission"
-                elif this_side == "transmission" and 0.0 < abs(th_s) < 90.0:
-                    note("back", line)
-                if this_side is None:
-                    note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
-                out_side.append(_SIDE_CODE[this_side])
-                out["value"].append(v)
-                out["std"].append(s)
-                out_rel.append(s_rel)
-                out["theta_i"].append(th_i if col.incidence is None else col.incidence)
-                out["wavelength"].append(lam if col.wavelength is None else col.wavelength)
-            out["phi_i"].extend([ph_i] * n_v)
-            out["theta_s"].extend([th_s] * n_v)
-            out["phi_s"].extend([ph_s] * n_v)
-            out_line.extend([line] * n_v)
-        if out_line:
-            add(*(np.frombuffer(out[k], dtype=np.float64) for k in ("theta_i", "phi_i", "theta_s", "phi_s",
-                                                                     "wavelength", "value", "std")),
-                np.frombuffer(out_rel, dtype=np.int8).astype(bool), np.frombuffer(out_side, dtype=np.int8),
-                np.frombuffer(out_line, dtype=np.int64))
-
-    def flush(block: list[tuple[int, str]]) -> None:
+        "spec": np.int16, "line": np.int32 if Path(layout.path).stat().st_size < 2**31 - 1 else np.int64})
+    for block in _blocks(events, pending):
         while pending and pending[0][0] < block[0][0]:
-            apply_block(_metadata([pending.pop(0)]))
-        if not fast(block):
-            by_rows(block)
+            state = _with_metadata(state, _metadata([pending.popleft()]), layout.path)
+        entries = _parse_fast(block, layout, state, firsts)
+        if entries is None:
+            entries, state = _parse_by_rows(block, layout, state, pending, firsts)
+        if entries["line"].size:
+            _store_entries(store, entries, len(layout.specs))
+    return _rows_of(store, layout, firsts)
 
+
+def _blocks(events: Iterator[tuple[str, int, str]], pending: deque[tuple[int, str]]
+            ) -> Iterator[list[tuple[int, str]]]:
+    """Blocks of at most :data:`_BLOCK_LINES` data lines, cut at every comment; the comments are appended to
+    ``pending`` as they come (before the block that follows them is given)."""
     block: list[tuple[int, str]] = []
     for kind, line, text in events:
         if kind == "comment":
             if block:
-                flush(block)
+                yield block
                 block = []
             pending.append((line, text))
             continue
         block.append((line, text))
         if len(block) >= _BLOCK_LINES:
-            flush(block)
+            yield block
             block = []
     if block:
-        flush(block)
-    if found["front"] is not None and found["back"] is not None:
-        raise ValidationError("transmission scatter angles in two frames", file=path, line=found["back"],
+        yield block
+
+
+def _rows_of(store: _Store, layout: _Layout, firsts: _Firsts) -> _Rows:
+    """The parsed entries as :class:`_Rows`, once the frame and the sides of the whole table are known."""
+    path = layout.path
+    if firsts.front is not None and firsts.back is not None:
+        raise ValidationError("transmission scatter angles in two frames", file=path, line=firsts.back,
                               field="theta_s", expected="all from the back normal (<= 90 deg) or all from the front "
-                              "normal (> 90 deg)", got=f"line {found['front']} beyond 90 deg")
+                              "normal (> 90 deg)", got=f"line {firsts.front} beyond 90 deg")
     side = store.take("side")
-    if found["sideless"] is not None:
-        if found["front"] is None:
-            line, where = found["sideless"]
+    if firsts.sideless is not None:
+        if firsts.front is None:
+            line, where = firsts.sideless
             raise InputError("the table does not say which side it holds; pass --side", file=path, line=line,
                              field=where, expected="--side reflection|transmission, a side column, "
                              "--quantity brdf|btdf, or polar angles up to 180 deg from the front normal")
@@ -1438,7 +1584,7 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
         phi_s=store.take("phi_s"), wavelength=store.take("wavelength"), value=store.take("value"),
         std=store.take("std"), std_relative=store.take("std_relative"), side=side, spec=store.take("spec"),
         line=store.take("line"),
-        quantities=[c.quantity for c in values], headers=[c.header for c in values])
+        quantities=[c.quantity for c, *_ in layout.specs], headers=[c.header for c, *_ in layout.specs])
 
 
 #: Plausible wavelengths [nm]: 1 nm (soft X-ray) to 100 µm (far infrared); a column outside is in another unit.
