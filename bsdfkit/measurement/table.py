@@ -60,7 +60,7 @@ from collections import deque
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -1272,6 +1272,8 @@ def _required(cells: list[str], role: str, line: int, default: float | None, lay
     return v
 
 
+#: The float64 entry arrays of a parsed block.
+_FLOAT_ENTRIES = ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")
 #: Entry arrays of a parsed block, in the order of :class:`_Rows`.
 _ENTRY_NAMES = ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std", "std_relative", "side", "line")
 
@@ -1368,10 +1370,10 @@ def _note_fast_sides(side: NDArray[np.int8], th_s: NDArray, lines: NDArray, layo
         firsts.note("sideless", (int(lines[k // n_v]), f"column {c.index + 1} '{c.header}'"))
 
 
-@dataclass(frozen=True)
-class _RowDirection:
+class _RowDirection(NamedTuple):
     """One data row's direction: θi, φi, θs, φs [deg], wavelength [nm], whether θs was given from the front
-    normal beyond 90° (``through``: a transmitted direction) and the side its side column or defaults give."""
+    normal beyond 90° (``through``: a transmitted direction) and the side its side column or defaults give.
+    (A named tuple: one is made per row of the row path.)"""
 
     theta_i: float
     phi_i: float
@@ -1416,53 +1418,61 @@ def _row_direction(cells: list[str], line: int, layout: _Layout, state: _RowDefa
     return _RowDirection(th_i, ph_i, th_s, ph_s, lam, through, row_side)
 
 
-def _row_value(cells: list[str], line: int, spec: tuple[_Column, _Column | None, bool, str | None],
-               d: _RowDirection, layout: _Layout, firsts: _Firsts) -> tuple[float, float, bool, int]:
-    """Value, uncertainty, whether it is relative, and side code of one value cell of a row."""
-    col, scol, s_rel_spec, q_side = spec
-    try:
-        v = float(cells[col.index])  # fast path; gaps, decimal commas and errors go through _cell_number()
-    except ValueError:
-        v = _cell_number(cells, col, line, "value", layout)
-    else:
-        if math.isinf(v) or layout.decimal_comma:
+def _row_values(cells: list[str], line: int, d: _RowDirection, layout: _Layout, firsts: _Firsts,
+                out: dict[str, array]) -> None:
+    """Append the entries of one data row to ``out``: per value cell its value, uncertainty, whether that is
+    relative, its side (the row's, the one its quantity fixes, transmission beyond 90° from the front normal),
+    θi and wavelength; the row's φi, θs, φs and line once per value cell. One call per row: the row path's
+    time is per call."""
+    for col, scol, s_rel_spec, q_side in layout.specs:
+        try:
+            v = float(cells[col.index])  # fast path; gaps, decimal commas and errors go through _cell_number()
+        except ValueError:
             v = _cell_number(cells, col, line, "value", layout)
-    if col.percent:
-        v *= 0.01
-    s, s_rel = math.nan, False
-    if scol is not None:
-        s = _cell_number(cells, scol, line, "uncertainty", layout)
-        if not math.isnan(s) and s < 0:
-            raise FormatError("negative uncertainty", file=layout.path, line=line,
-                              field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0", got=cells[scol.index])
-        s_rel = s_rel_spec
-        if scol.percent:
-            s *= 0.01
-    return v, s, s_rel, _SIDE_CODE[_value_side(line, col, q_side, d, layout, firsts, cells)]
-
-
-def _value_side(line: int, col: _Column, q_side: str | None, d: _RowDirection, layout: _Layout,
-                firsts: _Firsts, cells: list[str]) -> str | None:
-    """The side of one value cell: the row's, the one its quantity fixes, transmission beyond 90°."""
-    this_side = d.side
-    if q_side is not None:
-        if this_side is not None and this_side != q_side:
-            raise InputError(f"side contradicts the quantity {col.quantity}", file=layout.path, line=line,
-                             field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
-        this_side = q_side
-    if d.through:
-        if this_side == "reflection":
-            c = layout.roles["theta_s"][0]
-            raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
-                                  file=layout.path, line=line, field=f"column {c.index + 1} '{c.header}'",
-                                  expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
-                                           "transmission)", got=cells[c.index].strip())
-        this_side = "transmission"
-    elif this_side == "transmission" and 0.0 < abs(d.theta_s) < 90.0:
-        firsts.note("back", line)
-    if this_side is None:
-        firsts.note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
-    return this_side
+        else:
+            if math.isinf(v) or layout.decimal_comma:
+                v = _cell_number(cells, col, line, "value", layout)
+        if col.percent:
+            v *= 0.01
+        s, s_rel = math.nan, False
+        if scol is not None:
+            s = _cell_number(cells, scol, line, "uncertainty", layout)
+            if not math.isnan(s) and s < 0:
+                raise FormatError("negative uncertainty", file=layout.path, line=line,
+                                  field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
+                                  got=cells[scol.index])
+            s_rel = s_rel_spec
+            if scol.percent:
+                s *= 0.01
+        this_side = d.side
+        if q_side is not None:
+            if this_side is not None and this_side != q_side:
+                raise InputError(f"side contradicts the quantity {col.quantity}", file=layout.path, line=line,
+                                 field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
+            this_side = q_side
+        if d.through:
+            if this_side == "reflection":
+                c = layout.roles["theta_s"][0]
+                raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
+                                      file=layout.path, line=line, field=f"column {c.index + 1} '{c.header}'",
+                                      expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
+                                               "transmission)", got=cells[c.index].strip())
+            this_side = "transmission"
+        elif this_side == "transmission" and 0.0 < abs(d.theta_s) < 90.0:
+            firsts.note("back", line)
+        if this_side is None:
+            firsts.note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
+        out["side"].append(_SIDE_CODE[this_side])
+        out["value"].append(v)
+        out["std"].append(s)
+        out["std_relative"].append(s_rel)
+        out["theta_i"].append(d.theta_i if col.incidence is None else col.incidence)
+        out["wavelength"].append(d.wavelength if col.wavelength is None else col.wavelength)
+    n_v = len(layout.specs)
+    out["phi_i"].extend([d.phi_i] * n_v)
+    out["theta_s"].extend([d.theta_s] * n_v)
+    out["phi_s"].extend([d.phi_s] * n_v)
+    out["line"].extend([line] * n_v)
 
 
 def _row_cells(text: str, line: int, layout: _Layout) -> list[str] | None:
@@ -1477,9 +1487,9 @@ def _parse_by_rows(block: list[tuple[int, str]], layout: _Layout, state: _RowDef
                    pending: deque[tuple[int, str]], firsts: _Firsts) -> tuple[dict[str, NDArray], _RowDefaults]:
     """The entries of a block parsed row by row, and the row defaults after it (comments in ``pending`` and
     ``key: value`` lines between its rows change them)."""
-    out = {k: array("d") for k in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")}
-    out_rel, out_side, out_line = array("b"), array("b"), array("q")
-    n_cols, n_v = len(layout.columns), len(layout.specs)
+    out = {k: array("d") for k in _FLOAT_ENTRIES}
+    out.update(std_relative=array("b"), side=array("b"), line=array("q"))
+    n_cols = len(layout.columns)
     for line, text in block:
         while pending and pending[0][0] < line:
             state = _with_metadata(state, _metadata([pending.popleft()]), layout.path)
@@ -1496,22 +1506,10 @@ def _parse_by_rows(block: list[tuple[int, str]], layout: _Layout, state: _RowDef
         if len(cells) != n_cols:
             raise FormatError("wrong number of fields", file=layout.path, line=line, field="row",
                               expected=f"{n_cols} fields like the header", got=len(cells))
-        d = _row_direction(cells, line, layout, state, firsts)
-        for spec in layout.specs:
-            v, s, s_rel, side_code = _row_value(cells, line, spec, d, layout, firsts)
-            out_side.append(side_code)
-            out["value"].append(v)
-            out["std"].append(s)
-            out_rel.append(s_rel)
-            out["theta_i"].append(d.theta_i if spec[0].incidence is None else spec[0].incidence)
-            out["wavelength"].append(d.wavelength if spec[0].wavelength is None else spec[0].wavelength)
-        out["phi_i"].extend([d.phi_i] * n_v)
-        out["theta_s"].extend([d.theta_s] * n_v)
-        out["phi_s"].extend([d.phi_s] * n_v)
-        out_line.extend([line] * n_v)
-    entries = {k: np.frombuffer(x, dtype=np.float64) for k, x in out.items()}
-    entries.update(std_relative=np.frombuffer(out_rel, dtype=np.int8).astype(bool),
-                   side=np.frombuffer(out_side, dtype=np.int8), line=np.frombuffer(out_line, dtype=np.int64))
+        _row_values(cells, line, _row_direction(cells, line, layout, state, firsts), layout, firsts, out)
+    entries = {k: np.frombuffer(out[k], dtype=np.float64) for k in _FLOAT_ENTRIES}
+    entries.update(std_relative=np.frombuffer(out["std_relative"], dtype=np.int8).astype(bool),
+                   side=np.frombuffer(out["side"], dtype=np.int8), line=np.frombuffer(out["line"], dtype=np.int64))
     return entries, state
 
 
