@@ -59,6 +59,7 @@ from array import array
 from collections import deque
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -856,7 +857,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     _check_values(path, rows, rel)
     signed = "phi_s" not in roles
     stated = sorted({rows.quantities[k] for k in np.unique(rows.spec).tolist()})
-    ds = _assemble(path, rows, signed, rel, zeros, wavelength_known=bool(np.isfinite(rows.wavelength).any()))
+    ds = _assemble(path, rows, signed, rel, zeros)
     provenance = {
         "format": "measured-table",
         "reader": f"bsdfkit.measurement.table {__version__}",
@@ -1954,30 +1955,33 @@ def _azimuth_frame(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, v
     return "specular" if votes["specular"] and not votes["sample"] else "sample"
 
 
-def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str, wavelength_known: bool
-              ) -> xr.Dataset:
-    """The dataset of the parsed entries: records keyed by (side, θi, φi, θs, φs) rounded to 1e-9, in order of
-    first appearance, one per repetition of a direction. Computed in slices of :data:`_SLICE` entries on integer
-    codes; the entries of ``rows`` are released once the value matrices are filled."""
+def _theta_s_of(rows: _Rows, signed: bool, sl: Any) -> NDArray:
+    """θs [deg] of the entries ``sl``: |θs| of a signed in-plane angle."""
+    t = rows.theta_s[sl]
+    return np.abs(t) if signed else t
+
+
+def _phi_s_of(rows: _Rows, signed: bool, sl: Any) -> NDArray:
+    """φs [deg] in [0, 360) of the entries ``sl`` (0 at θs = 0); of a signed in-plane angle: the specular side
+    (φi − 180°) for θs ≥ 0, the source side (φi) below."""
+    ts = rows.theta_s[sl]
+    if signed:
+        pi_ = rows.phi_i[sl]
+        ps = np.where(ts >= 0, np.mod(pi_ - 180.0, 360.0), np.mod(pi_, 360.0))
+        ts = np.abs(ts)
+    else:
+        ps = rows.phi_s[sl]
+    p = np.mod(ps, 360.0)
+    return np.where((ts < 1e-12) | (p >= 360.0), 0.0, p)
+
+
+def _record_of_entries(rows: _Rows, signed: bool) -> tuple[NDArray, NDArray[np.int64]]:
+    """The record of every entry and the first entry of every record: records keyed by (side, θi, φi, θs, φs)
+    rounded to 1e-9, in order of first appearance, one per repetition of a direction."""
     n = rows.line.size
-
-    def theta_s(sl: Any) -> NDArray:
-        t = rows.theta_s[sl]
-        return np.abs(t) if signed else t
-
-    def phi_norm(sl: Any) -> NDArray:
-        ts = rows.theta_s[sl]
-        if signed:
-            pi_ = rows.phi_i[sl]
-            ps = np.where(ts >= 0, np.mod(pi_ - 180.0, 360.0), np.mod(pi_, 360.0))
-            ts = np.abs(ts)
-        else:
-            ps = rows.phi_s[sl]
-        p = np.mod(ps, 360.0)
-        return np.where((ts < 1e-12) | (p >= 360.0), 0.0, p)
-
     direction = [(rows.side, None), (rows.theta_i, _exact), (rows.phi_i, lambda u: _exact(np.mod(u, 360.0))),
-                 (theta_s, _exact), (phi_norm, lambda u: np.mod(_exact(u), 360.0))]
+                 (partial(_theta_s_of, rows, signed), _exact),
+                 (partial(_phi_s_of, rows, signed), lambda u: np.mod(_exact(u), 360.0))]
     # a direction measured more than once (the nadir of every C-plane, a repeated point) is kept as several
     # records, one per repetition: the hemispherical engine merges them with their spread in the uncertainty
     cell, n_cell = _codes_of_tuples([*direction, (rows.wavelength, None)], n)
@@ -2001,28 +2005,42 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     del code
     for i in range(0, n, _SLICE):
         rec_of[i: i + _SLICE] = rank[rec_of[i: i + _SLICE]]
-    first = first[order]
-    n_rec = first.size
-    rec_line = np.asarray(rows.line[first], dtype=np.int64).tolist()
-    rec_side = [SIDES[int(c)] for c in rows.side[first]]
-    rec_th_i, rec_ph_i = np.array(rows.theta_i[first]), np.array(rows.phi_i[first])
-    rec_th_s, rec_ph_s = theta_s(first), phi_norm(first)
+    return rec_of, first[order]
+
+
+@dataclass
+class _Records:
+    """The directions of the records [deg], their sides and first lines (φs rewritten once the azimuth origin
+    is known)."""
+
+    theta_i: NDArray[np.float64]
+    phi_i: NDArray[np.float64]
+    theta_s: NDArray[np.float64]
+    phi_s: NDArray[np.float64]
+    side: list[str]
+    line: list[int]
+
+
+def _records_of(rows: _Rows, first: NDArray[np.int64], signed: bool) -> _Records:
+    """The directions of the records from their first entries; the entries' directions are then released."""
+    rec = _Records(np.array(rows.theta_i[first]), np.array(rows.phi_i[first]), _theta_s_of(rows, signed, first),
+                   _phi_s_of(rows, signed, first), [SIDES[int(c)] for c in rows.side[first]],
+                   np.asarray(rows.line[first], dtype=np.int64).tolist())
     for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
         # the directions are in the records now: released
         setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
+    return rec
+
+
+def _wavelengths(rows: _Rows, path: str) -> tuple[NDArray[np.float64], bool]:
+    """The sorted distinct wavelengths [nm] of the entries (one NaN when none is stated) and whether any is;
+    refuses a table where stated and unstated wavelengths mix (a (record, wavelength) pair would repeat)."""
+    n = rows.line.size
     finite = [np.unique(w[np.isfinite(w)]) for w in (rows.wavelength[i: i + _SLICE] for i in range(0, n, _SLICE))]
     lam = np.unique(np.concatenate(finite)) if finite else np.zeros(0)
-    stated_lam = lam.size > 0
     if lam.size == 0:
-        lam = np.array([np.nan])
-
-    def lam_index(sl: slice) -> NDArray:
-        return np.searchsorted(lam, rows.wavelength[sl]) if stated_lam else np.zeros(len(range(*sl.indices(n))),
-                                                                                      dtype=np.int64)
-
-    # records are (direction, repetition) per wavelength: a (record, wavelength) pair cannot repeat, unless stated
-    # and unstated (NaN) wavelengths mix, which is refused
-    for i in range(0, n if stated_lam else 0, _SLICE):
+        return np.array([np.nan]), False
+    for i in range(0, n, _SLICE):
         unstated = np.isnan(rows.wavelength[i: i + _SLICE])
         if unstated.any():
             k = i + int(np.argmax(unstated))
@@ -2030,6 +2048,12 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
                               line=int(rows.line[k]), field="wavelength",
                               expected="a wavelength column, '# wavelength: NM' before the first block, or "
                                        "--wavelength NM", got="no wavelength")
+    return lam, True
+
+
+def _record_quantities(rows: _Rows, first: NDArray[np.int64], rec_of: NDArray, path: str) -> NDArray[np.object_]:
+    """The quantity of every record (that of its first entry); refuses a direction holding two quantities."""
+    n = rows.line.size
     q_names = sorted(set(rows.quantities))
     q_of_spec = np.array([q_names.index(q) for q in rows.quantities])
     q_first = q_of_spec[rows.spec[first]]
@@ -2041,49 +2065,65 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
                 raise ValidationError("one direction holds two quantities", file=path, line=int(rows.line[k]),
                                       field=rows.column(k), expected=q_names[q_first[rec_of[k]]],
                                       got=rows.quantity(k))
-    quantity = np.array([q_names[c] for c in q_first], dtype=object)
-    # no uncertainty column: one read-only NaN matrix of no size instead of a matrix of NaN
+    return np.array([q_names[c] for c in q_first], dtype=object)
+
+
+def _value_matrices(rows: _Rows, rec_of: NDArray, lam: NDArray[np.float64], stated_lam: bool, n_rec: int
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+    """Values and absolute uncertainties on (record, wavelength) (NaN = gap), and whether the table has no
+    uncertainty column (then the uncertainties are a read-only NaN matrix of no size); the entries are then
+    released."""
+    n = rows.line.size
     no_std = rows.std.strides == (0,) and bool(np.isnan(rows.std[:1]).all())
     values = np.full((n_rec, lam.size), np.nan)
     stds = np.broadcast_to(np.float64(np.nan), values.shape) if no_std else np.full((n_rec, lam.size), np.nan)
     v_flat, s_flat = values.reshape(-1), stds.reshape(-1)
     for i in range(0, n, _SLICE):
         sl = slice(i, i + _SLICE)
-        at = rec_of[sl].astype(np.int64) * lam.size + lam_index(sl)
+        lam_at = np.searchsorted(lam, rows.wavelength[sl]) if stated_lam else np.zeros(len(range(*sl.indices(n))),
+                                                                                       dtype=np.int64)
+        at = rec_of[sl].astype(np.int64) * lam.size + lam_at
         v = rows.value[sl]
         v_flat[at] = v
         if not no_std:
             s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
-    del rec_of, v_flat, s_flat, v, at
     for name in ("wavelength", "value", "std", "std_relative", "side", "spec", "line"):
         # the entries are in the matrices now: released
         setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
-    frame = "sample" if signed else _azimuth_frame(rec_th_i, rec_ph_i, rec_th_s, rec_ph_s, values)
-    if frame == "specular":  # φs measured from the specular direction: into the sample frame
-        rec_ph_s = np.where(rec_th_s < 1e-12, 0.0, np.mod(rec_ph_s + rec_ph_i - 180.0, 360.0))
-    # gaps: exact zeros per the policy
-    zero_records = 0
+    return values, stds, no_std
+
+
+def _zeros_as_gaps(values: NDArray[np.float64], zeros: str) -> tuple[NDArray[np.float64], int]:
+    """The values with exact zeros made gaps per the policy, and how many all-zero records became gaps."""
     if zeros == "missing":
-        values = np.where(values == 0.0, np.nan, values)
-    elif zeros == "auto":
+        return np.where(values == 0.0, np.nan, values), 0
+    if zeros == "auto":
         stated = np.isfinite(values)
         all_zero = stated.any(axis=1) & np.all(np.where(stated, values == 0.0, True), axis=1)
-        zero_records = int(all_zero.sum())
         values[all_zero] = np.nan
-    has_std = np.zeros(values.shape, dtype=bool) if no_std else np.isfinite(stds) & np.isfinite(values)
-    # convert to BSDF
+        return values, int(all_zero.sum())
+    return values, 0
+
+
+def _bsdf_matrices(values: NDArray[np.float64], stds: NDArray[np.float64], no_std: bool, quantity: NDArray,
+                   theta_s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """BSDF and its absolute uncertainty [1/sr] from the table's quantities (None: no uncertainty column)."""
     if len(set(quantity.tolist())) == 1:  # one quantity: converted whole (no copy for brdf/btdf/bsdf)
-        f = to_bsdf(values, quantity[0], rec_th_s)
-        s = None if no_std else np.abs(to_bsdf(stds, quantity[0], rec_th_s))
-    else:
-        f = np.full_like(values, np.nan)
-        s = np.full_like(values, np.nan)
-        for q in set(quantity.tolist()):
-            sel = quantity == q
-            f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
-            if not no_std:
-                s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
-    del values, stds
+        return (to_bsdf(values, quantity[0], theta_s),
+                None if no_std else np.abs(to_bsdf(stds, quantity[0], theta_s)))
+    f = np.full_like(values, np.nan)
+    s = np.full_like(values, np.nan)
+    for q in set(quantity.tolist()):
+        sel = quantity == q
+        f[sel] = to_bsdf(values[sel], q, theta_s[sel])
+        if not no_std:
+            s[sel] = np.abs(to_bsdf(stds[sel], q, theta_s[sel]))
+    return f, s
+
+
+def _fill_std(f: NDArray[np.float64], s: NDArray[np.float64] | None, has_std: NDArray[np.bool_], rel: float | None
+              ) -> tuple[NDArray[np.float64], str]:
+    """The uncertainty [1/sr] with ``relative_std · |f|`` where the table states none, and where it comes from."""
     rel_used = DEFAULT_RELATIVE_STD if rel is None else float(rel)
     if s is None or not has_std.any():  # rel · |f| everywhere, formed in place
         s = np.abs(f)
@@ -2091,34 +2131,54 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     else:
         np.copyto(s, rel_used * np.abs(f), where=~has_std)
         s[~np.isfinite(f)] = np.nan
+    if has_std.all():
+        return s, "the table's uncertainty column"
+    if has_std.any():
+        return s, (f"the table's uncertainty column where given, else {rel_used:g} x |bsdf|"
+                   + (" (assumed default)" if rel is None else ""))
+    return s, f"{rel_used:g} x |bsdf|" + (" (assumed default: the table states no uncertainty)" if rel is None
+                                          else " (relative_std given)")
+
+
+def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str) -> xr.Dataset:
+    """The dataset of the parsed entries: records keyed by (side, θi, φi, θs, φs) rounded to 1e-9, in order of
+    first appearance, one per repetition of a direction. Computed in slices of :data:`_SLICE` entries on integer
+    codes; the entries of ``rows`` are released once the value matrices are filled."""
+    wavelength_known = bool(np.isfinite(rows.wavelength).any())
+    rec_of, first = _record_of_entries(rows, signed)
+    rec = _records_of(rows, first, signed)
+    lam, stated_lam = _wavelengths(rows, path)
+    quantity = _record_quantities(rows, first, rec_of, path)
+    values, stds, no_std = _value_matrices(rows, rec_of, lam, stated_lam, first.size)
+    del rec_of
+    frame = "sample" if signed else _azimuth_frame(rec.theta_i, rec.phi_i, rec.theta_s, rec.phi_s, values)
+    if frame == "specular":  # φs measured from the specular direction: into the sample frame
+        rec.phi_s = np.where(rec.theta_s < 1e-12, 0.0, np.mod(rec.phi_s + rec.phi_i - 180.0, 360.0))
+    values, zero_records = _zeros_as_gaps(values, zeros)
+    has_std = np.zeros(values.shape, dtype=bool) if no_std else np.isfinite(stds) & np.isfinite(values)
+    f, s = _bsdf_matrices(values, stds, no_std, quantity, rec.theta_s)
+    del values, stds
+    s, origin = _fill_std(f, s, has_std, rel)
     keep = np.isfinite(f).any(axis=1)
-    dropped = int((~keep).sum())
     if not keep.any():
         raise InputError("the table holds no values (every cell is a gap)", file=path, field="value",
                          expected="at least one finite value")
-    if has_std.all():
-        origin = "the table's uncertainty column"
-    elif has_std.any():
-        origin = (f"the table's uncertainty column where given, else {rel_used:g} x |bsdf|"
-                  + (" (assumed default)" if rel is None else ""))
-    else:
-        origin = f"{rel_used:g} x |bsdf|" + (" (assumed default: the table states no uncertainty)" if rel is None
-                                              else " (relative_std given)")
     idx = np.flatnonzero(keep)
-    quantities = sorted(set(quantity.tolist()))
     note = "" if wavelength_known else "not stated by the table; pass --wavelength NM (NaN = unknown)"
-    if idx.size < n_rec:  # records without any value dropped (a copy of the matrices only then)
+    if idx.size < keep.size:  # records without any value dropped (a copy of the matrices only then)
         f, s = f[idx], s[idx]
-    ds = records_dataset(RecordDirections(rec_th_i[idx], rec_ph_i[idx], rec_th_s[idx], rec_ph_s[idx],
-                                          [rec_side[i] for i in idx], source_line=[rec_line[i] for i in idx]),
+    ds = records_dataset(RecordDirections(rec.theta_i[idx], rec.phi_i[idx], rec.theta_s[idx], rec.phi_s[idx],
+                                          [rec.side[i] for i in idx], source_line=[rec.line[i] for i in idx]),
                          lam, f, s, RecordsOrigin(path, std_origin=origin, wavelength_note=note,
                                                   description=f"measured table {Path(path).name}: "
-                                                              f"{', '.join(quantities)}, elastic"))
+                                                              f"{', '.join(sorted(set(quantity.tolist())))}, "
+                                                              "elastic"))
     if frame == "specular":
         ds.attrs["azimuth_note"] = ("phi_s read from the specular direction (phi_s = 0 on the specular side): the "
                                     "table's peaks sit at phi_s = 0 although phi_i is not 180 deg")
-    ds.attrs.update(gap_records_dropped=dropped, zero_records_as_gaps=zero_records, zeros_policy=zeros,
-                    negative_values=int(np.sum(f < 0)), relative_std=rel_used)
+    ds.attrs.update(gap_records_dropped=int((~keep).sum()), zero_records_as_gaps=zero_records, zeros_policy=zeros,
+                    negative_values=int(np.sum(f < 0)),
+                    relative_std=DEFAULT_RELATIVE_STD if rel is None else float(rel))
     if note:
         ds.attrs["wavelength_note"] = note
     return ds
