@@ -727,6 +727,118 @@ def _refuse_cut_end(source: _Source, path: str, delim: str | None) -> None:
                           expected=exc.expected, got=exc.got) from None
 
 
+def _check_options(zeros: str, side: str | None, relative_std: float | None, wavelength: float | None) -> None:
+    """Refuse options of :func:`read_table` outside their domain (before the file is opened)."""
+    if zeros not in ZERO_POLICIES:
+        raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
+    if side is not None and side not in SIDES:
+        raise InputError("unknown side", field="--side", expected="reflection | transmission", got=side)
+    if relative_std is not None and not (np.isfinite(relative_std) and relative_std > 0):
+        raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
+                         expected="> 0 (e.g. 0.05 for 5 %)", got=relative_std)
+    if wavelength is not None and not (np.isfinite(wavelength) and wavelength > 0):
+        raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+
+
+def _roles_of(columns: list[_Column], path: str, header_line: int) -> dict[str, list[_Column]]:
+    """The columns by role; at most one column per angle, wavelength and side."""
+    roles: dict[str, list[_Column]] = {}
+    for c in columns:
+        roles.setdefault(c.role, []).append(c)
+    for role in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "side"):
+        if len(roles.get(role, [])) > 1:
+            raise FormatError(f"two columns for {role}", file=path, line=header_line, field=roles[role][1].header,
+                              expected=f"one {role} column", got=[c.header for c in roles[role]])
+    return roles
+
+
+def _check_header_layout(columns: list[_Column], roles: dict[str, list[_Column]], path: str, header_line: int,
+                         wavelength: float | None, incidence: float | None) -> None:
+    """Refuse a header whose layout contradicts itself or the options: wavelengths or incidences both in a
+    column and in value headers (or also given as an option), no scatter angle, wavelength columns repeated
+    or not increasing."""
+    values = roles.get("value", [])
+    wide_wl = [c for c in values if c.wavelength is not None]
+    wide_inc = [c for c in values if c.incidence is not None]
+    if wide_wl and "wavelength" in roles:
+        raise FormatError("wavelength both in a column and in value headers", file=path, line=header_line,
+                          field=roles["wavelength"][0].header, expected="one of the two layouts")
+    if wide_inc and "theta_i" in roles:
+        raise FormatError("incidence both in a column and in value headers", file=path, line=header_line,
+                          field=roles["theta_i"][0].header, expected="one of the two layouts")
+    if "theta_s" not in roles:
+        raise FormatError("no scatter-angle column", file=path, line=header_line, field="header",
+                          expected="theta_s (with phi_s) or a signed in-plane scatter angle",
+                          got=[c.header for c in columns][:8])
+    if wavelength is not None and (wide_wl or "wavelength" in roles):
+        raise InputError("the table states its wavelengths; --wavelength is for monochrome tables", file=path,
+                         line=header_line, field="--wavelength", got=wavelength)
+    wl_list = [c.wavelength for c in wide_wl]
+    if len(set(np.round(wl_list, 9))) != len(wl_list):
+        dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][-1]
+        raise FormatError("wavelength given twice in the header", file=path, line=header_line, field=dup.header,
+                          expected="distinct wavelengths", got=dup.wavelength)
+    if len(wl_list) > 1 and np.any(np.diff(wl_list) <= 0):
+        bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
+        raise FormatError("wavelength columns not increasing", file=path, line=header_line, field=bad.header,
+                          expected="increasing wavelengths", got=bad.wavelength)
+    if incidence is not None and ("theta_i" in roles or wide_inc):
+        raise InputError("the table states its incidences; --incidence is for tables without them", file=path,
+                         line=header_line, field="--incidence", got=incidence)
+
+
+def _default_side(meta: dict[str, tuple[str, int]], side: str | None, path: str) -> str | None:
+    """The side of rows without a side column: ``--side`` or the metadata's (which must agree)."""
+    side_meta = None
+    if "side" in meta:
+        side_meta = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
+        if side_meta is None:
+            raise InputError("unknown side in the metadata", file=path, line=meta["side"][1], field="side",
+                             expected="reflection or transmission", got=meta["side"][0])
+    if side is not None and side_meta is not None and side != side_meta:
+        raise InputError("--side contradicts the table", file=path, line=meta["side"][1], field="side",
+                         expected=side_meta, got=side)
+    return side or side_meta
+
+
+def _provenance(layout: _Layout, text: _Text, header_line: int, meta: dict[str, tuple[str, int]],
+                comments: list[tuple[int, str]], stated: list[str]) -> dict[str, Any]:
+    """How the table was read (``manifest_json`` of its dataset): layout, delimiter, encoding, the role of each
+    column, the metadata and the first comments."""
+    columns = layout.columns
+    wide = any(c.wavelength is not None or c.incidence is not None for c in columns if c.role == "value")
+    return {
+        "format": "measured-table",
+        "reader": f"bsdfkit.measurement.table {__version__}",
+        "layout": "wide" if wide else "long",
+        "delimiter": {"\t": "tab", ";": "semicolon", ",": "comma", None: "whitespace"}[layout.delim],
+        "decimal_comma": bool(layout.decimal_comma),
+        "encoding": text.encoding,
+        "header_line": header_line,
+        "columns": {c.header: (c.role if c.role not in ("value", "std") else
+                               f"{c.role} ({c.quantity}"
+                               + (f", {c.wavelength:g} nm" if c.wavelength is not None else "")
+                               + (f", theta_i {c.incidence:g} deg" if c.incidence is not None else "") + ")")
+                    for c in columns},
+        "metadata": {k: v for k, (v, _) in meta.items()},
+        "comments": [c for _, c in comments][:50],
+        "quantity": stated,
+        "signed_in_plane_angle": layout.signed,
+    }
+
+
+def _row_defaults(meta: dict[str, tuple[str, int]], path: str, wavelength: float | None,
+                  incidence: float | None, phi_i: float | None) -> _RowDefaults:
+    """θi, φi [deg] and wavelength [nm] of rows without such columns: the options, else the metadata (φi
+    180°); the side is set later (:func:`_default_side`)."""
+    meta_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+    meta_inc = _meta_number(meta, "incidence", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    meta_phi = _meta_number(meta, "phi_i", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    return _RowDefaults(theta_i=incidence if incidence is not None else meta_inc,
+                        phi_i=phi_i if phi_i is not None else (meta_phi if meta_phi is not None else 180.0),
+                        wavelength=wavelength if wavelength is not None else meta_lambda, side=None)
+
+
 def read_table(path: str | Path, quantity: str | None = None, side: str | None = None,
                relative_std: float | None = None, *, wavelength: float | None = None,
                incidence: float | None = None, phi_i: float | None = None, zeros: str = "auto",
@@ -763,15 +875,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
         ``attrs['source_quantity']``.
     """
     path = str(path)
-    if zeros not in ZERO_POLICIES:
-        raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
-    if side is not None and side not in SIDES:
-        raise InputError("unknown side", field="--side", expected="reflection | transmission", got=side)
-    if relative_std is not None and not (np.isfinite(relative_std) and relative_std > 0):
-        raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
-                         expected="> 0 (e.g. 0.05 for 5 %)", got=relative_std)
-    if wavelength is not None and not (np.isfinite(wavelength) and wavelength > 0):
-        raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+    _check_options(zeros, side, relative_std, wavelength)
     source = _Source(path)
     text = _load_text(path, source)  # the head of the file; the data rows are streamed by _parse_rows
     k_header, delim, columns, preamble = _find_header(text)
@@ -786,96 +890,31 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     if not data:
         raise FormatError("header only, no data rows", file=path, line=header_line, field="data",
                           expected="data rows after the header")
-    roles: dict[str, list[_Column]] = {}
-    for c in columns:
-        roles.setdefault(c.role, []).append(c)
-    for role in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "side"):
-        if len(roles.get(role, [])) > 1:
-            raise FormatError(f"two columns for {role}", file=path, line=header_line, field=roles[role][1].header,
-                              expected=f"one {role} column", got=[c.header for c in roles[role]])
-    values = roles.get("value", [])
-    wide_wl = [c for c in values if c.wavelength is not None]
-    wide_inc = [c for c in values if c.incidence is not None]
-    if wide_wl and "wavelength" in roles:
-        raise FormatError("wavelength both in a column and in value headers", file=path, line=header_line,
-                          field=roles["wavelength"][0].header, expected="one of the two layouts")
-    if wide_inc and "theta_i" in roles:
-        raise FormatError("incidence both in a column and in value headers", file=path, line=header_line,
-                          field=roles["theta_i"][0].header, expected="one of the two layouts")
-    if "theta_s" not in roles:
-        raise FormatError("no scatter-angle column", file=path, line=header_line, field="header",
-                          expected="theta_s (with phi_s) or a signed in-plane scatter angle",
-                          got=[c.header for c in columns][:8])
-    if wavelength is not None and (wide_wl or "wavelength" in roles):
-        raise InputError("the table states its wavelengths; --wavelength is for monochrome tables", file=path,
-                         line=header_line, field="--wavelength", got=wavelength)
-    wl_list = [c.wavelength for c in wide_wl]
-    if len(set(np.round(wl_list, 9))) != len(wl_list):
-        dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][-1]
-        raise FormatError("wavelength given twice in the header", file=path, line=header_line, field=dup.header,
-                          expected="distinct wavelengths", got=dup.wavelength)
-    if len(wl_list) > 1 and np.any(np.diff(wl_list) <= 0):
-        bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
-        raise FormatError("wavelength columns not increasing", file=path, line=header_line, field=bad.header,
-                          expected="increasing wavelengths", got=bad.wavelength)
-    if incidence is not None and ("theta_i" in roles or wide_inc):
-        raise InputError("the table states its incidences; --incidence is for tables without them", file=path,
-                         line=header_line, field="--incidence", got=incidence)
+    roles = _roles_of(columns, path, header_line)
+    _check_header_layout(columns, roles, path, header_line, wavelength, incidence)
     _resolve_quantity(columns, meta, quantity, path, header_line)
     _pair_std(columns, path, header_line)
-    meta_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
-    meta_inc = _meta_number(meta, "incidence", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
-    meta_phi = _meta_number(meta, "phi_i", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    defaults = _row_defaults(meta, path, wavelength, incidence, phi_i)
     meta_rel = _meta_number(meta, "relative_std", path, {"": 1.0, "%": 0.01}, "")
-    mono_lambda = wavelength if wavelength is not None else meta_lambda
-    theta_i_default = incidence if incidence is not None else meta_inc
-    phi_i_default = phi_i if phi_i is not None else (meta_phi if meta_phi is not None else 180.0)
-    if "theta_i" not in roles and not wide_inc and theta_i_default is None \
+    wide_inc = any(c.incidence is not None for c in roles.get("value", []))
+    if "theta_i" not in roles and not wide_inc and defaults.theta_i is None \
             and not _states_incidence(_events(source, header_line, units_line, []), delim):
         raise FormatError("no incidence column", file=path, line=header_line, field="header",
                           expected="a theta_i / AOI / incidence column, '# incidence: 10 deg', or --incidence",
                           got=[c.header for c in columns][:8])
-    side_meta = None
-    if "side" in meta:
-        side_meta = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
-        if side_meta is None:
-            raise InputError("unknown side in the metadata", file=path, line=meta["side"][1], field="side",
-                             expected="reflection or transmission", got=meta["side"][0])
-    if side is not None and side_meta is not None and side != side_meta:
-        raise InputError("--side contradicts the table", file=path, line=meta["side"][1], field="side",
-                         expected=side_meta, got=side)
-    default_side = side or side_meta
+    defaults = replace(defaults, side=_default_side(meta, side, path))
     rel = relative_std if relative_std is not None else (meta_rel if meta_rel is not None else None)
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
     comments = [c for c in text.comments if c[0] < header_line]
     layout = _layout(path, delim, columns, roles, decimal_comma, _fields(text.lines[k_header][1], delim))
-    rows = _parse_rows(_events(source, header_line, units_line, comments), layout,
-                       _RowDefaults(theta_i_default, phi_i_default, mono_lambda, default_side),
+    rows = _parse_rows(_events(source, header_line, units_line, comments), layout, defaults,
                        _rows_estimate(path, data))
     _refuse_cut_last_block(path, rows)
     _check_units(path, rows, roles)
     _check_values(path, rows, rel)
-    signed = "phi_s" not in roles
     stated = sorted({rows.quantities[k] for k in np.unique(rows.spec).tolist()})
-    ds = _assemble(path, rows, signed, rel, zeros)
-    provenance = {
-        "format": "measured-table",
-        "reader": f"bsdfkit.measurement.table {__version__}",
-        "layout": "wide" if (wide_wl or wide_inc) else "long",
-        "delimiter": {"\t": "tab", ";": "semicolon", ",": "comma", None: "whitespace"}[delim],
-        "decimal_comma": bool(decimal_comma),
-        "encoding": text.encoding,
-        "header_line": header_line,
-        "columns": {c.header: (c.role if c.role not in ("value", "std") else
-                               f"{c.role} ({c.quantity}"
-                               + (f", {c.wavelength:g} nm" if c.wavelength is not None else "")
-                               + (f", theta_i {c.incidence:g} deg" if c.incidence is not None else "") + ")")
-                    for c in columns},
-        "metadata": {k: v for k, (v, _) in meta.items()},
-        "comments": [c for _, c in comments][:50],
-        "quantity": stated,
-        "signed_in_plane_angle": signed,
-    }
+    ds = _assemble(path, rows, layout.signed, rel, zeros)
+    provenance = _provenance(layout, text, header_line, meta, comments, stated)
     ds.attrs.update(
         source_format="text table",
         source_layout=provenance["layout"],
