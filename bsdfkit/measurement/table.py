@@ -839,6 +839,22 @@ def _row_defaults(meta: dict[str, tuple[str, int]], path: str, wavelength: float
                         wavelength=wavelength if wavelength is not None else meta_lambda, side=None)
 
 
+def _data_head(text: _Text, k_header: int, delim: str | None, columns: list[_Column]
+               ) -> tuple[list[tuple[int, str]], int | None]:
+    """The data lines of the table's head and the line of a units row right after the header (applied to the
+    columns), or None; refuses a header without data rows."""
+    header_line = text.lines[k_header][0]
+    data = text.lines[k_header + 1:]
+    units_line = None
+    if data and _units_row(data[0][1], delim, columns, text.path, data[0][0]):
+        units_line = data[0][0]
+        data = data[1:]
+    if not data:
+        raise FormatError("header only, no data rows", file=text.path, line=header_line, field="data",
+                          expected="data rows after the header")
+    return data, units_line
+
+
 def read_table(path: str | Path, quantity: str | None = None, side: str | None = None,
                relative_std: float | None = None, *, wavelength: float | None = None,
                incidence: float | None = None, phi_i: float | None = None, zeros: str = "auto",
@@ -882,14 +898,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     _refuse_cut_end(source, path, delim)
     header_line = text.lines[k_header][0]
     meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
-    data = text.lines[k_header + 1:]
-    units_line = None
-    if data and _units_row(data[0][1], delim, columns, path, data[0][0]):
-        units_line = data[0][0]
-        data = data[1:]
-    if not data:
-        raise FormatError("header only, no data rows", file=path, line=header_line, field="data",
-                          expected="data rows after the header")
+    data, units_line = _data_head(text, k_header, delim, columns)
     roles = _roles_of(columns, path, header_line)
     _check_header_layout(columns, roles, path, header_line, wavelength, incidence)
     _resolve_quantity(columns, meta, quantity, path, header_line)
