@@ -19,6 +19,8 @@ from typing import Any
 
 import xarray as xr
 
+from bsdfkit.measurement.schema import validate_bsdf_dataset
+
 
 @xr.register_dataset_accessor("bsdf")
 class BsdfAccessor:
@@ -55,6 +57,12 @@ class BsdfAccessor:
         from bsdfkit import api
 
         return api.fit_bsdf(self._ds, interaction, side, model, **options)
+
+    def validate(self) -> xr.Dataset:
+        """The dataset when it follows the BSDF dataset schema, else a one-line
+        :class:`~bsdfkit.core.errors.ValidationError` naming the variable, what was expected and what was found
+        (:func:`bsdfkit.measurement.schema.validate_bsdf_dataset`)."""
+        return validate_bsdf_dataset(self._ds)
 
     def save(self, path: str | Path, force: bool = False) -> Path:
         """Write the dataset to netCDF atomically (never overwrites without ``force``)."""

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bsdfkit.measurement.table import records_dataset
+from bsdfkit.measurement.table import RecordDirections, RecordsOrigin, records_dataset
 from bsdfkit.reduction.tis import polar_grid
 
 
@@ -110,5 +110,5 @@ def table(truth: Truth, geometry: str, incidences: tuple[float, ...], side: str 
     by = np.sin(np.radians(th)) * np.sin(np.radians(ph))
     f = np.array([truth.f(t, x, y) for t, x, y in zip(ti, bx, by)])
     f = f * (1 + noise * rng.standard_normal(f.size))
-    return records_dataset(ti, np.full(ti.size, 180.0), th, ph, [side] * ti.size, [550.0], f[:, None],
-                           relative_std * np.abs(f)[:, None], source=f"synthetic-{geometry}")
+    return records_dataset(RecordDirections(ti, np.full(ti.size, 180.0), th, ph, [side] * ti.size), [550.0],
+                           f[:, None], relative_std * np.abs(f)[:, None], RecordsOrigin(f"synthetic-{geometry}"))

@@ -32,12 +32,15 @@ linearity, stray light, T_ND; listed in docs/raw-format.md) are not.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.measurement.instrument import Instrument, aperture_solid_angle, aperture_solid_angle_small
+from bsdfkit.measurement.schema import new_bsdf_dataset
 
 __all__ = ["calibrate", "aperture_solid_angle", "aperture_solid_angle_small", "dark_statistics"]
 
@@ -75,133 +78,122 @@ def _net(counts: np.ndarray, exposure: np.ndarray, darks: dict, gain: float, sou
     return net, var, dark_var
 
 
+@dataclass(frozen=True)
+class _Incident:
+    """The reference beam per configuration (rows of ``configuration`` × ``wavelength``)."""
+
+    power: np.ndarray  # P_i per pixel [counts/s]
+    var_power: np.ndarray  # its variance
+    valid: np.ndarray  # incident light present
+    flux: np.ndarray  # Φ_i, band-integrated, responsivity-corrected (one per configuration)
+    var_flux: np.ndarray  # its variance
+    spectrum: np.ndarray  # normalised incident spectrum [1/nm]
+
+
+def _incident_of(raw: xr.Dataset, name: str, darks: dict, gain: float, source: str
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """P_i, its variance and the valid pixels of one configuration's reference beam."""
+    sel = raw["reference_config"].values == name
+    if not np.any(sel):
+        raise InputError("no reference-beam frames for a configuration", file=source, field="reference_file",
+                         expected=f"frames for configuration '{name}'")
+    t_ref = raw["reference_exposure"].values[sel]
+    net, var, _ = _net(raw["reference_counts"].values[sel], t_ref, darks, gain, source)
+    rate = (net / t_ref[:, None]).mean(axis=0)
+    var_rate = (var / t_ref[:, None] ** 2).sum(axis=0) / sel.sum() ** 2
+    att = float(raw["reference_attenuation"].sel(configuration=name))
+    power, var_power = rate / att, var_rate / att**2
+    peak = power.max()
+    valid = (power > INCIDENT_THRESHOLD * peak) & (power > 10.0 * np.sqrt(var_power))
+    if not valid.any():
+        raise NumericalError("zero incident power in the reference beam", file=source,
+                             field=f"configuration '{name}'",
+                             expected="a reference spectrum above 10 standard uncertainties somewhere",
+                             got=f"peak {peak:.3g} counts/s")
+    return power, var_power, valid
+
+
+def _incident(raw: xr.Dataset, darks: dict, gain: float, source: str) -> _Incident:
+    """The reference beam of every configuration, its band-integrated power Φ_i and normalised spectrum."""
+    lam = raw["wavelength"].values
+    resp = raw["responsivity"].values
+    weights = np.gradient(lam)  # trapezoid-like Δλ per pixel (exact Δλ on a uniform grid)
+    parts = [_incident_of(raw, name, darks, gain, source) for name in raw["configuration"].values]
+    power, var_power, valid = (np.array([p[k] for p in parts]) for k in range(3))
+    spectral = np.where(valid, power / resp, 0.0)
+    flux = np.sum(spectral * weights, axis=1)
+    var_flux = np.sum(np.where(valid, var_power / resp**2, 0.0) * weights**2, axis=1)
+    return _Incident(power, var_power, valid, flux, var_flux, spectral / flux[:, None])
+
+
+def _records(raw: xr.Dataset, inc: _Incident, instrument: Instrument, darks: dict, source: str
+             ) -> dict[str, np.ndarray]:
+    """The per-record values of the measurement equation: BSDF, bi-spectral BSDF, their uncertainties and noise
+    floors, and the flags (``saturated``, ``below_dark``, ``grazing``)."""
+    gain = float(raw.attrs["gain_e_per_count"])
+    configs = list(raw["configuration"].values)
+    cfg_index = np.array([configs.index(c) for c in raw["config"].values])
+    t = raw["exposure"].values
+    counts = raw["counts"].values
+    net, var, dark_var = _net(counts, t, darks, gain, source)
+    # the dark noise pooled over the pixels (a per-pixel variance from a few frames can be tiny by chance)
+    pooled = np.median(dark_var, axis=1, keepdims=True)
+    theta_s = np.radians(raw["theta_s"].values)
+    grazing = theta_s > np.pi / 2 - 2 * instrument.half_angle_rad
+    geom = instrument.solid_angle_sr * np.where(grazing, np.nan, np.cos(theta_s))[:, None]
+    rate = net / t[:, None]
+    var_rate = var / t[:, None] ** 2
+    pi_rec = inc.power[cfg_index]
+    ok = inc.valid[cfg_index] & ~grazing[:, None]
+    flux = inc.flux[cfg_index]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        denom = np.where(ok, pi_rec * geom, np.nan)
+        bsdf = rate / denom
+        bsdf_var = var_rate / denom**2 + bsdf**2 * (inc.var_power[cfg_index] / pi_rec**2)
+        denom_b = flux[:, None] * geom * raw["responsivity"].values[None, :]
+        bisp = rate / denom_b
+        bisp_var = var_rate / denom_b**2 + bisp**2 * (inc.var_flux[cfg_index] / flux**2)[:, None]
+        return {"bsdf": bsdf, "bsdf_std": np.sqrt(bsdf_var), "noise_floor": np.sqrt(dark_var) / t[:, None] / denom,
+                "bsdf_bispectral": bisp, "bsdf_bispectral_std": np.sqrt(bisp_var),
+                "noise_floor_bispectral": np.sqrt(dark_var) / t[:, None] / denom_b,
+                "saturated": counts >= float(raw.attrs["full_scale_counts"]),
+                "below_dark": net < -BELOW_DARK_SIGMA * np.sqrt(np.maximum(dark_var, pooled)), "grazing": grazing}
+
+
 def calibrate(raw: xr.Dataset) -> xr.Dataset:
     """Calibrate a raw scan (from :func:`bsdfkit.measurement.raw_scan.read_scan`) into a BSDF dataset.
 
     Returns a Dataset over ``record`` × ``wavelength`` with ``bsdf`` and ``bsdf_std`` (1/sr; NaN where there is
     no incident light at λ or the position is grazing, see ``incident_valid`` and ``grazing``),
     ``bsdf_bispectral`` and its std (1/(sr·nm)), the noise floors (noise-equivalent BSDFs), ``saturated``,
-    and per configuration the normalised incident spectrum ``incident_spectrum`` (1/nm, unit integral).
+    and per configuration the normalised incident spectrum ``incident_spectrum`` (1/nm, unit integral); the
+    schema of :mod:`bsdfkit.measurement.schema`.
     """
     source = raw.attrs.get("source", "<dataset>")
     instrument = Instrument(raw.attrs["detector_distance_mm"], raw.attrs["aperture_diameter_mm"],
                             raw.attrs["beam_diameter_mm"])
-    gain = float(raw.attrs["gain_e_per_count"])
-    full_scale = float(raw.attrs["full_scale_counts"])
-    lam = raw["wavelength"].values
     darks = dark_statistics(raw)
-    resp = raw["responsivity"].values
-    omega = instrument.solid_angle_sr
-    half = instrument.half_angle_rad
-
-    configs = list(raw["configuration"].values)
-    n_cfg, n_wl = len(configs), lam.size
-    p_i = np.zeros((n_cfg, n_wl))
-    var_p_i = np.zeros((n_cfg, n_wl))
-    valid = np.zeros((n_cfg, n_wl), dtype=bool)
-    phi = np.zeros(n_cfg)
-    var_phi = np.zeros(n_cfg)
-    spectrum = np.zeros((n_cfg, n_wl))
-    weights = np.gradient(lam)  # trapezoid-like Δλ per pixel (exact Δλ on a uniform grid)
-    for c, name in enumerate(configs):
-        sel = raw["reference_config"].values == name
-        if not np.any(sel):
-            raise InputError("no reference-beam frames for a configuration", file=source, field="reference_file",
-                             expected=f"frames for configuration '{name}'")
-        t_ref = raw["reference_exposure"].values[sel]
-        net, var, _ = _net(raw["reference_counts"].values[sel], t_ref, darks, gain, source)
-        rate = (net / t_ref[:, None]).mean(axis=0)
-        var_rate = (var / t_ref[:, None] ** 2).sum(axis=0) / sel.sum() ** 2
-        att = float(raw["reference_attenuation"].sel(configuration=name))
-        p_i[c] = rate / att
-        var_p_i[c] = var_rate / att**2
-        peak = p_i[c].max()
-        valid[c] = (p_i[c] > INCIDENT_THRESHOLD * peak) & (p_i[c] > 10.0 * np.sqrt(var_p_i[c]))
-        if not valid[c].any():
-            raise NumericalError("zero incident power in the reference beam", file=source,
-                                 field=f"configuration '{name}'",
-                                 expected="a reference spectrum above 10 standard uncertainties somewhere",
-                                 got=f"peak {peak:.3g} counts/s")
-        power = np.where(valid[c], p_i[c] / resp, 0.0)
-        phi[c] = np.sum(power * weights)
-        var_phi[c] = np.sum(np.where(valid[c], var_p_i[c] / resp**2, 0.0) * weights**2)
-        spectrum[c] = power / phi[c]
-
-    cfg_index = np.array([configs.index(c) for c in raw["config"].values])
-    t = raw["exposure"].values
-    counts = raw["counts"].values
-    net, var, dark_var = _net(counts, t, darks, gain, source)
-    saturated = counts >= full_scale
-    # the dark noise pooled over the pixels (a per-pixel variance from a few frames can be tiny by chance)
-    pooled = np.median(dark_var, axis=1, keepdims=True)
-    below_dark = net < -BELOW_DARK_SIGMA * np.sqrt(np.maximum(dark_var, pooled))
-    theta_s = np.radians(raw["theta_s"].values)
-    grazing = theta_s > np.pi / 2 - 2 * half
-    cos = np.where(grazing, np.nan, np.cos(theta_s))
-    geom = omega * cos[:, None]
-    rate = net / t[:, None]
-    var_rate = var / t[:, None] ** 2
-    pi_rec = p_i[cfg_index]
-    ok = valid[cfg_index] & ~grazing[:, None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        denom = np.where(ok, pi_rec * geom, np.nan)
-        bsdf = rate / denom
-        rel_ref = var_p_i[cfg_index] / pi_rec**2
-        bsdf_var = var_rate / denom**2 + bsdf**2 * rel_ref
-        floor = np.sqrt(dark_var) / t[:, None] / denom
-        denom_b = phi[cfg_index][:, None] * geom * resp[None, :]
-        bisp = rate / denom_b
-        bisp_var = var_rate / denom_b**2 + bisp**2 * (var_phi[cfg_index] / phi[cfg_index] ** 2)[:, None]
-        floor_b = np.sqrt(dark_var) / t[:, None] / denom_b
-
-    coords = {k: raw[k] for k in ("config", "theta_i", "phi_i", "theta_s", "phi_s", "side", "arc", "exposure",
-                                  "source_line")}
-    ds = xr.Dataset(
-        {
-            "bsdf": (("record", "wavelength"), bsdf),
-            "bsdf_std": (("record", "wavelength"), np.sqrt(bsdf_var)),
-            "noise_floor": (("record", "wavelength"), floor),
-            "bsdf_bispectral": (("record", "wavelength"), bisp),
-            "bsdf_bispectral_std": (("record", "wavelength"), np.sqrt(bisp_var)),
-            "noise_floor_bispectral": (("record", "wavelength"), floor_b),
-            "saturated": (("record", "wavelength"), saturated),
-            "below_dark": (("record", "wavelength"), below_dark),
-            "grazing": ("record", grazing),
-            "incident_spectrum": (("configuration", "wavelength"), spectrum),
-            "incident_relative_std": (("configuration", "wavelength"),
-                                      np.where(valid, np.sqrt(var_p_i) / np.where(valid, p_i, 1.0), np.nan)),
-            "incident_valid": (("configuration", "wavelength"), valid),
-            "incident_power_relative_std": ("configuration", np.sqrt(var_phi) / phi),
-            "incident_band": raw["incident_band"],
-            "configuration_description": raw["configuration_description"],
-        },
-        coords={**coords, "wavelength": raw["wavelength"], "configuration": raw["configuration"],
-                "band_edge": raw["band_edge"]},
-    )
+    inc = _incident(raw, darks, float(raw.attrs["gain_e_per_count"]), source)
+    data: dict[str, Any] = _records(raw, inc, instrument, darks, source)
+    data.update(incident_spectrum=inc.spectrum,
+                incident_relative_std=np.where(inc.valid, np.sqrt(inc.var_power) / np.where(inc.valid, inc.power, 1.0),
+                                               np.nan),
+                incident_valid=inc.valid, incident_power_relative_std=np.sqrt(inc.var_flux) / inc.flux,
+                incident_band=raw["incident_band"], configuration_description=raw["configuration_description"])
     for name in ("band_series", "excitation_wavelength"):  # present for a monochromator scan only
         if name in raw:
-            ds[name] = raw[name]
-    ds["bsdf"].attrs.update(units="1/sr", long_name="BSDF", note="NaN where incident_valid is false or grazing is true")
-    ds["bsdf_std"].attrs.update(units="1/sr", long_name="standard uncertainty of bsdf (counting and dark noise)")
-    ds["noise_floor"].attrs.update(units="1/sr", long_name="noise-equivalent BSDF (dark noise)")
-    ds["bsdf_bispectral"].attrs.update(units="1/(sr nm)",
-                                       long_name="band-averaged bi-spectral BSDF <q_lambda>(lambda_s)",
-                                       note="eq. (10) of the power-budget paper; NaN only where grazing")
-    ds["bsdf_bispectral_std"].attrs.update(units="1/(sr nm)")
-    ds["noise_floor_bispectral"].attrs.update(units="1/(sr nm)")
-    ds["incident_spectrum"].attrs.update(units="1/nm", long_name="incident spectral power, normalised to unit integral")
-    ds["incident_relative_std"].attrs.update(
-        units="1", long_name="relative standard uncertainty of the reference-beam power per pixel",
-        note="common to every record of the configuration: a fully correlated scale uncertainty")
-    ds["incident_power_relative_std"].attrs.update(
-        units="1", long_name="relative standard uncertainty of the band-integrated incident power Φ_i",
-        note="common to every bi-spectral value of the configuration")
-    ds["saturated"].attrs["long_name"] = "raw counts at full scale"
-    ds["below_dark"].attrs.update(long_name=f"signal more than {BELOW_DARK_SIGMA:g} standard uncertainties below "
-                                            "the dark level (dark frames above the signal?)")
-    ds["grazing"].attrs["long_name"] = "aperture within one diameter of the horizon; BSDF masked"
+            data[name] = raw[name]
+    coords = {k: raw[k] for k in ("config", "theta_i", "phi_i", "theta_s", "phi_s", "side", "arc", "exposure",
+                                  "source_line", "wavelength", "configuration", "band_edge")}
+    ds = new_bsdf_dataset(data, coords, _attributes(raw, instrument, data["below_dark"], source))
+    _describe(ds)
+    return ds
+
+
+def _attributes(raw: xr.Dataset, instrument: Instrument, below_dark: np.ndarray, source: str) -> dict[str, Any]:
+    """The dataset attributes of a calibrated scan: the schema's, the gain and the below-dark counts."""
     geometry = {k: raw.attrs[k] for k in ("detector_distance_mm", "aperture_diameter_mm", "beam_diameter_mm")}
-    ds.attrs.update(
+    return dict(
         quantity="bsdf",
         frame="sample",
         side="reflection transmission",
@@ -211,15 +203,34 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
         sample_name=raw.attrs.get("sample_name", ""),
         synthetic=raw.attrs.get("synthetic", 0),
         source=source,
-        solid_angle_sr=omega,
-        aperture_half_angle_deg=float(np.degrees(half)),
-        gain_e_per_count=gain,
+        solid_angle_sr=instrument.solid_angle_sr,
+        aperture_half_angle_deg=float(np.degrees(instrument.half_angle_rad)),
+        gain_e_per_count=float(raw.attrs["gain_e_per_count"]),
         manifest_json=raw.attrs.get("manifest_json", "{}"),
         below_dark_pixels=int(below_dark.sum()),
-        negative_raw_counts=int((counts < 0).sum()),
+        negative_raw_counts=int((raw["counts"].values < 0).sum()),
         **geometry,
     )
-    return ds
+
+
+def _describe(ds: xr.Dataset) -> None:
+    """The long names and notes of a calibrated scan's variables (units come from the schema)."""
+    ds["bsdf"].attrs.update(long_name="BSDF", note="NaN where incident_valid is false or grazing is true")
+    ds["bsdf_std"].attrs.update(long_name="standard uncertainty of bsdf (counting and dark noise)")
+    ds["noise_floor"].attrs.update(long_name="noise-equivalent BSDF (dark noise)")
+    ds["bsdf_bispectral"].attrs.update(long_name="band-averaged bi-spectral BSDF <q_lambda>(lambda_s)",
+                                       note="eq. (10) of the power-budget paper; NaN only where grazing")
+    ds["incident_spectrum"].attrs.update(long_name="incident spectral power, normalised to unit integral")
+    ds["incident_relative_std"].attrs.update(
+        long_name="relative standard uncertainty of the reference-beam power per pixel",
+        note="common to every record of the configuration: a fully correlated scale uncertainty")
+    ds["incident_power_relative_std"].attrs.update(
+        long_name="relative standard uncertainty of the band-integrated incident power Φ_i",
+        note="common to every bi-spectral value of the configuration")
+    ds["saturated"].attrs["long_name"] = "raw counts at full scale"
+    ds["below_dark"].attrs.update(long_name=f"signal more than {BELOW_DARK_SIGMA:g} standard uncertainties below "
+                                            "the dark level (dark frames above the signal?)")
+    ds["grazing"].attrs["long_name"] = "aperture within one diameter of the horizon; BSDF masked"
 
 
 def truth_tis(ds: xr.Dataset) -> dict[str, dict[str, float]] | None:

@@ -138,9 +138,33 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
     sample = _get(data, "sample", dict, path, "sample")
     name = _get(sample, "name", str, path, "sample.name")
     synthetic = bool(_get(sample, "synthetic", bool, path, "sample.synthetic", required=False) or False)
+    instrument = _instrument(data, path)
+    spec = _spectrometer(data, path)
+    folder = path.parent
+    resp = _file(folder, spec.responsivity, path, "spectrometer.responsivity_file") if spec.responsivity else None
+    dark = _get(data, "dark", dict, path, "dark")
+    dark_file = _file(folder, _get(dark, "file", str, path, "dark.file"), path, "dark.file")
+    series_raw = _get(data, "band_series", list, path, "band_series", required=False) or []
+    configs_raw = _get(data, "configuration", list, path, "configuration", required=not series_raw) or []
+    if not configs_raw and not series_raw:
+        raise InputError("no incident configuration", file=path, field="configuration",
+                         expected="at least one [[configuration]] or [[band_series]]")
+    seen: set[str] = set()
+    configs = [_configuration(c, k, folder, path, seen) for k, c in enumerate(configs_raw)]
+    for k, entry in enumerate(series_raw):
+        configs.extend(_band_series(entry, k, folder, path, seen))
+    return Manifest(path=path, sample_name=name, synthetic=synthetic, instrument=instrument,
+                    wavelength_min_nm=spec.wavelength_min_nm, wavelength_max_nm=spec.wavelength_max_nm,
+                    wavelength_step_nm=spec.wavelength_step_nm, gain_e_per_count=spec.gain_e_per_count,
+                    full_scale_counts=spec.full_scale_counts, responsivity_file=resp, dark_file=dark_file,
+                    configurations=tuple(configs), raw=data)
+
+
+def _instrument(data: Any, path: Path) -> Instrument:
+    """The ``[instrument]`` table: detector distance, aperture and beam diameters [mm]."""
     inst = _get(data, "instrument", dict, path, "instrument")
     try:
-        instrument = Instrument(
+        return Instrument(
             detector_distance_mm=float(_get(inst, "detector_distance_mm", float, path,
                                             "instrument.detector_distance_mm")),
             aperture_diameter_mm=float(_get(inst, "aperture_diameter_mm", float, path,
@@ -149,6 +173,23 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
         )
     except ValidationError as exc:
         raise ValidationError(str(exc), file=path) from None
+
+
+@dataclass(frozen=True)
+class _Spectrometer:
+    """The ``[spectrometer]`` table, checked (wavelengths [nm])."""
+
+    wavelength_min_nm: float
+    wavelength_max_nm: float
+    wavelength_step_nm: float
+    gain_e_per_count: float
+    full_scale_counts: int
+    responsivity: str | None  # the responsivity file's name as written, if any
+
+
+def _spectrometer(data: Any, path: Path) -> _Spectrometer:
+    """Read and check ``[spectrometer]``: a non-empty wavelength grid of at most :data:`MAX_WAVELENGTHS`, a
+    positive gain and full scale."""
     spec = _get(data, "spectrometer", dict, path, "spectrometer")
     wmin = _in_nm(float(_get(spec, "wavelength_min_nm", float, path, "spectrometer.wavelength_min_nm")), path,
                   "spectrometer.wavelength_min_nm")
@@ -172,45 +213,32 @@ def read_manifest(folder_or_file: str | Path) -> Manifest:
         raise ValidationError("full scale must be positive (every pixel would be saturated)", file=path,
                               field="spectrometer.full_scale_counts", expected="an integer > 0", got=full_scale)
     resp_name = _get(spec, "responsivity_file", str, path, "spectrometer.responsivity_file", required=False)
-    folder = path.parent
-    resp = _file(folder, resp_name, path, "spectrometer.responsivity_file") if resp_name else None
-    dark = _get(data, "dark", dict, path, "dark")
-    dark_file = _file(folder, _get(dark, "file", str, path, "dark.file"), path, "dark.file")
-    series_raw = _get(data, "band_series", list, path, "band_series", required=False) or []
-    configs_raw = _get(data, "configuration", list, path, "configuration", required=not series_raw) or []
-    if not configs_raw and not series_raw:
-        raise InputError("no incident configuration", file=path, field="configuration",
-                         expected="at least one [[configuration]] or [[band_series]]")
-    configs = []
-    seen: set[str] = set()
-    for k, c in enumerate(configs_raw):
-        pre = f"configuration[{k}]"
-        cname = _get(c, "name", str, path, f"{pre}.name")
-        if cname in seen:
-            raise ValidationError("duplicate configuration name", file=path, field=f"{pre}.name", got=cname)
-        seen.add(cname)
-        band = _get(c, "incident_band_nm", list, path, f"{pre}.incident_band_nm")
-        if (len(band) != 2 or not all(isinstance(b, _NUMBER) and not isinstance(b, bool) for b in band)
-                or not band[1] > band[0]):
-            raise ValidationError("bad incident band", file=path, field=f"{pre}.incident_band_nm",
-                                  expected="[low_nm, high_nm] with low < high", got=band)
-        configs.append(ConfigurationEntry(
-            name=cname,
-            description=_get(c, "description", str, path, f"{pre}.description", required=False) or "",
-            incident_band_nm=(float(band[0]), float(band[1])),
-            scan_file=_file(folder, _get(c, "scan_file", str, path, f"{pre}.scan_file"), path, f"{pre}.scan_file"),
-            reference_file=_file(folder, _get(c, "reference_file", str, path, f"{pre}.reference_file"), path,
-                                 f"{pre}.reference_file"),
-            reference_attenuation=_transmittance(_get(c, "reference_attenuation", float, path,
-                                                      f"{pre}.reference_attenuation"),
-                                                 path, f"{pre}.reference_attenuation"),
-        ))
-    for k, entry in enumerate(series_raw):
-        configs.extend(_band_series(entry, k, folder, path, seen))
-    return Manifest(path=path, sample_name=name, synthetic=synthetic, instrument=instrument, wavelength_min_nm=wmin,
-                    wavelength_max_nm=wmax, wavelength_step_nm=step, gain_e_per_count=gain,
-                    full_scale_counts=int(full_scale), responsivity_file=resp, dark_file=dark_file,
-                    configurations=tuple(configs), raw=data)
+    return _Spectrometer(wmin, wmax, step, gain, int(full_scale), resp_name)
+
+
+def _configuration(c: Any, k: int, folder: Path, path: Path, seen: set[str]) -> ConfigurationEntry:
+    """The ``k``-th ``[[configuration]]``, checked; its name is added to ``seen`` (names are unique)."""
+    pre = f"configuration[{k}]"
+    cname = _get(c, "name", str, path, f"{pre}.name")
+    if cname in seen:
+        raise ValidationError("duplicate configuration name", file=path, field=f"{pre}.name", got=cname)
+    seen.add(cname)
+    band = _get(c, "incident_band_nm", list, path, f"{pre}.incident_band_nm")
+    if (len(band) != 2 or not all(isinstance(b, _NUMBER) and not isinstance(b, bool) for b in band)
+            or not band[1] > band[0]):
+        raise ValidationError("bad incident band", file=path, field=f"{pre}.incident_band_nm",
+                              expected="[low_nm, high_nm] with low < high", got=band)
+    return ConfigurationEntry(
+        name=cname,
+        description=_get(c, "description", str, path, f"{pre}.description", required=False) or "",
+        incident_band_nm=(float(band[0]), float(band[1])),
+        scan_file=_file(folder, _get(c, "scan_file", str, path, f"{pre}.scan_file"), path, f"{pre}.scan_file"),
+        reference_file=_file(folder, _get(c, "reference_file", str, path, f"{pre}.reference_file"), path,
+                             f"{pre}.reference_file"),
+        reference_attenuation=_transmittance(_get(c, "reference_attenuation", float, path,
+                                                  f"{pre}.reference_attenuation"),
+                                             path, f"{pre}.reference_attenuation"),
+    )
 
 
 def _band_series(entry: Any, k: int, folder: Path, path: Path, seen: set[str]) -> list[ConfigurationEntry]:

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io.text import decode_text, refuse_cut_last_line
-from bsdfkit.measurement.manifest import Manifest, read_manifest
+from bsdfkit.measurement.manifest import ConfigurationEntry, Manifest, read_manifest
 
 SCAN_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", "exposure_s")
 SCAN_OPTIONAL = ("arc",)
@@ -57,10 +57,8 @@ def _open_text(path: Path) -> str:
     return decode_text(raw, path, expected="a CSV scan table")
 
 
-def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
-    """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
-    text = _open_text(path)
-    refuse_cut_last_line(text, path, ",", expected="a row of counts")
+def _numbered_rows(text: str, path: Path) -> list[tuple[int, list[str]]]:
+    """The CSV rows of ``text`` with their 1-based physical line, blank and ``#`` comment lines left out."""
     if '"' not in text and "\r" not in text:  # no quoting, one row per line: what csv.reader gives, 3× faster
         rows = [(k, line.split(",")) for k, line in enumerate(text.split("\n"), start=1) if line]
     else:
@@ -71,18 +69,15 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
         except csv.Error as exc:
             raise FormatError(f"not valid CSV ({exc})", file=path) from None
     # Skip blank and '#' comment lines but keep 1-based physical line numbers for messages.
-    numbered = [(k, r) for k, r in rows
-                if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
-    if not numbered:
-        raise InputError("empty file", file=path, expected="a header line and at least one data row")
-    header_line, header = numbered[0]
-    header = [h.strip() for h in header]
-    data = numbered[1:]
-    if not data:
-        raise InputError("no data rows", file=path, line=header_line, expected="at least one data row after the header")
+    return [(k, r) for k, r in rows if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+
+
+def _header_columns(header: list[str], header_line: int, path: Path, required: tuple[str, ...],
+                    optional: tuple[str, ...]) -> tuple[list[str], NDArray[np.float64]]:
+    """The named columns and the strictly increasing wavelengths [nm] of a spectra file's header."""
     names: list[str] = []
     wl: list[float] = []
-    for _k, h in enumerate(header):
+    for h in header:
         try:
             value = float(h)
         except ValueError:
@@ -114,12 +109,17 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
         raise ValidationError("wavelength grid not strictly increasing", file=path, line=header_line,
                               field=header[len(names) + bad], expected=f"> {wavelength[bad - 1]:g} nm",
                               got=wavelength[bad])
-    n_named = len(names)
-    width = n_named + wavelength.size
-    # checks in file order, as a row-by-row reader would make them: the first faulty row is the one reported
+    return names, wavelength
+
+
+def _counts(data: list[tuple[int, list[str]]], header: list[str], n_named: int, n_wl: int, path: Path
+            ) -> NDArray[np.float64]:
+    """The counts matrix (rows × wavelengths) of the data rows, checked in file order, as a row-by-row reader
+    would check them: the first faulty row is the one reported."""
+    width = n_named + n_wl
     n_ok = next((r for r, (_, row) in enumerate(data) if len(row) != width), len(data))
     try:  # one conversion of every count cell (a per-row conversion was most of the time of a 62-file scan)
-        counts = np.array([row[n_named:] for _, row in data[:n_ok]], dtype=np.float64).reshape(n_ok, wavelength.size)
+        counts = np.array([row[n_named:] for _, row in data[:n_ok]], dtype=np.float64).reshape(n_ok, n_wl)
     except ValueError:  # find the first bad cell for the message
         for line, row in data[:n_ok]:
             for k, cell in enumerate(row[n_named:]):
@@ -138,6 +138,23 @@ def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[st
     if n_ok < len(data):
         line, row = data[n_ok]
         raise FormatError("wrong number of fields", file=path, line=line, expected=f"{width} fields", got=len(row))
+    return counts
+
+
+def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
+    """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
+    text = _open_text(path)
+    refuse_cut_last_line(text, path, ",", expected="a row of counts")
+    numbered = _numbered_rows(text, path)
+    if not numbered:
+        raise InputError("empty file", file=path, expected="a header line and at least one data row")
+    header_line, header = numbered[0]
+    header = [h.strip() for h in header]
+    data = numbered[1:]
+    if not data:
+        raise InputError("no data rows", file=path, line=header_line, expected="at least one data row after the header")
+    names, wavelength = _header_columns(header, header_line, path, required, optional)
+    counts = _counts(data, header, len(names), wavelength.size, path)
     columns = {n: [row[j].strip() for _, row in data] for j, n in enumerate(names)}
     return SpectraTable(path=path, columns=columns, wavelength=wavelength, counts=counts, first_data_line=data[0][0],
                         lines=tuple(line for line, _ in data))
@@ -210,6 +227,105 @@ def _read_responsivity(path: Path, grid: NDArray[np.float64]) -> NDArray[np.floa
     return arr[:, 1]
 
 
+def _grid(manifest: Manifest) -> NDArray[np.float64]:
+    """The manifest's wavelength grid [nm]; its range must be a whole number of steps."""
+    n = int(round((manifest.wavelength_max_nm - manifest.wavelength_min_nm) / manifest.wavelength_step_nm)) + 1
+    grid = manifest.wavelength_min_nm + manifest.wavelength_step_nm * np.arange(n)
+    if abs(grid[-1] - manifest.wavelength_max_nm) > 1e-6:
+        raise ValidationError("wavelength range is not a whole number of steps", file=manifest.path,
+                              field="spectrometer.wavelength_step_nm",
+                              expected="(max − min)/step integral", got=manifest.wavelength_step_nm)
+    return grid
+
+
+def _sides_and_arcs(table: SpectraTable) -> tuple[list[str], list[str]]:
+    """The checked ``side`` (lower case) and ``arc`` (default ``other``) of every row of a scan file."""
+    side = []
+    for k, s in enumerate(table.columns["side"]):
+        if s.lower() not in SIDES:
+            raise ValidationError("unknown side", file=table.path, line=_line_of(table, k), field="side",
+                                  expected="reflection or transmission", got=s)
+        side.append(s.lower())
+    arcs = table.columns.get("arc") or ["other"] * len(side)
+    for k, a in enumerate(arcs):
+        if a not in ARCS:
+            raise ValidationError("unknown arc", file=table.path, line=_line_of(table, k), field="arc",
+                                  expected=" or ".join(ARCS), got=a)
+    return side, arcs
+
+
+def _refuse_duplicates(table: SpectraTable, angles: tuple[NDArray[np.float64], ...], side: list[str]) -> None:
+    """Refuse a position measured twice: identical directions (θi, φi, θs, φs [deg]) to 1e-6°, φ modulo 360,
+    and φ irrelevant at θ = 0."""
+    theta_i, phi_i, theta_s, phi_s = angles
+    seen: dict[tuple, int] = {}
+    # on Python floats: rounding NumPy scalars one by one was a tenth of a 62-file scan's reading time
+    for k, (ti, pi, ts, phs, sd) in enumerate(zip(theta_i.tolist(), phi_i.tolist(), theta_s.tolist(),
+                                                  phi_s.tolist(), side)):
+        ps = 0.0 if ts < 1e-9 else round(phs % 360.0, 6) % 360.0
+        key = (round(ti, 6), round(pi % 360.0, 6) % 360.0, round(ts, 6), ps, sd)
+        if key in seen:
+            raise ValidationError("duplicate detector position", file=table.path, line=_line_of(table, k),
+                                  field="theta_s_deg/phi_s_deg",
+                                  expected=f"each position once (same as line {_line_of(table, seen[key])})",
+                                  got=f"θi={theta_i[k]:g} θs={theta_s[k]:g} φs={phi_s[k]:g} {side[k]}")
+        seen[key] = k
+
+
+def _scan_part(cfg: ConfigurationEntry, grid: NDArray[np.float64], manifest: Manifest) -> xr.Dataset:
+    """The records of one configuration's scan file: counts and the per-record coordinates."""
+    table = read_spectra_table(cfg.scan_file, SCAN_COLUMNS, SCAN_OPTIONAL)
+    _check_grid(table, grid, manifest)
+    theta_i = _floats(table, "theta_i_deg", 0.0, 90.0, hi_open=True)
+    phi_i = _floats(table, "phi_i_deg", -360.0, 360.0)
+    theta_s = _floats(table, "theta_s_deg", 0.0, 90.0)
+    phi_s = _floats(table, "phi_s_deg", -360.0, 360.0)
+    exposure = _floats(table, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
+    side, arcs = _sides_and_arcs(table)
+    _refuse_duplicates(table, (theta_i, phi_i, theta_s, phi_s), side)
+    return xr.Dataset(
+        {"counts": (("record", "wavelength"), table.counts)},
+        coords={
+            "config": ("record", np.array([cfg.name] * len(side), dtype=object)),
+            "theta_i": ("record", theta_i), "phi_i": ("record", phi_i),
+            "theta_s": ("record", theta_s), "phi_s": ("record", phi_s),
+            "side": ("record", np.array(side, dtype=object)),
+            "arc": ("record", np.array(arcs, dtype=object)),
+            "exposure": ("record", exposure),
+            "source_line": ("record", np.array([_line_of(table, k) for k in range(len(side))], dtype=np.int64)),
+        },
+    )
+
+
+def _reference_part(cfg: ConfigurationEntry, grid: NDArray[np.float64], manifest: Manifest) -> xr.Dataset:
+    """The reference-beam frames of one configuration."""
+    ref = read_spectra_table(cfg.reference_file, FRAME_COLUMNS)
+    _check_grid(ref, grid, manifest)
+    return xr.Dataset(
+        {"reference_counts": (("reference_record", "wavelength"), ref.counts)},
+        coords={"reference_config": ("reference_record", np.array([cfg.name] * ref.counts.shape[0], dtype=object)),
+                "reference_exposure": ("reference_record", _floats(ref, "exposure_s", 0.0, np.inf,
+                                                                   lo_open=True, hi_open=True))},
+    )
+
+
+def _dark(manifest: Manifest, grid: NDArray[np.float64], needed: set[float]) -> tuple[SpectraTable, NDArray]:
+    """The dark frames and their exposures [s]: at least two at every exposure time in ``needed``."""
+    dark = read_spectra_table(manifest.dark_file, FRAME_COLUMNS)
+    _check_grid(dark, grid, manifest)
+    dark_exposure = _floats(dark, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
+    have: dict[float, int] = {}
+    for t in dark_exposure:
+        have[round(t, 12)] = have.get(round(t, 12), 0) + 1
+    for t in sorted(needed):
+        if have.get(round(t, 12), 0) < 2:
+            raise ValidationError("not enough dark frames for an exposure time", file=manifest.dark_file,
+                                  field="exposure_s",
+                                  expected=f"≥ 2 dark frames at {t:g} s (used by a scan or reference)",
+                                  got=have.get(round(t, 12), 0))
+    return dark, dark_exposure
+
+
 def read_scan(folder: str | Path) -> xr.Dataset:
     """Read a raw export folder into a raw xarray Dataset (counts, darks, references; no physics).
 
@@ -219,89 +335,29 @@ def read_scan(folder: str | Path) -> xr.Dataset:
     ``[[band_series]]`` adds ``band_series`` and ``excitation_wavelength`` (nm) per configuration.
     """
     manifest = read_manifest(folder)
-    n = int(round((manifest.wavelength_max_nm - manifest.wavelength_min_nm) / manifest.wavelength_step_nm)) + 1
-    grid = manifest.wavelength_min_nm + manifest.wavelength_step_nm * np.arange(n)
-    if abs(grid[-1] - manifest.wavelength_max_nm) > 1e-6:
-        raise ValidationError("wavelength range is not a whole number of steps", file=manifest.path,
-                              field="spectrometer.wavelength_step_nm",
-                              expected="(max − min)/step integral", got=manifest.wavelength_step_nm)
-    parts = []
-    refs = []
+    grid = _grid(manifest)
+    parts, refs = [], []
     for cfg in manifest.configurations:
-        table = read_spectra_table(cfg.scan_file, SCAN_COLUMNS, SCAN_OPTIONAL)
-        _check_grid(table, grid, manifest)
-        theta_i = _floats(table, "theta_i_deg", 0.0, 90.0, hi_open=True)
-        phi_i = _floats(table, "phi_i_deg", -360.0, 360.0)
-        theta_s = _floats(table, "theta_s_deg", 0.0, 90.0)
-        phi_s = _floats(table, "phi_s_deg", -360.0, 360.0)
-        exposure = _floats(table, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
-        side = []
-        for k, s in enumerate(table.columns["side"]):
-            if s.lower() not in SIDES:
-                raise ValidationError("unknown side", file=table.path, line=_line_of(table, k), field="side",
-                                      expected="reflection or transmission", got=s)
-            side.append(s.lower())
-        arcs = table.columns.get("arc") or ["other"] * len(side)
-        for k, a in enumerate(arcs):
-            if a not in ARCS:
-                raise ValidationError("unknown arc", file=table.path, line=_line_of(table, k), field="arc",
-                                      expected=" or ".join(ARCS), got=a)
-        # Duplicate positions: identical directions (to 1e-6°, φ modulo 360, and φ irrelevant at θ = 0).
-        seen: dict[tuple, int] = {}
-        # on Python floats: rounding NumPy scalars one by one was a tenth of a 62-file scan's reading time
-        for k, (ti, pi, ts, phs, sd) in enumerate(zip(theta_i.tolist(), phi_i.tolist(), theta_s.tolist(),
-                                                      phi_s.tolist(), side)):
-            ps = 0.0 if ts < 1e-9 else round(phs % 360.0, 6) % 360.0
-            key = (round(ti, 6), round(pi % 360.0, 6) % 360.0, round(ts, 6), ps, sd)
-            if key in seen:
-                raise ValidationError("duplicate detector position", file=table.path, line=_line_of(table, k),
-                                      field="theta_s_deg/phi_s_deg",
-                                      expected=f"each position once (same as line {_line_of(table, seen[key])})",
-                                      got=f"θi={theta_i[k]:g} θs={theta_s[k]:g} φs={phi_s[k]:g} {side[k]}")
-            seen[key] = k
-        parts.append(xr.Dataset(
-            {"counts": (("record", "wavelength"), table.counts)},
-            coords={
-                "config": ("record", np.array([cfg.name] * len(side), dtype=object)),
-                "theta_i": ("record", theta_i), "phi_i": ("record", phi_i),
-                "theta_s": ("record", theta_s), "phi_s": ("record", phi_s),
-                "side": ("record", np.array(side, dtype=object)),
-                "arc": ("record", np.array(arcs, dtype=object)),
-                "exposure": ("record", exposure),
-                "source_line": ("record", np.array([_line_of(table, k) for k in range(len(side))], dtype=np.int64)),
-            },
-        ))
-        ref = read_spectra_table(cfg.reference_file, FRAME_COLUMNS)
-        _check_grid(ref, grid, manifest)
-        refs.append(xr.Dataset(
-            {"reference_counts": (("reference_record", "wavelength"), ref.counts)},
-            coords={"reference_config": ("reference_record", np.array([cfg.name] * ref.counts.shape[0], dtype=object)),
-                    "reference_exposure": ("reference_record", _floats(ref, "exposure_s", 0.0, np.inf,
-                                                                       lo_open=True, hi_open=True))},
-        ))
-    dark = read_spectra_table(manifest.dark_file, FRAME_COLUMNS)
-    _check_grid(dark, grid, manifest)
-    dark_exposure = _floats(dark, "exposure_s", 0.0, np.inf, lo_open=True, hi_open=True)
+        parts.append(_scan_part(cfg, grid, manifest))
+        refs.append(_reference_part(cfg, grid, manifest))
     needed = set(np.concatenate([p["exposure"].values for p in parts]
                                 + [r["reference_exposure"].values for r in refs]).tolist())
-    have = {}
-    for t in dark_exposure:
-        have[round(t, 12)] = have.get(round(t, 12), 0) + 1
-    for t in sorted(needed):
-        if have.get(round(t, 12), 0) < 2:
-            raise ValidationError("not enough dark frames for an exposure time", file=manifest.dark_file,
-                                  field="exposure_s",
-                                  expected=f"≥ 2 dark frames at {t:g} s (used by a scan or reference)",
-                                  got=have.get(round(t, 12), 0))
+    dark, dark_exposure = _dark(manifest, grid, needed)
     responsivity = (_read_responsivity(manifest.responsivity_file, grid) if manifest.responsivity_file
                     else np.ones_like(grid))
-
     ds = xr.concat(parts, dim="record")
     ds = xr.merge([ds, xr.concat(refs, dim="reference_record")])
     ds["dark_counts"] = (("dark_record", "wavelength"), dark.counts)
     ds = ds.assign_coords(dark_exposure=("dark_record", dark_exposure), wavelength=grid,
                           configuration=[c.name for c in manifest.configurations])
     ds["responsivity"] = ("wavelength", responsivity)
+    ds = _per_configuration(ds, manifest)
+    _describe_raw(ds, manifest)
+    return ds
+
+
+def _per_configuration(ds: xr.Dataset, manifest: Manifest) -> xr.Dataset:
+    """The manifest's per-configuration values: attenuation, incident band, description, band series."""
     ds["reference_attenuation"] = ("configuration", [c.reference_attenuation for c in manifest.configurations])
     ds["incident_band"] = (("configuration", "band_edge"), [list(c.incident_band_nm) for c in manifest.configurations])
     ds = ds.assign_coords(band_edge=["low", "high"])
@@ -313,6 +369,11 @@ def read_scan(folder: str | Path) -> xr.Dataset:
         ds["band_series"].attrs["long_name"] = "[[band_series]] of the configuration ('' for a [[configuration]])"
         ds["excitation_wavelength"].attrs.update(units="nm", long_name="nominal centre of a band-series band",
                                                  note="NaN for configurations outside a band series")
+    return ds
+
+
+def _describe_raw(ds: xr.Dataset, manifest: Manifest) -> None:
+    """Units and long names of the raw dataset's variables, and its attributes from the manifest."""
     for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
         ds[name].attrs["units"] = "deg"
     ds["wavelength"].attrs.update(units="nm", long_name="scattered (detected) wavelength")
@@ -331,4 +392,3 @@ def read_scan(folder: str | Path) -> xr.Dataset:
         full_scale_counts=manifest.full_scale_counts,
         manifest_json=json.dumps(manifest.raw, sort_keys=True),
     )
-    return ds

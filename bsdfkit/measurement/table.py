@@ -56,21 +56,26 @@ import json
 import math
 import re
 from array import array
+from collections import deque
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
+from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, SIDES, ZERO_POLICIES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io.text import _BOMS, _unmarked_utf16, refuse_cut_last_line, text_and_encoding
+from bsdfkit.measurement.schema import new_bsdf_dataset
 
 __all__ = ["QUANTITIES", "DEFAULT_RELATIVE_STD", "CONFIG_NAME", "read_table", "guess_can_open", "records_dataset",
+           "RecordDirections", "RecordsOrigin",
            "to_bsdf", "side_of_quantity", "normalise_quantity", "arc_labels"]
 
 #: prefixes of comment lines
@@ -80,7 +85,6 @@ _QUANTITY_SIDE = {"brdf": "reflection", "ccbrdf": "reflection", "reflectance-fac
                   "bsdf": None}
 #: The configuration name of datasets read from tables and vendor files (one elastic configuration).
 CONFIG_NAME = "measured"
-SIDES = ("reflection", "transmission")
 _MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
             "?", "#n/a", "#value!", "nv", "n.v."}
 _ANGLE_ATOL = 1e-9
@@ -723,6 +727,134 @@ def _refuse_cut_end(source: _Source, path: str, delim: str | None) -> None:
                           expected=exc.expected, got=exc.got) from None
 
 
+def _check_options(zeros: str, side: str | None, relative_std: float | None, wavelength: float | None) -> None:
+    """Refuse options of :func:`read_table` outside their domain (before the file is opened)."""
+    if zeros not in ZERO_POLICIES:
+        raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
+    if side is not None and side not in SIDES:
+        raise InputError("unknown side", field="--side", expected="reflection | transmission", got=side)
+    if relative_std is not None and not (np.isfinite(relative_std) and relative_std > 0):
+        raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
+                         expected="> 0 (e.g. 0.05 for 5 %)", got=relative_std)
+    if wavelength is not None and not (np.isfinite(wavelength) and wavelength > 0):
+        raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+
+
+def _roles_of(columns: list[_Column], path: str, header_line: int) -> dict[str, list[_Column]]:
+    """The columns by role; at most one column per angle, wavelength and side."""
+    roles: dict[str, list[_Column]] = {}
+    for c in columns:
+        roles.setdefault(c.role, []).append(c)
+    for role in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "side"):
+        if len(roles.get(role, [])) > 1:
+            raise FormatError(f"two columns for {role}", file=path, line=header_line, field=roles[role][1].header,
+                              expected=f"one {role} column", got=[c.header for c in roles[role]])
+    return roles
+
+
+def _check_header_layout(columns: list[_Column], roles: dict[str, list[_Column]], path: str, header_line: int,
+                         wavelength: float | None, incidence: float | None) -> None:
+    """Refuse a header whose layout contradicts itself or the options: wavelengths or incidences both in a
+    column and in value headers (or also given as an option), no scatter angle, wavelength columns repeated
+    or not increasing."""
+    values = roles.get("value", [])
+    wide_wl = [c for c in values if c.wavelength is not None]
+    wide_inc = [c for c in values if c.incidence is not None]
+    if wide_wl and "wavelength" in roles:
+        raise FormatError("wavelength both in a column and in value headers", file=path, line=header_line,
+                          field=roles["wavelength"][0].header, expected="one of the two layouts")
+    if wide_inc and "theta_i" in roles:
+        raise FormatError("incidence both in a column and in value headers", file=path, line=header_line,
+                          field=roles["theta_i"][0].header, expected="one of the two layouts")
+    if "theta_s" not in roles:
+        raise FormatError("no scatter-angle column", file=path, line=header_line, field="header",
+                          expected="theta_s (with phi_s) or a signed in-plane scatter angle",
+                          got=[c.header for c in columns][:8])
+    if wavelength is not None and (wide_wl or "wavelength" in roles):
+        raise InputError("the table states its wavelengths; --wavelength is for monochrome tables", file=path,
+                         line=header_line, field="--wavelength", got=wavelength)
+    wl_list = [c.wavelength for c in wide_wl]
+    if len(set(np.round(wl_list, 9))) != len(wl_list):
+        dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][-1]
+        raise FormatError("wavelength given twice in the header", file=path, line=header_line, field=dup.header,
+                          expected="distinct wavelengths", got=dup.wavelength)
+    if len(wl_list) > 1 and np.any(np.diff(wl_list) <= 0):
+        bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
+        raise FormatError("wavelength columns not increasing", file=path, line=header_line, field=bad.header,
+                          expected="increasing wavelengths", got=bad.wavelength)
+    if incidence is not None and ("theta_i" in roles or wide_inc):
+        raise InputError("the table states its incidences; --incidence is for tables without them", file=path,
+                         line=header_line, field="--incidence", got=incidence)
+
+
+def _default_side(meta: dict[str, tuple[str, int]], side: str | None, path: str) -> str | None:
+    """The side of rows without a side column: ``--side`` or the metadata's (which must agree)."""
+    side_meta = None
+    if "side" in meta:
+        side_meta = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
+        if side_meta is None:
+            raise InputError("unknown side in the metadata", file=path, line=meta["side"][1], field="side",
+                             expected="reflection or transmission", got=meta["side"][0])
+    if side is not None and side_meta is not None and side != side_meta:
+        raise InputError("--side contradicts the table", file=path, line=meta["side"][1], field="side",
+                         expected=side_meta, got=side)
+    return side or side_meta
+
+
+def _provenance(layout: _Layout, text: _Text, header_line: int, meta: dict[str, tuple[str, int]],
+                comments: list[tuple[int, str]], stated: list[str]) -> dict[str, Any]:
+    """How the table was read (``manifest_json`` of its dataset): layout, delimiter, encoding, the role of each
+    column, the metadata and the first comments."""
+    columns = layout.columns
+    wide = any(c.wavelength is not None or c.incidence is not None for c in columns if c.role == "value")
+    return {
+        "format": "measured-table",
+        "reader": f"bsdfkit.measurement.table {__version__}",
+        "layout": "wide" if wide else "long",
+        "delimiter": {"\t": "tab", ";": "semicolon", ",": "comma", None: "whitespace"}[layout.delim],
+        "decimal_comma": bool(layout.decimal_comma),
+        "encoding": text.encoding,
+        "header_line": header_line,
+        "columns": {c.header: (c.role if c.role not in ("value", "std") else
+                               f"{c.role} ({c.quantity}"
+                               + (f", {c.wavelength:g} nm" if c.wavelength is not None else "")
+                               + (f", theta_i {c.incidence:g} deg" if c.incidence is not None else "") + ")")
+                    for c in columns},
+        "metadata": {k: v for k, (v, _) in meta.items()},
+        "comments": [c for _, c in comments][:50],
+        "quantity": stated,
+        "signed_in_plane_angle": layout.signed,
+    }
+
+
+def _row_defaults(meta: dict[str, tuple[str, int]], path: str, wavelength: float | None,
+                  incidence: float | None, phi_i: float | None) -> _RowDefaults:
+    """θi, φi [deg] and wavelength [nm] of rows without such columns: the options, else the metadata (φi
+    180°); the side is set later (:func:`_default_side`)."""
+    meta_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+    meta_inc = _meta_number(meta, "incidence", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    meta_phi = _meta_number(meta, "phi_i", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    return _RowDefaults(theta_i=incidence if incidence is not None else meta_inc,
+                        phi_i=phi_i if phi_i is not None else (meta_phi if meta_phi is not None else 180.0),
+                        wavelength=wavelength if wavelength is not None else meta_lambda, side=None)
+
+
+def _data_head(text: _Text, k_header: int, delim: str | None, columns: list[_Column]
+               ) -> tuple[list[tuple[int, str]], int | None]:
+    """The data lines of the table's head and the line of a units row right after the header (applied to the
+    columns), or None; refuses a header without data rows."""
+    header_line = text.lines[k_header][0]
+    data = text.lines[k_header + 1:]
+    units_line = None
+    if data and _units_row(data[0][1], delim, columns, text.path, data[0][0]):
+        units_line = data[0][0]
+        data = data[1:]
+    if not data:
+        raise FormatError("header only, no data rows", file=text.path, line=header_line, field="data",
+                          expected="data rows after the header")
+    return data, units_line
+
+
 def read_table(path: str | Path, quantity: str | None = None, side: str | None = None,
                relative_std: float | None = None, *, wavelength: float | None = None,
                incidence: float | None = None, phi_i: float | None = None, zeros: str = "auto",
@@ -759,118 +891,39 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
         ``attrs['source_quantity']``.
     """
     path = str(path)
-    if zeros not in ZERO_POLICIES:
-        raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
-    if side is not None and side not in SIDES:
-        raise InputError("unknown side", field="--side", expected="reflection | transmission", got=side)
-    if relative_std is not None and not (np.isfinite(relative_std) and relative_std > 0):
-        raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
-                         expected="> 0 (e.g. 0.05 for 5 %)", got=relative_std)
-    if wavelength is not None and not (np.isfinite(wavelength) and wavelength > 0):
-        raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+    _check_options(zeros, side, relative_std, wavelength)
     source = _Source(path)
     text = _load_text(path, source)  # the head of the file; the data rows are streamed by _parse_rows
     k_header, delim, columns, preamble = _find_header(text)
     _refuse_cut_end(source, path, delim)
     header_line = text.lines[k_header][0]
     meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
-    data = text.lines[k_header + 1:]
-    units_line = None
-    if data and _units_row(data[0][1], delim, columns, path, data[0][0]):
-        units_line = data[0][0]
-        data = data[1:]
-    if not data:
-        raise FormatError("header only, no data rows", file=path, line=header_line, field="data",
-                          expected="data rows after the header")
-    roles: dict[str, list[_Column]] = {}
-    for c in columns:
-        roles.setdefault(c.role, []).append(c)
-    for role in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "side"):
-        if len(roles.get(role, [])) > 1:
-            raise FormatError(f"two columns for {role}", file=path, line=header_line, field=roles[role][1].header,
-                              expected=f"one {role} column", got=[c.header for c in roles[role]])
-    values = roles.get("value", [])
-    wide_wl = [c for c in values if c.wavelength is not None]
-    wide_inc = [c for c in values if c.incidence is not None]
-    if wide_wl and "wavelength" in roles:
-        raise FormatError("wavelength both in a column and in value headers", file=path, line=header_line,
-                          field=roles["wavelength"][0].header, expected="one of the two layouts")
-    if wide_inc and "theta_i" in roles:
-        raise FormatError("incidence both in a column and in value headers", file=path, line=header_line,
-                          field=roles["theta_i"][0].header, expected="one of the two layouts")
-    if "theta_s" not in roles:
-        raise FormatError("no scatter-angle column", file=path, line=header_line, field="header",
-                          expected="theta_s (with phi_s) or a signed in-plane scatter angle",
-                          got=[c.header for c in columns][:8])
-    if wavelength is not None and (wide_wl or "wavelength" in roles):
-        raise InputError("the table states its wavelengths; --wavelength is for monochrome tables", file=path,
-                         line=header_line, field="--wavelength", got=wavelength)
-    wl_list = [c.wavelength for c in wide_wl]
-    if len(set(np.round(wl_list, 9))) != len(wl_list):
-        dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][-1]
-        raise FormatError("wavelength given twice in the header", file=path, line=header_line, field=dup.header,
-                          expected="distinct wavelengths", got=dup.wavelength)
-    if len(wl_list) > 1 and np.any(np.diff(wl_list) <= 0):
-        bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
-        raise FormatError("wavelength columns not increasing", file=path, line=header_line, field=bad.header,
-                          expected="increasing wavelengths", got=bad.wavelength)
-    if incidence is not None and ("theta_i" in roles or wide_inc):
-        raise InputError("the table states its incidences; --incidence is for tables without them", file=path,
-                         line=header_line, field="--incidence", got=incidence)
+    data, units_line = _data_head(text, k_header, delim, columns)
+    roles = _roles_of(columns, path, header_line)
+    _check_header_layout(columns, roles, path, header_line, wavelength, incidence)
     _resolve_quantity(columns, meta, quantity, path, header_line)
     _pair_std(columns, path, header_line)
-    meta_lambda = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
-    meta_inc = _meta_number(meta, "incidence", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
-    meta_phi = _meta_number(meta, "phi_i", path, {"deg": 1.0, "rad": 180.0 / math.pi}, "deg")
+    defaults = _row_defaults(meta, path, wavelength, incidence, phi_i)
     meta_rel = _meta_number(meta, "relative_std", path, {"": 1.0, "%": 0.01}, "")
-    mono_lambda = wavelength if wavelength is not None else meta_lambda
-    theta_i_default = incidence if incidence is not None else meta_inc
-    phi_i_default = phi_i if phi_i is not None else (meta_phi if meta_phi is not None else 180.0)
-    if "theta_i" not in roles and not wide_inc and theta_i_default is None \
+    wide_inc = any(c.incidence is not None for c in roles.get("value", []))
+    if "theta_i" not in roles and not wide_inc and defaults.theta_i is None \
             and not _states_incidence(_events(source, header_line, units_line, []), delim):
         raise FormatError("no incidence column", file=path, line=header_line, field="header",
                           expected="a theta_i / AOI / incidence column, '# incidence: 10 deg', or --incidence",
                           got=[c.header for c in columns][:8])
-    side_meta = None
-    if "side" in meta:
-        side_meta = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
-        if side_meta is None:
-            raise InputError("unknown side in the metadata", file=path, line=meta["side"][1], field="side",
-                             expected="reflection or transmission", got=meta["side"][0])
-    if side is not None and side_meta is not None and side != side_meta:
-        raise InputError("--side contradicts the table", file=path, line=meta["side"][1], field="side",
-                         expected=side_meta, got=side)
-    default_side = side or side_meta
+    defaults = replace(defaults, side=_default_side(meta, side, path))
     rel = relative_std if relative_std is not None else (meta_rel if meta_rel is not None else None)
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
     comments = [c for c in text.comments if c[0] < header_line]
-    rows = _parse_rows(path, _events(source, header_line, units_line, comments), delim, columns, roles,
-                       decimal_comma, theta_i_default, phi_i_default, default_side, mono_lambda,
-                       _fields(text.lines[k_header][1], delim), _rows_estimate(path, data))
+    layout = _layout(path, delim, columns, roles, decimal_comma, _fields(text.lines[k_header][1], delim))
+    rows = _parse_rows(_events(source, header_line, units_line, comments), layout, defaults,
+                       _rows_estimate(path, data))
     _refuse_cut_last_block(path, rows)
     _check_units(path, rows, roles)
     _check_values(path, rows, rel)
-    signed = "phi_s" not in roles
     stated = sorted({rows.quantities[k] for k in np.unique(rows.spec).tolist()})
-    ds = _assemble(path, rows, signed, rel, zeros, wavelength_known=bool(np.isfinite(rows.wavelength).any()))
-    provenance = {
-        "format": "measured-table",
-        "reader": f"bsdfkit.measurement.table {__version__}",
-        "layout": "wide" if (wide_wl or wide_inc) else "long",
-        "delimiter": {"\t": "tab", ";": "semicolon", ",": "comma", None: "whitespace"}[delim],
-        "decimal_comma": bool(decimal_comma),
-        "encoding": text.encoding,
-        "header_line": header_line,
-        "columns": {c.header: (c.role if c.role not in ("value", "std") else
-                               f"{c.role} ({c.quantity}"
-                               + (f", {c.wavelength:g} nm" if c.wavelength is not None else "")
-                               + (f", theta_i {c.incidence:g} deg" if c.incidence is not None else "") + ")")
-                    for c in columns},
-        "metadata": {k: v for k, (v, _) in meta.items()},
-        "comments": [c for _, c in comments][:50],
-        "quantity": stated,
-        "signed_in_plane_angle": signed,
-    }
+    ds = _assemble(path, rows, layout.signed, rel, zeros)
+    provenance = _provenance(layout, text, header_line, meta, comments, stated)
     ds.attrs.update(
         source_format="text table",
         source_layout=provenance["layout"],
@@ -1148,285 +1201,427 @@ class _Store:
         return np.broadcast_to(np.asarray(value, dtype=self.dtypes[name]), (n,))
 
 
-def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | None, columns: list[_Column],
-                roles: dict[str, list[_Column]], decimal_comma: bool, theta_i_default: float | None,
-                phi_i_default: float, default_side: str | None, mono_lambda: float | None,
-                header_cells: list[str], rows_estimate: int = 0) -> _Rows:
+@dataclass(frozen=True)
+class _Layout:
+    """What every data row of a table shares: the file, its delimiter and columns, and what they hold.
+
+    ``specs`` has one entry per value column: (the column, its uncertainty column or None, whether that
+    uncertainty is relative to the value, the side the column's quantity fixes or None).
+    """
+
+    path: str
+    delim: str | None
+    columns: list[_Column]
+    roles: dict[str, list[_Column]]
+    decimal_comma: bool
+    header_norm: list[str]
+    specs: list[tuple[_Column, _Column | None, bool, str | None]]
+
+    @property
+    def signed(self) -> bool:
+        """No φs column: θs is a signed in-plane angle."""
+        return "phi_s" not in self.roles
+
+    @property
+    def wide_inc(self) -> bool:
+        """One value column per incidence."""
+        return any(c.incidence is not None for c, *_ in self.specs)
+
+    @property
+    def plain(self) -> bool:
+        """Every column numeric and no decimal comma: blocks may be parsed as arrays."""
+        numeric = {"theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std"}
+        return not self.decimal_comma and all(c.role in numeric for c in self.columns)
+
+
+def _layout(path: str, delim: str | None, columns: list[_Column], roles: dict[str, list[_Column]],
+            decimal_comma: bool, header_cells: list[str]) -> _Layout:
+    """The :class:`_Layout` of a table: its value columns paired with their uncertainty columns."""
+    std_of = {c.pair: c for c in roles.get("std", [])}
+    specs = []
+    for c in roles["value"]:
+        s_col = std_of.get(c.index)
+        relative = bool(s_col is not None and (s_col.relative or (s_col.percent and not c.percent)))
+        specs.append((c, s_col, relative, side_of_quantity(c.quantity)))
+    return _Layout(path, delim, columns, roles, decimal_comma,
+                   [c.strip().strip('"').lower() for c in header_cells], specs)
+
+
+@dataclass(frozen=True)
+class _RowDefaults:
+    """Values of the rows that follow where the table has no column: set before the header, changed by
+    ``# incidence: 20`` comments or ``Incidence: 20`` lines between blocks (θi, φi [deg], wavelength [nm])."""
+
+    theta_i: float | None
+    phi_i: float
+    wavelength: float | None
+    side: str | None
+
+
+def _with_metadata(defaults: _RowDefaults, meta: dict[str, tuple[str, int]], path: str) -> _RowDefaults:
+    """``defaults`` changed by the metadata of a comment or ``key: value`` line."""
+    angle = {"deg": 1.0, "rad": 180.0 / math.pi}
+    changes: dict[str, Any] = {}
+    if "incidence" in meta:
+        changes["theta_i"] = _meta_number(meta, "incidence", path, angle, "deg")
+    if "phi_i" in meta:
+        changes["phi_i"] = _meta_number(meta, "phi_i", path, angle, "deg")
+    if "wavelength" in meta:
+        changes["wavelength"] = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
+    if "side" in meta:
+        word = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
+        if word is None:
+            raise InputError("unknown side", file=path, line=meta["side"][1], field="side",
+                             expected="reflection or transmission", got=meta["side"][0])
+        changes["side"] = word
+    return replace(defaults, **changes) if changes else defaults
+
+
+@dataclass
+class _Firsts:
+    """The first line of what decides the frame and side of a whole table, noted while its blocks are parsed:
+    a polar angle beyond 90° (``front``), a transmitted angle within 0..90° (``back``), a value without a side
+    (``sideless``: line and column)."""
+
+    front: int | None = None
+    back: int | None = None
+    sideless: tuple[int, str] | None = None
+
+    def note(self, key: str, value: Any) -> None:
+        """Keep ``value`` as the first ``key`` unless one is already kept."""
+        if getattr(self, key) is None:
+            setattr(self, key, value)
+
+
+def _cell_number(cells: list[str], col: _Column, line: int, what: str, layout: _Layout) -> float:
+    """The number of a cell in the column's unit (scaled); NaN for a gap; one-line errors for text and ±inf."""
+    try:
+        v = _number(cells[col.index], layout.decimal_comma)
+    except ValueError:
+        raise FormatError(f"not a number in the {what} column", file=layout.path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'", expected="a number or an empty cell",
+                          got=cells[col.index]) from None
+    if math.isinf(v):
+        raise FormatError(f"infinite number in the {what} column", file=layout.path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'", expected="a finite number",
+                          got=cells[col.index])
+    return v * col.scale
+
+
+def _required(cells: list[str], role: str, line: int, default: float | None, layout: _Layout) -> float:
+    """The number of the row's ``role`` column (never a gap), or ``default`` (NaN for None) without one."""
+    if role not in layout.roles:
+        return math.nan if default is None else default
+    col = layout.roles[role][0]
+    v = _cell_number(cells, col, line, role, layout)
+    if math.isnan(v):
+        raise FormatError(f"missing {role}", file=layout.path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'",
+                          expected="a number (angles and wavelengths cannot be gaps)", got=cells[col.index])
+    return v
+
+
+#: The float64 entry arrays of a parsed block.
+_FLOAT_ENTRIES = ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")
+#: Entry arrays of a parsed block, in the order of :class:`_Rows`.
+_ENTRY_NAMES = ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std", "std_relative", "side", "line")
+
+
+def _store_entries(store: _Store, entries: dict[str, NDArray], n_v: int) -> None:
+    """Append a block's entries (``n_v`` per row, one per value column) to the store, with their column index."""
+    n = entries["line"].size
+    for name in _ENTRY_NAMES[:-1]:
+        store.add(name, entries[name])
+    store.add("spec", np.tile(np.arange(n_v, dtype=np.int16), n // n_v if n_v else 0))
+    store.add("line", entries["line"])
+
+
+def _fast_columns(a: NDArray, layout: _Layout, state: _RowDefaults) -> dict[str, NDArray] | None:
+    """The direction columns (θi, φi, θs, φs [deg], wavelength [nm]) of a block of numbers; None when a row
+    is out of range (the row path then says which)."""
+    n = a.shape[0]
+
+    def col(role: str, default: float | None) -> NDArray:
+        if role in layout.roles:
+            c = layout.roles[role][0]
+            return a[:, c.index] * c.scale
+        return np.full(n, math.nan if default is None else default)
+
+    out = {"theta_i": col("theta_i", state.theta_i), "phi_i": col("phi_i", state.phi_i),
+           "theta_s": col("theta_s", None), "phi_s": col("phi_s", 0.0),
+           "wavelength": col("wavelength", state.wavelength)}
+    th_i, th_s = out["theta_i"], out["theta_s"]
+    th_i0 = np.where(np.isnan(th_i), 0.0, th_i)
+    if (np.isnan(th_i).any() and not layout.wide_inc) or not np.all((th_i0 >= 0.0) & (th_i0 < 90.0)) \
+            or not np.all((th_s >= (-90.0 if layout.signed else 0.0)) & (th_s <= 90.0)) \
+            or not np.all((np.abs(out["phi_i"]) <= 360.0) & (np.abs(out["phi_s"]) <= 360.0)) \
+            or ("wavelength" in layout.roles and not np.all(out["wavelength"] > 0)):
+        return None
+    return out
+
+
+def _parse_fast(block: list[tuple[int, str]], layout: _Layout, state: _RowDefaults, firsts: _Firsts
+                ) -> dict[str, NDArray] | None:
+    """The entries of a block of plain numbers, parsed as arrays; None (nothing noted) when a row needs the
+    row path."""
+    if not layout.plain:
+        return None
+    try:
+        a = np.loadtxt([t for _, t in block], delimiter=layout.delim, comments=None, quotechar='"',
+                       dtype=np.float64, ndmin=2)
+    except (ValueError, TypeError, OverflowError):  # anything not plain numbers: the row path says what
+        return None
+    n, n_v = len(block), len(layout.specs)
+    if a.shape != (n, len(layout.columns)) or not np.all(np.isfinite(a)):
+        return None
+    cols = _fast_columns(a, layout, state)
+    if cols is None:
+        return None
+    shape = (n, n_v)
+    v, s = np.empty(shape), np.full(shape, math.nan)
+    rel, side = np.zeros(shape, dtype=bool), np.empty(shape, dtype=np.int8)
+    t_i, wl = np.empty(shape), np.empty(shape)
+    for j, (c, scol, s_rel, q_side) in enumerate(layout.specs):
+        v[:, j] = a[:, c.index] * 0.01 if c.percent else a[:, c.index]
+        if scol is not None:
+            sj = a[:, scol.index] * scol.scale
+            if np.any(sj < 0):
+                return None
+            s[:, j] = sj * 0.01 if scol.percent else sj
+            rel[:, j] = s_rel
+        this_side = state.side
+        if q_side is not None:
+            if this_side is not None and this_side != q_side:
+                return None
+            this_side = q_side
+        side[:, j] = _SIDE_CODE[this_side]
+        t_i[:, j] = cols["theta_i"] if c.incidence is None else c.incidence
+        wl[:, j] = cols["wavelength"] if c.wavelength is None else c.wavelength
+    lines = np.fromiter((ln for ln, _ in block), dtype=np.int64, count=n)
+    _note_fast_sides(side, cols["theta_s"], lines, layout, firsts)
+    return {"theta_i": t_i.ravel(), "phi_i": np.repeat(cols["phi_i"], n_v),
+            "theta_s": np.repeat(cols["theta_s"], n_v), "phi_s": np.repeat(cols["phi_s"], n_v),
+            "wavelength": wl.ravel(), "value": v.ravel(), "std": s.ravel(), "std_relative": rel.ravel(),
+            "side": side.ravel(), "line": np.repeat(lines, n_v)}
+
+
+def _note_fast_sides(side: NDArray[np.int8], th_s: NDArray, lines: NDArray, layout: _Layout,
+                     firsts: _Firsts) -> None:
+    """Note the first transmitted angle from the back normal and the first value without a side of a block."""
+    n_v = len(layout.specs)
+    if np.any(side == 1):
+        back = (side == 1) & ((0.0 < np.abs(th_s)) & (np.abs(th_s) < 90.0))[:, None]
+        if back.any():
+            firsts.note("back", int(lines[np.argmax(back.any(axis=1))]))
+    if np.any(side == -1):
+        k = int(np.argmax(side.ravel() == -1))
+        c = layout.specs[k % n_v][0]
+        firsts.note("sideless", (int(lines[k // n_v]), f"column {c.index + 1} '{c.header}'"))
+
+
+class _RowDirection(NamedTuple):
+    """One data row's direction: θi, φi, θs, φs [deg], wavelength [nm], whether θs was given from the front
+    normal beyond 90° (``through``: a transmitted direction) and the side its side column or defaults give.
+    (A named tuple: one is made per row of the row path.)"""
+
+    theta_i: float
+    phi_i: float
+    theta_s: float
+    phi_s: float
+    wavelength: float
+    through: bool
+    side: str | None
+
+
+def _row_direction(cells: list[str], line: int, layout: _Layout, state: _RowDefaults, firsts: _Firsts
+                   ) -> _RowDirection:
+    """The direction of one data row, checked (one-line errors naming the line and column)."""
+    path, roles = layout.path, layout.roles
+    th_i = _required(cells, "theta_i", line, state.theta_i, layout)
+    if math.isnan(th_i) and not layout.wide_inc:
+        raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
+                          expected="a theta_i column, or '# incidence: <deg>' before the block")
+    ph_i = _required(cells, "phi_i", line, state.phi_i, layout)
+    th_s = _required(cells, "theta_s", line, None, layout)
+    ph_s = _required(cells, "phi_s", line, 0.0, layout)
+    lam = _required(cells, "wavelength", line, state.wavelength, layout)
+    # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
+    # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
+    through = 90.0 < abs(th_s) <= 180.0
+    if through:
+        th_s = math.copysign(180.0 - abs(th_s), th_s) if layout.signed else 180.0 - th_s
+        firsts.note("front", line)
+    row_side = state.side
+    if "side" in roles:
+        col = roles["side"][0]
+        word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
+        if word is None:
+            raise FormatError("unknown side", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
+                              expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
+        row_side = word
+    _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, layout.signed, roles)
+    if "wavelength" in roles and not lam > 0:
+        col = roles["wavelength"][0]
+        raise FormatError("wavelength must be positive", file=path, line=line,
+                          field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm", got=cells[col.index])
+    return _RowDirection(th_i, ph_i, th_s, ph_s, lam, through, row_side)
+
+
+def _row_values(cells: list[str], line: int, d: _RowDirection, layout: _Layout, firsts: _Firsts,
+                out: dict[str, array]) -> None:
+    """Append the entries of one data row to ``out``: per value cell its value, uncertainty, whether that is
+    relative, its side (the row's, the one its quantity fixes, transmission beyond 90° from the front normal),
+    θi and wavelength; the row's φi, θs, φs and line once per value cell. One call per row: the row path's
+    time is per call."""
+    for col, scol, s_rel_spec, q_side in layout.specs:
+        try:
+            v = float(cells[col.index])  # fast path; gaps, decimal commas and errors go through _cell_number()
+        except ValueError:
+            v = _cell_number(cells, col, line, "value", layout)
+        else:
+            if math.isinf(v) or layout.decimal_comma:
+                v = _cell_number(cells, col, line, "value", layout)
+        if col.percent:
+            v *= 0.01
+        s, s_rel = math.nan, False
+        if scol is not None:
+            s = _cell_number(cells, scol, line, "uncertainty", layout)
+            if not math.isnan(s) and s < 0:
+                raise FormatError("negative uncertainty", file=layout.path, line=line,
+                                  field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
+                                  got=cells[scol.index])
+            s_rel = s_rel_spec
+            if scol.percent:
+                s *= 0.01
+        this_side = d.side
+        if q_side is not None:
+            if this_side is not None and this_side != q_side:
+                raise InputError(f"side contradicts the quantity {col.quantity}", file=layout.path, line=line,
+                                 field=f"column {col.index + 1} '{col.header}'", expected=q_side, got=this_side)
+            this_side = q_side
+        if d.through:
+            if this_side == "reflection":
+                c = layout.roles["theta_s"][0]
+                raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
+                                      file=layout.path, line=line, field=f"column {c.index + 1} '{c.header}'",
+                                      expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
+                                               "transmission)", got=cells[c.index].strip())
+            this_side = "transmission"
+        elif this_side == "transmission" and 0.0 < abs(d.theta_s) < 90.0:
+            firsts.note("back", line)
+        if this_side is None:
+            firsts.note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
+        out["side"].append(_SIDE_CODE[this_side])
+        out["value"].append(v)
+        out["std"].append(s)
+        out["std_relative"].append(s_rel)
+        out["theta_i"].append(d.theta_i if col.incidence is None else col.incidence)
+        out["wavelength"].append(d.wavelength if col.wavelength is None else col.wavelength)
+    n_v = len(layout.specs)
+    out["phi_i"].extend([d.phi_i] * n_v)
+    out["theta_s"].extend([d.theta_s] * n_v)
+    out["phi_s"].extend([d.phi_s] * n_v)
+    out["line"].extend([line] * n_v)
+
+
+def _row_cells(text: str, line: int, layout: _Layout) -> list[str] | None:
+    """The cells of a data line, or None for the header repeated at the start of a block."""
+    cells = _split(text, layout.delim)
+    if [c.strip().strip('"').lower() for c in _fields(text, layout.delim)] == layout.header_norm:
+        return None
+    return cells
+
+
+def _parse_by_rows(block: list[tuple[int, str]], layout: _Layout, state: _RowDefaults,
+                   pending: deque[tuple[int, str]], firsts: _Firsts) -> tuple[dict[str, NDArray], _RowDefaults]:
+    """The entries of a block parsed row by row, and the row defaults after it (comments in ``pending`` and
+    ``key: value`` lines between its rows change them)."""
+    out = {k: array("d") for k in _FLOAT_ENTRIES}
+    out.update(std_relative=array("b"), side=array("b"), line=array("q"))
+    n_cols = len(layout.columns)
+    for line, text in block:
+        while pending and pending[0][0] < line:
+            state = _with_metadata(state, _metadata([pending.popleft()]), layout.path)
+        cells = _row_cells(text, line, layout)
+        if cells is None:
+            continue  # the header repeated at the start of the next block
+        if cells and not _is_numberlike(cells[0]):
+            meta = _metadata([(line, text.strip())])
+            if meta and re.match(r"^\s*[^:=]+[:=]", text):
+                state = _with_metadata(state, meta, layout.path)
+                continue
+        while len(cells) > n_cols and not cells[-1].strip():
+            cells.pop()  # trailing separators
+        if len(cells) != n_cols:
+            raise FormatError("wrong number of fields", file=layout.path, line=line, field="row",
+                              expected=f"{n_cols} fields like the header", got=len(cells))
+        _row_values(cells, line, _row_direction(cells, line, layout, state, firsts), layout, firsts, out)
+    entries = {k: np.frombuffer(out[k], dtype=np.float64) for k in _FLOAT_ENTRIES}
+    entries.update(std_relative=np.frombuffer(out["std_relative"], dtype=np.int8).astype(bool),
+                   side=np.frombuffer(out["side"], dtype=np.int8), line=np.frombuffer(out["line"], dtype=np.int64))
+    return entries, state
+
+
+def _parse_rows(events: Iterator[tuple[str, int, str]], layout: _Layout, state: _RowDefaults,
+                rows_estimate: int = 0) -> _Rows:
     """Rows → one entry per value cell, streamed in blocks of :data:`_BLOCK_LINES` lines.
 
     ``events`` yields ``("data", line, text)`` for the data lines and ``("comment", line, text)`` for the
     comment lines after the header, in file order. Between blocks, a repeated header is skipped, and
     ``# incidence: 20`` comments or ``Incidence: 20`` lines set the incidence (wavelength, phi_i, side) of the
-    rows that follow. A block of plain numbers is parsed by :func:`numpy.loadtxt` and checked as arrays; any
-    other block (gaps, text, a decimal comma, a side column, angles beyond 90°, a bad value) row by row, which
-    gives the one-line error of the first bad row with its physical line. ``rows_estimate`` (rows expected)
-    sizes the arrays.
+    rows that follow (``state``: the defaults before the first row). A block of plain numbers is parsed by
+    :func:`numpy.loadtxt` and checked as arrays; any other block (gaps, text, a decimal comma, a side column,
+    angles beyond 90°, a bad value) row by row, which gives the one-line error of the first bad row with its
+    physical line. ``rows_estimate`` (rows expected) sizes the arrays.
     """
-    pending: list[tuple[int, str]] = []
-    header_norm = [c.strip().strip('"').lower() for c in header_cells]
-    state = {"theta_i": theta_i_default, "phi_i": phi_i_default, "wavelength": mono_lambda, "side": default_side}
-
-    def apply_block(meta: dict[str, tuple[str, int]]) -> None:
-        angle = {"deg": 1.0, "rad": 180.0 / math.pi}
-        if "incidence" in meta:
-            state["theta_i"] = _meta_number(meta, "incidence", path, angle, "deg")
-        if "phi_i" in meta:
-            state["phi_i"] = _meta_number(meta, "phi_i", path, angle, "deg")
-        if "wavelength" in meta:
-            state["wavelength"] = _meta_number(meta, "wavelength", path, {"nm": 1.0, "um": 1000.0}, "nm")
-        if "side" in meta:
-            word = _side_word(meta["side"][0]) or _side_of_words(meta["side"][0])
-            if word is None:
-                raise InputError("unknown side", file=path, line=meta["side"][1], field="side",
-                                 expected="reflection or transmission", got=meta["side"][0])
-            state["side"] = word
-
-    n_cols = len(columns)
-    values = roles["value"]
-    std_of = {c.pair: c for c in roles.get("std", [])}
-    signed = "phi_s" not in roles
-    wide_inc = any(c.incidence is not None for c in values)
-
-    def num(cells: list[str], col: _Column, line: int, what: str) -> float:
-        try:
-            v = _number(cells[col.index], decimal_comma)
-        except ValueError:
-            raise FormatError(f"not a number in the {what} column", file=path, line=line,
-                              field=f"column {col.index + 1} '{col.header}'", expected="a number or an empty cell",
-                              got=cells[col.index]) from None
-        if math.isinf(v):
-            raise FormatError(f"infinite number in the {what} column", file=path, line=line,
-                              field=f"column {col.index + 1} '{col.header}'", expected="a finite number",
-                              got=cells[col.index])
-        return v * col.scale
-
-    def required(cells: list[str], role: str, line: int, default: float | None) -> float:
-        if role not in roles:
-            return math.nan if default is None else default
-        col = roles[role][0]
-        v = num(cells, col, line, role)
-        if math.isnan(v):
-            raise FormatError(f"missing {role}", file=path, line=line, field=f"column {col.index + 1} '{col.header}'",
-                              expected="a number (angles and wavelengths cannot be gaps)", got=cells[col.index])
-        return v
-
-    specs = [(c, std_of.get(c.index), bool(std_of.get(c.index) is not None and (
-        std_of[c.index].relative or (std_of[c.index].percent and not c.percent))), side_of_quantity(c.quantity))
-             for c in values]
-    n_v = len(specs)
-    found: dict[str, Any] = {"front": None, "back": None, "sideless": None}  # first line of each
-    store = _Store(rows_estimate * max(len(values), 1), {
+    pending: deque[tuple[int, str]] = deque()
+    firsts = _Firsts()
+    store = _Store(rows_estimate * max(len(layout.specs), 1), {
         "theta_i": np.float64, "phi_i": np.float64, "theta_s": np.float64, "phi_s": np.float64,
         "wavelength": np.float64, "value": np.float64, "std": np.float64, "std_relative": bool, "side": np.int8,
-        "spec": np.int16, "line": np.int32 if Path(path).stat().st_size < 2**31 - 1 else np.int64})
-    numeric = {"theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std"}
-    plain = not decimal_comma and all(c.role in numeric for c in columns)
-
-    def note(key: str, value: Any) -> None:
-        if found[key] is None:
-            found[key] = value
-
-    def add(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, lam: NDArray, v: NDArray, s: NDArray,
-            rel: NDArray, side: NDArray, lines: NDArray) -> None:
-        n = lines.size
-        for name, x in (("theta_i", th_i), ("phi_i", ph_i), ("theta_s", th_s), ("phi_s", ph_s),
-                        ("wavelength", lam), ("value", v), ("std", s), ("std_relative", rel), ("side", side)):
-            store.add(name, x)
-        store.add("spec", np.tile(np.arange(n_v, dtype=np.int16), n // n_v if n_v else 0))
-        store.add("line", lines)
-
-    def fast(block: list[tuple[int, str]]) -> bool:
-        """Parse a block of plain numbers as arrays; False (nothing stored) when a row needs the row path."""
-        if not plain:
-            return False
-        try:
-            a = np.loadtxt([t for _, t in block], delimiter=delim, comments=None, quotechar='"',
-                           dtype=np.float64, ndmin=2)
-        except (ValueError, TypeError, OverflowError):  # anything not plain numbers: the row path says what
-            return False
-        n = len(block)
-        if a.shape != (n, n_cols) or not np.all(np.isfinite(a)):
-            return False
-
-        def col(role: str, default: float | None) -> NDArray:
-            if role in roles:
-                c = roles[role][0]
-                return a[:, c.index] * c.scale
-            return np.full(n, math.nan if default is None else default)
-
-        th_i, ph_i = col("theta_i", state["theta_i"]), col("phi_i", state["phi_i"])
-        th_s, ph_s, lam = col("theta_s", None), col("phi_s", 0.0), col("wavelength", state["wavelength"])
-        th_i0 = np.where(np.isnan(th_i), 0.0, th_i)
-        if (np.isnan(th_i).any() and not wide_inc) or not np.all((th_i0 >= 0.0) & (th_i0 < 90.0)) \
-                or not np.all((th_s >= (-90.0 if signed else 0.0)) & (th_s <= 90.0)) \
-                or not np.all((np.abs(ph_i) <= 360.0) & (np.abs(ph_s) <= 360.0)) \
-                or ("wavelength" in roles and not np.all(lam > 0)):
-            return False
-        lines = np.fromiter((ln for ln, _ in block), dtype=np.int64, count=n)
-        shape = (n, n_v)
-        v, s = np.empty(shape), np.full(shape, math.nan)
-        rel, side = np.zeros(shape, dtype=bool), np.empty(shape, dtype=np.int8)
-        t_i, wl = np.empty(shape), np.empty(shape)
-        for j, (c, scol, s_rel, q_side) in enumerate(specs):
-            v[:, j] = a[:, c.index] * 0.01 if c.percent else a[:, c.index]
-            if scol is not None:
-                sj = a[:, scol.index] * scol.scale
-                if np.any(sj < 0):
-                    return False
-                s[:, j] = sj * 0.01 if scol.percent else sj
-                rel[:, j] = s_rel
-            this_side = state["side"]
-            if q_side is not None:
-                if this_side is not None and this_side != q_side:
-                    return False
-                this_side = q_side
-            side[:, j] = _SIDE_CODE[this_side]
-            t_i[:, j] = th_i if c.incidence is None else c.incidence
-            wl[:, j] = lam if c.wavelength is None else c.wavelength
-        if np.any(side == 1):
-            back = (side == 1) & ((0.0 < np.abs(th_s)) & (np.abs(th_s) < 90.0))[:, None]
-            if back.any():
-                note("back", int(lines[np.argmax(back.any(axis=1))]))
-        if np.any(side == -1):
-            k = int(np.argmax(side.ravel() == -1))
-            c = specs[k % n_v][0]
-            note("sideless", (int(lines[k // n_v]), f"column {c.index + 1} '{c.header}'"))
-        add(t_i.ravel(), np.repeat(ph_i, n_v), np.repeat(th_s, n_v), np.repeat(ph_s, n_v), wl.ravel(), v.ravel(),
-            s.ravel(), rel.ravel(), side.ravel(), np.repeat(lines, n_v))
-        return True
-
-    def by_rows(block: list[tuple[int, str]]) -> None:
-        out = {k: array("d") for k in ("theta_i", "phi_i", "theta_s", "phi_s", "wavelength", "value", "std")}
-        out_rel, out_side, out_line = array("b"), array("b"), array("q")
-        for line, text in block:
-            while pending and pending[0][0] < line:
-                apply_block(_metadata([pending.pop(0)]))
-            cells = _split(text, delim)
-            if [c.strip().strip('"').lower() for c in _fields(text, delim)] == header_norm:
-                continue  # the header repeated at the start of the next block
-            if cells and not _is_numberlike(cells[0]):
-                meta = _metadata([(line, text.strip())])
-                if meta and re.match(r"^\s*[^:=]+[:=]", text):
-                    apply_block(meta)
-                    continue
-            while len(cells) > n_cols and not cells[-1].strip():
-                cells.pop()  # trailing separators
-            if len(cells) != n_cols:
-                raise FormatError("wrong number of fields", file=path, line=line, field="row",
-                                  expected=f"{n_cols} fields like the header", got=len(cells))
-            th_i = required(cells, "theta_i", line, state["theta_i"])
-            if math.isnan(th_i) and not wide_inc:
-                raise FormatError("no incidence for this row", file=path, line=line, field="theta_i",
-                                  expected="a theta_i column, or '# incidence: <deg>' before the block")
-            ph_i = required(cells, "phi_i", line, state["phi_i"])
-            th_s = required(cells, "theta_s", line, None)
-            ph_s = required(cells, "phi_s", line, 0.0)
-            lam = required(cells, "wavelength", line, state["wavelength"])
-            # a polar angle beyond 90° is measured from the FRONT normal (full-sphere goniometers): a transmitted
-            # direction, 180° − θs from the back normal with the same azimuth (the undeviated side stays φs = 0)
-            through = 90.0 < abs(th_s) <= 180.0
-            if through:
-                th_s = math.copysign(180.0 - abs(th_s), th_s) if signed else 180.0 - th_s
-                note("front", line)
-            row_side = state["side"]
-            if "side" in roles:
-                col = roles["side"][0]
-                word = _side_word(cells[col.index]) or _side_of_words(cells[col.index])
-                if word is None:
-                    raise FormatError("unknown side", file=path, line=line,
-                                      field=f"column {col.index + 1} '{col.header}'",
-                                      expected="reflection/transmission (R/T, BRDF/BTDF)", got=cells[col.index])
-                row_side = word
-            _check_angles(path, line, 0.0 if math.isnan(th_i) else th_i, ph_i, th_s, ph_s, signed, roles)
-            if "wavelength" in roles and not lam > 0:
-                col = roles["wavelength"][0]
-                raise FormatError("wavelength must be positive", file=path, line=line,
-                                  field=f"column {col.index + 1} '{col.header}'", expected="> 0 nm",
-                                  got=cells[col.index])
-            for col, scol, s_rel_spec, q_side in specs:
-                text_v = cells[col.index]
-                try:
-                    v = float(text_v)  # fast path; gaps, decimal commas and errors go through num()
-                except ValueError:
-                    v = num(cells, col, line, "value")
-                else:
-                    if math.isinf(v) or decimal_comma:
-                        v = num(cells, col, line, "value")
-                if col.percent:
-                    v *= 0.01
-                s, s_rel = math.nan, False
-                if scol is not None:
-                    s = num(cells, scol, line, "uncertainty")
-                    if not math.isnan(s) and s < 0:
-                        raise FormatError("negative uncertainty", file=path, line=line,
-                                          field=f"column {scol.index + 1} '{scol.header}'", expected=">= 0",
-                                          got=cells[scol.index])
-                    s_rel = s_rel_spec
-                    if scol.percent:
-                        s *= 0.01
-                this_side = row_side
-                if q_side is not None:
-                    if this_side is not None and this_side != q_side:
-                        raise InputError(f"side contradicts the quantity {col.quantity}", file=path, line=line,
-                                         field=f"column {col.index + 1} '{col.header}'", expected=q_side,
-                                         got=this_side)
-                    this_side = q_side
-                if through:
-                    if this_side == "reflection":
-                        c = roles["theta_s"][0]
-                        raise ValidationError(f"scatter angle out of range for the reflection side ({col.header})",
-                                              file=path, line=line, field=f"column {c.index + 1} '{c.header}'",
-                                              expected="theta_s <= 90 deg (beyond 90 deg from the front normal is "
-                                                       "transmission)", got=cells[c.index].strip())
-                    this_side = "transmission"
-                elif this_side == "transmission" and 0.0 < abs(th_s) < 90.0:
-                    note("back", line)
-                if this_side is None:
-                    note("sideless", (line, f"column {col.index + 1} '{col.header}'"))
-                out_side.append(_SIDE_CODE[this_side])
-                out["value"].append(v)
-                out["std"].append(s)
-                out_rel.append(s_rel)
-                out["theta_i"].append(th_i if col.incidence is None else col.incidence)
-                out["wavelength"].append(lam if col.wavelength is None else col.wavelength)
-            out["phi_i"].extend([ph_i] * n_v)
-            out["theta_s"].extend([th_s] * n_v)
-            out["phi_s"].extend([ph_s] * n_v)
-            out_line.extend([line] * n_v)
-        if out_line:
-            add(*(np.frombuffer(out[k], dtype=np.float64) for k in ("theta_i", "phi_i", "theta_s", "phi_s",
-                                                                     "wavelength", "value", "std")),
-                np.frombuffer(out_rel, dtype=np.int8).astype(bool), np.frombuffer(out_side, dtype=np.int8),
-                np.frombuffer(out_line, dtype=np.int64))
-
-    def flush(block: list[tuple[int, str]]) -> None:
+        "spec": np.int16, "line": np.int32 if Path(layout.path).stat().st_size < 2**31 - 1 else np.int64})
+    for block in _blocks(events, pending):
         while pending and pending[0][0] < block[0][0]:
-            apply_block(_metadata([pending.pop(0)]))
-        if not fast(block):
-            by_rows(block)
+            state = _with_metadata(state, _metadata([pending.popleft()]), layout.path)
+        entries = _parse_fast(block, layout, state, firsts)
+        if entries is None:
+            entries, state = _parse_by_rows(block, layout, state, pending, firsts)
+        if entries["line"].size:
+            _store_entries(store, entries, len(layout.specs))
+    return _rows_of(store, layout, firsts)
 
+
+def _blocks(events: Iterator[tuple[str, int, str]], pending: deque[tuple[int, str]]
+            ) -> Iterator[list[tuple[int, str]]]:
+    """Blocks of at most :data:`_BLOCK_LINES` data lines, cut at every comment; the comments are appended to
+    ``pending`` as they come (before the block that follows them is given)."""
     block: list[tuple[int, str]] = []
     for kind, line, text in events:
         if kind == "comment":
             if block:
-                flush(block)
+                yield block
                 block = []
             pending.append((line, text))
             continue
         block.append((line, text))
         if len(block) >= _BLOCK_LINES:
-            flush(block)
+            yield block
             block = []
     if block:
-        flush(block)
-    if found["front"] is not None and found["back"] is not None:
-        raise ValidationError("transmission scatter angles in two frames", file=path, line=found["back"],
+        yield block
+
+
+def _rows_of(store: _Store, layout: _Layout, firsts: _Firsts) -> _Rows:
+    """The parsed entries as :class:`_Rows`, once the frame and the sides of the whole table are known."""
+    path = layout.path
+    if firsts.front is not None and firsts.back is not None:
+        raise ValidationError("transmission scatter angles in two frames", file=path, line=firsts.back,
                               field="theta_s", expected="all from the back normal (<= 90 deg) or all from the front "
-                              "normal (> 90 deg)", got=f"line {found['front']} beyond 90 deg")
+                              "normal (> 90 deg)", got=f"line {firsts.front} beyond 90 deg")
     side = store.take("side")
-    if found["sideless"] is not None:
-        if found["front"] is None:
-            line, where = found["sideless"]
+    if firsts.sideless is not None:
+        if firsts.front is None:
+            line, where = firsts.sideless
             raise InputError("the table does not say which side it holds; pass --side", file=path, line=line,
                              field=where, expected="--side reflection|transmission, a side column, "
                              "--quantity brdf|btdf, or polar angles up to 180 deg from the front normal")
@@ -1436,7 +1631,7 @@ def _parse_rows(path: str, events: Iterator[tuple[str, int, str]], delim: str | 
         phi_s=store.take("phi_s"), wavelength=store.take("wavelength"), value=store.take("value"),
         std=store.take("std"), std_relative=store.take("std_relative"), side=side, spec=store.take("spec"),
         line=store.take("line"),
-        quantities=[c.quantity for c in values], headers=[c.header for c in values])
+        quantities=[c.quantity for c, *_ in layout.specs], headers=[c.header for c, *_ in layout.specs])
 
 
 #: Plausible wavelengths [nm]: 1 nm (soft X-ray) to 100 µm (far infrared); a column outside is in another unit.
@@ -1615,102 +1810,145 @@ def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArra
     return np.where(in_plane, "in_plane", np.where(perp, "perpendicular", "other")).astype(object)
 
 
-def records_dataset(
-    theta_i: Sequence[float], phi_i: Sequence[float], theta_s: Sequence[float], phi_s: Sequence[float],
-    side: Sequence[str], wavelength: Sequence[float], bsdf: NDArray[np.float64], bsdf_std: NDArray[np.float64],
-    *, source: str, source_line: Sequence[int] | None = None, arc: Sequence[str] | None = None,
-    std_origin: str = "", description: str = "", wavelength_note: str = "",
-) -> xr.Dataset:
-    """The calibrated-dataset schema of :func:`bsdfkit.measurement.calibrate.calibrate` from per-record angles
-    [deg], sides and BSDF values [1/sr] (records × wavelengths, NaN = gap).
+@dataclass(frozen=True)
+class RecordDirections:
+    """Where each record of a table or vendor file was measured.
+
+    Attributes
+    ----------
+    theta_i, phi_i, theta_s, phi_s
+        Per-record incidence and scatter angles [deg], sample frame.
+    side
+        ``reflection`` or ``transmission`` per record.
+    arc
+        ``in_plane`` / ``perpendicular`` / ``other`` per record (default: from the angles, :func:`arc_labels`).
+    source_line
+        Line of each record in its file (default 0).
+    """
+
+    theta_i: Sequence[float]
+    phi_i: Sequence[float]
+    theta_s: Sequence[float]
+    phi_s: Sequence[float]
+    side: Sequence[str]
+    arc: Sequence[str] | None = None
+    source_line: Sequence[int] | None = None
+
+
+@dataclass(frozen=True)
+class RecordsOrigin:
+    """What a dataset of records says about its source.
+
+    Attributes
+    ----------
+    source
+        The file read.
+    std_origin
+        Where ``bsdf_std`` comes from (the ``origin`` of ``bsdf_std`` and ``attrs['bsdf_std_origin']``).
+    description
+        The configuration's description (default ``"measured table"``).
+    wavelength_note
+        Why the wavelength is NaN, when it is (the ``note`` of ``wavelength``).
+    """
+
+    source: str
+    std_origin: str = ""
+    description: str = ""
+    wavelength_note: str = ""
+
+
+def _flat_incident(lam: NDArray[np.float64]) -> tuple[NDArray[np.float64], list[float]]:
+    """The incident spectrum of elastic data [1/nm] (flat, unit integral when there are several wavelengths)
+    and its band (low, high) [nm]."""
+    if lam.size > 1 and np.all(np.isfinite(lam)):
+        return np.full(lam.size, 1.0 / float(np.sum(np.gradient(lam)))), [float(lam.min()), float(lam.max())]
+    return np.ones(lam.size), [float(lam[0]), float(lam[0])]
+
+
+def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf: NDArray[np.float64],
+                    bsdf_std: NDArray[np.float64], origin: RecordsOrigin) -> xr.Dataset:
+    """The BSDF dataset (:mod:`bsdfkit.measurement.schema`) of per-record directions and BSDF values [1/sr]
+    (records × wavelengths [nm], NaN = gap).
 
     One configuration (:data:`CONFIG_NAME`) with a flat incident spectrum over the wavelengths (elastic data:
     each wavelength is scattered at itself); no bi-spectral values (NaN), no noise floor (NaN), no instrument
-    geometry (NaN attributes). Used by the table reader and by :mod:`bsdfkit.tables.to_dataset`.
+    geometry (NaN attributes). Used by the table reader and by :mod:`bsdfkit.tables.vendor`.
     """
-    n = len(theta_i)
+    n = len(records.theta_i)
     lam = np.asarray(wavelength, dtype=np.float64)
-    f = np.asarray(bsdf, dtype=np.float64).reshape(n, lam.size)
-    s = np.asarray(bsdf_std, dtype=np.float64).reshape(n, lam.size)
-    th_i = np.asarray(theta_i, dtype=np.float64)
-    ph_i = np.asarray(phi_i, dtype=np.float64)
-    th_s = np.asarray(theta_s, dtype=np.float64)
-    ph_s = np.asarray(phi_s, dtype=np.float64)
-    arcs = np.asarray(arc, dtype=object) if arc is not None else arc_labels(th_i, ph_i, th_s, ph_s)
-    grazing = th_s >= 90.0 - 1e-9
-    if lam.size > 1 and np.all(np.isfinite(lam)):
-        spectrum = np.full(lam.size, 1.0 / float(np.sum(np.gradient(lam))))
-        band = [float(lam.min()), float(lam.max())]
-    else:
-        spectrum = np.ones(lam.size)
-        band = [float(lam[0]), float(lam[0])]
-    valid = np.ones(lam.size, dtype=bool)
+    th_i, ph_i, th_s, ph_s = (np.asarray(a, dtype=np.float64) for a in (records.theta_i, records.phi_i,
+                                                                        records.theta_s, records.phi_s))
+    arcs = np.asarray(records.arc, dtype=object) if records.arc is not None else arc_labels(th_i, ph_i, th_s, ph_s)
+    spectrum, band = _flat_incident(lam)
     # the quantities an elastic table does not state: one read-only NaN matrix of no size, shared
     nan2 = np.broadcast_to(np.float64(np.nan), (n, lam.size))
-    ds = xr.Dataset(
-        {
-            "bsdf": (("record", "wavelength"), f),
-            "bsdf_std": (("record", "wavelength"), s),
-            "noise_floor": (("record", "wavelength"), nan2),
-            "bsdf_bispectral": (("record", "wavelength"), nan2),
-            "bsdf_bispectral_std": (("record", "wavelength"), nan2),
-            "noise_floor_bispectral": (("record", "wavelength"), nan2),
-            "saturated": (("record", "wavelength"), np.zeros((n, lam.size), dtype=bool)),
-            "grazing": ("record", grazing),
-            "incident_spectrum": (("configuration", "wavelength"), spectrum[None, :]),
-            "incident_relative_std": (("configuration", "wavelength"), np.zeros((1, lam.size))),
-            "incident_valid": (("configuration", "wavelength"), valid[None, :]),
-            "incident_power_relative_std": ("configuration", np.zeros(1)),
-            "incident_band": (("configuration", "band_edge"), np.array([band])),
-            "configuration_description": ("configuration", np.array([description or "measured table"], dtype=object)),
-        },
-        coords={
-            "config": ("record", np.full(n, CONFIG_NAME, dtype=object)),
-            "theta_i": ("record", th_i), "phi_i": ("record", ph_i), "theta_s": ("record", th_s),
-            "phi_s": ("record", ph_s), "side": ("record", np.asarray(side, dtype=object)),
-            "arc": ("record", arcs),
-            "exposure": ("record", np.full(n, np.nan)),
-            "source_line": ("record", np.asarray(source_line if source_line is not None else np.zeros(n),
-                                                 dtype=np.int64)),
-            "wavelength": lam,
-            "configuration": np.array([CONFIG_NAME], dtype=object),
-            "band_edge": np.array(["low", "high"], dtype=object),
-        },
-    )
-    for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
-        ds[name].attrs["units"] = "deg"
-    ds["wavelength"].attrs["units"] = "nm"
-    if wavelength_note:
-        ds["wavelength"].attrs["note"] = wavelength_note
-    ds["bsdf"].attrs.update(units="1/sr", long_name="BSDF", note="NaN where the table has no value (gap)")
-    ds["bsdf_std"].attrs.update(units="1/sr", long_name="standard uncertainty of bsdf", origin=std_origin)
-    ds["noise_floor"].attrs.update(units="1/sr", long_name="noise-equivalent BSDF (not stated by the source: NaN)")
-    ds["bsdf_bispectral"].attrs.update(units="1/(sr nm)", note="elastic data: no wavelength conversion measured (NaN)")
-    ds["bsdf_bispectral_std"].attrs["units"] = "1/(sr nm)"
-    ds["noise_floor_bispectral"].attrs["units"] = "1/(sr nm)"
-    ds["incident_spectrum"].attrs.update(units="1/nm", long_name="flat (equal-energy) weighting over the measured "
-                                         "wavelengths: the source states no incident spectrum")
-    ds["grazing"].attrs["long_name"] = "theta_s = 90 deg (no finite BSDF from a cosine-corrected value)"
-    sides = sorted(set(map(str, side)))
-    ds.attrs.update(
-        quantity="bsdf", frame="sample", side=" ".join(s for s in SIDES if s in sides), units="1/sr",
+    data = {
+        "bsdf": np.asarray(bsdf, dtype=np.float64).reshape(n, lam.size),
+        "bsdf_std": np.asarray(bsdf_std, dtype=np.float64).reshape(n, lam.size),
+        "noise_floor": nan2, "bsdf_bispectral": nan2, "bsdf_bispectral_std": nan2, "noise_floor_bispectral": nan2,
+        "saturated": np.zeros((n, lam.size), dtype=bool),
+        "grazing": th_s >= 90.0 - 1e-9,
+        "incident_spectrum": spectrum[None, :],
+        "incident_relative_std": np.zeros((1, lam.size)),
+        "incident_valid": np.ones((1, lam.size), dtype=bool),
+        "incident_power_relative_std": np.zeros(1),
+        "incident_band": np.array([band]),
+        "configuration_description": np.array([origin.description or "measured table"], dtype=object),
+    }
+    lines = records.source_line
+    coords = {
+        "config": np.full(n, CONFIG_NAME, dtype=object), "theta_i": th_i, "phi_i": ph_i, "theta_s": th_s,
+        "phi_s": ph_s, "side": np.asarray(records.side, dtype=object), "arc": arcs, "exposure": np.full(n, np.nan),
+        "source_line": np.asarray(lines if lines is not None else np.zeros(n), dtype=np.int64),
+        "wavelength": lam, "configuration": np.array([CONFIG_NAME], dtype=object),
+        "band_edge": np.array(["low", "high"], dtype=object),
+    }
+    sides = set(pd.unique(coords["side"]).tolist())
+    ds = new_bsdf_dataset(data, coords, _records_attributes(origin, [s for s in SIDES if s in sides]))
+    _describe_records(ds, origin)
+    digest = _sha256(origin.source)
+    if digest is not None:
+        ds.attrs["source_sha256"] = digest
+    return ds
+
+
+def _records_attributes(origin: RecordsOrigin, sides: list[str]) -> dict[str, Any]:
+    """The dataset attributes of elastic records: the schema's, with NaN instrument geometry."""
+    return dict(
+        quantity="bsdf", frame="sample", side=" ".join(sides), units="1/sr",
         angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
                          "transmission angles from the back normal",
-        sample_name="", synthetic=0, source=str(source), elastic=1,
-        bsdf_std_origin=std_origin,
+        sample_name="", synthetic=0, source=str(origin.source), elastic=1,
+        bsdf_std_origin=origin.std_origin,
         solid_angle_sr=np.nan, aperture_half_angle_deg=np.nan, gain_e_per_count=np.nan,
         detector_distance_mm=np.nan, aperture_diameter_mm=np.nan, beam_diameter_mm=np.nan,
         manifest_json="{}",
     )
+
+
+def _describe_records(ds: xr.Dataset, origin: RecordsOrigin) -> None:
+    """Long names and notes of the variables of elastic records (units come from the schema)."""
+    if origin.wavelength_note:
+        ds["wavelength"].attrs["note"] = origin.wavelength_note
+    ds["bsdf"].attrs.update(long_name="BSDF", note="NaN where the table has no value (gap)")
+    ds["bsdf_std"].attrs.update(long_name="standard uncertainty of bsdf", origin=origin.std_origin)
+    ds["noise_floor"].attrs.update(long_name="noise-equivalent BSDF (not stated by the source: NaN)")
+    ds["bsdf_bispectral"].attrs.update(note="elastic data: no wavelength conversion measured (NaN)")
+    ds["incident_spectrum"].attrs.update(long_name="flat (equal-energy) weighting over the measured "
+                                         "wavelengths: the source states no incident spectrum")
+    ds["grazing"].attrs["long_name"] = "theta_s = 90 deg (no finite BSDF from a cosine-corrected value)"
+
+
+def _sha256(path: str) -> str | None:
+    """SHA-256 of a file read in blocks (the file is not held whole), or None when it cannot be read."""
     try:
         digest = hashlib.sha256()
-        with open(source, "rb") as fh:
-            while block := fh.read(1 << 20):  # in blocks: the file is not held whole
+        with open(path, "rb") as fh:
+            while block := fh.read(1 << 20):
                 digest.update(block)
-        ds.attrs["source_sha256"] = digest.hexdigest()
     except OSError:
-        pass
-    return ds
+        return None
+    return digest.hexdigest()
 
 
 #: A peak counts when it stands this many times above the profile's median and above the mirrored position.
@@ -1765,30 +2003,33 @@ def _azimuth_frame(th_i: NDArray, ph_i: NDArray, th_s: NDArray, ph_s: NDArray, v
     return "specular" if votes["specular"] and not votes["sample"] else "sample"
 
 
-def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str, wavelength_known: bool
-              ) -> xr.Dataset:
-    """The dataset of the parsed entries: records keyed by (side, θi, φi, θs, φs) rounded to 1e-9, in order of
-    first appearance, one per repetition of a direction. Computed in slices of :data:`_SLICE` entries on integer
-    codes; the entries of ``rows`` are released once the value matrices are filled."""
+def _theta_s_of(rows: _Rows, signed: bool, sl: Any) -> NDArray:
+    """θs [deg] of the entries ``sl``: |θs| of a signed in-plane angle."""
+    t = rows.theta_s[sl]
+    return np.abs(t) if signed else t
+
+
+def _phi_s_of(rows: _Rows, signed: bool, sl: Any) -> NDArray:
+    """φs [deg] in [0, 360) of the entries ``sl`` (0 at θs = 0); of a signed in-plane angle: the specular side
+    (φi − 180°) for θs ≥ 0, the source side (φi) below."""
+    ts = rows.theta_s[sl]
+    if signed:
+        pi_ = rows.phi_i[sl]
+        ps = np.where(ts >= 0, np.mod(pi_ - 180.0, 360.0), np.mod(pi_, 360.0))
+        ts = np.abs(ts)
+    else:
+        ps = rows.phi_s[sl]
+    p = np.mod(ps, 360.0)
+    return np.where((ts < 1e-12) | (p >= 360.0), 0.0, p)
+
+
+def _record_of_entries(rows: _Rows, signed: bool) -> tuple[NDArray, NDArray[np.int64]]:
+    """The record of every entry and the first entry of every record: records keyed by (side, θi, φi, θs, φs)
+    rounded to 1e-9, in order of first appearance, one per repetition of a direction."""
     n = rows.line.size
-
-    def theta_s(sl: Any) -> NDArray:
-        t = rows.theta_s[sl]
-        return np.abs(t) if signed else t
-
-    def phi_norm(sl: Any) -> NDArray:
-        ts = rows.theta_s[sl]
-        if signed:
-            pi_ = rows.phi_i[sl]
-            ps = np.where(ts >= 0, np.mod(pi_ - 180.0, 360.0), np.mod(pi_, 360.0))
-            ts = np.abs(ts)
-        else:
-            ps = rows.phi_s[sl]
-        p = np.mod(ps, 360.0)
-        return np.where((ts < 1e-12) | (p >= 360.0), 0.0, p)
-
     direction = [(rows.side, None), (rows.theta_i, _exact), (rows.phi_i, lambda u: _exact(np.mod(u, 360.0))),
-                 (theta_s, _exact), (phi_norm, lambda u: np.mod(_exact(u), 360.0))]
+                 (partial(_theta_s_of, rows, signed), _exact),
+                 (partial(_phi_s_of, rows, signed), lambda u: np.mod(_exact(u), 360.0))]
     # a direction measured more than once (the nadir of every C-plane, a repeated point) is kept as several
     # records, one per repetition: the hemispherical engine merges them with their spread in the uncertainty
     cell, n_cell = _codes_of_tuples([*direction, (rows.wavelength, None)], n)
@@ -1812,28 +2053,42 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     del code
     for i in range(0, n, _SLICE):
         rec_of[i: i + _SLICE] = rank[rec_of[i: i + _SLICE]]
-    first = first[order]
-    n_rec = first.size
-    rec_line = np.asarray(rows.line[first], dtype=np.int64).tolist()
-    rec_side = [SIDES[int(c)] for c in rows.side[first]]
-    rec_th_i, rec_ph_i = np.array(rows.theta_i[first]), np.array(rows.phi_i[first])
-    rec_th_s, rec_ph_s = theta_s(first), phi_norm(first)
+    return rec_of, first[order]
+
+
+@dataclass
+class _Records:
+    """The directions of the records [deg], their sides and first lines (φs rewritten once the azimuth origin
+    is known)."""
+
+    theta_i: NDArray[np.float64]
+    phi_i: NDArray[np.float64]
+    theta_s: NDArray[np.float64]
+    phi_s: NDArray[np.float64]
+    side: list[str]
+    line: list[int]
+
+
+def _records_of(rows: _Rows, first: NDArray[np.int64], signed: bool) -> _Records:
+    """The directions of the records from their first entries; the entries' directions are then released."""
+    rec = _Records(np.array(rows.theta_i[first]), np.array(rows.phi_i[first]), _theta_s_of(rows, signed, first),
+                   _phi_s_of(rows, signed, first), [SIDES[int(c)] for c in rows.side[first]],
+                   np.asarray(rows.line[first], dtype=np.int64).tolist())
     for name in ("theta_i", "phi_i", "theta_s", "phi_s"):
         # the directions are in the records now: released
         setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
+    return rec
+
+
+def _wavelengths(rows: _Rows, path: str) -> tuple[NDArray[np.float64], bool]:
+    """The sorted distinct wavelengths [nm] of the entries (one NaN when none is stated) and whether any is;
+    refuses a table where stated and unstated wavelengths mix (a (record, wavelength) pair would repeat)."""
+    n = rows.line.size
     finite = [np.unique(w[np.isfinite(w)]) for w in (rows.wavelength[i: i + _SLICE] for i in range(0, n, _SLICE))]
     lam = np.unique(np.concatenate(finite)) if finite else np.zeros(0)
-    stated_lam = lam.size > 0
     if lam.size == 0:
-        lam = np.array([np.nan])
-
-    def lam_index(sl: slice) -> NDArray:
-        return np.searchsorted(lam, rows.wavelength[sl]) if stated_lam else np.zeros(len(range(*sl.indices(n))),
-                                                                                      dtype=np.int64)
-
-    # records are (direction, repetition) per wavelength: a (record, wavelength) pair cannot repeat, unless stated
-    # and unstated (NaN) wavelengths mix, which is refused
-    for i in range(0, n if stated_lam else 0, _SLICE):
+        return np.array([np.nan]), False
+    for i in range(0, n, _SLICE):
         unstated = np.isnan(rows.wavelength[i: i + _SLICE])
         if unstated.any():
             k = i + int(np.argmax(unstated))
@@ -1841,6 +2096,12 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
                               line=int(rows.line[k]), field="wavelength",
                               expected="a wavelength column, '# wavelength: NM' before the first block, or "
                                        "--wavelength NM", got="no wavelength")
+    return lam, True
+
+
+def _record_quantities(rows: _Rows, first: NDArray[np.int64], rec_of: NDArray, path: str) -> NDArray[np.object_]:
+    """The quantity of every record (that of its first entry); refuses a direction holding two quantities."""
+    n = rows.line.size
     q_names = sorted(set(rows.quantities))
     q_of_spec = np.array([q_names.index(q) for q in rows.quantities])
     q_first = q_of_spec[rows.spec[first]]
@@ -1852,49 +2113,65 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
                 raise ValidationError("one direction holds two quantities", file=path, line=int(rows.line[k]),
                                       field=rows.column(k), expected=q_names[q_first[rec_of[k]]],
                                       got=rows.quantity(k))
-    quantity = np.array([q_names[c] for c in q_first], dtype=object)
-    # no uncertainty column: one read-only NaN matrix of no size instead of a matrix of NaN
+    return np.array([q_names[c] for c in q_first], dtype=object)
+
+
+def _value_matrices(rows: _Rows, rec_of: NDArray, lam: NDArray[np.float64], stated_lam: bool, n_rec: int
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+    """Values and absolute uncertainties on (record, wavelength) (NaN = gap), and whether the table has no
+    uncertainty column (then the uncertainties are a read-only NaN matrix of no size); the entries are then
+    released."""
+    n = rows.line.size
     no_std = rows.std.strides == (0,) and bool(np.isnan(rows.std[:1]).all())
     values = np.full((n_rec, lam.size), np.nan)
     stds = np.broadcast_to(np.float64(np.nan), values.shape) if no_std else np.full((n_rec, lam.size), np.nan)
     v_flat, s_flat = values.reshape(-1), stds.reshape(-1)
     for i in range(0, n, _SLICE):
         sl = slice(i, i + _SLICE)
-        at = rec_of[sl].astype(np.int64) * lam.size + lam_index(sl)
+        lam_at = np.searchsorted(lam, rows.wavelength[sl]) if stated_lam else np.zeros(len(range(*sl.indices(n))),
+                                                                                       dtype=np.int64)
+        at = rec_of[sl].astype(np.int64) * lam.size + lam_at
         v = rows.value[sl]
         v_flat[at] = v
         if not no_std:
             s_flat[at] = np.where(rows.std_relative[sl], rows.std[sl] * np.abs(v), rows.std[sl])
-    del rec_of, v_flat, s_flat, v, at
     for name in ("wavelength", "value", "std", "std_relative", "side", "spec", "line"):
         # the entries are in the matrices now: released
         setattr(rows, name, np.zeros(0, dtype=getattr(rows, name).dtype))
-    frame = "sample" if signed else _azimuth_frame(rec_th_i, rec_ph_i, rec_th_s, rec_ph_s, values)
-    if frame == "specular":  # φs measured from the specular direction: into the sample frame
-        rec_ph_s = np.where(rec_th_s < 1e-12, 0.0, np.mod(rec_ph_s + rec_ph_i - 180.0, 360.0))
-    # gaps: exact zeros per the policy
-    zero_records = 0
+    return values, stds, no_std
+
+
+def _zeros_as_gaps(values: NDArray[np.float64], zeros: str) -> tuple[NDArray[np.float64], int]:
+    """The values with exact zeros made gaps per the policy, and how many all-zero records became gaps."""
     if zeros == "missing":
-        values = np.where(values == 0.0, np.nan, values)
-    elif zeros == "auto":
+        return np.where(values == 0.0, np.nan, values), 0
+    if zeros == "auto":
         stated = np.isfinite(values)
         all_zero = stated.any(axis=1) & np.all(np.where(stated, values == 0.0, True), axis=1)
-        zero_records = int(all_zero.sum())
         values[all_zero] = np.nan
-    has_std = np.zeros(values.shape, dtype=bool) if no_std else np.isfinite(stds) & np.isfinite(values)
-    # convert to BSDF
+        return values, int(all_zero.sum())
+    return values, 0
+
+
+def _bsdf_matrices(values: NDArray[np.float64], stds: NDArray[np.float64], no_std: bool, quantity: NDArray,
+                   theta_s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """BSDF and its absolute uncertainty [1/sr] from the table's quantities (None: no uncertainty column)."""
     if len(set(quantity.tolist())) == 1:  # one quantity: converted whole (no copy for brdf/btdf/bsdf)
-        f = to_bsdf(values, quantity[0], rec_th_s)
-        s = None if no_std else np.abs(to_bsdf(stds, quantity[0], rec_th_s))
-    else:
-        f = np.full_like(values, np.nan)
-        s = np.full_like(values, np.nan)
-        for q in set(quantity.tolist()):
-            sel = quantity == q
-            f[sel] = to_bsdf(values[sel], q, rec_th_s[sel])
-            if not no_std:
-                s[sel] = np.abs(to_bsdf(stds[sel], q, rec_th_s[sel]))
-    del values, stds
+        return (to_bsdf(values, quantity[0], theta_s),
+                None if no_std else np.abs(to_bsdf(stds, quantity[0], theta_s)))
+    f = np.full_like(values, np.nan)
+    s = np.full_like(values, np.nan)
+    for q in set(quantity.tolist()):
+        sel = quantity == q
+        f[sel] = to_bsdf(values[sel], q, theta_s[sel])
+        if not no_std:
+            s[sel] = np.abs(to_bsdf(stds[sel], q, theta_s[sel]))
+    return f, s
+
+
+def _fill_std(f: NDArray[np.float64], s: NDArray[np.float64] | None, has_std: NDArray[np.bool_], rel: float | None
+              ) -> tuple[NDArray[np.float64], str]:
+    """The uncertainty [1/sr] with ``relative_std · |f|`` where the table states none, and where it comes from."""
     rel_used = DEFAULT_RELATIVE_STD if rel is None else float(rel)
     if s is None or not has_std.any():  # rel · |f| everywhere, formed in place
         s = np.abs(f)
@@ -1902,33 +2179,54 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
     else:
         np.copyto(s, rel_used * np.abs(f), where=~has_std)
         s[~np.isfinite(f)] = np.nan
+    if has_std.all():
+        return s, "the table's uncertainty column"
+    if has_std.any():
+        return s, (f"the table's uncertainty column where given, else {rel_used:g} x |bsdf|"
+                   + (" (assumed default)" if rel is None else ""))
+    return s, f"{rel_used:g} x |bsdf|" + (" (assumed default: the table states no uncertainty)" if rel is None
+                                          else " (relative_std given)")
+
+
+def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: str) -> xr.Dataset:
+    """The dataset of the parsed entries: records keyed by (side, θi, φi, θs, φs) rounded to 1e-9, in order of
+    first appearance, one per repetition of a direction. Computed in slices of :data:`_SLICE` entries on integer
+    codes; the entries of ``rows`` are released once the value matrices are filled."""
+    wavelength_known = bool(np.isfinite(rows.wavelength).any())
+    rec_of, first = _record_of_entries(rows, signed)
+    rec = _records_of(rows, first, signed)
+    lam, stated_lam = _wavelengths(rows, path)
+    quantity = _record_quantities(rows, first, rec_of, path)
+    values, stds, no_std = _value_matrices(rows, rec_of, lam, stated_lam, first.size)
+    del rec_of
+    frame = "sample" if signed else _azimuth_frame(rec.theta_i, rec.phi_i, rec.theta_s, rec.phi_s, values)
+    if frame == "specular":  # φs measured from the specular direction: into the sample frame
+        rec.phi_s = np.where(rec.theta_s < 1e-12, 0.0, np.mod(rec.phi_s + rec.phi_i - 180.0, 360.0))
+    values, zero_records = _zeros_as_gaps(values, zeros)
+    has_std = np.zeros(values.shape, dtype=bool) if no_std else np.isfinite(stds) & np.isfinite(values)
+    f, s = _bsdf_matrices(values, stds, no_std, quantity, rec.theta_s)
+    del values, stds
+    s, origin = _fill_std(f, s, has_std, rel)
     keep = np.isfinite(f).any(axis=1)
-    dropped = int((~keep).sum())
     if not keep.any():
         raise InputError("the table holds no values (every cell is a gap)", file=path, field="value",
                          expected="at least one finite value")
-    if has_std.all():
-        origin = "the table's uncertainty column"
-    elif has_std.any():
-        origin = (f"the table's uncertainty column where given, else {rel_used:g} x |bsdf|"
-                  + (" (assumed default)" if rel is None else ""))
-    else:
-        origin = f"{rel_used:g} x |bsdf|" + (" (assumed default: the table states no uncertainty)" if rel is None
-                                              else " (relative_std given)")
     idx = np.flatnonzero(keep)
-    quantities = sorted(set(quantity.tolist()))
     note = "" if wavelength_known else "not stated by the table; pass --wavelength NM (NaN = unknown)"
-    if idx.size < n_rec:  # records without any value dropped (a copy of the matrices only then)
+    if idx.size < keep.size:  # records without any value dropped (a copy of the matrices only then)
         f, s = f[idx], s[idx]
-    ds = records_dataset(rec_th_i[idx], rec_ph_i[idx], rec_th_s[idx], rec_ph_s[idx], [rec_side[i] for i in idx],
-                         lam, f, s, source=path, source_line=[rec_line[i] for i in idx],
-                         std_origin=origin, wavelength_note=note,
-                         description=f"measured table {Path(path).name}: {', '.join(quantities)}, elastic")
+    ds = records_dataset(RecordDirections(rec.theta_i[idx], rec.phi_i[idx], rec.theta_s[idx], rec.phi_s[idx],
+                                          [rec.side[i] for i in idx], source_line=[rec.line[i] for i in idx]),
+                         lam, f, s, RecordsOrigin(path, std_origin=origin, wavelength_note=note,
+                                                  description=f"measured table {Path(path).name}: "
+                                                              f"{', '.join(sorted(set(quantity.tolist())))}, "
+                                                              "elastic"))
     if frame == "specular":
         ds.attrs["azimuth_note"] = ("phi_s read from the specular direction (phi_s = 0 on the specular side): the "
                                     "table's peaks sit at phi_s = 0 although phi_i is not 180 deg")
-    ds.attrs.update(gap_records_dropped=dropped, zero_records_as_gaps=zero_records, zeros_policy=zeros,
-                    negative_values=int(np.sum(f < 0)), relative_std=rel_used)
+    ds.attrs.update(gap_records_dropped=int((~keep).sum()), zero_records_as_gaps=zero_records, zeros_policy=zeros,
+                    negative_values=int(np.sum(f < 0)),
+                    relative_std=DEFAULT_RELATIVE_STD if rel is None else float(rel))
     if note:
         ds.attrs["wavelength_note"] = note
     return ds

@@ -21,6 +21,8 @@ from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.measurement.table import (
     DEFAULT_RELATIVE_STD,
     ZERO_POLICIES,
+    RecordDirections,
+    RecordsOrigin,
     normalise_quantity,
     records_dataset,
     side_of_quantity,
@@ -156,14 +158,15 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     idx = np.flatnonzero(keep)
     n = idx.size
     pick = (lambda name: [cols[name][i] for i in idx])  # noqa: E731
-    ds = records_dataset(pick("theta_i"), np.full(n, 180.0), pick("theta_s"), pick("phi_s"), pick("side"),
+    ds = records_dataset(RecordDirections(pick("theta_i"), np.full(n, 180.0), pick("theta_s"), pick("phi_s"),
+                                          pick("side"), arc=pick("arc")),
                          [np.nan if lam is None else lam], f[idx][:, None], rel * np.abs(f[idx])[:, None],
-                         source=path, arc=pick("arc"),
-                         std_origin=f"{rel:g} x |bsdf|" + (" (assumed default: the file states no uncertainty)"
-                                                          if relative_std is None else " (relative_std given)"),
-                         description=f"{vendor.format} file {Path(path).name}",
-                         wavelength_note="" if lam is not None else
-                         "not stated by the file; pass --wavelength NM (NaN = unknown)")
+                         RecordsOrigin(path, std_origin=f"{rel:g} x |bsdf|" + (
+                             " (assumed default: the file states no uncertainty)" if relative_std is None
+                             else " (relative_std given)"),
+                             description=f"{vendor.format} file {Path(path).name}",
+                             wavelength_note="" if lam is not None else
+                             "not stated by the file; pass --wavelength NM (NaN = unknown)"))
     if all(g.solid_angle is not None for g in chosen):
         ds = ds.assign_coords({basis.COORD: ("record", np.asarray(pick("psa"), dtype=np.float64))})
         ds[basis.COORD].attrs.update(units="sr", long_name="projected solid angle of the basis cell of the record")
