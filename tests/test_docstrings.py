@@ -38,7 +38,7 @@ PENDING = [
     "cli/convert.py", "cli/export.py", "cli/info.py", "cli/read.py", "cli/tis.py",
     "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py", "fit/spectrum.py",
     "measurement/calibrate.py", "measurement/describe.py", "measurement/instrument.py", "measurement/manifest.py",
-    "measurement/raw_scan.py", "measurement/table.py",
+    "measurement/raw_scan.py", "measurement/schema.py", "measurement/table.py",
     "models/functions.py",
     "pipeline/recipe.py", "pipeline/report.py", "pipeline/spectral_comparison.py",
     "plotting/figures.py",
