@@ -121,9 +121,13 @@ class PolarInterpolant:
             sin_psi = None
         q = _coords(psi, r, self.azimuth_weight, sin_psi)
         q, simplex = _locate(self.tri, q)
-        t = self.tri.transform[simplex]
-        b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
-        bary = np.concatenate([b, 1.0 - b.sum(axis=1, keepdims=True)], axis=1)
+        # T⁻¹ (q − p2) written out: the same products and sums as einsum's, without its (m, 3, 2) gather
+        t = self.tri.transform.reshape(-1, 6)
+        d0, d1 = q[:, 0] - t[simplex, 4], q[:, 1] - t[simplex, 5]
+        bary = np.empty((simplex.size, 3))
+        bary[:, 0] = t[simplex, 0] * d0 + t[simplex, 1] * d1
+        bary[:, 1] = t[simplex, 2] * d0 + t[simplex, 3] * d1
+        bary[:, 2] = 1.0 - (bary[:, 0] + bary[:, 1])
         return bary, self.point_node[self.tri.simplices[simplex]], inside
 
     def _matrix_polar(self, psi: NDArray[np.float64], r: NDArray[np.float64]) -> sp.csr_matrix:
