@@ -57,9 +57,12 @@ QUAD_PSI, QUAD_R = 256, 160
 CENTER_TOL = 1e-7
 
 
-def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad]."""
-    bu = center[0] * np.cos(psi) + center[1] * np.sin(psi)
+def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64],
+                     cos_sin: tuple[NDArray, NDArray] | None = None) -> NDArray[np.float64]:
+    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad];
+    ``cos_sin``: (cos ψ, sin ψ) when already known."""
+    cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
+    bu = center[0] * cos_psi + center[1] * sin_psi
     b2 = center[0] ** 2 + center[1] ** 2
     return -bu + np.sqrt(bu * bu + 1.0 - b2)
 
@@ -106,19 +109,18 @@ class PolarInterpolant:
         ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the polar quadrature grid, ψ repeated
         over the radii): what depends on ψ alone is computed once per block (the same numbers)."""
         psi_u = np.mod(psi[::repeats] + np.pi, 2.0 * np.pi) - np.pi
-        top_u = self._top(psi_u)  # once for the clip and the domain test (it was computed twice per call)
-        sin_u = np.sin(psi_u)
-        cos_u = np.cos(psi_u) if self.direction_polar is not None else None
+        sin_u, cos_u = np.sin(psi_u), np.cos(psi_u)
+        top_u = self._top(psi_u, (cos_u, sin_u))  # once for the clip and the domain test
         if repeats > 1:
             psi, top, sin_psi = (np.repeat(a, repeats) for a in (psi_u, top_u, sin_u))
-            cos_psi = None if cos_u is None else np.repeat(cos_u, repeats)
+            cos_psi = np.repeat(cos_u, repeats) if self.direction_polar is not None else None
         else:
             psi, top, sin_psi, cos_psi = psi_u, top_u, sin_u, cos_u
         inside = ~(r > top * (1.0 + 1e-9) + 1e-12)
         r = np.clip(r, 0.0, top * (1.0 - 1e-12))
         if self.direction_polar is not None:
             psi, r = direction_polar(self.center, psi, r, self.direction_polar, (cos_psi, sin_psi))
-            sin_psi = None
+            sin_psi = psi  # ψ from arctan2 lies in [−π, π], where sin ψ has the sign of ψ (all _coords takes of it)
         q = _coords(psi, r, self.azimuth_weight, sin_psi)
         q, simplex = _locate(self.tri, q)
         # T⁻¹ (q − p2) written out: the same products and sums as einsum's, without its (m, 3, 2) gather
@@ -140,8 +142,8 @@ class PolarInterpolant:
             out = sp.diags(inside.astype(float)) @ out
         return out.tocsr()
 
-    def _top(self, psi: NDArray[np.float64]) -> NDArray[np.float64]:
-        t = horizon_distance(self.center, psi)
+    def _top(self, psi: NDArray[np.float64], cos_sin: tuple[NDArray, NDArray] | None = None) -> NDArray[np.float64]:
+        t = horizon_distance(self.center, psi, cos_sin)
         return t if self.radius is None else np.minimum(t, self.radius)
 
     def evaluate(self, values: NDArray[np.float64], x: NDArray[np.float64],
@@ -329,7 +331,8 @@ TIE_SHEAR = 1e-7
 
 
 def _coords(psi: NDArray, r: NDArray, s: float, sin_psi: NDArray | None = None) -> NDArray[np.float64]:
-    """Triangulation coordinates (s·ψ + shear, r) of polar points (``sin_psi``: sin ψ when already known)."""
+    """Triangulation coordinates (s·ψ + shear, r) of polar points (``sin_psi``: sin ψ, or an array of its signs,
+    when already known: the shear takes only its sign)."""
     sin_psi = np.sin(psi) if sin_psi is None else sin_psi
     return np.stack([s * psi + TIE_SHEAR * np.sign(sin_psi) * r, r], axis=1)
 
