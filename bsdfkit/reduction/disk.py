@@ -26,7 +26,12 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.machinery
+import importlib.util
+import sys
 from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -42,7 +47,41 @@ if TYPE_CHECKING:
 # scipy's sparse and spatial modules (0.3-0.7 s to import) are needed only when records are triangulated; a
 # table on its own spokes (Zemax, TracePro, ASAP) is integrated without them (`bsdfkit tis`/`read` stay light)
 sp = LazyModule("scipy.sparse")
-spatial = LazyModule("scipy.spatial")
+
+#: scipy's Qhull wrapper: Delaunay and QhullError (scipy.spatial re-exports them)
+QHULL = "scipy.spatial._qhull"
+
+
+def qhull() -> ModuleType:
+    """:data:`QHULL`, without the rest of scipy.spatial when that is not imported yet.
+
+    The package's import also loads scipy.spatial.distance (and with it scipy.special), transform, the k-d trees
+    and the Voronoi code, none of which a reduction uses: 0.1-0.3 s of every ``bsdfkit read`` and ``tis``
+    (docs/performance.md). The extension module is then loaded from its file under its own name, as the package's
+    import would load it (a later ``import scipy.spatial`` finds and re-exports it); any other layout or failure
+    falls back to the package import.
+    """
+    module = sys.modules.get(QHULL)
+    if module is not None:
+        return module
+    if "scipy.spatial" not in sys.modules:
+        try:
+            import scipy
+
+            folder = Path(scipy.__file__).parent / "spatial"
+            for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+                spec = importlib.util.spec_from_file_location(QHULL, folder / f"_qhull{suffix}")
+                if spec is None or spec.loader is None or not (folder / f"_qhull{suffix}").is_file():
+                    continue
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[QHULL] = module
+                spec.loader.exec_module(module)
+                return module
+        except Exception:  # any surprise of another scipy: the ordinary import below
+            sys.modules.pop(QHULL, None)
+    from scipy.spatial import _qhull
+
+    return _qhull
 
 #: Weight of the azimuth (radians) against the radius (direction cosines) in the triangulation metric: records
 #: at about the same distance from the centre are joined across azimuth before records along a spoke.
@@ -343,7 +382,7 @@ def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
     key = (pts.shape, hashlib.blake2b(pts.tobytes(), digest_size=16).digest())
     tri = _TRIANGULATIONS.get(key)
     if tri is None:
-        tri = spatial.Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
+        tri = qhull().Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
         if getattr(tri, "_transform", 0) is None:  # scipy computes it lazily, one LAPACK call per simplex
             tri._transform = barycentric_transforms(tri.points, tri.simplices)
         _TRIANGULATIONS[key] = tri
@@ -471,7 +510,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     pp, rr, nn = _periodic(p0, r0, n0, n)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)
-    except spatial.QhullError as exc:
+    except qhull().QhullError as exc:
         raise InputError("records are degenerate on the disk (all on one line through the centre)",
                          field="bsdf", expected="records spanning an area of the disk") from exc
     stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)
