@@ -131,3 +131,28 @@ def test_light_verbs_on_real_files_do_not_import_dask_or_jax(tmp_path):
     got = json.loads(done.stdout)
     want = json.loads(ref.stdout)
     assert [r["value"] for r in got["band_averaged"]] == [r["value"] for r in want["band_averaged"]]
+
+
+RADIANT = ROOT / "tests" / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+
+
+def test_read_triangulates_without_the_scipy_spatial_package(tmp_path):
+    """`bsdfkit read` of a vendor file triangulates with scipy's Qhull extension alone
+    (:func:`bsdfkit.reduction.disk.qhull`): the scipy.spatial package, whose import also loads scipy.special,
+    distance and transform, stays unloaded; the TIS are those of the same reading in a process that imported
+    scipy.spatial first (its Delaunay, by the package's own import)."""
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "bsdfkit", "read", str(RADIANT), "--json"],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          env={**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")})
+    assert done.returncode == 0, done.stderr[-2000:]
+    names = {line.split("|")[-1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")}
+    # the extension itself, loaded from its file, is not listed by -X importtime; the LAPACK it links to is
+    assert "scipy.linalg.cython_lapack" in names
+    assert not names & {"scipy.spatial", "scipy.special", "scipy.spatial.distance"}
+    code = ("import json, sys, scipy.spatial; from bsdfkit.tables.export import read_any;"
+            "print(json.dumps(read_any(sys.argv[1]).tis_computed))")
+    ref = subprocess.run([sys.executable, "-c", code, str(RADIANT)], capture_output=True, text=True, timeout=300,
+                         cwd=tmp_path,
+                         env={**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")})
+    assert ref.returncode == 0, ref.stderr[-2000:]
+    assert json.loads(done.stdout)["tis_computed"] == json.loads(ref.stdout)

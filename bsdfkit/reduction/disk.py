@@ -26,7 +26,12 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.machinery
+import importlib.util
+import sys
 from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -42,7 +47,41 @@ if TYPE_CHECKING:
 # scipy's sparse and spatial modules (0.3-0.7 s to import) are needed only when records are triangulated; a
 # table on its own spokes (Zemax, TracePro, ASAP) is integrated without them (`bsdfkit tis`/`read` stay light)
 sp = LazyModule("scipy.sparse")
-spatial = LazyModule("scipy.spatial")
+
+#: scipy's Qhull wrapper: Delaunay and QhullError (scipy.spatial re-exports them)
+QHULL = "scipy.spatial._qhull"
+
+
+def qhull() -> ModuleType:
+    """:data:`QHULL`, without the rest of scipy.spatial when that is not imported yet.
+
+    The package's import also loads scipy.spatial.distance (and with it scipy.special), transform, the k-d trees
+    and the Voronoi code, none of which a reduction uses: 0.1-0.3 s of every ``bsdfkit read`` and ``tis``
+    (docs/performance.md). The extension module is then loaded from its file under its own name, as the package's
+    import would load it (a later ``import scipy.spatial`` finds and re-exports it); any other layout or failure
+    falls back to the package import.
+    """
+    module = sys.modules.get(QHULL)
+    if module is not None:
+        return module
+    if "scipy.spatial" not in sys.modules:
+        try:
+            import scipy
+
+            folder = Path(scipy.__file__).parent / "spatial"
+            for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+                spec = importlib.util.spec_from_file_location(QHULL, folder / f"_qhull{suffix}")
+                if spec is None or spec.loader is None or not (folder / f"_qhull{suffix}").is_file():
+                    continue
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[QHULL] = module
+                spec.loader.exec_module(module)
+                return module
+        except Exception:  # any surprise of another scipy: the ordinary import below
+            sys.modules.pop(QHULL, None)
+    from scipy.spatial import _qhull
+
+    return _qhull
 
 #: Weight of the azimuth (radians) against the radius (direction cosines) in the triangulation metric: records
 #: at about the same distance from the centre are joined across azimuth before records along a spoke.
@@ -57,9 +96,12 @@ QUAD_PSI, QUAD_R = 256, 160
 CENTER_TOL = 1e-7
 
 
-def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad]."""
-    bu = center[0] * np.cos(psi) + center[1] * np.sin(psi)
+def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64],
+                     cos_sin: tuple[NDArray, NDArray] | None = None) -> NDArray[np.float64]:
+    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad];
+    ``cos_sin``: (cos ψ, sin ψ) when already known."""
+    cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
+    bu = center[0] * cos_psi + center[1] * sin_psi
     b2 = center[0] ** 2 + center[1] ** 2
     return -bu + np.sqrt(bu * bu + 1.0 - b2)
 
@@ -106,24 +148,27 @@ class PolarInterpolant:
         ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the polar quadrature grid, ψ repeated
         over the radii): what depends on ψ alone is computed once per block (the same numbers)."""
         psi_u = np.mod(psi[::repeats] + np.pi, 2.0 * np.pi) - np.pi
-        top_u = self._top(psi_u)  # once for the clip and the domain test (it was computed twice per call)
-        sin_u = np.sin(psi_u)
-        cos_u = np.cos(psi_u) if self.direction_polar is not None else None
+        sin_u, cos_u = np.sin(psi_u), np.cos(psi_u)
+        top_u = self._top(psi_u, (cos_u, sin_u))  # once for the clip and the domain test
         if repeats > 1:
             psi, top, sin_psi = (np.repeat(a, repeats) for a in (psi_u, top_u, sin_u))
-            cos_psi = None if cos_u is None else np.repeat(cos_u, repeats)
+            cos_psi = np.repeat(cos_u, repeats) if self.direction_polar is not None else None
         else:
             psi, top, sin_psi, cos_psi = psi_u, top_u, sin_u, cos_u
         inside = ~(r > top * (1.0 + 1e-9) + 1e-12)
         r = np.clip(r, 0.0, top * (1.0 - 1e-12))
         if self.direction_polar is not None:
             psi, r = direction_polar(self.center, psi, r, self.direction_polar, (cos_psi, sin_psi))
-            sin_psi = None
+            sin_psi = psi  # ψ from arctan2 lies in [−π, π], where sin ψ has the sign of ψ (all _coords takes of it)
         q = _coords(psi, r, self.azimuth_weight, sin_psi)
         q, simplex = _locate(self.tri, q)
-        t = self.tri.transform[simplex]
-        b = np.einsum("mij,mj->mi", t[:, :2, :], q - t[:, 2, :])
-        bary = np.concatenate([b, 1.0 - b.sum(axis=1, keepdims=True)], axis=1)
+        # T⁻¹ (q − p2) written out: the same products and sums as einsum's, without its (m, 3, 2) gather
+        t = self.tri.transform.reshape(-1, 6)
+        d0, d1 = q[:, 0] - t[simplex, 4], q[:, 1] - t[simplex, 5]
+        bary = np.empty((simplex.size, 3))
+        bary[:, 0] = t[simplex, 0] * d0 + t[simplex, 1] * d1
+        bary[:, 1] = t[simplex, 2] * d0 + t[simplex, 3] * d1
+        bary[:, 2] = 1.0 - (bary[:, 0] + bary[:, 1])
         return bary, self.point_node[self.tri.simplices[simplex]], inside
 
     def _matrix_polar(self, psi: NDArray[np.float64], r: NDArray[np.float64]) -> sp.csr_matrix:
@@ -136,8 +181,8 @@ class PolarInterpolant:
             out = sp.diags(inside.astype(float)) @ out
         return out.tocsr()
 
-    def _top(self, psi: NDArray[np.float64]) -> NDArray[np.float64]:
-        t = horizon_distance(self.center, psi)
+    def _top(self, psi: NDArray[np.float64], cos_sin: tuple[NDArray, NDArray] | None = None) -> NDArray[np.float64]:
+        t = horizon_distance(self.center, psi, cos_sin)
         return t if self.radius is None else np.minimum(t, self.radius)
 
     def evaluate(self, values: NDArray[np.float64], x: NDArray[np.float64],
@@ -325,7 +370,8 @@ TIE_SHEAR = 1e-7
 
 
 def _coords(psi: NDArray, r: NDArray, s: float, sin_psi: NDArray | None = None) -> NDArray[np.float64]:
-    """Triangulation coordinates (s·ψ + shear, r) of polar points (``sin_psi``: sin ψ when already known)."""
+    """Triangulation coordinates (s·ψ + shear, r) of polar points (``sin_psi``: sin ψ, or an array of its signs,
+    when already known: the shear takes only its sign)."""
     sin_psi = np.sin(psi) if sin_psi is None else sin_psi
     return np.stack([s * psi + TIE_SHEAR * np.sign(sin_psi) * r, r], axis=1)
 
@@ -336,7 +382,7 @@ def _triangulate(psi: NDArray, r: NDArray, s: float) -> Delaunay:
     key = (pts.shape, hashlib.blake2b(pts.tobytes(), digest_size=16).digest())
     tri = _TRIANGULATIONS.get(key)
     if tri is None:
-        tri = spatial.Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
+        tri = qhull().Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
         if getattr(tri, "_transform", 0) is None:  # scipy computes it lazily, one LAPACK call per simplex
             tri._transform = barycentric_transforms(tri.points, tri.simplices)
         _TRIANGULATIONS[key] = tri
@@ -464,7 +510,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     pp, rr, nn = _periodic(p0, r0, n0, n)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)
-    except spatial.QhullError as exc:
+    except qhull().QhullError as exc:
         raise InputError("records are degenerate on the disk (all on one line through the centre)",
                          field="bsdf", expected="records spanning an area of the disk") from exc
     stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)

@@ -1172,10 +1172,11 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`)."""
     finite = np.isfinite(ref)
     s = np.nan_to_num(ref_std)
-    lobe_c, radius, in_plane_region = _disk_region(geom, ref, s)
     native = _native_grid(geom, finite)
-    if native:  # a polar grid about the specular point or direction: integrated on its own spokes
+    if native:  # a polar grid about the specular point or direction: integrated on its own spokes (no lobe region)
         lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
+    else:
+        lobe_c, radius, in_plane_region = _disk_region(geom, ref, s)
     resolved = lobe_c is not None and radius > LOBE_MAX_RADIUS
     if resolved:  # scatter rising over most of the disk is no specular lobe: integrated directly with the body
         lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)

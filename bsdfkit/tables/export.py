@@ -51,7 +51,7 @@ from bsdfkit.tables.axes_choice import (
     plane_symmetric_grid,
 )
 from bsdfkit.tables.formats import asap, tracepro
-from bsdfkit.tables.registry import FileSummary, WriteJob, sniff_format
+from bsdfkit.tables.registry import FileSummary, VendorTable, WriteJob, sniff_format
 from bsdfkit.tables.vendor import vendor_dataset
 
 __all__ = [
@@ -419,7 +419,7 @@ def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
 # export
 # --------------------------------------------------------------------------------------------------
 def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence[str], path: str | Path,
-                settings: ExportSettings) -> dict[str, dict[str, list[float]]]:
+                settings: ExportSettings, vendor: VendorTable | None = None) -> dict[str, dict[str, list[float]]]:
     """Peak of the lobe of the written file against the source's (see :attr:`ExportResult.peak_error`).
 
     The table is read back with its format's reader (its registry ``vendor_table``); the source is evaluated at
@@ -427,9 +427,10 @@ def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence
     midpoints of its radial segments on every written azimuth (the mirror average for a PlaneSymmetrical Zemax
     file, which is what that file holds). Both peaks are maxima over the lobe's core
     (:func:`bsdfkit.tables.grids.lobe_core`: from the specular direction outward while the BSDF stays at least
-    half its specular value), so a peak the table's nodes step over is seen.
+    half its specular value), so a peak the table's nodes step over is seen. ``vendor``: the file's nodes when
+    already read (the re-check's re-read of the same file).
     """
-    vendor = registry.get(to).vendor_table(str(path))
+    vendor = vendor if vendor is not None else registry.get(to).vendor_table(str(path))
     by_side = {g.side: g for g in vendor.grids}
     first = vendor.grids[0]
     # (side, theta, azimuth, radial); a side the file leaves all zero (TracePro's other column) is zero
@@ -534,6 +535,7 @@ def export(
     write(settings, force)
     reference: dict[str, list[float]] | None = None
     summary = None  # the written file as read_any read it, while it is the file on disk (its re-read, 3-4 s)
+    nodes = None  # and its nodes as the engine integrated them (the peak check reads the same file)
     if grid_info.get("mode") == "auto":
         # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
         # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
@@ -593,7 +595,7 @@ def export(
                 current = replace(settings, grid="fixed")
                 write(current, True)
                 grid_info["mode"] = FALLBACK_RECHECK
-            summary = read_any(path)
+            summary, nodes = _read_any(path)
             computed = summary.tis_computed
             worst = max(abs(computed[s][k_] / reference[s][k_] - 1.0) if reference[s][k_] > 0 else 0.0
                         for s in sides for k_ in range(theta.size))
@@ -608,7 +610,7 @@ def export(
         if len(tried) > 1:
             grid_info["recheck_worst"] = float(tried[best][0])
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
-    reread = summary if summary is not None else read_any(path)
+    reread, nodes = (summary, nodes) if summary is not None else _read_any(path)
     tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     held = grid_info.get("klems_incidence_map_deg")
     if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):
@@ -627,7 +629,7 @@ def export(
         tis_source = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
     else:
         tis_source = reference or {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
-    peaks = _peak_check(fn, to, theta, sides, path, settings) if "radial" in grid_info else {}
+    peaks = _peak_check(fn, to, theta, sides, path, settings, nodes) if "radial" in grid_info else {}
     if not written_mask.all():
         grid_info["incidences_not_held_deg"] = [float(t) for t in theta[~written_mask]]
         tis_source = {s: [v for v, w in zip(vals, written_mask) if w] for s, vals in tis_source.items()}
@@ -649,11 +651,13 @@ def _floats(values: Any) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
 
 
-def file_tis(path: str | Path, incidences_deg: Sequence[float]) -> dict[str, list[float]]:
+def file_tis(path: str | Path, incidences_deg: Sequence[float],
+             table: VendorTable | None = None) -> dict[str, list[float]]:
     """Hemispherical TIS per side and incidence of a vendor file by the engine of
     :mod:`bsdfkit.reduction.hemispherical` on the file's nodes (:func:`bsdfkit.tables.vendor.vendor_dataset`): the
-    same integral ``bsdfkit tis`` computes for the ingested file. A side the file leaves all zero gives 0."""
-    ds = vendor_dataset(path)
+    same integral ``bsdfkit tis`` computes for the ingested file. A side the file leaves all zero gives 0.
+    ``table``: the file's nodes when already read by its format's reader."""
+    ds = vendor_dataset(path, table=table)
     out: dict[str, list[float]] = {}
     for res in hemispherical(ds, errors=False):
         values = out.setdefault(res.side, [0.0] * len(incidences_deg))
@@ -670,13 +674,21 @@ def read_any(path: str | Path) -> FileSummary:
     whatever the path); the format's own quadrature on its native grid is kept in
     ``details['tis_format_quadrature']`` (files with several Zemax sample rotations use it as ``tis_computed``).
     """
-    summary = _read_format(path)
+    return _read_any(path)[0]
+
+
+def _read_any(path: str | Path) -> tuple[FileSummary, VendorTable | None]:
+    """:func:`read_any` and the file's nodes the engine integrated (None when the format's own rule gives the TIS),
+    the file read once by each of its format's two readers."""
+    fmt = sniff_format(path)
+    summary = _read_format(path, fmt)
     if any("@rotation=" in k for k in summary.tis_computed):
         summary.details["tis_rule"] = "format quadrature (several sample rotations)"
-        return summary
+        return summary, None
     if "tis_rule" in summary.details:  # the format's own rule (a TracePro ABg property holds no table)
-        return summary
-    engine = file_tis(path, summary.incidences_deg)
+        return summary, None
+    table = registry.get(fmt).vendor_table(str(path))
+    engine = file_tis(path, summary.incidences_deg, table)
     computed = {k: engine.get(k, [0.0] * len(summary.incidences_deg)) for k in summary.tis_computed
                 if k != "total"}
     if "total" in summary.tis_computed:
@@ -684,9 +696,10 @@ def read_any(path: str | Path) -> FileSummary:
     own = {} if summary.details.get("own_quadrature") is False else {"tis_format_quadrature": summary.tis_computed}
     details = dict(summary.details, **own,
                    tis_rule="bsdfkit.reduction.hemispherical on the file's nodes (as bsdfkit tis)")
-    return replace(summary, tis_computed=computed, details=details)
+    return replace(summary, tis_computed=computed, details=details), table
 
 
-def _read_format(path: str | Path) -> FileSummary:
-    """The summary of the file's own format (sniffed by content, :func:`bsdfkit.tables.registry.sniff_format`)."""
-    return registry.get(sniff_format(path)).summarise(str(path))
+def _read_format(path: str | Path, fmt: str | None = None) -> FileSummary:
+    """The summary of the file's own format ``fmt`` (default: sniffed by content,
+    :func:`bsdfkit.tables.registry.sniff_format`)."""
+    return registry.get(fmt or sniff_format(path)).summarise(str(path))

@@ -970,6 +970,50 @@ def _coarse_radial_round(first: float, last: float, max_step: float) -> NDArray[
     return np.concatenate([nodes, max_step * np.arange(1, int(round(count)) + 1)])
 
 
+class _NodeValues:
+    """The BSDF at Harvey–Shack nodes (ρ, ψ) as :func:`harvey_shack_grid` samples it (the same directions, 0 beyond
+    the disk), each node evaluated once: every round of :func:`_refine_polar` asks again for most of the nodes of
+    the round before (the radial nodes and the unsplit segments' midpoints on the old azimuths, the radial nodes on
+    the new ones), and a reconstruction's evaluation is the cost of the auto grid."""
+
+    def __init__(self, bsdf_fn: BsdfFn, thetas: NDArray[np.float64], sides: tuple[str, ...], zero: float) -> None:
+        self.fn, self.thetas, self.sides, self.zero = bsdf_fn, thetas, sides, zero
+        self.known: dict[float, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}  # ψ → (ρ sorted, f[s, t, ρ])
+
+    def __call__(self, r: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
+        """f[side, theta, a, r] [1/sr] on the grid ``r`` × ``a`` (ρ, table azimuths [deg])."""
+        new_r, new_a = [], []
+        for psi in a:
+            have = self.known.get(float(psi))
+            missing = r if have is None else r[~np.isin(r, have[0])]
+            new_r.append(missing)
+            new_a.append(np.full(missing.size, psi))
+        r_p, a_p = np.concatenate(new_r), np.concatenate(new_a)
+        if r_p.size:
+            f_p = np.zeros((len(self.sides), self.thetas.size, r_p.size))
+            psi_sample = np.radians(a_p + self.zero)
+            unit = np.stack([np.cos(psi_sample), np.sin(psi_sample)], axis=-1)
+            for t, theta in enumerate(self.thetas):
+                # harvey_shack_grid's directions and inside test, node by node
+                inside = r_p <= rho_max(theta, a_p + self.zero)
+                beta = frames.beta0(np.radians(theta)) + r_p[:, None] * unit
+                directions = frames.direction_from_beta(beta[inside])
+                for s, side in enumerate(self.sides):
+                    f_p[s, t, inside] = evaluate_bsdf(self.fn, theta, side, directions)
+            for psi in np.unique(a_p):
+                on = a_p == psi
+                have = self.known.get(float(psi))
+                radii = r_p[on] if have is None else np.concatenate([have[0], r_p[on]])
+                values = f_p[..., on] if have is None else np.concatenate([have[1], f_p[..., on]], axis=-1)
+                order = np.argsort(radii)
+                self.known[float(psi)] = (radii[order], values[..., order])
+        out = np.empty((len(self.sides), self.thetas.size, a.size, r.size))
+        for j, psi in enumerate(a):
+            radii, values = self.known[float(psi)]
+            out[:, :, j, :] = values[..., np.searchsorted(radii, r)]
+        return out
+
+
 def auto_harvey_shack_axes(
     bsdf_fn: BsdfFn,
     theta_i_deg: Sequence[float],
@@ -998,10 +1042,11 @@ def auto_harvey_shack_axes(
     thetas = _check_incidences(theta_i_deg)
     sides = _check_sides(sides)
 
+    memo = _NodeValues(bsdf_fn, thetas, sides, zero_azimuth_deg)
+
     def evaluate(r: NDArray, a: NDArray) -> tuple[NDArray, NDArray]:
-        grid = harvey_shack_grid(bsdf_fn, thetas, sides, HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg))
         inside = r[None, None, :] <= rho_max(thetas[:, None, None], a[None, :, None] + zero_azimuth_deg)
-        return np.swapaxes(grid.values, -1, -2), inside
+        return memo(r, a), inside
 
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)

