@@ -29,6 +29,10 @@ COVERED = [
     "models/led.py", "models/registry.py",
     "plotting/maps.py", "plotting/spectra.py",
     "reduction/any_sample.py", "reduction/basis.py",
+    "raytrace/effects.py", "raytrace/geometry.py", "raytrace/kernel.py", "raytrace/oracles/numpy_reference.py",
+    "raytrace/oracles/radiosity.py", "raytrace/oracles/spectral_budget.py", "raytrace/plate.py",
+    "raytrace/plate_from_scan.py", "raytrace/programs.py", "raytrace/rayfile.py", "raytrace/sampling.py",
+    "raytrace/scene.py", "raytrace/sweep.py", "raytrace/tallies.py", "raytrace/tracer.py",
     "simulation/truth.py",
 ]
 
@@ -42,10 +46,7 @@ PENDING = [
     "models/functions.py",
     "pipeline/recipe.py", "pipeline/report.py", "pipeline/spectral_comparison.py",
     "plotting/figures.py",
-    "raytrace/effects.py", "raytrace/geometry.py", "raytrace/kernel.py", "raytrace/oracles/numpy_reference.py",
-    "raytrace/oracles/radiosity.py", "raytrace/oracles/spectral_budget.py", "raytrace/plate.py",
-    "raytrace/plate_from_scan.py", "raytrace/programs.py", "raytrace/rayfile.py", "raytrace/sampling.py",
-    "raytrace/scene.py", "raytrace/spectral.py", "raytrace/sweep.py", "raytrace/tallies.py", "raytrace/tracer.py",
+    "raytrace/spectral.py",
     "reduction/budget.py", "reduction/colorimetry.py", "reduction/disk.py", "reduction/excitation_emission.py",
     "reduction/hemispherical.py", "reduction/spectral.py", "reduction/spectrum_metrics.py", "reduction/tis.py",
     "simulation/virtual_goniometer.py",
