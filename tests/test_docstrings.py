@@ -24,15 +24,16 @@ COVERED = [
     "cli/bench.py", "cli/budget.py", "cli/color.py", "cli/fit.py", "cli/ingest.py", "cli/main.py", "cli/run.py",
     "cli/simulate.py", "cli/sweep.py", "cli/trace.py",
     "core/conventions.py", "core/frames.py", "core/jaxconfig.py", "core/quadrature.py", "core/records.py",
+    "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py",
     "io/atomic.py", "io/jsonout.py", "io/netcdf.py", "io/spectrum_file.py", "io/text.py", "io/toml_write.py",
     "io/xarray_dask.py",
     "models/led.py", "models/registry.py",
     "plotting/maps.py", "plotting/spectra.py",
-    "reduction/any_sample.py", "reduction/basis.py",
     "raytrace/effects.py", "raytrace/geometry.py", "raytrace/kernel.py", "raytrace/oracles/numpy_reference.py",
     "raytrace/oracles/radiosity.py", "raytrace/oracles/spectral_budget.py", "raytrace/plate.py",
     "raytrace/plate_from_scan.py", "raytrace/programs.py", "raytrace/rayfile.py", "raytrace/sampling.py",
     "raytrace/scene.py", "raytrace/sweep.py", "raytrace/tallies.py", "raytrace/tracer.py",
+    "reduction/any_sample.py", "reduction/basis.py",
     "simulation/truth.py",
 ]
 
@@ -40,7 +41,7 @@ COVERED = [
 PENDING = [
     "accessor.py",
     "cli/convert.py", "cli/export.py", "cli/info.py", "cli/read.py", "cli/tis.py",
-    "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py", "fit/spectrum.py",
+    "fit/spectrum.py",
     "measurement/calibrate.py", "measurement/describe.py", "measurement/instrument.py", "measurement/manifest.py",
     "measurement/raw_scan.py", "measurement/table.py",
     "models/functions.py",
