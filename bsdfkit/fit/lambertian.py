@@ -112,7 +112,20 @@ def lambertian_from_reflectance(
 
 def at_wavelength(model: xr.Dataset, wavelength_nm: float) -> xr.Dataset:
     """The model at one wavelength [nm] (linear interpolation; no extrapolation): an ordinary fit result, with
-    the plausibility gate's verdict at that wavelength."""
+    the plausibility gate's verdict at that wavelength.
+
+    Parameters
+    ----------
+    model : xarray.Dataset
+        A Lambertian model over ``wavelength`` (:func:`lambertian_from_reflectance`).
+    wavelength_nm : float
+        The wavelength [nm], within the model's range.
+
+    Returns
+    -------
+    xarray.Dataset
+        The fit result at that wavelength (``rho`` [-]).
+    """
     wl = model["wavelength"].values
     if not (np.isfinite(wavelength_nm) and wl[0] <= wavelength_nm <= wl[-1]):
         raise InputError("wavelength outside the measured spectrum", file=model.attrs.get("source") or None,
@@ -129,6 +142,22 @@ def band_weighted_reflectance(model: xr.Dataset, spectrum_wavelength_nm: ArrayLi
 
     This is the single reflectance a two-wavelength tracer gives its "blue" or "yellow" rays. The model is
     interpolated onto the spectrum's wavelengths, which must lie within the measured range.
+
+    Parameters
+    ----------
+    model : xarray.Dataset
+        A Lambertian model over ``wavelength``.
+    spectrum_wavelength_nm : array_like
+        Wavelengths of the weighting spectrum [nm].
+    spectrum : array_like
+        Weighting power spectrum S, any scale, ≥ 0 in the band.
+    band_nm : tuple of float
+        (low, high) band edges [nm].
+
+    Returns
+    -------
+    float
+        The weighted reflectance [-].
     """
     lam = np.asarray(spectrum_wavelength_nm, dtype=np.float64)
     s = np.asarray(spectrum, dtype=np.float64)

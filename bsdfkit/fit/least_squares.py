@@ -787,7 +787,26 @@ class BsdfFitOptions:
 
 
 def bsdf_model_values(model: str, params: dict[str, float], theta_i_deg, theta_s_deg, phi_s_deg) -> np.ndarray:
-    """Evaluate a named BSDF model [1/sr] at angles in **degrees** (source at φi = 180°)."""
+    """Evaluate a named BSDF model [1/sr] at angles in **degrees** (source at φi = 180°).
+
+    Parameters
+    ----------
+    model : str
+        Model name, e.g. 'lambert+gaussian' (:mod:`bsdfkit.models.registry`).
+    params : dict of str to float
+        The model's parameters.
+    theta_i_deg : float or array_like
+        Angle of incidence [deg].
+    theta_s_deg : float or array_like
+        Scatter polar angle [deg].
+    phi_s_deg : float or array_like
+        Scatter azimuth [deg].
+
+    Returns
+    -------
+    ndarray
+        BSDF [1/sr].
+    """
     return bsdf_model(model).values(params, theta_i_deg, theta_s_deg, phi_s_deg)
 
 
@@ -851,7 +870,7 @@ def fit_bsdf(
         :class:`BsdfFitOptions`: default masks θs > 85° and bsdf < 3·bsdf_std; log residuals weighted by
         bsdf_std/bsdf.
     incidence_deg
-        Fit only the records at this incidence angle (degrees).
+        Fit only the records at this incidence angle [deg].
 
     Returns
     -------

@@ -132,6 +132,24 @@ def jacobian_products(residuals: Callable[[jax.Array], tuple[jax.Array, Any]], t
     ``residuals(θ) -> (r, aux)``; the residuals and ``aux`` come from the same primal evaluation as the p
     Jacobian columns (one pass, vectorised over the tangents). Use it inside ``jax.vmap`` to build the
     linearisation kernel of a batch.
+
+    Parameters
+    ----------
+    residuals : callable
+        θ → (r, aux): the residual vector (in the units it is weighted to) and any auxiliary output.
+    theta : jax.Array
+        Parameter vector θ of the fit (not an angle) [each parameter's own unit].
+
+    Returns
+    -------
+    cost : jax.Array
+        ½Σr².
+    jtr : jax.Array
+        Jᵀr.
+    jtj : jax.Array
+        JᵀJ.
+    aux : object
+        The auxiliary output of ``residuals``.
     """
     jac, (r, aux) = jax.jacfwd(lambda t: _with_copy(residuals(t)), has_aux=True)(theta)
     return 0.5 * jnp.sum(r * r), jac.T @ r, jac.T @ jac, aux

@@ -133,7 +133,22 @@ class Verdict:
 
 
 def at_bound(value: np.ndarray | float, parameter: Parameter, thresholds: Thresholds = THRESHOLDS) -> np.ndarray:
-    """Whether ``value`` [parameter unit] lies on a bound of ``parameter`` (rule in :class:`Thresholds`)."""
+    """Whether ``value`` [parameter unit] lies on a bound of ``parameter`` (rule in :class:`Thresholds`).
+
+    Parameters
+    ----------
+    value : float or ndarray
+        Parameter values, in the parameter's unit.
+    parameter : Parameter
+        The parameter, with its bounds.
+    thresholds : Thresholds
+        The gate's limits; default :data:`THRESHOLDS`.
+
+    Returns
+    -------
+    ndarray
+        Boolean, same shape as ``value``.
+    """
     v = np.asarray(value, dtype=np.float64)
     lo, hi = parameter.lower, parameter.upper
     if math.isfinite(lo) and math.isfinite(hi):
@@ -318,7 +333,20 @@ def evaluate(fit: xr.Dataset, thresholds: Thresholds = THRESHOLDS) -> Verdict:
 
 def annotate(fit: xr.Dataset, thresholds: Thresholds = THRESHOLDS) -> xr.Dataset:
     """``fit`` with the gate's verdict stored: ``physically_possible``, ``determined``, ``plausible`` [bool] and
-    ``attrs['warnings']``, a JSON list of the reasons (then the notes). Returns the same dataset, modified."""
+    ``attrs['warnings']``, a JSON list of the reasons (then the notes). Returns the same dataset, modified.
+
+    Parameters
+    ----------
+    fit : xarray.Dataset
+        Fit dataset (see :func:`evaluate`).
+    thresholds : Thresholds
+        The gate's limits; default :data:`THRESHOLDS`.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``fit``, with the verdict added.
+    """
     verdict = evaluate(fit, thresholds)
     fit["physically_possible"] = verdict.physically_possible.assign_attrs(
         long_name=f"model TIS not above 1 by more than {thresholds.tis_sigma:g} standard uncertainties")
@@ -363,6 +391,20 @@ def tis_excess_allowed(fit: xr.Dataset, theta_i_deg: Sequence[float], thresholds
 
     A writer that checks energy itself (TracePro, whose absorptance cannot be negative) uses this so that it
     refuses exactly what the gate refuses. ``fit`` is one side of one interaction over ``theta_i``.
+
+    Parameters
+    ----------
+    fit : xarray.Dataset
+        Fit of one side of one interaction over ``theta_i``.
+    theta_i_deg : sequence of float
+        Incidences of the table [deg].
+    thresholds : Thresholds
+        The gate's limits; default :data:`THRESHOLDS`.
+
+    Returns
+    -------
+    ndarray
+        Allowed excess of the total scatter over 1 per incidence [-].
     """
     model = _model_of(fit)
     names = bsdf_model(model).parameter_names

@@ -55,7 +55,22 @@ def _log_y(ax) -> None:
 
 
 def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
-    """Render ``fig`` to PNG atomically."""
+    """Render ``fig`` to PNG atomically.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure.
+    path : str or Path
+        The PNG file to write.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     FigureCanvasAgg(fig)
     return write_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120), force)
 
@@ -64,6 +79,20 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
     """BSDF at one wavelength in the plane of incidence, reflection (R) and transmission (T), per incidence.
 
     The analogue of Fig. 6 of the power-budget paper (log scale; + angles on the specular side).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan with ``bsdf`` and ``bsdf_std`` [1/sr] over ``wavelength``.
+    config : str
+        Configuration to plot (``blue`` or ``yellow``).
+    wavelength_nm : float
+        Wavelength plotted (nearest in the data) [nm].
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
     """
     fig = Figure(figsize=(9, 4))
     axes = fig.subplots(1, 2, sharey=True)
@@ -92,6 +121,18 @@ def budget_figure(power, photons=None) -> Figure:
     """Cumulative extracted power and losses per plate interaction (Fig. 10 of the power-budget paper).
 
     With ``photons`` a second panel gives the same in photons (% of the LEDs' photons): one quantity per axis.
+
+    Parameters
+    ----------
+    power : ModuleBudget
+        Budget in power (% of the LEDs' power).
+    photons : ModuleBudget, optional
+        Budget in photons (% of the LEDs' photons).
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
     """
     budgets = [("power", power)] + ([("photons", photons)] if photons is not None else [])
     fig = Figure(figsize=(6.0 * len(budgets) + 2.0, 4))
@@ -136,6 +177,20 @@ def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | N
     ``YBR_std`` and ``non_uniformity`` (fractions); LER and YBR carry ± 1σ error bars (the non-uniformity of a
     map has none). The grey dotted line is the traced device. ``paper`` maps (study, quantity) to a list of
     (x, y) values printed by the paper, in the axis units, drawn as open squares.
+
+    Parameters
+    ----------
+    device : TraceResult
+        The traced device (its LER, YBR, non_uniformity [-]).
+    studies : dict of str to list of dict
+        Study → rows, as above.
+    paper : dict, optional
+        (study, quantity) → printed (x, y) points.
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
     """
     panels = [k for k in STUDY_AXES if studies.get(k)]
     ncol = max(len(panels), 1)
@@ -179,6 +234,26 @@ def plate_incidence_figure(histograms: dict[str, np.ndarray], measured_deg: tupl
     plate's TIS (%) vs incidence for the blue channels, the tracer's grid (line; dashed where model-extrapolated)
     with the measured values ± 1σ (``measured_tis``: channel → (incidences, TIS, σ)). The measured range is
     shaded on both panels.
+
+    Parameters
+    ----------
+    histograms : dict of str to ndarray
+        Trace label → blue power on the plate per incidence bin over 0-90° (any scale).
+    measured_deg : tuple of float
+        (first, last) measured incidence [deg].
+    plate_grid_deg : array_like
+        Incidence grid of the tracer's plate [deg].
+    plate_tis : dict of str to list of float
+        Channel → TIS on that grid [-].
+    measured_tis : dict, optional
+        Channel → (incidences [deg], TIS [-], σ [-]).
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
     """
     fig = Figure(figsize=(13.5, 4.2))
     left, right = fig.subplots(1, 2)
@@ -219,7 +294,18 @@ def plate_incidence_figure(histograms: dict[str, np.ndarray], measured_deg: tupl
 
 
 def bsdf_fits_figure(fits: dict) -> Figure:
-    """In-plane data vs fitted model for each interaction and side (one curve per incidence)."""
+    """In-plane data vs fitted model for each interaction and side (one curve per incidence).
+
+    Parameters
+    ----------
+    fits : dict
+        (interaction, side) → (fit dataset, profile dataset with ``bsdf`` [1/sr]).
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
+    """
 
     keys = [k for k in (("bibs", "reflection"), ("bibs", "transmission"), ("yiys", "reflection"),
                         ("yiys", "transmission"), ("biys", "reflection"), ("biys", "transmission")) if k in fits]
@@ -254,7 +340,24 @@ def bsdf_fits_figure(fits: dict) -> Figure:
 
 def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> Figure:
     """Fig. 7 of the cylindrical-module paper: normalised blue and yellow spectra (left) and the
-    reconstructed absolute spectral flux of the module (right)."""
+    reconstructed absolute spectral flux of the module (right).
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Wavelength grid of the two spectra [nm].
+    s_blue, s_yellow : ndarray
+        Normalised blue and yellow spectra [-] (peak 1).
+    emission : dict
+        Measured converted light: ``wavelength`` [nm] and ``measured`` (relative).
+    sd : colour.SpectralDistribution
+        Reconstructed module spectrum [W/nm].
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
+    """
     fig = Figure(figsize=(10, 3.8))
     left, right = fig.subplots(1, 2)
     left.plot(wavelength, s_blue, label="S_blue (LED, Gaussian)")
@@ -277,7 +380,18 @@ def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> 
 
 
 def sweep_figure(ds: xr.Dataset) -> Figure:
-    """LER, YBR and non-uniformity vs the first parameter (one line per combination of the others)."""
+    """LER, YBR and non-uniformity vs the first parameter (one line per combination of the others).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Sweep dataset (:func:`bsdfkit.raytrace.sweep.sweep_dataset`).
+
+    Returns
+    -------
+    Figure
+        The figure (not attached to pyplot).
+    """
     dims = [d for d in ds["LER"].dims]
     panels = [("LER", "std_err_LER"), ("YBR", "std_err_YBR")]
     if np.any(np.isfinite(ds["non_uniformity"].values)):

@@ -50,6 +50,16 @@ def top_plate(scene: Scene) -> PhosphorPlate | None:
     A Lambertian diffuser (ρ, τ) is the plate bibs = yiys = (ρ, τ) with Lambertian distributions; an exit
     top is the plate with bibs and yiys transmission 1 (used only when an exit top is forced through the
     full kernel).
+
+    Parameters
+    ----------
+    scene : Scene
+        The parsed scene; its ``top`` is read.
+
+    Returns
+    -------
+    PhosphorPlate
+        The plate standing for the top.
     """
     top = scene.top
     if top.kind == "phosphor":
@@ -62,7 +72,20 @@ def top_plate(scene: Scene) -> PhosphorPlate | None:
 
 
 def scene_effects(scene: Scene, full: bool = False) -> Effects:
-    """The effects a scene needs; ``full=True`` switches every optional branch on (benchmark/tests)."""
+    """The effects a scene needs; ``full=True`` switches every optional branch on (benchmark/tests).
+
+    Parameters
+    ----------
+    scene : Scene
+        The parsed scene.
+    full : bool
+        Switch every optional branch on.
+
+    Returns
+    -------
+    Effects
+        The static kernel configuration.
+    """
     t = scene.tallies
     common = dict(precision=scene.trace.precision, source="rayfile" if scene.leds.ray_file else "leds",
                   termination=scene.trace.termination, map_bins=t.map_bins, histogram_bins=t.histogram_bins,
@@ -104,7 +127,20 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
 
 
 def kernel_params(scene: Scene, effects: Effects) -> dict:
-    """Numeric kernel inputs (a pytree of NumPy arrays): geometry, surfaces, source, plate tables."""
+    """Numeric kernel inputs (a pytree of NumPy arrays): geometry, surfaces, source, plate tables.
+
+    Parameters
+    ----------
+    scene : Scene
+        The parsed scene.
+    effects : Effects
+        The static configuration from :func:`scene_effects`; selects which entries are built and their dtype.
+
+    Returns
+    -------
+    dict
+        Name → array (nested dicts for ``spectral`` and ``plate``); lengths in [mm], reflectances [-].
+    """
     dt = np.float32 if effects.precision == "float32" else np.float64
     leds, led = scene.leds, scene.led_surface
     p: dict = {

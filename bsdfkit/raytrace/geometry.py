@@ -17,6 +17,22 @@ def distances_to_surfaces(px, py, pz, dx, dy, dz, radius, height):
     Wall: |p_xy + t d_xy|² = R² ⇔ A t² + 2B t + C = 0 with A = |d_xy|², B = p_xy·d_xy, C = |p_xy|² − R²
     (C ≤ 0 inside). The exit root is t = (−B + √(B² − AC))/A, evaluated as −C/(B + √(B² − AC)) when
     B > 0 to avoid cancellation. Planes: t = (H − z)/dz for dz > 0, t = −z/dz for dz < 0.
+
+    Parameters
+    ----------
+    px, py, pz : jax.Array
+        Ray positions in the cavity frame [mm].
+    dx, dy, dz : jax.Array
+        Unit ray directions [-].
+    radius : float or jax.Array
+        Cavity radius R [mm].
+    height : float or jax.Array
+        Cavity height H [mm].
+
+    Returns
+    -------
+    t_wall, t_base, t_top : jax.Array
+        Distances to the wall, the base and the top plane [mm]; ∞ where the surface is not ahead.
     """
     inf = jnp.asarray(jnp.inf, dtype=px.dtype)
     a = dx * dx + dy * dy
@@ -33,7 +49,26 @@ def distances_to_surfaces(px, py, pz, dx, dy, dz, radius, height):
 
 
 def next_hit(px, py, pz, dx, dy, dz, radius, height):
-    """The next surface (WALL, BASE or TOP) and the hit point, snapped onto that surface."""
+    """The next surface (WALL, BASE or TOP) and the hit point, snapped onto that surface.
+
+    Parameters
+    ----------
+    px, py, pz : jax.Array
+        Ray positions in the cavity frame [mm].
+    dx, dy, dz : jax.Array
+        Unit ray directions [-].
+    radius : float or jax.Array
+        Cavity radius R [mm].
+    height : float or jax.Array
+        Cavity height H [mm].
+
+    Returns
+    -------
+    surface : jax.Array
+        WALL, BASE or TOP (int32).
+    x, y, z : jax.Array
+        Hit point on that surface [mm].
+    """
     t_wall, t_base, t_top = distances_to_surfaces(px, py, pz, dx, dy, dz, radius, height)
     on_top = t_top <= jnp.minimum(t_wall, t_base)
     on_base = (~on_top) & (t_base <= t_wall)
@@ -52,7 +87,24 @@ def next_hit(px, py, pz, dx, dy, dz, radius, height):
 
 
 def on_led(x, y, grid, pitch, emitter_radius):
-    """True where (x, y) on the base lies on one of the k × k LED disks (nearest-centre test)."""
+    """True where (x, y) on the base lies on one of the k × k LED disks (nearest-centre test).
+
+    Parameters
+    ----------
+    x, y : jax.Array
+        Points on the base [mm].
+    grid : int or jax.Array
+        LEDs per side k [-].
+    pitch : float or jax.Array
+        LED centre spacing [mm].
+    emitter_radius : float or jax.Array
+        Radius of each LED disk [mm].
+
+    Returns
+    -------
+    jax.Array
+        Boolean, True on an LED disk.
+    """
     half = (grid - 1) / 2.0
     ix = jnp.clip(jnp.round(x / pitch + half), 0, grid - 1)
     iy = jnp.clip(jnp.round(y / pitch + half), 0, grid - 1)
@@ -62,7 +114,22 @@ def on_led(x, y, grid, pitch, emitter_radius):
 
 
 def map_index(x, y, radius, bins):
-    """Flat index iy·bins + ix of the square bin of side 2R/bins (over [−R, R]²) containing (x, y)."""
+    """Flat index iy·bins + ix of the square bin of side 2R/bins (over [−R, R]²) containing (x, y).
+
+    Parameters
+    ----------
+    x, y : jax.Array
+        Points [mm].
+    radius : float or jax.Array
+        Cavity radius R [mm].
+    bins : int
+        Bins per side of the map [-].
+
+    Returns
+    -------
+    jax.Array
+        Flat bin index (int32), clipped into the map.
+    """
     ix = jnp.clip(jnp.floor((x + radius) / (2.0 * radius) * bins), 0, bins - 1).astype(jnp.int32)
     iy = jnp.clip(jnp.floor((y + radius) / (2.0 * radius) * bins), 0, bins - 1).astype(jnp.int32)
     return iy * bins + ix

@@ -134,7 +134,24 @@ def _fixed(w):
 
 def emission(params, key_words, ray, effects: Effects):
     """Start points and directions of rays ``ray`` (global indices, uint32), event 0; in spectral mode also
-    their wavelength bins."""
+    their wavelength bins.
+
+    Parameters
+    ----------
+    params : dict
+        Numeric kernel inputs from :func:`bsdfkit.raytrace.effects.kernel_params` (lengths [mm]).
+    key_words : jax.Array
+        The two uint32 words of the seed's key (counter-based random numbers).
+    ray : jax.Array
+        Global ray indices (uint32).
+    effects : Effects
+        Static kernel configuration.
+
+    Returns
+    -------
+    tuple of jax.Array
+        x, y, z [mm] and dx, dy, dz [-]; in spectral mode also the wavelength bin index (int32).
+    """
     dt = effects.dtype
     u = sampling.event_uniforms(key_words, ray, jnp.zeros_like(ray), dt, 6 if effects.spectral else 5)
     if effects.spectral:  # the ray's wavelength bin, drawn from the LED's bin powers (word 5)
@@ -145,7 +162,22 @@ def emission(params, key_words, ray, effects: Effects):
 
 
 def emission_geometry(params, u, effects: Effects):
-    """Start points and directions from the emission uniforms ``u`` (words 0-4)."""
+    """Start points and directions from the emission uniforms ``u`` (words 0-4).
+
+    Parameters
+    ----------
+    params : dict
+        Numeric kernel inputs (lengths [mm]).
+    u : list of jax.Array
+        Uniforms in [0, 1) of the emission event; words 0-4 are used [-].
+    effects : Effects
+        Static kernel configuration.
+
+    Returns
+    -------
+    tuple of jax.Array
+        x, y, z [mm] and the unit direction dx, dy, dz [-].
+    """
     dt = effects.dtype
     if effects.source == "rayfile":
         idx = jnp.clip(jnp.searchsorted(params["ray_cdf"], u[0].astype(jnp.float64), side="right"), 0,
@@ -407,6 +439,28 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
 
     ``lane``: dict of per-lane arrays (ids, live, px … dz, w, colour, acc, cnt); ``arrays``: (map, histogram,
     budget) int64 tallies. Returns the updated (lane, arrays); lanes not live are left unchanged.
+
+    Parameters
+    ----------
+    params : dict
+        Numeric kernel inputs from :func:`bsdfkit.raytrace.effects.kernel_params` (lengths [mm]).
+    key_words : jax.Array
+        The two uint32 words of the seed's key (counter-based random numbers).
+    start_u : jax.Array
+        First ray index of the chunk (uint32).
+    lane : dict
+        Per-lane state arrays.
+    arrays : tuple of jax.Array
+        (map, histogram, budget) int64 fixed-point tallies.
+    effects : Effects
+        Static kernel configuration.
+
+    Returns
+    -------
+    lane : dict
+        Updated per-lane state.
+    arrays : tuple of jax.Array
+        Updated (map, histogram, budget).
     """
     dt = effects.dtype
     hit = _next_hit(params, key_words, start_u, lane, effects)
@@ -629,7 +683,18 @@ def _budget_tally(new_budget, n_plate, live, parts, ext_o, stokes, effects: Effe
 
 
 def active_columns(effects: Effects) -> tuple[bool, ...]:
-    """Which per-ray tallies of :data:`COLUMNS` the compiled kernel carries (the others are always zero)."""
+    """Which per-ray tallies of :data:`COLUMNS` the compiled kernel carries (the others are always zero).
+
+    Parameters
+    ----------
+    effects : Effects
+        Static kernel configuration.
+
+    Returns
+    -------
+    tuple of bool
+        One flag per entry of :data:`COLUMNS`.
+    """
     plate, roulette, sp = effects.top == "plate", effects.termination == "roulette", effects.spectral
     on = {"extracted_blue": True, "extracted_yellow": effects.conversion or sp, "absorbed_wall": True,
           "absorbed_base": True, "absorbed_leds": True, "absorbed_plate": plate,
@@ -660,6 +725,30 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
     extracted weight per bin and its square, fixed point, deposited when the ray retires (a ray is extracted at
     most once, in one bin, so the per-bin sums of squares give exact per-ray variances), and ``emitted`` (K,)
     rays emitted per bin (counts); and ``iterations`` of the loop.
+
+    Parameters
+    ----------
+    params : dict
+        Numeric kernel inputs from :func:`bsdfkit.raytrace.effects.kernel_params` (lengths [mm]).
+    key_words : jax.Array
+        The two uint32 words of the seed's key (counter-based random numbers).
+    start : int or jax.Array
+        Global index of the chunk's first ray.
+    n_valid : int or jax.Array
+        Rays of the chunk to trace, at most ``chunk``.
+    effects : Effects
+        Static kernel configuration.
+    lanes : int
+        Width of the lane state (static).
+    chunk : int, optional
+        Emissions computed up front (static); default ``lanes``.
+    substeps : int
+        Interactions per loop iteration (static).
+
+    Returns
+    -------
+    dict
+        Name → int64 array, as described above.
     """
     C = int(chunk or lanes)
     start_u = jnp.asarray(start, jnp.uint32)

@@ -73,6 +73,7 @@ class Lambertian:
     kind = "lambertian"
 
     def to_mapping(self) -> dict[str, Any]:
+        """The JSON/TOML mapping of the distribution."""
         return {"kind": self.kind}
 
 
@@ -91,6 +92,7 @@ class LambertGaussian:
     kind = "lambert_gaussian"
 
     def to_mapping(self) -> dict[str, Any]:
+        """The JSON/TOML mapping of the distribution (BSDF levels in 1/sr)."""
         return {"kind": self.kind, "rho_per_sr": self.rho_per_sr, "a_per_sr": self.a_per_sr, "sigma": self.sigma}
 
 
@@ -107,6 +109,7 @@ class Tabulated:
     kind = "tabulated"
 
     def to_mapping(self) -> dict[str, Any]:
+        """The JSON/TOML mapping of the distribution (angles in degrees, BSDF in 1/sr)."""
         return {"kind": self.kind, "theta_s_deg": list(self.theta_s_deg), "bsdf_per_sr": list(self.bsdf_per_sr)}
 
 
@@ -121,6 +124,7 @@ class PlateChannel:
     distributions: tuple[AngularDistribution, ...]
 
     def to_mapping(self) -> dict[str, Any]:
+        """The JSON/TOML mapping of the channel; one distribution when it is the same at every incidence."""
         dists = [d.to_mapping() for d in self.distributions]
         if all(d == dists[0] for d in dists):
             return {"tis": list(self.tis), "distribution": dists[0]}
@@ -155,6 +159,22 @@ class PhosphorPlate:
         ``tis`` maps the six channel names (``bibs_reflection`` ... ``yiys_transmission``) to fractions of
         the incident power; missing channels are zero. ``distribution`` (default Lambertian) is used for
         every channel.
+
+        Parameters
+        ----------
+        tis : mapping of str to float
+            Channel name → TIS [-].
+        name : str
+            Plate name.
+        notes : str
+            Free text.
+        distribution : Lambertian, LambertGaussian or Tabulated, optional
+            Angular distribution of every channel.
+
+        Returns
+        -------
+        PhosphorPlate
+            The validated plate.
         """
         unknown = set(tis) - set(CHANNELS)
         if unknown:
@@ -168,11 +188,40 @@ class PhosphorPlate:
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], file: str | Path | None = None, prefix: str = "") -> "PhosphorPlate":
-        """Parse the JSON/TOML mapping of a plate (see module docstring); errors name ``file`` and key."""
+        """Parse the JSON/TOML mapping of a plate (see module docstring); errors name ``file`` and key.
+
+        Parameters
+        ----------
+        data : mapping
+            The parsed JSON object or TOML table.
+        file : str or Path, optional
+            File named in errors.
+        prefix : str
+            Prefix of the key names in errors (e.g. the enclosing TOML table).
+
+        Returns
+        -------
+        PhosphorPlate
+            The parsed, validated plate.
+        """
         return _parse_plate(data, file, prefix)
 
     @classmethod
     def from_json(cls, text: str, file: str | Path | None = None) -> "PhosphorPlate":
+        """Parse a plate from JSON text (see module docstring).
+
+        Parameters
+        ----------
+        text : str
+            The JSON document.
+        file : str or Path, optional
+            File named in errors.
+
+        Returns
+        -------
+        PhosphorPlate
+            The parsed, validated plate.
+        """
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
@@ -184,9 +233,22 @@ class PhosphorPlate:
 
     # ---- output ---------------------------------------------------------------------------------------
     def channel(self, name: str) -> PlateChannel:
+        """One channel by name.
+
+        Parameters
+        ----------
+        name : str
+            One of :data:`CHANNELS`, e.g. ``bibs_reflection``.
+
+        Returns
+        -------
+        PlateChannel
+            The channel.
+        """
         return getattr(self, name)
 
     def to_mapping(self) -> dict[str, Any]:
+        """The JSON mapping of the plate (the layout :meth:`from_mapping` reads)."""
         out: dict[str, Any] = {"format": FORMAT, "version": VERSION, "name": self.name, "notes": self.notes,
                                "theta_i_deg": list(self.theta_i_deg)}
         for inter in INTERACTIONS:
@@ -194,15 +256,37 @@ class PhosphorPlate:
         return out
 
     def to_json(self) -> str:
+        """The plate as indented JSON text."""
         return json.dumps(self.to_mapping(), indent=2) + "\n"
 
     def save(self, path: str | Path, force: bool = False) -> Path:
-        """Write the plate as JSON, atomically; an existing file is kept unless ``force``."""
+        """Write the plate as JSON, atomically; an existing file is kept unless ``force``.
+
+        Parameters
+        ----------
+        path : str or Path
+            The JSON file to write.
+        force : bool
+            Replace an existing file.
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
         return write_text(path, self.to_json(), force)
 
     # ---- checks ---------------------------------------------------------------------------------------
     def validate(self, file: str | Path | None = None, prefix: str = "") -> None:
-        """Raise :class:`ValidationError` unless the plate conserves energy at every incidence."""
+        """Raise :class:`ValidationError` unless the plate conserves energy at every incidence.
+
+        Parameters
+        ----------
+        file : str or Path, optional
+            File named in errors.
+        prefix : str
+            Prefix of the key names in errors (e.g. the enclosing TOML table).
+        """
         g = np.asarray(self.theta_i_deg, dtype=float)
         if g.size < 1 or np.any(~np.isfinite(g)) or np.any(g < 0) or np.any(g > 90) or np.any(np.diff(g) <= 0):
             raise ValidationError("incidence grid must be strictly increasing within [0, 90] deg", file=file,
@@ -242,7 +326,18 @@ class PhosphorPlate:
 
 
 def load_plate(path: str | Path) -> PhosphorPlate:
-    """Read a plate JSON file written by :meth:`PhosphorPlate.save` (or by hand, same layout)."""
+    """Read a plate JSON file written by :meth:`PhosphorPlate.save` (or by hand, same layout).
+
+    Parameters
+    ----------
+    path : str or Path
+        The plate JSON file.
+
+    Returns
+    -------
+    PhosphorPlate
+        The parsed, validated plate.
+    """
     path = Path(path)
     return PhosphorPlate.from_json(read_text(path, expected="a phosphor plate JSON file"), path)
 
@@ -393,6 +488,18 @@ def lobe_disk_integral(beta0: float, sigma: float) -> float:
 
     The registry's clipped-lobe TIS (:func:`bsdfkit.models.functions.tis_gaussian_lobe`) at A = 1 and
     sin θi = |β0|, with 4096 azimuth nodes so that lobes of σ ≳ 1e-3 stay exact up to grazing incidence.
+
+    Parameters
+    ----------
+    beta0 : float
+        Lobe centre in direction cosines, sin θi [-].
+    sigma : float
+        Lobe width in direction-cosine units [-].
+
+    Returns
+    -------
+    float
+        The integral over the unit disk [-].
     """
     with x64():
         return float(_unit_lobe_tis(math.asin(min(abs(float(beta0)), 1.0)), float(sigma)))
@@ -403,6 +510,18 @@ def lobe_share(dist: AngularDistribution, theta_i_deg: float) -> float:
 
     The Lambert part scatters ∫ ρ/π dβ = ρ over the unit disk (ρ = π·rho_per_sr); the lobe scatters A·L with
     L from :func:`lobe_disk_integral` at β0 = sin θi.
+
+    Parameters
+    ----------
+    dist : Lambertian, LambertGaussian or Tabulated
+        The channel's angular distribution.
+    theta_i_deg : float
+        Incidence angle [deg].
+
+    Returns
+    -------
+    float
+        The lobe's share of the scattered power [-].
     """
     if not isinstance(dist, LambertGaussian):
         return 0.0
@@ -438,7 +557,18 @@ class PlateTables:
 
 
 def plate_tables(plate: PhosphorPlate) -> PlateTables:
-    """Tables for the kernel: TIS per channel and sampling data of the backward distributions."""
+    """Tables for the kernel: TIS per channel and sampling data of the backward distributions.
+
+    Parameters
+    ----------
+    plate : PhosphorPlate
+        The plate.
+
+    Returns
+    -------
+    PlateTables
+        The kernel's tables (incidence grid in radians).
+    """
     grid_deg = np.asarray(plate.theta_i_deg, dtype=float)
     tis = np.stack([np.asarray(plate.channel(c).tis, dtype=float) for c in CHANNELS], axis=1)
     dists = [[plate.channel(c).distributions[g] for c in BACKWARD] for g in range(grid_deg.size)]

@@ -47,6 +47,24 @@ def extrapolated_tis(measured_tis: float, model: str, params: dict[str, float], 
     TIS at θe (no step at the edge of the measured range). For a Lambertian model the ratio is 1; for a
     Lambert + Gaussian lobe the lobe moves with β0 = sin θ and loses the part beyond the unit disk (half of a
     narrow lobe at grazing incidence).
+
+    Parameters
+    ----------
+    measured_tis : float
+        Measured TIS of the channel at ``edge_deg`` [-].
+    model : str
+        Name of the fitted model in :data:`bsdfkit.models.registry.BSDF_MODELS`.
+    params : dict of str to float
+        The model's fitted parameters at ``edge_deg``.
+    edge_deg : float
+        Nearest measured incidence [deg].
+    theta_deg : ndarray
+        Incidences to extrapolate to [deg].
+
+    Returns
+    -------
+    ndarray
+        TIS at ``theta_deg`` [-].
     """
     spec = BSDF_MODELS[model]
     theta = np.asarray(theta_deg, dtype=float)
@@ -126,7 +144,20 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
 
 
 def recipe_measurement(recipe: str | Path) -> tuple[Path, str]:
-    """The measurement folder and name that a fitting recipe names (its ``[recipe]`` table)."""
+    """The measurement folder and name that a fitting recipe names (its ``[recipe]`` table).
+
+    Parameters
+    ----------
+    recipe : str or Path
+        The recipe's TOML file.
+
+    Returns
+    -------
+    folder : Path
+        The measurement folder, resolved relative to the recipe.
+    name : str
+        The recipe's name ('' when it gives none).
+    """
     recipe = Path(recipe)
     if not recipe.is_file():
         raise InputError("recipe not found", file=recipe, expected="a TOML recipe file")
@@ -140,6 +171,17 @@ def recipe_measurement(recipe: str | Path) -> tuple[Path, str]:
 
 
 def plate_from_recipe(recipe: str | Path) -> PhosphorPlate:
-    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``)."""
+    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``).
+
+    Parameters
+    ----------
+    recipe : str or Path
+        The fitting recipe's TOML file.
+
+    Returns
+    -------
+    PhosphorPlate
+        The plate from the calibrated scan of the recipe's measurement.
+    """
     measurement, name = recipe_measurement(recipe)
     return plate_from_scan(calibrate(read_scan(measurement)), name=name)

@@ -53,7 +53,18 @@ def program_folder() -> Path | None:
 
 
 def program_name(key: tuple) -> str:
-    """File name of the program identified by ``key`` in this bsdfkit source, JAX version and backend."""
+    """File name of the program identified by ``key`` in this bsdfkit source, JAX version and backend.
+
+    Parameters
+    ----------
+    key : tuple
+        What identifies the program, by its ``repr``.
+
+    Returns
+    -------
+    str
+        A SHA-256 hex digest plus the program suffix.
+    """
     parts = (source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend(),
              bool(jax.config.jax_enable_x64), repr(key))
     return hashlib.sha256(repr(parts).encode()).hexdigest() + SUFFIX
@@ -65,6 +76,20 @@ def cached_program(program: Callable, abstract_args: Sequence, key: tuple) -> Ca
 
     ``abstract_args`` are the ``jax.ShapeDtypeStruct`` arguments (with shardings) to export for; ``key`` must
     identify everything else the traced program depends on (static arguments, closure values) by its ``repr``.
+
+    Parameters
+    ----------
+    program : callable
+        A ``jax.jit`` function.
+    abstract_args : sequence of jax.ShapeDtypeStruct
+        The arguments to export for.
+    key : tuple
+        Identifies the program's static arguments and closure values.
+
+    Returns
+    -------
+    callable
+        The jitted exported program, or ``program`` itself.
     """
     folder = program_folder()
     if folder is None:

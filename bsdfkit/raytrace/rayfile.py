@@ -37,7 +37,24 @@ class RaySet:
         return int(self.power.size)
 
     def check_inside(self, radius: float, height: float, file=None, field: str = "ray_file") -> None:
-        """Raise unless every ray starts inside the cavity and does not leave through the base at once."""
+        """Raise unless every ray starts inside the cavity and does not leave through the base at once.
+
+        Parameters
+        ----------
+        radius : float
+            Cavity radius [mm].
+        height : float
+            Cavity height [mm].
+        file : str or Path, optional
+            File named in the error.
+        field : str
+            Field named in the error.
+
+        Raises
+        ------
+        ValidationError
+            Naming the first ray that starts outside or points into the base.
+        """
         r = np.hypot(self.origin[:, 0], self.origin[:, 1])
         z = self.origin[:, 2]
         tol = 1e-9 * max(radius, height)
@@ -51,7 +68,18 @@ class RaySet:
 
 
 def read_ray_file(path: str | Path) -> RaySet:
-    """Read a ray file (see module docstring); errors name the file and line."""
+    """Read a ray file (see module docstring); errors name the file and line.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ray file.
+
+    Returns
+    -------
+    RaySet
+        Origins [mm], unit directions [-] and powers [W].
+    """
     path = Path(path)
     text = read_text(path, expected="a ray file (lines of x y z dx dy dz power)")
     rows = []
@@ -87,7 +115,18 @@ def read_ray_file(path: str | Path) -> RaySet:
 
 
 def format_rays(rays: RaySet) -> str:
-    """Ray-file text for ``rays`` (inverse of :func:`read_ray_file`)."""
+    """Ray-file text for ``rays`` (inverse of :func:`read_ray_file`).
+
+    Parameters
+    ----------
+    rays : RaySet
+        The rays.
+
+    Returns
+    -------
+    str
+        One line ``x y z dx dy dz power`` per ray after a header line.
+    """
     lines = ["# x_mm y_mm z_mm dx dy dz power_W"]
     for o, d, p in zip(rays.origin, rays.direction, rays.power):
         lines.append(" ".join(repr(float(v)) for v in (*o, *d, p)))

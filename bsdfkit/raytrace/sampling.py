@@ -54,6 +54,18 @@ def threefry2x32(key_words, x0, x1):
     Written out element-wise (no concatenation or reshaping of the counters), bit-identical to
     ``jax.extend.random.threefry_2x32`` applied to ``concatenate([x0, x1])`` (tested), so XLA fuses it into
     the surrounding kernel.
+
+    Parameters
+    ----------
+    key_words : jax.Array
+        The key's two uint32 words, shape (2,).
+    x0, x1 : jax.Array
+        The two uint32 counter words.
+
+    Returns
+    -------
+    x0, x1 : jax.Array
+        The two uint32 output words.
     """
     k0, k1 = key_words[0], key_words[1]
     ks = (k0, k1, k0 ^ k1 ^ jnp.uint32(_PARITY))
@@ -74,6 +86,20 @@ def random_words(key_words, ray, counters):
 
     ``key_words`` (2,) uint32, ``ray`` (n,) uint32, ``counters`` list of (n,) uint32. Returns a list of
     2·len(counters) arrays (n,) uint32, the two words of counter h at positions 2h and 2h + 1.
+
+    Parameters
+    ----------
+    key_words : jax.Array
+        The key's two uint32 words, shape (2,).
+    ray : jax.Array
+        Ray indices (n,), uint32.
+    counters : list of jax.Array
+        Second counter words, each (n,) uint32.
+
+    Returns
+    -------
+    list of jax.Array
+        The 2·len(counters) uint32 words.
     """
     words = []
     for c in counters:
@@ -86,6 +112,24 @@ def event_uniforms(key_words, ray, event, dtype, count: int = 6):
 
     Word i comes from counter h = i // 2, so the first words do not change when fewer are drawn (the
     spectral mode's conversion draws words 6 and 7, h = 3, which no other mode uses).
+
+    Parameters
+    ----------
+    key_words : jax.Array
+        The key's two uint32 words, shape (2,).
+    ray : jax.Array
+        Ray indices (n,), uint32.
+    event : jax.Array
+        Event number of each ray (0: emission).
+    dtype : dtype
+        float32 or float64.
+    count : int
+        Number of uniforms, at most 8.
+
+    Returns
+    -------
+    list of jax.Array
+        ``count`` arrays of uniforms in [0, 1) [-].
     """
     base = event.astype(jnp.uint32) * jnp.uint32(4)
     blocks = [base + jnp.uint32(h) for h in range((count + 1) // 2)]
@@ -101,6 +145,19 @@ def materialise(key_words, arrays):
     times (measured ~2-3x slower interactions on CPU). ``lax.optimization_barrier`` is removed before fusion on
     CPU, so the arrays pass through a one-trip ``while`` loop whose trip count XLA cannot see (it depends on
     the key): loop operands are always materialised. The loop body is the identity on its only trip.
+
+    Parameters
+    ----------
+    key_words : jax.Array
+        The key's two uint32 words, shape (2,).
+        Only used to make the loop's trip count opaque to XLA.
+    arrays : list of jax.Array
+        The arrays to materialise.
+
+    Returns
+    -------
+    list of jax.Array
+        The same values.
     """
     one = ((key_words[0] | jnp.uint32(1)) > 0).astype(jnp.uint32)  # 1, but not a compile-time constant
 
@@ -121,14 +178,38 @@ def materialise(key_words, arrays):
 
 
 def to_unit(bits, dtype):
-    """uint32 → uniform in [0, 1): top 24 bits for float32, all 32 bits for float64 (both exact)."""
+    """uint32 → uniform in [0, 1): top 24 bits for float32, all 32 bits for float64 (both exact).
+
+    Parameters
+    ----------
+    bits : jax.Array
+        Random uint32 words.
+    dtype : dtype
+        float32 or float64.
+
+    Returns
+    -------
+    jax.Array
+        Uniforms in [0, 1) [-].
+    """
     if jnp.dtype(dtype) == jnp.float32:
         return (bits >> jnp.uint32(8)).astype(jnp.float32) * jnp.float32(2.0 ** -24)
     return bits.astype(jnp.float64) * (2.0 ** -32)
 
 
 def orthonormal_basis(nx, ny, nz):
-    """Tangents t1, t2 with (t1, t2, n) right-handed and orthonormal (Duff et al. 2017, Listing 3)."""
+    """Tangents t1, t2 with (t1, t2, n) right-handed and orthonormal (Duff et al. 2017, Listing 3).
+
+    Parameters
+    ----------
+    nx, ny, nz : jax.Array
+        Unit normal n [-].
+
+    Returns
+    -------
+    t1, t2 : tuple of jax.Array
+        The two unit tangents, each as (x, y, z) [-].
+    """
     sign = jnp.where(nz >= 0, 1.0, -1.0).astype(nx.dtype)
     a = -1.0 / (sign + nz)
     b = nx * ny * a
@@ -146,6 +227,16 @@ def cos_sin_turn(u):
     |a| ≤ π/4) and sin a, cos a are Cephes' minimax polynomials, followed by a quarter-turn rotation. Max error
     1.1e−7 in float32 (libm on a float32 2πu: 4e−7) and 3.5e−16 in float64, over all 2²⁴ uniforms of the float32
     kernel.
+
+    Parameters
+    ----------
+    u : jax.Array
+        Fractions of a turn in [0, 1) [-].
+
+    Returns
+    -------
+    cos, sin : jax.Array
+        cos 2πu and sin 2πu [-].
     """
     dt = u.dtype
     f = 4.0 * u
@@ -167,26 +258,78 @@ def cos_sin_turn(u):
 
 def local_to_world_cs(sin_t, cos_t, c, s, nx, ny, nz):
     """Direction with polar angle θ (from n; its sine and cosine) and azimuth φ (cos φ = c, sin φ = s) in the
-    frame of n."""
+    frame of n.
+
+    Parameters
+    ----------
+    sin_t, cos_t : jax.Array
+        Sine and cosine of the polar angle from n [-].
+    c, s : jax.Array
+        Cosine and sine of the azimuth [-].
+    nx, ny, nz : jax.Array
+        Unit normal n [-].
+
+    Returns
+    -------
+    tuple of jax.Array
+        The unit direction (x, y, z) [-].
+    """
     (ax, ay, az), (bx, by, bz) = orthonormal_basis(nx, ny, nz)
     lx, ly = sin_t * c, sin_t * s
     return (lx * ax + ly * bx + cos_t * nx, lx * ay + ly * by + cos_t * ny, lx * az + ly * bz + cos_t * nz)
 
 
 def lambertian_angles(u1, u2):
-    """(sin θ, cos θ, cos φ, sin φ) of a cosine-weighted direction."""
+    """(sin θ, cos θ, cos φ, sin φ) of a cosine-weighted direction.
+
+    Parameters
+    ----------
+    u1, u2 : jax.Array
+        Uniforms in [0, 1) for the polar angle and the azimuth [-].
+
+    Returns
+    -------
+    tuple of jax.Array
+        sin θ, cos θ, cos φ, sin φ [-].
+    """
     return (jnp.sqrt(u1), jnp.sqrt(1.0 - u1)) + cos_sin_turn(u2)
 
 
 def cos_power_angles(u1, u2, m):
-    """(sin θ, cos θ, cos φ, sin φ) for intensity ∝ cos^m θ: cos θ = (1 − u₁)^{1/(m+1)}."""
+    """(sin θ, cos θ, cos φ, sin φ) for intensity ∝ cos^m θ: cos θ = (1 − u₁)^{1/(m+1)}.
+
+    Parameters
+    ----------
+    u1, u2 : jax.Array
+        Uniforms in [0, 1) for the polar angle and the azimuth [-].
+    m : float or jax.Array
+        Exponent of the cos^m θ intensity [-] (1: Lambertian).
+
+    Returns
+    -------
+    tuple of jax.Array
+        sin θ, cos θ, cos φ, sin φ [-].
+    """
     cos_t = (1.0 - u1) ** (1.0 / (m + 1.0))
     cos_t = cos_t.astype(u1.dtype)
     return (jnp.sqrt(jnp.maximum(1.0 - cos_t * cos_t, 0.0)), cos_t) + cos_sin_turn(u2)
 
 
 def mirror(dx, dy, dz, nx, ny, nz):
-    """Specular reflection d − 2(d·n)n."""
+    """Specular reflection d − 2(d·n)n.
+
+    Parameters
+    ----------
+    dx, dy, dz : jax.Array
+        Unit incident direction d [-].
+    nx, ny, nz : jax.Array
+        Unit normal n [-].
+
+    Returns
+    -------
+    tuple of jax.Array
+        The reflected direction (x, y, z) [-].
+    """
     k = 2.0 * (dx * nx + dy * ny + dz * nz)
     return dx - k * nx, dy - k * ny, dz - k * nz
 
@@ -203,6 +346,30 @@ def lobe_beta(key_words, ray, event, pending, beta0x, beta0y, sigma, dtype):
     into 1/:data:`LOBE_NARROW` of the lanes for the remaining attempts, so the retries do not cost a pass over
     every lane each (full-width retries only while more rays are pending than fit). A ray's attempts and
     their random numbers are the same either way.
+
+    Parameters
+    ----------
+    key_words : jax.Array
+        The key's two uint32 words, shape (2,).
+    ray : jax.Array
+        Ray indices (n,), uint32.
+    event : jax.Array
+        Event number of each ray.
+    pending : jax.Array
+        Boolean, lanes that need a sample.
+    beta0x, beta0y : jax.Array
+        Lobe centre β0 in direction cosines [-].
+    sigma : jax.Array
+        Lobe width in direction-cosine units [-].
+    dtype : dtype
+        float32 or float64.
+
+    Returns
+    -------
+    bx, by : jax.Array
+        The sampled β [-] (0 where not accepted).
+    accepted : jax.Array
+        Boolean.
     """
     n = ray.shape[0]
     ray_lobe = ray + jnp.uint32(LOBE_STREAM)
@@ -260,6 +427,22 @@ def table_s(u, s_nodes, f_nodes, cdf):
     In cell k (s_k ≤ s ≤ s_{k+1}) the pdf is f_k + κ(s − s_k), κ = (f_{k+1} − f_k)/(s_{k+1} − s_k), and the CDF
     is F_k + f_k x + κx²/2 with x = s − s_k. For a target r = u − F_k the root is
     x = 2r / (f_k + √(f_k² + 2κr)) (stable for κ → 0).
+
+    Parameters
+    ----------
+    u : jax.Array
+        Uniforms in [0, 1) (n,) [-].
+    s_nodes : jax.Array
+        Nodes of s = sin²θ per lane (n, T) [-].
+    f_nodes : jax.Array
+        The normalised pdf of s at the nodes (n, T) [-].
+    cdf : jax.Array
+        The CDF at the nodes (n, T) [-].
+
+    Returns
+    -------
+    jax.Array
+        Sampled s in [0, 1] [-].
     """
     T = s_nodes.shape[-1]
     k = jnp.clip(jnp.sum(cdf <= u[:, None], axis=-1) - 1, 0, T - 2)

@@ -252,6 +252,18 @@ class Scene:
         return Surface(self.leds.led_reflectance, spec)
 
     def tally_enabled(self, name: str) -> bool:
+        """Whether the optional tally ``name`` is on: its setting, or by default on unless the top is an exit.
+
+        Parameters
+        ----------
+        name : str
+            ``irradiance_map``, ``incidence_histogram`` or ``interaction_budget``.
+
+        Returns
+        -------
+        bool
+            True when the tally is traced.
+        """
         value = getattr(self.tallies, name)
         return (self.top.kind != "exit") if value is None else bool(value)
 
@@ -355,6 +367,20 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
 
     ``preloaded`` may hold ``{"ray_file": (text, RaySet), "plate": (key, PhosphorPlate)}`` to skip
     re-reading unchanged files (used by sweeps).
+
+    Parameters
+    ----------
+    data : mapping
+        The parsed TOML document.
+    file : str or Path, optional
+        The scene file, named in errors.
+    preloaded : mapping, optional
+        Files already read, keyed as above.
+
+    Returns
+    -------
+    Scene
+        The validated scene.
     """
     preloaded = preloaded or {}
     base_dir = Path(file).parent if file is not None else None
@@ -573,7 +599,22 @@ def _tallies(table: Any, file: str | Path | None) -> Tallies:
 def read_reflectance_spectrum(path: Path, field_name: str) -> tuple[np.ndarray, np.ndarray]:
     """(wavelength [nm], reflectance [1]) of a reflectance spectrum file: the first value column of a table read
     by :func:`bsdfkit.io.spectrum_file.read_spectrum_table`, checked by
-    :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance` (fractions in [0, 1], wavelengths in nm)."""
+    :func:`bsdfkit.fit.lambertian.lambertian_from_reflectance` (fractions in [0, 1], wavelengths in nm).
+
+    Parameters
+    ----------
+    path : Path
+        The spectrum file.
+    field_name : str
+        The scene key that names the file (not used by the reading itself).
+
+    Returns
+    -------
+    wavelength : ndarray
+        Wavelengths [nm].
+    reflectance : ndarray
+        Reflectance [-].
+    """
     wl, columns, _ = read_spectrum_table(path)
     rho = next(iter(columns.values()))
     model = lambertian_from_reflectance(wl, rho, source=str(path))
@@ -664,7 +705,20 @@ def _with_blue_reflectance(surface: Surface, leds: Leds) -> Surface:
 
 def band_reflectances(surface: Surface, leds: Leds) -> tuple[float, float]:
     """(blue, yellow) reflectance of a spectral surface for the two-wavelength mode: ρ weighted by the LED spectrum
-    (flat without one) over the module blue band and flat over the module yellow band."""
+    (flat without one) over the module blue band and flat over the module yellow band.
+
+    Parameters
+    ----------
+    surface : Surface
+        A surface with a reflectance spectrum.
+    leds : Leds
+        The LEDs, whose spectrum (if any) weights the blue band.
+
+    Returns
+    -------
+    blue, yellow : float
+        Band reflectances [-].
+    """
     wl, rho = surface.spectrum
     model = lambertian_from_reflectance(wl, rho, source=surface.spectrum_file or "")
     out = []
@@ -679,7 +733,18 @@ def band_reflectances(surface: Surface, leds: Leds) -> tuple[float, float]:
 
 
 def spectral_grid(scene: Scene) -> np.ndarray:
-    """Bin centres [nm] of a spectral scene: the plate model's emission grid, else ``[trace] spectral_grid_nm``."""
+    """Bin centres [nm] of a spectral scene: the plate model's emission grid, else ``[trace] spectral_grid_nm``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    ndarray
+        Bin centres [nm].
+    """
     if scene.top.spectral_model is not None:
         return scene.top.spectral_model.emission_nm
     start, stop, step = scene.trace.spectral_grid_nm
@@ -687,7 +752,18 @@ def spectral_grid(scene: Scene) -> np.ndarray:
 
 
 def scene_spectral_tables(scene: Scene) -> SpectralTables:
-    """The spectral kernel's tables of ``scene`` (:func:`bsdfkit.raytrace.spectral.spectral_tables`)."""
+    """The spectral kernel's tables of ``scene`` (:func:`bsdfkit.raytrace.spectral.spectral_tables`).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    SpectralTables
+        The kernel's spectral tables (bins in [nm]).
+    """
     source = None if scene.path is None else str(scene.path)
     return spectral_tables(scene.top.spectral_model, scene.top.plate, spectral_grid(scene), scene.leds.spectrum,
                            source=source, temperature_K=scene.top.temperature_K)
@@ -695,7 +771,18 @@ def scene_spectral_tables(scene: Scene) -> SpectralTables:
 
 def surface_reflectance_table(scene: Scene) -> np.ndarray:
     """Reflectance of wall, base and LED disks per colour (two-wavelength: blue, yellow) or per bin (spectral),
-    flattened row-major (surface, colour) for the kernel."""
+    flattened row-major (surface, colour) for the kernel.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    ndarray
+        Reflectances [-], 3 × (2 colours or K bins), flattened.
+    """
     rows = []
     spectral = scene.trace.mode == "spectral"
     lam = spectral_grid(scene) if spectral else None
@@ -747,24 +834,72 @@ def _check_sizes(cavity: Cavity, leds: Leds, trace: TraceOptions, tallies: Talli
 
 
 def plate_from_recipe(recipe: Path, scene_file: str | Path | None) -> PhosphorPlate:
-    """The plate of a fitting recipe (:func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`)."""
+    """The plate of a fitting recipe (:func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`).
+
+    Parameters
+    ----------
+    recipe : Path
+        The fitting recipe's TOML file.
+    scene_file : str or Path or None
+        The scene file that names the recipe (not used).
+
+    Returns
+    -------
+    PhosphorPlate
+        The plate of the recipe's calibrated measurement.
+    """
     return plate_source.plate_from_recipe(recipe)
 
 
 def loads_scene(text: str, file: str | Path | None = None) -> Scene:
-    """Parse scene TOML text (``file`` is used for messages and relative paths)."""
+    """Parse scene TOML text (``file`` is used for messages and relative paths).
+
+    Parameters
+    ----------
+    text : str
+        The scene TOML text.
+    file : str or Path, optional
+        The file it came from.
+
+    Returns
+    -------
+    Scene
+        The validated scene.
+    """
     return parse_scene(loads_toml(text, file), file)
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene TOML file."""
+    """Read a scene TOML file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene TOML file.
+
+    Returns
+    -------
+    Scene
+        The validated scene.
+    """
     path = Path(path)
     return loads_scene(read_text(path, expected="a scene TOML file"), path)
 
 
 # ---- writing ----------------------------------------------------------------------------------------------
 def scene_to_mapping(scene: Scene) -> dict[str, Any]:
-    """The TOML mapping of ``scene`` (inverse of :func:`parse_scene`)."""
+    """The TOML mapping of ``scene`` (inverse of :func:`parse_scene`).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    dict
+        Section → table; lengths in [mm], angles in [deg], power in [W].
+    """
     leds = scene.leds
     led_map: dict[str, Any] = {"count": leds.count, "pitch_mm": leds.pitch_mm,
                                "emitter_radius_mm": leds.emitter_radius_mm}
@@ -823,12 +958,38 @@ def _surface_mapping(surface: Surface) -> dict[str, Any]:
 
 
 def dumps_scene(scene: Scene) -> str:
-    """The scene as TOML text."""
+    """The scene as TOML text.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    str
+        TOML text.
+    """
     return toml_write.dumps(scene_to_mapping(scene))
 
 
 def save_scene(scene: Scene, path: str | Path, force: bool = False) -> Path:
-    """Write the scene as TOML, atomically; an existing file is kept unless ``force``."""
+    """Write the scene as TOML, atomically; an existing file is kept unless ``force``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    path : str or Path
+        The TOML file to write.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return write_text(path, dumps_scene(scene), force)
 
 
@@ -839,6 +1000,16 @@ def map_symmetry(scene: Scene) -> int:
     k × k grid centred on the axis with rotation-symmetric emission: rotations by 90° and the mirrors of the square
     map the scene onto itself, so they map the irradiance field onto itself (8). LEDs from a ray file carry their
     own far field and positions: no symmetry is assumed (1).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    int
+        8 or 1.
     """
     return 1 if scene.leds.ray_file is not None else 8
 
@@ -848,6 +1019,18 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
 
     Setting ``leds.fwhm_deg`` also sets ``leds.distribution = "fwhm"``; setting ``leds.distribution`` to
     ``"lambertian"`` drops ``fwhm_deg``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The base scene.
+    values : mapping of str to object
+        ``section.key`` → new value, in the units of the TOML key (e.g. ``cavity.height_mm`` in mm).
+
+    Returns
+    -------
+    Scene
+        The modified, validated scene (same path).
     """
     doc = scene_to_mapping(scene)
     for dotted, value in values.items():
@@ -901,6 +1084,20 @@ def top_reflectance(top: Top, mode: str = "two-wavelength", least: bool = False)
     reflection TIS of the spectral model (spectral mode); the rest is transmitted out of the module or absorbed.
     The largest bounds the events of a ray (:func:`events_per_ray`); the smallest is 1 only for a top that loses
     nothing at any incidence (:func:`check_termination`).
+
+    Parameters
+    ----------
+    top : Top
+        The scene's top.
+    mode : str
+        ``two-wavelength`` or ``spectral``.
+    least : bool
+        Return the smallest instead of the largest.
+
+    Returns
+    -------
+    float or None
+        The fraction [-], or None for an exit top.
     """
     pick = np.min if least else np.max
     if top.kind == "exit":
@@ -927,6 +1124,22 @@ def events_per_ray(wall: Surface, base: Surface, leds: Leds, top: Top, trace: Tr
     the flux threshold Th ends it after ln Th / ln ρ_max events and the roulette, once the weight is at its
     threshold, after 1/(1 − ρ_max) more on average; ``max_events`` caps both. None for an exit top, through
     which rays leave at a rate the geometry sets.
+
+    Parameters
+    ----------
+    wall, base : Surface
+        The cavity's wall and base.
+    leds : Leds
+        The LEDs (their reflectance).
+    top : Top
+        The top.
+    trace : TraceOptions
+        Termination, thresholds, ``max_events`` and mode.
+
+    Returns
+    -------
+    float or None
+        Events per ray [-], or None for an exit top.
     """
     rho_top = top_reflectance(top, trace.mode)
     if rho_top is None:
@@ -945,7 +1158,20 @@ def events_per_ray(wall: Surface, base: Surface, leds: Leds, top: Top, trace: Tr
 
 
 def check_work(scene: "Scene", rays: int) -> None:
-    """Refuse a trace whose surface events would exceed :data:`MAX_TRACE_EVENTS` (see :func:`events_per_ray`)."""
+    """Refuse a trace whose surface events would exceed :data:`MAX_TRACE_EVENTS` (see :func:`events_per_ray`).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to trace.
+    rays : int
+        Rays to trace.
+
+    Raises
+    ------
+    ValidationError
+        If rays × events per ray exceeds :data:`MAX_TRACE_EVENTS`.
+    """
     n = events_per_ray(scene.wall, scene.base, scene.leds, scene.top, scene.trace)
     if n is not None and rays * n > MAX_TRACE_EVENTS:
         raise ValidationError("the trace would cost too many surface events (a closed cavity that absorbs very "
@@ -966,6 +1192,24 @@ def check_termination(wall: Surface, base: Surface, leds: Leds, top: Top, trace:
     ``max_events`` whatever the termination, their power is "truncated", and the run costs rays x max_events
     events (2e6 rays under a lossless plate: 2e10 events, hours). Such a scene is accepted only as a test of
     the truncation ledger, with ``max_events`` <= :data:`LOSSLESS_MAX_EVENTS`.
+
+    Parameters
+    ----------
+    wall, base : Surface
+        The cavity's wall and base.
+    leds : Leds
+        The LEDs (their reflectance).
+    top : Top
+        The top.
+    trace : TraceOptions
+        Mode and ``max_events``.
+    file : str or Path or None
+        The scene file, named in the error.
+
+    Raises
+    ------
+    ValidationError
+        For a closed lossless cavity with ``max_events`` above :data:`LOSSLESS_MAX_EVENTS`.
     """
     rho_led = base.reflectance if leds.led_reflectance is None else leds.led_reflectance
     rho_top = top_reflectance(top, trace.mode, least=True)

@@ -109,12 +109,38 @@ class SpectralPlateModel:
         )
 
     def save(self, path: str | Path, force: bool = False) -> Path:
-        """Write the model as netCDF, atomically (an existing file is kept unless ``force``)."""
+        """Write the model as netCDF, atomically (an existing file is kept unless ``force``).
+
+        Parameters
+        ----------
+        path : str or Path
+            The netCDF file to write.
+        force : bool
+            Replace an existing file.
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
         return netcdf.save(self.to_dataset(), path, force)
 
 
 def spectral_model_from_dataset(ds: xr.Dataset, source: str | Path | None = None) -> SpectralPlateModel:
-    """Validate a plate spectral model dataset (module docstring); errors name ``source`` and the variable."""
+    """Validate a plate spectral model dataset (module docstring); errors name ``source`` and the variable.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The model dataset.
+    source : str or Path, optional
+        Its file, named in errors.
+
+    Returns
+    -------
+    SpectralPlateModel
+        The validated model (TIS [-], incidences [deg], wavelengths [nm], emission pdf [1/nm]).
+    """
     where = None if source is None else str(source)
     for name in ("elastic_tis", "converted_tis", "emission_pdf"):
         if name not in ds:
@@ -210,12 +236,36 @@ def _checked_photons(model: SpectralPlateModel, elastic_std: np.ndarray, convert
 
 
 def load_spectral_model(path: str | Path) -> SpectralPlateModel:
-    """Read a plate spectral model written by :meth:`SpectralPlateModel.save` (or any dataset of the contract)."""
+    """Read a plate spectral model written by :meth:`SpectralPlateModel.save` (or any dataset of the contract).
+
+    Parameters
+    ----------
+    path : str or Path
+        The netCDF file.
+
+    Returns
+    -------
+    SpectralPlateModel
+        The validated model.
+    """
     return spectral_model_from_dataset(netcdf.load(path), source=path)
 
 
 def photon_pdf_from_power(wavelength_nm: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """Photon-number pdf [1/nm] of a power spectrum on a uniform grid: p ∝ S(λ)·λ, Σ p Δλ = 1."""
+    """Photon-number pdf [1/nm] of a power spectrum on a uniform grid: p ∝ S(λ)·λ, Σ p Δλ = 1.
+
+    Parameters
+    ----------
+    wavelength_nm : ndarray
+        Uniform wavelength grid [nm].
+    power : ndarray
+        Power spectrum S on that grid, any scale.
+
+    Returns
+    -------
+    ndarray
+        Photon-number pdf [1/nm].
+    """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     photons = np.asarray(power, dtype=np.float64) * wl
     total = photons.sum() * (wl[1] - wl[0])
@@ -234,6 +284,24 @@ def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence
     spectrum on ``wavelength_nm`` (uniform grid, any scale), which is also the model's excitation and emission
     grid. With no emission inside the pump band this model and the two-wavelength plate trace the same blue and
     yellow powers (the equivalence of issue 17).
+
+    Parameters
+    ----------
+    plate : PhosphorPlate
+        The two-wavelength plate.
+    wavelength_nm : sequence of float
+        Uniform wavelength grid [nm].
+    emission_spectrum : array_like
+        Power spectrum of the converted light on ``wavelength_nm``, any scale.
+    pump_band_nm : tuple of float
+        (low, high) of the pump band [nm].
+    name : str
+        Model name (default: the plate's).
+
+    Returns
+    -------
+    SpectralPlateModel
+        The validated model.
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     pump = (wl >= pump_band_nm[0]) & (wl <= pump_band_nm[1])
@@ -253,12 +321,39 @@ def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence
 
 # ---- spectra on the bin grid ------------------------------------------------------------------------------------
 def bin_edges(centres_nm: np.ndarray) -> np.ndarray:
+    """Edges [nm] of the uniform bins centred on ``centres_nm`` (K + 1 values).
+
+    Parameters
+    ----------
+    centres_nm : ndarray
+        Uniformly spaced bin centres [nm].
+
+    Returns
+    -------
+    ndarray
+        Bin edges [nm].
+    """
     step = centres_nm[1] - centres_nm[0]
     return np.concatenate([centres_nm - step / 2.0, [centres_nm[-1] + step / 2.0]])
 
 
 def bin_powers(wavelength_nm: np.ndarray, values: np.ndarray, centres_nm: np.ndarray) -> np.ndarray:
-    """∫ S dλ over each bin of the grid (S piecewise linear between its samples, 0 outside them)."""
+    """∫ S dλ over each bin of the grid (S piecewise linear between its samples, 0 outside them).
+
+    Parameters
+    ----------
+    wavelength_nm : ndarray
+        Sample wavelengths of S, increasing [nm].
+    values : ndarray
+        Spectral density S at those wavelengths (any unit per nm).
+    centres_nm : ndarray
+        Uniform bin centres [nm].
+
+    Returns
+    -------
+    ndarray
+        ∫ S dλ per bin (the unit of S times nm).
+    """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     s = np.asarray(values, dtype=np.float64)
     edges = np.clip(bin_edges(centres_nm), wl[0], wl[-1])
@@ -282,6 +377,18 @@ def alias_table(pdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Sampling: i = ⌊u₁K⌋, then i if u₂ < prob[i] else alias[i]. A zero row gets the uniform table (unused).
     The construction (a Python loop, ~0.4 s for 200 rows of 401) is cached per process by the table's bytes:
     a scene's tables are built for its compilation, its kernel parameters and its result.
+
+    Parameters
+    ----------
+    pdf : ndarray
+        (rows, K) non-negative weights.
+
+    Returns
+    -------
+    prob : ndarray
+        (rows, K) acceptance probabilities [-].
+    alias : ndarray
+        (rows, K) alias indices (int32).
     """
     pdf = np.ascontiguousarray(pdf, dtype=np.float64)
     prob, alias = _alias_rows(pdf.shape, pdf.tobytes())
@@ -317,7 +424,22 @@ def model_on_bins(model: SpectralPlateModel, plate: PhosphorPlate | None = None
     """elastic, converted (2, I, K) and pdf (K, K) at the emission bins: linear in excitation wavelength; below the
     excitation grid the first excitation's values; above it, with a two-wavelength ``plate``, its yiys TIS (at the
     model's incidences, linear in θi) and no conversion — the light the plate emits, not measured by an excitation
-    scan — else the last excitation's values."""
+    scan — else the last excitation's values.
+
+    Parameters
+    ----------
+    model : SpectralPlateModel
+        The plate's spectral model.
+    plate : PhosphorPlate, optional
+        A two-wavelength plate for the bins above the excitation grid.
+
+    Returns
+    -------
+    elastic, converted : ndarray
+        (2 sides, I incidences, K bins) TIS [-].
+    pdf : ndarray
+        (K excitation, K emission) emission pdf [1/nm].
+    """
     lam = model.emission_nm
     x = model.excitation_nm
     if x.size == 1:
@@ -368,6 +490,20 @@ def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: fl
 
     The weights are formed in log space relative to each row's largest, so a row whose whole emission lies far
     below its excitation (or a very cold plate) keeps its sum instead of underflowing to zero.
+
+    Parameters
+    ----------
+    pdf : ndarray
+        (K, K) emission pdf, row = excitation bin [1/nm].
+    lam : ndarray
+        Bin centres [nm].
+    temperature_K : float
+        Plate temperature [K], > 0.
+
+    Returns
+    -------
+    ndarray
+        (K, K) conditional emission pdf [1/nm].
     """
     pdf = np.asarray(pdf, dtype=np.float64)
     positive = pdf > 0
@@ -383,7 +519,18 @@ def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: fl
 
 def anti_stokes_share(pdf: np.ndarray) -> np.ndarray:
     """Per excitation bin k (rows of a pdf on its own bins), the probability that a converted photon leaves in a
-    bin shorter than k: Σ_{j<k} p_kj / Σ_j p_kj [1] (0 for zero rows)."""
+    bin shorter than k: Σ_{j<k} p_kj / Σ_j p_kj [1] (0 for zero rows).
+
+    Parameters
+    ----------
+    pdf : ndarray
+        (K, K) emission pdf on its own bins, row = excitation bin.
+
+    Returns
+    -------
+    ndarray
+        (K,) probabilities [-].
+    """
     below = np.tril(pdf, -1).sum(axis=1)
     total = pdf.sum(axis=1)
     return np.where(total > 0, below / np.where(total > 0, total, 1.0), 0.0)
@@ -394,6 +541,18 @@ def shape_plate_on_grid(plate: PhosphorPlate | None, incidence_deg: np.ndarray) 
 
     Each grid point takes the distributions of the nearest incidence of ``plate`` (Lambertian without a plate);
     the TIS are the plate's, interpolated linearly in θi (only the shapes are used in spectral mode).
+
+    Parameters
+    ----------
+    plate : PhosphorPlate or None
+        The two-wavelength plate, or None (Lambertian).
+    incidence_deg : ndarray
+        The model's incidence grid [deg].
+
+    Returns
+    -------
+    PhosphorPlate
+        The plate on that grid.
     """
     base = plate if plate is not None else PhosphorPlate.constant({c: 0.0 for c in CHANNELS})
     src = np.asarray(base.theta_i_deg, dtype=float)
@@ -440,7 +599,22 @@ class SpectralTables:
 
 
 def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, source: str | None = None) -> np.ndarray:
-    """Fractions of the LED power in each bin; refuses a spectrum with more than 0.1 % outside the grid."""
+    """Fractions of the LED power in each bin; refuses a spectrum with more than 0.1 % outside the grid.
+
+    Parameters
+    ----------
+    spectrum : tuple of ndarray
+        (wavelength [nm], power spectrum, any scale) of the LEDs.
+    lam : ndarray
+        Bin centres [nm].
+    source : str, optional
+        The scene file, named in errors.
+
+    Returns
+    -------
+    ndarray
+        (K,) fractions of the LED power [-], summing to 1.
+    """
     wl, values = spectrum
     if np.any(np.asarray(values) < 0):
         raise ValidationError("LED spectrum has negative power", file=source, field="leds.spectrum",
@@ -462,7 +636,28 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     emission conditioned on the excitation bin at the plate temperature ``temperature_K`` [K] (module docstring).
 
     Bins in the module's blue band (:data:`MODULE_BLUE_BAND_NM`, also the pump band whose elastic light takes the
-    bibs distribution) count as blue, those in :data:`MODULE_YELLOW_BAND_NM` as yellow."""
+    bibs distribution) count as blue, those in :data:`MODULE_YELLOW_BAND_NM` as yellow.
+
+    Parameters
+    ----------
+    model : SpectralPlateModel or None
+        The plate's spectral model; None for an exit top.
+    plate : PhosphorPlate or None
+        The two-wavelength plate (angular shapes; yiys above the excitation grid).
+    lam : ndarray
+        Bin centres [nm].
+    led_spectrum : tuple of ndarray
+        (wavelength [nm], power spectrum, any scale) of the LEDs.
+    source : str, optional
+        The scene file, named in errors.
+    temperature_K : float
+        Plate temperature [K].
+
+    Returns
+    -------
+    SpectralTables
+        The kernel's tables.
+    """
     lam = np.asarray(lam, dtype=np.float64)
     blue, yellow = MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
     band = np.where((lam >= blue[0]) & (lam <= blue[1]), 0,
@@ -502,7 +697,24 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
 
 def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, field_name: str,
                                 source: str | None = None) -> np.ndarray:
-    """A surface's reflectance ρ(λ) at the bin centres (linear interpolation; the bins must be inside)."""
+    """A surface's reflectance ρ(λ) at the bin centres (linear interpolation; the bins must be inside).
+
+    Parameters
+    ----------
+    spectrum : tuple of ndarray
+        (wavelength [nm], reflectance [-]).
+    lam : ndarray
+        Bin centres [nm].
+    field_name : str
+        The scene key, named in errors.
+    source : str, optional
+        The spectrum file, named in errors.
+
+    Returns
+    -------
+    ndarray
+        Reflectance at the bin centres [-].
+    """
     wl, rho = spectrum
     if lam[0] < wl[0] or lam[-1] > wl[-1]:
         raise ValidationError("the reflectance spectrum does not cover the spectral grid", file=source,

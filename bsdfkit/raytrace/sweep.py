@@ -70,7 +70,20 @@ def _token(text: str):
 
 
 def parse_parameter(spec: str, source: str = "--param") -> SweepParameter:
-    """Parse ``KEYS=VALUES`` (see module docstring)."""
+    """Parse ``KEYS=VALUES`` (see module docstring).
+
+    Parameters
+    ----------
+    spec : str
+        ``KEYS=VALUES``: comma-separated ``section.key`` names, then ``start:stop:count`` or a comma list.
+    source : str
+        Field named in errors.
+
+    Returns
+    -------
+    SweepParameter
+        The keys and their values.
+    """
     if "=" not in spec:
         raise InputError("a sweep parameter is KEYS=VALUES", field=source, expected="e.g. wall.reflectance=0.80:0.98:5",
                          got=spec)
@@ -131,7 +144,26 @@ class SweepPointsFailed(BsdfkitError):
 
 
 def trace_point(scene: Scene, values: dict, rays: int, seed: int, chunk: int | None):
-    """One grid point: ``scene`` with ``values`` set, traced (the task of a distributed sweep)."""
+    """One grid point: ``scene`` with ``values`` set, traced (the task of a distributed sweep).
+
+    Parameters
+    ----------
+    scene : Scene
+        The base scene.
+    values : dict
+        ``section.key`` → value to set (empty: the scene itself).
+    rays : int
+        Rays to trace.
+    seed : int
+        Seed of the random numbers.
+    chunk : int or None
+        Rays per compiled call (None: the scene's).
+
+    Returns
+    -------
+    TraceResult
+        The point's trace.
+    """
     point = with_values(scene, values) if values else scene
     return trace(point, rays, seed, chunk=chunk)
 
@@ -230,6 +262,22 @@ def sweep_dataset(scene: Scene, spec: SweepSpec, progress: Callable[[int, int], 
     standard errors (``std_err_*``), ledger_error, non_uniformity and, when the scene tallies it, the
     irradiance map (dims …, y_mm, x_mm). With ``cluster`` the points run as dask.distributed tasks (module
     docstring); failed points are NaN and listed in the ``failed_points`` attribute.
+
+    Parameters
+    ----------
+    scene : Scene
+        The base scene.
+    spec : SweepSpec
+        Parameters, rays, seed and chunk.
+    progress : callable, optional
+        Called with (points done, total points) as points finish.
+    cluster : Cluster, optional
+        Run the points on dask.distributed; None traces them in this process.
+
+    Returns
+    -------
+    xarray.Dataset
+        One dimension per parameter.
     """
     names = [p.name for p in spec.parameters]
     if len(set(names)) != len(names):
@@ -326,7 +374,18 @@ def _results_dataset(results: dict, parameters: Sequence[SweepParameter], radius
 
 
 def check_point_count(parameters: Sequence[SweepParameter]) -> int:
-    """The number of grid points, refused above :data:`MAX_SWEEP_POINTS` (before anything is traced)."""
+    """The number of grid points, refused above :data:`MAX_SWEEP_POINTS` (before anything is traced).
+
+    Parameters
+    ----------
+    parameters : sequence of SweepParameter
+        The swept parameters.
+
+    Returns
+    -------
+    int
+        Product of the parameters' value counts.
+    """
     total = 1
     for p in parameters:
         total *= len(p.values)  # Python integers: no overflow
@@ -338,13 +397,41 @@ def check_point_count(parameters: Sequence[SweepParameter]) -> int:
 
 
 def plot_paths(out: Path) -> list[Path]:
-    """PNG files written next to the netCDF output ``out``."""
+    """PNG files written next to the netCDF output ``out``.
+
+    Parameters
+    ----------
+    out : Path
+        The netCDF output file.
+
+    Returns
+    -------
+    list of Path
+        The PNG paths.
+    """
     return [out.with_name(out.stem + "_LER_YBR.png")]
 
 
 def sweep_spec(parameters: Sequence[str], rays: int, seed: int, chunk: int | None = None) -> SweepSpec:
     """The sweep of parameter specs ``parameters`` (``KEYS=VALUES``, :func:`parse_parameter`) with ``rays`` rays
-    per point, checked to have at most :data:`MAX_SWEEP_POINTS` points."""
+    per point, checked to have at most :data:`MAX_SWEEP_POINTS` points.
+
+    Parameters
+    ----------
+    parameters : sequence of str
+        ``KEYS=VALUES`` specs.
+    rays : int
+        Rays per point.
+    seed : int
+        Seed of every point.
+    chunk : int, optional
+        Rays per compiled call (None: the scene's).
+
+    Returns
+    -------
+    SweepSpec
+        The parsed sweep.
+    """
     params = tuple(parse_parameter(p) for p in parameters)
     check_point_count(params)
     return SweepSpec(params, rays, seed, chunk)
@@ -361,6 +448,33 @@ def run_sweep(scene: Scene, spec: SweepSpec, out: str | Path, *, force: bool = F
     is checked before any tracing. The files are one :class:`~bsdfkit.io.atomic.OutputSet`: an interrupted
     sweep leaves the previous files or none, and a rerun needs no ``force``.
     ``cluster`` runs the points on dask.distributed (module docstring). Returns the dataset.
+
+    Parameters
+    ----------
+    scene : Scene
+        The base scene.
+    spec : SweepSpec
+        Parameters, rays, seed and chunk.
+    out : str or Path
+        The netCDF file to write.
+    force : bool
+        Replace existing outputs.
+    figure : callable, optional
+        ``figure(ds)`` → matplotlib figure, saved as a PNG beside ``out``.
+    progress : callable, optional
+        Called with (points done, total points) as points finish.
+    cluster : Cluster, optional
+        Run the points on dask.distributed; None traces them in this process.
+
+    Returns
+    -------
+    xarray.Dataset
+        The sweep dataset as written.
+
+    Raises
+    ------
+    SweepPointsFailed
+        After writing, if some points failed (they are NaN in the outputs).
     """
     out = Path(out)
     names = [out.name] + ([p.name for p in plot_paths(out)] if figure is not None else [])

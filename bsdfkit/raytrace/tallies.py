@@ -39,6 +39,13 @@ class FixedSum:
         self._total = 0
 
     def add(self, hi: int, lo: int) -> None:
+        """Add one limb pair: hi·2^limb + lo, in units of 1/scale.
+
+        Parameters
+        ----------
+        hi, lo : int
+            High and low limbs of a fixed-point sum.
+        """
         self._total += (int(hi) << self._limb) + int(lo)
 
     @property
@@ -50,7 +57,22 @@ class FixedSum:
 
 
 def mean_and_se(s1: Fraction, s2: Fraction, n: int) -> tuple[float, float]:
-    """Mean and its standard error from Σx and Σx² over n samples."""
+    """Mean and its standard error from Σx and Σx² over n samples.
+
+    Parameters
+    ----------
+    s1 : Fraction
+        Σx.
+    s2 : Fraction
+        Σx².
+    n : int
+        Number of samples.
+
+    Returns
+    -------
+    mean, se : float
+        Mean and its standard error (NaN for n < 2), in the unit of x.
+    """
     mean = s1 / n
     if n < 2:
         return float(mean), float("nan")
@@ -60,7 +82,22 @@ def mean_and_se(s1: Fraction, s2: Fraction, n: int) -> tuple[float, float]:
 
 def ratio_and_se(sy: Fraction, sb: Fraction, syy: Fraction, sbb: Fraction, syb: Fraction,
                  n: int) -> tuple[float, float]:
-    """R = Σy/Σb and its delta-method standard error."""
+    """R = Σy/Σb and its delta-method standard error.
+
+    Parameters
+    ----------
+    sy, sb : Fraction
+        Σy and Σb.
+    syy, sbb, syb : Fraction
+        Σy², Σb² and Σyb.
+    n : int
+        Number of samples.
+
+    Returns
+    -------
+    ratio, se : float
+        R [-] and its standard error [-] (NaN when Σb = 0; se NaN for n < 2).
+    """
     if sb == 0:
         return float("nan"), float("nan")
     r = sy / sb
@@ -75,14 +112,36 @@ def ratio_and_se(sy: Fraction, sb: Fraction, syy: Fraction, sbb: Fraction, syb: 
 
 
 def interior_bins(bins: int) -> np.ndarray:
-    """Boolean (bins, bins) mask of the square bins of [−1, 1]² lying entirely inside the unit disk."""
+    """Boolean (bins, bins) mask of the square bins of [−1, 1]² lying entirely inside the unit disk.
+
+    Parameters
+    ----------
+    bins : int
+        Bins per side.
+
+    Returns
+    -------
+    ndarray
+        Boolean mask, shape (bins, bins).
+    """
     edges = np.linspace(-1.0, 1.0, bins + 1)
     far = np.maximum(np.abs(edges[:-1]), np.abs(edges[1:]))  # farthest |coordinate| within each bin row/col
     return far[:, None] ** 2 + far[None, :] ** 2 <= 1.0 + 1e-12
 
 
 def non_uniformity(irradiance: np.ndarray) -> float:
-    """(E_max − E_min)/(E_max + E_min) over bins entirely inside the plate (see module docstring)."""
+    """(E_max − E_min)/(E_max + E_min) over bins entirely inside the plate (see module docstring).
+
+    Parameters
+    ----------
+    irradiance : ndarray
+        Square (n, n) irradiance map over [−R, R]² [W/mm²].
+
+    Returns
+    -------
+    float
+        Non-uniformity [-] (NaN for a dark map).
+    """
     inside = irradiance[interior_bins(irradiance.shape[0])]
     hi, lo = float(np.max(inside)), float(np.min(inside))
     return (hi - lo) / (hi + lo) if hi + lo > 0 else float("nan")
@@ -92,6 +151,18 @@ def rebin_map(irradiance: np.ndarray, bins: int) -> np.ndarray:
     """A square irradiance map [W/mm²] on ``bins`` cells per side: the mean of blocks of the finer cells.
 
     Exact for the tallied power (a coarse cell is a block of fine ones); ``bins`` must divide the map's side.
+
+    Parameters
+    ----------
+    irradiance : ndarray
+        Maps (..., n, n) [W/mm²].
+    bins : int
+        Cells per side of the result; must divide n.
+
+    Returns
+    -------
+    ndarray
+        Maps (..., bins, bins) [W/mm²].
     """
     side = irradiance.shape[-1]
     if side % bins:
@@ -109,6 +180,20 @@ def non_uniformity_std(irradiance: np.ndarray, draws: int = 200, seed: int = 0) 
     times with that relative Gaussian noise (generator ``seed``: reproducible) and the σ of the redrawn
     non-uniformities is returned. Structure on the scale of a cell (hot spots of mirror walls) counts as noise, so
     the estimate is conservative there; docs/tracer.md compares it with the spread over independent seeds.
+
+    Parameters
+    ----------
+    irradiance : ndarray
+        Square (n, n) irradiance map over [−R, R]² [W/mm²].
+    draws : int
+        Number of redrawn maps.
+    seed : int
+        Seed of the generator.
+
+    Returns
+    -------
+    float
+        σ of the non-uniformity [-] (NaN when too few cells qualify).
     """
     e = np.asarray(irradiance, dtype=np.float64)
     inside = interior_bins(e.shape[0])
@@ -132,6 +217,16 @@ def split_half_non_uniformity(first: np.ndarray, second: np.ndarray) -> float:
     The cells of the largest and smallest irradiance are chosen on one map and their irradiance is read on the
     other (and the other way round; the two estimates are averaged). A noisy cell that is extreme on one map is
     an ordinary cell on the other, so E_max is not raised (nor E_min lowered) by the noise of the selection.
+
+    Parameters
+    ----------
+    first, second : ndarray
+        Two independent (n, n) irradiance maps of the same scene [W/mm²].
+
+    Returns
+    -------
+    float
+        Non-uniformity [-] (NaN for dark maps).
     """
     inside = interior_bins(first.shape[0])
     a, b = first[inside], second[inside]
@@ -148,6 +243,16 @@ def symmetrise_square(maps: np.ndarray) -> np.ndarray:
     Monte Carlo map are equally likely maps of the same field, so their mean estimates the field with up to 8×
     fewer variance (cells on a mirror line have 4 distinct images, the central cells 1 or 4). Works on the last
     two axes, which must be square and centred on the axis.
+
+    Parameters
+    ----------
+    maps : ndarray
+        Maps (..., n, n) [W/mm²].
+
+    Returns
+    -------
+    ndarray
+        Symmetrised maps, same shape [W/mm²].
     """
     m = np.asarray(maps, dtype=np.float64)
     images = [np.rot90(m, k, axes=(-2, -1)) for k in range(4)]
@@ -230,6 +335,18 @@ def map_fields(parts: np.ndarray, symmetric: bool) -> dict[str, Any]:
     ``irradiance`` (their sum), ``irradiance_parts``, ``non_uniformity`` (the converged value of
     :func:`converged_non_uniformity`, whose dict is ``non_uniformity_converged``) and ``non_uniformity_map`` (the
     whole map's :func:`non_uniformity`).
+
+    Parameters
+    ----------
+    parts : ndarray
+        (P, n, n) sub-maps of interleaved rays [W/mm²].
+    symmetric : bool
+        The scene is invariant under the square's symmetries.
+
+    Returns
+    -------
+    dict
+        The fields named above.
     """
     irradiance = parts.sum(axis=0)
     conv = converged_non_uniformity(parts, symmetric=symmetric)
@@ -242,6 +359,22 @@ def merge_maps(parts: np.ndarray, rays: int, more_parts: np.ndarray, more_rays: 
 
     Each trace's maps are power per ray times its own ray count, so the merged part k is the ray-weighted mean
     (rays·A_k + more_rays·B_k)/(rays + more_rays): its sum is the map of all rays, and the parts stay independent.
+
+    Parameters
+    ----------
+    parts : ndarray
+        (P, n, n) sub-maps of the first trace [W/mm²].
+    rays : int
+        Rays of the first trace.
+    more_parts : ndarray
+        Sub-maps of the second trace, same shape [W/mm²].
+    more_rays : int
+        Rays of the second trace.
+
+    Returns
+    -------
+    ndarray
+        Merged sub-maps [W/mm²].
     """
     a, b = np.asarray(parts, dtype=np.float64), np.asarray(more_parts, dtype=np.float64)
     if a.shape != b.shape:
@@ -257,6 +390,18 @@ def grid_study(maps: np.ndarray, grids: tuple[int, ...]) -> dict[str, dict[str, 
     one trace's value), ``pooled`` [1] (the map of all seeds summed), ``split_half`` [1]
     (:func:`split_half_non_uniformity` of the even and odd seeds' mean maps) and ``split_half_std`` [1] (its σ
     from the spread of the per-pair estimates, seeds paired 0-1, 2-3, …, divided by √pairs).
+
+    Parameters
+    ----------
+    maps : ndarray
+        (seeds, n, n) irradiance maps [W/mm²].
+    grids : tuple of int
+        Cells per side of each grid studied.
+
+    Returns
+    -------
+    dict
+        Grid (as a string) → the statistics above.
     """
     maps = np.asarray(maps, dtype=np.float64)
     if maps.ndim != 3 or maps.shape[0] < 2:
@@ -291,6 +436,26 @@ def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.nda
     wavelength bin than they were absorbed at (anti-Stokes, the thermal tail of the emission table), their share
     [1], and the power those anti-Stokes conversions created [W] (the Stokes line is net of it); absent with
     an exit top.
+
+    Parameters
+    ----------
+    col : dict of str to Fraction
+        Kernel column → sum over rays, in unit-weight rays (photon columns in photons of a ray at λ_max).
+    emitted_bins : sequence of int
+        Rays emitted per bin.
+    photon_scale : ndarray
+        λ_k / λ_max per bin [-].
+    lam : ndarray
+        Bin centres [nm].
+    n : int
+        Rays traced.
+    power_W : float
+        Emitted LED power [W].
+
+    Returns
+    -------
+    dict
+        ``power_W`` and ``photons_per_s`` (line → value, plus ``error`` [-]) and, with conversion, ``conversions``.
     """
     scale = power_W / n
     to_photons = scale * float(lam[-1]) * 1e-9 / (PLANCK_H * LIGHT_C)
@@ -357,7 +522,18 @@ class SpectralResult:
     def band_power(self, band: tuple[float, float]) -> tuple[float, float]:
         """Extracted power [W] of the bins whose centres lie in ``band`` (inclusive) and its standard error (the
         bins' errors add in quadrature: a ray is extracted in one bin, so bins are nearly independent; the
-        covariance −x̄_i x̄_j/N is neglected, conservative)."""
+        covariance −x̄_i x̄_j/N is neglected, conservative).
+
+        Parameters
+        ----------
+        band : tuple of float
+            (low, high) band edges [nm].
+
+        Returns
+        -------
+        power, se : float
+            Band power and its standard error [W].
+        """
         inside = (self.wavelength_nm >= band[0]) & (self.wavelength_nm <= band[1])
         p = float(self.spectrum_W_per_nm[inside].sum() * self.step_nm)
         return p, float(np.sqrt(np.sum(self.spectrum_std_err[inside] ** 2)) * self.step_nm)
@@ -376,6 +552,9 @@ class SpectralResult:
         return float(colour.luminous_efficacy(sd))
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as JSON-ready values: spectra [W/nm] on the bins [nm], blue and yellow band powers [W], luminous
+        efficacy [lm/W] (None for an empty spectrum), ledger and the extrapolated, yiys and capped bins.
+        """
         blue, se_b = self.band_power(MODULE_BLUE_BAND_NM)
         yellow, se_y = self.band_power(MODULE_YELLOW_BAND_NM)
         return {

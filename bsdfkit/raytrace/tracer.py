@@ -59,6 +59,32 @@ def trace(
     ``full_kernel=True``
     traces with every optional branch compiled in (same physics, for benchmarks and tests); ``effects``
     overrides the compiled configuration entirely. ``progress(done)`` is called after every chunk.
+
+    Parameters
+    ----------
+    scene : Scene
+        The parsed scene.
+    rays : int
+        Number of rays to trace.
+    seed : int
+        Seed of the random numbers.
+    chunk : int, optional
+        Rays per device and compiled call.
+    lanes : int, optional
+        Rays traced at once.
+    width : int, optional
+        Static emission count of the kernel.
+    effects : Effects, optional
+        Compiled configuration, replacing the scene's.
+    full_kernel : bool
+        Compile every optional branch in.
+    progress : callable, optional
+        Called with the number of rays done after every chunk.
+
+    Returns
+    -------
+    TraceResult
+        Powers [W], LER and YBR with standard errors, and the enabled tallies.
     """
     chunk, lanes, width, n_dev = _sizes(scene, rays, seed, chunk, lanes, width)
     check_termination(scene.wall, scene.base, scene.leds, scene.top, scene.trace, scene.path)  # replace()d scenes
@@ -164,7 +190,18 @@ class _Run(NamedTuple):
 
 def emission_width(chunk: int) -> int:
     """Static emission count of the compiled kernel for chunks of ``chunk`` rays: the next power of two
-    (at least 1024), so traces of different lengths share a few compiled kernels."""
+    (at least 1024), so traces of different lengths share a few compiled kernels.
+
+    Parameters
+    ----------
+    chunk : int
+        Rays per chunk.
+
+    Returns
+    -------
+    int
+        A power of two, at least 1024.
+    """
     return max(1024, 1 << max(chunk - 1, 1).bit_length())
 
 
@@ -185,6 +222,24 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
     Must be called inside :func:`bsdfkit.core.jaxconfig.x64`. Sweeping numbers (reflectance, height, plate TIS)
     keeps the signature, so a sweep compiles once per distinct :class:`Effects`. With JAX's persistent
     compilation cache on, the traced program is kept on disk too (:mod:`bsdfkit.raytrace.programs`).
+
+    Parameters
+    ----------
+    effects : Effects
+        Static kernel configuration.
+    lanes : int
+        Rays traced at once per device.
+    width : int
+        Static emission count per chunk.
+    signature : tuple
+        Tree structure and (shape, dtype) of every leaf of the kernel parameters.
+    n_devices : int
+        Local devices the program spans.
+
+    Returns
+    -------
+    callable
+        The compiled program ``(params, key_words, starts, n_valid) → dict of arrays``.
     """
     treedef, shapes = signature
     mesh = jax.sharding.Mesh(np.asarray(jax.local_devices()[:n_devices]), ("chunks",))
@@ -262,7 +317,24 @@ def _result(scene: Scene, run: _Run, eff: Effects, sums: list, counts: list, arr
 
 
 def spectral_result(scene: Scene, n: int, col: dict, arrays: dict) -> SpectralResult:
-    """The spectral tallies of a trace: spectrum (W/nm) with standard errors, bands, ledger in power and photons."""
+    """The spectral tallies of a trace: spectrum (W/nm) with standard errors, bands, ledger in power and photons.
+
+    Parameters
+    ----------
+    scene : Scene
+        The traced spectral scene.
+    n : int
+        Number of rays traced.
+    col : dict of str to Fraction
+        Column of :data:`kernel.COLUMNS` → summed per-ray weight (in unit-weight rays).
+    arrays : dict
+        The kernel's array tallies; ``spectrum`` and ``emitted`` are read.
+
+    Returns
+    -------
+    SpectralResult
+        Extracted and emitted spectra [W/nm] on the bins [nm], standard errors, and the power and photon ledger.
+    """
     tab = scene_spectral_tables(scene)
     lam = tab.lam
     K = lam.size
@@ -286,6 +358,24 @@ def threshold_bias(scene: Scene, rays: int, seed: int, thresholds, **kwargs) -> 
     """LER with the per-ray flux threshold Th vs the unbiased (roulette) LER at the same seed.
 
     Returns one row per Th: ``{"Th", "LER", "LER_roulette", "bias", "se_roulette", "discarded"}``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The parsed scene.
+    rays : int
+        Rays per trace.
+    seed : int
+        Seed of every trace.
+    thresholds : iterable of float
+        Per-ray flux thresholds Th [-] (fraction of a ray's starting weight).
+    **kwargs
+        Passed to :func:`trace`.
+
+    Returns
+    -------
+    list of dict
+        One row per threshold.
     """
     ref = trace(scene, rays, seed, **kwargs)
     rows = []

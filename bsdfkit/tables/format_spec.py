@@ -30,6 +30,7 @@ class FileSummary:
     details: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The summary as a JSON-ready dict (incidences [deg], TIS [-])."""
         return {"format": self.format, "path": self.path, "incidences_deg": self.incidences_deg,
                 "tis_computed": self.tis_computed, "tis_stated": self.tis_stated, "details": self.details}
 
@@ -122,7 +123,18 @@ class TableFormat:
 
 
 def first_line_is(magic: str) -> Callable[[str, Path], bool]:
-    """A content sniffer (``TableFormat.guess_can_open``) for formats whose first line is a fixed header."""
+    """A content sniffer (``TableFormat.guess_can_open``) for formats whose first line is a fixed header.
+
+    Parameters
+    ----------
+    magic : str
+        The header line, compared after stripping whitespace.
+
+    Returns
+    -------
+    callable
+        ``guess_can_open(head, path) -> bool``.
+    """
 
     def guess_can_open(head: str, path: Path) -> bool:
         lines = head.splitlines()

@@ -58,7 +58,18 @@ def names() -> tuple[str, ...]:
 
 
 def get(name: str) -> TableFormat:
-    """The format called ``name`` (FormatError naming the known ones otherwise); imports its module."""
+    """The format called ``name`` (FormatError naming the known ones otherwise); imports its module.
+
+    Parameters
+    ----------
+    name : str
+        A name of :data:`NAMES`.
+
+    Returns
+    -------
+    TableFormat
+        The format's declaration.
+    """
     if name not in NAMES:
         raise FormatError("unknown table format", field="format", expected=" | ".join(NAMES), got=name)
     return import_module(f"bsdfkit.tables.formats.{name}").FORMAT
@@ -79,7 +90,18 @@ def _head(path: Path) -> str:
 
 
 def sniff_format(path: str | Path) -> str:
-    """The name of the registered format whose sniffer accepts the file's content (FormatError otherwise)."""
+    """The name of the registered format whose sniffer accepts the file's content (FormatError otherwise).
+
+    Parameters
+    ----------
+    path : str or Path
+        The table file.
+
+    Returns
+    -------
+    str
+        The format's name.
+    """
     path = Path(path)
     head = _head(path)
     formats = [get(n) for n in NAMES]

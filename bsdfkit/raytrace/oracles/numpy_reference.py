@@ -63,7 +63,24 @@ def _onb(nx, ny, nz):
 
 
 def trace_numpy(scene: Scene, rays: int, seed: int = 0, batch: int = 100_000) -> ReferenceResult:
-    """Trace ``rays`` rays through ``scene`` with NumPy (see module docstring)."""
+    """Trace ``rays`` rays through ``scene`` with NumPy (see module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        A two-colour scene with LED disks and an exit, Lambertian or Lambertian-plate top.
+    rays : int
+        Number of rays to trace.
+    seed : int
+        Seed of NumPy's PCG64 generator.
+    batch : int
+        Rays traced per vectorised batch.
+
+    Returns
+    -------
+    ReferenceResult
+        The tallies as fractions of the emitted power [-], and the run time.
+    """
     require_two_colours(scene, "the NumPy reference")
     if scene.leds.ray_file is not None:
         raise ValidationError("the NumPy reference does not read ray files", field="leds.ray_file",

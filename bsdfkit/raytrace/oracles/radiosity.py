@@ -57,6 +57,20 @@ def disk_to_disk(r1, r2, h):
     Howell C-41, ½[S − √(S² − 4(r₂/r₁)²)], rewritten without cancellation or division by r₁ as
     F = 2R₂² / (X + √(X² − 4R₁²R₂²)) with Rᵢ = rᵢ/h and X = 1 + R₁² + R₂² (r₁ → 0 gives the element
     factor R₂²/(1 + R₂²)). At h = 0 the disks coincide: F = min(1, (r₂/r₁)²).
+
+    Parameters
+    ----------
+    r1 : float or array_like
+        Radius of the emitting disk [mm].
+    r2 : float or array_like
+        Radius of the receiving disk [mm].
+    h : float or array_like
+        Distance between the disks [mm].
+
+    Returns
+    -------
+    float or ndarray
+        View factor [-].
     """
     r1, r2, h = np.broadcast_arrays(np.asarray(r1, float), np.asarray(r2, float), np.asarray(h, float))
     out = np.zeros(r1.shape)
@@ -76,6 +90,20 @@ def element_to_disk(offset, a, h):
 
     ``offset`` is the element's distance from the disk axis, ``h`` the plane separation (h = 0: 1 inside the
     disk, 0 outside).
+
+    Parameters
+    ----------
+    offset : float or array_like
+        Distance of the element from the disk axis [mm].
+    a : float or array_like
+        Disk radius [mm].
+    h : float or array_like
+        Plane separation [mm].
+
+    Returns
+    -------
+    float or ndarray
+        View factor [-].
     """
     r, a, h = np.broadcast_arrays(np.asarray(offset, float), np.asarray(a, float), np.asarray(h, float))
     num = h * h + r * r - a * a
@@ -104,7 +132,22 @@ class Patches:
 
 
 def cylinder_patches(radius: float, height: float, n_base: int, n_wall: int, n_top: int) -> Patches:
-    """Base annuli (equal area), wall rings (equal height) and top annuli (equal area)."""
+    """Base annuli (equal area), wall rings (equal height) and top annuli (equal area).
+
+    Parameters
+    ----------
+    radius : float
+        Cavity radius [mm].
+    height : float
+        Cavity height [mm].
+    n_base, n_wall, n_top : int
+        Number of base annuli, wall rings and top annuli.
+
+    Returns
+    -------
+    Patches
+        The patches, base first, then wall, then top.
+    """
     rb = radius * np.sqrt(np.linspace(0.0, 1.0, n_base + 1))
     rt = radius * np.sqrt(np.linspace(0.0, 1.0, n_top + 1))
     zw = np.linspace(0.0, height, n_wall + 1)
@@ -121,7 +164,18 @@ def _annulus_to_disk(a, b, R, h):
 
 
 def view_factors(p: Patches) -> np.ndarray:
-    """The exact view-factor matrix F[i, j] (fraction of power leaving patch i that reaches patch j)."""
+    """The exact view-factor matrix F[i, j] (fraction of power leaving patch i that reaches patch j).
+
+    Parameters
+    ----------
+    p : Patches
+        The cavity's patches.
+
+    Returns
+    -------
+    ndarray
+        (n, n) view factors [-].
+    """
     n = p.kind.size
     R, H = p.radius, p.height
     A = p.area
@@ -183,7 +237,24 @@ def _gauss_disk(n: int = 24):
 
 
 def led_direct(p: Patches, centres, emitter_radius: float, quad: int = 24) -> np.ndarray:
-    """Fraction of the LEDs' power (Lambertian disks, equal power each) first reaching each patch."""
+    """Fraction of the LEDs' power (Lambertian disks, equal power each) first reaching each patch.
+
+    Parameters
+    ----------
+    p : Patches
+        The cavity's patches.
+    centres : iterable of (float, float)
+        LED centres (x, y) on the base [mm].
+    emitter_radius : float
+        Radius of each LED disk [mm].
+    quad : int
+        Gauss–Legendre order of the quadrature over each LED disk.
+
+    Returns
+    -------
+    ndarray
+        Fraction of the emitted power first reaching each patch [-].
+    """
     rho, phi, wq = _gauss_disk(quad)
     out = np.zeros(p.kind.size)
     R, H = p.radius, p.height
@@ -240,7 +311,20 @@ def _plate_tis(scene: Scene) -> dict[str, float]:
 
 
 def require_two_colours(scene: Scene, who: str) -> None:
-    """Refuse a spectral scene (spectral mode or a reflectance spectrum) in a two-colour oracle."""
+    """Refuse a spectral scene (spectral mode or a reflectance spectrum) in a two-colour oracle.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to check.
+    who : str
+        The oracle's name, used in the error message.
+
+    Raises
+    ------
+    ValidationError
+        If the scene is spectral.
+    """
     if scene.trace.mode != "two-wavelength" or any(x.spectrum is not None for x in (scene.wall, scene.base)):
         raise ValidationError(f"{who} traces two colours with constant reflectances", file=scene.path,
                               field="trace.mode", expected="two-wavelength, no reflectance_spectrum "
@@ -249,7 +333,20 @@ def require_two_colours(scene: Scene, who: str) -> None:
 
 
 def module_radiosity(scene: Scene, n_base: int = 48, n_wall: int = 96, n_top: int = 48) -> RadiosityResult:
-    """Two-wavelength radiosity of ``scene`` (diffuse cavity, Lambertian LEDs; see module docstring)."""
+    """Two-wavelength radiosity of ``scene`` (diffuse cavity, Lambertian LEDs; see module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        A diffuse two-colour scene with Lambertian LED disks and an angle-independent Lambertian top.
+    n_base, n_wall, n_top : int
+        Number of base annuli, wall rings and top annuli.
+
+    Returns
+    -------
+    RadiosityResult
+        Fractions of the emitted power [-].
+    """
     led = scene.led_surface
     require_two_colours(scene, "the radiosity oracle")
     if any(s.specular_fraction > 0 for s in (scene.wall, scene.base, led)):

@@ -42,7 +42,29 @@ class SpectralBudget:
 
 def spectral_module_budget(scene: Scene, n_base: int = 48, n_wall: int = 96, n_top: int = 48,
                            tol: float = 1e-14, max_sweeps: int = 2000) -> SpectralBudget:
-    """The exact spectral budget of a diffuse spectral scene (see module docstring)."""
+    """The exact spectral budget of a diffuse spectral scene (see module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        A diffuse spectral scene with Lambertian LED disks and an angle-independent Lambertian top.
+    n_base, n_wall, n_top : int
+        Number of base annuli, wall rings and top annuli.
+    tol : float
+        Convergence limit on the largest change of a patch's power per sweep [-].
+    max_sweeps : int
+        Sweeps over the wavelength bins before giving up.
+
+    Returns
+    -------
+    SpectralBudget
+        Fractions of the emitted power [-] per wavelength bin, the plate's loss and the sweeps used.
+
+    Raises
+    ------
+    NumericalError
+        If the sweeps do not converge within ``max_sweeps``.
+    """
     led = scene.led_surface
     if any(s.specular_fraction > 0 for s in (scene.wall, scene.base, led)) or scene.leds.ray_file is not None \
             or (scene.leds.fwhm is not None and abs(scene.leds.cos_exponent - 1.0) > 1e-12):

@@ -150,7 +150,24 @@ def asap_table(
     harvey: Sequence[HarveyParameters] = (),
     comments: Sequence[str] = (),
 ) -> AsapTable:
-    """An ASAP-style table from :func:`bsdfkit.tables.grids.harvey_shack_grid` (azimuths from the sample x axis)."""
+    """An ASAP-style table from :func:`bsdfkit.tables.grids.harvey_shack_grid` (azimuths from the sample x axis).
+
+    Parameters
+    ----------
+    grid : xarray.DataArray
+        BSDF [1/sr] on dims (side, theta_i [deg], rho [-], psi [deg]).
+    abg : sequence of AbgParameters
+        ABg parameters to state.
+    harvey : sequence of HarveyParameters
+        Harvey parameters to state.
+    comments : sequence of str
+        Single-line comments.
+
+    Returns
+    -------
+    AsapTable
+        The table, values and angles rounded as written, with its stated TIS [-].
+    """
     if tuple(grid.dims) != ("side", "theta_i", "rho", "psi"):
         raise ValidationError("grid must have dims (side, theta_i, rho, psi)", field="grid", got=str(grid.dims))
     if float(grid.attrs.get("zero_azimuth_deg", 0.0)) != 0.0:
@@ -171,7 +188,20 @@ def asap_table(
 
 
 def asap_text(asap: AsapTable, generated_at: datetime | None = None) -> str:
-    """The file text. Line 2 (bsdfkit version and time) is the only line that changes between runs."""
+    """The file text. Line 2 (bsdfkit version and time) is the only line that changes between runs.
+
+    Parameters
+    ----------
+    asap : AsapTable
+        The table.
+    generated_at : datetime, optional
+        Time stated on line 2 (default: now).
+
+    Returns
+    -------
+    str
+        The file text.
+    """
     when = generated_at or datetime.now()
     f = lambda v, fmt=_VALUE_FMT: format(float(v), fmt)  # noqa: E731
     lines = [MAGIC, f"# bsdfkit {__version__} {when:%Y-%m-%dT%H:%M:%S}", _DOC]
@@ -201,7 +231,24 @@ def asap_text(asap: AsapTable, generated_at: datetime | None = None) -> str:
 
 def write_asap(path: str | Path, asap: AsapTable, *, force: bool = False,
                generated_at: datetime | None = None) -> Path:
-    """Write ``asap`` atomically; refuses to overwrite unless ``force``."""
+    """Write ``asap`` atomically; refuses to overwrite unless ``force``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    asap : AsapTable
+        The table.
+    force : bool
+        Replace an existing file.
+    generated_at : datetime, optional
+        Time stated in the file (default: now).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     atomic.check_writable(path, force)
     return atomic.write_text(path, asap_text(asap, generated_at), force=force)
 
@@ -224,7 +271,18 @@ def _side(token: str, path: str, line: int) -> str:
 
 
 def read_asap(path: str | Path) -> AsapTable:
-    """Read a table written by :func:`write_asap`; errors name file, line and field."""
+    """Read a table written by :func:`write_asap`; errors name file, line and field.
+
+    Parameters
+    ----------
+    path : str or Path
+        The table file.
+
+    Returns
+    -------
+    AsapTable
+        The table (BSDF [1/sr], angles [deg]), stated TIS [-], parameters and comments.
+    """
     path = str(path)
     text = read_text(path, expected="a bsdfkit ASAP-style table")
     lines = text.splitlines()

@@ -133,11 +133,33 @@ class KlemsBsdf:
 
     def hemispherical(self, direction: str) -> NDArray[np.float64]:
         """Σ_out f Λ per incident patch [1]: the file's own direct-hemispherical value (Radiance's), by the basis
-        sum the hemispherical engine uses for ingested records (:func:`bsdfkit.reduction.basis.basis_sum`)."""
+        sum the hemispherical engine uses for ingested records (:func:`bsdfkit.reduction.basis.basis_sum`).
+
+        Parameters
+        ----------
+        direction : str
+            A block name, e.g. ``Reflection Front``.
+
+        Returns
+        -------
+        ndarray
+            Hemispherical value per incident patch [-].
+        """
         return basis_sum(self.blocks[direction], self.basis.lambdas())
 
     def band_tis(self, direction: str) -> NDArray[np.float64]:
-        """The hemispherical value at the first patch (azimuth 0) of every incident band [1]."""
+        """The hemispherical value at the first patch (azimuth 0) of every incident band [1].
+
+        Parameters
+        ----------
+        direction : str
+            A block name, e.g. ``Reflection Front``.
+
+        Returns
+        -------
+        ndarray
+            One value per incident band [-].
+        """
         first = np.concatenate([[0], np.cumsum(self.basis.n_phi)[:-1]])
         return self.hemispherical(direction)[first]
 
@@ -154,7 +176,20 @@ class TreeBsdf:
     details: dict[str, Any] = field(default_factory=dict)
 
     def hemispherical(self, direction: str, theta_deg: float) -> float:
-        """π Σ f s² over the leaves at the incidence [deg] (source at azimuth 180°) [1]: Radiance's value."""
+        """π Σ f s² over the leaves at the incidence [deg] (source at azimuth 180°) [1]: Radiance's value.
+
+        Parameters
+        ----------
+        direction : str
+            A block name, e.g. ``Reflection Front``.
+        theta_deg : float
+            Incidence [deg].
+
+        Returns
+        -------
+        float
+            The hemispherical value [-].
+        """
         return self.trees[direction].hemispherical(theta_deg)
 
     def incidences_deg(self) -> list[float]:
@@ -205,8 +240,19 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
         The source's incidences [deg]; band b takes the one nearest its centre.
     sides
         ``reflection`` and/or ``transmission`` (front blocks).
+    basis
+        The angle basis (default LBNL/Klems Full).
+    wavelength_nm
+        The single wavelength of the ``Visible`` block [nm] (None: unknown, written as ``nan``).
     back
         ``none`` or ``mirror`` (Back blocks = Front blocks).
+    comments
+        Comment lines written into the file.
+
+    Returns
+    -------
+    KlemsBsdf
+        The matrices [1/sr] and the source incidence [deg] each incident band takes.
     """
     theta = np.sort(np.asarray(theta_deg, dtype=np.float64))
     if theta.size == 0:
@@ -235,7 +281,20 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
 
 
 def xml_text(bsdf: KlemsBsdf, generated_at: datetime | None = None) -> str:
-    """The XML document of ``bsdf`` (values to 7 significant digits)."""
+    """The XML document of ``bsdf`` (values to 7 significant digits).
+
+    Parameters
+    ----------
+    bsdf : KlemsBsdf
+        The matrices.
+    generated_at : datetime, optional
+        Time stamp of the first comment (default: now).
+
+    Returns
+    -------
+    str
+        The XML text.
+    """
     comments = list(bsdf.comments)
     if bsdf.source_incidence_deg is not None:
         mapping = ", ".join(f"{c:g}<-{t:g}" for c, t in zip(bsdf.basis.centres_deg, bsdf.source_incidence_deg))
@@ -258,7 +317,24 @@ def xml_text(bsdf: KlemsBsdf, generated_at: datetime | None = None) -> str:
 
 def write_bsdfxml(path: str | Path, bsdf: KlemsBsdf, *, force: bool = False,
                   generated_at: datetime | None = None) -> Path:
-    """Write atomically; an existing file is replaced only with ``force``."""
+    """Write atomically; an existing file is replaced only with ``force``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    bsdf : KlemsBsdf
+        The matrices.
+    force : bool
+        Replace an existing file.
+    generated_at : datetime, optional
+        Time stamp of the first comment (default: now).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return atomic.write_text(path, xml_text(bsdf, generated_at), force=force)
 
 
@@ -313,6 +389,16 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf | TreeBsdf:
 
     Raises :class:`FormatError` naming the file, line and element for what cannot be read: a missing basis, a
     matrix of the wrong size, a malformed tree, a value that is not a finite number ≥ 0.
+
+    Parameters
+    ----------
+    path : str or Path
+        The BSDF XML file.
+
+    Returns
+    -------
+    KlemsBsdf or TreeBsdf
+        The file's BSDF [1/sr].
     """
     path = str(path)
     text, layer = _open_layer(path)

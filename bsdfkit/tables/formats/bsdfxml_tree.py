@@ -39,7 +39,22 @@ KLEMS_PATCH_DEG = 10.0
 def lobe_fwhm_deg(fn: grids.BsdfFn, theta_deg: float, side: str) -> float | None:
     """In-plane FWHM [deg] of the specular lobe at the incidence: the contiguous arc about the highest value within
     0.1 (direction cosines) of β0 = (sin θi, 0) where f stays above halfway between that peak and the arc's floor
-    (its minimum within 0.3 of β0); None when the peak is less than twice the floor (no lobe)."""
+    (its minimum within 0.3 of β0); None when the peak is less than twice the floor (no lobe).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta_deg : float
+        Incidence [deg].
+    side : str
+        ``reflection`` or ``transmission``.
+
+    Returns
+    -------
+    float or None
+        FWHM [deg], or None.
+    """
     b0 = float(np.sin(np.radians(theta_deg)))
     t = np.arange(-0.3, 0.3 + 1e-12, 0.001)
     bx = b0 + t
@@ -63,7 +78,22 @@ def lobe_fwhm_deg(fn: grids.BsdfFn, theta_deg: float, side: str) -> float | None
 
 
 def narrowest_lobe_deg(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: tuple[str, ...]) -> float | None:
-    """The smallest :func:`lobe_fwhm_deg` [deg] over the incidences [deg] and sides (None: no lobe anywhere)."""
+    """The smallest :func:`lobe_fwhm_deg` [deg] over the incidences [deg] and sides (None: no lobe anywhere).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta : ndarray
+        Incidences [deg].
+    sides : tuple of str
+        Sides to look at.
+
+    Returns
+    -------
+    float or None
+        FWHM [deg], or None.
+    """
     widths = [w for s in sides for t in theta if (w := lobe_fwhm_deg(fn, float(t), s)) is not None]
     return min(widths) if widths else None
 
@@ -71,7 +101,26 @@ def narrowest_lobe_deg(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: tupl
 def tree_grids(fn: grids.BsdfFn, theta: NDArray[np.float64], side: str, log2_cells: int = tensortree.LOG2_CELLS
                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The full (n, n, n) TT3 grid [1/sr] of one side (incident cells ≥ n/2 zero: Radiance does not use them) and
-    the source incidence [deg] each incident cell holds (the nearest to its centre)."""
+    the source incidence [deg] each incident cell holds (the nearest to its centre).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta : ndarray
+        Source incidences, ascending [deg].
+    side : str
+        ``reflection`` or ``transmission``.
+    log2_cells : int
+        log₂ of the cells per dimension n.
+
+    Returns
+    -------
+    grid : ndarray
+        (n, n, n) cell averages [1/sr].
+    held : ndarray
+        (n/2,) source incidence of each incident cell [deg].
+    """
     n = 2**log2_cells
     centre = np.degrees(np.arcsin(1.0 - 2.0 * (np.arange(n // 2) + 0.5) / n))
     held = np.array([theta[int(np.argmin(np.abs(theta - c)))] for c in centre])
@@ -97,7 +146,26 @@ def _incidence_map(texts: list[str], held: NDArray[np.float64], n: int) -> dict[
 
 def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None, comments: tuple[str, ...],
                   generated_at: datetime | None = None) -> str:
-    """The XML document of tensor-tree ``blocks`` (direction -> ScatteringData text)."""
+    """The XML document of tensor-tree ``blocks`` (direction -> ScatteringData text).
+
+    Parameters
+    ----------
+    blocks : dict of str to str
+        Direction → ScatteringData text of its tree.
+    name : str
+        Material name.
+    wavelength_nm : float or None
+        The single wavelength of the ``Visible`` block [nm] (None: written as ``nan``).
+    comments : tuple of str
+        Comment lines.
+    generated_at : datetime, optional
+        Time stamp of the first comment (default: now).
+
+    Returns
+    -------
+    str
+        The XML text.
+    """
     out = xml_document.head("Radiance tensor tree (TensorTree3)", name, wavelength_nm, "TensorTree3", comments,
                             generated_at)
     out.append("</DataDefinition>")
@@ -108,7 +176,20 @@ def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None
 
 
 def write_tree_job(job: WriteJob, rule: str) -> WriteOutcome:
-    """Write ``job`` as a TensorTree3 BSDF XML (module docstring); ``rule`` says why (for the outcome)."""
+    """Write ``job`` as a TensorTree3 BSDF XML (module docstring); ``rule`` says why (for the outcome).
+
+    Parameters
+    ----------
+    job : WriteJob
+        The export's write job.
+    rule : str
+        Why a tensor tree was chosen.
+
+    Returns
+    -------
+    WriteOutcome
+        The grid description and the incidence map [deg].
+    """
     theta = np.sort(np.asarray(job.theta, dtype=np.float64))
     n = 2**tensortree.LOG2_CELLS
     blocks: dict[str, str] = {}

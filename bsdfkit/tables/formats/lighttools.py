@@ -69,7 +69,26 @@ def lighttools_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: t
                     wavelength_nm: float | None = None,
                     axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> LightToolsBsdf:
     """Blocks of a BSDF callable on ``axes`` (θs, φs [deg], bsdfkit's frame: specular at φs = 0; default: the fixed
-    grid), written in the LightTools frame (azimuth φs − 90°)."""
+    grid), written in the LightTools frame (azimuth φs − 90°).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta_i_deg : ndarray
+        Incidences [deg].
+    sides : tuple of str
+        ``reflection`` and/or ``transmission``.
+    wavelength_nm : float, optional
+        Wavelength stated in the blocks [nm].
+    axes : tuple of ndarray, optional
+        (θs [deg], φs [deg]) axes.
+
+    Returns
+    -------
+    LightToolsBsdf
+        Front blocks with values [1/sr] and TIS [-].
+    """
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
     rad, az = axes if axes is not None else normal_axes.fixed_normal_axes()
     rad = np.asarray(rad, dtype=np.float64)
@@ -84,6 +103,18 @@ def lighttools_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: t
 
 
 def lighttools_text(bsdf: LightToolsBsdf) -> str:
+    """The file text of ``bsdf`` (values to 7 significant digits; 550 nm when no wavelength is given).
+
+    Parameters
+    ----------
+    bsdf : LightToolsBsdf
+        The blocks.
+
+    Returns
+    -------
+    str
+        The ``.bsdf`` text.
+    """
     lam = bsdf.wavelength_nm
     out = [f"# bsdfkit {__version__} LightTools BSDF: BSDF in 1/sr (not cosine-weighted); angles in deg about the",
            "# surface normal, plane of incidence at azimuth 90 (specular at 270); wavelength in nm",
@@ -100,7 +131,22 @@ def lighttools_text(bsdf: LightToolsBsdf) -> str:
 
 
 def write_lighttools(path: str | Path, bsdf: LightToolsBsdf, *, force: bool = False) -> Path:
-    """Write atomically; an existing file is replaced only with ``force``."""
+    """Write atomically; an existing file is replaced only with ``force``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    bsdf : LightToolsBsdf
+        The blocks.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return atomic.write_text(path, lighttools_text(bsdf), force=force)
 
 
@@ -113,7 +159,18 @@ def _tokens(text: str) -> list[tuple[int, str]]:
 
 
 def read_lighttools(path: str | Path) -> LightToolsBsdf:
-    """Read a LightTools ``.bsdf``; FormatError names the file, line and keyword."""
+    """Read a LightTools ``.bsdf``; FormatError names the file, line and keyword.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.bsdf`` file.
+
+    Returns
+    -------
+    LightToolsBsdf
+        Axes [deg] and blocks: incidences [deg], values [1/sr], stated TIS [-].
+    """
     path = str(path)
     cursor = _Cursor(_tokens(read_text(path, expected="a LightTools BSDF file", legacy="latin-1")), path)
     header = _read_header(cursor)
@@ -310,14 +367,36 @@ def _vendor_table(path: str) -> VendorTable:
 
 
 def header_words(head: str) -> list[str]:
-    """The lower-case header keywords and values of a Zemax-like keyword file, up to ``ScatterAzimuth``."""
+    """The lower-case header keywords and values of a Zemax-like keyword file, up to ``ScatterAzimuth``.
+
+    Parameters
+    ----------
+    head : str
+        The start of the file.
+
+    Returns
+    -------
+    list of str
+        The words before ``ScatterAzimuth`` (empty without one).
+    """
     words = [t.lower() for _, t in _tokens(head)]
     return words[:words.index("scatterazimuth")] if "scatterazimuth" in words else []
 
 
 def is_lighttools_header(head: str) -> bool:
     """A LightTools header: ``ScatterAzimuth`` comes before any Zemax-only keyword (SampleRotation,
-    AngleOfIncidence, ScatterType, Source: a LightTools file states those per block or not at all)."""
+    AngleOfIncidence, ScatterType, Source: a LightTools file states those per block or not at all).
+
+    Parameters
+    ----------
+    head : str
+        The start of the file.
+
+    Returns
+    -------
+    bool
+        True for a LightTools header.
+    """
     words = header_words(head)
     return bool(words) and words[0] in ("symmetry", "spectralcontent") and not any(
         w in ("samplerotation", "angleofincidence", "scattertype", "source") for w in words)

@@ -84,7 +84,20 @@ class SpeosBsdf:
 def speos_nodes(axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """θs, φs [deg] written (``axes``, default the fixed grid :func:`bsdfkit.tables.normal_axes.fixed_normal_axes`,
-    with the φ = 360° column repeating 0° that both Speos formats write) and their directions (θ, φ, 3)."""
+    with the φ = 360° column repeating 0° that both Speos formats write) and their directions (θ, φ, 3).
+
+    Parameters
+    ----------
+    axes : tuple of ndarray or None
+        (θs [deg], φs [deg]) axes; None: the fixed grid.
+
+    Returns
+    -------
+    theta, phi : ndarray
+        The axes written [deg].
+    directions : ndarray
+        (θ, φ, 3) unit directions [-].
+    """
     theta, phi = axes if axes is not None else normal_axes.fixed_normal_axes()
     theta = np.asarray(theta, dtype=np.float64)
     phi = np.append(np.asarray(phi, dtype=np.float64), 360.0)
@@ -96,7 +109,28 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
                axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> SpeosBsdf:
     """Tables of a BSDF callable on ``axes`` (θs, φs [deg] in [0, 360); default: the fixed grid; the φ = 360° column
     repeating 0° is added); the spectrum is the source's TIS at its first incidence
-    (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral)."""
+    (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta_i_deg : ndarray
+        Incidences [deg].
+    sides : tuple of str
+        ``reflection`` and/or ``transmission``.
+    wavelength_nm : float, optional
+        Wavelength noted in the comment line [nm].
+    description : str
+        The file's description.
+    axes : tuple of ndarray, optional
+        (θs [deg], φs [deg]) axes.
+
+    Returns
+    -------
+    SpeosBsdf
+        Tables [1/sr] and the spectrum (incidence [deg], TIS in per cent).
+    """
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
     theta, phi, d = speos_nodes(axes)
     tables, spectrum = {}, {}
@@ -110,6 +144,18 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
 
 
 def speos_text(bsdf: SpeosBsdf) -> str:
+    """The file text of ``bsdf`` (values to 7 significant digits; a flat spectrum at the stated percentage).
+
+    Parameters
+    ----------
+    bsdf : SpeosBsdf
+        The tables.
+
+    Returns
+    -------
+    str
+        The ``.anisotropicbsdf`` text.
+    """
     sides = [s for s in ("reflection", "transmission") if s in bsdf.tables]
     out = [MAGIC, "0", bsdf.comment, str(len(bsdf.description)), bsdf.description, "0\t1\t0",
            f"{int('reflection' in sides)}\t{int('transmission' in sides)}", "0" if bsdf.intensity else "1"]
@@ -130,7 +176,22 @@ def speos_text(bsdf: SpeosBsdf) -> str:
 
 
 def write_speos(path: str | Path, bsdf: SpeosBsdf, *, force: bool = False) -> Path:
-    """Write atomically; an existing file is replaced only with ``force``."""
+    """Write atomically; an existing file is replaced only with ``force``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    bsdf : SpeosBsdf
+        The tables.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return atomic.write_text(path, speos_text(bsdf), force=force)
 
 
@@ -144,6 +205,18 @@ class Lines:
         self.path = path
 
     def next(self, what: str) -> str:
+        """The next line (FormatError at the end of the file).
+
+        Parameters
+        ----------
+        what : str
+            The field expected, named in errors.
+
+        Returns
+        -------
+        str
+            The line.
+        """
         if self.k >= len(self.lines):
             raise FormatError("file ends early", file=self.path, line=self.k + 1, field=what, expected=what,
                               got="end of file")
@@ -151,6 +224,20 @@ class Lines:
         return self.lines[self.k - 1]
 
     def numbers(self, what: str, count: int | None = None) -> NDArray[np.float64]:
+        """The numbers of the next line, all finite (FormatError otherwise).
+
+        Parameters
+        ----------
+        what : str
+            The field expected, named in errors.
+        count : int, optional
+            Required number of values.
+
+        Returns
+        -------
+        ndarray
+            The values.
+        """
         line = self.next(what)
         try:
             values = np.array([float(t) for t in line.split()], dtype=np.float64)
@@ -163,6 +250,20 @@ class Lines:
         return values
 
     def integer(self, what: str, lo: int, hi: int) -> int:
+        """The next line as one integer in [lo, hi] (FormatError otherwise).
+
+        Parameters
+        ----------
+        what : str
+            The field expected, named in errors.
+        lo, hi : int
+            Inclusive bounds.
+
+        Returns
+        -------
+        int
+            The value.
+        """
         v = self.numbers(what, 1)[0]
         if v != int(v) or not lo <= v <= hi:
             raise FormatError("integer out of range", file=self.path, line=self.k, field=what,
@@ -171,7 +272,18 @@ class Lines:
 
 
 def read_speos(path: str | Path) -> SpeosBsdf:
-    """Read a text ``*.anisotropicbsdf`` (one anisotropy angle). FormatError names the file, line and field."""
+    """Read a text ``*.anisotropicbsdf`` (one anisotropy angle). FormatError names the file, line and field.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.anisotropicbsdf`` file.
+
+    Returns
+    -------
+    SpeosBsdf
+        Axes and incidences [deg], tables as written, spectrum (incidence [deg], per cent).
+    """
     path = str(path)
     r = Lines(read_text(path, expected="a Speos anisotropic BSDF file", legacy="latin-1"), path)
     first = r.next("header").strip()

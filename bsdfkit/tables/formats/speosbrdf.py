@@ -82,7 +82,26 @@ def speos_brdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
                wavelength_nm: float | None,
                axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> SpeosBrdf:
     """One-wavelength tables of a BSDF callable on ``axes`` (θs, φs [deg] in [0, 360); default: the fixed grid; the
-    φ = 360° column repeating 0° is added); the percentages are the source's direct integrals."""
+    φ = 360° column repeating 0° is added); the percentages are the source's direct integrals.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
+    theta_i_deg : ndarray
+        Incidences [deg].
+    sides : tuple of str
+        ``reflection`` and/or ``transmission``.
+    wavelength_nm : float or None
+        The table's wavelength [nm] (None: 550 nm).
+    axes : tuple of ndarray, optional
+        (θs [deg], φs [deg]) axes.
+
+    Returns
+    -------
+    SpeosBrdf
+        Tables [1/sr] and percentages (100 × TIS).
+    """
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
     theta, phi, d = speos_nodes(axes)
     tables, percent = {}, {}
@@ -94,6 +113,18 @@ def speos_brdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
 
 
 def speos_brdf_text(b: SpeosBrdf) -> str:
+    """The file text of ``b`` (values to 7 significant digits).
+
+    Parameters
+    ----------
+    b : SpeosBrdf
+        The tables.
+
+    Returns
+    -------
+    str
+        The ``.brdf`` text.
+    """
     sides = [s for s in ("reflection", "transmission") if s in b.tables]
     description = "bsdfkit export"
     out = [MAGIC, "0", b.comment, str(len(description)), description,
@@ -114,12 +145,38 @@ def speos_brdf_text(b: SpeosBrdf) -> str:
 
 
 def write_speos_brdf(path: str | Path, b: SpeosBrdf, *, force: bool = False) -> Path:
-    """Write atomically; an existing file is replaced only with ``force``."""
+    """Write atomically; an existing file is replaced only with ``force``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    b : SpeosBrdf
+        The tables.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return atomic.write_text(path, speos_brdf_text(b), force=force)
 
 
 def read_speos_brdf(path: str | Path) -> SpeosBrdf:
-    """Read a text ``*.brdf``. FormatError names the file, line and field."""
+    """Read a text ``*.brdf``. FormatError names the file, line and field.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.brdf`` file.
+
+    Returns
+    -------
+    SpeosBrdf
+        Incidences and axes [deg], wavelengths [nm], tables as written, stated percentages.
+    """
     path = str(path)
     r = Lines(read_text(path, expected="a Speos .brdf file", legacy="latin-1"), path)
     first = r.next("header").strip()

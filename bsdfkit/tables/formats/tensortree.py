@@ -53,14 +53,40 @@ class TensorTree:
     value: NDArray[np.float64]
 
     def incident_point(self, theta_deg: float) -> NDArray[np.float64]:
-        """Incident hypercube coordinates of the source at ``theta_deg`` [deg], azimuth 180° (bsdfkit's frame)."""
+        """Incident hypercube coordinates of the source at ``theta_deg`` [deg], azimuth 180° (bsdfkit's frame).
+
+        Parameters
+        ----------
+        theta_deg : float
+            Incidence [deg].
+
+        Returns
+        -------
+        ndarray
+            (1,) for TT3 or (2,) for TT4 coordinates in [0, 1] [-].
+        """
         r = float(np.sin(np.radians(theta_deg)))
         if self.ndim == 3:
             return np.array([min(0.5 - 0.5 * r, 0.5 - _TINY)])
         return np.asarray(disk_to_square(np.array([r]), np.array([0.0]))).reshape(2)
 
     def slice_at(self, theta_deg: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """(corner (leaf, 2), size (leaf,), value (leaf,)) of the outgoing leaves at the incidence [deg]."""
+        """(corner (leaf, 2), size (leaf,), value (leaf,)) of the outgoing leaves at the incidence [deg].
+
+        Parameters
+        ----------
+        theta_deg : float
+            Incidence [deg].
+
+        Returns
+        -------
+        corner : ndarray
+            (leaf, 2) outgoing corners in the unit square [-].
+        size : ndarray
+            (leaf,) edge lengths [-].
+        value : ndarray
+            (leaf,) BSDF [1/sr].
+        """
         p = self.incident_point(theta_deg)
         ni = self.ndim - 2
         lo = self.corner[:, :ni]
@@ -68,7 +94,18 @@ class TensorTree:
         return self.corner[inside, ni:], self.size[inside], self.value[inside]
 
     def hemispherical(self, theta_deg: float) -> float:
-        """ρ = π Σ f s² [1] over the slice at the incidence [deg] (the module docstring)."""
+        """ρ = π Σ f s² [1] over the slice at the incidence [deg] (the module docstring).
+
+        Parameters
+        ----------
+        theta_deg : float
+            Incidence [deg].
+
+        Returns
+        -------
+        float
+            ρ [-].
+        """
         _, size, value = self.slice_at(theta_deg)
         return float(basis_sum(value, np.pi * size**2))
 
@@ -84,12 +121,36 @@ class TensorTree:
 
 
     def cells_per_side(self, minimum: int = MIN_CELLS) -> int:
-        """Cells per side of the finest uniform grid every outgoing leaf is a union of (at least ``minimum``)."""
+        """Cells per side of the finest uniform grid every outgoing leaf is a union of (at least ``minimum``).
+
+        Parameters
+        ----------
+        minimum : int
+            Fewest cells per side.
+
+        Returns
+        -------
+        int
+            Cells per side.
+        """
         return max(minimum, int(round(1.0 / float(self.size.min()))))
 
     def out_grid(self, theta_deg: float, m: int) -> NDArray[np.float64]:
         """The BSDF [1/sr] on the m × m uniform grid of the outgoing square at the incidence [deg] (cell (a, b)
-        covers [a, a + 1) / m × [b, b + 1) / m): each cell takes the value of the leaf it lies in."""
+        covers [a, a + 1) / m × [b, b + 1) / m): each cell takes the value of the leaf it lies in.
+
+        Parameters
+        ----------
+        theta_deg : float
+            Incidence [deg].
+        m : int
+            Cells per side.
+
+        Returns
+        -------
+        ndarray
+            (m, m) BSDF [1/sr] (NaN where no leaf covers a cell).
+        """
         corner, size, value = self.slice_at(theta_deg)
         out = np.full((m, m), np.nan)
         lo = np.rint(corner * m).astype(int)
@@ -101,7 +162,20 @@ class TensorTree:
 
 def incidences_deg(edges: NDArray[np.float64], ndim: int) -> list[float]:
     """Normal incidence and the centres of the incident cells between consecutive ``edges`` (of
-    :meth:`TensorTree.incident_edges`) [deg], ascending."""
+    :meth:`TensorTree.incident_edges`) [deg], ascending.
+
+    Parameters
+    ----------
+    edges : ndarray
+        Leaf boundaries along the incident axis [-].
+    ndim : int
+        3 (TT3) or 4 (TT4).
+
+    Returns
+    -------
+    list of float
+        Incidences [deg].
+    """
     e = np.unique(edges)
     c = 0.5 * (e[:-1] + e[1:])
     r = 1.0 - 2.0 * c if ndim == 3 else 2.0 * c - 1.0  # TT3: x0 = (1 - sin) / 2; TT4: x0 = (1 + sin) / 2
@@ -110,14 +184,36 @@ def incidences_deg(edges: NDArray[np.float64], ndim: int) -> list[float]:
 
 def grid_directions(m: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(βx, βy) of the centres of the m × m uniform grid of the square (row-major, as :meth:`TensorTree.out_grid`);
-    each cell covers the projected solid angle π / m² [sr]."""
+    each cell covers the projected solid angle π / m² [sr].
+
+    Parameters
+    ----------
+    m : int
+        Cells per side.
+
+    Returns
+    -------
+    bx, by : ndarray
+        (m·m,) direction cosines [-].
+    """
     c = (np.arange(m) + 0.5) / m
     a, b = np.meshgrid(c, c, indexing="ij")
     return square_to_disk(a.ravel(), b.ravel())
 
 
 def square_to_disk(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Shirley–Chiu concentric map of the unit square onto the unit disk (area preserving up to the factor π)."""
+    """Shirley–Chiu concentric map of the unit square onto the unit disk (area preserving up to the factor π).
+
+    Parameters
+    ----------
+    a, b : ndarray
+        Points of the unit square [-].
+
+    Returns
+    -------
+    x, y : ndarray
+        Points of the unit disk [-].
+    """
     u, v = 2.0 * np.asarray(a, dtype=np.float64) - 1.0, 2.0 * np.asarray(b, dtype=np.float64) - 1.0
     first = np.abs(u) > np.abs(v)  # the wedges about the x axis
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -128,7 +224,18 @@ def square_to_disk(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDAr
 
 
 def disk_to_square(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Inverse of :func:`square_to_disk`: unit-disk points to the unit square."""
+    """Inverse of :func:`square_to_disk`: unit-disk points to the unit square.
+
+    Parameters
+    ----------
+    x, y : ndarray
+        Points of the unit disk [-].
+
+    Returns
+    -------
+    a, b : ndarray
+        Points of the unit square [-].
+    """
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     r = np.hypot(x, y)
     phi = np.arctan2(y, x)
@@ -152,7 +259,20 @@ def parse_tree(text: str, ndim: int) -> TensorTree:
     """The leaves of the tree in ``text`` (a ScatteringData body) of dimension ``ndim`` (3 or 4).
 
     Raises :class:`TreeSyntaxError` on a missing brace, a grid whose value count is not 2^(D·k), a value that is
-    not a finite number ≥ 0 [1/sr] or text after the tree."""
+    not a finite number ≥ 0 [1/sr] or text after the tree.
+
+    Parameters
+    ----------
+    text : str
+        The ScatteringData body.
+    ndim : int
+        3 (TT3) or 4 (TT4).
+
+    Returns
+    -------
+    TensorTree
+        The leaves (values [1/sr]).
+    """
     tokens = [(m.group(), m.start()) for m in _TOKEN.finditer(text)]
     leaves: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]] = []
     pos = _node(tokens, 0, np.zeros(ndim), 1.0, 0, ndim, leaves, text)
@@ -231,7 +351,22 @@ MERGE_RTOL = 0.05
 def cell_averages(values_at: Callable[[NDArray[np.float64]], NDArray[np.float64]], n: int,
                   sub: int = SUB_SAMPLES_TREE) -> NDArray[np.float64]:
     """(n, n) projected-solid-angle averages [1/sr] over the cells of the outgoing square of ``values_at(d)`` (unit
-    vectors (..., 3)): ``sub`` × ``sub`` points per cell, uniform in the square (the map preserves area)."""
+    vectors (..., 3)): ``sub`` × ``sub`` points per cell, uniform in the square (the map preserves area).
+
+    Parameters
+    ----------
+    values_at : callable
+        Unit directions (..., 3) → BSDF [1/sr].
+    n : int
+        Cells per side.
+    sub : int
+        Sub-samples per side of a cell.
+
+    Returns
+    -------
+    ndarray
+        (n, n) averages [1/sr].
+    """
     k = (np.arange(n * sub) + 0.5) / (n * sub)
     a, b = np.meshgrid(k, k, indexing="ij")
     x, y = square_to_disk(a, b)
@@ -242,7 +377,20 @@ def cell_averages(values_at: Callable[[NDArray[np.float64]], NDArray[np.float64]
 
 def tree_text(grid: NDArray[np.float64], rtol: float = MERGE_RTOL) -> str:
     """The ``{ … }`` text of a full (n, n, n) TT3 grid [1/sr] (n a power of 2), cells merged where uniform within
-    ``rtol`` (each merged leaf holds the mean of its cells, so π Σ f s² is unchanged)."""
+    ``rtol`` (each merged leaf holds the mean of its cells, so π Σ f s² is unchanged).
+
+    Parameters
+    ----------
+    grid : ndarray
+        (n, n, n) BSDF [1/sr].
+    rtol : float
+        Relative spread below which cells merge [-].
+
+    Returns
+    -------
+    str
+        The tree text.
+    """
     out: list[str] = []
     _emit(np.asarray(grid, dtype=np.float64), rtol, out)
     return "\n".join(out)

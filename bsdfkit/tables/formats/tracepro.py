@@ -178,7 +178,24 @@ class TraceProProperty:
 # building properties
 # --------------------------------------------------------------------------------------------------
 def tis_abg(a: float, b: float, g: float, theta_i_deg: float) -> float:
-    """TIS of A/(B + |β − β0|^g) over the unit disk at incidence θi [deg], 0 when A = 0 (the registry's ABg)."""
+    """TIS of A/(B + |β − β0|^g) over the unit disk at incidence θi [deg], 0 when A = 0 (the registry's ABg).
+
+    Parameters
+    ----------
+    a : float
+        A [1/sr].
+    b : float
+        B [-].
+    g : float
+        g [-].
+    theta_i_deg : float
+        Incidence [deg].
+
+    Returns
+    -------
+    float
+        TIS [-].
+    """
     if a == 0.0:
         return 0.0
     return float(bsdf_model("abg").total_integrated_scatter({"A": a, "B": b, "g": g}, theta_i_deg))
@@ -237,6 +254,24 @@ def table_property(
     ``scatter_excess_allowed`` [1] (per incidence): by how much TIS_R + TIS_T + Refl + Tran may exceed 1 —
     k·u(TIS) of a fit that passed :mod:`bsdfkit.fit.plausibility`, so that this writer refuses what the gate
     refuses and nothing more (Abso is then 0); 0 by default (the sum may exceed 1 only by rounding).
+
+    Parameters
+    ----------
+    grid : xarray.DataArray
+        BSDF [1/sr] on dims (side, theta_i [deg], rho [-], psi [deg]).
+    options : TraceProOptions
+        Header settings and the table's azimuth frame.
+    specular_reflectance : float or array_like
+        Specular reflectance Refl per incidence [-].
+    specular_transmittance : float or array_like
+        Specular transmittance Tran per incidence [-].
+    scatter_excess_allowed : float or array_like
+        Allowed excess of the energy sum over 1 per incidence [-].
+
+    Returns
+    -------
+    TraceProProperty
+        Scatter 5 property: table [1/sr] and absorptance [-] per incidence.
     """
     if tuple(grid.dims) != ("side", "theta_i", "rho", "psi"):
         raise ValidationError("grid must have dims (side, theta_i, rho, psi)", field="grid", got=str(grid.dims))
@@ -278,7 +313,30 @@ def abg_property(
 ) -> TraceProProperty:
     """ABg (Scatter 1) property: ``brdf_abg``/``btdf_abg`` are (A, B, g) per incidence, shape (n, 3) or (3,).
 
-    ``scatter_excess_allowed`` as in :func:`table_property`."""
+    ``scatter_excess_allowed`` as in :func:`table_property`.
+
+    Parameters
+    ----------
+    theta_i_deg : sequence of float
+        Incidences [deg].
+    brdf_abg : array_like or None
+        Reflection (A [1/sr], B [-], g [-]); None: no reflected scatter.
+    btdf_abg : array_like or None
+        Transmission (A [1/sr], B [-], g [-]); None: no transmitted scatter.
+    options : TraceProOptions
+        Header settings and the table's azimuth frame.
+    specular_reflectance : float or array_like
+        Specular reflectance Refl per incidence [-].
+    specular_transmittance : float or array_like
+        Specular transmittance Tran per incidence [-].
+    scatter_excess_allowed : float or array_like
+        Allowed excess of the energy sum over 1 per incidence [-].
+
+    Returns
+    -------
+    TraceProProperty
+        Scatter 1 property: ABg parameters and absorptance [-] per incidence.
+    """
     theta = np.asarray(theta_i_deg, dtype=np.float64)
     params = np.zeros((2, theta.size, 3))
     for k, (side, value) in enumerate(zip(SIDES, (brdf_abg, btdf_abg))):
@@ -314,7 +372,20 @@ def _fmt(value: float, fmt: str = _VALUE_FMT) -> str:
 
 
 def tracepro_text(prop: TraceProProperty, generated_at: datetime | None = None) -> str:
-    """The file text (LF line ends; :func:`write_tracepro` converts to CRLF)."""
+    """The file text (LF line ends; :func:`write_tracepro` converts to CRLF).
+
+    Parameters
+    ----------
+    prop : TraceProProperty
+        The property.
+    generated_at : datetime, optional
+        Time stated in the header (default: now).
+
+    Returns
+    -------
+    str
+        The file text.
+    """
     o = prop.options
     when = generated_at or datetime.now()
     description = f"{o.description} [bsdfkit zero_azimuth_deg={o.zero_azimuth_deg:g}]".strip()
@@ -372,7 +443,24 @@ def tracepro_text(prop: TraceProProperty, generated_at: datetime | None = None) 
 def write_tracepro(
     path: str | Path, prop: TraceProProperty, *, force: bool = False, generated_at: datetime | None = None
 ) -> Path:
-    """Write ``prop`` atomically (CRLF, tabs); refuses to overwrite unless ``force``."""
+    """Write ``prop`` atomically (CRLF, tabs); refuses to overwrite unless ``force``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    prop : TraceProProperty
+        The property.
+    force : bool
+        Replace an existing file.
+    generated_at : datetime, optional
+        Time stated in the header (default: now).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     atomic.check_writable(path, force)
     return atomic.write_text(path, tracepro_text(prop, generated_at), force=force, newline="\r\n")
 
@@ -465,6 +553,18 @@ def read_tracepro(path: str | Path, *, zero_azimuth_deg: float | None = None) ->
     The table's azimuth frame is taken from a ``[bsdfkit zero_azimuth_deg=…]`` tag in the Description,
     else from ``zero_azimuth_deg``, else :data:`DEFAULT_ZERO_AZIMUTH_DEG`. Errors name file, line and
     field.
+
+    Parameters
+    ----------
+    path : str or Path
+        The surface-property file.
+    zero_azimuth_deg : float, optional
+        Sample azimuth of table azimuth 0 when the file has no tag [deg].
+
+    Returns
+    -------
+    TraceProProperty
+        Incidences [deg], absorptance and specular terms [-], and the table [1/sr] or ABg parameters.
     """
     path = str(path)
     text = read_text(path, expected="a TracePro surface property file", legacy="latin-1")

@@ -52,7 +52,24 @@ def head(basis_note: str, name: str, wavelength_nm: float | None, structure: str
 
 def wavelength_data(direction: str, label: str, basis_lines: Sequence[str], data_lines: Sequence[str]) -> list[str]:
     """One ``WavelengthData`` element: the block of ``direction`` (``Reflection Front`` …) under the wavelength
-    ``label``, its basis elements and the lines of its ``ScatteringData`` (BRDF or BTDF by the direction)."""
+    ``label``, its basis elements and the lines of its ``ScatteringData`` (BRDF or BTDF by the direction).
+
+    Parameters
+    ----------
+    direction : str
+        ``Reflection Front``, ``Transmission Back`` …
+    label : str
+        Text of the ``Wavelength`` element (e.g. ``Visible``).
+    basis_lines : sequence of str
+        The block's basis elements.
+    data_lines : sequence of str
+        Lines of the ``ScatteringData`` element (BSDF in 1/sr).
+
+    Returns
+    -------
+    list of str
+        The element's lines.
+    """
     kind = "BRDF" if direction.startswith("Reflection") else "BTDF"
     return ["<WavelengthData>", "<LayerNumber>System</LayerNumber>",
             f'<Wavelength unit="Integral">{label}</Wavelength>',
