@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.errors import InputError
 from bsdfkit.fit.least_squares import fit_bsdf
-from bsdfkit.io.text import read_toml
+from bsdfkit.io.recipe_head import read_recipe_head
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
@@ -143,33 +142,6 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
     return plate
 
 
-def recipe_measurement(recipe: str | Path) -> tuple[Path, str]:
-    """The measurement folder and name that a fitting recipe names (its ``[recipe]`` table).
-
-    Parameters
-    ----------
-    recipe : str or Path
-        The recipe's TOML file.
-
-    Returns
-    -------
-    folder : Path
-        The measurement folder, resolved relative to the recipe.
-    name : str
-        The recipe's name ('' when it gives none).
-    """
-    recipe = Path(recipe)
-    if not recipe.is_file():
-        raise InputError("recipe not found", file=recipe, expected="a TOML recipe file")
-    head = read_toml(recipe, expected="a TOML recipe file").get("recipe")
-    if not isinstance(head, dict) or not isinstance(head.get("measurement"), str):
-        raise InputError("recipe names no measurement", file=recipe, field="recipe.measurement",
-                         expected="a path to a measurement folder", got=None if not isinstance(head, dict)
-                         else head.get("measurement"))
-    name = head.get("name") if isinstance(head.get("name"), str) else ""
-    return (recipe.parent / head["measurement"]).resolve(), name
-
-
 def plate_from_recipe(recipe: str | Path) -> PhosphorPlate:
     """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``).
 
@@ -183,5 +155,5 @@ def plate_from_recipe(recipe: str | Path) -> PhosphorPlate:
     PhosphorPlate
         The plate from the calibrated scan of the recipe's measurement.
     """
-    measurement, name = recipe_measurement(recipe)
+    name, measurement = read_recipe_head(recipe)
     return plate_from_scan(calibrate(read_scan(measurement)), name=name)
