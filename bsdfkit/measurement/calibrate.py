@@ -51,7 +51,19 @@ BELOW_DARK_SIGMA = 6.0
 
 
 def dark_statistics(raw: xr.Dataset) -> dict[float, tuple[np.ndarray, np.ndarray, int]]:
-    """Mean, variance (ddof=1) and frame count of the dark frames per exposure time."""
+    """Mean, variance (ddof=1) and frame count of the dark frames per exposure time.
+
+    Parameters
+    ----------
+    raw : xarray.Dataset
+        Raw scan with ``dark_counts`` (frame × wavelength) [counts] and ``dark_exposure`` per frame [s].
+
+    Returns
+    -------
+    dict of float to tuple
+        Exposure time [s] (rounded to 12 decimals) → (mean dark per pixel [counts], its frame-to-frame variance
+        [counts²], number of frames).
+    """
     out = {}
     t = raw["dark_exposure"].values
     counts = raw["dark_counts"].values
@@ -168,6 +180,26 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
     ``bsdf_bispectral`` and its std (1/(sr·nm)), the noise floors (noise-equivalent BSDFs), ``saturated``,
     and per configuration the normalised incident spectrum ``incident_spectrum`` (1/nm, unit integral); the
     schema of :mod:`bsdfkit.measurement.schema`.
+
+    Parameters
+    ----------
+    raw : xarray.Dataset
+        Raw scan: sample, dark and reference-beam counts, exposures [s], angles [deg], responsivity [-],
+        instrument geometry [mm] and detector gain in its attributes.
+
+    Returns
+    -------
+    xarray.Dataset
+        Calibrated BSDF dataset: ``bsdf``, ``bsdf_std``, ``noise_floor`` [1/sr], ``bsdf_bispectral``, its std
+        and noise floor [1/(sr·nm)], the flags ``saturated``, ``below_dark``, ``grazing``, and the incident
+        spectrum [1/nm] and its relative uncertainties [-] per configuration.
+
+    Raises
+    ------
+    InputError
+        No dark frames at a record's exposure time, or no reference-beam frames for a configuration.
+    NumericalError
+        A configuration's reference beam has no pixel above 10 standard uncertainties.
     """
     source = raw.attrs.get("source", "<dataset>")
     instrument = Instrument(raw.attrs["detector_distance_mm"], raw.attrs["aperture_diameter_mm"],
@@ -234,7 +266,19 @@ def _describe(ds: xr.Dataset) -> None:
 
 
 def truth_tis(ds: xr.Dataset) -> dict[str, dict[str, float]] | None:
-    """The exact TIS table recorded in a synthetic data set's manifest (percent), keyed by incidence, or None."""
+    """The exact TIS table recorded in a synthetic data set's manifest (percent), keyed by incidence, or None.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Raw or calibrated scan; its ``manifest_json`` attribute is read.
+
+    Returns
+    -------
+    dict or None
+        Angle of incidence as text (``"45"``) [deg] → TIS entry (Table 2 keys) → TIS [%]; None when the
+        manifest has no ``[truth]`` table (a real measurement).
+    """
     manifest = json.loads(ds.attrs.get("manifest_json", "{}"))
     truth = manifest.get("truth")
     return None if truth is None else truth.get("tis_percent")

@@ -10,7 +10,25 @@ from bsdfkit.core.records import incidences
 
 
 def describe(ds: xr.Dataset) -> dict:
-    """Incidences, sides, positions per arc, wavelength range and configurations of a raw or calibrated scan."""
+    """Incidences, sides, positions per arc, wavelength range and configurations of a raw or calibrated scan.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Raw scan (:func:`bsdfkit.measurement.raw_scan.read_scan`) or calibrated one (it then also has ``bsdf``).
+
+    Returns
+    -------
+    dict
+        JSON-ready summary: ``quantity``, ``sample``, ``synthetic``, ``records``, ``incidences_deg`` [deg],
+        ``sides``, ``positions`` (detector positions per incidence, side and arc, counted in one configuration),
+        ``wavelength_nm`` (min, max, median step [nm] and count), ``configurations`` (name, description,
+        ``incident_band_nm`` [nm], records), ``instrument`` (distance and diameters [mm], ``solid_angle_sr``
+        [sr] when known); for a calibrated scan ``calibration`` (counts of grazing records, saturated pixels,
+        finite BSDF values, values above 10 × noise floor, negative values after dark subtraction and, when
+        recorded, pixels below dark and negative raw counts); ``truth_tis_percent`` [%] when the manifest holds
+        a truth.
+    """
     lam = ds["wavelength"].values
     positions: dict[str, dict[str, dict[str, int]]] = {}
     for th in incidences(ds):

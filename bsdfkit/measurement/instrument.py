@@ -51,6 +51,18 @@ def aperture_solid_angle(distance: ArrayLike, radius: ArrayLike) -> NDArray[np.f
     Ω = 2π(1 − cos(atan(a/d))) = 2π(1 − d/√(d² + a²)), written as 2π a² / (√(d²+a²)(√(d²+a²) + d))
     to avoid cancellation for small a/d (docs/raw-format.md "Measurement equation"). Units: sr; ``d`` and
     ``a`` in the same unit.
+
+    Parameters
+    ----------
+    distance : float or array_like
+        Distance ``d`` from the sample to the aperture, on its axis [mm] (any length unit, that of ``radius``).
+    radius : float or array_like
+        Aperture radius ``a`` [mm] (the unit of ``distance``).
+
+    Returns
+    -------
+    ndarray
+        Solid angle Ω [sr], broadcast over ``distance`` and ``radius``.
     """
     d = np.asarray(distance, dtype=np.float64)
     a = np.asarray(radius, dtype=np.float64)
@@ -59,14 +71,40 @@ def aperture_solid_angle(distance: ArrayLike, radius: ArrayLike) -> NDArray[np.f
 
 
 def aperture_solid_angle_small(distance: ArrayLike, radius: ArrayLike) -> NDArray[np.float64]:
-    """Small-angle form Ω ≈ π a²/d²; over-estimates the exact Ω by ≈ (3/4)(a/d)² relative."""
+    """Small-angle form Ω ≈ π a²/d²; over-estimates the exact Ω by ≈ (3/4)(a/d)² relative.
+
+    Parameters
+    ----------
+    distance : float or array_like
+        Distance ``d`` from the sample to the aperture, on its axis [mm] (any length unit, that of ``radius``).
+    radius : float or array_like
+        Aperture radius ``a`` [mm] (the unit of ``distance``).
+
+    Returns
+    -------
+    ndarray
+        Approximate solid angle Ω [sr], broadcast over ``distance`` and ``radius``.
+    """
     d = np.asarray(distance, dtype=np.float64)
     a = np.asarray(radius, dtype=np.float64)
     return np.pi * a * a / (d * d)
 
 
 def sample_direction(theta: ArrayLike, phi: ArrayLike) -> NDArray[np.float64]:
-    """Unit vector (sinθ cosφ, sinθ sinφ, cosθ) for angles in radians; shape (..., 3)."""
+    """Unit vector (sinθ cosφ, sinθ sinφ, cosθ) for angles in radians; shape (..., 3).
+
+    Parameters
+    ----------
+    theta : float or array_like
+        Polar angle from the sample normal (z) [rad].
+    phi : float or array_like
+        Azimuth from x [rad]; broadcast with ``theta``.
+
+    Returns
+    -------
+    ndarray
+        Unit direction vectors [-], shape ``broadcast(theta, phi).shape + (3,)``.
+    """
     theta, phi = np.broadcast_arrays(np.asarray(theta, dtype=np.float64), np.asarray(phi, dtype=np.float64))
     s = np.sin(theta)
     return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
@@ -92,6 +130,25 @@ def aperture_quadrature(
     A point at radius ρ, angle ψ on the aperture plane (distance d, normal = centre direction) is seen in
     direction (d·ĉ + ρ cosψ û + ρ sinψ v̂)/r with r = √(d² + ρ²) and solid-angle element dΩ = d dA / r³,
     so Σ w = 2π(1 − d/√(d²+a²)) = Ω up to quadrature error (≈1e-12 with the defaults). Angles in radians.
+
+    Parameters
+    ----------
+    theta_s : float or array_like
+        Polar angle of each detector centre from the sample normal [rad].
+    phi_s : float or array_like
+        Azimuth of each detector centre [rad]; broadcast with ``theta_s``.
+    instrument : Instrument
+        Detector distance and aperture diameter [mm].
+    n_radial : int, optional
+        Gauss–Legendre nodes along the aperture radius.
+    n_azimuth : int, optional
+        Equally spaced nodes in azimuth on the aperture.
+
+    Returns
+    -------
+    ApertureQuadrature
+        ``directions`` (..., n_radial·n_azimuth, 3) unit vectors [-] and ``weights`` (n_radial·n_azimuth,)
+        [sr], the same for every centre.
     """
     d = instrument.detector_distance_mm
     a = instrument.aperture_diameter_mm / 2

@@ -121,7 +121,26 @@ def _file(folder: Path, name: str, path: Path, dotted: str) -> Path:
 
 
 def read_manifest(folder_or_file: str | Path) -> Manifest:
-    """Read and validate the manifest of a raw export folder (or the manifest file itself)."""
+    """Read and validate the manifest of a raw export folder (or the manifest file itself).
+
+    Parameters
+    ----------
+    folder_or_file : str or Path
+        Export folder (its ``manifest.toml`` is read) or a manifest file.
+
+    Returns
+    -------
+    Manifest
+        Sample, instrument geometry [mm], spectrometer grid [nm], gain [e⁻/count], full scale [counts], the
+        data files (checked to exist) and the incident configurations, ``[[band_series]]`` expanded into one
+        configuration per band; the parsed TOML in ``raw``.
+
+    Raises
+    ------
+    InputError
+        No manifest, a missing file it names, or (as ``FormatError``/``ValidationError``) an unknown format or
+        version, a missing or mistyped key, or an implausible value, naming the dotted key.
+    """
     path = Path(folder_or_file)
     if path.is_dir():
         path = path / "manifest.toml"

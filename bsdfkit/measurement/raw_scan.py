@@ -142,7 +142,31 @@ def _counts(data: list[tuple[int, list[str]]], header: list[str], n_named: int, 
 
 
 def read_spectra_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> SpectraTable:
-    """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm)."""
+    """Parse a CSV spectra file: named columns first, then one column per wavelength (header = nm).
+
+    Blank lines and ``#`` comment lines are skipped; a gzip file (``.gz`` or gzip magic bytes) is decompressed.
+
+    Parameters
+    ----------
+    path : Path
+        Spectra file (CSV, optionally gzip-compressed).
+    required : tuple of str
+        Named columns the header must hold, e.g. :data:`SCAN_COLUMNS` or :data:`FRAME_COLUMNS`.
+    optional : tuple of str, optional
+        Further named columns allowed in the header.
+
+    Returns
+    -------
+    SpectraTable
+        The named columns as text, the wavelengths of the header [nm] (strictly increasing), the counts
+        (rows × wavelengths) [counts] and the physical line of each data row.
+
+    Raises
+    ------
+    InputError
+        The file is missing, unreadable, empty or has no data row; its subclasses ``FormatError`` and
+        ``ValidationError`` for a malformed header, a count that is not a finite number or a wrong field count.
+    """
     text = _open_text(path)
     refuse_cut_last_line(text, path, ",", expected="a row of counts")
     numbered = _numbered_rows(text, path)
@@ -333,6 +357,25 @@ def read_scan(folder: str | Path) -> xr.Dataset:
     ``dark_record``, ``configuration``. Record coordinates: ``config``, ``theta_i``, ``phi_i``, ``theta_s``,
     ``phi_s`` (degrees), ``side``, ``arc``, ``exposure`` (s), ``source_line``. A manifest with a
     ``[[band_series]]`` adds ``band_series`` and ``excitation_wavelength`` (nm) per configuration.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Export folder holding ``manifest.toml`` and the spectra files it names (or the manifest file itself).
+
+    Returns
+    -------
+    xarray.Dataset
+        Raw scan: ``counts``, ``reference_counts``, ``dark_counts`` [counts], ``responsivity`` [-] (ones when
+        the manifest names no responsivity file), per configuration ``reference_attenuation`` [-],
+        ``incident_band`` [nm] and ``configuration_description``; the manifest's instrument geometry [mm], gain
+        [e⁻/count], full scale [counts] and text in the attributes.
+
+    Raises
+    ------
+    InputError
+        Any malformed manifest or spectra file (one line naming the file, the line or field, what was expected
+        and what was found).
     """
     manifest = read_manifest(folder)
     grid = _grid(manifest)

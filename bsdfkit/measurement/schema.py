@@ -158,6 +158,21 @@ def validate_bsdf_dataset(ds: xr.Dataset) -> xr.Dataset:
     Checked: the dimensions; each required variable and each optional one present, its dims, dtype kind, being
     a coordinate or not, and its ``units``; the required attributes and their fixed values; the side names.
     Further variables and attributes are allowed.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Dataset to check (raw or calibrated scan, or a table read as one).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``ds`` itself, unchanged.
+
+    Raises
+    ------
+    ValidationError
+        The first departure from the schema found.
     """
     missing = [d for d in DIMS if d not in ds.dims]
     if missing:

@@ -95,7 +95,30 @@ ARC_TOL = 1e-5
 # ------------------------------------------------------------------------------------------- quantities
 def normalise_quantity(text: str, *, file: str | None = None, field: str = "quantity",
                        line: int | None = None) -> str:
-    """One of :data:`QUANTITIES` from a user or file spelling (``BRDF``, ``cc-BRDF``, ``reflectance factor`` …)."""
+    """One of :data:`QUANTITIES` from a user or file spelling (``BRDF``, ``cc-BRDF``, ``reflectance factor`` …).
+
+    Parameters
+    ----------
+    text : str
+        The spelling to recognise (case, ``_``, ``-`` and spaces do not matter).
+    file : str, optional
+        File named in the error message.
+    field : str, optional
+        Field (column, metadata key or option) named in the error message.
+    line : int, optional
+        Line named in the error message.
+
+    Returns
+    -------
+    str
+        ``brdf``, ``btdf``, ``ccbrdf``, ``ccbtdf``, ``reflectance-factor``, ``transmittance-factor`` or
+        ``bsdf``.
+
+    Raises
+    ------
+    InputError
+        ``text`` names no known quantity.
+    """
     q = _quantity_from_words(str(text))
     if q is None:
         raise InputError("unknown quantity", file=file, line=line, field=field,
@@ -125,7 +148,18 @@ def _quantity_from_words(text: str) -> str | None:
 
 
 def side_of_quantity(quantity: str) -> str | None:
-    """The side a quantity fixes (``brdf`` → reflection …), or None for ``bsdf``."""
+    """The side a quantity fixes (``brdf`` → reflection …), or None for ``bsdf``.
+
+    Parameters
+    ----------
+    quantity : str
+        One of :data:`QUANTITIES` (as :func:`normalise_quantity` gives).
+
+    Returns
+    -------
+    str or None
+        ``"reflection"``, ``"transmission"``, or None when the quantity fixes no side.
+    """
     return _QUANTITY_SIDE[quantity]
 
 
@@ -140,7 +174,23 @@ def _side_word(text: str) -> str | None:
 
 def to_bsdf(values: NDArray[np.float64], quantity: str, theta_s_deg: NDArray[np.float64]) -> NDArray[np.float64]:
     """BSDF [1/sr] from a table quantity: cosine-corrected values / cos θs, factors / π (broadcast over the
-    last axis = wavelength when ``values`` is 2-D). cos θs = 0 gives NaN (no finite BSDF at grazing)."""
+    last axis = wavelength when ``values`` is 2-D). cos θs = 0 gives NaN (no finite BSDF at grazing).
+
+    Parameters
+    ----------
+    values : ndarray
+        Table values in the unit of ``quantity`` (BRDF/BTDF [1/sr], cosine-corrected [1/sr], factors [-]),
+        per record, or records × wavelengths.
+    quantity : str
+        One of :data:`QUANTITIES`.
+    theta_s_deg : ndarray
+        Scatter polar angle of each record [deg].
+
+    Returns
+    -------
+    ndarray
+        BSDF [1/sr], the shape of ``values``.
+    """
     v = np.asarray(values, dtype=np.float64)
     theta = np.asarray(theta_s_deg, dtype=np.float64)
     if quantity in ("ccbrdf", "ccbtdf"):
@@ -1798,7 +1848,25 @@ def _check_angles(path: str, line: int, th_i: float, ph_i: float, th_s: float, p
 # ------------------------------------------------------------------------------------------- dataset
 def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArray) -> NDArray[np.object_]:
     """``in_plane`` (φs on the specular or source side, or θs = 0), ``perpendicular`` (the great circle
-    through the specular direction normal to the plane of incidence) or ``other``, per record (degrees)."""
+    through the specular direction normal to the plane of incidence) or ``other``, per record (degrees).
+
+    Parameters
+    ----------
+    theta_i : ndarray
+        Angle of incidence of each record [deg].
+    phi_i : ndarray
+        Source azimuth of each record [deg].
+    theta_s : ndarray
+        Scatter polar angle of each record [deg].
+    phi_s : ndarray
+        Scatter azimuth of each record [deg].
+
+    Returns
+    -------
+    ndarray of object
+        ``"in_plane"``, ``"perpendicular"`` or ``"other"`` per record (tolerance :data:`ARC_TOL` on direction
+        cosines).
+    """
     ti, pi_, ts, ps = (np.radians(np.asarray(a, dtype=np.float64)) for a in (theta_i, phi_i, theta_s, phi_s))
     rel = np.mod(ps - (pi_ - np.pi) + np.pi, 2 * np.pi) - np.pi  # φs relative to the specular azimuth
     # tolerance ARC_TOL (1e-5 rad ≈ 0.0006°): angles written in radians or with few decimals are not exact
@@ -1873,6 +1941,24 @@ def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf
     One configuration (:data:`CONFIG_NAME`) with a flat incident spectrum over the wavelengths (elastic data:
     each wavelength is scattered at itself); no bi-spectral values (NaN), no noise floor (NaN), no instrument
     geometry (NaN attributes). Used by the table reader and by :mod:`bsdfkit.tables.vendor`.
+
+    Parameters
+    ----------
+    records : RecordDirections
+        Per-record angles [deg], side, and optionally arc and source line.
+    wavelength : sequence of float
+        Wavelengths [nm] (one NaN when the source states none).
+    bsdf : ndarray
+        BSDF [1/sr], records × wavelengths (reshaped to it), NaN for a gap.
+    bsdf_std : ndarray
+        Standard uncertainty of ``bsdf`` [1/sr], same shape.
+    origin : RecordsOrigin
+        Source file, origin of ``bsdf_std``, description and wavelength note.
+
+    Returns
+    -------
+    xarray.Dataset
+        Validated BSDF dataset of one configuration, with ``source_sha256`` when the source file can be read.
     """
     n = len(records.theta_i)
     lam = np.asarray(wavelength, dtype=np.float64)
@@ -2234,7 +2320,19 @@ def _assemble(path: str, rows: _Rows, signed: bool, rel: float | None, zeros: st
 
 def guess_can_open(path: str | Path) -> bool:
     """True when ``path`` looks like a measured text table :func:`read_table` can read (a header with angle and
-    value columns within the first lines); never raises."""
+    value columns within the first lines); never raises.
+
+    Parameters
+    ----------
+    path : str or Path
+        File to probe (its first 64 KiB are read).
+
+    Returns
+    -------
+    bool
+        True when a header with angle and value columns is found; False for anything else (missing file,
+        netCDF/HDF5 or zip, no header).
+    """
     p = Path(path)
     try:
         if not p.is_file():
@@ -2255,7 +2353,25 @@ def guess_can_open(path: str | Path) -> bool:
 
 
 def describe_columns(path: str | Path) -> dict[str, Any]:
-    """Which role bsdfkit gives each column of a table (for error messages and ``--json`` summaries)."""
+    """Which role bsdfkit gives each column of a table (for error messages and ``--json`` summaries).
+
+    Parameters
+    ----------
+    path : str or Path
+        Measured text table.
+
+    Returns
+    -------
+    dict
+        ``delimiter`` (tab, ``;`` or ``,``; None for whitespace) and ``columns``: (header, role) per column,
+        roles ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s``, ``wavelength``, ``side``, ``value``, ``std`` or
+        ``ignore``.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read or has no recognisable header.
+    """
     text = _load_text(str(path))
     _, delim, columns, _ = _find_header(text)
     return {"delimiter": delim, "columns": [(c.header, c.role) for c in columns]}
