@@ -50,9 +50,9 @@ import xarray as xr
 from bsdfkit.core.conventions import SPECTRUM_CRITERIA
 from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalError, ValidationError
 from bsdfkit.core.jaxconfig import jitted, x64
+from bsdfkit.core.spectra import FWHM_PER_SIGMA, split_gaussian
 from bsdfkit.fit import lm
 from bsdfkit.fit.least_squares import FitOptions, Parameter, least_squares
-from bsdfkit.models.functions import C_FWHM
 from bsdfkit.models.registry import SPECTRUM_MODELS as _REGISTERED_SPECTRUM_MODELS
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
 from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
@@ -806,7 +806,7 @@ def _phosphor_pair_starts(wl: np.ndarray, y: np.ndarray, mask: np.ndarray, split
     w, v = wl[region], np.clip(y[region], 0.0, None)
     peak, fwhm, amp, alpha = _peak_and_fwhm(wl, y, region, with_alpha=True)
     # eq. (3) in NumPy: a JAX call here would compile its operations once per spectrum length
-    first = amp * np.exp(-C_FWHM * ((w - peak) / (fwhm * (1.0 + np.sign(w - peak) * alpha))) ** 2)
+    first = amp * split_gaussian(w, peak, fwhm, alpha)
     rest = np.clip(v - first, 0.0, None)
 
     def centre_spread(weights):
@@ -815,7 +815,7 @@ def _phosphor_pair_starts(wl: np.ndarray, y: np.ndarray, mask: np.ndarray, split
             return peak, fwhm
         c = np.trapezoid(w * weights, w) / area
         sd = math.sqrt(max(np.trapezoid((w - c) ** 2 * weights, w) / area, 1.0))
-        return float(c), float(np.clip(2.3548 * sd, *PHOSPHOR2_FWHM_NM))
+        return float(c), float(np.clip(FWHM_PER_SIGMA * sd, *PHOSPHOR2_FWHM_NM))
 
     c_rest, f_rest = centre_spread(rest)
     c_all, f_all = centre_spread(v)

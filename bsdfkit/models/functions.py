@@ -27,6 +27,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from bsdfkit.core.quadrature import gauss_legendre
+from bsdfkit.core.spectra import C_FWHM
 
 __all__ = [
     "C_FWHM",
@@ -51,9 +52,6 @@ __all__ = [
     "tis_lambert_gaussian",
     "tis_lambert_abg",
 ]
-
-#: C = 4 ln 2 of eqs. (2)–(3) of the cylindrical-module paper: with it Δλ is the true FWHM.
-C_FWHM: float = 4.0 * math.log(2.0)
 
 #: Floor of the ABg denominator B + |β−β0|^g. Only reached when B → 0 exactly on the specular
 #: direction, where the model is infinite; the floor keeps the value finite (and representable in

@@ -42,7 +42,6 @@ each grid point taking the plate's distribution at the nearest plate incidence.
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -52,6 +51,7 @@ import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
+from bsdfkit.core.spectra import gaussian, photon_pdf_from_power
 from bsdfkit.io import netcdf
 from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, PlateChannel, PlateTables, plate_tables
 
@@ -214,16 +214,6 @@ def load_spectral_model(path: str | Path) -> SpectralPlateModel:
     return spectral_model_from_dataset(netcdf.load(path), source=path)
 
 
-def photon_pdf_from_power(wavelength_nm: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """Photon-number pdf [1/nm] of a power spectrum on a uniform grid: p ∝ S(λ)·λ, Σ p Δλ = 1."""
-    wl = np.asarray(wavelength_nm, dtype=np.float64)
-    photons = np.asarray(power, dtype=np.float64) * wl
-    total = photons.sum() * (wl[1] - wl[0])
-    if not total > 0:
-        raise ValidationError("emission spectrum has no power", field="emission_spectrum", expected="some S > 0")
-    return photons / total
-
-
 def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence[float], emission_spectrum,
                                    pump_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
                                    name: str = "") -> SpectralPlateModel:
@@ -272,7 +262,7 @@ def bin_powers(wavelength_nm: np.ndarray, values: np.ndarray, centres_nm: np.nda
 def gaussian_led_spectrum(peak_nm: float, fwhm_nm: float) -> tuple[np.ndarray, np.ndarray]:
     """A Gaussian LED spectrum (eq. (2) of [Cylindrical-module]) sampled every FWHM/200 over ±4 FWHM."""
     wl = np.linspace(peak_nm - 4.0 * fwhm_nm, peak_nm + 4.0 * fwhm_nm, 1601)
-    return wl, np.exp(-4.0 * math.log(2.0) * ((wl - peak_nm) / fwhm_nm) ** 2)
+    return wl, gaussian(wl, peak_nm, fwhm_nm)
 
 
 # ---- kernel tables -------------------------------------------------------------------------------------------------

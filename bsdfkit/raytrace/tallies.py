@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, RAY_YBR_DEFINITION, band_label
-from bsdfkit.reduction.spectral import LIGHT_C, PLANCK_H
+from bsdfkit.core.spectra import LIGHT_C, PLANCK_H
 
 #: The spectral mode's YBR: extracted power per band of the traced spectrum.
 SPECTRAL_YBR_DEFINITION = (f"extracted power in {band_label(MODULE_YELLOW_BAND_NM)} / extracted power in "
