@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.conventions import SPECTRUM_CRITERIA
+from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SPECTRUM_CRITERIA
 from bsdfkit.core.errors import BsdfkitError, FitError, InputError, NumericalError, ValidationError
 from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.core.spectra import FWHM_PER_SIGMA, split_gaussian
@@ -114,9 +114,10 @@ SPECTRUM_MODELS = SINGLE_BAND_MODELS + TWO_BAND_MODELS
 #: Information criteria for ``model="best"``.
 CRITERIA = SPECTRUM_CRITERIA
 
-#: Band limits (nm, inclusive) of the §4.2 reconstruction in the cylindrical-module paper.
-BLUE_BAND_NM: tuple[float, float] = (380.0, 500.0)
-YELLOW_BAND_NM: tuple[float, float] = (501.0, 780.0)
+#: Band limits (nm, inclusive) of the §4.2 reconstruction in the cylindrical-module paper (defined once, in
+#: :mod:`bsdfkit.core.conventions`).
+BLUE_BAND_NM: tuple[float, float] = MODULE_BLUE_BAND_NM
+YELLOW_BAND_NM: tuple[float, float] = MODULE_YELLOW_BAND_NM
 
 #: Largest accepted 2-norm condition number of the 2×2 band-sum matrix. With flux uncertainties of
 #: ~1 % (Table 1 of the paper: simulation vs measurement differ by 4 %), κ = 1e3 already allows the

@@ -65,7 +65,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
+from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, SIDES, ZERO_POLICIES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io.text import _BOMS, _unmarked_utf16, refuse_cut_last_line, text_and_encoding
@@ -80,7 +80,6 @@ _QUANTITY_SIDE = {"brdf": "reflection", "ccbrdf": "reflection", "reflectance-fac
                   "bsdf": None}
 #: The configuration name of datasets read from tables and vendor files (one elastic configuration).
 CONFIG_NAME = "measured"
-SIDES = ("reflection", "transmission")
 _MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
             "?", "#n/a", "#value!", "nv", "n.v."}
 _ANGLE_ATOL = 1e-9

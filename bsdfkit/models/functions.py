@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
+from bsdfkit.core.hemisphere import unit_disk_reach
 from bsdfkit.core.quadrature import gauss_legendre
 from bsdfkit.core.spectra import C_FWHM
 
@@ -325,8 +326,7 @@ def _psi_grid(n_psi: int) -> jnp.ndarray:
 
 def _radial_limit(b0: ArrayLike, psi: jnp.ndarray) -> jnp.ndarray:
     """t_max(ψ) ≥ 0 with |β0 + t(cos ψ, sin ψ)| = 1 for β0 = (b0, 0), |b0| < 1 (edge of the unit disk)."""
-    proj = b0 * jnp.cos(psi)
-    return -proj + jnp.sqrt(jnp.maximum(proj**2 + 1.0 - b0**2, 0.0))
+    return unit_disk_reach(b0 * jnp.cos(psi), b0 * jnp.sin(psi), jnp)
 
 
 def tis_gaussian_lobe(theta_i: ArrayLike, A: ArrayLike, sigma: ArrayLike, n_psi: int = 1024) -> jnp.ndarray:

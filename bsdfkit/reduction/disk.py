@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bsdfkit.core.errors import InputError
+from bsdfkit.core.hemisphere import unit_disk_reach
 from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.quadrature import gauss_legendre
 
@@ -59,9 +60,8 @@ CENTER_TOL = 1e-7
 
 def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad]."""
-    bu = center[0] * np.cos(psi) + center[1] * np.sin(psi)
-    b2 = center[0] ** 2 + center[1] ** 2
-    return -bu + np.sqrt(bu * bu + 1.0 - b2)
+    cos_psi, sin_psi = np.cos(psi), np.sin(psi)
+    return unit_disk_reach(center[0] * cos_psi + center[1] * sin_psi, center[0] * sin_psi - center[1] * cos_psi)
 
 
 @dataclass(frozen=True)

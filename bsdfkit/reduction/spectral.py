@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, EXCITATION_BAND_NM, INTERACTIONS
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, INTERACTIONS, InteractionBands
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.core.spectra import LIGHT_C, PLANCK_H, Band, band_mask, band_sum, mean_wavelength_nm
 
@@ -212,29 +212,30 @@ def _only_configuration(ds: xr.Dataset) -> str:
 
 
 def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = None,
-                        bands: dict[str, Band] | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
+                        bands: InteractionBands | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
     """The per-record BSDF profile (1/sr) of one interaction of the two-wavelength approach, or of any sample.
 
     bibs: eq. (5) weighted mean over the blue band with the blue configuration; yiys: eq. (8) over the yellow
     band with the yellow configuration; biys: eq. (13) integrand ⟨⟨q_λ⟩⟩·ΔΛs from the blue configuration.
     ``elastic``: any sample (a measured table, a vendor file, a monochrome scan): the weighted mean over the
-    whole measured range (or ``bands["elastic"]``) of the dataset's only configuration (or
-    ``configs["elastic"]``). Optionally restricted to one ``side``. Band and configuration names can be
-    overridden.
+    whole measured range (or ``bands.elastic_nm``) of the dataset's only configuration (or
+    ``configs["elastic"]``). Optionally restricted to one ``side``. ``bands``: the bands [nm]
+    (:class:`bsdfkit.core.conventions.InteractionBands`, default the power-budget filters); configuration names
+    can be overridden.
     """
-    bands = {"blue": EXCITATION_BAND_NM, "yellow": CONVERSION_BAND_NM, **(bands or {})}
+    bands = bands or InteractionBands()
     configs = {"blue": "blue", "yellow": "yellow", **(configs or {})}
     if interaction == "bibs":
-        out = weighted_mean_bsdf(ds, configs["blue"], bands["blue"])
+        out = weighted_mean_bsdf(ds, configs["blue"], bands.blue_nm)
     elif interaction == "yiys":
-        out = weighted_mean_bsdf(ds, configs["yellow"], bands["yellow"])
+        out = weighted_mean_bsdf(ds, configs["yellow"], bands.yellow_nm)
     elif interaction == "biys":
-        out = bispectral_band_integral(ds, configs["blue"], bands["yellow"])
+        out = bispectral_band_integral(ds, configs["blue"], bands.yellow_nm)
     elif interaction == ELASTIC_INTERACTION:
         config = configs.get(ELASTIC_INTERACTION) or _only_configuration(ds)
         lam = ds["wavelength"].values
         # default: the measured range; None (every wavelength) where it is unknown (a NaN monochrome wavelength)
-        band = bands.get(ELASTIC_INTERACTION) or (
+        band = bands.elastic_nm or (
             (float(lam.min()), float(lam.max())) if np.all(np.isfinite(lam)) else None)
         out = weighted_mean_bsdf(ds, config, band)
     else:
