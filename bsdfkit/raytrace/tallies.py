@@ -24,6 +24,7 @@ import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, RAY_YBR_DEFINITION, band_label
 from bsdfkit.core.spectra import LIGHT_C, PLANCK_H
+from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation, spectral_distribution
 
 #: The spectral mode's YBR: extracted power per band of the traced spectrum.
 SPECTRAL_YBR_DEFINITION = (f"extracted power in {band_label(MODULE_YELLOW_BAND_NM)} / extracted power in "
@@ -365,15 +366,11 @@ class SpectralResult:
     def luminous_efficacy_lm_per_W(self) -> float:
         """Luminous efficacy of radiation of the extracted spectrum [lm/W] (CIE 1924 V(λ), K_m = 683 lm/W).
 
-        The computation of :func:`bsdfkit.reduction.colorimetry.luminous_efficacy_of_radiation`
-        (``colour.luminous_efficacy`` on the uniform bin grid); colour-science is imported here, on first use,
-        so that tracing does not pay its import time.
+        :func:`bsdfkit.reduction.colorimetry.luminous_efficacy_of_radiation` of the bins (which imports
+        colour-science on first use, so that tracing does not pay its import time).
         """
-        import colour  # deferred: see the docstring
-
-        sd = colour.SpectralDistribution(dict(zip(self.wavelength_nm.tolist(), self.spectrum_W_per_nm.tolist())),
-                                         name="extracted spectrum")
-        return float(colour.luminous_efficacy(sd))
+        return luminous_efficacy_of_radiation(spectral_distribution(self.wavelength_nm, self.spectrum_W_per_nm,
+                                                                    "extracted spectrum"))
 
     def to_dict(self) -> dict[str, Any]:
         blue, se_b = self.band_power(MODULE_BLUE_BAND_NM)
