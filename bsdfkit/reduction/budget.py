@@ -111,13 +111,13 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
         raise InputError("incidence not in the TIS table", field="theta_i", got=theta_i)
     power, power_std = {}, {}
     for inter in ("bibs", "biys", "yiys"):
-        for tag, side in (("B", "reflection"), ("F", "transmission")):
+        for tag, side in zip("BF", SIDES):  # back (reflection), forward (transmission)
             power[f"{tag}_{inter}"] = 100 * float(sel["tis"].sel(interaction=inter, side=side))
             power_std[f"{tag}_{inter}"] = 100 * float(sel["tis_std"].sel(interaction=inter, side=side))
     # eq. (15): incident blue spectrum; eq. (14): hemispherically scattered yellow spectrum per side
     incident = spectral.incident_spectrum(ds, "blue")
     ratio = {}
-    for tag, side in (("B", "reflection"), ("F", "transmission")):
+    for tag, side in zip("BF", SIDES):  # back (reflection), forward (transmission)
         scattered = angular.hemispherical_spectrum(ds, "blue", theta_i, side, "biys", bands.yellow_nm)
         ratio[tag] = spectral.photon_ratio(incident, bands.blue_nm, scattered, bands.yellow_nm)
     photons = dict(power)

@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, INTERACTIONS, InteractionBands
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, INTERACTIONS, SIDES, InteractionBands
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.core.spectra import LIGHT_C, PLANCK_H, Band, band_mask, band_sum, mean_wavelength_nm
 
@@ -243,8 +243,8 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
                          expected=" or ".join((*INTERACTIONS, ELASTIC_INTERACTION)), got=interaction)
     out.attrs["interaction"] = interaction
     if side is not None:
-        if side not in ("reflection", "transmission"):
-            raise InputError("unknown side", field="side", expected="reflection or transmission", got=side)
+        if side not in SIDES:
+            raise InputError("unknown side", field="side", expected=" or ".join(SIDES), got=side)
         out = out.isel(record=np.flatnonzero(out["side"].values == side))
     return out
 
