@@ -10,8 +10,8 @@
   phosphor sums ``two-band`` (pump Gaussian + phosphor split Gaussian, the paper's §4.2 components) and
   ``two-band-led`` (pump Gaussian line + side band, phosphor split Gaussian) and ``two-band-wide`` (that pump,
   phosphor split Gaussian + Gaussian: a second phosphor such as a red nitride band, or the long tail of one;
-  three start points from the measured phosphor band, :func:`~bsdfkit.fit.spectrum.starts._phosphor_pair_starts`), whose split between pump
-  and phosphor is found from the data (:func:`find_two_band_split`). Every reported component peak is the
+  three start points from the measured phosphor band,
+  :func:`~bsdfkit.fit.spectrum.starts._phosphor_pair_starts`), whose split between pump and phosphor is found from the data (:func:`find_two_band_split`). Every reported component peak is the
   maximum of the fitted component curve, not a parameter.
 * :func:`analyse_spectra` is the batch front-end of ``bsdfkit fit spectrum``: it fits many spectra (different
   grids allowed: padded and masked), optionally every single-band model with the best chosen by AICc or BIC
