@@ -11,8 +11,9 @@
   ``two-band-led`` (pump Gaussian line + side band, phosphor split Gaussian) and ``two-band-wide`` (that pump,
   phosphor split Gaussian + Gaussian: a second phosphor such as a red nitride band, or the long tail of one;
   three start points from the measured phosphor band,
-  :func:`~bsdfkit.fit.spectrum.starts._phosphor_pair_starts`), whose split between pump and phosphor is found from the data (:func:`find_two_band_split`). Every reported component peak is the
-  maximum of the fitted component curve, not a parameter.
+  :func:`~bsdfkit.fit.spectrum.starts._phosphor_pair_starts`), whose split between pump and phosphor is found
+  from the data (:func:`find_two_band_split`). Every reported component peak is the maximum of the fitted
+  component curve, not a parameter.
 * :func:`analyse_spectra` is the batch front-end of ``bsdfkit fit spectrum``: it fits many spectra (different
   grids allowed: padded and masked), optionally every single-band model with the best chosen by AICc or BIC
   (``model="best"``), and returns one record per spectrum with the measured metrics
