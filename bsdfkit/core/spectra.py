@@ -1,16 +1,15 @@
 """Spectral formulas used by more than one layer: Gaussian line shapes, band sums, mean wavelength, photons.
 
 One home for each formula (issue #28): the reductions, the fits' start heuristics, the tracer's spectra and the
-scene reader all call these. NumPy, float64; the line shapes take an array module ``xp`` so that a JAX caller can
-pass ``jax.numpy`` without this module importing JAX. The JAX models that need finite gradients at zero width
-(:func:`bsdfkit.models.functions.gaussian_spectrum`) use :data:`C_FWHM` from here.
+scene reader all call these. NumPy, float64. The JAX versions of the line shapes, which need finite gradients
+at zero width (:func:`bsdfkit.models.functions.gaussian_spectrum` and
+:func:`~bsdfkit.models.functions.split_gaussian_spectrum`), take :data:`C_FWHM` from here.
 
 Wavelengths, peaks and widths in nm; band limits inclusive.
 """
 from __future__ import annotations
 
 import math
-from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,18 +42,18 @@ FWHM_PER_SIGMA: float = math.sqrt(8.0 * math.log(2.0))
 Band = tuple[float, float]
 
 
-def gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, xp: ModuleType = np):
+def gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> NDArray[np.float64]:
     """Relative Gaussian spectrum with peak 1, S(λ) = exp(−C((λ − λp)/Δλ)²) with C = 4 ln 2 (eq. (2) of the
-    cylindrical-module paper; Δλ is the true FWHM) [1]. ``xp``: the array module (NumPy or ``jax.numpy``)."""
-    return xp.exp(-C_FWHM * ((wavelength - peak_nm) / fwhm_nm) ** 2)
+    cylindrical-module paper; Δλ is the true FWHM) [1]."""
+    return np.exp(-C_FWHM * ((wavelength - peak_nm) / fwhm_nm) ** 2)
 
 
-def split_gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike,
-                   xp: ModuleType = np):
+def split_gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
+                   ) -> NDArray[np.float64]:
     """Asymmetric Gaussian of eq. (3) of the cylindrical-module paper [1]: the width Δλ(1 + sign(λ − λp)·α) on
     each side of the peak (the total FWHM stays Δλ), α in (−1, 1)."""
     offset = wavelength - peak_nm
-    return xp.exp(-C_FWHM * (offset / (fwhm_nm * (1.0 + xp.sign(offset) * alpha))) ** 2)
+    return np.exp(-C_FWHM * (offset / (fwhm_nm * (1.0 + np.sign(offset) * alpha))) ** 2)
 
 
 def band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
