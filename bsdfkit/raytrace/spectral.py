@@ -51,7 +51,7 @@ import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
-from bsdfkit.core.spectra import gaussian, photon_pdf_from_power
+from bsdfkit.core.spectra import band_mask, gaussian, photon_pdf_from_power
 from bsdfkit.io import netcdf
 from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, PlateChannel, PlateTables, plate_tables
 
@@ -226,7 +226,7 @@ def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence
     yellow powers (the equivalence of issue 17).
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
-    pump = (wl >= pump_band_nm[0]) & (wl <= pump_band_nm[1])
+    pump = band_mask(wl, pump_band_nm)
     inc = np.asarray(plate.theta_i_deg, dtype=np.float64)
 
     def tis(channel: str) -> np.ndarray:  # (incidence,)
@@ -454,9 +454,8 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top), the
     emission conditioned on the excitation bin at the plate temperature ``temperature_K`` [K] (module docstring)."""
     lam = np.asarray(lam, dtype=np.float64)
-    band = np.where((lam >= blue_band_nm[0]) & (lam <= blue_band_nm[1]), 0,
-                    np.where((lam >= yellow_band_nm[0]) & (lam <= yellow_band_nm[1]), 1, 2)).astype(np.int32)
-    shape = np.where((lam >= pump_band_nm[0]) & (lam <= pump_band_nm[1]), 0, 2).astype(np.int32)
+    band = np.where(band_mask(lam, blue_band_nm), 0, np.where(band_mask(lam, yellow_band_nm), 1, 2)).astype(np.int32)
+    shape = np.where(band_mask(lam, pump_band_nm), 0, 2).astype(np.int32)
     led = led_bin_power(led_spectrum, lam, source)
     cdf = np.cumsum(led)
     cdf[-1] = 1.0

@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, RAY_YBR_DEFINITION, band_label
-from bsdfkit.core.spectra import LIGHT_C, PLANCK_H
+from bsdfkit.core.spectra import LIGHT_C, PLANCK_H, band_mask
 from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation, spectral_distribution
 
 #: The spectral mode's YBR: extracted power per band of the traced spectrum.
@@ -359,7 +359,7 @@ class SpectralResult:
         """Extracted power [W] of the bins whose centres lie in ``band`` (inclusive) and its standard error (the
         bins' errors add in quadrature: a ray is extracted in one bin, so bins are nearly independent; the
         covariance −x̄_i x̄_j/N is neglected, conservative)."""
-        inside = (self.wavelength_nm >= band[0]) & (self.wavelength_nm <= band[1])
+        inside = band_mask(self.wavelength_nm, band)
         p = float(self.spectrum_W_per_nm[inside].sum() * self.step_nm)
         return p, float(np.sqrt(np.sum(self.spectrum_std_err[inside] ** 2)) * self.step_nm)
 
