@@ -239,6 +239,27 @@ def analyse_spectra(
     colorimetric sample count: wavelengths not in nm, negative power beyond the noise) and fewer samples in the
     fit range than a model's parameters + 2.
     """
+    _check_request(spectra, model, criterion, candidates)
+    options = options or FitOptions()
+    n_batch = len(spectra)
+    ranges = list(ranges) if ranges is not None else [None] * n_batch
+    labels = list(labels) if labels is not None else [f"spectrum {b}" for b in range(n_batch)]
+    wl2, y2, m2 = _pad_spectra(spectra, ranges)
+    models_to_fit = list(candidates) if model == "best" else [model]
+    n_parameters = {name: len(_parameters(name, 380.0, 780.0)) for name in models_to_fit}
+    records = _measured_records(spectra, ranges, labels, wl2, y2, m2, n_parameters)
+    alive_all = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
+    per_model = {name: _fit_model(name, alive_all, wl2, y2, m2, records, labels, n_parameters[name], options,
+                                  split_nm, colorimetry=len(models_to_fit) == 1)
+                 for name in models_to_fit}
+    for b in alive_all:
+        _complete_record(records[int(b)], {name: per_model[name][int(b)] for name in models_to_fit}, model, criterion,
+                         per_model, wl2[b], m2[b], labels[b])
+    return records
+
+
+def _check_request(spectra, model: str, criterion: str, candidates: Sequence[str]) -> None:
+    """One-line refusals of :func:`analyse_spectra`'s arguments."""
     if model != "best" and model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model",
                               expected="best | " + " | ".join(SPECTRUM_MODELS), got=model)
@@ -251,17 +272,14 @@ def analyse_spectra(
                                   expected=" | ".join(SPECTRUM_MODELS), got=c)
     if not spectra:
         raise InputError("no spectra to fit", field="spectra")
-    options = options or FitOptions()
-    n_batch = len(spectra)
-    ranges = list(ranges) if ranges is not None else [None] * n_batch
-    labels = list(labels) if labels is not None else [f"spectrum {b}" for b in range(n_batch)]
-    wl2, y2, m2 = _pad_spectra(spectra, ranges)
 
+
+def _measured_records(spectra, ranges, labels, wl2, y2, m2, n_parameters: dict[str, int]) -> list[dict[str, Any]]:
+    """One record per spectrum with its fit range and ``measured`` metrics, or ``error`` for a spectrum no model
+    can use (implausible power, too few samples for the smallest model)."""
     records: list[dict[str, Any]] = []
-    models_to_fit = list(candidates) if model == "best" else [model]
-    n_parameters = {name: len(_parameters(name, 380.0, 780.0)) for name in models_to_fit}
     fewest = min(n_parameters.values()) + 2  # AICc needs n > p + 2 (p counting the variance)
-    for b in range(n_batch):
+    for b in range(len(spectra)):
         w, v = wl2[b][m2[b]], y2[b][m2[b]]
         rec: dict[str, Any] = {"range_nm": None if ranges[b] is None else [float(r) for r in ranges[b]]}
         try:
@@ -277,64 +295,67 @@ def analyse_spectra(
         except BsdfkitError as exc:
             rec["error"] = f"{labels[b]}: {exc}"
         records.append(rec)
-    alive_all = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
-    per_model: dict[str, dict[int, dict[str, Any]]] = {}
-    for name in models_to_fit:
-        per_model[name] = {}
-        too_few = [b for b in alive_all if np.count_nonzero(m2[b]) < n_parameters[name] + 2]
-        for b in too_few:
-            per_model[name][int(b)] = {"error": f"{labels[b]}: too few samples in the fit range for a {name} fit "
-                                                f"(at least {n_parameters[name] + 2}, got {np.count_nonzero(m2[b])})"}
-        alive = np.array([b for b in alive_all if b not in too_few], dtype=int)
-        if alive.size == 0:
-            continue
-        ds, errors, splits = _fit_batch(wl2[alive], y2[alive], m2[alive], name, sigma=None, options=options,
-                                        split_nm=split_nm, labels=[labels[b] for b in alive], collect=True)
-        if ds is None:
-            for k, b in enumerate(alive):
-                per_model[name][int(b)] = {"error": errors.get(k, f"{labels[b]}: fit failed")}
-            continue
-        curves = _curves(name, ds, wl2[alive], m2[alive])
-        for k, b in enumerate(alive):
-            b = int(b)
-            if k in errors:
-                per_model[name][b] = {"error": errors[k]}
-                continue
-            per_model[name][b] = _row_record(ds, k, name, curves, wl2[b], m2[b], records[b]["measured"],
-                                             colorimetry=len(models_to_fit) == 1)
-            per_model[name][b]["_k"] = k
-            if k in splits:
-                per_model[name][b]["measured_split"] = {
-                    "pump_peak_nm": splits[k].pump_peak_nm, "valley_nm": splits[k].valley_nm,
-                    "phosphor_peak_nm": splits[k].phosphor_peak_nm}
-        per_model[name]["_ds"], per_model[name]["_curves"] = ds, curves
-
-    for b in alive_all:
-        b = int(b)
-        rec = records[b]
-        results = {name: per_model[name][b] for name in models_to_fit}
-        if model == "best":
-            ok = {n: r for n, r in results.items() if "error" not in r and math.isfinite(r["criteria"][criterion])}
-            rec["criterion"] = criterion
-            rec["candidates"] = {
-                n: ({"error": r["error"]} if "error" in r else
-                    {criterion: r["criteria"][criterion], **{c: r["criteria"][c] for c in CRITERIA},
-                     "r2": r["r2"], "peak_nm": r["fitted"]["peak_nm"], "fwhm_nm": r["fitted"]["fwhm_nm"],
-                     "warnings": len(_warnings(r, rec["measured"]))})
-                for n, r in results.items()}
-            if not ok:
-                rec["error"] = "; ".join(r["error"] for r in results.values() if "error" in r) or \
-                    f"{labels[b]}: no candidate model could be fitted"
-                continue
-            best = min(ok, key=lambda n: ok[n]["criteria"][criterion])
-            # Colorimetry of the chosen curve only (the candidates report peak, FWHM and criteria).
-            chosen = _row_record(per_model[best]["_ds"], ok[best]["_k"], best, per_model[best]["_curves"], wl2[b],
-                                 m2[b], rec["measured"], colorimetry=True)
-        else:
-            chosen = results[model]
-            if "error" in chosen:
-                rec["error"] = chosen["error"]
-                continue
-        rec.update({k: v for k, v in chosen.items() if not k.startswith("_")})
-        rec["warnings"] = _warnings(chosen, rec["measured"])
     return records
+
+
+def _fit_model(name: str, alive_all: np.ndarray, wl2, y2, m2, records, labels, n_parameters: int,
+               options: FitOptions, split_nm: float | None, colorimetry: bool) -> dict[Any, Any]:
+    """Model ``name`` fitted to the usable spectra in one batch: {spectrum index: record or {"error"}}, plus the
+    batch result ``_ds`` and its curves ``_curves`` (the chosen model's colorimetry is computed from them)."""
+    out: dict[Any, Any] = {}
+    too_few = [b for b in alive_all if np.count_nonzero(m2[b]) < n_parameters + 2]
+    for b in too_few:
+        out[int(b)] = {"error": f"{labels[b]}: too few samples in the fit range for a {name} fit "
+                                f"(at least {n_parameters + 2}, got {np.count_nonzero(m2[b])})"}
+    alive = np.array([b for b in alive_all if b not in too_few], dtype=int)
+    if alive.size == 0:
+        return out
+    ds, errors, splits = _fit_batch(wl2[alive], y2[alive], m2[alive], name, sigma=None, options=options,
+                                    split_nm=split_nm, labels=[labels[b] for b in alive], collect=True)
+    if ds is None:
+        for k, b in enumerate(alive):
+            out[int(b)] = {"error": errors.get(k, f"{labels[b]}: fit failed")}
+        return out
+    curves = _curves(name, ds, wl2[alive], m2[alive])
+    for k, b in enumerate(alive):
+        b = int(b)
+        if k in errors:
+            out[b] = {"error": errors[k]}
+            continue
+        out[b] = _row_record(ds, k, name, curves, wl2[b], m2[b], records[b]["measured"], colorimetry=colorimetry)
+        out[b]["_k"] = k
+        if k in splits:
+            out[b]["measured_split"] = {"pump_peak_nm": splits[k].pump_peak_nm, "valley_nm": splits[k].valley_nm,
+                                        "phosphor_peak_nm": splits[k].phosphor_peak_nm}
+    out["_ds"], out["_curves"] = ds, curves
+    return out
+
+
+def _complete_record(rec: dict[str, Any], results: dict[str, dict[str, Any]], model: str, criterion: str,
+                     per_model: dict[str, dict[Any, Any]], wl: np.ndarray, mask: np.ndarray, label: str) -> None:
+    """Fill a usable spectrum's record from its fits: the requested model's, or with ``model="best"`` every
+    candidate's criteria and the lowest-criterion candidate's full record (its colorimetry computed here)."""
+    if model == "best":
+        ok = {n: r for n, r in results.items() if "error" not in r and math.isfinite(r["criteria"][criterion])}
+        rec["criterion"] = criterion
+        rec["candidates"] = {
+            n: ({"error": r["error"]} if "error" in r else
+                {criterion: r["criteria"][criterion], **{c: r["criteria"][c] for c in CRITERIA},
+                 "r2": r["r2"], "peak_nm": r["fitted"]["peak_nm"], "fwhm_nm": r["fitted"]["fwhm_nm"],
+                 "warnings": len(_warnings(r, rec["measured"]))})
+            for n, r in results.items()}
+        if not ok:
+            rec["error"] = "; ".join(r["error"] for r in results.values() if "error" in r) or \
+                f"{label}: no candidate model could be fitted"
+            return
+        best = min(ok, key=lambda n: ok[n]["criteria"][criterion])
+        # Colorimetry of the chosen curve only (the candidates report peak, FWHM and criteria).
+        chosen = _row_record(per_model[best]["_ds"], ok[best]["_k"], best, per_model[best]["_curves"], wl, mask,
+                             rec["measured"], colorimetry=True)
+    else:
+        chosen = results[model]
+        if "error" in chosen:
+            rec["error"] = chosen["error"]
+            return
+    rec.update({k: v for k, v in chosen.items() if not k.startswith("_")})
+    rec["warnings"] = _warnings(chosen, rec["measured"])
