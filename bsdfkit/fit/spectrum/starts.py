@@ -75,6 +75,26 @@ class TwoBandSplit:
     phosphor_value: float
 
 
+def _pump_and_valley(wl: np.ndarray, y: np.ndarray, below: np.ndarray, top: float) -> tuple[int, int]:
+    """Indices of the pump maximum and of the valley after it in the smoothed spectrum ``y``, or (−1, −1).
+
+    The pump is the largest local maximum among ``below`` (the samples under :data:`DEFAULT_SPLIT_NM`) that
+    reaches :data:`PUMP_MIN_FRACTION` of ``top`` and that the spectrum falls from by ≥ 10 % before 560 nm; the
+    valley is the first local minimum after it, else the smallest value up to 560 nm."""
+    for j in sorted(below[1:], key=lambda j: -y[j]):
+        if not (y[j] >= y[j - 1] and y[j] >= y[j + 1]) or y[j] < PUMP_MIN_FRACTION * top:
+            continue
+        after = np.flatnonzero((wl > wl[j]) & (wl <= 560.0))
+        dips = [int(k) for k in after[:-1] if y[k] <= y[k - 1] and y[k] < y[k + 1] and y[k] <= 0.9 * y[j]]
+        if dips:  # the pump's decay ends at the first local minimum after it
+            return int(j), dips[0]
+        if after.size and y[after].min() <= 0.9 * y[j] and y[after[-1]] > y[after].min():
+            return int(j), int(after[np.argmin(y[after])])
+        if after.size and y[after].min() <= 0.9 * y[j]:  # falls and stays down: no phosphor (checked below)
+            return int(j), int(after[-1])
+    return -1, -1
+
+
 def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.ndarray | None = None, *,
                         label: str = "") -> TwoBandSplit:
     """Pump maximum, valley and phosphor maximum of a phosphor-converted spectrum, or a refusal.
@@ -110,22 +130,7 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
     if below.size < 3:
         raise FitError(f"{prefix}refusing two-band fit: no pump band, the data start at {wl[0]:g} nm (a pump "
                        f"peak below {DEFAULT_SPLIT_NM:g} nm is needed)")
-    # Pump: the largest local maximum below 500 nm that the spectrum falls from by ≥ 10 % before 560 nm.
-    i_pump, i_valley = -1, -1
-    for j in sorted(below[1:], key=lambda j: -y[j]):
-        if not (y[j] >= y[j - 1] and y[j] >= y[j + 1]) or y[j] < PUMP_MIN_FRACTION * top:
-            continue
-        after = np.flatnonzero((wl > wl[j]) & (wl <= 560.0))
-        dips = [int(k) for k in after[:-1] if y[k] <= y[k - 1] and y[k] < y[k + 1] and y[k] <= 0.9 * y[j]]
-        if dips:  # the pump's decay ends at the first local minimum after it
-            i_pump, i_valley = int(j), dips[0]
-            break
-        if after.size and y[after].min() <= 0.9 * y[j] and y[after[-1]] > y[after].min():
-            i_pump, i_valley = int(j), int(after[np.argmin(y[after])])
-            break
-        if after.size and y[after].min() <= 0.9 * y[j]:  # falls and stays down: no phosphor (checked below)
-            i_pump, i_valley = int(j), int(after[-1])
-            break
+    i_pump, i_valley = _pump_and_valley(wl, y, below, top)
     if i_pump < 0:
         largest = float(np.max(y[below]))
         raise FitError(f"{prefix}refusing two-band fit: no pump band below {DEFAULT_SPLIT_NM:g} nm (no local "
