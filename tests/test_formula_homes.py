@@ -59,7 +59,7 @@ def test_unit_disk_reach_lands_on_the_unit_circle():
     r, phi, psi = np.sqrt(rng.uniform(0, 0.99, 500)), rng.uniform(0, 2 * np.pi, 500), rng.uniform(0, 2 * np.pi, 500)
     b0 = np.stack([r * np.cos(phi), r * np.sin(phi)], axis=-1)
     u = np.stack([np.cos(psi), np.sin(psi)], axis=-1)
-    t = unit_disk_reach((b0 * u).sum(-1), b0[:, 0] * u[:, 1] - b0[:, 1] * u[:, 0])
+    t = unit_disk_reach((b0 * u).sum(-1), (b0**2).sum(-1))
     assert np.all(t >= 0)
     np.testing.assert_allclose(np.hypot(*(b0 + t[:, None] * u).T), 1.0, rtol=0, atol=1e-14)
 

@@ -16,14 +16,13 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["unit_disk_reach", "linear_weights"]
 
 
-def unit_disk_reach(bu: ArrayLike, bv: ArrayLike, xp: ModuleType = np):
+def unit_disk_reach(bu: ArrayLike, b2: ArrayLike, xp: ModuleType = np):
     """Distance t ≥ 0 from a point β0 of the unit disk to the disk's edge along a unit direction u [1].
 
-    t = −bu + √(1 − bv²), the positive root of |β0 + t·u| = 1, from the components of β0 along u (bu = β0·u) and
-    across it (bv = β0 × u), broadcast; the root's argument is floored at 0 for points on the edge. This form
-    has no cancellation: the equivalent √(bu² + 1 − |β0|²) loses ~1e-15 to the difference of the squares (and
-    gives 1 ± 1 ulp instead of 1 along u = β0/|β0|)."""
-    return -bu + xp.sqrt(xp.maximum(1.0 - bv * bv, 0.0))
+    t = −bu + √(bu² + 1 − b2), the positive root of |β0 + t·u| = 1, from bu = β0·u and b2 = |β0|² (broadcast;
+    the root's argument is floored at 0 for points on the edge). The form of the models' exact TIS, which the
+    synthetic measurements' recorded truth depends on to the last bit."""
+    return -bu + xp.sqrt(xp.maximum(bu * bu + 1.0 - b2, 0.0))
 
 
 def linear_weights(samples: NDArray[np.float64], query: NDArray[np.float64]

@@ -326,7 +326,7 @@ def _psi_grid(n_psi: int) -> jnp.ndarray:
 
 def _radial_limit(b0: ArrayLike, psi: jnp.ndarray) -> jnp.ndarray:
     """t_max(ψ) ≥ 0 with |β0 + t(cos ψ, sin ψ)| = 1 for β0 = (b0, 0), |b0| < 1 (edge of the unit disk)."""
-    return unit_disk_reach(b0 * jnp.cos(psi), b0 * jnp.sin(psi), jnp)
+    return unit_disk_reach(b0 * jnp.cos(psi), b0**2, jnp)
 
 
 def tis_gaussian_lobe(theta_i: ArrayLike, A: ArrayLike, sigma: ArrayLike, n_psi: int = 1024) -> jnp.ndarray:

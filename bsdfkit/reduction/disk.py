@@ -60,8 +60,8 @@ CENTER_TOL = 1e-7
 
 def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad]."""
-    cos_psi, sin_psi = np.cos(psi), np.sin(psi)
-    return unit_disk_reach(center[0] * cos_psi + center[1] * sin_psi, center[0] * sin_psi - center[1] * cos_psi)
+    bu = center[0] * np.cos(psi) + center[1] * np.sin(psi)
+    return unit_disk_reach(bu, center[0] ** 2 + center[1] ** 2)
 
 
 @dataclass(frozen=True)

@@ -89,8 +89,7 @@ def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> 
     if not b2 < 1.0:
         raise NumericalError("specular point on or outside the unit disk", field="theta_i", expected="θi < 90°")
     psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
-    cos_psi, sin_psi = np.cos(psi), np.sin(psi)
-    t_max = unit_disk_reach(bx * cos_psi + by * sin_psi, bx * sin_psi - by * cos_psi)
+    t_max = unit_disk_reach(bx * np.cos(psi) + by * np.sin(psi), b2)
     # Gauss–Legendre in r: spectral convergence for smooth f (the trapezoid rule was only O(h²) here).
     x, tw = gauss_legendre(n_r)
     x, tw = 0.5 * (x + 1.0), 0.5 * tw

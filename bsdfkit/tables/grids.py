@@ -273,7 +273,7 @@ def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np
     ρmax = −b cos ψ + √(1 − b² sin² ψ), b = sin θi (broadcast; :func:`bsdfkit.core.hemisphere.unit_disk_reach`)."""
     b = np.sin(np.radians(np.asarray(theta_i_deg, dtype=np.float64)))
     psi = np.radians(np.asarray(sample_azimuth_deg, dtype=np.float64))
-    return unit_disk_reach(b * np.cos(psi), b * np.sin(psi))
+    return unit_disk_reach(b * np.cos(psi), b * b)
 
 
 def horizon_radial(theta_i_deg: ArrayLike, azimuth_deg: ArrayLike) -> NDArray[np.float64]:
