@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import xarray as xr
@@ -79,7 +79,28 @@ def _validated_grids(wavelength: np.ndarray, n_batch: int) -> np.ndarray:
     return wl
 
 
-def _solve(function, wl, y, m, p0, parameters, *, sigma, options, labels, model_name, collect):
+@dataclass(frozen=True)
+class _Batch:
+    """What every solve of one batch shares: the standard uncertainties (batch, n) or None, the solver options, one
+    label per spectrum (for messages) and whether a failing spectrum is recorded (``collect``) or raises."""
+
+    sigma: np.ndarray | None
+    options: FitOptions
+    labels: Sequence[str]
+    collect: bool
+
+    def rows(self, idx) -> _Batch:
+        """The settings of the spectra ``idx`` of the batch (in that order)."""
+        return replace(self, sigma=None if self.sigma is None else self.sigma[idx],
+                       labels=[self.labels[i] for i in idx])
+
+    def tiled(self, k: int) -> _Batch:
+        """The settings of ``k`` copies of the batch stacked (multi-start rounds)."""
+        return replace(self, sigma=None if self.sigma is None else np.concatenate([self.sigma] * k, axis=0),
+                       labels=list(self.labels) * k)
+
+
+def _solve(function, wl, y, m, p0, parameters, batch: _Batch, model_name: str):
     """:func:`least_squares` over a batch. Returns (result or None, errors: index → one-line message).
 
     Without ``collect`` any degenerate member raises :class:`FitError` as :func:`least_squares` does. With
@@ -91,6 +112,7 @@ def _solve(function, wl, y, m, p0, parameters, *, sigma, options, labels, model_
     labels), recorded, and its row replaced by a copy of a healthy one, so the retry keeps the batch shape and
     the compiled kernel (at most :data:`MAX_BATCH_RETRIES` retries; after that, or on an error naming no
     spectrum, the spectra are fitted one at a time)."""
+    sigma, options, labels, collect = batch.sigma, batch.options, batch.labels, batch.collect
     kwargs = dict(batch_dim="spectrum", model_name=model_name)
     n = y.shape[0]
 
@@ -170,7 +192,7 @@ def _fit_batch(wl2, y, m, model, *, sigma, options, split_nm, labels, collect):
     s_n = None if sigma is None else np.broadcast_to(np.asarray(sigma, dtype=float), y.shape) / scale
     used = np.where(m, wl2, np.nan)
     lo, hi = float(np.nanmin(used)), float(np.nanmax(used))
-    common = dict(sigma=s_n, options=options, labels=labels, collect=collect)
+    batch = _Batch(s_n, options, labels, collect)
     errors: dict[int, str] = {}
     splits: dict[int, TwoBandSplit] = {}
 
@@ -178,21 +200,18 @@ def _fit_batch(wl2, y, m, model, *, sigma, options, split_nm, labels, collect):
         p0 = np.array([_peak_and_fwhm(wl2[b], y_n[b], m[b]) for b in range(n_batch)])
         wl_in = wl2[0] if np.all(wl2 == wl2[0]) else wl2  # 1-D grid as before: identical numbers
         wl_use = np.broadcast_to(wl_in, y.shape)
-        first, errors = _solve(_gaussian, wl_use, y_n, m, p0, _parameters("gaussian", lo, hi),
-                               model_name="gaussian", **common)
+        first, errors = _solve(_gaussian, wl_use, y_n, m, p0, _parameters("gaussian", lo, hi), batch, "gaussian")
         result = first
         if model == "split-gaussian" and first is not None:
             p1 = np.stack([first.peak_nm.values, first.fwhm_nm.values, np.zeros(n_batch),
                            first.amplitude.values], axis=1)
             alive = np.array([b for b in range(n_batch) if b not in errors])
             result, more = _solve(_split_gaussian, wl_use[alive], y_n[alive], m[alive], p1[alive],
-                                  _parameters(model, lo, hi), model_name=model,
-                                  **{**common, "sigma": None if s_n is None else s_n[alive],
-                                     "labels": [labels[b] for b in alive]})
+                                  _parameters(model, lo, hi), batch.rows(alive), model)
             errors.update({int(alive[k]): v for k, v in more.items()})
             result = _expand(result, alive, n_batch)
     elif model in SHOULDER_MODELS:
-        result, errors = _fit_multistart(wl2, y_n, m, model, _parameters(model, lo, hi), common)
+        result, errors = _fit_multistart(wl2, y_n, m, model, _parameters(model, lo, hi), batch)
     elif model in SINGLE_BAND_MODELS:
         rows = []
         for b in range(n_batch):
@@ -201,10 +220,10 @@ def _fit_batch(wl2, y, m, model, *, sigma, options, split_nm, labels, collect):
                 rows.append([peak, fwhm, amp])
             else:
                 rows.append([peak, fwhm, alpha, 0.5 if model == "split-pseudo-voigt" else 2.0, amp])
-        result, errors = _solve(_FUNCTIONS[model], wl2, y_n, m, np.array(rows), _parameters(model, lo, hi),
-                                model_name=model, **common)
+        result, errors = _solve(_FUNCTIONS[model], wl2, y_n, m, np.array(rows), _parameters(model, lo, hi), batch,
+                                model)
     else:
-        result, errors, splits = _fit_two_band(wl2, y_n, m, model, split_nm=split_nm, common=common)
+        result, errors, splits = _fit_two_band(wl2, y_n, m, model, split_nm=split_nm, batch=batch)
 
     if result is None:
         return None, errors, splits
@@ -226,15 +245,15 @@ def _fit_batch(wl2, y, m, model, *, sigma, options, split_nm, labels, collect):
     return result, errors, splits
 
 
-def _fit_multistart(wl2, y_n, m, model, parameters, common):
+def _fit_multistart(wl2, y_n, m, model, parameters, batch: _Batch):
     """Shoulder models: every spectrum from each of :func:`_shoulder_starts`; see :func:`_solve_multistart`."""
     shape = 0.5 if model.startswith("pseudo-voigt") else 2.0
     starts = np.array([_shoulder_starts(*_peak_and_fwhm(wl2[b], y_n[b], m[b], with_alpha=True)[:4], shape)
                        for b in range(y_n.shape[0])]).transpose(1, 0, 2)
-    return _solve_multistart(_FUNCTIONS[model], wl2, y_n, m, starts, parameters, common, model)
+    return _solve_multistart(_FUNCTIONS[model], wl2, y_n, m, starts, parameters, batch, model)
 
 
-def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, common, model_name):
+def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, batch: _Batch, model_name: str):
     """Solve every spectrum from each of ``starts`` (shape (k, batch, p)) and keep the lowest cost.
 
     Two rounds on the same compiled kernel (the batch keeps its k × batch shape): every start runs for at most
@@ -247,13 +266,10 @@ def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, commo
     def tile(a):
         return np.concatenate([a] * k_starts, axis=0)
 
-    sub = {**common, "labels": list(common["labels"]) * k_starts,
-           "sigma": None if common["sigma"] is None else tile(common["sigma"])}
     x_t = {k: tile(v) for k, v in x.items()} if isinstance(x, dict) else tile(x)
-    options = sub.pop("options")
-    short = replace(options, maxiter=min(options.maxiter, MULTISTART_ROUND1_MAXITER))
+    short = replace(batch.options, maxiter=min(batch.options.maxiter, MULTISTART_ROUND1_MAXITER))
     first, errors = _solve(function, x_t, tile(y_n), tile(m), starts.reshape(k_starts * n_batch, -1), parameters,
-                           model_name=model_name, options=short, **sub)
+                           replace(batch.tiled(k_starts), options=short), model_name)
     if first is None:
         return None, {b: errors.get(b, "fit failed") for b in range(n_batch)}
     cost = first.cost.values.reshape(k_starts, n_batch)
@@ -272,10 +288,7 @@ def _solve_multistart(function, x, y_n, m, starts: np.ndarray, parameters, commo
     def continue_from(src: np.ndarray, start: np.ndarray):
         """The rows ``src`` of the batch from ``start[src]`` with the full iteration limit."""
         x_s = {k: v[src] for k, v in x.items()} if isinstance(x, dict) else x[src]
-        sub_s = {**sub, "labels": [common["labels"][i] for i in src],
-                 "sigma": None if common["sigma"] is None else common["sigma"][src]}
-        return _solve(function, x_s, y_n[src], m[src], start[src], parameters, model_name=model_name,
-                      options=options, **sub_s)
+        return _solve(function, x_s, y_n[src], m[src], start[src], parameters, batch.rows(src), model_name)
 
     result, errors2 = continue_from(np.concatenate([np.arange(n_batch), np.full((k_starts - 1) * n_batch, donor)]),
                                     best)
@@ -332,11 +345,11 @@ def _expand(result, alive: np.ndarray, n_batch: int):
     return xr.concat(rows, dim="spectrum", data_vars="all", coords="minimal", compat="override")
 
 
-def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
+def _fit_two_band(wl2, y_n, m, model, *, split_nm, batch: _Batch):
     """Two-band fit with a per-spectrum split: pump maximum and valley from :func:`find_two_band_split` (or the
     valley fixed at ``split_nm``), components held on their side of their own spectrum's valley."""
     n_batch = y_n.shape[0]
-    labels = common["labels"]
+    labels = batch.labels
     errors: dict[int, str] = {}
     splits: dict[int, TwoBandSplit] = {}
     for b in range(n_batch):
@@ -353,7 +366,7 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
                 i_split = int(np.argmin(np.abs(wl2[b] - split_nm)))
                 splits[b] = TwoBandSplit(pk, pv, float(split_nm), float(y_n[b, i_split]), yk, yv)
         except FitError as exc:
-            if not common["collect"]:
+            if not batch.collect:
                 raise
             errors[b] = str(exc)
     alive = np.array(sorted(splits), dtype=int)
@@ -373,13 +386,11 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, common):
                                  (alive.size, wl2.shape[1])),
          "valley": np.broadcast_to(np.array([splits[int(b)].valley_nm for b in alive])[:, None],
                                    (alive.size, wl2.shape[1]))}
-    sub = {**common, "labels": [labels[b] for b in alive],
-           "sigma": None if common["sigma"] is None else common["sigma"][alive]}
+    sub = batch.rows(alive)
     function = _RELATIVE[model][0]
     if model == "two-band":
         p0 = np.array([pump + phosphor for pump, phosphor in rows])
-        result, more = _solve(function, x, y_n[alive], m[alive], p0, _relative_parameters(model), model_name=model,
-                              **sub)
+        result, more = _solve(function, x, y_n[alive], m[alive], p0, _relative_parameters(model), sub, model)
     else:
         # Pump line + side band (offset, FWHM, height fraction) from three starts; the lowest cost is kept.
         pump_starts = ((5.0, 15.0, 0.3), (10.0, 25.0, 0.3), (15.0, 30.0, 0.2))
