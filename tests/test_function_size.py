@@ -1,4 +1,5 @@
-"""Every function is short enough to read at once (issue #28): at most 80 lines and 8 parameters, or a named reason."""
+"""Every function is short enough to read at once (issue #28): at most 80 lines (its docstring
+not counted) and 8 parameters, or a named reason."""
 from __future__ import annotations
 
 import ast
@@ -12,11 +13,9 @@ MAX_PARAMETERS = 8  # self and cls not counted
 # "module:qualname" -> why this function stays longer or wider than the limits. Keep it short.
 EXCEPTIONS = {
     # pending: split on another branch
-    "bsdfkit.fit.spectrum:analyse_spectra": "pending: split on another branch",
-    "bsdfkit.fit.spectrum:find_two_band_split": "pending: split on another branch",
-    "bsdfkit.fit.spectrum:_solve": "pending: split on another branch",
-    "bsdfkit.fit.spectrum:reconstruct_two_band_spectrum": "pending: split on another branch",
-    "bsdfkit.fit.spectrum:_fit_batch": "pending: split on another branch",
+    "bsdfkit.fit.spectrum.reconstruction:reconstruct_two_band_spectrum": "pending: split on another branch",
+    "bsdfkit.fit.spectrum.reporting:_fit_model": "pending: split on another branch",
+    "bsdfkit.fit.spectrum.solver:_fit_batch": "pending: split on another branch",
     "bsdfkit.pipeline.recipe:stage_trace": "pending: split on another branch",
     "bsdfkit.pipeline.report:_Report.sec_trace": "pending: split on another branch",
     "bsdfkit.pipeline.spectral_comparison:_summary": "pending: split on another branch",
@@ -30,7 +29,6 @@ EXCEPTIONS = {
     "bsdfkit.tables.to_dataset:convert": "pending: split on another branch",
     "bsdfkit.tables.grids:_refine_polar": "pending: split on another branch",
     "bsdfkit.tables.vendor:vendor_dataset": "pending: split on another branch",
-    "bsdfkit.reduction.excitation_emission:plate_spectral_model": "pending: split on another branch",
     "bsdfkit.reduction.excitation_emission:_model_dataset": "pending: split on another branch",
     # public entry points whose keywords callers pass by name (fit.spectrum, the command line, the pipeline, tests):
     # their bodies are split, a config object would only move the count
@@ -59,7 +57,7 @@ def oversized(source: str, module: str) -> dict[str, str]:
     def walk(node: ast.AST, prefix: str) -> None:
         for child in ast.iter_child_nodes(node):
             if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                lines, parameters = child.end_lineno - child.lineno + 1, _parameters(child)
+                lines, parameters = _code_lines(child), _parameters(child)
                 if lines > MAX_LINES or parameters > MAX_PARAMETERS:
                     found[f"{module}:{prefix}{child.name}"] = f"{lines} lines, {parameters} parameters"
                 walk(child, f"{prefix}{child.name}.<locals>.")
@@ -68,6 +66,17 @@ def oversized(source: str, module: str) -> dict[str, str]:
 
     walk(ast.parse(source), "")
     return found
+
+
+def _code_lines(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    """Lines from the signature to the end, without the docstring: issue #28 also asks for a numpydoc section on
+    every public function, and the documentation of a function should not count against its length."""
+    lines = node.end_lineno - node.lineno + 1
+    first = node.body[0]
+    if (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str)
+            and len(node.body) > 1):
+        lines -= first.end_lineno - first.lineno + 1
+    return lines
 
 
 def _package_oversized() -> dict[str, str]:
@@ -95,6 +104,8 @@ def test_the_checker_finds_long_wide_and_nested_functions():
               f"def wide(a, b, c, d, e, f, g, h, i):\n    pass\n"
               f"class K:\n    def method(self, a, b, c, d, e, f, g, h):\n        pass\n"
               f"def outer():\n    def inner(*a, b, c, d, e, f, g, h, **k):\n        pass\n")
+    documented = "def documented(a):\n    \"\"\"" + "\n" * MAX_LINES + "    \"\"\"\n    return a\n"
+    assert oversized(documented, "m") == {}  # a long docstring alone does not make a long function
     assert oversized(source, "m") == {"m:long": f"{MAX_LINES + 1} lines, 0 parameters",
                                       "m:wide": "2 lines, 9 parameters",
                                       "m:outer.<locals>.inner": "2 lines, 9 parameters"}

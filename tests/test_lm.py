@@ -12,7 +12,8 @@ from bsdfkit.core.errors import FitError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import least_squares as fit
 from bsdfkit.fit import lm
-from bsdfkit.fit import spectrum as spectra
+from bsdfkit.fit.spectrum import models as spectrum_models
+from bsdfkit.fit.spectrum import starts as spectrum_starts
 
 
 # ------------------------------------------------------------------------------------ the driver, NumPy-only
@@ -142,14 +143,14 @@ def split_gaussian_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def start(wl: np.ndarray, y: np.ndarray) -> np.ndarray:
-    rows = [spectra._peak_and_fwhm(wl, row / row.max(), np.ones(wl.size, bool)) for row in y]
+    rows = [spectrum_starts._peak_and_fwhm(wl, row / row.max(), np.ones(wl.size, bool)) for row in y]
     return np.array([[p, w, 0.0, a * row.max()] for (p, w, a), row in zip(rows, y)])
 
 
 def split_fit(wl, y, p0, **options):
-    params = spectra._parameters("split-gaussian", float(wl[0]), float(wl[-1]))
+    params = spectrum_models._parameters("split-gaussian", float(wl[0]), float(wl[-1]))
     options.setdefault("solver", "lm")
-    return fit.least_squares(spectra._split_gaussian, wl, y, p0, params, options=fit.FitOptions(**options))
+    return fit.least_squares(spectrum_models._split_gaussian, wl, y, p0, params, options=fit.FitOptions(**options))
 
 
 def values(ds) -> np.ndarray:
@@ -161,7 +162,7 @@ def test_split_gaussian_fits_agree_with_scipy_and_with_jaxopt():
     p0 = start(wl, y)
     ds = split_fit(wl, y, p0)
     assert ds.attrs["solver"].startswith("bsdfkit.fit.lm") and bool(ds.converged.all())
-    params = spectra._parameters("split-gaussian", float(wl[0]), float(wl[-1]))
+    params = spectrum_models._parameters("split-gaussian", float(wl[0]), float(wl[-1]))
     lo, hi = params[0].lower, params[0].upper
 
     def natural(u):
@@ -202,11 +203,11 @@ def test_masked_points_are_ignored_whatever_they_hold():
     p0 = start(wl, y)
     keep = (wl < 520.0) | (wl > 560.0)
     spoiled = np.where(keep, y, np.nan)
-    masked = fit.least_squares(spectra._split_gaussian, wl, spoiled, p0,
-                               spectra._parameters("split-gaussian", float(wl[0]), float(wl[-1])),
+    masked = fit.least_squares(spectrum_models._split_gaussian, wl, spoiled, p0,
+                               spectrum_models._parameters("split-gaussian", float(wl[0]), float(wl[-1])),
                                mask=np.broadcast_to(keep, y.shape), options=fit.FitOptions(solver="lm"))
-    cut = fit.least_squares(spectra._split_gaussian, wl[keep], y[:, keep], p0,
-                            spectra._parameters("split-gaussian", float(wl[0]), float(wl[-1])),
+    cut = fit.least_squares(spectrum_models._split_gaussian, wl[keep], y[:, keep], p0,
+                            spectrum_models._parameters("split-gaussian", float(wl[0]), float(wl[-1])),
                             options=fit.FitOptions(solver="lm"))
     assert bool(masked.converged.all()) and list(masked.n_points.values) == [int(keep.sum())] * 2
     np.testing.assert_allclose(values(masked), values(cut), rtol=1e-9)

@@ -58,7 +58,7 @@ def test_exports_and_fits_take_their_models_from_the_registry():
 
 
 def test_spectrum_models_are_registered_once_with_the_fits_parameters():
-    from bsdfkit.fit import spectrum
+    from bsdfkit.fit.spectrum import models as spectrum
     from bsdfkit.models.registry import SPECTRUM_MODELS
 
     assert tuple(SPECTRUM_MODELS) == spectrum.SPECTRUM_MODELS

@@ -108,6 +108,23 @@ class Progress:
             sys.stderr.flush()
 
 
+def add_table_arguments(p: Any) -> None:
+    """The writers' options of ``export`` and ``convert``: ``--symmetry`` (Zemax), ``--xml-back``, ``--xml-basis``
+    (BSDF XML) and ``--symmetry-tolerance``."""
+    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
+                   help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
+                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
+                        "between its faces)")
+    p.add_argument("--xml-basis", default="auto", choices=("auto", "klems", "tree"),
+                   help="BSDF XML basis: auto (default: a Radiance TensorTree3 when the source's specular lobe is "
+                        "narrower than a Klems patch, FWHM < 10 deg, else Klems), klems (always; WINDOW reads only "
+                        "Klems) or tree (always)")
+    p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
+                   help="PlaneSymmetrical: largest accepted mirror deviation of the source, as a fraction "
+                        "of the block maximum (default 0.01); the mirror average is written")
+
+
 def add_grid_arguments(p: Any, tis_tolerance_help: str) -> None:
     """The exported table's grid options of ``export`` and ``convert``: ``--grid``, ``--grid-tis-tolerance`` (its
     default differs by verb: ``tis_tolerance_help``), ``--grid-peak-tolerance`` and ``--node-values``."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bsdfkit.cli._common import add_grid_arguments, check_options, emit_json
+from bsdfkit.cli._common import add_grid_arguments, add_table_arguments, check_options, emit_json
 from bsdfkit.cli.ingest import OPTION_RANGES
 from bsdfkit.core.conventions import QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import ValidationError
@@ -59,17 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="for text tables (see bsdfkit ingest)")
     p.add_argument("--relative-std", type=float, default=None, metavar="R", help="for text tables")
     p.add_argument("--zeros", choices=ZERO_POLICIES, default=None, help="for text tables (see bsdfkit ingest)")
-    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
-                   help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
-    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
-                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
-                        "between its faces)")
-    p.add_argument("--xml-basis", default="auto", choices=("auto", "klems", "tree"),
-                   help="BSDF XML basis: auto (default: a Radiance TensorTree3 when the source's specular lobe is "
-                        "narrower than a Klems patch, FWHM < 10 deg, else Klems), klems (always; WINDOW reads only "
-                        "Klems) or tree (always)")
-    p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
-                   help="PlaneSymmetrical: largest accepted mirror deviation of the source (default 0.01)")
+    add_table_arguments(p)
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="largest accepted |TIS written / TIS source - 1| (default 0.01)")
     add_grid_arguments(p, "auto grid: largest estimated relative TIS error of the table (default: half of "

@@ -11,7 +11,7 @@ import argparse
 from dataclasses import replace
 
 from bsdfkit import api
-from bsdfkit.cli._common import add_grid_arguments, emit_json
+from bsdfkit.cli._common import add_grid_arguments, add_table_arguments, emit_json
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.tables import registry
 
@@ -72,18 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, metavar="PATH", help="output file")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.add_argument("--incidences", metavar="DEG,DEG,...", help="incidence angles to export (default: the source's)")
-    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
-                   help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
-    p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
-                   help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
-                        "between its faces)")
-    p.add_argument("--xml-basis", default="auto", choices=("auto", "klems", "tree"),
-                   help="BSDF XML basis: auto (default: a Radiance TensorTree3 when the source's specular lobe is "
-                        "narrower than a Klems patch, FWHM < 10 deg, else Klems), klems (always; WINDOW reads only "
-                        "Klems) or tree (always)")
-    p.add_argument("--symmetry-tolerance", type=float, default=0.01, metavar="FRACTION",
-                   help="PlaneSymmetrical: largest accepted mirror deviation of the source, as a fraction "
-                        "of the block maximum (default 0.01); the mirror average is written")
+    add_table_arguments(p)
     p.add_argument("--tracepro-scatter", default="table", choices=("table", "abg"),
                    help="TracePro Scatter 5 asymmetric table, or Scatter 1 ABg (ABg fits only)")
     p.add_argument("--zero-azimuth", type=float, default=None, metavar="DEG",

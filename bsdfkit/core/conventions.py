@@ -10,6 +10,8 @@ two-wavelength spectrum reconstruction, YBR).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 #: The two sides of a sample: light scattered back (reflection) or through it (transmission).
 SIDES: tuple[str, str] = ("reflection", "transmission")
 
@@ -28,6 +30,24 @@ YELLOW_CONFIGURATION = "yellow"
 EXCITATION_BAND_NM: tuple[float, float] = (450.0, 470.0)
 #: Yellow (converted-light) band of the power-budget measurement, [Power-budget] eqs. (8)-(13).
 CONVERSION_BAND_NM: tuple[float, float] = (470.0, 740.0)
+
+
+
+@dataclass(frozen=True)
+class InteractionBands:
+    """The bands [nm] of the two-wavelength reductions, one value for every quantity that uses them: the weighted
+    means and bi-spectral integrals of :func:`bsdfkit.reduction.spectral.interaction_profile` (hence the TIS) and
+    the photon ratios of :func:`bsdfkit.reduction.budget.interaction_table`.
+
+    ``blue_nm``: excitation band (bibs mean; the incident spectrum's mean wavelength); ``yellow_nm``: converted
+    band (yiys mean, biys integral; the scattered spectrum's mean wavelength); ``elastic_nm``: band of an elastic
+    sample's mean, None = the whole measured range.
+    """
+
+    blue_nm: tuple[float, float] = EXCITATION_BAND_NM
+    yellow_nm: tuple[float, float] = CONVERSION_BAND_NM
+    elastic_nm: tuple[float, float] | None = None
+
 
 #: Blue and yellow parts of a module spectrum for the two-band reconstruction and the tracer's YBR,
 #: [Cylindrical-module] §4.2.

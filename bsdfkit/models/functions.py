@@ -26,7 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
+from bsdfkit.core.hemisphere import unit_disk_reach
 from bsdfkit.core.quadrature import gauss_legendre
+from bsdfkit.core.spectra import C_FWHM
 
 __all__ = [
     "C_FWHM",
@@ -51,9 +53,6 @@ __all__ = [
     "tis_lambert_gaussian",
     "tis_lambert_abg",
 ]
-
-#: C = 4 ln 2 of eqs. (2)–(3) of the cylindrical-module paper: with it Δλ is the true FWHM.
-C_FWHM: float = 4.0 * math.log(2.0)
 
 #: Floor of the ABg denominator B + |β−β0|^g. Only reached when B → 0 exactly on the specular
 #: direction, where the model is infinite; the floor keeps the value finite (and representable in
@@ -327,8 +326,7 @@ def _psi_grid(n_psi: int) -> jnp.ndarray:
 
 def _radial_limit(b0: ArrayLike, psi: jnp.ndarray) -> jnp.ndarray:
     """t_max(ψ) ≥ 0 with |β0 + t(cos ψ, sin ψ)| = 1 for β0 = (b0, 0), |b0| < 1 (edge of the unit disk)."""
-    proj = b0 * jnp.cos(psi)
-    return -proj + jnp.sqrt(jnp.maximum(proj**2 + 1.0 - b0**2, 0.0))
+    return unit_disk_reach(b0 * jnp.cos(psi), b0**2, jnp)
 
 
 def tis_gaussian_lobe(theta_i: ArrayLike, A: ArrayLike, sigma: ArrayLike, n_psi: int = 1024) -> jnp.ndarray:

@@ -41,6 +41,7 @@ import numpy as np
 import bsdfkit.raytrace.plate_from_scan as plate_source
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
+from bsdfkit.core.spectra import gaussian
 from bsdfkit.fit.lambertian import band_weighted_reflectance, lambertian_from_reflectance
 from bsdfkit.io import toml_write
 from bsdfkit.io.atomic import write_text
@@ -675,7 +676,7 @@ def _spectral_top(top: Top, r: _Reader, base_dir: Path | None, preloaded: Mappin
         raise ValidationError("bad spectral grid", file=r.file, field="top.spectral.step_nm",
                               expected="start_nm < stop_nm with 2-1024 steps", got=(start, stop, step))
     wl = start + step * np.arange(n)
-    emission = np.exp(-4.0 * math.log(2.0) * ((wl - peak) / fwhm) ** 2)
+    emission = gaussian(wl, peak, fwhm)
     model = spectral_plate_from_two_colour(top.plate, wl, emission,
                                            name=f"{top.plate.name} with a Gaussian emission ({peak:g}, {fwhm:g} nm)")
     return replace(top, spectral_emission=(peak, fwhm, start, stop, step), spectral_model=model)

@@ -42,7 +42,6 @@ each grid point taking the plate's distribution at the nearest plate incidence.
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -52,6 +51,7 @@ import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
+from bsdfkit.core.spectra import band_mask, gaussian, photon_pdf_from_power
 from bsdfkit.io import netcdf
 from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, PlateChannel, PlateTables, plate_tables
 
@@ -251,29 +251,6 @@ def load_spectral_model(path: str | Path) -> SpectralPlateModel:
     return spectral_model_from_dataset(netcdf.load(path), source=path)
 
 
-def photon_pdf_from_power(wavelength_nm: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """Photon-number pdf [1/nm] of a power spectrum on a uniform grid: p ∝ S(λ)·λ, Σ p Δλ = 1.
-
-    Parameters
-    ----------
-    wavelength_nm : ndarray
-        Uniform wavelength grid [nm].
-    power : ndarray
-        Power spectrum S on that grid, any scale.
-
-    Returns
-    -------
-    ndarray
-        Photon-number pdf [1/nm].
-    """
-    wl = np.asarray(wavelength_nm, dtype=np.float64)
-    photons = np.asarray(power, dtype=np.float64) * wl
-    total = photons.sum() * (wl[1] - wl[0])
-    if not total > 0:
-        raise ValidationError("emission spectrum has no power", field="emission_spectrum", expected="some S > 0")
-    return photons / total
-
-
 def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence[float], emission_spectrum,
                                    pump_band_nm: tuple[float, float] = MODULE_BLUE_BAND_NM,
                                    name: str = "") -> SpectralPlateModel:
@@ -304,7 +281,7 @@ def spectral_plate_from_two_colour(plate: PhosphorPlate, wavelength_nm: Sequence
         The validated model.
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
-    pump = (wl >= pump_band_nm[0]) & (wl <= pump_band_nm[1])
+    pump = band_mask(wl, pump_band_nm)
     inc = np.asarray(plate.theta_i_deg, dtype=np.float64)
 
     def tis(channel: str) -> np.ndarray:  # (incidence,)
@@ -367,7 +344,7 @@ def bin_powers(wavelength_nm: np.ndarray, values: np.ndarray, centres_nm: np.nda
 def gaussian_led_spectrum(peak_nm: float, fwhm_nm: float) -> tuple[np.ndarray, np.ndarray]:
     """A Gaussian LED spectrum (eq. (2) of [Cylindrical-module]) sampled every FWHM/200 over ±4 FWHM."""
     wl = np.linspace(peak_nm - 4.0 * fwhm_nm, peak_nm + 4.0 * fwhm_nm, 1601)
-    return wl, np.exp(-4.0 * math.log(2.0) * ((wl - peak_nm) / fwhm_nm) ** 2)
+    return wl, gaussian(wl, peak_nm, fwhm_nm)
 
 
 # ---- kernel tables -------------------------------------------------------------------------------------------------
@@ -660,9 +637,8 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     """
     lam = np.asarray(lam, dtype=np.float64)
     blue, yellow = MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
-    band = np.where((lam >= blue[0]) & (lam <= blue[1]), 0,
-                    np.where((lam >= yellow[0]) & (lam <= yellow[1]), 1, 2)).astype(np.int32)
-    shape = np.where((lam >= blue[0]) & (lam <= blue[1]), 0, 2).astype(np.int32)  # plate.BACK_BIBS, BACK_YIYS
+    band = np.where(band_mask(lam, blue), 0, np.where(band_mask(lam, yellow), 1, 2)).astype(np.int32)
+    shape = np.where(band_mask(lam, blue), 0, 2).astype(np.int32)  # plate.BACK_BIBS, BACK_YIYS
     led = led_bin_power(led_spectrum, lam, source)
     cdf = np.cumsum(led)
     cdf[-1] = 1.0

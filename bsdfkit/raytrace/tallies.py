@@ -23,7 +23,8 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, RAY_YBR_DEFINITION, band_label
-from bsdfkit.reduction.spectral import LIGHT_C, PLANCK_H
+from bsdfkit.core.spectra import LIGHT_C, PLANCK_H, band_mask
+from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation, spectral_distribution
 
 #: The spectral mode's YBR: extracted power per band of the traced spectrum.
 SPECTRAL_YBR_DEFINITION = (f"extracted power in {band_label(MODULE_YELLOW_BAND_NM)} / extracted power in "
@@ -534,22 +535,18 @@ class SpectralResult:
         power, se : float
             Band power and its standard error [W].
         """
-        inside = (self.wavelength_nm >= band[0]) & (self.wavelength_nm <= band[1])
+        inside = band_mask(self.wavelength_nm, band)
         p = float(self.spectrum_W_per_nm[inside].sum() * self.step_nm)
         return p, float(np.sqrt(np.sum(self.spectrum_std_err[inside] ** 2)) * self.step_nm)
 
     def luminous_efficacy_lm_per_W(self) -> float:
         """Luminous efficacy of radiation of the extracted spectrum [lm/W] (CIE 1924 V(λ), K_m = 683 lm/W).
 
-        The computation of :func:`bsdfkit.reduction.colorimetry.luminous_efficacy_of_radiation`
-        (``colour.luminous_efficacy`` on the uniform bin grid); colour-science is imported here, on first use,
-        so that tracing does not pay its import time.
+        :func:`bsdfkit.reduction.colorimetry.luminous_efficacy_of_radiation` of the bins (which imports
+        colour-science on first use, so that tracing does not pay its import time).
         """
-        import colour  # deferred: see the docstring
-
-        sd = colour.SpectralDistribution(dict(zip(self.wavelength_nm.tolist(), self.spectrum_W_per_nm.tolist())),
-                                         name="extracted spectrum")
-        return float(colour.luminous_efficacy(sd))
+        return luminous_efficacy_of_radiation(spectral_distribution(self.wavelength_nm, self.spectrum_W_per_nm,
+                                                                    "extracted spectrum"))
 
     def to_dict(self) -> dict[str, Any]:
         """The result as JSON-ready values: spectra [W/nm] on the bins [nm], blue and yellow band powers [W], luminous

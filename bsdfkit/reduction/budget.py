@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.conventions import SIDES
+from bsdfkit.core.conventions import SIDES, InteractionBands
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.reduction import spectral
 from bsdfkit.reduction import tis as angular
@@ -90,28 +90,36 @@ def require_phosphor_scan(ds: xr.Dataset) -> None:
 
 
 def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = None,
-                      blue_band: tuple[float, float] = (450.0, 470.0),
-                      yellow_band: tuple[float, float] = (470.0, 740.0)) -> InteractionTable:
+                      bands: InteractionBands | None = None) -> InteractionTable:
     """Table 2 of the power-budget paper at incidence ``theta_i`` (deg) from a calibrated scan.
 
-    A dataset that is not a phosphor scan is refused with one line (:func:`require_phosphor_scan`).
+    ``bands`` (default: the power-budget filters) reach both the TIS and the photon ratios; a given ``tis``
+    (:func:`bsdfkit.reduction.tis.tis_table`) must have been computed with the same bands. A dataset that is not a
+    phosphor scan is refused with one line (:func:`require_phosphor_scan`).
     """
     require_phosphor_scan(ds)
-    tis = tis if tis is not None else angular.tis_table(ds, theta_i=[theta_i])
+    bands = bands or InteractionBands()
+    if tis is None:
+        tis = angular.tis_table(ds, theta_i=[theta_i], bands=bands)
+    for name, band in (("blue_band_nm", bands.blue_nm), ("yellow_band_nm", bands.yellow_nm)):
+        used = tuple(float(v) for v in tis.attrs.get(name, band))
+        if used != tuple(band):
+            raise InputError("the TIS table was computed with other bands", file=ds.attrs.get("source") or None,
+                             field=f"tis.attrs['{name}']", expected=list(band), got=list(used))
     sel = tis.sel(theta_i=theta_i, method="nearest")
     if abs(float(sel["theta_i"]) - theta_i) > 1e-6:
         raise InputError("incidence not in the TIS table", field="theta_i", got=theta_i)
     power, power_std = {}, {}
     for inter in ("bibs", "biys", "yiys"):
-        for tag, side in (("B", "reflection"), ("F", "transmission")):
+        for tag, side in zip("BF", SIDES):  # back (reflection), forward (transmission)
             power[f"{tag}_{inter}"] = 100 * float(sel["tis"].sel(interaction=inter, side=side))
             power_std[f"{tag}_{inter}"] = 100 * float(sel["tis_std"].sel(interaction=inter, side=side))
     # eq. (15): incident blue spectrum; eq. (14): hemispherically scattered yellow spectrum per side
     incident = spectral.incident_spectrum(ds, "blue")
     ratio = {}
-    for tag, side in (("B", "reflection"), ("F", "transmission")):
-        scattered = angular.hemispherical_spectrum(ds, "blue", theta_i, side, "biys", yellow_band)
-        ratio[tag] = spectral.photon_ratio(incident, blue_band, scattered, yellow_band)
+    for tag, side in zip("BF", SIDES):  # back (reflection), forward (transmission)
+        scattered = angular.hemispherical_spectrum(ds, "blue", theta_i, side, "biys", bands.yellow_nm)
+        ratio[tag] = spectral.photon_ratio(incident, bands.blue_nm, scattered, bands.yellow_nm)
     photons = dict(power)
     photons_std = dict(power_std)
     for tag in ("B", "F"):

@@ -27,10 +27,9 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import colour
 import numpy as np
-from colour import SpectralDistribution
 
 from bsdfkit.core.conventions import (
     COLORIMETRY_BLUE_BAND_NM,
@@ -39,7 +38,15 @@ from bsdfkit.core.conventions import (
     band_label,
 )
 from bsdfkit.core.errors import InputError, NumericalError, ValidationError
+from bsdfkit.core.lazy import LazyModule
 from bsdfkit.reduction.spectral import band_sum
+
+if TYPE_CHECKING:
+    from colour import SpectralDistribution
+
+#: colour-science on first use (about 1 s with matplotlib): the tracer reports a luminous efficacy through this
+#: module and must not pay that import before it does
+colour = LazyModule("colour")
 
 __all__ = [
     "CMFS_NAME",
@@ -52,6 +59,7 @@ __all__ = [
     "CCT_RANGE_K",
     "luminous_flux_lm",
     "luminous_efficacy_of_radiation",
+    "spectral_distribution",
     "yellow_blue_ratio",
     "ybr_label",
     "check_power_spectrum",
@@ -240,6 +248,12 @@ def cct_is_meaningful(duv: float, cct_K: float | None = None) -> bool:
     table of the Ohno (2013) solver (:data:`CCT_RANGE_K`); otherwise the CCT should not be quoted."""
     inside = cct_K is None or CCT_RANGE_K[0] <= cct_K <= CCT_RANGE_K[1]
     return abs(duv) <= DUV_LIMIT and inside
+
+
+def spectral_distribution(wavelength_nm: np.ndarray, values: np.ndarray, name: str = "") -> SpectralDistribution:
+    """Samples ``values`` on ``wavelength_nm`` [nm] as a ``colour.SpectralDistribution`` (float64)."""
+    return colour.SpectralDistribution(np.asarray(values, dtype=np.float64),
+                                       np.asarray(wavelength_nm, dtype=np.float64), name=name)
 
 
 def luminous_flux_lm(sd: SpectralDistribution) -> float:

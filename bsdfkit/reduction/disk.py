@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bsdfkit.core.errors import InputError
+from bsdfkit.core.hemisphere import unit_disk_reach
 from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.quadrature import gauss_legendre
 
@@ -102,8 +103,7 @@ def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64],
     ``cos_sin``: (cos ψ, sin ψ) when already known."""
     cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
     bu = center[0] * cos_psi + center[1] * sin_psi
-    b2 = center[0] ** 2 + center[1] ** 2
-    return -bu + np.sqrt(bu * bu + 1.0 - b2)
+    return unit_disk_reach(bu, center[0] ** 2 + center[1] ** 2)
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
 from bsdfkit.core.records import incidences
+from bsdfkit.core.spectra import photon_pdf_from_power
 from bsdfkit.core.version import __version__
 from bsdfkit.io import netcdf
 from bsdfkit.reduction.spectral import SpectrumLike, band_sum, mean_wavelength, spectrum_on
@@ -275,8 +276,7 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
                                   expected=f"a negative part within what the spectrum's noise explains "
                                            f"({allowed / norm:.2%} of the photons)",
                                   got=f"{clipped[k]:.2%} (lowest at {lam[j]:g} nm)")
-        photons = np.clip(photons, 0.0, None)
-        pdf[k] = photons / band_sum(lam, photons, grid)
+        pdf[k] = photon_pdf_from_power(lam, np.clip(density, 0.0, None), grid)  # clip(S)·λ = clip(S·λ): λ > 0
         incident = matrix["incident_spectrum"].isel(wavelength_i=k)
         per_photon = mean_wavelength(incident, grid) * band_sum(lam, pdf[k] / lam, grid)
         yield_[:, k] = total / per_photon

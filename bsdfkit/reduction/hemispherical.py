@@ -78,7 +78,9 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import InputError
+from bsdfkit.core.hemisphere import linear_weights
 from bsdfkit.core.records import incidences
 from bsdfkit.reduction import basis, disk
 from bsdfkit.reduction.tis import HALVES, Hemisphere, polar_grid
@@ -93,9 +95,6 @@ EDGE_DROP = 0.2
 TAIL_EXCESS = 0.02
 #: Angles (deg) at or beyond which a half-profile counts as reaching the horizon (no extrapolation).
 HORIZON_DEG = 89.9
-
-SIDES = ("reflection", "transmission")
-
 
 @dataclass(frozen=True)
 class Geometry:
@@ -473,15 +472,7 @@ def _evaluation_matrix(hemi: Hemisphere, r: NDArray, psi: NDArray, p: float = 2.
     rows = np.arange(r.size)
     for k, name in enumerate(HALVES):
         for h, share in hemi.halves[name]:
-            if h.radius.size == 1:
-                lo = hi = np.zeros(r.size, dtype=np.int64)
-                wl, wh = np.ones(r.size), np.zeros(r.size)
-            else:
-                q = np.clip(r, h.radius[0], h.radius[-1])
-                hi = np.clip(np.searchsorted(h.radius, q, side="right"), 1, h.radius.size - 1)
-                lo = hi - 1
-                wh = (q - h.radius[lo]) / (h.radius[hi] - h.radius[lo])
-                wl = 1.0 - wh
+            lo, hi, wl, wh = linear_weights(h.radius, r)
             a = coef[:, k] * share
             np.add.at(m, (rows, h.record[lo]), a * wl)
             np.add.at(m, (rows, h.record[hi]), a * wh)
@@ -502,12 +493,9 @@ def _weights(hemi: Hemisphere, n_psi: int, n_r: int, p: float = 2.0) -> NDArray[
             if h.radius.size == 1:
                 w += np.bincount(h.record[:1], weights=[a.sum()], minlength=hemi.n_records)
                 continue
-            q = np.clip(grid.r, h.radius[0], h.radius[-1])
-            hi = np.clip(np.searchsorted(h.radius, q, side="right"), 1, h.radius.size - 1)
-            lo = hi - 1
-            t = (q - h.radius[lo]) / (h.radius[hi] - h.radius[lo])
-            w += np.bincount(h.record[lo], weights=a * (1.0 - t), minlength=hemi.n_records)
-            w += np.bincount(h.record[hi], weights=a * t, minlength=hemi.n_records)
+            lo, hi, w_lo, w_hi = linear_weights(h.radius, grid.r)
+            w += np.bincount(h.record[lo], weights=a * w_lo, minlength=hemi.n_records)
+            w += np.bincount(h.record[hi], weights=a * w_hi, minlength=hemi.n_records)
     return w
 
 

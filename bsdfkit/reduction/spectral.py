@@ -25,16 +25,18 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, EXCITATION_BAND_NM, INTERACTIONS
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, ELASTIC_INTERACTION, INTERACTIONS, SIDES, InteractionBands
 from bsdfkit.core.errors import InputError, NumericalError
-
-PLANCK_H = 6.62607015e-34  # J s (exact, SI 2019)
-LIGHT_C = 299_792_458.0  # m/s (exact)
+from bsdfkit.core.spectra import LIGHT_C, PLANCK_H, Band, band_mask, band_sum, mean_wavelength_nm
 
 if TYPE_CHECKING:
     import colour
 
-Band = tuple[float, float]
+__all__ = ["LIGHT_C", "PLANCK_H", "Band", "SpectrumLike", "band_sum", "band_integral", "spectrum_on",
+           "to_spectral_distribution", "incident_spectrum", "weighted_mean_bsdf", "bispectral_band_integral",
+           "bispectral_band_mean", "bispectral_weighted_mean", "mean_wavelength", "mean_photon_energy", "photon_ratio",
+           "interaction_profile"]
+
 SpectrumLike = "colour.SpectralDistribution | xr.DataArray"
 
 
@@ -42,13 +44,6 @@ def _is_spectral_distribution(spectrum: object) -> bool:
     # Duck-typed so that this module does not import colour-science (about 1 s, and it pulls in matplotlib):
     # the tracer reaches these reductions through the plate builder and needs no colorimetry.
     return hasattr(spectrum, "wavelengths") and hasattr(spectrum, "values") and not isinstance(spectrum, xr.DataArray)
-
-
-def _band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
-    lo, hi = band
-    if not hi >= lo:  # [λ, λ] is the band of one wavelength (a monochrome scan); NaN edges are refused
-        raise InputError("empty wavelength band", field="band", expected="(low, high) with low <= high", got=band)
-    return (wavelength >= lo - 1e-9) & (wavelength <= hi + 1e-9)
 
 
 def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -85,14 +80,6 @@ def _arrays(spectrum: SpectrumLike) -> tuple[NDArray[np.float64], NDArray[np.flo
     return spectrum["wavelength"].values, spectrum.values
 
 
-def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band) -> float:
-    """Σ_band values(λ)·Δλ with Δλ the central-difference sample spacing, band closed: the sums of eqs. (4)-(16)
-    of the power-budget paper and §4.2 of the cylindrical-module paper."""
-    wl = np.asarray(wavelength, dtype=np.float64)
-    inside = _band_mask(wl, band)
-    return float(np.sum(np.asarray(values, dtype=np.float64)[inside] * np.gradient(wl)[inside]))
-
-
 def band_integral(spectrum: SpectrumLike, band: Band) -> float:
     """Σ_band S(λ) Δλ on the spectrum's own grid (:func:`band_sum`)."""
     return band_sum(*_arrays(spectrum), band)
@@ -113,7 +100,7 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
     lam = sub["wavelength"].values
     weight = (sub["incident_spectrum"].sel(configuration=config).values if spectrum is None
               else spectrum_on(spectrum, lam))
-    in_band = np.ones(lam.size, dtype=bool) if band is None else _band_mask(lam, band)
+    in_band = np.ones(lam.size, dtype=bool) if band is None else band_mask(lam, band)
     usable = in_band & sub["incident_valid"].sel(configuration=config).values & (weight > 0)
     if not usable.any():
         raise InputError("band with no signal: no wavelength in the band carries incident light",
@@ -142,7 +129,7 @@ def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSIO
     """Σ_band ⟨q_λ⟩(λs) Δλs per record, in 1/sr: ⟨⟨q_λ⟩⟩·ΔΛs of eqs. (11)-(13)."""
     sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
     lam = sub["wavelength"].values
-    inside = _band_mask(lam, band)
+    inside = band_mask(lam, band)
     if not inside.any():
         raise InputError("band outside the wavelength grid", field="band", got=band)
     w = np.gradient(lam) * inside
@@ -183,12 +170,9 @@ def bispectral_weighted_mean(donaldson: xr.DataArray, excitation: SpectrumLike) 
 
 
 def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
-    """Power-weighted mean wavelength λ̄ = Σ Φ_λ λ Δλ / Σ Φ_λ Δλ over ``band`` (nm)."""
-    wl, values = _arrays(spectrum)
-    total = band_sum(wl, values, band)
-    if not total > 0:
-        raise NumericalError("spectrum carries no power in the band", field="band", got=band)
-    return band_sum(wl, values * wl, band) / total
+    """Power-weighted mean wavelength λ̄ = Σ Φ_λ λ Δλ / Σ Φ_λ Δλ over ``band`` (nm)
+    (:func:`bsdfkit.core.spectra.mean_wavelength_nm`)."""
+    return mean_wavelength_nm(*_arrays(spectrum), band)
 
 
 def mean_photon_energy(spectrum: SpectrumLike, band: Band) -> float:
@@ -228,29 +212,30 @@ def _only_configuration(ds: xr.Dataset) -> str:
 
 
 def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = None,
-                        bands: dict[str, Band] | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
+                        bands: InteractionBands | None = None, configs: dict[str, str] | None = None) -> xr.Dataset:
     """The per-record BSDF profile (1/sr) of one interaction of the two-wavelength approach, or of any sample.
 
     bibs: eq. (5) weighted mean over the blue band with the blue configuration; yiys: eq. (8) over the yellow
     band with the yellow configuration; biys: eq. (13) integrand ⟨⟨q_λ⟩⟩·ΔΛs from the blue configuration.
     ``elastic``: any sample (a measured table, a vendor file, a monochrome scan): the weighted mean over the
-    whole measured range (or ``bands["elastic"]``) of the dataset's only configuration (or
-    ``configs["elastic"]``). Optionally restricted to one ``side``. Band and configuration names can be
-    overridden.
+    whole measured range (or ``bands.elastic_nm``) of the dataset's only configuration (or
+    ``configs["elastic"]``). Optionally restricted to one ``side``. ``bands``: the bands [nm]
+    (:class:`bsdfkit.core.conventions.InteractionBands`, default the power-budget filters); configuration names
+    can be overridden.
     """
-    bands = {"blue": EXCITATION_BAND_NM, "yellow": CONVERSION_BAND_NM, **(bands or {})}
+    bands = bands or InteractionBands()
     configs = {"blue": "blue", "yellow": "yellow", **(configs or {})}
     if interaction == "bibs":
-        out = weighted_mean_bsdf(ds, configs["blue"], bands["blue"])
+        out = weighted_mean_bsdf(ds, configs["blue"], bands.blue_nm)
     elif interaction == "yiys":
-        out = weighted_mean_bsdf(ds, configs["yellow"], bands["yellow"])
+        out = weighted_mean_bsdf(ds, configs["yellow"], bands.yellow_nm)
     elif interaction == "biys":
-        out = bispectral_band_integral(ds, configs["blue"], bands["yellow"])
+        out = bispectral_band_integral(ds, configs["blue"], bands.yellow_nm)
     elif interaction == ELASTIC_INTERACTION:
         config = configs.get(ELASTIC_INTERACTION) or _only_configuration(ds)
         lam = ds["wavelength"].values
         # default: the measured range; None (every wavelength) where it is unknown (a NaN monochrome wavelength)
-        band = bands.get(ELASTIC_INTERACTION) or (
+        band = bands.elastic_nm or (
             (float(lam.min()), float(lam.max())) if np.all(np.isfinite(lam)) else None)
         out = weighted_mean_bsdf(ds, config, band)
     else:
@@ -258,8 +243,8 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
                          expected=" or ".join((*INTERACTIONS, ELASTIC_INTERACTION)), got=interaction)
     out.attrs["interaction"] = interaction
     if side is not None:
-        if side not in ("reflection", "transmission"):
-            raise InputError("unknown side", field="side", expected="reflection or transmission", got=side)
+        if side not in SIDES:
+            raise InputError("unknown side", field="side", expected=" or ".join(SIDES), got=side)
         out = out.isel(record=np.flatnonzero(out["side"].values == side))
     return out
 

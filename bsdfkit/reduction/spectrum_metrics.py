@@ -6,8 +6,8 @@ dominant wavelength and excitation purity.
 * **FWHM**: distance between the half-maximum crossings nearest the peak on either side, each linearly
   interpolated between the two samples that bracket half of the maximum sample. A side without a crossing
   (a line truncated by the range) gives ``nan`` for the FWHM and that half width.
-* **Centroid** λc = ∫λS dλ / ∫S dλ (trapezoid rule on the samples; the values as given, negative noise
-  included).
+* **Centroid** λc = ΣλSΔλ / ΣSΔλ over the whole grid, the power-weighted mean wavelength of the photon budget
+  (:func:`bsdfkit.core.spectra.mean_wavelength_nm`; the values as given, negative noise included).
 * **Dominant wavelength** λd and **excitation purity** pe: ``colour.dominant_wavelength`` and
   ``colour.excitation_purity`` (CIE 1931 2°) of the chromaticity (:func:`bsdfkit.reduction.colorimetry.
   chromaticity_xy`) against a white point, equal-energy illuminant E (x = y = 1/3) by default, on the
@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from bsdfkit.core.errors import BsdfkitError, InputError, NumericalError
+from bsdfkit.core.spectra import mean_wavelength_nm
 from bsdfkit.reduction.colorimetry import CMFS_NAME, chromaticity_xy
 
 __all__ = [
@@ -116,12 +117,8 @@ def half_maximum_crossings(wavelength, values, level: float | None = None) -> tu
 
 
 def centroid_wavelength(wavelength, values) -> float:
-    """λc = ∫λS dλ / ∫S dλ [nm] by the trapezoid rule on the samples."""
-    wl, y = _grid(wavelength, values)
-    area = float(np.trapezoid(y, wl))
-    if not area > 0:
-        raise NumericalError("spectrum has no positive area; its centroid is undefined")
-    return float(np.trapezoid(wl * y, wl)) / area
+    """λc = ΣλSΔλ / ΣSΔλ [nm] over the whole grid: :func:`bsdfkit.core.spectra.mean_wavelength_nm`."""
+    return mean_wavelength_nm(*_grid(wavelength, values))
 
 
 @functools.lru_cache(maxsize=1)

@@ -54,7 +54,9 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, SIDES, InteractionBands
 from bsdfkit.core.errors import InputError, NumericalError
+from bsdfkit.core.hemisphere import linear_weights, unit_disk_reach
 from bsdfkit.core.quadrature import gauss_legendre
 from bsdfkit.core.records import incidences, select
 from bsdfkit.reduction.spectral import bispectral_band_integral, interaction_profile
@@ -87,29 +89,13 @@ def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> 
     if not b2 < 1.0:
         raise NumericalError("specular point on or outside the unit disk", field="theta_i", expected="θi < 90°")
     psi = (np.arange(n_psi) + 0.5) * (2 * np.pi / n_psi)
-    bu = bx * np.cos(psi) + by * np.sin(psi)
-    t_max = -bu + np.sqrt(bu * bu + 1.0 - b2)
+    t_max = unit_disk_reach(bx * np.cos(psi) + by * np.sin(psi), b2)
     # Gauss–Legendre in r: spectral convergence for smooth f (the trapezoid rule was only O(h²) here).
     x, tw = gauss_legendre(n_r)
     x, tw = 0.5 * (x + 1.0), 0.5 * tw
     r = t_max[:, None] * x[None, :]
     w = (t_max[:, None] ** 2) * x[None, :] * tw[None, :] * (2 * np.pi / n_psi)
     return QuadratureGrid(r=r.ravel(), psi=np.repeat(psi, n_r), w=w.ravel())
-
-
-def _interp_weights(samples: NDArray[np.float64],
-                    query: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """Indices and weights of linear interpolation with constant extrapolation (same as np.interp)."""
-    m = samples.size
-    if m == 1:
-        z = np.zeros(query.size, dtype=np.int64)
-        return z, z, np.ones(query.size), np.zeros(query.size)
-    q = np.clip(query, samples[0], samples[-1])
-    hi = np.clip(np.searchsorted(samples, q, side="right"), 1, m - 1)
-    lo = hi - 1
-    span = samples[hi] - samples[lo]
-    t = (q - samples[lo]) / span
-    return lo, hi, 1.0 - t, t
 
 
 @dataclass(frozen=True)
@@ -290,7 +276,7 @@ class Hemisphere:
             idx = rows[k]
             for h, share in self.halves[name]:
                 a = coef[idx, k] * share * grid.w[idx]
-                lo, hi, wl, wh = _interp_weights(h.radius, grid.r[idx])
+                lo, hi, wl, wh = linear_weights(h.radius, grid.r[idx])
                 w += np.bincount(h.record[lo], weights=a * wl, minlength=self.n_records)
                 w += np.bincount(h.record[hi], weights=a * wh, minlength=self.n_records)
         return w
@@ -416,16 +402,21 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
 
 
 def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "yiys"),
-              theta_i: list[float] | None = None) -> xr.Dataset:
+              theta_i: list[float] | None = None, bands: InteractionBands | None = None) -> xr.Dataset:
     """TIS per interaction, side and incidence from a calibrated scan: a Dataset with ``tis``, ``tis_std``,
-    ``tis_std_measurement``, ``tis_std_reconstruction`` (fractions) over (interaction, side, theta_i)."""
+    ``tis_std_measurement``, ``tis_std_reconstruction`` (fractions) over (interaction, side, theta_i).
 
+    ``bands``: the bands of the profiles (:func:`bsdfkit.reduction.spectral.interaction_profile`), recorded in
+    the attributes ``blue_band_nm`` and ``yellow_band_nm`` so that a later photon budget can check it uses the
+    same ones."""
+
+    bands = bands or InteractionBands()
     angles = theta_i if theta_i is not None else incidences(ds)
-    sides = ["reflection", "transmission"]
+    sides = list(SIDES)
     shape = (len(interactions), len(sides), len(angles))
     arrays = {k: np.full(shape, np.nan) for k in ("tis", "tis_std", "tis_std_measurement", "tis_std_reconstruction")}
     for a, inter in enumerate(interactions):
-        prof = interaction_profile(ds, inter)
+        prof = interaction_profile(ds, inter, bands=bands)
         for b, side in enumerate(sides):
             for c, th in enumerate(angles):
                 sel = (prof["side"].values == side) & np.isclose(prof["theta_i"].values, th, atol=1e-6)
@@ -442,12 +433,13 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
     for k in arrays:
         out[k].attrs["units"] = "1"
     out["theta_i"].attrs["units"] = "deg"
-    out.attrs.update(quantity="tis", source=ds.attrs.get("source", ""))
+    out.attrs.update(quantity="tis", source=ds.attrs.get("source", ""), blue_band_nm=list(bands.blue_nm),
+                     yellow_band_nm=list(bands.yellow_nm))
     return out
 
 
 def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: str,
-                           interaction: str = "biys", band: tuple[float, float] = (470.0, 740.0)) -> xr.DataArray:
+                           interaction: str = "biys", band: tuple[float, float] = CONVERSION_BAND_NM) -> xr.DataArray:
     """Spectral TIS density (1/nm): the bi-spectral BSDF integrated over the hemisphere at each λs.
 
     The hemisphere weights of the band-integrated profile are linear in the data, so one reconstruction

@@ -29,7 +29,7 @@ import jaxlib
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import CONVERSION_BAND_NM, EXCITATION_BAND_NM
+from bsdfkit.core.conventions import CONVERSION_BAND_NM, EXCITATION_BAND_NM, band_label
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.toml_write import dumps as toml_dumps
@@ -106,7 +106,8 @@ class Configuration:
         return beam_scale * synthetic.xenon_lamp(wavelength) * filt
 
 
-BLUE = Configuration("blue", "blue interference filter 450-470 nm", ("bandpass", 450.0, 470.0), (450.0, 470.0))
+BLUE = Configuration("blue", f"blue interference filter {band_label(EXCITATION_BAND_NM)}",
+                     ("bandpass", *EXCITATION_BAND_NM), EXCITATION_BAND_NM)
 YELLOW = Configuration("yellow", "yellow cut-on filter 475 nm", ("longpass", 475.0), (475.0, 780.0))
 
 

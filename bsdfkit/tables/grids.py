@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from bsdfkit.core import frames
 from bsdfkit.core.errors import NumericalError, ValidationError
+from bsdfkit.core.hemisphere import unit_disk_reach
 from bsdfkit.core.lazy import LazyModule
 from bsdfkit.core.quadrature import gauss_legendre
 
@@ -66,6 +67,7 @@ __all__ = [
     "auto_harvey_shack_axes",
     "auto_specular_axes",
     "azimuth_midpoints_deg",
+    "quantize",
     "harvey_shack_cell_grid",
     "harvey_shack_grid",
     "harvey_shack_row_weights",
@@ -268,10 +270,10 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:
     """Distance from β0 = (sin θi, 0) to the unit circle along sample-frame azimuth ψ:
-    ρmax = −b cos ψ + √(1 − b² sin² ψ), b = sin θi (broadcast)."""
+    ρmax = −b cos ψ + √(1 − b² sin² ψ), b = sin θi (broadcast; :func:`bsdfkit.core.hemisphere.unit_disk_reach`)."""
     b = np.sin(np.radians(np.asarray(theta_i_deg, dtype=np.float64)))
     psi = np.radians(np.asarray(sample_azimuth_deg, dtype=np.float64))
-    return -b * np.cos(psi) + np.sqrt(np.maximum(0.0, 1.0 - (b * np.sin(psi)) ** 2))
+    return unit_disk_reach(b * np.cos(psi), b * b)
 
 
 def horizon_radial(theta_i_deg: ArrayLike, azimuth_deg: ArrayLike) -> NDArray[np.float64]:
@@ -818,6 +820,13 @@ def bulk_marking(indicators: ArrayLike, share: float = BULK_SHARE) -> NDArray[np
         # incidence keeps symmetric axes
         flag |= row >= cut * (1.0 - TIE_RTOL)
     return flag
+
+
+def quantize(values: ArrayLike, fmt: str) -> NDArray[np.float64]:
+    """``values`` as a table writes them with the format spec ``fmt`` and reads them back (float64, same shape):
+    the writers' TIS and checks are computed from what the file holds."""
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    return np.array([format(v, fmt) for v in flat], dtype=np.float64).reshape(np.shape(values))
 
 
 def azimuth_midpoints_deg(azimuth_deg: ArrayLike, periodic: bool = True) -> NDArray[np.float64]:

@@ -138,11 +138,6 @@ class AsapTable:
                             coords={"side": t["side"].values, "theta_i": t["theta_i"].values})
 
 
-def _quantize(values: NDArray[np.float64], fmt: str) -> NDArray[np.float64]:
-    flat = np.asarray(values, dtype=np.float64).ravel()
-    return np.array([format(v, fmt) for v in flat], dtype=np.float64).reshape(np.shape(values))
-
-
 def asap_table(
     grid: xr.DataArray,
     *,
@@ -176,13 +171,13 @@ def asap_table(
     for text in comments:
         if "\n" in text or "\r" in text:
             raise ValidationError("comments must be single lines", field="comments", got=text)
-    values = _quantize(grid.values, _VALUE_FMT)
-    rho = _quantize(grid["rho"].values, _ANGLE_FMT)
-    psi = _quantize(grid["psi"].values, _ANGLE_FMT)
+    values = grids.quantize(grid.values, _VALUE_FMT)
+    rho = grids.quantize(grid["rho"].values, _ANGLE_FMT)
+    psi = grids.quantize(grid["psi"].values, _ANGLE_FMT)
     theta = np.asarray(grid["theta_i"].values, dtype=np.float64)
     table = grid.copy(data=values).assign_coords(rho=rho, psi=psi)
     tis = grids.tis_harvey_shack_table(values, rho, psi, theta, 0.0)
-    tis_da = xr.DataArray(_quantize(tis, _VALUE_FMT), dims=("side", "theta_i"),
+    tis_da = xr.DataArray(grids.quantize(tis, _VALUE_FMT), dims=("side", "theta_i"),
                           coords={"side": grid["side"].values, "theta_i": theta})
     return AsapTable(table=table, tis_stated=tis_da, abg=tuple(abg), harvey=tuple(harvey), comments=tuple(comments))
 

@@ -201,11 +201,6 @@ def tis_abg(a: float, b: float, g: float, theta_i_deg: float) -> float:
     return float(bsdf_model("abg").total_integrated_scatter({"A": a, "B": b, "g": g}, theta_i_deg))
 
 
-def _quantize(values: NDArray[np.float64], fmt: str = _VALUE_FMT) -> NDArray[np.float64]:
-    flat = np.asarray(values, dtype=np.float64).ravel()
-    return np.array([format(v, fmt) for v in flat], dtype=np.float64).reshape(np.shape(values))
-
-
 def _per_incidence(name: str, value: ArrayLike, n: int) -> NDArray[np.float64]:
     arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy()
     if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 1):
@@ -227,7 +222,7 @@ def _absorptance(theta: NDArray, scatter_total: NDArray, refl: NDArray, tran: ND
             f"energy balance exceeds 1 at IncAngle {theta[k]:g} deg (TIS_R + TIS_T + Refl + Tran)",
             field="absorptance", expected=f"<= 1{within}", got=float(scatter_total[k] + refl[k] + tran[k]),
         )
-    return _quantize(np.clip(abso, 0.0, 1.0))
+    return grids.quantize(np.clip(abso, 0.0, 1.0), _VALUE_FMT)
 
 
 def _allowance(value: ArrayLike, n: int) -> NDArray[np.float64]:
@@ -283,11 +278,11 @@ def table_property(
     full = np.zeros((2,) + grid.shape[1:])
     for k, side in enumerate(SIDES):
         if side in grid["side"].values:
-            full[k] = _quantize(grid.sel(side=side).values)
+            full[k] = grids.quantize(grid.sel(side=side).values, _VALUE_FMT)
     table = xr.DataArray(
         full, dims=grid.dims,
-        coords={"side": list(SIDES), "theta_i": theta, "rho": _quantize(grid["rho"].values, _ANGLE_FMT),
-                "psi": _quantize(grid["psi"].values, _ANGLE_FMT)},
+        coords={"side": list(SIDES), "theta_i": theta, "rho": grids.quantize(grid["rho"].values, _ANGLE_FMT),
+                "psi": grids.quantize(grid["psi"].values, _ANGLE_FMT)},
         name="bsdf", attrs={"units": "1/sr", "frame": "harvey_shack", "zero_azimuth_deg": zero},
     )
     refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)
@@ -347,7 +342,7 @@ def abg_property(
         if not np.all(np.isfinite(arr)) or np.any(a < 0) or np.any((b <= 0) & (g != 0)) or np.any(b < 0):
             raise ValidationError("ABg parameters need A >= 0 and B > 0 (B >= 0 when g = 0)",
                                   field=f"{side} ABg", got=arr.tolist())
-        params[k] = _quantize(arr)
+        params[k] = grids.quantize(arr, _VALUE_FMT)
     abg = xr.DataArray(params, dims=("side", "theta_i", "param"),
                        coords={"side": list(SIDES), "theta_i": theta, "param": ["A", "B", "g"]})
     refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)

@@ -99,11 +99,6 @@ class ZemaxBsdf:
 # --------------------------------------------------------------------------------------------------
 # building and writing
 # --------------------------------------------------------------------------------------------------
-def _quantize(values: NDArray[np.float64], fmt: str) -> NDArray[np.float64]:
-    flat = np.asarray(values, dtype=np.float64).ravel()
-    return np.array([format(v, fmt) for v in flat], dtype=np.float64).reshape(np.shape(values))
-
-
 def zemax_bsdf(
     grid: xr.DataArray, *, symmetry: str = "PlaneSymmetrical", comments: Sequence[str] = ()
 ) -> ZemaxBsdf:
@@ -142,15 +137,15 @@ def zemax_bsdf(
         if "\n" in text or "\r" in text:
             raise ValidationError("comments must be single lines", field="comments", got=text)
     side = str(grid["side"].values[0])
-    values = _quantize(grid.values[0], _VALUE_FMT)[None]
+    values = grids.quantize(grid.values[0], _VALUE_FMT)[None]
     theta = np.asarray(grid["theta_i"].values, dtype=np.float64)
-    radial = _quantize(grid["radial"].values, _ANGLE_FMT)
-    azimuth = _quantize(azimuth, _ANGLE_FMT)
+    radial = grids.quantize(grid["radial"].values, _ANGLE_FMT)
+    azimuth = grids.quantize(azimuth, _ANGLE_FMT)
     table = xr.DataArray(values, dims=("sample_rotation", "theta_i", "azimuth", "radial"),
                          coords={"sample_rotation": [0.0], "theta_i": theta, "azimuth": azimuth, "radial": radial},
                          name="bsdf", attrs={"units": "1/sr", "frame": "specular"})
     tis = grids.tis_specular_table(values, radial, azimuth, theta, symmetry == "PlaneSymmetrical")
-    tis_da = xr.DataArray(_quantize(tis, _TIS_FMT), dims=("sample_rotation", "theta_i"),
+    tis_da = xr.DataArray(grids.quantize(tis, _TIS_FMT), dims=("sample_rotation", "theta_i"),
                           coords={"sample_rotation": [0.0], "theta_i": theta})
     return ZemaxBsdf(scatter_type=_TYPE_OF[side], symmetry=symmetry, table=table, tis_stated=tis_da,
                      comments=tuple(comments))

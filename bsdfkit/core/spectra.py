@@ -1,0 +1,101 @@
+"""Spectral formulas used by more than one layer: Gaussian line shapes, band sums, mean wavelength, photons.
+
+One home for each formula (issue #28): the reductions, the fits' start heuristics, the tracer's spectra and the
+scene reader all call these. NumPy, float64. The JAX versions of the line shapes, which need finite gradients
+at zero width (:func:`bsdfkit.models.functions.gaussian_spectrum` and
+:func:`~bsdfkit.models.functions.split_gaussian_spectrum`), take :data:`C_FWHM` from here.
+
+Wavelengths, peaks and widths in nm; band limits inclusive.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from bsdfkit.core.errors import InputError, NumericalError, ValidationError
+
+__all__ = [
+    "PLANCK_H",
+    "LIGHT_C",
+    "C_FWHM",
+    "FWHM_PER_SIGMA",
+    "Band",
+    "gaussian",
+    "split_gaussian",
+    "band_mask",
+    "band_sum",
+    "mean_wavelength_nm",
+    "photon_pdf_from_power",
+]
+
+PLANCK_H = 6.62607015e-34  # J s (exact, SI 2019)
+LIGHT_C = 299_792_458.0  # m/s (exact)
+
+#: C = 4 ln 2 of eqs. (2)–(3) of the cylindrical-module paper: with it Δλ is the true FWHM.
+C_FWHM: float = 4.0 * math.log(2.0)
+#: FWHM / σ of a Gaussian, √(8 ln 2) = 2.35482…
+FWHM_PER_SIGMA: float = math.sqrt(8.0 * math.log(2.0))
+
+#: A wavelength band (low, high) in nm, limits inclusive.
+Band = tuple[float, float]
+
+
+def gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> NDArray[np.float64]:
+    """Relative Gaussian spectrum with peak 1, S(λ) = exp(−C((λ − λp)/Δλ)²) with C = 4 ln 2 (eq. (2) of the
+    cylindrical-module paper; Δλ is the true FWHM) [1]."""
+    return np.exp(-C_FWHM * ((wavelength - peak_nm) / fwhm_nm) ** 2)
+
+
+def split_gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
+                   ) -> NDArray[np.float64]:
+    """Asymmetric Gaussian of eq. (3) of the cylindrical-module paper [1]: the width Δλ(1 + sign(λ − λp)·α) on
+    each side of the peak (the total FWHM stays Δλ), α in (−1, 1)."""
+    offset = wavelength - peak_nm
+    return np.exp(-C_FWHM * (offset / (fwhm_nm * (1.0 + np.sign(offset) * alpha))) ** 2)
+
+
+def band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
+    """The samples inside the closed ``band`` [nm] (1e-9 nm slack for grids built by float steps)."""
+    lo, hi = band
+    if not hi >= lo:  # [λ, λ] is the band of one wavelength (a monochrome scan); NaN edges are refused
+        raise InputError("empty wavelength band", field="band", expected="(low, high) with low <= high", got=band)
+    return (wavelength >= lo - 1e-9) & (wavelength <= hi + 1e-9)
+
+
+def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band) -> float:
+    """Σ_band values(λ)·Δλ with Δλ the central-difference sample spacing (:func:`numpy.gradient`), band closed:
+    the sums of eqs. (4)-(16) of the power-budget paper and §4.2 of the cylindrical-module paper.
+
+    Each sample stands for the bin of width Δλ around it (a spectrometer pixel, a tracer bin), so the sums of
+    adjacent bands add up; inside the grid the weights equal the trapezoid rule's."""
+    wl = np.asarray(wavelength, dtype=np.float64)
+    inside = band_mask(wl, band)
+    return float(np.sum(np.asarray(values, dtype=np.float64)[inside] * np.gradient(wl)[inside]))
+
+
+def mean_wavelength_nm(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band | None = None
+                       ) -> float:
+    """Power-weighted mean (centroid) wavelength λ̄ = Σ S λ Δλ / Σ S Δλ [nm] over ``band`` (None: the whole grid),
+    by the sums of :func:`band_sum` (eqs. (14)-(16) of the power-budget paper)."""
+    wl = np.asarray(wavelength, dtype=np.float64)
+    band = (float(wl[0]), float(wl[-1])) if band is None else band
+    total = band_sum(wl, values, band)
+    if not total > 0:
+        raise NumericalError("spectrum carries no power in the band", field="band", got=band)
+    return band_sum(wl, np.asarray(values, dtype=np.float64) * wl, band) / total
+
+
+def photon_pdf_from_power(wavelength_nm: NDArray[np.float64], power: NDArray[np.float64], band: Band | None = None
+                          ) -> NDArray[np.float64]:
+    """Photon-number pdf [1/nm] of a power spectrum, p ∝ S(λ)·λ with Σ p Δλ = 1.
+
+    ``band`` None: a uniform grid, summed with its step over every sample (the tracer's bins); a band [nm]: any
+    grid, normalised by :func:`band_sum` over that band (a measured emission spectrum)."""
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    photons = np.asarray(power, dtype=np.float64) * wl
+    total = photons.sum() * (wl[1] - wl[0]) if band is None else band_sum(wl, photons, band)
+    if not total > 0:
+        raise ValidationError("emission spectrum has no power", field="emission_spectrum", expected="some S > 0")
+    return photons / total
