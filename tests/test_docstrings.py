@@ -22,8 +22,8 @@ COVERED = [
     "accessor.py",
     "api.py",
     "bench/core.py", "bench/fitting.py", "bench/measurement.py", "bench/run.py", "bench/tracing.py",
-    "cli/bench.py", "cli/budget.py", "cli/color.py", "cli/fit.py", "cli/ingest.py", "cli/main.py", "cli/run.py",
-    "cli/simulate.py", "cli/sweep.py", "cli/trace.py",
+    "cli/bench.py", "cli/budget.py", "cli/color.py", "cli/fit.py", "cli/info.py", "cli/ingest.py", "cli/main.py",
+    "cli/read.py", "cli/run.py", "cli/simulate.py", "cli/sweep.py", "cli/tis.py", "cli/trace.py",
     "core/conventions.py", "core/frames.py", "core/jaxconfig.py", "core/quadrature.py", "core/records.py",
     "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py",
     "io/atomic.py", "io/jsonout.py", "io/netcdf.py", "io/recipe_head.py",
@@ -48,7 +48,7 @@ COVERED = [
 # pending: docstrings not yet complete
 PENDING = [
     "core/hemisphere.py", "core/spectra.py",
-    "cli/convert.py", "cli/export.py", "cli/info.py", "cli/read.py", "cli/tis.py",
+    "cli/convert.py", "cli/export.py",
     "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
     "fit/spectrum/solver.py", "fit/spectrum/starts.py",
     "models/functions.py",

@@ -10,6 +10,13 @@ from bsdfkit.io.text import existing_source
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``info`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("info",
                        help="summarise a scan: incidences, sides, positions per arc, wavelengths, configurations")
     p.add_argument("scan", help="netCDF written by bsdfkit, or a raw measurement folder")

@@ -14,6 +14,13 @@ from bsdfkit.tables import registry
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``read`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     formats = ", ".join(registry.names())
     p = sub.add_parser("read", help=f"summarise a BSDF table ({formats})",
                        description=f"Sniff a BSDF table ({formats}) by its content and report its incidences and "
@@ -24,7 +31,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``bsdfkit read``: the table's format, and its TIS per incidence, recomputed and as stated.
 
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of the verb.
+
+    Returns
+    -------
+    int
+        Exit status: 0 on success.
+    """
     summary = api.read(args.file)
     if args.json:
         emit_json(summary.to_dict())

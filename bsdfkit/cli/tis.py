@@ -25,6 +25,13 @@ from bsdfkit.io.text import existing_source
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``tis`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     p = sub.add_parser("tis", help="TIS: a phosphor plate's interaction table (Table 2 style), or the "
                                    "hemispherical reflectance/transmittance of any elastic scan")
     p.add_argument("scan", help="calibrated scan (netCDF from `bsdfkit ingest`), a raw measurement folder, a "
@@ -45,6 +52,21 @@ def load_scan(path: str, quantity: str | None = None, verb: str = "tis"):
 
     Records whose dark frames are brighter than their signal are said on stderr (one line, ``bsdfkit VERB:
     warning: …``): every reduction of them is biased low.
+
+    Parameters
+    ----------
+    path : str
+        Raw measurement folder, bsdfkit netCDF, measured BSDF text table or vendor table file.
+    quantity : str, optional
+        What a text table holds (one of :data:`bsdfkit.core.conventions.QUANTITIES`) when it does not say;
+        None to take it from the table.
+    verb : str, optional
+        The verb named in the warning line.
+
+    Returns
+    -------
+    xarray.Dataset
+        The calibrated BSDF dataset (:func:`bsdfkit.tables.to_dataset.ingest`).
     """
     existing_source(path)  # a mistyped path is answered before the engine is imported
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
