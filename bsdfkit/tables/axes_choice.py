@@ -27,6 +27,26 @@ def plane_symmetric_grid(
     noise. The deviation max|f(a) − f(360° − a)| / max f (per incidence block) is returned; above
     ``tolerance`` the export is refused (use Asymmetrical). The average leaves the TIS unchanged (the
     projected solid angle is symmetric under the mirror y → −y).
+
+    Parameters
+    ----------
+    fn : callable
+        The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
+    theta : ndarray
+        Incidences of the table (the specular angle) [deg].
+    side : str
+        The side tabulated, ``reflection`` or ``transmission``.
+    axes : bsdfkit.tables.grids.SpecularAxes
+        The table's radial and azimuth axes [deg].
+    tolerance : float
+        Largest deviation from plane symmetry accepted, relative to the block maximum [-].
+
+    Returns
+    -------
+    grid : xarray.DataArray
+        The mirror-averaged BSDF [1/sr], dims ``(side, theta_i, azimuth, radial)``.
+    deviation : float
+        The largest deviation found, relative to the block maximum [-].
     """
     mirrored = tuple(sorted({float(np.mod(360.0 - a, 360.0)) for a in axes.azimuth_deg}))
     half = grids.specular_grid(fn, theta, side, axes)
@@ -60,6 +80,26 @@ RECHECK_TIGHTEN = 0.7
 
 
 def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[str, Any]:
+    """The ``grid`` entry of an export's result: mode, node counts and, for a mode other than fixed or given, the
+    tolerances.
+
+    Parameters
+    ----------
+    mode : str
+        How the axes were chosen: ``given``, ``fixed``, ``auto`` or a fallback (:data:`FALLBACK`).
+    n_radial : int
+        Number of radial nodes.
+    n_azimuth : int
+        Number of azimuth nodes.
+    settings : bsdfkit.tables.export.ExportSettings
+        The export's settings (its ``grid_tolerance``).
+
+    Returns
+    -------
+    dict
+        ``mode``, ``radial``, ``azimuth``, and ``tis_rtol``, ``peak_rtol`` [-] unless ``mode`` is ``fixed`` or
+        ``given``.
+    """
     info: dict[str, Any] = {"mode": mode, "radial": n_radial, "azimuth": n_azimuth}
     if mode != "fixed" and mode != "given":
         info.update(tis_rtol=settings.grid_tolerance.tis_rtol, peak_rtol=settings.grid_tolerance.peak_rtol)
@@ -70,7 +110,28 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
                        zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
     """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven; for a table
     of cell averages, ``settings.node_values == "cell"``, refined by the lobe's peak only:
-    :func:`harvey_shack_table`)."""
+    :func:`harvey_shack_table`).
+
+    Parameters
+    ----------
+    fn : callable
+        The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
+    theta : ndarray
+        Incidences of the table [deg].
+    sides : sequence of str
+        Sides the axes serve (``reflection``, ``transmission``).
+    settings : bsdfkit.tables.export.ExportSettings
+        The export's settings (``harvey_shack_axes``, ``grid``, ``grid_tolerance``, ``node_values``).
+    zero_azimuth_deg : float
+        Sample-frame azimuth of the table's 0 azimuth axis [deg].
+
+    Returns
+    -------
+    axes : bsdfkit.tables.grids.HarveyShackAxes
+        The chosen axes.
+    info : dict
+        The ``grid`` entry of the export's result (:func:`grid_info`).
+    """
     if settings.harvey_shack_axes is not None:
         axes, mode = settings.harvey_shack_axes, "given"
     elif settings.grid == "fixed":
@@ -93,7 +154,28 @@ def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[s
     (:data:`VALUES_LABEL`): ``settings.node_values`` ``point`` (default: point samples), ``edge`` (point samples,
     each row's last node inside the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`) or
     ``cell`` (cell averages: the table's TIS by its format's rule is the source's on any axes,
-    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`)."""
+    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`).
+
+    Parameters
+    ----------
+    fn : callable
+        The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
+    theta : ndarray
+        Incidences of the table [deg].
+    sides : sequence of str
+        Sides tabulated (``reflection``, ``transmission``).
+    axes : bsdfkit.tables.grids.HarveyShackAxes
+        The table's axes (:func:`harvey_shack_axes`).
+    info : dict
+        The ``grid`` entry of the export's result; its ``values`` is set here.
+    settings : bsdfkit.tables.export.ExportSettings
+        The export's settings (its ``node_values``).
+
+    Returns
+    -------
+    xarray.DataArray
+        The BSDF values on the nodes [1/sr], dims ``(side, theta_i, rho, psi)``.
+    """
     values = settings.node_values
     info["values"] = VALUES_LABEL[values]
     if values == "cell":
@@ -110,7 +192,26 @@ VALUES_LABEL = {"point": "point samples", "edge": "point samples, edge values at
 
 def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
                    settings: Any) -> tuple[grids.SpecularAxes, dict[str, Any]]:
-    """The Zemax axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven)."""
+    """The Zemax axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven).
+
+    Parameters
+    ----------
+    fn : callable
+        The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
+    theta : ndarray
+        Incidences of the table (the specular angle) [deg].
+    sides : sequence of str
+        Sides the axes serve (``reflection``, ``transmission``).
+    settings : bsdfkit.tables.export.ExportSettings
+        The export's settings (``specular_axes``, ``grid``, ``grid_tolerance``, ``zemax_symmetry``).
+
+    Returns
+    -------
+    axes : bsdfkit.tables.grids.SpecularAxes
+        The chosen radial and azimuth axes [deg].
+    info : dict
+        The ``grid`` entry of the export's result (:func:`grid_info`).
+    """
     symmetric = settings.zemax_symmetry == "PlaneSymmetrical"
     if settings.specular_axes is not None:
         axes, mode = settings.specular_axes, "given"

@@ -33,7 +33,20 @@ FIXED_PHI_STEP_DEG = 2.0
 
 def normal_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit vectors (φ, θ, 3) of the nodes θs = ``theta_deg``, φs = ``phi_deg`` [deg] (bsdfkit's sample frame:
-    specular at φs = 0); the horizon row exactly at z = 0."""
+    specular at φs = 0); the horizon row exactly at z = 0.
+
+    Parameters
+    ----------
+    theta_deg : ndarray
+        Polar angles θs from the normal [deg].
+    phi_deg : ndarray
+        Azimuths φs [deg].
+
+    Returns
+    -------
+    ndarray
+        Unit direction vectors [-], shape ``(phi_deg.size, theta_deg.size, 3)``.
+    """
     a, t = np.meshgrid(np.radians(phi_deg), np.radians(theta_deg), indexing="ij")
     d = np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)], axis=-1)
     d[..., 2] = np.maximum(d[..., 2], 0.0)
@@ -42,13 +55,28 @@ def normal_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float6
 
 def tis_normal_table(values: NDArray[np.float64], theta_deg: NDArray[np.float64],
                      phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """TIS [1] of tables ``values[..., phi, theta]`` [1/sr] about the normal: per azimuth row the piecewise-linear
+    """TIS [-] of tables ``values[..., phi, theta]`` [1/sr] about the normal: per azimuth row the piecewise-linear
     interpolant in the distance from the normal in direction cosines, ρ = sin θs, against ρ dρ (exact per segment;
     the hemispherical engine behind ``bsdfkit read`` interpolates records about the normal linearly in that
     distance), then periodic trapezoid weights in φs (a row at 360° repeating 0° counts once).
 
     This is the refinement's yardstick only (the formats state no quadrature of their own; ``bsdfkit read``
-    integrates them with the hemispherical engine, which the export re-checks on the written file)."""
+    integrates them with the hemispherical engine, which the export re-checks on the written file).
+
+    Parameters
+    ----------
+    values : ndarray
+        BSDF tables [1/sr], shape ``(..., phi, theta)``.
+    theta_deg : ndarray
+        The θs axis, increasing from the normal [deg].
+    phi_deg : ndarray
+        The φs axis [deg].
+
+    Returns
+    -------
+    ndarray
+        TIS of each table [-], shape ``values.shape[:-2]``.
+    """
     f = np.asarray(values, dtype=np.float64)
     rho = np.sin(np.radians(np.asarray(theta_deg, dtype=np.float64)))
     seg = grids._segment_rho_moment(rho[:-1], rho[1:], f[..., :-1], f[..., 1:]).sum(axis=-1)  # (..., phi)
@@ -120,7 +148,29 @@ def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
                 settings: Any) -> tuple[NDArray[np.float64], NDArray[np.float64], dict]:
     """The θs and φs axes [deg] of an export about the normal (``settings`` an ``ExportSettings``): ``grid`` fixed,
     or auto (:func:`auto_normal_axes`; the fixed grid when the tolerance needs more nodes than it), and the
-    ``grid`` entry of the export's result (``mode``, ``theta``, ``phi`` node counts, tolerances)."""
+    ``grid`` entry of the export's result (``mode``, ``theta``, ``phi`` node counts, tolerances).
+
+    Parameters
+    ----------
+    fn : callable
+        The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
+    theta : ndarray
+        Incidences of the file [deg].
+    sides : sequence of str
+        Sides the axes serve (``reflection``, ``transmission``).
+    settings : bsdfkit.tables.export.ExportSettings
+        The export's settings (``grid``, ``grid_tolerance``).
+
+    Returns
+    -------
+    theta : ndarray
+        The θs axis [deg].
+    phi : ndarray
+        The φs axis [deg].
+    info : dict
+        The ``grid`` entry: ``mode``, ``theta`` and ``phi`` node counts, and ``tis_rtol``, ``peak_rtol`` [-]
+        unless the mode is ``fixed``.
+    """
     fixed = fixed_normal_axes()
     axes, mode = fixed, "fixed"
     tol = settings.grid_tolerance
@@ -136,7 +186,22 @@ def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
 def describe(info: dict, n_theta: int, n_phi: int) -> dict:
     """The ``grid`` entry of a written table about the normal: ``info`` of :func:`normal_axes` with the written node
     counts (``theta``; ``phi`` with a repeated 360° column where the format writes one) and, for the fixed grid,
-    the steps in ``mode``."""
+    the steps in ``mode``.
+
+    Parameters
+    ----------
+    info : dict
+        The ``grid`` entry of :func:`normal_axes`.
+    n_theta : int
+        Number of θs nodes written.
+    n_phi : int
+        Number of φs nodes written.
+
+    Returns
+    -------
+    dict
+        ``info`` with the written node counts (and the fixed grid's steps in ``mode``).
+    """
     out = dict(info, theta=int(n_theta), phi=int(n_phi))
     if out["mode"] == "fixed":
         out["mode"] = f"fixed: theta {FIXED_THETA_STEP_DEG:g} deg x phi {FIXED_PHI_STEP_DEG:g} deg (normal frame)"
