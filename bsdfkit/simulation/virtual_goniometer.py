@@ -75,7 +75,18 @@ class Spectrometer:
         return self.wavelength_min_nm + self.wavelength_step_nm * np.arange(n)
 
     def responsivity(self, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Relative spectral responsivity (counts per unit spectral power), peak 1: a smooth CCD-like curve."""
+        """Relative spectral responsivity (counts per unit spectral power), peak 1: a smooth CCD-like curve.
+
+        Parameters
+        ----------
+        wavelength : ndarray
+            Wavelength [nm].
+
+        Returns
+        -------
+        ndarray
+            Relative responsivity [-], 1 at 600 nm.
+        """
         lam = np.asarray(wavelength, dtype=np.float64)
         return 0.35 + 0.65 * np.exp(-(((lam - 600.0) / 230.0) ** 2))
 
@@ -92,7 +103,21 @@ class Configuration:
     reference_attenuation: float = 1e-3
 
     def incident_power(self, wavelength: NDArray[np.float64], beam_scale: float) -> NDArray[np.float64]:
-        """Spectral power of the beam at the sample (counts/s at unit responsivity per pixel)."""
+        """Spectral power of the beam at the sample (counts/s at unit responsivity per pixel).
+
+        Parameters
+        ----------
+        wavelength : ndarray
+            Wavelength [nm].
+        beam_scale : float
+            The lamp's spectral power at 560 nm before the filter, in the unit of the result (e.g. [counts/s] per
+            pixel; 1 for a relative spectrum).
+
+        Returns
+        -------
+        ndarray
+            The lamp spectrum times the filter's transmittance, in the unit of ``beam_scale``.
+        """
         kind = self.filter[0]
         if kind == "bandpass":
             filt = synthetic.bandpass_filter(wavelength, self.filter[1], self.filter[2])
@@ -140,12 +165,27 @@ class BandSeries:
         return self.first_nm + self.step_nm * np.arange(n)
 
     def configurations(self) -> tuple[Configuration, ...]:
+        """One monochromator configuration per band, named ``{name}-{centre:g}``.
+
+        Returns
+        -------
+        tuple of Configuration
+            The bands in order of their centres; each nominal band is centre ± bandwidth/2 [nm].
+        """
         half = self.bandwidth_nm / 2
         return tuple(Configuration(f"{self.name}-{c:g}", f"{self.description}, centre {c:g} nm",
                                    ("monochromator", float(c), self.bandwidth_nm), (float(c) - half, float(c) + half),
                                    self.reference_attenuation) for c in self.centers_nm)
 
     def manifest_entry(self) -> dict:
+        """The series' ``[[band_series]]`` manifest entry (docs/raw-format.md).
+
+        Returns
+        -------
+        dict
+            Name, description, first and last centre, centre step and bandwidth [nm], the scan and reference file
+            patterns (``{center}`` for the centre) and the reference attenuation [-].
+        """
         return {"name": self.name, "description": self.description, "first_center_nm": self.first_nm,
                 "last_center_nm": self.last_nm, "center_step_nm": self.step_nm, "bandwidth_nm": self.bandwidth_nm,
                 "scan_file": f"scans/{self.name}-{{center}}.csv.gz",
@@ -178,7 +218,24 @@ class ScanPlan:
                                   got=f"{n:.3g}")
 
     def positions(self, theta_i_deg: float, side: str) -> list[tuple[float, float, str]]:
-        """(θs, φs, arc) in degrees in the sample frame for one incidence and side."""
+        """(θs, φs, arc) in degrees in the sample frame for one incidence and side.
+
+        In-plane positions beyond 90° are dropped, and in reflection those within ``retro_block_deg`` of the
+        incident beam's direction; the perpendicular arc's ε = 0 is on the in-plane arc already.
+
+        Parameters
+        ----------
+        theta_i_deg : float
+            Angle of incidence [deg].
+        side : str
+            ``reflection`` or ``transmission``.
+
+        Returns
+        -------
+        list of tuple
+            ``(theta_s [deg], phi_s [deg], arc)`` per detector position, ``arc`` ``in_plane`` or
+            ``perpendicular``.
+        """
         th = theta_i_deg
         signed = set(np.round(self.in_plane_deg, 6))
         if self.fine_halfwidth_deg > 0:
@@ -224,7 +281,29 @@ class VirtualGoniometer:
     # -- signal model ------------------------------------------------------------------------------
     def scattered_rate(self, truth: synthetic.TruthModel, config: Configuration, theta_i_deg: float,
                        side: str, theta_s_deg: NDArray, phi_s_deg: NDArray) -> NDArray[np.float64]:
-        """Mean signal (counts/s per pixel, no dark) for detector centres (θs, φs); shape (n_pos, n_wavelength)."""
+        """Mean signal (counts/s per pixel, no dark) for detector centres (θs, φs); shape (n_pos, n_wavelength).
+
+        Parameters
+        ----------
+        truth : bsdfkit.simulation.truth.TruthModel
+            The sample's truth BSDF.
+        config : Configuration
+            The incident configuration (lamp and filter).
+        theta_i_deg : float
+            Angle of incidence [deg].
+        side : str
+            ``reflection`` or ``transmission``.
+        theta_s_deg : ndarray
+            Polar angles of the detector centres [deg].
+        phi_s_deg : ndarray
+            Azimuths of the detector centres [deg].
+
+        Returns
+        -------
+        ndarray
+            Mean signal rate [counts/s] per spectral pixel, shape ``(n_pos, n_wavelength)``: the scattered power
+            integrated over each detector aperture (:func:`bsdfkit.measurement.instrument.aperture_quadrature`).
+        """
         lam = self.spectrometer.wavelength
         resp = self.spectrometer.responsivity(lam)
         p_i = config.incident_power(lam, self.beam_peak_counts_per_s)
@@ -239,6 +318,27 @@ class VirtualGoniometer:
         """What an ideal (noise-free) instrument reports: aperture-averaged BSDF and bi-spectral BSDF.
 
         ``bsdf`` = P_s(λ)/(P_i(λ) Ω cos θs) where P_i(λ) > 0; ``bsdf_bispectral`` = P_s(λ)/(Φ_i Ω cos θs).
+
+        Parameters
+        ----------
+        truth : bsdfkit.simulation.truth.TruthModel
+            The sample's truth BSDF.
+        config : Configuration
+            The incident configuration (lamp and filter).
+        theta_i_deg : float
+            Angle of incidence [deg].
+        side : str
+            ``reflection`` or ``transmission``.
+        theta_s_deg : ndarray
+            Polar angles of the detector centres [deg].
+        phi_s_deg : ndarray
+            Azimuths of the detector centres [deg].
+
+        Returns
+        -------
+        dict
+            ``bsdf`` [1/sr] (NaN where no incident power) and ``bsdf_bispectral`` [1/(sr nm)], each of shape
+            ``(n_pos, n_wavelength)``.
         """
         lam = self.spectrometer.wavelength
         resp = self.spectrometer.responsivity(lam)
@@ -252,6 +352,19 @@ class VirtualGoniometer:
 
     # -- noise -------------------------------------------------------------------------------------
     def choose_exposure(self, peak_rate: float) -> float:
+        """The longest exposure of the ladder, up to ``max_exposure_s``, that keeps the peak pixel's mean counts
+        (bias + signal + dark) within ``target_fill`` × full scale (the shortest step when none does).
+
+        Parameters
+        ----------
+        peak_rate : float
+            Mean signal rate of the brightest pixel, dark excluded [counts/s].
+
+        Returns
+        -------
+        float
+            Exposure time [s].
+        """
         sp = self.spectrometer
         budget = self.target_fill * sp.full_scale_counts - sp.bias_counts
         best = self.exposure_ladder_s[0]
@@ -263,7 +376,22 @@ class VirtualGoniometer:
     def read_counts(self, rate: NDArray[np.float64], exposure_s: NDArray[np.float64] | float,
                     rng: np.random.Generator) -> NDArray[np.int64]:
         """Raw counts for mean signal ``rate`` (counts/s) integrated for ``exposure_s``, with dark, shot and read
-        noise."""
+        noise.
+
+        Parameters
+        ----------
+        rate : ndarray
+            Mean signal rate per spectral pixel, dark excluded [counts/s], shape ``(n, n_wavelength)``.
+        exposure_s : float or ndarray
+            Exposure time, one for all or one per row [s].
+        rng : numpy.random.Generator
+            The random stream of the draws.
+
+        Returns
+        -------
+        ndarray
+            Raw counts (bias included, rounded and clipped to 0 … full scale) [counts], shape of ``rate``.
+        """
         sp = self.spectrometer
         t = np.asarray(exposure_s, dtype=np.float64)
         if t.ndim == 1:
@@ -298,7 +426,32 @@ def simulate_scan(truth: synthetic.TruthModel, plan: ScanPlan | None = None,
                   sample_name: str | None = None, extra_manifest: dict | None = None,
                   band_series: tuple[BandSeries, ...] = ()) -> RawExport:
     """Simulate a complete raw export (scans, reference beams, darks) of ``truth`` measured with ``plan``:
-    the ``configurations`` and then every band of each ``band_series`` (a monochromator scan)."""
+    the ``configurations`` and then every band of each ``band_series`` (a monochromator scan).
+
+    Parameters
+    ----------
+    truth : bsdfkit.simulation.truth.TruthModel
+        The sample's truth BSDF.
+    plan : ScanPlan, optional
+        Incidences and detector positions; None for :func:`default_plan`.
+    goniometer : VirtualGoniometer, optional
+        Instrument, spectrometer and lamp; None for the default set-up.
+    configurations : tuple of Configuration, optional
+        Incident configurations measured (default: the blue and yellow filters).
+    seed : int, optional
+        Seed of every file's random stream.
+    sample_name : str, optional
+        The manifest's sample name; None for the truth's name.
+    extra_manifest : dict, optional
+        Top-level manifest tables added to (or replacing) the generated ones.
+    band_series : tuple of BandSeries, optional
+        Monochromator scans measured after the configurations.
+
+    Returns
+    -------
+    RawExport
+        The export in memory (:func:`write_raw_export` writes it).
+    """
     plan = plan or default_plan()
     gonio = goniometer or VirtualGoniometer()
     sp = gonio.spectrometer
@@ -394,7 +547,18 @@ def _wl_header(lam: NDArray[np.float64]) -> list[str]:
 
 
 def raw_export_names(export: RawExport) -> list[str]:
-    """The files of a raw export folder, manifest last."""
+    """The files of a raw export folder, manifest last.
+
+    Parameters
+    ----------
+    export : RawExport
+        The export.
+
+    Returns
+    -------
+    list of str
+        Paths relative to the export folder.
+    """
     return ([f"scans/{n}.csv.gz" for n in export.scans] + [f"reference/{n}.csv.gz" for n in export.references]
             + ["dark.csv.gz", "responsivity.csv", "manifest.toml"])
 
@@ -404,6 +568,20 @@ def write_raw_export(export: RawExport, folder: str | Path, force: bool = False)
 
     ``folder`` is the export as a whole: an existing folder that is not empty is refused without ``force`` and
     replaced with it (:class:`bsdfkit.io.atomic.OutputSet`, ``whole_folder``).
+
+    Parameters
+    ----------
+    export : RawExport
+        The export to write.
+    folder : str or Path
+        The export folder.
+    force : bool, optional
+        Replace an existing, non-empty folder.
+
+    Returns
+    -------
+    Path
+        The folder written.
     """
     folder = Path(folder)
     wl = _wl_header(export.wavelength)
@@ -457,6 +635,16 @@ def cl830_truth(goniometer: VirtualGoniometer | None = None) -> synthetic.Phosph
 
     The exact TIS depends on the measurement's incident spectra (the weighted means of eqs. 5 and 8), so the
     lamp and filters of ``goniometer`` enter: ρ = TIS/⟨m⟩ − TIS_lobe.
+
+    Parameters
+    ----------
+    goniometer : VirtualGoniometer, optional
+        The set-up whose spectrometer grid and incident spectra enter; None for the default set-up.
+
+    Returns
+    -------
+    bsdfkit.simulation.truth.PhosphorPlateTruth
+        The truth at the incidences of :data:`CL830_TIS_TARGETS`.
     """
     gonio = goniometer or VirtualGoniometer()
     lam = gonio.spectrometer.wavelength
@@ -488,7 +676,20 @@ def cl830_truth(goniometer: VirtualGoniometer | None = None) -> synthetic.Phosph
 
 
 def truth_manifest_section(truth: synthetic.PhosphorPlateTruth, goniometer: VirtualGoniometer | None = None) -> dict:
-    """The ``[truth]`` manifest table: parameters and the exact TIS per incidence (percent)."""
+    """The ``[truth]`` manifest table: parameters and the exact TIS per incidence (percent).
+
+    Parameters
+    ----------
+    truth : bsdfkit.simulation.truth.PhosphorPlateTruth
+        The truth of the simulated scan.
+    goniometer : VirtualGoniometer, optional
+        The set-up whose spectrometer grid and incident spectra enter the exact TIS; None for the default set-up.
+
+    Returns
+    -------
+    dict
+        ``{"truth": {...}}``: the model's name, its parameters as JSON and ``tis_percent`` [%] per incidence.
+    """
     gonio = goniometer or VirtualGoniometer()
     lam = gonio.spectrometer.wavelength
     blue = BLUE.incident_power(lam, 1.0)
@@ -500,7 +701,22 @@ def truth_manifest_section(truth: synthetic.PhosphorPlateTruth, goniometer: Virt
 
 def cl830_synthetic(seed: int = 830, plan: ScanPlan | None = None,
                     goniometer: VirtualGoniometer | None = None) -> RawExport:
-    """The bundled measurement: the cl830 truth measured with the default plan (``measurements/cl830-synthetic``)."""
+    """The bundled measurement: the cl830 truth measured with the default plan (``measurements/cl830-synthetic``).
+
+    Parameters
+    ----------
+    seed : int, optional
+        Seed of every file's random stream (830 for the bundled set).
+    plan : ScanPlan, optional
+        Incidences and detector positions; None for :func:`default_plan`.
+    goniometer : VirtualGoniometer, optional
+        Instrument, spectrometer and lamp; None for the default set-up.
+
+    Returns
+    -------
+    RawExport
+        The export in memory, with the ``[truth]`` table and the command that regenerates it in its manifest.
+    """
     gonio = goniometer or VirtualGoniometer()
     truth = cl830_truth(gonio)
     extra = truth_manifest_section(truth, gonio)
@@ -561,7 +777,20 @@ def eem_truth() -> synthetic.ExcitationEmissionTruth:
 
 
 def eem_command(seed: int = EEM_SEED, folder: str = "measurements/eem-synthetic") -> str:
-    """The command that regenerates the eem-synthetic set bit for bit."""
+    """The command that regenerates the eem-synthetic set bit for bit.
+
+    Parameters
+    ----------
+    seed : int, optional
+        Seed of every file's random stream.
+    folder : str, optional
+        The export folder the command writes.
+
+    Returns
+    -------
+    str
+        A shell command line.
+    """
     return (f"python -c \"from bsdfkit.simulation.virtual_goniometer import eem_synthetic, write_raw_export; "
             f"write_raw_export(eem_synthetic(seed={seed}), '{folder}')\"")
 
@@ -569,7 +798,18 @@ def eem_command(seed: int = EEM_SEED, folder: str = "measurements/eem-synthetic"
 def eem_synthetic(seed: int = EEM_SEED) -> RawExport:
     """The bundled excitation-emission set (``measurements/eem-synthetic``): the eem truth measured with the
     blue and yellow filters of the two-wavelength approach and the monochromator scan :data:`EEM_BAND_SERIES` +
-    :data:`EEM_LONG_SERIES`, on the sparse :func:`eem_plan`, with a 1 nm spectrometer."""
+    :data:`EEM_LONG_SERIES`, on the sparse :func:`eem_plan`, with a 1 nm spectrometer.
+
+    Parameters
+    ----------
+    seed : int, optional
+        Seed of every file's random stream.
+
+    Returns
+    -------
+    RawExport
+        The export in memory, with the ``[truth]`` table and the command that regenerates it in its manifest.
+    """
     gonio = VirtualGoniometer(spectrometer=EEM_SPECTROMETER)
     truth = eem_truth()
     lam = EEM_SPECTROMETER.wavelength
