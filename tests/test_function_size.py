@@ -13,9 +13,6 @@ MAX_PARAMETERS = 8  # self and cls not counted
 # "module:qualname" -> why this function stays longer or wider than the limits. Keep it short.
 EXCEPTIONS = {
     # pending: split on another branch
-    "bsdfkit.fit.spectrum.reconstruction:reconstruct_two_band_spectrum": "pending: split on another branch",
-    "bsdfkit.fit.spectrum.reporting:_fit_model": "pending: split on another branch",
-    "bsdfkit.fit.spectrum.solver:_fit_batch": "pending: split on another branch",
     "bsdfkit.pipeline.recipe:stage_trace": "pending: split on another branch",
     "bsdfkit.pipeline.report:_Report.sec_trace": "pending: split on another branch",
     "bsdfkit.pipeline.spectral_comparison:_summary": "pending: split on another branch",

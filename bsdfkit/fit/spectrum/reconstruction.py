@@ -126,20 +126,20 @@ def reconstruct_two_band_spectrum(
     flux_blue_W: float,
     flux_yellow_W: float,
     *,
-    blue_band_nm: tuple[float, float] = BLUE_BAND_NM,
-    yellow_band_nm: tuple[float, float] = YELLOW_BAND_NM,
+    bands_nm: tuple[tuple[float, float], tuple[float, float]] = (BLUE_BAND_NM, YELLOW_BAND_NM),
     max_condition: float = MAX_CONDITION,
     name: str = "two-band reconstruction",
 ) -> SpectralDistribution:
     """Absolute spectral radiant flux Φ_e,λ = A1·S_blue + A2·S_yellow in W/nm (§4.2, cylindrical-module paper).
 
-    Arguments as :func:`two_band_gains` (bands 380–500 nm and 501–780 nm by default, λ in nm). Returns a
+    Arguments as :func:`two_band_gains`, its blue and yellow bands given as one pair ``bands_nm`` (380–500 nm
+    and 501–780 nm by default, λ in nm). Returns a
     :class:`colour.SpectralDistribution` on the input grid; its band sums reproduce the two fluxes.
     """
     import colour
 
     gains = two_band_gains(wavelength, s_blue, s_yellow, flux_blue_W, flux_yellow_W,
-                           blue_band_nm=blue_band_nm, yellow_band_nm=yellow_band_nm,
+                           blue_band_nm=bands_nm[0], yellow_band_nm=bands_nm[1],
                            max_condition=max_condition)
     wl = np.asarray(wavelength, dtype=float)
     flux = gains.a1_W_per_nm * np.asarray(s_blue, float) + gains.a2_W_per_nm * np.asarray(s_yellow, float)

@@ -25,7 +25,7 @@ from bsdfkit.fit.spectrum.models import (
     TWO_BAND_MODELS,
     _parameters,
 )
-from bsdfkit.fit.spectrum.solver import _fit_batch, _validated_grid
+from bsdfkit.fit.spectrum.solver import _fit_batch, _PaddedSpectra, _validated_grid
 from bsdfkit.models.registry import pump_two_band, pump_two_band_led
 from bsdfkit.reduction.colorimetry import check_power_spectrum, check_wavelengths_nm
 from bsdfkit.reduction.spectrum_metrics import spectrum_metrics
@@ -249,8 +249,8 @@ def analyse_spectra(
     n_parameters = {name: len(_parameters(name, 380.0, 780.0)) for name in models_to_fit}
     records = _measured_records(spectra, ranges, labels, wl2, y2, m2, n_parameters)
     alive_all = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
-    per_model = {name: _fit_model(name, alive_all, wl2, y2, m2, records, labels, n_parameters[name], options,
-                                  split_nm, colorimetry=len(models_to_fit) == 1)
+    per_model = {name: _fit_model(name, alive_all, _PaddedSpectra(wl2, y2, m2, labels), records, n_parameters[name],
+                                  options, split_nm, colorimetry=len(models_to_fit) == 1)
                  for name in models_to_fit}
     for b in alive_all:
         _complete_record(records[int(b)], {name: per_model[name][int(b)] for name in models_to_fit}, model, criterion,
@@ -298,10 +298,11 @@ def _measured_records(spectra, ranges, labels, wl2, y2, m2, n_parameters: dict[s
     return records
 
 
-def _fit_model(name: str, alive_all: np.ndarray, wl2, y2, m2, records, labels, n_parameters: int,
+def _fit_model(name: str, alive_all: np.ndarray, spectra: _PaddedSpectra, records, n_parameters: int,
                options: FitOptions, split_nm: float | None, colorimetry: bool) -> dict[Any, Any]:
     """Model ``name`` fitted to the usable spectra in one batch: {spectrum index: record or {"error"}}, plus the
     batch result ``_ds`` and its curves ``_curves`` (the chosen model's colorimetry is computed from them)."""
+    wl2, _, m2, labels = spectra
     out: dict[Any, Any] = {}
     too_few = [b for b in alive_all if np.count_nonzero(m2[b]) < n_parameters + 2]
     for b in too_few:
@@ -310,8 +311,8 @@ def _fit_model(name: str, alive_all: np.ndarray, wl2, y2, m2, records, labels, n
     alive = np.array([b for b in alive_all if b not in too_few], dtype=int)
     if alive.size == 0:
         return out
-    ds, errors, splits = _fit_batch(wl2[alive], y2[alive], m2[alive], name, sigma=None, options=options,
-                                    split_nm=split_nm, labels=[labels[b] for b in alive], collect=True)
+    ds, errors, splits = _fit_batch(spectra.rows(alive), name, sigma=None, options=options, split_nm=split_nm,
+                                    collect=True)
     if ds is None:
         for k, b in enumerate(alive):
             out[int(b)] = {"error": errors.get(k, f"{labels[b]}: fit failed")}

@@ -8,6 +8,7 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -179,9 +180,24 @@ def _degenerate(result: xr.Dataset, labels: Sequence[str], max_condition: float)
     return errors
 
 
-def _fit_batch(wl2, y, m, model, *, sigma, options, split_nm, labels, collect):
+class _PaddedSpectra(NamedTuple):
+    """Spectra on (batch, n) grids: wavelengths [nm], values, the mask of the samples used, and one label each."""
+
+    wavelength_nm: np.ndarray
+    values: np.ndarray
+    mask: np.ndarray
+    labels: list[str]
+
+    def rows(self, index: np.ndarray) -> _PaddedSpectra:
+        """The spectra at ``index`` (an integer array)."""
+        return _PaddedSpectra(self.wavelength_nm[index], self.values[index], self.mask[index],
+                             [self.labels[b] for b in index])
+
+
+def _fit_batch(spectra: _PaddedSpectra, model, *, sigma, options, split_nm, collect):
     """Core of :func:`fit_spectra` on (batch, n) grids. Returns (Dataset on normalised data or None, errors,
     splits) where errors maps a spectrum index to a one-line message."""
+    wl2, y, m, labels = spectra
     n_batch = y.shape[0]
     peak_values = np.max(np.where(m, y, -np.inf), axis=1)
     if not np.all(peak_values > 0):
@@ -495,8 +511,8 @@ def fit_spectra(
         raise InputError("spectral value is not finite", field=f"values[{i}, {j}] at {wl2[i, j]:g} nm",
                          got=float(y[i, j]))
     labels = [f"spectrum {b}" for b in range(y.shape[0])] if y.shape[0] > 1 else [""]
-    result, _, _ = _fit_batch(wl2, y, m, model, sigma=sigma, options=options, split_nm=split_nm, labels=labels,
-                              collect=False)
+    result, _, _ = _fit_batch(_PaddedSpectra(wl2, y, m, labels), model, sigma=sigma, options=options,
+                              split_nm=split_nm, collect=False)
     return result
 
 
