@@ -25,6 +25,7 @@ COVERED = [
     "cli/bench.py", "cli/budget.py", "cli/color.py", "cli/fit.py", "cli/info.py", "cli/ingest.py", "cli/main.py",
     "cli/read.py", "cli/run.py", "cli/simulate.py", "cli/sweep.py", "cli/tis.py", "cli/trace.py",
     "core/conventions.py", "core/frames.py", "core/jaxconfig.py", "core/quadrature.py", "core/records.py",
+    "core/hemisphere.py", "core/spectra.py",
     "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py",
     "io/atomic.py", "io/jsonout.py", "io/netcdf.py", "io/recipe_head.py",
     "io/spectrum_file.py", "io/text.py", "io/toml_write.py",
@@ -48,7 +49,6 @@ COVERED = [
 
 # pending: docstrings not yet complete
 PENDING = [
-    "core/hemisphere.py", "core/spectra.py",
     "cli/convert.py", "cli/export.py",
     "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
     "fit/spectrum/solver.py", "fit/spectrum/starts.py",
