@@ -24,6 +24,7 @@ COVERED = [
     "bench/core.py", "bench/fitting.py", "bench/measurement.py", "bench/run.py", "bench/tracing.py",
     "cli/bench.py", "cli/budget.py", "cli/color.py", "cli/fit.py", "cli/info.py", "cli/ingest.py", "cli/main.py",
     "cli/read.py", "cli/run.py", "cli/simulate.py", "cli/sweep.py", "cli/tis.py", "cli/trace.py",
+    "cli/convert.py", "cli/export.py",
     "core/conventions.py", "core/frames.py", "core/jaxconfig.py", "core/quadrature.py", "core/records.py",
     "core/hemisphere.py", "core/spectra.py",
     "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py",
@@ -51,7 +52,6 @@ COVERED = [
 
 # pending: docstrings not yet complete
 PENDING = [
-    "cli/convert.py", "cli/export.py",
     "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
     "fit/spectrum/solver.py", "fit/spectrum/starts.py",
     "pipeline/recipe.py", "pipeline/report.py", "pipeline/spectral_comparison.py",
