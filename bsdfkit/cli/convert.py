@@ -37,6 +37,13 @@ def _grid_tis_default(args: argparse.Namespace) -> float | None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``convert`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     formats = registry.names()
     p = sub.add_parser("convert", help="convert a BSDF table or dataset to another table format "
                                        f"({', '.join(formats)})",
@@ -69,6 +76,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``bsdfkit convert``: write the table and compare the TIS of the re-read file with the source's.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of the verb.
+
+    Returns
+    -------
+    int
+        Exit status: 0 when every re-read TIS is within ``--tis-tolerance``, 1 when the file was written but the
+        check failed.
+    """
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
     from bsdfkit.cli.export import describe_grid, grid_tolerance
     from bsdfkit.tables.export import ExportSettings

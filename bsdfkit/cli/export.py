@@ -29,7 +29,25 @@ def _incidences(text: str) -> tuple[float, ...]:
 
 def grid_tolerance(args: argparse.Namespace, tis_default: float | None = None):
     """The :class:`bsdfkit.tables.grids.GridTolerance` of ``--grid-tis-tolerance`` / ``--grid-peak-tolerance``
-    (``tis_default`` [1] replaces the class default of the TIS tolerance when the option is not given)."""
+    (``tis_default`` [1] replaces the class default of the TIS tolerance when the option is not given).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (``grid``, ``grid_tis_tolerance``, ``grid_peak_tolerance``).
+    tis_default : float, optional
+        Relative TIS tolerance [-] used when ``--grid-tis-tolerance`` is not given; None keeps the class default.
+
+    Returns
+    -------
+    GridTolerance
+        The tolerances of the automatic grid.
+
+    Raises
+    ------
+    ValidationError
+        If a grid tolerance is given without ``--grid auto``.
+    """
     from bsdfkit.tables.grids import GridTolerance
 
     given = {k: v for k, v in (("tis_rtol", args.grid_tis_tolerance), ("peak_rtol", args.grid_peak_tolerance))
@@ -42,7 +60,18 @@ def grid_tolerance(args: argparse.Namespace, tis_default: float | None = None):
 
 
 def describe_grid(result) -> str:
-    """One line: written size [bytes] and how the axes were chosen."""
+    """One line: written size [bytes] and how the axes were chosen.
+
+    Parameters
+    ----------
+    result : bsdfkit.tables.export.ExportResult
+        A written table (its ``grid`` description and ``size_bytes``).
+
+    Returns
+    -------
+    str
+        The description.
+    """
     g = result.grid
     text = f"{result.size_bytes:,} bytes; grid {g.get('mode', '?')}"
     if "radial" in g:
@@ -59,6 +88,13 @@ def describe_grid(result) -> str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``export`` verb and its options to the ``bsdfkit`` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``bsdfkit`` parser.
+    """
     formats = registry.names()
     p = sub.add_parser("export", help=f"write a BSDF table ({', '.join(formats)})",
                        description=f"Write a BSDF table ({', '.join(formats)}) from a fit result or a "
@@ -88,6 +124,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``bsdfkit export``: write the table and print the TIS of source and table per side and incidence.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line of the verb.
+
+    Returns
+    -------
+    int
+        Exit status: 0 on success.
+    """
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
     from bsdfkit.tables.export import ExportSettings
     from bsdfkit.tables.formats.tracepro import TraceProOptions

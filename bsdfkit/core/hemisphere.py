@@ -21,14 +21,44 @@ def unit_disk_reach(bu: ArrayLike, b2: ArrayLike, xp: ModuleType = np):
 
     t = −bu + √(bu² + 1 − b2), the positive root of |β0 + t·u| = 1, from bu = β0·u and b2 = |β0|² (broadcast;
     the root's argument is floored at 0 for points on the edge). The form of the models' exact TIS, which the
-    synthetic measurements' recorded truth depends on to the last bit."""
+    synthetic measurements' recorded truth depends on to the last bit.
+
+    Parameters
+    ----------
+    bu : array_like
+        β0·u, the start point's component along the unit direction [-].
+    b2 : array_like
+        |β0|², the start point's squared distance from the disk centre [-], ≤ 1.
+    xp : module, optional
+        Array module (``numpy`` or ``jax.numpy``).
+
+    Returns
+    -------
+    array
+        Distance t ≥ 0 to the edge in direction-cosine space [-], broadcast from ``bu`` and ``b2``.
+    """
     return -bu + xp.sqrt(xp.maximum(bu * bu + 1.0 - b2, 0.0))
 
 
 def linear_weights(samples: NDArray[np.float64], query: NDArray[np.float64]
                    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """(lo, hi, w_lo, w_hi): indices and weights of linear interpolation in increasing ``samples`` with constant
-    extrapolation beyond the ends (the rule of :func:`numpy.interp`): f(q) = w_lo·f[lo] + w_hi·f[hi]."""
+    extrapolation beyond the ends (the rule of :func:`numpy.interp`): f(q) = w_lo·f[lo] + w_hi·f[hi].
+
+    Parameters
+    ----------
+    samples : ndarray, shape (m,)
+        Strictly increasing sample abscissae (any unit), m ≥ 1.
+    query : ndarray, shape (n,)
+        Abscissae to interpolate at, in the unit of ``samples``.
+
+    Returns
+    -------
+    lo, hi : ndarray of int, shape (n,)
+        Indices into ``samples`` of the two neighbours (equal, 0, when m = 1).
+    w_lo, w_hi : ndarray, shape (n,)
+        Their weights [-], summing to 1.
+    """
     m = samples.size
     if m == 1:
         z = np.zeros(query.size, dtype=np.int64)

@@ -44,20 +44,70 @@ Band = tuple[float, float]
 
 def gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> NDArray[np.float64]:
     """Relative Gaussian spectrum with peak 1, S(λ) = exp(−C((λ − λp)/Δλ)²) with C = 4 ln 2 (eq. (2) of the
-    cylindrical-module paper; Δλ is the true FWHM) [1]."""
+    cylindrical-module paper; Δλ is the true FWHM) [1].
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelengths at which to evaluate [nm].
+    peak_nm : array_like
+        Peak wavelength λp [nm].
+    fwhm_nm : array_like
+        Full width at half maximum Δλ [nm]; broadcast with ``wavelength`` and ``peak_nm``.
+
+    Returns
+    -------
+    ndarray
+        S(λ), 1 at the peak [-].
+    """
     return np.exp(-C_FWHM * ((wavelength - peak_nm) / fwhm_nm) ** 2)
 
 
 def split_gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
                    ) -> NDArray[np.float64]:
     """Asymmetric Gaussian of eq. (3) of the cylindrical-module paper [1]: the width Δλ(1 + sign(λ − λp)·α) on
-    each side of the peak (the total FWHM stays Δλ), α in (−1, 1)."""
+    each side of the peak (the total FWHM stays Δλ), α in (−1, 1).
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelengths at which to evaluate [nm].
+    peak_nm : array_like
+        Peak wavelength λp [nm].
+    fwhm_nm : array_like
+        Total full width at half maximum Δλ [nm].
+    alpha : array_like
+        Asymmetry α in (−1, 1) [-]; positive widens the long-wavelength side.
+
+    Returns
+    -------
+    ndarray
+        S(λ), 1 at the peak [-].
+    """
     offset = wavelength - peak_nm
     return np.exp(-C_FWHM * (offset / (fwhm_nm * (1.0 + np.sign(offset) * alpha))) ** 2)
 
 
 def band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
-    """The samples inside the closed ``band`` [nm] (1e-9 nm slack for grids built by float steps)."""
+    """The samples inside the closed ``band`` [nm] (1e-9 nm slack for grids built by float steps).
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Sample wavelengths [nm].
+    band : tuple of float
+        (low, high) limits [nm], inclusive, low ≤ high.
+
+    Returns
+    -------
+    ndarray of bool
+        True where ``wavelength`` lies in the band, shaped like ``wavelength``.
+
+    Raises
+    ------
+    InputError
+        If high < low or a limit is NaN.
+    """
     lo, hi = band
     if not hi >= lo:  # [λ, λ] is the band of one wavelength (a monochrome scan); NaN edges are refused
         raise InputError("empty wavelength band", field="band", expected="(low, high) with low <= high", got=band)
@@ -69,7 +119,22 @@ def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band:
     the sums of eqs. (4)-(16) of the power-budget paper and §4.2 of the cylindrical-module paper.
 
     Each sample stands for the bin of width Δλ around it (a spectrometer pixel, a tracer bin), so the sums of
-    adjacent bands add up; inside the grid the weights equal the trapezoid rule's."""
+    adjacent bands add up; inside the grid the weights equal the trapezoid rule's.
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Sample wavelengths [nm], increasing, at least 2 samples.
+    values : ndarray
+        Spectral density at each sample, same shape as ``wavelength`` (e.g. [W/nm]).
+    band : tuple of float
+        (low, high) limits [nm], inclusive.
+
+    Returns
+    -------
+    float
+        The band integral, in the unit of ``values`` times nm (e.g. [W]).
+    """
     wl = np.asarray(wavelength, dtype=np.float64)
     inside = band_mask(wl, band)
     return float(np.sum(np.asarray(values, dtype=np.float64)[inside] * np.gradient(wl)[inside]))
@@ -78,7 +143,27 @@ def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band:
 def mean_wavelength_nm(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band | None = None
                        ) -> float:
     """Power-weighted mean (centroid) wavelength λ̄ = Σ S λ Δλ / Σ S Δλ [nm] over ``band`` (None: the whole grid),
-    by the sums of :func:`band_sum` (eqs. (14)-(16) of the power-budget paper)."""
+    by the sums of :func:`band_sum` (eqs. (14)-(16) of the power-budget paper).
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Sample wavelengths [nm], increasing.
+    values : ndarray
+        Spectral power density S at each sample (any unit, e.g. [W/nm]).
+    band : tuple of float, optional
+        (low, high) limits [nm], inclusive; None for the whole grid.
+
+    Returns
+    -------
+    float
+        Mean wavelength λ̄ [nm].
+
+    Raises
+    ------
+    NumericalError
+        If the spectrum carries no positive power in the band.
+    """
     wl = np.asarray(wavelength, dtype=np.float64)
     band = (float(wl[0]), float(wl[-1])) if band is None else band
     total = band_sum(wl, values, band)
@@ -92,7 +177,27 @@ def photon_pdf_from_power(wavelength_nm: NDArray[np.float64], power: NDArray[np.
     """Photon-number pdf [1/nm] of a power spectrum, p ∝ S(λ)·λ with Σ p Δλ = 1.
 
     ``band`` None: a uniform grid, summed with its step over every sample (the tracer's bins); a band [nm]: any
-    grid, normalised by :func:`band_sum` over that band (a measured emission spectrum)."""
+    grid, normalised by :func:`band_sum` over that band (a measured emission spectrum).
+
+    Parameters
+    ----------
+    wavelength_nm : ndarray
+        Sample wavelengths [nm], increasing.
+    power : ndarray
+        Spectral power density S at each sample (any unit, e.g. [W/nm]).
+    band : tuple of float, optional
+        (low, high) normalisation band [nm], inclusive; None for a uniform grid normalised over every sample.
+
+    Returns
+    -------
+    ndarray
+        Photon-number pdf at each sample [1/nm] (nonzero outside ``band`` too, where S is).
+
+    Raises
+    ------
+    ValidationError
+        If the spectrum has no positive power.
+    """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     photons = np.asarray(power, dtype=np.float64) * wl
     total = photons.sum() * (wl[1] - wl[0]) if band is None else band_sum(wl, photons, band)

@@ -73,7 +73,22 @@ def _tiny_width(*arrays) -> jnp.ndarray:
 
 def ratio_squared(offset: ArrayLike, width: ArrayLike, cap: float = _RATIO_SQ_CAP) -> jnp.ndarray:
     """min((offset/width)², cap) with the width → 0 limit (0 on the peak, the cap elsewhere) taken
-    safely: value and derivatives stay finite for any width ≥ 0, including 0 and subnormal widths."""
+    safely: value and derivatives stay finite for any width ≥ 0, including 0 and subnormal widths.
+
+    Parameters
+    ----------
+    offset : array_like
+        Numerator, in any unit (the unit of ``width``).
+    width : array_like
+        Denominator, ≥ 0, in the unit of ``offset``.
+    cap : float, optional
+        Upper limit of the result [-].
+
+    Returns
+    -------
+    jax.Array
+        min((offset/width)², cap) [-], broadcast over ``offset`` and ``width``.
+    """
     offset = jnp.asarray(offset)
     width = jnp.asarray(width)
     ok = width > _tiny_width(offset, width)
@@ -124,13 +139,14 @@ def gaussian_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -
 
     Parameters
     ----------
-    wavelength, peak, fwhm
-        λ, λp and Δλ in nm (broadcast together). Δλ = 0 gives a unit spike at λ = λp and 0 elsewhere;
+    wavelength, peak, fwhm : array_like
+        λ, λp and Δλ [nm] (broadcast together). Δλ = 0 gives a unit spike at λ = λp and 0 elsewhere;
         values below ~1e-308 are exactly 0 (the exponent is capped where exp underflows anyway).
 
     Returns
     -------
-    Dimensionless relative spectral value in [0, 1].
+    jax.Array
+        Relative spectral value in [0, 1] [-].
     """
     z2 = _offset_over_width_squared(jnp.asarray(wavelength) - peak, fwhm)
     return jnp.exp(-C_FWHM * z2)
@@ -149,14 +165,15 @@ def split_gaussian_spectrum(
 
     Parameters
     ----------
-    wavelength, peak, fwhm
-        λ, λp, Δλ in nm.
-    alpha
-        Asymmetry constant α (dimensionless). Table 2 of the paper: α = −0.12 for the phosphor band.
+    wavelength, peak, fwhm : array_like
+        λ, λp, Δλ [nm] (broadcast together).
+    alpha : array_like
+        Asymmetry constant α [-]. Table 2 of the paper: α = −0.12 for the phosphor band.
 
     Returns
     -------
-    Dimensionless relative spectral value in [0, 1].
+    jax.Array
+        Relative spectral value in [0, 1] [-].
     """
     offset = jnp.asarray(wavelength) - peak
     width = fwhm * (1.0 + jnp.sign(offset) * alpha)
@@ -178,6 +195,26 @@ def two_band_spectrum(
     S(λ) = a_b·S_blue(λ; λp1, Δλ1) + a_y·S_yellow(λ; λp2, Δλ2, α), the linear combination of §4.2 of the
     cylindrical-module paper (there a_b = A1 and a_y = A2 in W/nm). Wavelengths and widths in nm; the
     result has the unit of the amplitudes.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelengths λ [nm].
+    blue_peak, blue_fwhm : array_like
+        Peak λp1 and FWHM Δλ1 of the blue pump band [nm].
+    blue_amplitude : array_like
+        Blue amplitude a_b (e.g. [W/nm]).
+    yellow_peak, yellow_fwhm : array_like
+        Peak λp2 and FWHM Δλ2 of the yellow phosphor band [nm].
+    yellow_alpha : array_like
+        Asymmetry α of the yellow band [-] (see :func:`split_gaussian_spectrum`).
+    yellow_amplitude : array_like
+        Yellow amplitude a_y, in the unit of ``blue_amplitude``.
+
+    Returns
+    -------
+    jax.Array
+        S(λ) in the unit of the amplitudes.
     """
     return blue_amplitude * gaussian_spectrum(wavelength, blue_peak, blue_fwhm) + (
         yellow_amplitude * split_gaussian_spectrum(wavelength, yellow_peak, yellow_fwhm, yellow_alpha)
@@ -188,7 +225,20 @@ def two_band_spectrum(
 # Geometry
 # ------------------------------------------------------------------------------------------------
 def direction_cosines(theta: ArrayLike, phi: ArrayLike) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Direction cosines β = (sin θ cos φ, sin θ sin φ) of a direction (θ, φ) in radians."""
+    """Direction cosines β = (sin θ cos φ, sin θ sin φ) of a direction (θ, φ) in radians.
+
+    Parameters
+    ----------
+    theta : array_like
+        Polar angle from the normal [rad].
+    phi : array_like
+        Azimuth [rad].
+
+    Returns
+    -------
+    bx, by : jax.Array
+        Direction cosines βx, βy [-].
+    """
     theta = jnp.asarray(theta)
     phi = jnp.asarray(phi)
     s = jnp.sin(theta)
@@ -200,20 +250,60 @@ def specular_direction_cosines(theta_i: ArrayLike) -> tuple[jnp.ndarray, jnp.nda
 
     θi in radians. For transmission the angles are measured from the back normal and the straight-through
     direction has the same β0.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad].
+
+    Returns
+    -------
+    b0x, b0y : jax.Array
+        Direction cosines of the specular direction [-]; b0y is 0.
     """
     theta_i = jnp.asarray(theta_i)
     return jnp.sin(theta_i), jnp.zeros_like(theta_i)
 
 
 def delta_beta_squared(theta_i: ArrayLike, theta_s: ArrayLike, phi_s: ArrayLike) -> jnp.ndarray:
-    """|β − β0|² for incidence θi (source at φi = π) and scatter direction (θs, φs), all in radians."""
+    """|β − β0|² for incidence θi (source at φi = π) and scatter direction (θs, φs), all in radians.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad] (source at φi = π).
+    theta_s : array_like
+        Scatter polar angle from the normal (the back normal in transmission) [rad].
+    phi_s : array_like
+        Scatter azimuth [rad], 0 on the specular side.
+
+    Returns
+    -------
+    jax.Array
+        |β − β0|² [-].
+    """
     bx, by = direction_cosines(theta_s, phi_s)
     b0x, b0y = specular_direction_cosines(theta_i)
     return (bx - b0x) ** 2 + (by - b0y) ** 2
 
 
 def delta_beta(theta_i: ArrayLike, theta_s: ArrayLike, phi_s: ArrayLike) -> jnp.ndarray:
-    """|β − β0| (dimensionless, in [0, 2]) with a finite derivative on the specular direction."""
+    """|β − β0| (dimensionless, in [0, 2]) with a finite derivative on the specular direction.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad] (source at φi = π).
+    theta_s : array_like
+        Scatter polar angle from the normal (the back normal in transmission) [rad].
+    phi_s : array_like
+        Scatter azimuth [rad], 0 on the specular side.
+
+    Returns
+    -------
+    jax.Array
+        |β − β0| [-].
+    """
     return _safe_sqrt(delta_beta_squared(theta_i, theta_s, phi_s))
 
 
@@ -221,7 +311,18 @@ def delta_beta(theta_i: ArrayLike, theta_s: ArrayLike, phi_s: ArrayLike) -> jnp.
 # BSDF models (sr⁻¹)
 # ------------------------------------------------------------------------------------------------
 def lambert(rho: ArrayLike) -> jnp.ndarray:
-    """Lambertian BSDF f = ρ/π in sr⁻¹ for a diffuse reflectance (or transmittance) ρ (docs/fitting.md §5)."""
+    """Lambertian BSDF f = ρ/π in sr⁻¹ for a diffuse reflectance (or transmittance) ρ (docs/fitting.md §5).
+
+    Parameters
+    ----------
+    rho : array_like
+        Diffuse reflectance or transmittance ρ [-].
+
+    Returns
+    -------
+    jax.Array
+        BSDF value [1/sr], broadcast over the arguments.
+    """
     return jnp.asarray(rho) / jnp.pi
 
 
@@ -230,12 +331,17 @@ def gaussian_lobe(dbeta: ArrayLike, amplitude: ArrayLike, sigma: ArrayLike) -> j
 
     Parameters
     ----------
-    dbeta
-        |β − β0| (dimensionless).
-    amplitude
-        Peak value A in sr⁻¹.
-    sigma
-        Lobe width σ in direction-cosine units; σ = 0 gives a spike (A on specular, 0 elsewhere).
+    dbeta : array_like
+        |β − β0| [-].
+    amplitude : array_like
+        Peak value A [1/sr].
+    sigma : array_like
+        Lobe width σ in direction cosines [-]; σ = 0 gives a spike (A on specular, 0 elsewhere).
+
+    Returns
+    -------
+    jax.Array
+        BSDF value [1/sr].
     """
     return amplitude * jnp.exp(-0.5 * _offset_over_width_squared(dbeta, sigma))
 
@@ -247,6 +353,22 @@ def abg(dbeta: ArrayLike, A: ArrayLike, B: ArrayLike, g: ArrayLike) -> jnp.ndarr
     B ≥ 0, g ≥ 0. Edge handling: |β−β0|^g is evaluated as exp(g ln|β−β0|) only where |β−β0| > 0
     (0^g := 0 for g > 0 and 1 for g = 0, the g → 0 limit), and the denominator is floored at
     :data:`ABG_DENOMINATOR_FLOOR` so B → 0 on specular gives a large finite value, never inf/NaN.
+
+    Parameters
+    ----------
+    dbeta : array_like
+        |β − β0| [-].
+    A : array_like
+        Numerator A [1/sr], ≥ 0.
+    B : array_like
+        Knee constant B [-], ≥ 0.
+    g : array_like
+        Far-field slope exponent g [-], ≥ 0.
+
+    Returns
+    -------
+    jax.Array
+        BSDF value [1/sr], broadcast over the arguments.
     """
     dbeta = jnp.asarray(dbeta)
     g = jnp.asarray(g)
@@ -262,6 +384,22 @@ def harvey_shack(dbeta: ArrayLike, b0: ArrayLike, L: ArrayLike, S: ArrayLike) ->
     b0 is the specular value (sr⁻¹), L the shoulder (roll-off) in direction cosines, S the far-field
     log–log slope (negative) ([FRED]); equal to ABg with g = −S, B = L^g, A = b0·L^g
     for g = 2 (docs/fitting.md §5). L → 0 gives b0 on specular and the power-law limit 0 (S < 0) elsewhere.
+
+    Parameters
+    ----------
+    dbeta : array_like
+        |β − β0| [-].
+    b0 : array_like
+        Specular value [1/sr].
+    L : array_like
+        Shoulder (roll-off) in direction cosines [-], ≥ 0.
+    S : array_like
+        Far-field log–log slope [-] (negative).
+
+    Returns
+    -------
+    jax.Array
+        BSDF value [1/sr], broadcast over the arguments.
     """
     log_term = _log1p_ratio_squared(dbeta, L)
     finite = jnp.isfinite(log_term)
@@ -283,6 +421,26 @@ def lambert_gaussian(
 
     Angles θi, θs, φs in radians (source at φi = π, specular at φs = 0); ρ dimensionless, A in sr⁻¹,
     σ in direction cosines.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad] (source at φi = π).
+    theta_s : array_like
+        Scatter polar angle from the normal (the back normal in transmission) [rad].
+    phi_s : array_like
+        Scatter azimuth [rad], 0 on the specular side.
+    rho : array_like
+        Diffuse reflectance or transmittance ρ [-].
+    A : array_like
+        Lobe peak value [1/sr].
+    sigma : array_like
+        Lobe width σ in direction cosines [-].
+
+    Returns
+    -------
+    jax.Array
+        BSDF value [1/sr], broadcast over the arguments.
     """
     d2 = delta_beta_squared(theta_i, theta_s, phi_s)
     return lambert(rho) + A * jnp.exp(-0.5 * _offset_over_width_squared(_safe_sqrt(d2), sigma))
@@ -297,7 +455,30 @@ def lambert_abg(
     B: ArrayLike,
     g: ArrayLike,
 ) -> jnp.ndarray:
-    """Lambert + ABg: f = ρ/π + A/(B + |β − β0|^g) in sr⁻¹ (angles in radians, see :func:`abg`)."""
+    """Lambert + ABg: f = ρ/π + A/(B + |β − β0|^g) in sr⁻¹ (angles in radians, see :func:`abg`).
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad] (source at φi = π).
+    theta_s : array_like
+        Scatter polar angle from the normal (the back normal in transmission) [rad].
+    phi_s : array_like
+        Scatter azimuth [rad], 0 on the specular side.
+    rho : array_like
+        Diffuse reflectance or transmittance ρ [-].
+    A : array_like
+        ABg numerator [1/sr].
+    B : array_like
+        ABg knee constant [-], ≥ 0.
+    g : array_like
+        ABg slope exponent [-], ≥ 0.
+
+    Returns
+    -------
+    jax.Array
+        BSDF value [1/sr], broadcast over the arguments.
+    """
     return lambert(rho) + abg(delta_beta(theta_i, theta_s, phi_s), A, B, g)
 
 
@@ -305,7 +486,18 @@ def lambert_abg(
 # Total integrated scatter, TIS = ∫∫_{|β|≤1} f dβx dβy (dimensionless)
 # ------------------------------------------------------------------------------------------------
 def tis_lambert(rho: ArrayLike) -> jnp.ndarray:
-    """TIS of the Lambert term: ∫∫_{|β|≤1} ρ/π dβ = ρ (exact)."""
+    """TIS of the Lambert term: ∫∫_{|β|≤1} ρ/π dβ = ρ (exact).
+
+    Parameters
+    ----------
+    rho : array_like
+        Diffuse reflectance or transmittance ρ [-].
+
+    Returns
+    -------
+    jax.Array
+        Total integrated scatter [-], broadcast over the arguments.
+    """
     return jnp.asarray(rho)
 
 
@@ -314,6 +506,18 @@ def tis_gaussian_lobe_unclipped(A: ArrayLike, sigma: ArrayLike) -> jnp.ndarray:
 
     Exact only when the lobe does not reach |β| = 1 (|β0| + several σ < 1); use
     :func:`tis_gaussian_lobe` otherwise.
+
+    Parameters
+    ----------
+    A : array_like
+        Lobe peak value [1/sr].
+    sigma : array_like
+        Lobe width σ in direction cosines [-].
+
+    Returns
+    -------
+    jax.Array
+        Total integrated scatter [-], broadcast over the arguments.
     """
     return 2.0 * jnp.pi * jnp.asarray(sigma) ** 2 * A
 
@@ -337,6 +541,22 @@ def tis_gaussian_lobe(theta_i: ArrayLike, A: ArrayLike, sigma: ArrayLike, n_psi:
     t_max(ψ) = −β0·u + √((β0·u)² + 1 − |β0|²), u = (cos ψ, sin ψ). The ψ integral uses the periodic
     trapezoid rule with ``n_psi`` nodes (spectrally accurate; 1024 nodes give ~1e-12 relative for
     sin θi ≤ 0.99). Reduces to 2πσ²A when the lobe is far from the disk edge.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad].
+    A : array_like
+        Lobe peak value [1/sr].
+    sigma : array_like
+        Lobe width σ in direction cosines [-].
+    n_psi : int, optional
+        Number of azimuthal trapezoid nodes.
+
+    Returns
+    -------
+    jax.Array
+        Total integrated scatter [-], broadcast over the arguments.
     """
     psi = _psi_grid(n_psi)
     b0 = jnp.sin(jnp.asarray(theta_i))[..., None]
@@ -352,6 +572,20 @@ def tis_abg_normal_incidence(A: float, B: float, g: float) -> float:
     TIS = 2πA ∫₀¹ β/(B + β^g) dβ = (πA/B)·₂F₁(1, 2/g; 1 + 2/g; −1/B); g = 2 → πA ln(1 + 1/B);
     g → 0 → πA/(B + 1). Evaluated with :func:`scipy.special.hyp2f1` (NumPy, not traced by JAX: JAX's
     hyp2f1 loses accuracy for arguments z ≪ −1, i.e. small B). Arguments: A in sr⁻¹, B ≥ 0, g ≥ 0.
+
+    Parameters
+    ----------
+    A : float
+        ABg numerator [1/sr].
+    B : float
+        ABg knee constant [-]; > 0 unless g = 0.
+    g : float
+        ABg slope exponent [-], ≥ 0.
+
+    Returns
+    -------
+    float
+        Total integrated scatter at θi = 0 [-].
     """
     from scipy.special import hyp2f1
 
@@ -398,6 +632,28 @@ def tis_abg(
     TIS = ∫₀^{2π} ∫₀^{t_max(ψ)} A t/(B + t^g) dt dψ in polar coordinates centred on β0, with a log-spaced
     radius because the integrand peaks sharply at t ≲ B^{1/g} (docs/fitting.md §5); periodic trapezoid in ψ, composite
     Gauss–Legendre in ln t. Agrees with :func:`tis_abg_normal_incidence` at θi = 0.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad].
+    A : array_like
+        ABg numerator [1/sr].
+    B : array_like
+        ABg knee constant [-], ≥ 0.
+    g : array_like
+        ABg slope exponent [-], ≥ 0.
+    n_psi : int, optional
+        Number of azimuthal trapezoid nodes.
+    n_panels : int, optional
+        Number of Gauss–Legendre panels in ln t (over 60 natural-log units).
+    n_nodes : int, optional
+        Gauss–Legendre nodes per panel.
+
+    Returns
+    -------
+    jax.Array
+        Total integrated scatter [-], broadcast over the arguments.
     """
     psi = _psi_grid(n_psi)
     b0 = jnp.sin(jnp.asarray(theta_i))[..., None]
@@ -409,10 +665,46 @@ def tis_abg(
 
 
 def tis_lambert_gaussian(theta_i: ArrayLike, rho: ArrayLike, A: ArrayLike, sigma: ArrayLike) -> jnp.ndarray:
-    """TIS of :func:`lambert_gaussian`: ρ + clipped Gaussian lobe (θi in radians)."""
+    """TIS of :func:`lambert_gaussian`: ρ + clipped Gaussian lobe (θi in radians).
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad].
+    rho : array_like
+        Diffuse reflectance or transmittance ρ [-].
+    A : array_like
+        Lobe peak value [1/sr].
+    sigma : array_like
+        Lobe width σ in direction cosines [-].
+
+    Returns
+    -------
+    jax.Array
+        Total integrated scatter [-], broadcast over the arguments.
+    """
     return tis_lambert(rho) + tis_gaussian_lobe(theta_i, A, sigma)
 
 
 def tis_lambert_abg(theta_i: ArrayLike, rho: ArrayLike, A: ArrayLike, B: ArrayLike, g: ArrayLike) -> jnp.ndarray:
-    """TIS of :func:`lambert_abg`: ρ + clipped ABg lobe (θi in radians)."""
+    """TIS of :func:`lambert_abg`: ρ + clipped ABg lobe (θi in radians).
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Angle of incidence from the sample normal [rad].
+    rho : array_like
+        Diffuse reflectance or transmittance ρ [-].
+    A : array_like
+        ABg numerator [1/sr].
+    B : array_like
+        ABg knee constant [-], ≥ 0.
+    g : array_like
+        ABg slope exponent [-], ≥ 0.
+
+    Returns
+    -------
+    jax.Array
+        Total integrated scatter [-], broadcast over the arguments.
+    """
     return tis_lambert(rho) + tis_abg(theta_i, A, B, g)

@@ -95,7 +95,14 @@ class SpectralPlateModel:
         return float(self.emission_nm[1] - self.emission_nm[0])
 
     def to_dataset(self) -> xr.Dataset:
-        """The model as the contract dataset (``side``, ``incidence``, ``excitation``, ``emission``)."""
+        """The model as the contract dataset (``side``, ``incidence``, ``excitation``, ``emission``).
+
+        Returns
+        -------
+        xarray.Dataset
+            ``elastic_tis`` and ``converted_tis`` [-] on (side, incidence, excitation), ``emission_pdf`` [1/nm] on
+            (excitation, emission); coordinates incidence [deg], excitation and emission [nm].
+        """
         dims = ("side", "incidence", "excitation")
         return xr.Dataset(
             {"elastic_tis": (dims, self.elastic_tis, {"units": "1"}),
@@ -342,7 +349,22 @@ def bin_powers(wavelength_nm: np.ndarray, values: np.ndarray, centres_nm: np.nda
 
 
 def gaussian_led_spectrum(peak_nm: float, fwhm_nm: float) -> tuple[np.ndarray, np.ndarray]:
-    """A Gaussian LED spectrum (eq. (2) of [Cylindrical-module]) sampled every FWHM/200 over ±4 FWHM."""
+    """A Gaussian LED spectrum (eq. (2) of [Cylindrical-module]) sampled every FWHM/200 over ±4 FWHM.
+
+    Parameters
+    ----------
+    peak_nm : float
+        Peak wavelength [nm].
+    fwhm_nm : float
+        Full width at half maximum [nm], > 0.
+
+    Returns
+    -------
+    wavelength : ndarray, shape (1601,)
+        Sample wavelengths [nm].
+    spectrum : ndarray, shape (1601,)
+        Relative spectrum, 1 at the peak [-].
+    """
     wl = np.linspace(peak_nm - 4.0 * fwhm_nm, peak_nm + 4.0 * fwhm_nm, 1601)
     return wl, gaussian(wl, peak_nm, fwhm_nm)
 

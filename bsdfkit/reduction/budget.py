@@ -43,13 +43,38 @@ class InteractionTable:
     photon_ratio: dict[str, float]
 
     def as_dict(self) -> dict:
+        """The table as a JSON-ready dict (incidence under ``theta_i_deg``).
+
+        Returns
+        -------
+        dict
+            ``theta_i_deg`` [deg]; ``power``, ``photons``, ``power_std``, ``photons_std`` (key → percent);
+            ``eqe``, ``eqe_std`` [-]; ``photon_ratio_biys`` (B/F → λ̄s/λ̄i [-]).
+        """
         return {"theta_i_deg": self.theta_i, "power": self.power, "photons": self.photons,
                 "power_std": self.power_std, "photons_std": self.photons_std, "eqe": self.eqe,
                 "eqe_std": self.eqe_std, "photon_ratio_biys": self.photon_ratio}
 
 
 def complete_table(tis_percent: dict[str, float]) -> dict[str, float]:
-    """Add blue and yellow losses (100 − the scattered parts) to six TIS entries in percent."""
+    """Add blue and yellow losses (100 − the scattered parts) to six TIS entries in percent.
+
+    Parameters
+    ----------
+    tis_percent : dict of str to float
+        The six TIS entries (``B_bibs``, ``F_bibs``, ``B_biys``, ``F_biys``, ``B_yiys``, ``F_yiys``) [%]; other
+        keys are ignored.
+
+    Returns
+    -------
+    dict of str to float
+        The eight entries of :data:`KEYS` [%], losses included.
+
+    Raises
+    ------
+    InputError
+        If a TIS entry is missing.
+    """
     missing = [k for k in TIS_KEYS if k not in tis_percent]
     if missing:
         raise InputError("interaction table incomplete", field=missing[0], expected="keys " + ", ".join(TIS_KEYS))
@@ -72,6 +97,16 @@ def require_phosphor_scan(ds: xr.Dataset) -> None:
     They need a phosphor scan of the two-wavelength approach: configurations ``blue`` and ``yellow``, records
     on both sides and a bi-spectral BSDF (``bsdf_bispectral`` with finite values). Elastic data (any other
     sample) has directional-hemispherical values instead (``bsdfkit.tis`` / ``bsdfkit tis``).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A calibrated scan.
+
+    Raises
+    ------
+    InputError
+        If ``ds`` lacks the ``blue`` and ``yellow`` configurations, a side, or finite bi-spectral values.
     """
     configs = sorted({str(c) for c in ds["config"].values}) if "config" in ds.coords else []
     sides = sorted({str(s) for s in ds["side"].values}) if "side" in ds.coords else []
@@ -96,6 +131,29 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
     ``bands`` (default: the power-budget filters) reach both the TIS and the photon ratios; a given ``tis``
     (:func:`bsdfkit.reduction.tis.tis_table`) must have been computed with the same bands. A dataset that is not a
     phosphor scan is refused with one line (:func:`require_phosphor_scan`).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated phosphor scan.
+    theta_i : float
+        Angle of incidence [deg]; must be in ``tis`` when given.
+    tis : xarray.Dataset, optional
+        A precomputed :func:`bsdfkit.reduction.tis.tis_table`; None computes it at ``theta_i``.
+    bands : InteractionBands, optional
+        Excitation and conversion bands [nm]; None for the power-budget filters.
+
+    Returns
+    -------
+    InteractionTable
+        Power and photon entries with standard uncertainties [%], EQE [-] and photon ratios [-].
+
+    Raises
+    ------
+    InputError
+        If ``ds`` is not a phosphor scan, ``tis`` used other bands or lacks ``theta_i``.
+    NumericalError
+        If no blue light is absorbed (EQE undefined).
     """
     require_phosphor_scan(ds)
     bands = bands or InteractionBands()
@@ -150,6 +208,14 @@ class ModuleBudget:
     first_iteration: dict[str, float]
 
     def as_dict(self) -> dict:
+        """The budget as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``eta_mc`` [-]; ``iterations`` (one dict per plate interaction), ``converged`` and
+            ``first_iteration``, their values in percent of the LEDs' emission.
+        """
         return {"eta_mc": self.eta_mc, "iterations": self.iterations, "converged": self.converged,
                 "first_iteration": self.first_iteration}
 
@@ -170,6 +236,28 @@ def module_budget(table: dict[str, float], eta_mc: float, iterations: int = 7) -
 
     Iteration k is the k-th interaction with the plate (the first is the direct pass from the LEDs).
     ``table`` needs the six TIS keys (power or photons: the algebra is the same).
+
+    Parameters
+    ----------
+    table : dict of str to float
+        Interaction table [%] with at least the six TIS keys.
+    eta_mc : float
+        Mixing-chamber efficiency η_MC in [0, 1] [-].
+    iterations : int, optional
+        Number of plate interactions to list, in [1, :data:`MAX_ITERATIONS`].
+
+    Returns
+    -------
+    ModuleBudget
+        Cumulative extracted blue, yellow and total power, losses and backscattered power after each interaction
+        and in the converged limit [% of the LEDs' emission].
+
+    Raises
+    ------
+    InputError
+        If η_MC or ``iterations`` is out of range, a TIS is negative or the table creates energy.
+    NumericalError
+        If the recycling is lossless and the series does not converge.
     """
     if not (0.0 <= eta_mc <= 1.0):
         raise InputError("mixing-chamber efficiency out of range", field="eta_mc", expected="0 ≤ η_MC ≤ 1", got=eta_mc)
@@ -213,7 +301,26 @@ def module_budget(table: dict[str, float], eta_mc: float, iterations: int = 7) -
 
 
 def table_from_json(data: dict, source: str = "<table>") -> dict[str, dict[str, float]]:
-    """Validate ``{"power": {...}, "photons": {...}?}`` in percent (keys as in Table 2)."""
+    """Validate ``{"power": {...}, "photons": {...}?}`` in percent (keys as in Table 2).
+
+    Parameters
+    ----------
+    data : dict
+        Parsed JSON with a ``power`` object and optionally a ``photons`` object, each holding the six TIS keys
+        [%].
+    source : str, optional
+        Name of the source for error messages.
+
+    Returns
+    -------
+    dict
+        ``power`` (and ``photons`` when given): key → TIS [%], float.
+
+    Raises
+    ------
+    InputError
+        If an object or key is missing or a value is not a finite number in [0, 100].
+    """
     if not isinstance(data, dict) or "power" not in data:
         raise InputError("interaction table JSON needs a 'power' object", file=source, field="power",
                          expected='{"power": {"B_bibs": 10.9, ...}}')

@@ -110,7 +110,20 @@ END_FRACTION = 0.05
 
 
 def check_wavelengths_nm(wavelength, name: str) -> None:
-    """Refuse a grid outside :data:`WAVELENGTH_RANGE_NM` (µm, m or Å values): one line naming ``name``."""
+    """Refuse a grid outside :data:`WAVELENGTH_RANGE_NM` (µm, m or Å values): one line naming ``name``.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Wavelengths, expected in [nm].
+    name : str
+        What the message names (a file or spectrum name).
+
+    Raises
+    ------
+    ValidationError
+        If a wavelength lies outside :data:`WAVELENGTH_RANGE_NM`.
+    """
     wl = np.asarray(wavelength, dtype=float)
     lo, hi = WAVELENGTH_RANGE_NM
     if wl.min() < lo or wl.max() > hi:
@@ -221,7 +234,23 @@ def _xyz(sd) -> np.ndarray:
 
 
 def chromaticity_xy(sd: SpectralDistribution) -> tuple[float, float]:
-    """CIE 1931 2° chromaticity (x, y) of an emission spectrum (wavelength in nm, any radiometric unit)."""
+    """CIE 1931 2° chromaticity (x, y) of an emission spectrum (wavelength in nm, any radiometric unit).
+
+    Parameters
+    ----------
+    sd : colour.SpectralDistribution
+        Emission spectrum, wavelengths [nm], values in any radiometric unit.
+
+    Returns
+    -------
+    x, y : float
+        CIE 1931 chromaticity coordinates [-].
+
+    Raises
+    ------
+    NumericalError
+        If the tristimulus values are not positive.
+    """
     x, y = np.asarray(colour.XYZ_to_xy(_xyz(sd)), dtype=float)
     return float(x), float(y)
 
@@ -230,6 +259,23 @@ def cct_duv(sd: SpectralDistribution) -> tuple[float, float]:
     """Correlated colour temperature (K) and Duv by Ohno (2013) via ``colour.uv_to_CCT``.
 
     Duv is the signed distance from the Planckian locus in CIE 1960 uv (positive above the locus).
+
+    Parameters
+    ----------
+    sd : colour.SpectralDistribution
+        Emission spectrum, wavelengths [nm], values in any radiometric unit.
+
+    Returns
+    -------
+    cct : float
+        Correlated colour temperature [K].
+    duv : float
+        Signed distance from the Planckian locus in CIE 1960 uv [-].
+
+    Raises
+    ------
+    NumericalError
+        If the CCT is undefined for the spectrum's chromaticity.
     """
     xy = np.array(chromaticity_xy(sd))
     uv = colour.xy_to_UCS_uv(xy)
@@ -245,24 +291,79 @@ def cct_duv(sd: SpectralDistribution) -> tuple[float, float]:
 
 def cct_is_meaningful(duv: float, cct_K: float | None = None) -> bool:
     """True when |Duv| ≤ :data:`DUV_LIMIT` (CIE 015) and, if given, the CCT lies inside the Planckian
-    table of the Ohno (2013) solver (:data:`CCT_RANGE_K`); otherwise the CCT should not be quoted."""
+    table of the Ohno (2013) solver (:data:`CCT_RANGE_K`); otherwise the CCT should not be quoted.
+
+    Parameters
+    ----------
+    duv : float
+        Distance from the Planckian locus in CIE 1960 uv [-].
+    cct_K : float, optional
+        Correlated colour temperature [K]; None skips the range check.
+
+    Returns
+    -------
+    bool
+        Whether the CCT may be quoted.
+    """
     inside = cct_K is None or CCT_RANGE_K[0] <= cct_K <= CCT_RANGE_K[1]
     return abs(duv) <= DUV_LIMIT and inside
 
 
 def spectral_distribution(wavelength_nm: np.ndarray, values: np.ndarray, name: str = "") -> SpectralDistribution:
-    """Samples ``values`` on ``wavelength_nm`` [nm] as a ``colour.SpectralDistribution`` (float64)."""
+    """Samples ``values`` on ``wavelength_nm`` [nm] as a ``colour.SpectralDistribution`` (float64).
+
+    Parameters
+    ----------
+    wavelength_nm : ndarray
+        Sample wavelengths [nm].
+    values : ndarray
+        Spectral values at ``wavelength_nm`` (any unit, e.g. [W/nm]).
+    name : str, optional
+        Name of the distribution (appears in error messages).
+
+    Returns
+    -------
+    colour.SpectralDistribution
+        The samples, float64.
+    """
     return colour.SpectralDistribution(np.asarray(values, dtype=np.float64),
                                        np.asarray(wavelength_nm, dtype=np.float64), name=name)
 
 
 def luminous_flux_lm(sd: SpectralDistribution) -> float:
-    """Luminous flux in lm of a spectral radiant flux in W/nm (``colour.luminous_flux``, K_m = 683 lm/W)."""
+    """Luminous flux in lm of a spectral radiant flux in W/nm (``colour.luminous_flux``, K_m = 683 lm/W).
+
+    Parameters
+    ----------
+    sd : colour.SpectralDistribution
+        Spectral radiant flux, wavelengths [nm], values [W/nm].
+
+    Returns
+    -------
+    float
+        Luminous flux [lm].
+    """
     return float(colour.luminous_flux(_uniform_sd(sd)))
 
 
 def luminous_efficacy_of_radiation(sd: SpectralDistribution) -> float:
-    """Luminous efficacy of radiation K = Φ_v/Φ_e in lm/W (``colour.luminous_efficacy``); unit-free input."""
+    """Luminous efficacy of radiation K = Φ_v/Φ_e in lm/W (``colour.luminous_efficacy``); unit-free input.
+
+    Parameters
+    ----------
+    sd : colour.SpectralDistribution
+        Emission spectrum, wavelengths [nm], values in any radiometric unit.
+
+    Returns
+    -------
+    float
+        Luminous efficacy of radiation [lm/W].
+
+    Raises
+    ------
+    NumericalError
+        If the radiant flux is zero.
+    """
     value = float(colour.luminous_efficacy(_uniform_sd(sd)))
     if not math.isfinite(value):
         raise NumericalError(f"{sd.name}: luminous efficacy is undefined (zero radiant flux)")
@@ -274,7 +375,29 @@ def yellow_blue_ratio(
     blue_band_nm: tuple[float, float] = COLORIMETRY_BLUE_BAND_NM,
     yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM,
 ) -> float:
-    """YBR = Σ_yellow S Δλ / Σ_blue S Δλ (inclusive band limits in nm; defaults 380–470 and 471–780 nm)."""
+    """YBR = Σ_yellow S Δλ / Σ_blue S Δλ (inclusive band limits in nm; defaults 380–470 and 471–780 nm).
+
+    Parameters
+    ----------
+    sd : colour.SpectralDistribution
+        Emission spectrum, wavelengths [nm], values in any radiometric unit.
+    blue_band_nm : tuple of float, optional
+        (low, high) blue band [nm], inclusive, low < high.
+    yellow_band_nm : tuple of float, optional
+        (low, high) yellow band [nm], inclusive, low < high.
+
+    Returns
+    -------
+    float
+        Yellow-to-blue ratio [-].
+
+    Raises
+    ------
+    ValidationError
+        If a band is empty.
+    NumericalError
+        If the blue band carries no flux.
+    """
     for name, band in (("blue_band_nm", blue_band_nm), ("yellow_band_nm", yellow_band_nm)):
         if not band[0] < band[1]:
             raise ValidationError("empty band", field=name, expected="lower < upper [nm]", got=band)
@@ -313,7 +436,20 @@ class ColorimetricSummary:
 
 def ybr_label(yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM,
               blue_band_nm: tuple[float, float] = COLORIMETRY_BLUE_BAND_NM) -> str:
-    """A yellow-to-blue ratio's name with its band edges, e.g. ``"YBR (471-780 nm / 380-470 nm)"``."""
+    """A yellow-to-blue ratio's name with its band edges, e.g. ``"YBR (471-780 nm / 380-470 nm)"``.
+
+    Parameters
+    ----------
+    yellow_band_nm : tuple of float, optional
+        (low, high) yellow band [nm].
+    blue_band_nm : tuple of float, optional
+        (low, high) blue band [nm].
+
+    Returns
+    -------
+    str
+        The label.
+    """
     return f"YBR ({band_label(yellow_band_nm)} / {band_label(blue_band_nm)})"
 
 
@@ -323,7 +459,23 @@ def colorimetric_summary(
     yellow_band_nm: tuple[float, float] = COLORIMETRY_YELLOW_BAND_NM,
 ) -> ColorimetricSummary:
     """All colour quantities of :class:`ColorimetricSummary`; YBR over the given bands [nm] (default
-    380–470 and 471–780 nm), None if the blue band is empty."""
+    380–470 and 471–780 nm), None if the blue band is empty.
+
+    Parameters
+    ----------
+    sd : colour.SpectralDistribution
+        Emission spectrum, wavelengths [nm], values in any radiometric unit.
+    blue_band_nm : tuple of float, optional
+        (low, high) blue band of the YBR [nm], inclusive.
+    yellow_band_nm : tuple of float, optional
+        (low, high) yellow band of the YBR [nm], inclusive.
+
+    Returns
+    -------
+    ColorimetricSummary
+        x, y [-], CCT [K], Duv [-], luminous efficacy of radiation [lm/W], YBR [-] (None without blue flux) and
+        the YBR's bands [nm].
+    """
     x, y = chromaticity_xy(sd)
     cct, duv = cct_duv(sd)
     try:

@@ -47,7 +47,25 @@ def _is_spectral_distribution(spectrum: object) -> bool:
 
 
 def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Values of ``spectrum`` on ``wavelength`` (nm): linear interpolation, zero outside its domain."""
+    """Values of ``spectrum`` on ``wavelength`` (nm): linear interpolation, zero outside its domain.
+
+    Parameters
+    ----------
+    spectrum : colour.SpectralDistribution or xarray.DataArray
+        Spectrum over wavelength [nm] (a DataArray over ``wavelength``), any value unit.
+    wavelength : ndarray
+        Wavelengths to sample at [nm].
+
+    Returns
+    -------
+    ndarray
+        Values at ``wavelength``, in the unit of ``spectrum``.
+
+    Raises
+    ------
+    InputError
+        If ``spectrum`` is of another type or has non-finite values.
+    """
     if _is_spectral_distribution(spectrum):
         wl, values = spectrum.wavelengths, spectrum.values
     elif isinstance(spectrum, xr.DataArray):
@@ -63,14 +81,40 @@ def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDAr
 
 
 def to_spectral_distribution(da: xr.DataArray, name: str = "") -> colour.SpectralDistribution:
-    """A 1-D DataArray over ``wavelength`` as a colour SpectralDistribution."""
+    """A 1-D DataArray over ``wavelength`` as a colour SpectralDistribution.
+
+    Parameters
+    ----------
+    da : xarray.DataArray
+        1-D spectrum over ``wavelength`` [nm].
+    name : str, optional
+        Name of the distribution.
+
+    Returns
+    -------
+    colour.SpectralDistribution
+        The same samples.
+    """
     import colour  # only here: see _is_spectral_distribution
 
     return colour.SpectralDistribution(dict(zip(da["wavelength"].values.tolist(), da.values.tolist())), name=name)
 
 
 def incident_spectrum(ds: xr.Dataset, config: str) -> colour.SpectralDistribution:
-    """The measured, normalised incident spectrum of configuration ``config`` (1/nm)."""
+    """The measured, normalised incident spectrum of configuration ``config`` (1/nm).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan with ``incident_spectrum`` over (configuration, wavelength).
+    config : str
+        Configuration name (e.g. ``"blue"``).
+
+    Returns
+    -------
+    colour.SpectralDistribution
+        Normalised incident spectrum over wavelength [nm], values [1/nm].
+    """
     return to_spectral_distribution(ds["incident_spectrum"].sel(configuration=config), name=f"incident {config}")
 
 
@@ -81,7 +125,20 @@ def _arrays(spectrum: SpectrumLike) -> tuple[NDArray[np.float64], NDArray[np.flo
 
 
 def band_integral(spectrum: SpectrumLike, band: Band) -> float:
-    """Σ_band S(λ) Δλ on the spectrum's own grid (:func:`band_sum`)."""
+    """Σ_band S(λ) Δλ on the spectrum's own grid (:func:`band_sum`).
+
+    Parameters
+    ----------
+    spectrum : colour.SpectralDistribution or xarray.DataArray
+        Spectrum over wavelength [nm].
+    band : tuple of float
+        (low, high) band [nm], inclusive.
+
+    Returns
+    -------
+    float
+        The integral, in the spectrum's unit times nm.
+    """
     return band_sum(*_arrays(spectrum), band)
 
 
@@ -93,6 +150,28 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
     spectrum of ``config``. Only pixels inside ``band`` [nm] (None: every measured wavelength, also an unknown
     NaN one) where the BSDF is defined (incident light present) are used; a band without such pixels raises
     :class:`InputError` (a band with no signal). A scan of one wavelength is its own mean (weight 1).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan (``bsdf``, ``bsdf_std`` per record and wavelength, ``incident_spectrum``).
+    config : str
+        Configuration whose records are averaged.
+    band : tuple of float or None
+        (low, high) band [nm], inclusive; None for every measured wavelength.
+    spectrum : colour.SpectralDistribution or xarray.DataArray, optional
+        Weighting spectrum E over wavelength [nm] (relative shape only); None for the measured incident spectrum.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf`` and ``bsdf_std`` on ``record`` [1/sr], with the records' angle coordinates;
+        ``attrs['common_relative_std']`` [-] when the scan records the incident light's relative uncertainty.
+
+    Raises
+    ------
+    InputError
+        If ``config`` has no records or the band carries no incident light.
     """
     sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
     if sub.sizes["record"] == 0:
@@ -126,7 +205,28 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
 
 
 def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSION_BAND_NM) -> xr.Dataset:
-    """Σ_band ⟨q_λ⟩(λs) Δλs per record, in 1/sr: ⟨⟨q_λ⟩⟩·ΔΛs of eqs. (11)-(13)."""
+    """Σ_band ⟨q_λ⟩(λs) Δλs per record, in 1/sr: ⟨⟨q_λ⟩⟩·ΔΛs of eqs. (11)-(13).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated phosphor scan with ``bsdf_bispectral`` [1/(sr nm)] and its std.
+    config : str
+        Configuration whose records are integrated (the excitation, e.g. ``"blue"``).
+    band : tuple of float, optional
+        (low, high) emission band [nm], inclusive.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf`` and ``bsdf_std`` on ``record`` [1/sr], with the records' angle coordinates;
+        ``attrs['common_relative_std']`` [-] when the scan records the incident power's relative uncertainty.
+
+    Raises
+    ------
+    InputError
+        If the band holds no wavelength of the grid.
+    """
     sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
     lam = sub["wavelength"].values
     inside = band_mask(lam, band)
@@ -145,7 +245,22 @@ def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSIO
 
 
 def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = CONVERSION_BAND_NM) -> xr.Dataset:
-    """⟨⟨q_λ⟩⟩ per record (eq. (12)), in 1/(sr·nm): the band integral divided by ΔΛs = high − low."""
+    """⟨⟨q_λ⟩⟩ per record (eq. (12)), in 1/(sr·nm): the band integral divided by ΔΛs = high − low.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated phosphor scan with ``bsdf_bispectral`` [1/(sr nm)] and its std.
+    config : str
+        Configuration whose records are averaged (the excitation, e.g. ``"blue"``).
+    band : tuple of float, optional
+        (low, high) emission band [nm], inclusive.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf`` and ``bsdf_std`` on ``record`` [1/(sr nm)], as :func:`bispectral_band_integral` otherwise.
+    """
     out = bispectral_band_integral(ds, config, band)
     width = band[1] - band[0]
     out["bsdf"] = out["bsdf"] / width
@@ -156,7 +271,27 @@ def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = CONVERSION_BA
 
 
 def bispectral_weighted_mean(donaldson: xr.DataArray, excitation: SpectrumLike) -> xr.DataArray:
-    """Reduce a Donaldson-style bi-spectral BSDF q_λ(λi, λs) (dims include ``wavelength_i``) to ⟨q_λ⟩(λs), eq. (10)."""
+    """Reduce a Donaldson-style bi-spectral BSDF q_λ(λi, λs) (dims include ``wavelength_i``) to ⟨q_λ⟩(λs), eq. (10).
+
+    Parameters
+    ----------
+    donaldson : xarray.DataArray
+        Bi-spectral BSDF q_λ [1/(sr nm)] with a dimension ``wavelength_i`` (excitation [nm]).
+    excitation : colour.SpectralDistribution or xarray.DataArray
+        Excitation spectrum E over wavelength [nm] (relative shape only).
+
+    Returns
+    -------
+    xarray.DataArray
+        ⟨q_λ⟩ [1/(sr nm)], the dimensions of ``donaldson`` without ``wavelength_i``.
+
+    Raises
+    ------
+    InputError
+        If ``donaldson`` has no ``wavelength_i`` dimension.
+    NumericalError
+        If the excitation spectrum has no power on the excitation grid.
+    """
     if "wavelength_i" not in donaldson.dims:
         raise InputError("no excitation axis", field="wavelength_i", expected="a dimension 'wavelength_i'")
     lam_i = donaldson["wavelength_i"].values
@@ -171,17 +306,60 @@ def bispectral_weighted_mean(donaldson: xr.DataArray, excitation: SpectrumLike) 
 
 def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
     """Power-weighted mean wavelength λ̄ = Σ Φ_λ λ Δλ / Σ Φ_λ Δλ over ``band`` (nm)
-    (:func:`bsdfkit.core.spectra.mean_wavelength_nm`)."""
+    (:func:`bsdfkit.core.spectra.mean_wavelength_nm`).
+
+    Parameters
+    ----------
+    spectrum : colour.SpectralDistribution or xarray.DataArray
+        Power spectrum over wavelength [nm].
+    band : tuple of float
+        (low, high) band [nm], inclusive.
+
+    Returns
+    -------
+    float
+        Mean wavelength λ̄ [nm].
+    """
     return mean_wavelength_nm(*_arrays(spectrum), band)
 
 
 def mean_photon_energy(spectrum: SpectrumLike, band: Band) -> float:
-    """hc·ΣΦ_λΔλ / ΣΦ_λλΔλ in joules: the factor converting photon flux to power in eqs. (14)-(15)."""
+    """hc·ΣΦ_λΔλ / ΣΦ_λλΔλ in joules: the factor converting photon flux to power in eqs. (14)-(15).
+
+    Parameters
+    ----------
+    spectrum : colour.SpectralDistribution or xarray.DataArray
+        Power spectrum over wavelength [nm].
+    band : tuple of float
+        (low, high) band [nm], inclusive.
+
+    Returns
+    -------
+    float
+        Mean photon energy hc/λ̄ [J].
+    """
     return PLANCK_H * LIGHT_C / (mean_wavelength(spectrum, band) * 1e-9)
 
 
 def photon_ratio(incident: SpectrumLike, incident_band: Band, scattered: SpectrumLike, scattered_band: Band) -> float:
-    """TIS_photons / TIS_power for a converting interaction, eq. (16): E_ph,incident / E_ph,scattered = λ̄s/λ̄i."""
+    """TIS_photons / TIS_power for a converting interaction, eq. (16): E_ph,incident / E_ph,scattered = λ̄s/λ̄i.
+
+    Parameters
+    ----------
+    incident : colour.SpectralDistribution or xarray.DataArray
+        Incident power spectrum over wavelength [nm].
+    incident_band : tuple of float
+        (low, high) band of ``incident`` [nm], inclusive.
+    scattered : colour.SpectralDistribution or xarray.DataArray
+        Scattered (converted) power spectrum over wavelength [nm].
+    scattered_band : tuple of float
+        (low, high) band of ``scattered`` [nm], inclusive.
+
+    Returns
+    -------
+    float
+        λ̄s/λ̄i [-].
+    """
     return mean_photon_energy(incident, incident_band) / mean_photon_energy(scattered, scattered_band)
 
 
@@ -222,6 +400,30 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
     ``configs["elastic"]``). Optionally restricted to one ``side``. ``bands``: the bands [nm]
     (:class:`bsdfkit.core.conventions.InteractionBands`, default the power-budget filters); configuration names
     can be overridden.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan.
+    interaction : str
+        ``"bibs"``, ``"biys"``, ``"yiys"`` or ``"elastic"``.
+    side : str, optional
+        One of :data:`~bsdfkit.core.conventions.SIDES`; None keeps both.
+    bands : InteractionBands, optional
+        The bands [nm]; None for the power-budget filters.
+    configs : dict of str to str, optional
+        Configuration names by role (``blue``, ``yellow``, ``elastic``) overriding the defaults.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``bsdf`` and ``bsdf_std`` on ``record`` [1/sr] (see :func:`weighted_mean_bsdf`), ``attrs['interaction']``
+        set.
+
+    Raises
+    ------
+    InputError
+        If ``interaction`` or ``side`` is unknown, or the elastic configuration is ambiguous.
     """
     bands = bands or InteractionBands()
     configs = {"blue": "blue", "yellow": "yellow", **(configs or {})}

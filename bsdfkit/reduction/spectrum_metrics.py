@@ -57,6 +57,14 @@ class SpectrumMetrics:
     purity: float | None
 
     def as_dict(self) -> dict[str, float | None]:
+        """The metrics as a dict, field name → value (wavelengths [nm], ``peak_value`` in the spectrum's unit,
+        ``purity`` [-]).
+
+        Returns
+        -------
+        dict of str to float or None
+            One entry per field.
+        """
         return asdict(self)
 
 
@@ -81,6 +89,27 @@ def peak_wavelength(wavelength, values) -> tuple[float, float]:
 
     For a smooth top the error is far below the spacing; on an asymmetric cusp (a split Gaussian) the vertex
     leans towards the broader side by up to ~|α| × the local spacing.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
+    values : array_like
+        Spectral values at ``wavelength``, any radiometric unit, some positive.
+
+    Returns
+    -------
+    peak : float
+        Peak wavelength λp [nm].
+    value : float
+        The parabola's value at λp, in the unit of ``values``.
+
+    Raises
+    ------
+    InputError
+        If the arrays are not 1-D of equal length ≥ 3, not finite, or the wavelengths do not increase.
+    NumericalError
+        If no value is positive.
     """
     wl, y = _grid(wavelength, values)
     i = int(np.argmax(y))
@@ -100,7 +129,29 @@ def peak_wavelength(wavelength, values) -> tuple[float, float]:
 
 def half_maximum_crossings(wavelength, values, level: float | None = None) -> tuple[float, float]:
     """(left, right) wavelengths [nm] where the spectrum crosses ``level`` (default: half the maximum
-    sample) nearest the maximum, linearly interpolated; ``nan`` for a side without a crossing."""
+    sample) nearest the maximum, linearly interpolated; ``nan`` for a side without a crossing.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
+    values : array_like
+        Spectral values at ``wavelength``, any radiometric unit, some positive.
+    level : float, optional
+        Crossing level in the unit of ``values``; None for half the maximum sample.
+
+    Returns
+    -------
+    left, right : float
+        Crossing wavelengths [nm] below and above the maximum; nan where there is none.
+
+    Raises
+    ------
+    InputError
+        If the arrays are not 1-D of equal length ≥ 3, not finite, or the wavelengths do not increase.
+    NumericalError
+        If no value is positive.
+    """
     wl, y = _grid(wavelength, values)
     i = int(np.argmax(y))
     half = 0.5 * y[i] if level is None else float(level)
@@ -117,7 +168,27 @@ def half_maximum_crossings(wavelength, values, level: float | None = None) -> tu
 
 
 def centroid_wavelength(wavelength, values) -> float:
-    """λc = ΣλSΔλ / ΣSΔλ [nm] over the whole grid: :func:`bsdfkit.core.spectra.mean_wavelength_nm`."""
+    """λc = ΣλSΔλ / ΣSΔλ [nm] over the whole grid: :func:`bsdfkit.core.spectra.mean_wavelength_nm`.
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
+    values : array_like
+        Spectral values at ``wavelength``, any radiometric unit, some positive.
+
+    Returns
+    -------
+    float
+        Centroid wavelength λc [nm].
+
+    Raises
+    ------
+    InputError
+        If the arrays are not 1-D of equal length ≥ 3, not finite, or the wavelengths do not increase.
+    NumericalError
+        If no value is positive.
+    """
     return mean_wavelength_nm(*_grid(wavelength, values))
 
 
@@ -139,7 +210,24 @@ def dominant_wavelength_purity(wavelength, values,
                                white_point: tuple[float, float] = WHITE_POINT_E) -> tuple[float, float]:
     """(λd [nm], excitation purity [1]) of the spectrum's CIE 1931 chromaticity against ``white_point``.
 
-    Returns (nan, nan) when colour-science cannot place the chromaticity (e.g. the white point itself)."""
+    Returns (nan, nan) when colour-science cannot place the chromaticity (e.g. the white point itself).
+
+    Parameters
+    ----------
+    wavelength : array_like
+        Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
+    values : array_like
+        Spectral values at ``wavelength``, any radiometric unit, some positive.
+    white_point : tuple of float, optional
+        CIE 1931 (x, y) of the reference white [-].
+
+    Returns
+    -------
+    dominant : float
+        Dominant wavelength λd [nm], negative (complementary) for purple chromaticities.
+    purity : float
+        Excitation purity [-].
+    """
     import colour
 
     wl, y = _grid(wavelength, values)
@@ -167,6 +255,12 @@ def spectrum_metrics(wavelength, values, *, colorimetry: bool = True,
         spectrum, e.g. no light in 360-830 nm); else None.
     white_point
         CIE 1931 (x, y) of the reference white for λd and purity (default illuminant E).
+
+    Returns
+    -------
+    SpectrumMetrics
+        Peak, centroid, half-maximum crossings and FWHM [nm], peak value, and (with ``colorimetry``) λd [nm] and
+        purity [-].
     """
     wl, y = _grid(wavelength, values)
     peak, peak_value = peak_wavelength(wl, y)

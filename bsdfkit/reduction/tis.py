@@ -83,7 +83,27 @@ class QuadratureGrid:
 
 
 def polar_grid(beta0: tuple[float, float], n_psi: int = 256, n_r: int = 400) -> QuadratureGrid:
-    """Nodes covering the unit disk in polar coordinates centred on β0 (|β0| < 1)."""
+    """Nodes covering the unit disk in polar coordinates centred on β0 (|β0| < 1).
+
+    Parameters
+    ----------
+    beta0 : tuple of float
+        Centre β0 = (βx, βy) in direction cosines [-], |β0| < 1.
+    n_psi : int, optional
+        Quadrature nodes in ψ (midpoint rule).
+    n_r : int, optional
+        Gauss–Legendre nodes in r.
+
+    Returns
+    -------
+    QuadratureGrid
+        Radii r [-] and angles ψ [rad] about β0, and area weights w [-] (Σ w ≈ π, the disk's area), n_psi·n_r nodes.
+
+    Raises
+    ------
+    NumericalError
+        If β0 is on or outside the unit disk.
+    """
     bx, by = beta0
     b2 = bx * bx + by * by
     if not b2 < 1.0:
@@ -121,6 +141,26 @@ class Hemisphere:
         Fill rules: a missing perpendicular branch copies the other; no perpendicular arc → f_±β = mean of the
         in-plane halves; a missing in-plane half copies the other; no in-plane arc → f_±α = mean of f_±β.
         Records with a non-finite value (grazing, masked) are skipped.
+
+        Parameters
+        ----------
+        profile : xarray.Dataset
+            Profile of one incidence and side: ``bsdf`` [1/sr] on ``record`` with coordinates ``theta_i``, ``phi_i``,
+            ``theta_s``, ``phi_s`` [deg], ``side`` and optionally ``arc``.
+        use : {"both", "in_plane", "perpendicular"}, optional
+            Which arcs to use.
+        center : {"specular", "normal"}, optional
+            Reconstruction centre.
+
+        Returns
+        -------
+        Hemisphere
+            The reconstruction.
+
+        Raises
+        ------
+        InputError
+            If the profile is empty, mixes incidences or sides, has no usable record, or ``use``/``center`` is unknown.
         """
         th = np.radians(profile["theta_i"].values)
         if th.size == 0:
@@ -197,6 +237,24 @@ class Hemisphere:
         are missing); where none is, the half-axis sampled farthest out takes all the weight and its last value
         is held. ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the nodes of
         :func:`polar_grid`, ψ repeated over the radii): the blend is then computed once per block (same numbers).
+
+        Parameters
+        ----------
+        r : ndarray
+            Radii about β0 in direction cosines [-].
+        psi : ndarray
+            Polar angles about β0 in the plane-of-incidence frame [rad], as many as ``r``.
+        p : float, optional
+            Blend exponent [-].
+        borrow : bool, optional
+            Hand the weight of unsampled radii to the half-axes sampled there.
+        repeats : int, optional
+            Block length of equal ψ values (1: no blocks).
+
+        Returns
+        -------
+        ndarray, shape (n, 4)
+            Coefficients [-] of the half-axes in :data:`HALVES` order.
         """
         r = np.asarray(r, dtype=np.float64).ravel()
         psi = np.asarray(psi, dtype=np.float64).ravel()[::repeats]
@@ -227,7 +285,26 @@ class Hemisphere:
 
     def evaluate_polar(self, r: NDArray, psi: NDArray, mode: str = "linear", p: float = 2.0,
                        borrow: bool = True) -> NDArray[np.float64]:
-        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame)."""
+        """f at polar coordinates (r, ψ) about β0 (ψ in the plane-of-incidence frame).
+
+        Parameters
+        ----------
+        r : ndarray
+            Radii about β0 in direction cosines [-].
+        psi : ndarray
+            Polar angles about β0 [rad], broadcast with ``r``.
+        mode : {"linear", "log"}, optional
+            Interpolate the half-profiles in f or in ln f (between positive samples).
+        p : float, optional
+            Blend exponent [-].
+        borrow : bool, optional
+            Hand the weight of unsampled radii to the half-axes sampled there.
+
+        Returns
+        -------
+        ndarray
+            f [1/sr] with the broadcast shape of ``r`` and ``psi``.
+        """
         shape = np.broadcast(r, psi).shape
         r_flat = np.broadcast_to(r, shape).ravel()
         coef = self.coefficients(r_flat, np.broadcast_to(psi, shape).ravel(), p, borrow)
@@ -260,7 +337,18 @@ class Hemisphere:
 
     def bsdf(self, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """f (1/sr) for unit vectors (..., 3) in the scattering hemisphere's sample frame (source at φi = 180°
-        unless the profile said otherwise)."""
+        unless the profile said otherwise).
+
+        Parameters
+        ----------
+        directions : ndarray, shape (..., 3)
+            Unit scatter directions in the sample frame [-].
+
+        Returns
+        -------
+        ndarray, shape (...)
+            f [1/sr].
+        """
         d = np.asarray(directions, dtype=np.float64)
         x = d[..., 0] - self.beta0[0]
         y = d[..., 1] - self.beta0[1]
@@ -269,7 +357,20 @@ class Hemisphere:
         return self.evaluate_polar(np.hypot(du, dv), np.arctan2(dv, du))
 
     def weights(self, n_psi: int = 256, n_r: int = 400) -> NDArray[np.float64]:
-        """w such that TIS = Σ_records w_k f_k (the reconstruction and quadrature are linear in the data)."""
+        """w such that TIS = Σ_records w_k f_k (the reconstruction and quadrature are linear in the data).
+
+        Parameters
+        ----------
+        n_psi : int, optional
+            Quadrature nodes in ψ (midpoint rule).
+        n_r : int, optional
+            Gauss–Legendre nodes in r.
+
+        Returns
+        -------
+        ndarray, shape (n_records,)
+            Weight per profile record [sr] (linear interpolation in f).
+        """
         grid, coef, rows = self._grid_coefficients(n_psi, n_r)
         w = np.zeros(self.n_records)
         for k, name in enumerate(HALVES):
@@ -282,6 +383,24 @@ class Hemisphere:
         return w
 
     def tis(self, mode: str = "linear", n_psi: int = 256, n_r: int = 400, p: float = 2.0, borrow: bool = True) -> float:
+        """TIS of the reconstruction: ∫∫_{|β|≤1} f dβx dβy on the :func:`polar_grid` about β0.
+
+        Parameters
+        ----------
+        mode : {"linear", "log"}, optional
+            Interpolate the half-profiles in f or in ln f (between positive samples).
+        n_psi, n_r : int, optional
+            Quadrature nodes in ψ and in r.
+        p : float, optional
+            Blend exponent [-] (see :meth:`coefficients`).
+        borrow : bool, optional
+            Hand the weight of unsampled radii to the half-axes sampled there.
+
+        Returns
+        -------
+        float
+            Total integrated scatter [-] (for f in [1/sr]).
+        """
         grid, coef, rows = self._grid_coefficients(n_psi, n_r, p, borrow)
         return float(np.sum(self._evaluate(grid.r, coef, mode, rows) * grid.w))
 
@@ -291,6 +410,20 @@ class Hemisphere:
 
         The grid's radii do not depend on the blend, so every half-profile is interpolated at all of them
         once and each blend only gathers (the error budget of :func:`tis_from_profile` needs four blends).
+
+        Parameters
+        ----------
+        mode : {"linear", "log"}
+            Interpolate the half-profiles in f or in ln f (between positive samples).
+        n_psi, n_r : int
+            Quadrature nodes in ψ and in r.
+        variants : sequence of (float, bool)
+            (blend exponent p [-], borrow) per TIS.
+
+        Returns
+        -------
+        list of float
+            TIS [-] per variant, in order.
         """
         grid = self._grid_coefficients(n_psi, n_r)[0]
         at_nodes: dict[int, NDArray] | None = {id(h): _interp(h, grid.r, mode)
@@ -374,6 +507,23 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
     """TIS of one incidence and side of a profile (1/sr per record), with error bars (module docstring).
 
     ``center`` defaults to the profile's interaction (``attrs['interaction']``) via :data:`CENTER`, else specular.
+
+    Parameters
+    ----------
+    profile : xarray.Dataset
+        Profile of one incidence and side (:func:`bsdfkit.reduction.spectral.interaction_profile`): ``bsdf`` and
+        optionally ``bsdf_std`` [1/sr] per record.
+    n_psi : int, optional
+        Quadrature nodes in ψ (midpoint rule).
+    n_r : int, optional
+        Gauss–Legendre nodes in r.
+    center : {"specular", "normal"}, optional
+        Reconstruction centre; None picks it from the profile's interaction.
+
+    Returns
+    -------
+    TIS
+        Value and standard uncertainties [-], error-budget components and single-arc TIS [-], record weights [sr].
     """
     center = center or CENTER.get(profile.attrs.get("interaction", ""), "specular")
     hemi = Hemisphere.from_profile(profile, center=center)
@@ -408,7 +558,30 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
 
     ``bands``: the bands of the profiles (:func:`bsdfkit.reduction.spectral.interaction_profile`), recorded in
     the attributes ``blue_band_nm`` and ``yellow_band_nm`` so that a later photon budget can check it uses the
-    same ones."""
+    same ones.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan.
+    interactions : tuple of str, optional
+        Interactions to reduce (``"bibs"``, ``"biys"``, ``"yiys"``, ``"elastic"``).
+    theta_i : list of float, optional
+        Angles of incidence [deg]; None for every measured incidence.
+    bands : InteractionBands, optional
+        The bands [nm]; None for the power-budget filters.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``tis``, ``tis_std``, ``tis_std_measurement``, ``tis_std_reconstruction`` [-] over (interaction, side,
+        theta_i [deg]).
+
+    Raises
+    ------
+    InputError
+        If an incidence has no records on a side.
+    """
 
     bands = bands or InteractionBands()
     angles = theta_i if theta_i is not None else incidences(ds)
@@ -444,6 +617,26 @@ def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: st
 
     The hemisphere weights of the band-integrated profile are linear in the data, so one reconstruction
     integrates every wavelength: Φ_λ,s/Φ_i = Σ_k w_k ⟨q_λ⟩_k(λs). Its integral over ``band`` is the TIS.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated phosphor scan with ``bsdf_bispectral``.
+    config : str
+        Excitation configuration (e.g. ``"blue"``).
+    theta_i : float
+        Angle of incidence [deg], a measured one.
+    side : str
+        ``"reflection"`` or ``"transmission"``.
+    interaction : str, optional
+        Interaction whose reconstruction centre is used (:data:`CENTER`).
+    band : tuple of float, optional
+        (low, high) emission band [nm] of the profile that sets the hemisphere weights.
+
+    Returns
+    -------
+    xarray.DataArray
+        Spectral TIS density [1/nm] over ``wavelength`` [nm].
     """
 
     sub = select(ds, config=config, theta_i=theta_i, side=side)
@@ -460,6 +653,21 @@ def hemisphere_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> Callable[
     """A callable ``f(theta_i_deg, side, directions) -> bsdf`` over measured incidences (for grids/exports).
 
     Only measured incidences are available (no interpolation across incidence); others raise InputError.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan.
+    interaction : str
+        ``"bibs"``, ``"biys"`` or ``"yiys"``.
+    side : str
+        ``"reflection"`` or ``"transmission"``.
+
+    Returns
+    -------
+    callable
+        ``f(theta_i_deg, side, directions)``: incidence [deg], side, unit directions (..., 3) [-] → BSDF [1/sr];
+        its attribute ``incidences_deg`` lists the measured incidences [deg].
     """
 
     prof = interaction_profile(ds, interaction, side)
@@ -483,7 +691,27 @@ def hemisphere_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> Callable[
 
 def tis_rectangle_sum(bsdf: Callable[[NDArray, NDArray], NDArray], dtheta_deg: float, dphi_deg: float) -> float:
     """Eq. (7) of the power-budget paper: Σ_φ Σ_θ f(θ, φ) cos θ sin θ Δθ Δφ on the nodes θ = 0, Δθ, …, 90°
-    and φ = 0, Δφ, …, 360° − Δφ. ``bsdf(theta_rad, phi_rad)`` evaluates f on broadcast arrays."""
+    and φ = 0, Δφ, …, 360° − Δφ. ``bsdf(theta_rad, phi_rad)`` evaluates f on broadcast arrays.
+
+    Parameters
+    ----------
+    bsdf : callable
+        ``bsdf(theta_rad, phi_rad)``: scatter polar angle and azimuth [rad] → BSDF [1/sr].
+    dtheta_deg : float
+        Polar step Δθ [deg], dividing 90°.
+    dphi_deg : float
+        Azimuth step Δφ [deg], dividing 360°.
+
+    Returns
+    -------
+    float
+        Total integrated scatter [-].
+
+    Raises
+    ------
+    InputError
+        If a step does not divide its range.
+    """
     n_t = int(round(90.0 / dtheta_deg))
     n_p = int(round(360.0 / dphi_deg))
     if n_t < 1 or n_p < 1 or abs(n_t * dtheta_deg - 90) > 1e-9 or abs(n_p * dphi_deg - 360) > 1e-9:

@@ -162,7 +162,28 @@ def _relative_parameters(model: str) -> tuple[Parameter, ...]:
 
 
 def spectrum_model_values(model: str, params: dict[str, float], wavelength: np.ndarray) -> np.ndarray:
-    """Evaluate a fitted spectrum model (parameter names as in :func:`fit_spectrum`) at λ [nm]."""
+    """Evaluate a fitted spectrum model (parameter names as in :func:`fit_spectrum`) at λ [nm].
+
+    Parameters
+    ----------
+    model : str
+        One of :data:`SPECTRUM_MODELS`.
+    params : dict of str to float
+        Model parameters by name (peaks and widths [nm], ``alpha`` and shape parameters [-], amplitudes in the
+        spectrum's unit); extra keys are ignored.
+    wavelength : ndarray
+        Wavelengths λ [nm].
+
+    Returns
+    -------
+    ndarray
+        Model values at ``wavelength``, in the unit of the amplitudes.
+
+    Raises
+    ------
+    ValidationError
+        If ``model`` is unknown or a parameter is missing.
+    """
     if model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model", expected=" | ".join(SPECTRUM_MODELS),
                               got=model)

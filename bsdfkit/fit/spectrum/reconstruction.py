@@ -34,6 +34,25 @@ def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[flo
 
     λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.reduction.spectral.band_sum` on a
     validated grid. Result in value-unit·nm (W for W/nm).
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Grid [nm], strictly increasing.
+    values : ndarray
+        Spectral values on the grid (e.g. [W/nm]).
+    band_nm : tuple of float
+        (low, high) band [nm], inclusive, low < high.
+
+    Returns
+    -------
+    float
+        The band sum, in the unit of ``values`` times nm (e.g. [W]).
+
+    Raises
+    ------
+    ValidationError
+        If the band is empty or the grid is not in nm.
     """
     wl = _nm_grid(wavelength)
     lo, hi = band_nm
@@ -71,14 +90,21 @@ def two_band_gains(
 
     Parameters
     ----------
-    wavelength
-        Grid in nm.
-    s_blue, s_yellow
-        Normalised (peak 1) blue and yellow spectra on that grid (dimensionless).
-    flux_blue_W, flux_yellow_W
-        Band radiant fluxes in W (Table 1 of the paper, simulation: 0.058 W and 0.472 W).
-    max_condition
-        Refuse matrices with a larger 2-norm condition number (default :data:`MAX_CONDITION`).
+    wavelength : ndarray
+        Grid [nm], strictly increasing.
+    s_blue, s_yellow : ndarray
+        Normalised (peak 1) blue and yellow spectra on that grid [-].
+    flux_blue_W, flux_yellow_W : float
+        Band radiant fluxes [W], ≥ 0 (Table 1 of the paper, simulation: 0.058 W and 0.472 W).
+    blue_band_nm, yellow_band_nm : tuple of float, optional
+        (low, high) limits of the blue and yellow bands [nm], inclusive.
+    max_condition : float, optional
+        Refuse matrices with a larger 2-norm condition number [-] (default :data:`MAX_CONDITION`).
+
+    Returns
+    -------
+    TwoBandGains
+        Gains A1, A2 [W/nm], the matrix's condition number [-] and its band sums [nm].
 
     Raises
     ------

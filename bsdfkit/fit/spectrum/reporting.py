@@ -46,6 +46,20 @@ def information_criteria(cost: float, n_points: int, n_parameters: int) -> dict[
     With RSS = 2·cost and k = n_parameters + 1 (the variance): AIC = n·ln(RSS/n) + 2k,
     AICc = AIC + 2k(k + 1)/(n − k − 1), BIC = n·ln(RSS/n) + k·ln n. Only differences between models fitted to
     the same data matter.
+
+    Parameters
+    ----------
+    cost : float
+        Least-squares cost ½·RSS, in the squared unit of the residuals.
+    n_points : int
+        Number of fitted samples n.
+    n_parameters : int
+        Number of fitted model parameters.
+
+    Returns
+    -------
+    dict of str to float
+        ``aicc`` and ``bic`` [-]; NaN when RSS = 0 or n ≤ k + 1.
     """
     n, k = int(n_points), int(n_parameters) + 1
     rss = 2.0 * float(cost)

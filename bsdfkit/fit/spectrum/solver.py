@@ -528,8 +528,33 @@ def fit_spectrum(
 ) -> xr.Dataset:
     """Fit one spectrum; see :func:`fit_spectra` for the models and arguments (λ in nm).
 
-    Returns a Dataset of scalars: each parameter and its ``_std``, ``covariance``, ``r2``, ``rms``,
-    ``iterations`` and ``converged``.
+    Parameters
+    ----------
+    wavelength : ndarray, shape (n,)
+        Grid [nm], strictly increasing.
+    values : ndarray, shape (n,)
+        The spectrum, any unit (relative or W/nm).
+    model : str, optional
+        Spectrum model (see :func:`fit_spectra`).
+    sigma : ndarray, optional
+        Standard uncertainties of ``values`` (same unit); None = unweighted.
+    mask : ndarray of bool, optional
+        True = use the sample.
+    options : FitOptions, optional
+        Solver options (default: absolute residuals, linear loss).
+    split_nm : float, optional
+        Two-band only: the pump/phosphor split [nm]; None finds each spectrum's valley.
+
+    Returns
+    -------
+    xarray.Dataset
+        Scalars: each parameter (peaks and widths [nm], amplitudes in the unit of ``values``) and its ``_std``,
+        ``covariance``, ``r2``, ``rms``, ``iterations`` and ``converged``.
+
+    Raises
+    ------
+    InputError
+        If ``values`` is not 1-D.
     """
     y = np.asarray(values, dtype=float)
     if y.ndim != 1:

@@ -106,6 +106,22 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
     (noise); the reported maxima are those of the data: the largest sample within ±2 samples refined by the
     local quadratic through it and its neighbours (:func:`bsdfkit.reduction.spectrum_metrics.peak_wavelength`).
 
+    Parameters
+    ----------
+    wavelength : ndarray
+        Wavelengths [nm], increasing.
+    values : ndarray
+        Spectral values at ``wavelength``, any unit.
+    region : ndarray of bool, optional
+        Samples to search (True = use); None for all.
+    label : str, optional
+        Prefix of the error messages (the spectrum's name).
+
+    Returns
+    -------
+    TwoBandSplit
+        Pump maximum, valley and phosphor maximum: wavelengths [nm] and values in the unit of ``values``.
+
     Raises
     ------
     FitError
