@@ -156,11 +156,34 @@ def reconstruct_two_band_spectrum(
     max_condition: float = MAX_CONDITION,
     name: str = "two-band reconstruction",
 ) -> SpectralDistribution:
-    """Absolute spectral radiant flux Φ_e,λ = A1·S_blue + A2·S_yellow in W/nm (§4.2, cylindrical-module paper).
+    """Absolute spectral radiant flux Φ_e,λ = A1·S_blue + A2·S_yellow [W/nm] (§4.2, cylindrical-module paper).
 
-    Arguments as :func:`two_band_gains`, its blue and yellow bands given as one pair ``bands_nm`` (380–500 nm
-    and 501–780 nm by default, λ in nm). Returns a
-    :class:`colour.SpectralDistribution` on the input grid; its band sums reproduce the two fluxes.
+    The gains are those of :func:`two_band_gains`, so the band sums of the result reproduce the two fluxes.
+
+    Parameters
+    ----------
+    wavelength : ndarray
+        Grid [nm], strictly increasing.
+    s_blue, s_yellow : ndarray
+        Normalised (peak 1) blue and yellow spectra on that grid [-].
+    flux_blue_W, flux_yellow_W : float
+        Band radiant fluxes [W], ≥ 0.
+    bands_nm : tuple of two (low, high) tuples, optional
+        Blue and yellow band limits [nm], inclusive (default 380–500 nm and 501–780 nm).
+    max_condition : float, optional
+        Refuse gain matrices with a larger 2-norm condition number [-] (default :data:`MAX_CONDITION`).
+    name : str, optional
+        Name of the returned distribution.
+
+    Returns
+    -------
+    colour.SpectralDistribution
+        Φ_e,λ [W/nm] on the input grid.
+
+    Raises
+    ------
+    NumericalError
+        As :func:`two_band_gains`: a near-singular system or a negative gain.
     """
     import colour
 
