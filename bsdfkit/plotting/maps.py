@@ -34,6 +34,13 @@ _UNITS = {"W/mm^2": ("W/m²", 1e6), "W/mm2": ("W/m²", 1e6), "W/cm^2": ("W/m²",
           "W/m2": ("W/m²", 1.0)}
 
 
+#: Margins of :func:`irradiance_maps_figure` [in]: tick labels and axis label left and below, a line of a panel
+#: title at fontsize 9, the figure title, the colour bar's column (gap, bar, its tick labels and label)
+_LEFT_IN, _BOTTOM_IN, _RIGHT_IN, _WSPACE_IN = 0.75, 0.55, 0.15, 0.85
+_LINE_IN, _TITLE_PAD_IN, _SUPTITLE_IN = 0.155, 0.1, 0.3
+_COLOURBAR_IN, _COLOURBAR_GAP_IN, _COLOURBAR_WIDTH_IN = 1.3, 0.25, 0.15
+
+
 def find_map_variable(ds: xr.Dataset) -> str | None:
     """The name of the irradiance-map variable of ``ds`` (``irradiance`` first), or None.
 
@@ -170,9 +177,18 @@ def irradiance_maps_figure(maps: Mapping[str, xr.DataArray] | xr.DataArray, ncol
     nrows = -(-len(panels) // ncols)
     displays = [map_display(da) for _, da in panels]
     units = displays[0][1]
-    fig = Figure(figsize=(3.6 * ncols + (1.0 if shared_scale else 0.0), 3.5 * nrows + (0.4 if title else 0.0)),
-                 layout="constrained")
+    width, height = 3.6 * ncols + (1.0 if shared_scale else 0.0), 3.5 * nrows + (0.4 if title else 0.0)
+    fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
+    # fixed margins in inches instead of a layout engine (constrained layout measured every text twice: 40 % of
+    # the report's map drawing time); the panel titles' lines set the room above each row
+    head = _LINE_IN * max((name.count("\n") + 2 if name else 1) for name, _ in panels) + _TITLE_PAD_IN
+    top = head + (_SUPTITLE_IN if title else 0.0)
+    right = _COLOURBAR_IN if shared_scale else _RIGHT_IN
+    row = (height - top - _BOTTOM_IN) / nrows
+    fig.subplots_adjust(left=_LEFT_IN / width, right=1.0 - right / width, bottom=_BOTTOM_IN / height,
+                        top=1.0 - top / height, wspace=_WSPACE_IN * ncols / (width - _LEFT_IN - right),
+                        hspace=(head + _BOTTOM_IN) / max(row - head - _BOTTOM_IN, 1e-3) if nrows > 1 else 0.0)
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()
     finite = np.concatenate([v[np.isfinite(v)] for v, _ in displays])
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
@@ -191,8 +207,12 @@ def irradiance_maps_figure(maps: Mapping[str, xr.DataArray] | xr.DataArray, ncol
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     if shared_scale:
-        bar = fig.colorbar(meshes[0][1], ax=[a for a, _ in meshes])
+        # the colour bar spans the rows, in the right margin
+        lo_y, hi_y = _BOTTOM_IN / height, 1.0 - top / height
+        cax = fig.add_axes((1.0 - (_COLOURBAR_IN - _COLOURBAR_GAP_IN) / width, lo_y, _COLOURBAR_WIDTH_IN / width,
+                            hi_y - lo_y))
+        bar = fig.colorbar(meshes[0][1], cax=cax)
         bar.set_label(_colour_label(panels[0][1], units, emitted_W))
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(title, fontsize=10, y=1.0 - 0.08 / height, va="top")
     return fig
