@@ -1,6 +1,7 @@
 """Figures for run reports. Uses matplotlib's object API (no pyplot, so no global backend state)."""
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
@@ -12,9 +13,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
 
+from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
-from bsdfkit.fit.least_squares import bsdf_model_values
 from bsdfkit.io.atomic import write_with
+from bsdfkit.models.registry import bsdf_model
 
 _SUPERSCRIPTS = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
@@ -52,6 +54,26 @@ def _log_y(ax) -> None:
     ax.set_yscale("log")
     ax.yaxis.set_major_formatter(FuncFormatter(_decade_label))
     ax.yaxis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False))
+
+
+def _model_at(p, theta_i, theta_s, phi_s, *, model: str):
+    """The registry model's JAX function at angles [rad]."""
+    return bsdf_model(model).function(p, {"theta_i": theta_i, "theta_s": theta_s, "phi_s": phi_s})
+
+
+@functools.cache
+def _model_fn(model: str):
+    """One callable per model, so that :func:`bsdfkit.core.jaxconfig.jitted` compiles it once."""
+    return functools.partial(_model_at, model=model)
+
+
+def _model_curve(model: str, params: dict[str, float], theta_i_deg: float, theta_s_deg, phi_s_deg) -> np.ndarray:
+    """:func:`bsdfkit.fit.least_squares.bsdf_model_values` (the same model function) as one compiled call: op by
+    op, each JAX operation was compiled on first use (1.9 s CPU for the fits figure, 0.2 s compiled)."""
+    with x64():
+        return np.asarray(jitted(_model_fn(model))(
+            bsdf_model(model).vector(params), math.radians(theta_i_deg), np.radians(theta_s_deg),
+            np.radians(phi_s_deg)))
 
 
 def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
@@ -238,7 +260,7 @@ def bsdf_fits_figure(fits: dict) -> Figure:
                                label=f"data, θi = {th:g}° (± 1σ)")[0]
             grid = np.linspace(-88, 88, 353)
             params = {p: float(fit[p].sel(theta_i=th)) for p in ("rho", "A", "sigma", "B", "g") if p in fit}
-            y = bsdf_model_values(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
+            y = _model_curve(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
             ax.plot(grid, y, "-", color=line.get_color(), lw=1, label=f"{model} model, θi = {th:g}°")
         _log_y(ax)
         ax.set_title(f"{key[0]} {key[1]} ({model}, aperture-averaged fit)", fontsize=9)
