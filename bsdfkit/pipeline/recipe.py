@@ -63,7 +63,7 @@ from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
-from bsdfkit.raytrace.tallies import map_fields, merge_maps, non_uniformity_std
+from bsdfkit.raytrace.tallies import map_fields, merge_maps
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -527,8 +527,8 @@ def _nu(result) -> dict[str, Any]:
     value on the grid it converged on (``non_uniformity_bins`` cells per side, ``non_uniformity_converged``, the
     change to the next finer grid ``non_uniformity_change`` ± ``non_uniformity_change_std``, every grid in
     ``non_uniformity_grids``; :func:`bsdfkit.raytrace.tallies.converged_non_uniformity`), the quantity compared
-    with the papers; ``non_uniformity_map`` ± ``non_uniformity_map_std`` is the max − min of the whole map (noise
-    included; σ from the map, :func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
+    with the papers; ``non_uniformity_map`` is the max − min of the whole map (noise included; no σ: nothing
+    reads one, and its 200 redrawn maps per trace cost about 1 s of the run)."""
     if result.irradiance is None:
         return {"non_uniformity": None, "non_uniformity_std": None}
     conv = result.non_uniformity_converged
@@ -537,8 +537,7 @@ def _nu(result) -> dict[str, Any]:
             "non_uniformity_change": conv["change"], "non_uniformity_change_std": conv["change_std"],
             "non_uniformity_symmetric": conv["symmetric"], "non_uniformity_rays": result.map_rays or result.rays,
             "non_uniformity_grids": {str(g): v for g, v in conv["grids"].items()},
-            "non_uniformity_map": result.non_uniformity_map,
-            "non_uniformity_map_std": non_uniformity_std(result.irradiance)}
+            "non_uniformity_map": result.non_uniformity_map}
 
 
 #: A map whose non-uniformity has not converged in the grid gets more rays (more traces of the same scene with new
