@@ -239,6 +239,32 @@ def test_irradiance_maps_grid_of_a_sweep_shares_one_colour_bar():
     assert len([ax for ax in grid.axes if "W/m²" in ax.get_ylabel()]) == 3  # one colour bar per panel
 
 
+
+def _overlap(a, b) -> float:
+    """Area [px²] two display boxes share."""
+    return max(0.0, min(a.x1, b.x1) - max(a.x0, b.x0)) * max(0.0, min(a.y1, b.y1) - max(a.y0, b.y0))
+
+
+@pytest.mark.parametrize("count, ncols", [(3, 3), (5, 3), (5, 5)])
+def test_irradiance_maps_fixed_margins_keep_every_text_inside_and_apart(count, ncols):
+    """The map grid's fixed margins (no layout engine): as drawn at the report's dpi, every panel with its tick
+    labels, axis labels and three-line title, and the colour bar with its label, lies inside the figure, and no
+    two of them share a pixel."""
+    da = _device_dataset()["irradiance"]
+    maps = {f"panel {k} (trace_device.nc)\npaper: 36 %": da * (1.0 + 0.1 * k) for k in range(count)}
+    fig = irradiance_maps_figure(maps, ncols=ncols, emitted_W=1.0, title="Fig. 12 of [Cylindrical-module]: height")
+    fig.set_dpi(110)
+    renderer = fig.canvas.get_renderer()
+    fig.draw(renderer)
+    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible()]
+    assert len(boxes) == count + 1  # the panels and the colour bar
+    frame = fig.bbox
+    for box in boxes + [fig._suptitle.get_window_extent(renderer)]:
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+    assert all(_overlap(a, b) == 0.0 for k, a in enumerate(boxes) for b in boxes[k + 1:])
+    title = fig._suptitle.get_window_extent(renderer)
+    assert all(_overlap(title, b) == 0.0 for b in boxes)
+
 @pytest.mark.slow
 def test_report_renders_in_headless_chromium(built, tmp_path):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
