@@ -17,6 +17,7 @@ from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
 from bsdfkit.io.atomic import write_with
 from bsdfkit.models.registry import bsdf_model
+from bsdfkit.plotting.layout import fixed_margins
 
 _SUPERSCRIPTS = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
@@ -150,6 +151,10 @@ STUDY_QUANTITIES = {
 }
 
 
+#: Margins and gaps of the studies' grid [in] (tick labels at 10 pt, axis labels at 8 pt, titles at 9 pt)
+STUDY_MARGINS_IN = {"left": 0.75, "right": 0.1, "bottom": 0.5, "top": 0.3, "wspace": 0.8, "hspace": 0.75}
+
+
 def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | None = None) -> Figure:
     """LER, YBR and irradiance non-uniformity of the module studies, one quantity per row and one study per
     column (cf. Figs. 8-14 of the cylindrical-module paper).
@@ -162,6 +167,7 @@ def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | N
     panels = [k for k in STUDY_AXES if studies.get(k)]
     ncol = max(len(panels), 1)
     fig = Figure(figsize=(3.5 * ncol, 8.8))
+    fixed_margins(fig, len(STUDY_QUANTITIES), ncol, **STUDY_MARGINS_IN)
     axes = fig.subplots(len(STUDY_QUANTITIES), ncol, squeeze=False)
     for c, name in enumerate(panels):
         key, xlabel = STUDY_AXES[name]
@@ -186,7 +192,6 @@ def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | N
             ax.legend(fontsize=7)
             if r_i == 0:
                 ax.set_title(STUDY_TITLES[name], fontsize=9)
-    fig.tight_layout()
     return fig
 
 
@@ -240,12 +245,17 @@ def plate_incidence_figure(histograms: dict[str, np.ndarray], measured_deg: tupl
     return fig
 
 
+#: Margins and gaps of the fits' grid [in]: log tick labels as wide as '8.8×10⁻²' at 10 pt, titles at 9 pt
+FITS_MARGINS_IN = {"left": 1.0, "right": 0.15, "bottom": 0.55, "top": 0.3, "wspace": 1.0, "hspace": 0.9}
+
+
 def bsdf_fits_figure(fits: dict) -> Figure:
     """In-plane data vs fitted model for each interaction and side (one curve per incidence)."""
 
     keys = [k for k in (("bibs", "reflection"), ("bibs", "transmission"), ("yiys", "reflection"),
                         ("yiys", "transmission"), ("biys", "reflection"), ("biys", "transmission")) if k in fits]
     fig = Figure(figsize=(10, 3.2 * ((len(keys) + 1) // 2)))
+    fixed_margins(fig, (len(keys) + 1) // 2, 2, **FITS_MARGINS_IN)
     axes = fig.subplots((len(keys) + 1) // 2, 2, squeeze=False).ravel()
     for ax, key in zip(axes, keys):
         fit, prof = fits[key]
@@ -270,7 +280,6 @@ def bsdf_fits_figure(fits: dict) -> Figure:
         ax.legend(fontsize=6, ncol=2)
     for ax in axes[len(keys):]:
         ax.set_visible(False)
-    fig.tight_layout()
     return fig
 
 

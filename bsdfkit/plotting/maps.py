@@ -21,6 +21,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from bsdfkit.plotting.layout import fixed_margins
 from bsdfkit.raytrace.tallies import interior_bins
 
 __all__ = ["MAP_DIMS", "find_map_variable", "irradiance_map_figure", "irradiance_maps_figure", "map_display",
@@ -185,10 +186,8 @@ def irradiance_maps_figure(maps: Mapping[str, xr.DataArray] | xr.DataArray, ncol
     head = _LINE_IN * max((name.count("\n") + 2 if name else 1) for name, _ in panels) + _TITLE_PAD_IN
     top = head + (_SUPTITLE_IN if title else 0.0)
     right = _COLOURBAR_IN if shared_scale else _RIGHT_IN
-    row = (height - top - _BOTTOM_IN) / nrows
-    fig.subplots_adjust(left=_LEFT_IN / width, right=1.0 - right / width, bottom=_BOTTOM_IN / height,
-                        top=1.0 - top / height, wspace=_WSPACE_IN * ncols / (width - _LEFT_IN - right),
-                        hspace=(head + _BOTTOM_IN) / max(row - head - _BOTTOM_IN, 1e-3) if nrows > 1 else 0.0)
+    fixed_margins(fig, nrows, ncols, left=_LEFT_IN, right=right, bottom=_BOTTOM_IN, top=top, wspace=_WSPACE_IN,
+                  hspace=head + _BOTTOM_IN)
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()
     finite = np.concatenate([v[np.isfinite(v)] for v, _ in displays])
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
