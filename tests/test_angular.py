@@ -187,3 +187,21 @@ def test_tis_variants_equal_separate_blends_bit_for_bit(zero_tail):
         alone = [hemi.tis(mode, 128, 200, p=p, borrow=b) for p, b in variants]
         assert together == alone
     assert 0.2 < together[0] < 0.5  # a real integral: the Lambertian 0.25 plus the lobe
+
+
+def test_tis_without_single_arc_components_keeps_value_and_error_bars():
+    # plate_spectral_model asks for no single-arc components (singles=False): the value, both σ and the weights
+    # must be those of the full reduction, bit for bit; only the two single-arc reconstructions are left out
+    radii = np.linspace(0.0, 0.9, 19)
+    ts, ps, arc = _dense_arcs(30.0, radii)
+    d = sample_direction(np.radians(ts), np.radians(ps))
+    values = 0.25 / np.pi + 3.0 * np.exp(-((d[:, 0] - 0.5) ** 2 + d[:, 1] ** 2) / 0.02)
+    prof = _profile(30.0, ts, ps, arc, values)
+    prof["bsdf_std"] = ("record", 0.02 * values)
+    full, lean = angular.tis_from_profile(prof), angular.tis_from_profile(prof, singles=False)
+    assert (lean.value, lean.std_measurement, lean.std_reconstruction) == \
+        (full.value, full.std_measurement, full.std_reconstruction)
+    assert np.array_equal(lean.weights, full.weights)
+    assert {"in_plane_only", "perpendicular_only"} <= set(full.components)
+    assert set(lean.components) == set(full.components) - {"in_plane_only", "perpendicular_only"}
+    assert 0.2 < full.components["in_plane_only"] < 0.6  # the full reduction still reconstructs each arc

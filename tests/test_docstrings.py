@@ -36,7 +36,7 @@ COVERED = [
     "measurement/calibrate.py", "measurement/describe.py", "measurement/instrument.py", "measurement/manifest.py",
     "measurement/raw_scan.py", "measurement/schema.py", "measurement/table.py",
     "models/functions.py", "models/led.py", "models/registry.py",
-    "plotting/figures.py", "plotting/maps.py", "plotting/spectra.py",
+    "plotting/figures.py", "plotting/layout.py", "plotting/maps.py", "plotting/spectra.py",
     "raytrace/effects.py", "raytrace/geometry.py", "raytrace/kernel.py", "raytrace/oracles/numpy_reference.py",
     "raytrace/oracles/radiosity.py", "raytrace/oracles/spectral_budget.py", "raytrace/plate.py",
     "raytrace/plate_from_scan.py", "raytrace/programs.py", "raytrace/rayfile.py", "raytrace/sampling.py",

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import base64
+import itertools
 import json
 import math
 import re
@@ -238,6 +239,89 @@ def test_irradiance_maps_grid_of_a_sweep_shares_one_colour_bar():
                                   shared_scale=False)
     assert len([ax for ax in grid.axes if "W/m²" in ax.get_ylabel()]) == 3  # one colour bar per panel
 
+
+
+def _overlap(a, b) -> float:
+    """Area [px²] two display boxes share."""
+    return max(0.0, min(a.x1, b.x1) - max(a.x0, b.x0)) * max(0.0, min(a.y1, b.y1) - max(a.y0, b.y0))
+
+
+def _inside_and_apart(fig, dpi: float) -> None:
+    """Drawn at ``dpi``, every visible axes with its ticks, labels and title, and the figure title, lie inside the
+    figure, and no two of them share a pixel (what a layout engine would ensure)."""
+    fig.set_dpi(dpi)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible()]
+    if fig._suptitle is not None:
+        boxes.append(fig._suptitle.get_window_extent(renderer))
+    frame = fig.bbox
+    for box in boxes:
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1, box
+    assert all(_overlap(a, b) == 0.0 for k, a in enumerate(boxes) for b in boxes[k + 1:])
+
+
+@pytest.mark.parametrize("count, ncols", [(3, 3), (5, 3), (5, 5)])
+def test_irradiance_maps_fixed_margins_keep_every_text_inside_and_apart(count, ncols):
+    """The map grid's fixed margins (no layout engine), at the report's dpi: panels with three-line titles and
+    the shared colour bar with its two-line label."""
+    da = _device_dataset()["irradiance"]
+    maps = {f"panel {k} (trace_device.nc)\npaper: 36 %": da * (1.0 + 0.1 * k) for k in range(count)}
+    fig = irradiance_maps_figure(maps, ncols=ncols, emitted_W=1.0, title="Fig. 12 of [Cylindrical-module]: height")
+    assert len([ax for ax in fig.axes if ax.get_visible()]) == count + 1  # the panels and the colour bar
+    _inside_and_apart(fig, 110)
+
+
+def _fits_of_the_run() -> dict:
+    """Fits and in-plane profiles shaped like the main job's (three incidences; biys Lambertian): values whose log
+    axes carry the widest minor labels of the run ('8.8×10⁻²')."""
+    from bsdfkit.fit.least_squares import bsdf_model_values
+
+    theta_s = np.linspace(0.0, 88.0, 45)
+    out = {}
+    for inter, side in itertools.product(("bibs", "yiys", "biys"), ("reflection", "transmission")):
+        lam = inter == "biys"
+        model = "lambert" if lam else "lambert+gaussian"
+        th = np.array([5.0, 45.0, 56.0])
+        params = {"rho": 0.25 + 0.01 * th / 56} if lam else {"rho": 0.08 + 0 * th, "A": 0.5 + th / 20,
+                                                               "sigma": 0.05 + 0 * th}
+        fit = xr.Dataset({k: ("theta_i", v) for k, v in params.items()}, coords={"theta_i": th},
+                         attrs={"model": model})
+        records = [(t, ts, ps) for t in th for ts in theta_s for ps in (0.0, 180.0)]
+        t_i, t_s, p_s = (np.array(c) for c in zip(*records))
+        bsdf = np.concatenate([bsdf_model_values(model, {k: float(v[i]) for k, v in params.items()}, t,
+                                                 theta_s, np.array([ps] * theta_s.size))
+                               for i, t in enumerate(th) for ps in (0.0, 180.0)])
+        prof = xr.Dataset({"bsdf": ("record", bsdf), "bsdf_std": ("record", 0.01 * bsdf)},
+                          coords={"theta_i": ("record", t_i), "phi_i": ("record", np.full(t_i.size, 180.0)),
+                                  "theta_s": ("record", t_s), "phi_s": ("record", p_s),
+                                  "arc": ("record", np.full(t_i.size, "in_plane"))})
+        out[(inter, side)] = (fit, prof)
+    return out
+
+
+def test_fits_and_studies_figures_fixed_margins_keep_every_text_inside_and_apart():
+    from bsdfkit.plotting.figures import bsdf_fits_figure, trace_studies_figure
+
+    fig = bsdf_fits_figure(_fits_of_the_run())
+    assert len(fig.axes) == 6
+    _inside_and_apart(fig, 120)
+
+    class Device:
+        LER, YBR, non_uniformity = 0.558, 8.46, 0.11
+
+    def row(key, v, k):
+        return {"values": {key: v}, "LER": 0.3 + 0.05 * k, "LER_std": 2e-4, "YBR": 6.2 + 0.4 * k, "YBR_std": 0.05,
+                "non_uniformity": 0.145 - 0.007 * k}
+
+    keys = {"reflectance": ("wall.reflectance", (0.8, 0.85, 0.9, 0.95, 0.98)),
+            "height_mm": ("cavity.height_mm", (10.0, 43.0, 80.0)),
+            "led_fwhm_deg": ("leds.fwhm_deg", (10.0, 30.0, 70.0, 120.0)),
+            "specular_fraction": ("wall.specular_fraction", (0.0, 0.6, 1.0))}
+    studies = {name: [row(key, v, k) for k, v in enumerate(values)] for name, (key, values) in keys.items()}
+    fig = trace_studies_figure(Device, studies, {("reflectance", "LER"): [(0.8, 28.0), (0.98, 58.0)]})
+    assert len(fig.axes) == 12
+    _inside_and_apart(fig, 120)
 
 @pytest.mark.slow
 def test_report_renders_in_headless_chromium(built, tmp_path):

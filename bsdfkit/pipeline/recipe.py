@@ -37,6 +37,7 @@ from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_
 from bsdfkit.io import netcdf
 from bsdfkit.io.atomic import OutputSet, write_text
 from bsdfkit.io.jsonout import dumps
+from bsdfkit.io.recipe_head import recipe_head
 from bsdfkit.io.text import read_toml
 from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
@@ -63,7 +64,7 @@ from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
-from bsdfkit.raytrace.tallies import map_fields, merge_maps, non_uniformity_std
+from bsdfkit.raytrace.tallies import map_fields, merge_maps
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -208,10 +209,8 @@ def load_recipe(path: str | Path) -> Recipe:
         raise InputError("recipe not found", file=path, expected="a TOML recipe file")
     data = read_toml(path, expected="a recipe TOML file")
     _check_keys(data, path)
-    head = data.get("recipe")
-    if head is None:
-        raise InputError("recipe section missing", file=path, field="recipe")
-    measurement = (path.parent / _typed(head, "measurement", str, path, "recipe.measurement")).resolve()
+    head = data.get("recipe", {})
+    name, measurement = recipe_head(data, path)
     rep = data.get("report", {})
     report = ReportOptions(
         figure_config=_typed(rep, "figure_config", str, path, "report.figure_config", "blue"),
@@ -258,7 +257,7 @@ def load_recipe(path: str | Path) -> Recipe:
         led_fwhm_nm=float(_typed(ft, "led_fwhm_nm", (int, float), path, "fits.led_fwhm_nm", 22.9)),
         fallback_flux_W=(float(fallback[0]), float(fallback[1])),
     )
-    recipe = Recipe(path=path, name=_typed(head, "name", str, path, "recipe.name"), measurement=measurement,
+    recipe = Recipe(path=path, name=name, measurement=measurement,
                     description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
                     reductions=reductions, exports=exports, trace=trace, fits=fits,
                     spectral=_spectral_options(data.get("spectral"), path, trace, fits), raw=data)
@@ -527,8 +526,8 @@ def _nu(result) -> dict[str, Any]:
     value on the grid it converged on (``non_uniformity_bins`` cells per side, ``non_uniformity_converged``, the
     change to the next finer grid ``non_uniformity_change`` ± ``non_uniformity_change_std``, every grid in
     ``non_uniformity_grids``; :func:`bsdfkit.raytrace.tallies.converged_non_uniformity`), the quantity compared
-    with the papers; ``non_uniformity_map`` ± ``non_uniformity_map_std`` is the max − min of the whole map (noise
-    included; σ from the map, :func:`bsdfkit.raytrace.tallies.non_uniformity_std`)."""
+    with the papers; ``non_uniformity_map`` is the max − min of the whole map (noise included; no σ: nothing
+    reads one, and its 200 redrawn maps per trace cost about 1 s of the run)."""
     if result.irradiance is None:
         return {"non_uniformity": None, "non_uniformity_std": None}
     conv = result.non_uniformity_converged
@@ -537,8 +536,7 @@ def _nu(result) -> dict[str, Any]:
             "non_uniformity_change": conv["change"], "non_uniformity_change_std": conv["change_std"],
             "non_uniformity_symmetric": conv["symmetric"], "non_uniformity_rays": result.map_rays or result.rays,
             "non_uniformity_grids": {str(g): v for g, v in conv["grids"].items()},
-            "non_uniformity_map": result.non_uniformity_map,
-            "non_uniformity_map_std": non_uniformity_std(result.irradiance)}
+            "non_uniformity_map": result.non_uniformity_map}
 
 
 #: A map whose non-uniformity has not converged in the grid gets more rays (more traces of the same scene with new

@@ -1,6 +1,7 @@
 """Figures for run reports. Uses matplotlib's object API (no pyplot, so no global backend state)."""
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
@@ -12,9 +13,11 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
 
+from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
-from bsdfkit.fit.least_squares import bsdf_model_values
 from bsdfkit.io.atomic import write_with
+from bsdfkit.models.registry import bsdf_model
+from bsdfkit.plotting.layout import Margins, fixed_margins
 
 _SUPERSCRIPTS = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
@@ -52,6 +55,26 @@ def _log_y(ax) -> None:
     ax.set_yscale("log")
     ax.yaxis.set_major_formatter(FuncFormatter(_decade_label))
     ax.yaxis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False))
+
+
+def _model_at(p, theta_i, theta_s, phi_s, *, model: str):
+    """The registry model's JAX function at angles [rad]."""
+    return bsdf_model(model).function(p, {"theta_i": theta_i, "theta_s": theta_s, "phi_s": phi_s})
+
+
+@functools.cache
+def _model_fn(model: str):
+    """One callable per model, so that :func:`bsdfkit.core.jaxconfig.jitted` compiles it once."""
+    return functools.partial(_model_at, model=model)
+
+
+def _model_curve(model: str, params: dict[str, float], theta_i_deg: float, theta_s_deg, phi_s_deg) -> np.ndarray:
+    """:func:`bsdfkit.fit.least_squares.bsdf_model_values` (the same model function) as one compiled call: op by
+    op, each JAX operation was compiled on first use (1.9 s CPU for the fits figure, 0.2 s compiled)."""
+    with x64():
+        return np.asarray(jitted(_model_fn(model))(
+            bsdf_model(model).vector(params), math.radians(theta_i_deg), np.radians(theta_s_deg),
+            np.radians(phi_s_deg)))
 
 
 def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
@@ -169,6 +192,10 @@ STUDY_QUANTITIES = {
 }
 
 
+#: Margins and gaps of the studies' grid [in] (tick labels at 10 pt, axis labels at 8 pt, titles at 9 pt)
+STUDY_MARGINS_IN = Margins(left=0.75, right=0.1, bottom=0.5, top=0.3, wspace=0.8, hspace=0.75)
+
+
 def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | None = None) -> Figure:
     """LER, YBR and irradiance non-uniformity of the module studies, one quantity per row and one study per
     column (cf. Figs. 8-14 of the cylindrical-module paper).
@@ -195,6 +222,7 @@ def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | N
     panels = [k for k in STUDY_AXES if studies.get(k)]
     ncol = max(len(panels), 1)
     fig = Figure(figsize=(3.5 * ncol, 8.8))
+    fixed_margins(fig, len(STUDY_QUANTITIES), ncol, STUDY_MARGINS_IN)
     axes = fig.subplots(len(STUDY_QUANTITIES), ncol, squeeze=False)
     for c, name in enumerate(panels):
         key, xlabel = STUDY_AXES[name]
@@ -219,7 +247,6 @@ def trace_studies_figure(device, studies: dict[str, list[dict]], paper: dict | N
             ax.legend(fontsize=7)
             if r_i == 0:
                 ax.set_title(STUDY_TITLES[name], fontsize=9)
-    fig.tight_layout()
     return fig
 
 
@@ -293,6 +320,10 @@ def plate_incidence_figure(histograms: dict[str, np.ndarray], measured_deg: tupl
     return fig
 
 
+#: Margins and gaps of the fits' grid [in]: log tick labels as wide as '8.8×10⁻²' at 10 pt, titles at 9 pt
+FITS_MARGINS_IN = Margins(left=1.0, right=0.15, bottom=0.55, top=0.3, wspace=1.0, hspace=0.9)
+
+
 def bsdf_fits_figure(fits: dict) -> Figure:
     """In-plane data vs fitted model for each interaction and side (one curve per incidence).
 
@@ -310,6 +341,7 @@ def bsdf_fits_figure(fits: dict) -> Figure:
     keys = [k for k in (("bibs", "reflection"), ("bibs", "transmission"), ("yiys", "reflection"),
                         ("yiys", "transmission"), ("biys", "reflection"), ("biys", "transmission")) if k in fits]
     fig = Figure(figsize=(10, 3.2 * ((len(keys) + 1) // 2)))
+    fixed_margins(fig, (len(keys) + 1) // 2, 2, FITS_MARGINS_IN)
     axes = fig.subplots((len(keys) + 1) // 2, 2, squeeze=False).ravel()
     for ax, key in zip(axes, keys):
         fit, prof = fits[key]
@@ -324,7 +356,7 @@ def bsdf_fits_figure(fits: dict) -> Figure:
                                label=f"data, θi = {th:g}° (± 1σ)")[0]
             grid = np.linspace(-88, 88, 353)
             params = {p: float(fit[p].sel(theta_i=th)) for p in ("rho", "A", "sigma", "B", "g") if p in fit}
-            y = bsdf_model_values(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
+            y = _model_curve(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
             ax.plot(grid, y, "-", color=line.get_color(), lw=1, label=f"{model} model, θi = {th:g}°")
         _log_y(ax)
         ax.set_title(f"{key[0]} {key[1]} ({model}, aperture-averaged fit)", fontsize=9)
@@ -334,7 +366,6 @@ def bsdf_fits_figure(fits: dict) -> Figure:
         ax.legend(fontsize=6, ncol=2)
     for ax in axes[len(keys):]:
         ax.set_visible(False)
-    fig.tight_layout()
     return fig
 
 

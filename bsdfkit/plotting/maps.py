@@ -21,6 +21,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from bsdfkit.plotting.layout import Margins, fixed_margins
 from bsdfkit.raytrace.tallies import interior_bins
 
 __all__ = ["MAP_DIMS", "find_map_variable", "irradiance_map_figure", "irradiance_maps_figure", "map_display",
@@ -32,6 +33,13 @@ MAP_DIMS = ("y_mm", "x_mm")
 #: File units → (display units, factor): irradiance is shown in W/m² (SI).
 _UNITS = {"W/mm^2": ("W/m²", 1e6), "W/mm2": ("W/m²", 1e6), "W/cm^2": ("W/m²", 1e4), "W/m^2": ("W/m²", 1.0),
           "W/m2": ("W/m²", 1.0)}
+
+
+#: Margins of :func:`irradiance_maps_figure` [in]: tick labels and axis label left and below, a line of a panel
+#: title at fontsize 9, the figure title, the colour bar's column (gap, bar, its tick labels and label)
+_LEFT_IN, _BOTTOM_IN, _RIGHT_IN, _WSPACE_IN = 0.75, 0.55, 0.15, 0.85
+_LINE_IN, _TITLE_PAD_IN, _SUPTITLE_IN = 0.155, 0.1, 0.3
+_COLOURBAR_IN, _COLOURBAR_GAP_IN, _COLOURBAR_WIDTH_IN = 1.3, 0.25, 0.15
 
 
 def find_map_variable(ds: xr.Dataset) -> str | None:
@@ -246,9 +254,16 @@ def irradiance_maps_figure(maps: Mapping[str, xr.DataArray] | xr.DataArray, ncol
     nrows = -(-len(panels) // ncols)
     displays = [map_display(da) for _, da in panels]
     units = displays[0][1]
-    fig = Figure(figsize=(3.6 * ncols + (1.0 if shared_scale else 0.0), 3.5 * nrows + (0.4 if title else 0.0)),
-                 layout="constrained")
+    width, height = 3.6 * ncols + (1.0 if shared_scale else 0.0), 3.5 * nrows + (0.4 if title else 0.0)
+    fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
+    # fixed margins in inches instead of a layout engine (constrained layout measured every text twice: 40 % of
+    # the report's map drawing time); the panel titles' lines set the room above each row
+    head = _LINE_IN * max((name.count("\n") + 2 if name else 1) for name, _ in panels) + _TITLE_PAD_IN
+    top = head + (_SUPTITLE_IN if title else 0.0)
+    right = _COLOURBAR_IN if shared_scale else _RIGHT_IN
+    fixed_margins(fig, nrows, ncols, Margins(left=_LEFT_IN, right=right, bottom=_BOTTOM_IN, top=top,
+                                             wspace=_WSPACE_IN, hspace=head + _BOTTOM_IN))
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()
     finite = np.concatenate([v[np.isfinite(v)] for v, _ in displays])
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
@@ -267,8 +282,12 @@ def irradiance_maps_figure(maps: Mapping[str, xr.DataArray] | xr.DataArray, ncol
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     if shared_scale:
-        bar = fig.colorbar(meshes[0][1], ax=[a for a, _ in meshes])
+        # the colour bar spans the rows, in the right margin
+        lo_y, hi_y = _BOTTOM_IN / height, 1.0 - top / height
+        cax = fig.add_axes((1.0 - (_COLOURBAR_IN - _COLOURBAR_GAP_IN) / width, lo_y, _COLOURBAR_WIDTH_IN / width,
+                            hi_y - lo_y))
+        bar = fig.colorbar(meshes[0][1], cax=cax)
         bar.set_label(_colour_label(panels[0][1], units, emitted_W))
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(title, fontsize=10, y=1.0 - 0.08 / height, va="top")
     return fig

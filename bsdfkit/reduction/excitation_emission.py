@@ -186,7 +186,8 @@ def _profile(matrix: xr.Dataset, value: NDArray, std: NDArray, rel: float) -> xr
 
 
 def _tis(prof: xr.Dataset, sel: NDArray[np.bool_], center: str) -> TIS:
-    return tis_from_profile(prof.isel(record=np.flatnonzero(sel)), center=center)
+    # the single-arc components are not used here: two reconstructions fewer per band (a third of the time)
+    return tis_from_profile(prof.isel(record=np.flatnonzero(sel)), center=center, singles=False)
 
 
 # ------------------------------------------------------------------------------------- the model

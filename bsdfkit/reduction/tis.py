@@ -503,10 +503,13 @@ class TIS:
 CENTER = {"bibs": "specular", "yiys": "specular", "biys": "normal"}
 
 
-def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, center: str | None = None) -> TIS:
+def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, center: str | None = None,
+                     singles: bool = True) -> TIS:
     """TIS of one incidence and side of a profile (1/sr per record), with error bars (module docstring).
 
     ``center`` defaults to the profile's interaction (``attrs['interaction']``) via :data:`CENTER`, else specular.
+    ``singles=False`` leaves out the components ``in_plane_only`` and ``perpendicular_only`` (two more
+    reconstructions; value and error bars do not use them).
 
     Parameters
     ----------
@@ -519,6 +522,8 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
         Gauss–Legendre nodes in r.
     center : {"specular", "normal"}, optional
         Reconstruction centre; None picks it from the profile's interaction.
+    singles : bool, optional
+        Compute the single-arc components (default True).
 
     Returns
     -------
@@ -541,13 +546,13 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
     parts = {"quadrature": abs(value - coarse), "interpolation": abs(value - linear),
              "blend": max(abs(b - value) for b in blends), "extrapolation": abs(hold - value)}
     std_rec = float(np.sqrt(sum(v * v for v in parts.values())))
-    singles = {}
-    for use in ("in_plane", "perpendicular"):
+    arcs = {}
+    for use in ("in_plane", "perpendicular") if singles else ():
         try:
-            singles[f"{use}_only"] = Hemisphere.from_profile(profile, use=use, center=center).tis("log", n_psi, n_r)
+            arcs[f"{use}_only"] = Hemisphere.from_profile(profile, use=use, center=center).tis("log", n_psi, n_r)
         except InputError:
-            singles[f"{use}_only"] = float("nan")  # that arc was not measured
-    return TIS(value=value, std_measurement=std_meas, std_reconstruction=std_rec, components={**parts, **singles},
+            arcs[f"{use}_only"] = float("nan")  # that arc was not measured
+    return TIS(value=value, std_measurement=std_meas, std_reconstruction=std_rec, components={**parts, **arcs},
                weights=w)
 
 
