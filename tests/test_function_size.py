@@ -20,8 +20,6 @@ EXCEPTIONS = {
     "bsdfkit.pipeline.recipe:stage_trace": "pending: split on another branch",
     "bsdfkit.pipeline.report:_Report.sec_trace": "pending: split on another branch",
     "bsdfkit.pipeline.spectral_comparison:_summary": "pending: split on another branch",
-    "bsdfkit.reduction.disk:build": "pending: split on another branch",
-    "bsdfkit.reduction.disk:_with_spokes": "pending: split on another branch",
     "bsdfkit.tables.export:export": "pending: split on another branch",
     "bsdfkit.tables.to_dataset:convert": "pending: split on another branch",
     "bsdfkit.tables.grids:_refine_polar": "pending: split on another branch",

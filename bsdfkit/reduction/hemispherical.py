@@ -1063,9 +1063,9 @@ def _body_interpolant(x: NDArray[np.float64], y: NDArray[np.float64], center: tu
     or, about the specular point, a polar grid on its own spokes (straight in β, or great circles through the
     specular direction when ``about_direction`` gives the incidence [deg])."""
     if spokes:
-        return disk.build(x, y, center, rim=rim, normal_centered=False, reference=reference, spokes=True,
+        return disk.build(x, y, center, rim=disk.Rim(rim, normal_centered=False, reference=reference), spokes=True,
                           about_direction=about_direction)
-    return disk.build(x, y, center, rim=rim, normal_centered=True, reference=reference,
+    return disk.build(x, y, center, rim=disk.Rim(rim, normal_centered=True, reference=reference),
                       azimuth_weight=_body_azimuth_weight(x, y))
 
 
@@ -1235,7 +1235,7 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
             rows = np.concatenate([resid[half], resid[half]])
             lx, uniq = np.unique(np.round(np.stack([lx, ly], 1), 12), axis=0, return_index=True)
             lx, ly, rows = lx[:, 0], lx[:, 1], rows[uniq]
-        lobe = disk.build(lx, ly, (lobe_c, 0.0), rim="ring", radius=radius, normal_centered=False)
+        lobe = disk.build(lx, ly, (lobe_c, 0.0), rim=disk.Rim("ring", radius=radius, normal_centered=False))
         w = lobe.weights()
         c_lobe = w @ rows
         lv = rows @ np.nan_to_num(ref)
