@@ -20,7 +20,6 @@ EXCEPTIONS = {
     "bsdfkit.pipeline.recipe:stage_trace": "pending: split on another branch",
     "bsdfkit.pipeline.report:_Report.sec_trace": "pending: split on another branch",
     "bsdfkit.pipeline.spectral_comparison:_summary": "pending: split on another branch",
-    "bsdfkit.tables.grids:_refine_polar": "pending: split on another branch",
     "bsdfkit.tables.vendor:vendor_dataset": "pending: split on another branch",
     "bsdfkit.reduction.excitation_emission:plate_spectral_model": "pending: split on another branch",
     "bsdfkit.reduction.excitation_emission:_model_dataset": "pending: split on another branch",
