@@ -439,10 +439,94 @@ def _rim_psi() -> NDArray[np.float64]:
     return (np.arange(N_RIM) + 0.5) * (2 * np.pi / N_RIM) - np.pi
 
 
+@dataclass(frozen=True)
+class Rim:
+    """How a polar interpolant ends toward the horizon beyond its outermost records (:func:`build`).
+
+    Attributes
+    ----------
+    rule
+        ``trend`` | ``hold`` | ``zero``: the value on the horizon beyond the outermost data (module doc);
+        ``ring``: zeros on the circle of ``radius`` (a lobe), the edge value held where the horizon cuts it.
+    radius
+        With ``rule="ring"``: the domain's radius about the centre [direction cosines].
+    normal_centered
+        The centre is the normal (θs = arcsin r: the trend's slope is taken in θs).
+    reference
+        Band-mean record values that decide the trend's clipping (between 0 and the last value).
+    """
+
+    rule: str = "trend"
+    radius: float | None = None
+    normal_centered: bool = True
+    reference: NDArray[np.float64] | None = None
+
+
+def _polar_records(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float],
+                   about_direction: float | None) -> tuple[NDArray, NDArray, NDArray[np.bool_], NDArray[np.int64]]:
+    """The records' polar (ψ, r) about ``center`` (about the specular direction with ``about_direction``), which
+    are at the centre, and the indices of the others (two or more)."""
+    if x.size == 0:
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
+                         expected="finite values")
+    dx, dy = x - center[0], y - center[1]
+    r = np.hypot(dx, dy)
+    psi = np.arctan2(dy, dx)
+    if about_direction is not None:
+        psi, r = direction_polar(center, psi, r, about_direction)
+    at_center = r < CENTER_TOL
+    off = np.flatnonzero(~at_center)
+    if off.size < 2:
+        raise InputError("too few records off the centre to interpolate the hemisphere", field="bsdf",
+                         expected="records at two or more directions")
+    return psi, r, at_center, off
+
+
+def _center_row(r: NDArray[np.float64], at_center: NDArray[np.bool_], off: NDArray[np.int64]) -> NDArray:
+    """The centre value as a row over the records: the records there, else the mean of the innermost ring."""
+    c_row = np.zeros(r.size)
+    if at_center.any():
+        c_row[at_center] = 1.0 / at_center.sum()
+    else:
+        inner = off[r[off] <= 1.5 * r[off].min() + 1e-12]
+        c_row[inner] = 1.0 / inner.size
+    return c_row
+
+
+def _rim_rows(stage0: PolarInterpolant, tri0: Delaunay, rim: Rim, rim_psi: NDArray[np.float64]
+              ) -> tuple[sp.csr_matrix, NDArray[np.float64], float | None]:
+    """The rim nodes' rows over the records, their radii and the smallest extrapolated edge (None: none)."""
+    n, s = stage0.n_records, stage0.azimuth_weight
+    t_max = horizon_distance(stage0.center, rim_psi)
+    if rim.rule == "ring":
+        if rim.radius is None:
+            raise InputError("a ring rim needs a radius", field="radius")
+        top = np.minimum(t_max, rim.radius)
+        # zeros on the ring; where the horizon cuts the ring, the lobe goes on: its edge value held there
+        cut = t_max < rim.radius
+        rim_rows = sp.csr_matrix((N_RIM, n))
+        if cut.any():
+            edge = np.minimum(_edge(tri0, rim_psi, t_max, s), top)
+            rim_rows = (sp.diags(cut.astype(float)) @ stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))).tocsr()
+        return rim_rows, top, None
+    edge = _edge(tri0, rim_psi, t_max, s)
+    m_edge = stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))
+    gap = t_max - edge > 1e-6
+    extrapolated = float(edge[gap].min()) if gap.any() else None
+    if rim.rule == "hold" or not gap.any():
+        rim_rows = m_edge
+    elif rim.rule == "zero":
+        rim_rows = sp.diags((~gap).astype(float)) @ m_edge
+    elif rim.rule == "trend":
+        rim_rows = _trend_rows(stage0, rim_psi, edge, t_max, m_edge, rim.normal_centered, rim.reference)
+    else:
+        raise InputError("unknown rim rule", field="rim", expected="trend, hold, zero or ring", got=rim.rule)
+    return rim_rows, t_max, extrapolated
+
+
 def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], *,
-          rim: str = "trend", radius: float | None = None, normal_centered: bool = True,
-          reference: NDArray[np.float64] | None = None, azimuth_weight: float = AZIMUTH_WEIGHT,
-          spokes: bool = False, about_direction: float | None = None) -> PolarInterpolant:
+          rim: Rim | None = None, azimuth_weight: float = AZIMUTH_WEIGHT, spokes: bool = False,
+          about_direction: float | None = None) -> PolarInterpolant:
     """The polar interpolant of records at β = (x, y) about ``center``.
 
     Parameters
@@ -452,14 +536,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     center
         Centre of the polar coordinates [direction cosines].
     rim
-        ``trend`` | ``hold`` | ``zero``: the value on the horizon beyond the outermost data (module doc);
-        ``ring``: zeros on the circle of ``radius`` (a lobe), the edge value held where the horizon cuts it.
-    radius
-        With ``rim="ring"``: the domain's radius about the centre [direction cosines].
-    normal_centered
-        The centre is the normal (θs = arcsin r: the trend's slope is taken in θs).
-    reference
-        Band-mean record values that decide the trend's clipping (between 0 and the last value).
+        How the interpolant ends beyond the outermost records (:class:`Rim`; default: the trend, about the normal).
     azimuth_weight
         s of the triangulation metric (s·ψ, r) [direction cosines per radian].
     spokes
@@ -474,39 +551,21 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     -------
     PolarInterpolant
     """
+    rim = Rim() if rim is None else rim
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     n = x.size
-    if n == 0:
-        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
-                         expected="finite values")
-    dx, dy = x - center[0], y - center[1]
-    r = np.hypot(dx, dy)
-    psi = np.arctan2(dy, dx)
-    if about_direction is not None:
-        psi, r = direction_polar(center, psi, r, about_direction)
-    at_center = r < CENTER_TOL
-    off = np.flatnonzero(~at_center)
-    if off.size < 2:
-        raise InputError("too few records off the centre to interpolate the hemisphere", field="bsdf",
-                         expected="records at two or more directions")
-    # centre value: the records there, else the mean of the innermost ring
-    c_row = np.zeros(n)
-    if at_center.any():
-        c_row[at_center] = 1.0 / at_center.sum()
-    else:
-        inner = off[r[off] <= 1.5 * r[off].min() + 1e-12]
-        c_row[inner] = 1.0 / inner.size
+    psi, r, at_center, off = _polar_records(x, y, center, about_direction)
     rim_psi = _rim_psi()
     i_center = n
     # stage 1: records + centre line
     p0 = np.concatenate([psi[off], rim_psi])
     r0 = np.concatenate([r[off], np.zeros(N_RIM)])
     n0 = np.concatenate([off, np.full(N_RIM, i_center)])
-    rows_c = sp.csr_matrix(c_row[None, :])
+    rows_c = sp.csr_matrix(_center_row(r, at_center, off)[None, :])
     base = sp.vstack([sp.identity(n, format="csr"), rows_c]).tocsr()
     if spokes:
-        return _with_spokes(center, psi, r, off, base, n, azimuth_weight, rim_psi, about_direction)
+        return _with_spokes(center, psi, r, off, base, azimuth_weight, about_direction)
     pp, rr, nn = _periodic(p0, r0, n0, n)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)
@@ -514,37 +573,13 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         raise InputError("records are degenerate on the disk (all on one line through the centre)",
                          field="bsdf", expected="records spanning an area of the disk") from exc
     stage0 = PolarInterpolant(center, tri0, nn.astype(np.int64), base, n, None, None, azimuth_weight)
-    t_max = horizon_distance(center, rim_psi)
-    if rim == "ring":
-        if radius is None:
-            raise InputError("a ring rim needs a radius", field="radius")
-        top = np.minimum(t_max, radius)
-        # zeros on the ring; where the horizon cuts the ring, the lobe goes on: its edge value held there
-        cut = t_max < radius
-        rim_rows = sp.csr_matrix((N_RIM, n))
-        if cut.any():
-            edge = np.minimum(_edge(tri0, rim_psi, t_max, azimuth_weight), top)
-            rim_rows = (sp.diags(cut.astype(float)) @ stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))).tocsr()
-        extrapolated = None
-    else:
-        edge = _edge(tri0, rim_psi, t_max, azimuth_weight)
-        m_edge = stage0._matrix_polar(rim_psi, edge * (1.0 - 1e-9))
-        top = t_max
-        gap = t_max - edge > 1e-6
-        extrapolated = float(edge[gap].min()) if gap.any() else None
-        if rim == "hold" or not gap.any():
-            rim_rows = m_edge
-        elif rim == "zero":
-            rim_rows = sp.diags((~gap).astype(float)) @ m_edge
-        elif rim == "trend":
-            rim_rows = _trend_rows(stage0, rim_psi, edge, t_max, m_edge, normal_centered, reference)
-        else:
-            raise InputError("unknown rim rule", field="rim", expected="trend, hold, zero or ring", got=rim)
+    rim_rows, top, extrapolated = _rim_rows(stage0, tri0, rim, rim_psi)
     nodes = sp.vstack([base, rim_rows]).tocsr()
     i_rim = n + 1 + np.arange(N_RIM)
     p1 = np.concatenate([p0, rim_psi])
     r1 = np.concatenate([r0, top])
     n1 = np.concatenate([n0, i_rim])
+    radius = rim.radius
     if radius is not None:  # a lobe: only the records inside its ring
         keep = r1 <= np.concatenate([np.minimum(radius, horizon_distance(center, p0)), top]) + 1e-12
         p1, r1, n1 = p1[keep], r1[keep], n1[keep]
@@ -598,10 +633,10 @@ SPOKE_END = 2.0
 
 
 def _with_spokes(center: tuple[float, float], psi: NDArray, r: NDArray, off: NDArray[np.int64],
-                 base: sp.csr_matrix, n: int, s: float, rim_psi: NDArray,
-                 about_direction: float | None = None) -> PolarInterpolant:
+                 base: sp.csr_matrix, s: float, about_direction: float | None = None) -> PolarInterpolant:
     """A polar grid about ``center``: every spoke (records at one azimuth) held at its outermost value out to
     :data:`SPOKE_END`, so that the triangulation fills the whole disk between spokes (no rim)."""
+    n, rim_psi = base.shape[1], _rim_psi()
     key = np.round(psi[off] / 1e-6).astype(np.int64)
     ends_p, ends_n = [], []
     for k in np.unique(key):

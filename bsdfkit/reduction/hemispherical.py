@@ -568,10 +568,21 @@ def _tail_rows(geom: Geometry, keep: NDArray[np.int64], finite: NDArray[np.bool_
     return extra, t, ends
 
 
+@dataclass(frozen=True)
+class _ArcOptions:
+    """One reconstruction of the arcs (:func:`_body_and_lobe`): the tail rule, the polar grid's azimuth and radius
+    nodes, the perpendicular half-profiles ("mean" or an in-plane half), the blend exponent and the body's centre."""
+
+    rule: str = "trend"
+    n_psi: int = 256
+    n_r: int = 400
+    azimuth: str = "mean"
+    p: float = 2.0
+    body_center: str = "normal"
+
+
 def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: NDArray[np.float64],
-                   rule: str, n_psi: int, n_r: int, azimuth: str = "mean", p: float = 2.0,
-                   with_kappa: bool = False, body_center: str = "normal"
-                   ) -> tuple[NDArray, NDArray, list[float], float]:
+                   opts: _ArcOptions, with_kappa: bool = False) -> tuple:
     """Weights over profile records of the body (about the normal) and of the lobe (about its centre).
 
     Returns (body weights, lobe weights with linear interpolation, last measured angles of extrapolated halves,
@@ -582,11 +593,11 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
     n = geom.n
     region = reg.records
     outside = np.setdiff1d(np.flatnonzero(finite), region)
-    extra, t, ends = _tail_rows(geom, outside, finite, x, rule, ref)
-    body = Hemisphere.from_profile(geom.dataset(outside, extra=extra), center=body_center)
-    if azimuth != "mean":
-        body = _with_perpendicular(body, azimuth)
-    wb = _weights(body, n_psi, n_r, p)
+    extra, t, ends = _tail_rows(geom, outside, finite, x, opts.rule, ref)
+    body = Hemisphere.from_profile(geom.dataset(outside, extra=extra), center=opts.body_center)
+    if opts.azimuth != "mean":
+        body = _with_perpendicular(body, opts.azimuth)
+    wb = _weights(body, opts.n_psi, opts.n_r, opts.p)
     # body weights back onto profile records: own records + virtual ones through T
     c_body = np.zeros(n)
     np.add.at(c_body, outside, wb[:outside.size])
@@ -597,7 +608,7 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
     if region.size:
         # body at the region's records, as a linear map of the profile records
         r, psi = _polar(body, geom, region)
-        m = _evaluation_matrix(body, r, psi, p)
+        m = _evaluation_matrix(body, r, psi, opts.p)
         e = np.zeros((region.size, n))
         e[:, outside] += m[:, :outside.size]
         e += m[:, outside.size:] @ t
@@ -609,14 +620,14 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
         lobe_values[pos] = resid @ np.nan_to_num(ref)
         center = min(max(reg.center_deg if reg.center_deg is not None else geom.theta_i, 0.0), 89.0)
         lobe = Hemisphere.from_profile(geom.dataset(lobe_keep, lobe_values, theta_i=center), center="specular")
-        if azimuth != "mean":
-            lobe = _with_perpendicular(lobe, azimuth)
-        wl = _weights(lobe, n_psi, n_r, p)
+        if opts.azimuth != "mean":
+            lobe = _with_perpendicular(lobe, opts.azimuth)
+        wl = _weights(lobe, opts.n_psi, opts.n_r, opts.p)
         c_lobe = wl[pos] @ resid
         lobe_parts = (lobe_keep, pos, resid, center)
         linear = float(wl @ lobe_values)
         if with_kappa and linear > 0:
-            kappa = float(np.clip(lobe.tis("log", n_psi, n_r) / linear, 0.5, 1.5))
+            kappa = float(np.clip(lobe.tis("log", opts.n_psi, opts.n_r) / linear, 0.5, 1.5))
             gauss = _gaussian_lobe_tis(geom, region, lobe_values[pos])
             if gauss is not None:  # an under-sampled lobe: its Gaussian integral, the ln-f one in the error bar
                 kappa_alt, kappa = kappa, float(np.clip(gauss / linear, 0.5, 2.0))
@@ -624,7 +635,7 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
     def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64], k: float = 1.0) -> NDArray:
         v = np.nan_to_num(np.asarray(values, dtype=np.float64))
         d = geom.dataset(outside, np.concatenate([v[outside], t @ v]), extra=extra)
-        out = Hemisphere.from_profile(d, center=body_center).bsdf(directions)
+        out = Hemisphere.from_profile(d, center=opts.body_center).bsdf(directions)
         if lobe_parts is not None and k != 0.0:
             keep, at, res, centre = lobe_parts
             lv = np.zeros(keep.size)
@@ -796,52 +807,87 @@ def _perpendicular_anisotropy(geom: Geometry, ref: NDArray[np.float64], ref_std:
 ANISOTROPY_STATED = 0.01
 
 
-def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
-                      n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
+@dataclass(frozen=True)
+class _ArcFit:
+    """The central reconstruction of the arcs and what its alternatives and assumptions are made from."""
+
+    region: Region
+    options: _ArcOptions  # the central reconstruction's
+    other_center: str | None  # without a lobe: the other centre, when about as symmetric (the ``centre`` error)
+    mismatch: dict[str, float]  # without a lobe: the in-plane asymmetry about the normal and the specular point
+    two_arcs: bool
+    errors: bool
+    body: NDArray[np.float64]
+    lobe: NDArray[np.float64]
+    kappa: float
+    kappa_alt: float
+    ends: list[float]
+    bound: float | None
+    linear_lobe: float
+    anisotropy: float
+    evaluate: Callable
+
+
+def _arc_centre(geom: Geometry, ref: NDArray[np.float64]) -> tuple[str, str | None, dict[str, float]]:
+    """Without a separable lobe: the body's centre, the other centre when about as symmetric, the asymmetries."""
+    # the centre the in-plane profile is more symmetric about (a lobe as broad as the arc, e.g. forward scatter
+    # in transmission, or a body that depends on |β| only)
+    body_center, other_center = "normal", None
+    mismatch = {c: _mismatch(geom, ref, c) for c in ("normal", "specular")}
+    m_n, m_s = mismatch["normal"], mismatch["specular"]
+    if np.isfinite(m_s) and np.isfinite(m_n) and m_s < m_n:
+        body_center = "specular"
+    other = "specular" if body_center == "normal" else "normal"
+    if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
+        other_center = other
+    return body_center, other_center, mismatch
+
+
+def _arc_fit(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64], n_psi: int, n_r: int,
+             errors: bool) -> _ArcFit:
+    """The lobe region, the body's centre and the central body and lobe weights of the arcs."""
     finite = np.isfinite(ref)
-    if not finite.any():
-        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
-                         expected="finite values on an arc")
     two_arcs = bool(np.any(finite & (geom.arc == "perpendicular")))
     s = np.nan_to_num(ref_std)
     region = _grown_until_symmetric(geom, ref, find_region(geom, ref, s))
     body_center, other_center, mismatch = "normal", None, {}
     if not region.records.size:
-        # no separable lobe: the centre the in-plane profile is more symmetric about (a lobe as broad as the
-        # arc, e.g. forward scatter in transmission, or a body that depends on |β| only)
-        mismatch = {c: _mismatch(geom, ref, c) for c in ("normal", "specular")}
-        m_n, m_s = mismatch["normal"], mismatch["specular"]
-        if np.isfinite(m_s) and np.isfinite(m_n) and m_s < m_n:
-            body_center = "specular"
-        other = "specular" if body_center == "normal" else "normal"
-        if np.isfinite(m_s) and np.isfinite(m_n) and mismatch[other] <= 2.0 * mismatch[body_center] + 0.01:
-            other_center = other
-    body, lobe, ends, (kappa, kappa_alt), evaluate = _body_and_lobe(
-        geom, region, finite, ref, "trend", n_psi, n_r, with_kappa=True, body_center=body_center)
-
+        body_center, other_center, mismatch = _arc_centre(geom, ref)
+    opts = _ArcOptions(n_psi=n_psi, n_r=n_r, body_center=body_center)
+    body, lobe, ends, (kappa, kappa_alt), evaluate = _body_and_lobe(geom, region, finite, ref, opts, with_kappa=True)
     bound = _unresolved_lobe_bound(geom, region, ref, s) if region.records.size else None
     linear_lobe = float(lobe @ np.nan_to_num(ref))
     if bound is not None and linear_lobe > 0:  # a lobe narrower than the sampling: U/2 ± U/2
         kappa = 0.5 * bound / linear_lobe
-
-    def variant(reg: Region = region, rule: str = "trend", grid: tuple[int, int] = (n_psi, n_r),
-                **kw) -> NDArray[np.float64]:
-        if not errors:
-            return body + kappa * lobe
-        kw.setdefault("body_center", body_center)
-        b, lo, _, _, _ = _body_and_lobe(geom, reg, finite, ref, rule, *grid, **kw)
-        return b + kappa * lo
-
-    alt: dict[str, dict[str, NDArray]] = {}
-    if other_center is not None:
-        alt["centre"] = {f"{other_center}_centred": variant(body_center=other_center)}
-    if ends:
-        alt["tail"] = {rule: variant(rule=rule) for rule in ("hold", "zero")}
     aniso = _perpendicular_anisotropy(geom, ref, s, region.records) if two_arcs and errors else 0.0
-    if two_arcs:
+    return _ArcFit(region=region, options=opts, other_center=other_center, mismatch=mismatch, two_arcs=two_arcs,
+                   errors=errors, body=body, lobe=lobe, kappa=kappa, kappa_alt=kappa_alt, ends=ends, bound=bound,
+                   linear_lobe=linear_lobe, anisotropy=aniso, evaluate=evaluate)
+
+
+def _arc_variant(geom: Geometry, ref: NDArray[np.float64], fit: _ArcFit, reg: Region | None = None,
+                 **changes: object) -> NDArray[np.float64]:
+    """The weights of one alternative reconstruction: the central options with ``changes``, the lobe region ``reg``."""
+    if not fit.errors:
+        return fit.body + fit.kappa * fit.lobe
+    opts = dataclasses.replace(fit.options, **changes)
+    b, lo, _, _, _ = _body_and_lobe(geom, fit.region if reg is None else reg, np.isfinite(ref), ref, opts)
+    return b + fit.kappa * lo
+
+
+def _arc_alternatives(geom: Geometry, ref: NDArray[np.float64], fit: _ArcFit) -> dict[str, dict[str, NDArray]]:
+    """The alternative reconstructions of the arcs by error group (module docstring, Error bars)."""
+    variant = functools.partial(_arc_variant, geom, ref, fit)
+    body, lobe, kappa, region, opts = fit.body, fit.lobe, fit.kappa, fit.region, fit.options
+    alt: dict[str, dict[str, NDArray]] = {}
+    if fit.other_center is not None:
+        alt["centre"] = {f"{fit.other_center}_centred": variant(body_center=fit.other_center)}
+    if fit.ends:
+        alt["tail"] = {rule: variant(rule=rule) for rule in ("hold", "zero")}
+    if fit.two_arcs:
         alt["azimuth"] = {f"blend_p{p:g}": variant(p=p) for p in (1.0, 4.0)}
-        if aniso > 0:  # the arcs show a body not symmetric about the normal: unmeasured azimuths may vary as much
-            alt["anisotropy"] = {"body_scaled": body + kappa * lobe + aniso * body}
+        if fit.anisotropy > 0:  # the arcs show a body not symmetric about the normal: unmeasured azimuths vary too
+            alt["anisotropy"] = {"body_scaled": body + kappa * lobe + fit.anisotropy * body}
     else:
         alt["azimuth"] = {"forward": variant(azimuth="+alpha"), "backward": variant(azimuth="-alpha")}
     sep = {}
@@ -852,28 +898,42 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
                 sep[name] = variant(reg=other)
     if sep:
         alt["separation"] = sep
-    if bound is not None and linear_lobe > 0:
+    if fit.bound is not None and fit.linear_lobe > 0:
         alt["unresolved_lobe"] = {"none": body, "upper_bound": body + 2.0 * kappa * lobe}
     elif region.records.size:
         alt["interpolation"] = {"linear_lobe": body + lobe}
-        if kappa_alt != kappa:  # the Gaussian integral was used: the ln-f one is the alternative
-            alt["interpolation"]["log_lobe"] = body + kappa_alt * lobe
+        if fit.kappa_alt != kappa:  # the Gaussian integral was used: the ln-f one is the alternative
+            alt["interpolation"]["log_lobe"] = body + fit.kappa_alt * lobe
     else:  # the whole profile with ln-f instead of f interpolation (band-mean ratio)
+        finite = np.isfinite(ref)
         keep = np.flatnonzero(finite)
         extra, t, _ = _tail_rows(geom, keep, finite, geom.frame()[0], "trend", ref)
         values = np.concatenate([ref[keep], t @ np.nan_to_num(ref)])
-        hemi = Hemisphere.from_profile(geom.dataset(keep, values, extra), center=body_center)
-        linear = hemi.tis("linear", n_psi, n_r)
+        hemi = Hemisphere.from_profile(geom.dataset(keep, values, extra), center=opts.body_center)
+        linear = hemi.tis("linear", opts.n_psi, opts.n_r)
         if linear > 0:
-            alt["interpolation"] = {"log_f": body * float(np.clip(hemi.tis("log", n_psi, n_r) / linear, 0.5, 1.5))}
-    alt["quadrature"] = {"half_grid": variant(grid=(n_psi // 2, n_r // 2))}
+            ratio = float(np.clip(hemi.tis("log", opts.n_psi, opts.n_r) / linear, 0.5, 1.5))
+            alt["interpolation"] = {"log_f": body * ratio}
+    alt["quadrature"] = {"half_grid": variant(n_psi=opts.n_psi // 2, n_r=opts.n_r // 2)}
+    return alt
+
+
+def _centred_comparisons(geom: Geometry, finite: NDArray[np.bool_], n_psi: int, n_r: int
+                         ) -> dict[str, NDArray[np.float64]]:
+    """The single-centre reconstructions of the arcs (about the specular point, about the normal)."""
     comparisons = {}
     keep = np.flatnonzero(finite)
-    for center in ("specular", "normal") if errors else ():
+    for center in ("specular", "normal"):
         hemi = Hemisphere.from_profile(geom.dataset(keep), center=center)
         w = np.zeros(geom.n)
         w[keep] = hemi.weights(n_psi, n_r)
         comparisons[f"{center}_centred"] = w
+    return comparisons
+
+
+def _arc_assumptions(geom: Geometry, fit: _ArcFit) -> tuple[str, list[str]]:
+    """The method of the arcs' reconstruction and its assumptions in words."""
+    region, body_center, other_center, mismatch = fit.region, fit.options.body_center, fit.other_center, fit.mismatch
     assumptions = []
     if region.records.size:
         method = "body about the normal + lobe about its peak"
@@ -891,24 +951,40 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
         assumptions.append(f"no lobe separable from a floor near the specular direction: scatter taken as "
                            f"rotationally symmetric about {what[body_center]}{sym}"
                            + (f" (error bar: about {what[other_center]})" if other_center else ""))
-    if bound is not None and linear_lobe > 0:
+    if fit.bound is not None and fit.linear_lobe > 0:
         n_in = int(np.sum(geom.arc[region.records] == "in_plane"))
         assumptions.append(f"specular lobe narrower than the sampling ({n_in} in-plane sample(s)): its integral "
-                           f"is bounded, 0 to {bound:.3g} on the band mean, and "
+                           f"is bounded, 0 to {fit.bound:.3g} on the band mean, and "
                            "reported as half the bound with half the bound as its error")
-    if aniso > ANISOTROPY_STATED:
+    if fit.anisotropy > ANISOTROPY_STATED:
         assumptions.append(f"the perpendicular arc departs from the in-plane body at the same distance from the "
-                           f"normal by {100 * aniso:.2g} % rms beyond noise: the body is not symmetric about the "
-                           "normal, the azimuths between the arcs are not measured (error bar: the whole body "
+                           f"normal by {100 * fit.anisotropy:.2g} % rms beyond noise: the body is not symmetric about "
+                           "the normal, the azimuths between the arcs are not measured (error bar: the whole body "
                            "scaled by that departure)")
-    if not two_arcs:
+    if not fit.two_arcs:
         assumptions.append("in-plane data only: the perpendicular half-profiles are the mean of the two in-plane "
                            "halves (error bar: either half alone)")
-    if ends:
-        assumptions.append(f"in-plane profile extrapolated beyond {min(ends):g} deg to the horizon along the trend of "
-                           "its last three samples (error bar: held at the last value, or linear to 0 at 90 deg)")
-    return Reconstruction(central=body + kappa * lobe, alternatives=alt, comparisons=comparisons,
-                          lobe=kappa * lobe, region=region, extrapolated_beyond_deg=min(ends) if ends else None,
+    if fit.ends:
+        assumptions.append(f"in-plane profile extrapolated beyond {min(fit.ends):g} deg to the horizon along the trend "
+                           "of its last three samples (error bar: held at the last value, or linear to 0 at 90 deg)")
+    return method, assumptions
+
+
+def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
+                      n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
+    """Body about the normal + lobe about its peak for records on the in-plane and perpendicular arcs."""
+    finite = np.isfinite(ref)
+    if not finite.any():
+        raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
+                         expected="finite values on an arc")
+    fit = _arc_fit(geom, ref, ref_std, n_psi, n_r, errors)
+    alt = _arc_alternatives(geom, ref, fit)
+    comparisons = _centred_comparisons(geom, finite, n_psi, n_r) if errors else {}
+    method, assumptions = _arc_assumptions(geom, fit)
+    kappa, evaluate = fit.kappa, fit.evaluate
+    return Reconstruction(central=fit.body + kappa * fit.lobe, alternatives=alt, comparisons=comparisons,
+                          lobe=kappa * fit.lobe, region=fit.region,
+                          extrapolated_beyond_deg=min(fit.ends) if fit.ends else None,
                           assumptions=assumptions, method=method,
                           evaluate=lambda values, directions: evaluate(values, directions, kappa))
 
@@ -975,9 +1051,9 @@ def _body_interpolant(x: NDArray[np.float64], y: NDArray[np.float64], center: tu
     or, about the specular point, a polar grid on its own spokes (straight in β, or great circles through the
     specular direction when ``about_direction`` gives the incidence [deg])."""
     if spokes:
-        return disk.build(x, y, center, rim=rim, normal_centered=False, reference=reference, spokes=True,
+        return disk.build(x, y, center, rim=disk.Rim(rim, normal_centered=False, reference=reference), spokes=True,
                           about_direction=about_direction)
-    return disk.build(x, y, center, rim=rim, normal_centered=True, reference=reference,
+    return disk.build(x, y, center, rim=disk.Rim(rim, normal_centered=True, reference=reference),
                       azimuth_weight=_body_azimuth_weight(x, y))
 
 
@@ -1095,11 +1171,25 @@ def _gap_anisotropy(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.f
     return w, delta
 
 
-def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], body_center: str,
-                lobe_c: float | None, radius: float, rim: str = "trend", mirror: str | None = None,
-                native: str | None = None):
+@dataclass(frozen=True)
+class _DiskOptions:
+    """One reconstruction over the disk (:func:`_disk_parts`): the body's centre ("normal" or "specular"), the
+    lobe's centre (in-plane direction cosine; None: no lobe) and region radius [direction cosines], the body's rim
+    rule, an in-plane half of the lobe mirrored onto the other ("forward", "backward") and a native polar grid."""
+
+    body_center: str = "normal"
+    lobe_c: float | None = None
+    radius: float = 0.0
+    rim: str = "trend"
+    mirror: str | None = None
+    native: str | None = None
+
+
+def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float64], opts: _DiskOptions) -> tuple:
     """Body (about ``body_center``) and lobe (about (lobe_c, 0) within ``radius``) weights over the profile's
     records, the linear lobe integral's log/linear ratio on ``ref``, extrapolated radius, and an evaluator."""
+    body_center, lobe_c, radius, rim, mirror, native = (opts.body_center, opts.lobe_c, opts.radius, opts.rim,
+                                                        opts.mirror, opts.native)
     x, y = geom.frame()
     n = geom.n
     keep = np.flatnonzero(finite)
@@ -1133,7 +1223,7 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
             rows = np.concatenate([resid[half], resid[half]])
             lx, uniq = np.unique(np.round(np.stack([lx, ly], 1), 12), axis=0, return_index=True)
             lx, ly, rows = lx[:, 0], lx[:, 1], rows[uniq]
-        lobe = disk.build(lx, ly, (lobe_c, 0.0), rim="ring", radius=radius, normal_centered=False)
+        lobe = disk.build(lx, ly, (lobe_c, 0.0), rim=disk.Rim("ring", radius=radius, normal_centered=False))
         w = lobe.weights()
         c_lobe = w @ rows
         lv = rows @ np.nan_to_num(ref)
@@ -1155,121 +1245,181 @@ def _disk_parts(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.float
     return c_body, c_lobe, ratio, body.extrapolated_beyond, evaluate, region
 
 
-def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
-                      n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
-    """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`)."""
+@dataclass(frozen=True)
+class _DiskFit:
+    """The central reconstruction over the disk and what its alternatives and assumptions are made from."""
+
+    options: _DiskOptions  # the central reconstruction's
+    in_plane_region: NDArray[np.int64]  # the lobe region found on the in-plane arc
+    resolved: bool  # a peak wider than LOBE_MAX_RADIUS: no specular lobe, everything about the normal
+    errors: bool
+    body: NDArray[np.float64]
+    lobe: NDArray[np.float64]
+    kappa: float
+    beyond: float | None
+    evaluate: Callable
+    region: NDArray[np.int64]  # the records of the lobe region
+
+
+def _disk_fit(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64], errors: bool) -> _DiskFit:
+    """The lobe region, the body's centre and the central body and lobe weights over the disk."""
     finite = np.isfinite(ref)
-    s = np.nan_to_num(ref_std)
+    no_lobe = (None, 0.0, np.zeros(0, dtype=np.int64))
     native = _native_grid(geom, finite)
-    if native:  # a polar grid about the specular point or direction: integrated on its own spokes (no lobe region)
-        lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
-    else:
-        lobe_c, radius, in_plane_region = _disk_region(geom, ref, s)
+    # a polar grid about the specular point or direction: integrated on its own spokes (no lobe region)
+    lobe_c, radius, in_plane_region = no_lobe if native else _disk_region(geom, ref, np.nan_to_num(ref_std))
     resolved = lobe_c is not None and radius > LOBE_MAX_RADIUS
     if resolved:  # scatter rising over most of the disk is no specular lobe: integrated directly with the body
-        lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
+        lobe_c, radius, in_plane_region = no_lobe
     # the body is always interpolated about the normal: there the domain is r ≤ 1 for every azimuth, so records
     # at one distance from the centre never straddle the horizon (about an off-normal centre they do, and
     # interpolating across azimuth at constant distance bridges the concave edge of the domain)
-    body_center, other_center = ("specular" if native else "normal"), None
+    opts = _DiskOptions(body_center="specular" if native else "normal", lobe_c=lobe_c, radius=radius, native=native)
     try:
-        body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, lobe_c, radius,
-                                                              native=native)
-    except _RegionTooWide:  # a "lobe" covering most of the disk is the body itself
-        lobe_c, radius, in_plane_region = None, 0.0, np.zeros(0, dtype=np.int64)
-        body, lobe, kappa, beyond, evaluate, region = _disk_parts(geom, finite, ref, body_center, None, 0.0)
+        parts = _disk_parts(geom, finite, ref, opts)
+    except _RegionTooWide:  # a "lobe" covering most of the disk is the body itself (never with a native grid)
+        lobe_c, radius, in_plane_region = no_lobe
+        opts = dataclasses.replace(opts, lobe_c=None, radius=0.0)
+        parts = _disk_parts(geom, finite, ref, opts)
+    body, lobe, kappa, beyond, evaluate, region = parts
+    return _DiskFit(options=opts, in_plane_region=in_plane_region, resolved=resolved, errors=errors, body=body,
+                    lobe=lobe, kappa=kappa, beyond=beyond, evaluate=evaluate, region=region)
 
-    def variant(**kw) -> NDArray[np.float64]:
-        if not errors:
-            return body + kappa * lobe
-        args = dict(body_center=body_center, lobe_c=lobe_c, radius=radius, native=native) | kw
-        b, lo, _, _, _, _ = _disk_parts(geom, finite, ref, **args)
-        return b + kappa * lo
 
-    alt: dict[str, dict[str, NDArray]] = {}
-    if other_center is not None:
-        alt["centre"] = {f"{other_center}_centred": variant(body_center=other_center)}
-    if beyond is not None:
-        alt["tail"] = {rule: variant(rim=rule) for rule in ("hold", "zero")}
-    # the lobe's azimuths about its peak where it is strong (within half the region radius)
+def _disk_variant(geom: Geometry, ref: NDArray[np.float64], fit: _DiskFit, **changes: object) -> NDArray[np.float64]:
+    """The weights of one alternative reconstruction over the disk: the central options with ``changes``."""
+    if not fit.errors:
+        return fit.body + fit.kappa * fit.lobe
+    b, lo, _, _, _, _ = _disk_parts(geom, np.isfinite(ref), ref, dataclasses.replace(fit.options, **changes))
+    return b + fit.kappa * lo
+
+
+def _sparse_lobe(geom: Geometry, fit: _DiskFit) -> bool:
+    """Whether the lobe is measured at fewer than three azimuths about its peak where it is strong (within half
+    the region radius): then the in-plane arc alone."""
+    region, lobe_c, radius = fit.region, fit.options.lobe_c, fit.options.radius
     gx, gy = geom.frame()
     core = region[np.hypot(gx[region] - (lobe_c or 0.0), gy[region]) < 0.5 * radius] if region.size else region
     lobe_psi = np.unique(np.round(np.degrees(np.arctan2(gy[core], gx[core] - (lobe_c or 0.0))) % 180.0, 1))
-    sparse_lobe = region.size > 0 and len(lobe_psi) < 3
+    return region.size > 0 and len(lobe_psi) < 3
+
+
+def _disk_alternatives(geom: Geometry, ref: NDArray[np.float64], fit: _DiskFit, sparse_lobe: bool
+                       ) -> dict[str, dict[str, NDArray]]:
+    """The alternative reconstructions over the disk by error group, but the azimuth gap (:func:`_gap_statement`)."""
+    variant = functools.partial(_disk_variant, geom, ref, fit)
+    body, lobe = fit.body, fit.lobe
+    alt: dict[str, dict[str, NDArray]] = {}
+    if fit.beyond is not None:
+        alt["tail"] = {rule: variant(rim=rule) for rule in ("hold", "zero")}
     if sparse_lobe:
         alt["azimuth"] = {m: variant(mirror=m) for m in ("forward", "backward")}
-    if region.size:
+    if fit.region.size:
         sep = {}
         for k, factor in enumerate(DISK_WIDER):
             try:
-                sep[f"wider_{k + 1}"] = variant(radius=factor * radius)
+                sep[f"wider_{k + 1}"] = variant(radius=factor * fit.options.radius)
             except _RegionTooWide:
                 break
         if sep:
             alt["separation"] = sep
         alt["interpolation"] = {"linear_lobe": body + lobe}
-    elif errors:
-        keep = np.flatnonzero(finite)
+    elif fit.errors:
+        keep = np.flatnonzero(np.isfinite(ref))
         x, y = geom.frame()
         whole = _body_interpolant(x[keep], y[keep], (0.0, 0.0), "trend", ref[keep])
         v = np.nan_to_num(ref[keep])
         linear = whole.integral(v, "linear")
         if linear > 0:
             alt["interpolation"] = {"log_f": body * float(np.clip(whole.integral(v, "log") / linear, 0.5, 1.5))}
-    comparisons = {"normal_centred": variant(lobe_c=None, body_center="normal")}
-    n_other = int(np.sum(finite & (geom.arc == "other")))
-    assumptions = [f"records off the in-plane and perpendicular arcs ({n_other} of {int(finite.sum())}): "
-                   "interpolated over the projected disk in polar coordinates (linear in the distance from the "
-                   "centre, across azimuth between records at about the same distance)"]
+    return alt
+
+
+def _gap_statement(geom: Geometry, ref: NDArray[np.float64], fit: _DiskFit
+                   ) -> tuple[dict[str, NDArray] | None, str | None]:
+    """The ``azimuth_gap`` alternatives and the assumption stated for azimuths the records leave unmeasured."""
+    finite = np.isfinite(ref)
     # a polar grid about the specular point is interpolated along its spokes, not across azimuth about the normal
-    gap = None if native else _azimuth_gap(geom, finite)
-    if gap is not None:
-        text = (f"the records leave azimuths of up to {gap[0]:.0f} deg unmeasured at {gap[1]:.2g}-{gap[2]:.2g} "
-                "from the normal (direction cosines): the body there is interpolated across the gap at the same "
-                "distance from the normal, exact for a body symmetric about the normal; ")
-        aniso = (_gap_anisotropy(geom, finite, ref, np.setdiff1d(np.flatnonzero(finite), region)) if errors
-                 else None)
-        if aniso is not None:
-            alt["azimuth_gap"] = {"anisotropic_body": body + kappa * lobe + aniso[0]}
-            text += (f"error bar: the body over the gaps varying as much as it does across azimuth where the "
-                     f"records cover it ({100 * aniso[1]:.2g} % rms)")
-        else:
-            text += "an anisotropy there is not measured and not in the error bar"
-        assumptions.append(text)
-    center_deg = None if lobe_c is None else float(np.degrees(np.arcsin(lobe_c)))
+    gap = None if fit.options.native else _azimuth_gap(geom, finite)
+    if gap is None:
+        return None, None
+    text = (f"the records leave azimuths of up to {gap[0]:.0f} deg unmeasured at {gap[1]:.2g}-{gap[2]:.2g} "
+            "from the normal (direction cosines): the body there is interpolated across the gap at the same "
+            "distance from the normal, exact for a body symmetric about the normal; ")
+    aniso = (_gap_anisotropy(geom, finite, ref, np.setdiff1d(np.flatnonzero(finite), fit.region)) if fit.errors
+             else None)
+    if aniso is None:
+        return None, text + "an anisotropy there is not measured and not in the error bar"
+    text += (f"error bar: the body over the gaps varying as much as it does across azimuth where the "
+             f"records cover it ({100 * aniso[1]:.2g} % rms)")
+    return {"anisotropic_body": fit.body + fit.kappa * fit.lobe + aniso[0]}, text
+
+
+def _lobe_center_deg(fit: _DiskFit) -> float | None:
+    """The lobe's in-plane centre [deg] (None without a lobe)."""
+    return None if fit.options.lobe_c is None else float(np.degrees(np.arcsin(fit.options.lobe_c)))
+
+
+def _disk_method(geom: Geometry, fit: _DiskFit, sparse_lobe: bool) -> tuple[str, list[str]]:
+    """The method of the reconstruction over the disk and its assumptions after the records' and the gap's."""
+    opts, region = fit.options, fit.region
+    assumptions = []
     if region.size:
         method = "disk: body about the normal + lobe about its peak"
-        assumptions.append(f"specular lobe about its in-plane peak at {center_deg:.2f} deg within "
-                           f"{radius:.3g} (direction cosines), {region.size} record(s); the body under it "
+        assumptions.append(f"specular lobe about its in-plane peak at {_lobe_center_deg(fit):.2f} deg within "
+                           f"{opts.radius:.3g} (direction cosines), {region.size} record(s); the body under it "
                            "interpolated from the records around it")
         if sparse_lobe:
             assumptions.append("lobe measured on the in-plane arc only: rotationally symmetric about its peak "
                                "(error bar: either in-plane half alone)")
-    elif native:
+    elif opts.native:
         what = ("straight spokes about the specular point in direction cosines (a Harvey-Shack table)"
-                if native == "beta" else "great circles through the specular direction (a radial x azimuth "
+                if opts.native == "beta" else "great circles through the specular direction (a radial x azimuth "
                 "table about it)")
         method = "disk: a polar grid about the specular point, on its own spokes"
         assumptions.append(f"the records lie on {what}: interpolated along and between its spokes, each spoke "
                            "held at its outermost value up to the horizon (as the format's readers do)")
-    elif resolved:
+    elif fit.resolved:
         method = "disk: everything about the normal (no specular lobe narrower than the disk)"
         assumptions.append(f"the peak near the specular direction extends over more than {LOBE_MAX_RADIUS:g} in "
                            "direction cosines: no separable specular lobe, every record interpolated about the normal")
     else:
         what = {"normal": "the normal", "specular": "the specular direction"}
-        method = f"disk: everything about {what[body_center]} (no separable specular lobe)"
-    if beyond is not None:
-        edge = float(np.degrees(np.arcsin(min(beyond, 1.0)))) if body_center == "normal" else None
+        method = f"disk: everything about {what[opts.body_center]} (no separable specular lobe)"
+    if fit.beyond is not None:
+        edge = float(np.degrees(np.arcsin(min(fit.beyond, 1.0)))) if opts.body_center == "normal" else None
         assumptions.append("data end short of the horizon" + (f" (from {edge:.3g} deg)" if edge is not None else "")
                            + ": extrapolated along the trend of the last 10 deg (error bar: held at the last value, "
                            "or linear to 0 at the horizon)")
-    reg = Region(in_plane_region, None if lobe_c is None else (center_deg, center_deg), None, center_deg, ())
-    return Reconstruction(central=body + kappa * lobe, alternatives=alt, comparisons=comparisons,
-                          lobe=kappa * lobe, region=reg,
+    return method, assumptions
+
+
+def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
+                      n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
+    """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`)."""
+    finite = np.isfinite(ref)
+    fit = _disk_fit(geom, ref, ref_std, errors)
+    sparse_lobe = _sparse_lobe(geom, fit)
+    alt = _disk_alternatives(geom, ref, fit, sparse_lobe)
+    comparisons = {"normal_centred": _disk_variant(geom, ref, fit, lobe_c=None, body_center="normal")}
+    n_other = int(np.sum(finite & (geom.arc == "other")))
+    assumptions = [f"records off the in-plane and perpendicular arcs ({n_other} of {int(finite.sum())}): "
+                   "interpolated over the projected disk in polar coordinates (linear in the distance from the "
+                   "centre, across azimuth between records at about the same distance)"]
+    gap_alternatives, gap_text = _gap_statement(geom, ref, fit)
+    if gap_alternatives is not None:
+        alt["azimuth_gap"] = gap_alternatives
+    if gap_text is not None:
+        assumptions.append(gap_text)
+    method, stated = _disk_method(geom, fit, sparse_lobe)
+    center_deg = _lobe_center_deg(fit)
+    reg = Region(fit.in_plane_region, None if center_deg is None else (center_deg, center_deg), None, center_deg, ())
+    kappa, evaluate, beyond = fit.kappa, fit.evaluate, fit.beyond
+    return Reconstruction(central=fit.body + kappa * fit.lobe, alternatives=alt, comparisons=comparisons,
+                          lobe=kappa * fit.lobe, region=reg,
                           extrapolated_beyond_deg=(None if beyond is None else
                                                    float(np.degrees(np.arcsin(min(beyond, 1.0))))),
-                          assumptions=assumptions, method=method,
+                          assumptions=assumptions + stated, method=method,
                           evaluate=lambda values, directions: evaluate(values, directions, kappa))
 
 

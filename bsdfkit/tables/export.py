@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -481,6 +481,160 @@ def _peak_check(fn: BsdfFn, to: str, theta: NDArray[np.float64], sides: Sequence
     return out
 
 
+@dataclass(frozen=True)
+class _Job:
+    """What every table written by one :func:`export` call shares: the format, the source and the file."""
+
+    fmt: Any  # the registry's format
+    fn: BsdfFn
+    theta: NDArray[np.float64]  # exported incidences [deg]
+    side: str
+    sides: tuple[str, ...]
+    src: _Source
+    comments: tuple[str, ...]
+    path: str | Path
+    generated_at: datetime | None
+
+
+class _Written(NamedTuple):
+    """One table written: its axes, its grid description and the last plane-symmetry deviation reported."""
+
+    axes: Any
+    grid: dict[str, Any]
+    deviation: float | None
+
+
+class _Rechecked(NamedTuple):
+    """The auto grid's re-check: the kept table's grid description, its re-read (None: to read again) and
+    nodes, the direct integral per side and incidence, and the last plane-symmetry deviation reported."""
+
+    grid: dict[str, Any]
+    summary: FileSummary | None
+    nodes: VendorTable | None
+    reference: dict[str, list[float]]
+    deviation: float | None
+
+
+def _write(job: _Job, settings: ExportSettings, force: bool, deviation: float | None = None) -> _Written:
+    """Write the table with ``settings``; ``deviation``: the one reported by an earlier write of this export."""
+    assert job.fmt.write is not None
+    outcome = job.fmt.write(WriteJob(fn=job.fn, theta=job.theta, side=job.side, sides=job.sides, settings=settings,
+                                     abg=job.src.abg, tis_excess_allowed=job.src.tis_excess_allowed,
+                                     comments=job.comments, path=job.path, force=force,
+                                     generated_at=job.generated_at))
+    if outcome.plane_symmetry_deviation is not None:
+        deviation = outcome.plane_symmetry_deviation
+    return _Written(outcome.axes, dict(outcome.grid), deviation)
+
+
+def _doubled(settings: ExportSettings, axes: Any) -> ExportSettings | None:
+    """The first auto axes with every azimuth interval bisected (None: no polar axes, or more nodes than the fixed
+    grid)."""
+    a = np.asarray(getattr(axes, "azimuth_deg", ()), dtype=np.float64)
+    if isinstance(axes, grids.HarveyShackAxes):
+        both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a)]))
+        if len(axes.rho) * both.size > len(grids.HarveyShackAxes.default().rho) * 72:
+            return None
+        return replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
+            axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg))
+    if isinstance(axes, grids.SpecularAxes):
+        plane = settings.zemax_symmetry == "PlaneSymmetrical"
+        both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a, periodic=not plane)]))
+        fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
+        if len(axes.radial_deg) * both.size > len(fixed.radial_deg) * len(fixed.azimuth_deg):
+            return None
+        return replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist())))
+    return None
+
+
+def _recheck(job: _Job, settings: ExportSettings, first: _Written) -> _Rechecked:
+    """The auto table re-checked on the written file, written again with finer axes until it passes; the table
+    closest to the source is kept (on disk at the end)."""
+    # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
+    # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
+    # format's quadrature the grid was chosen with, so a lobe cut by the horizon may need more azimuths
+    theta, sides = job.theta, job.sides
+    reference = {s: [grids.tis_reference(job.fn, float(t), s) for t in theta] for s in sides}
+    limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
+    cell = first.grid.get("values") == VALUES_LABEL["cell"]
+    # candidates after the first auto table, in order, until one passes: the axes chosen again for a tighter TIS
+    # tolerance (not for cell averages, whose TIS needs no refinement), the first axes with doubled azimuths
+    # (the engine interpolates between spokes), the fixed grid; the table closest to the source is kept
+    steps: list[tuple[str, Any]] = []
+    if not cell:
+        steps += [("tighter", k) for k in range(1, RECHECK_ROUNDS)]
+    steps += [("doubled", None), ("fixed", None)]
+    tried = []  # (worst, settings written, grid info) of each table written
+    current, written, grid_info = settings, first, first.grid
+    summary = nodes = None
+    for step, k in [("auto", None)] + steps:
+        if step == "tighter":
+            tighter = replace(settings.grid_tolerance, tis_rtol=settings.grid_tolerance.tis_rtol
+                              * RECHECK_TIGHTEN ** k)
+            current = replace(settings, grid_tolerance=tighter)
+            written = _write(job, current, True, written.deviation)
+            grid_info = written.grid
+            if grid_info.get("mode") != "auto":  # needs more nodes than the fixed grid: the fixed grid
+                continue
+            grid_info = dict(grid_info, tis_rtol=tighter.tis_rtol)
+        elif step == "doubled":
+            candidate = _doubled(settings, first.axes)
+            if candidate is None:
+                continue
+            current = candidate
+            written = _write(job, current, True, written.deviation)
+            grid_info = dict(tried[0][2], azimuth=int(written.grid.get("azimuth", 0)))
+        elif step == "fixed":
+            current = replace(settings, grid="fixed")
+            written = _write(job, current, True, written.deviation)
+            grid_info = dict(written.grid, mode=FALLBACK_RECHECK)
+        summary, nodes = _read_any(job.path)
+        computed = summary.tis_computed
+        worst = max(abs(computed[s][k_] / reference[s][k_] - 1.0) if reference[s][k_] > 0 else 0.0
+                    for s in sides for k_ in range(theta.size))
+        tried.append((worst, current, dict(grid_info, rechecks=len(tried))))
+        if worst <= limit:
+            break
+    best = min(range(len(tried)), key=lambda i: tried[i][0])
+    if best != len(tried) - 1:  # an earlier table was closer to the source: written again
+        written = _write(job, tried[best][1], True, written.deviation)
+        summary = None
+    grid_info = dict(tried[best][2])
+    if len(tried) > 1:
+        grid_info["recheck_worst"] = float(tried[best][0])
+    return _Rechecked(grid_info, summary, nodes, reference, written.deviation)
+
+
+def _format_for(to: str, side: str) -> Any:
+    """The registry's format ``to`` after checking it and the side it is asked for."""
+    if to not in FORMATS:
+        raise ValidationError("unknown export format", field="to", expected=" | ".join(FORMATS), got=to)
+    if side not in _SIDE_CHOICES:
+        raise ValidationError("unknown side", field="side", expected=" | ".join(_SIDE_CHOICES), got=side)
+    fmt = registry.get(to)
+    if fmt.sides_per_file == 1 and side == "both":
+        raise ValidationError(f"a {fmt.title} file holds one side (one ScatterType); export each side to its own "
+                              "file",
+                              field="side", expected="reflection or transmission", got=side)
+    return fmt
+
+
+def _table_tis(reread: FileSummary, theta: NDArray[np.float64], sides: Sequence[str],
+               held: Mapping[float, float] | None) -> dict[str, list[float]]:
+    """The re-read table's TIS per side at each exported incidence."""
+    tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
+    if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):
+        # a file on its own incidences (BSDF XML: the Klems band centres): each exported incidence is compared
+        # with the file incidence that holds it (else the nearest)
+        file_theta = np.asarray(reread.incidences_deg, dtype=np.float64)
+        index = []
+        for t in theta:
+            holding = [k for k, c in enumerate(file_theta) if held and abs(held.get(float(c), np.nan) - t) <= 1e-9]
+            index.append(holding[0] if holding else int(np.argmin(np.abs(file_theta - t))))
+        tis_table = {s: [vals[k] for k in index] for s, vals in tis_table.items()}
+    return tis_table
+
+
 def export(
     source: Any,
     to: ExportFormat,
@@ -501,127 +655,27 @@ def export(
     it (the value ``bsdfkit read`` reports), so that grid adequacy is visible.
     """
     settings = settings or ExportSettings()
-    if to not in FORMATS:
-        raise ValidationError("unknown export format", field="to", expected=" | ".join(FORMATS), got=to)
-    if side not in _SIDE_CHOICES:
-        raise ValidationError("unknown side", field="side", expected=" | ".join(_SIDE_CHOICES), got=side)
-    fmt = registry.get(to)
-    if fmt.sides_per_file == 1 and side == "both":
-        raise ValidationError(f"a {fmt.title} file holds one side (one ScatterType); export each side to its own "
-                              "file",
-                              field="side", expected="reflection or transmission", got=side)
+    fmt = _format_for(to, side)
     # before computing: existing output, output that is the source itself (refused even with force), writability
     atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
     sides = frames.SIDES if side == "both" else (side,)
     src = _resolve_source(source, interaction, sides, settings.theta_i_deg, settings.wavelength_nm)
     theta = np.asarray(src.theta_i_deg, dtype=np.float64)
     fn = _dispatch(src.fns)
-    comments = (f"source: {src.description}",) + tuple(settings.comments)
-    deviation: float | None = None
-    grid_info: dict[str, Any] = {}
-    written_axes: list[Any] = [None]
-
-    def write(settings: ExportSettings, force: bool) -> None:
-        nonlocal deviation, grid_info
-        assert fmt.write is not None
-        outcome = fmt.write(WriteJob(fn=fn, theta=theta, side=side, sides=tuple(sides), settings=settings,
-                                     abg=src.abg, tis_excess_allowed=src.tis_excess_allowed, comments=comments,
-                                     path=path, force=force, generated_at=generated_at))
-        written_axes[0] = outcome.axes
-        grid_info = dict(outcome.grid)
-        if outcome.plane_symmetry_deviation is not None:
-            deviation = outcome.plane_symmetry_deviation
-
-    write(settings, force)
+    job = _Job(fmt=fmt, fn=fn, theta=theta, side=side, sides=tuple(sides), src=src,
+               comments=(f"source: {src.description}",) + tuple(settings.comments), path=path,
+               generated_at=generated_at)
+    written = _write(job, settings, force)
+    deviation, grid_info = written.deviation, written.grid
     reference: dict[str, list[float]] | None = None
     summary = None  # the written file as read_any read it, while it is the file on disk (its re-read, 3-4 s)
     nodes = None  # and its nodes as the engine integrated them (the peak check reads the same file)
     if grid_info.get("mode") == "auto":
-        # the re-check on the written file: its TIS as bsdfkit read integrates it (the hemispherical engine) against
-        # the direct integral of what it samples; the engine interpolates between the spokes otherwise than the
-        # format's quadrature the grid was chosen with, so a lobe cut by the horizon may need more azimuths
-        reference = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
-        limit = RECHECK_FACTOR * settings.grid_tolerance.tis_rtol
-        cell = grid_info.get("values") == VALUES_LABEL["cell"]
-        first_axes = written_axes[0]
-
-        def doubled() -> ExportSettings | None:
-            """The first auto axes with every azimuth interval bisected (None: no polar axes, or more nodes than
-            the fixed grid)."""
-            axes = first_axes
-            a = np.asarray(getattr(axes, "azimuth_deg", ()), dtype=np.float64)
-            if isinstance(axes, grids.HarveyShackAxes):
-                both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a)]))
-                if len(axes.rho) * both.size > len(grids.HarveyShackAxes.default().rho) * 72:
-                    return None
-                return replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
-                    axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg))
-            if isinstance(axes, grids.SpecularAxes):
-                plane = settings.zemax_symmetry == "PlaneSymmetrical"
-                both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a, periodic=not plane)]))
-                fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
-                if len(axes.radial_deg) * both.size > len(fixed.radial_deg) * len(fixed.azimuth_deg):
-                    return None
-                return replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist())))
-            return None
-
-        # candidates after the first auto table, in order, until one passes: the axes chosen again for a tighter TIS
-        # tolerance (not for cell averages, whose TIS needs no refinement), the first axes with doubled azimuths
-        # (the engine interpolates between spokes), the fixed grid; the table closest to the source is kept
-        steps: list[tuple[str, Any]] = []
-        if not cell:
-            steps += [("tighter", k) for k in range(1, RECHECK_ROUNDS)]
-        steps += [("doubled", None), ("fixed", None)]
-        tried = []  # (worst, settings written, grid info) of each table written
-        current = settings
-        for step, k in [("auto", None)] + steps:
-            if step == "tighter":
-                tighter = replace(settings.grid_tolerance, tis_rtol=settings.grid_tolerance.tis_rtol
-                                  * RECHECK_TIGHTEN ** k)
-                current = replace(settings, grid_tolerance=tighter)
-                write(current, True)
-                if grid_info.get("mode") != "auto":  # needs more nodes than the fixed grid: the fixed grid
-                    continue
-                grid_info = dict(grid_info, tis_rtol=tighter.tis_rtol)
-            elif step == "doubled":
-                candidate = doubled()
-                if candidate is None:
-                    continue
-                info = dict(tried[0][2])
-                current = candidate
-                write(current, True)
-                grid_info = dict(info, azimuth=int(grid_info.get("azimuth", 0)))
-            elif step == "fixed":
-                current = replace(settings, grid="fixed")
-                write(current, True)
-                grid_info["mode"] = FALLBACK_RECHECK
-            summary, nodes = _read_any(path)
-            computed = summary.tis_computed
-            worst = max(abs(computed[s][k_] / reference[s][k_] - 1.0) if reference[s][k_] > 0 else 0.0
-                        for s in sides for k_ in range(theta.size))
-            tried.append((worst, current, dict(grid_info, rechecks=len(tried))))
-            if worst <= limit:
-                break
-        best = min(range(len(tried)), key=lambda i: tried[i][0])
-        if best != len(tried) - 1:  # an earlier table was closer to the source: written again
-            write(tried[best][1], True)
-            summary = None
-        grid_info = dict(tried[best][2])
-        if len(tried) > 1:
-            grid_info["recheck_worst"] = float(tried[best][0])
+        grid_info, summary, nodes, reference, deviation = _recheck(job, settings, written)
     # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
     reread, nodes = (summary, nodes) if summary is not None else _read_any(path)
-    tis_table = {s: reread.tis_computed[s] for s in sides if s in reread.tis_computed}
     held = grid_info.get("klems_incidence_map_deg")
-    if len(reread.incidences_deg) != theta.size or not np.allclose(reread.incidences_deg, theta):
-        # a file on its own incidences (BSDF XML: the Klems band centres): each exported incidence is compared
-        # with the file incidence that holds it (else the nearest)
-        file_theta = np.asarray(reread.incidences_deg, dtype=np.float64)
-        index = []
-        for t in theta:
-            holding = [k for k, c in enumerate(file_theta) if held and abs(held.get(float(c), np.nan) - t) <= 1e-9]
-            index.append(holding[0] if holding else int(np.argmin(np.abs(file_theta - t))))
-        tis_table = {s: [vals[k] for k in index] for s, vals in tis_table.items()}
+    tis_table = _table_tis(reread, theta, sides, held)
     written_mask = np.ones(theta.size, dtype=bool)
     if held:  # incidences the format's grid does not hold (a Klems band holds the source incidence nearest it)
         written_mask = np.array([any(abs(v - t) <= 1e-9 for v in held.values()) for t in theta])

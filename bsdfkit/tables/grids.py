@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -837,108 +838,176 @@ def azimuth_midpoints_deg(azimuth_deg: ArrayLike, periodic: bool = True) -> NDAr
     return np.append(inner, 0.5 * (a[-1] + 360.0)) if periodic else inner
 
 
-def _refine_polar(
-    evaluate: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]],
-    quad: Callable[[NDArray, NDArray, NDArray], NDArray],
-    measure: Callable[[NDArray], NDArray],
-    radial: NDArray[np.float64],
-    azimuth: NDArray[np.float64],
-    azimuth_midpoints: Callable[[NDArray], NDArray],
-    tolerance: GridTolerance,
-    min_step: float,
-    azimuth_cap: int,
-    max_nodes: int | None = None,
-    tis_criteria: bool = True,
-    finish: Callable[[NDArray, NDArray, NDArray], NDArray] | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-    """Coarse-to-fine choice of a polar table's radial and azimuth nodes (shared by both geometries).
+class _PolarProblem(NamedTuple):
+    """The polar table :func:`_refine_polar` chooses nodes for (both geometries).
 
     ``evaluate(r, a)`` → (values[side, theta, a, r], inside[theta, a, r]); ``quad(values, r, a)`` → TIS
-    [side, theta] with the format's quadrature; ``measure(r)`` the radial area weight (ρ or sin r).
-    Each round evaluates the callable at the radial midpoints and at the azimuth midpoints of the current
-    grid. It stops when (i) bisecting every radial segment changes no block's TIS by more than
+    [side, theta] with the format's quadrature; ``measure(r)`` the radial area weight (ρ or sin r);
+    ``azimuth_midpoints(a)`` the azimuths between the nodes; ``finish(values, r, a)``, if given, turns the point
+    samples of a candidate grid into the values the table would hold (edge values:
+    :func:`harvey_shack_edge_values`)."""
+
+    evaluate: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]]
+    quad: Callable[[NDArray, NDArray, NDArray], NDArray]
+    measure: Callable[[NDArray], NDArray]
+    azimuth_midpoints: Callable[[NDArray], NDArray]
+    finish: Callable[[NDArray, NDArray, NDArray], NDArray] | None = None
+
+    def done(self, values: NDArray, r: NDArray, a: NDArray) -> NDArray:
+        """The values the table would hold at these nodes."""
+        return values if self.finish is None else self.finish(values, r, a)
+
+
+class _RefineLimits(NamedTuple):
+    """Limits of :func:`_refine_polar`: the finest radial step, the most azimuths, the most radial × azimuth nodes
+    (None: no limit) and whether the TIS criteria apply (not for cell averages)."""
+
+    min_step: float
+    azimuth_cap: int
+    max_nodes: int | None = None
+    tis_criteria: bool = True
+
+
+class _RadialCheck(NamedTuple):
+    """One round's samples on the current grid and at its radial midpoints, and what they say."""
+
+    f: NDArray  # values at the nodes (side, theta, a, r)
+    inside: NDArray
+    f_done: NDArray  # the coarse table as written (its own edge values)
+    tis_coarse: NDArray
+    norm: NDArray
+    core: NDArray
+    limit: NDArray  # the lobe's peak per (side, theta) with the peak tolerance
+    mid_r: NDArray
+    err_r: NDArray  # relative TIS change of bisecting every radial segment, per block
+    ind_block: NDArray  # each segment's share of that change (side, theta, seg)
+    peak_r: NDArray  # (seg,): a higher peak in the segment
+
+
+class _AzimuthCheck(NamedTuple):
+    """One round's samples at the azimuth midpoints and what they say."""
+
+    mid_a: NDArray
+    f_a: NDArray
+    in_a: NDArray
+    f_a_done: NDArray
+    err_a: NDArray  # relative TIS change of halving the azimuth step, per block
+    core_a: NDArray
+
+
+def _radial_check(problem: _PolarProblem, radial: NDArray, azimuth: NDArray, tolerance: GridTolerance
+                  ) -> _RadialCheck:
+    """The grid's values, its TIS and the TIS and peak misses of bisecting every radial segment."""
+    mid_r = 0.5 * (radial[:-1] + radial[1:])
+    both_r = np.sort(np.concatenate([radial, mid_r]))
+    f_both, in_both = problem.evaluate(both_r, azimuth)
+    f, inside = f_both[..., ::2], in_both[..., ::2]
+    f_mid, in_mid = f_both[..., 1::2], in_both[..., 1::2]
+    core = _lobe_core(f, inside)
+    top = np.max(np.where(core, f, 0.0), axis=(-1, -2))[..., None, None]  # the lobe's peak per (side, theta)
+    limit = (1.0 + tolerance.peak_rtol) * top
+    f_done = problem.done(f, radial, azimuth)
+    tis_fine = problem.quad(problem.done(f_both, both_r, azimuth), both_r, azimuth)
+    tis_coarse = problem.quad(f_done, radial, azimuth)
+    norm = np.where(np.abs(tis_fine) > 0, np.abs(tis_fine), 1.0)
+    err_r = np.abs(tis_fine - tis_coarse) / norm
+    # the coarse table at the radial midpoints, as the quadratures interpolate it (held at the edge)
+    lin = np.where(inside[..., 1:], 0.5 * (f[..., :-1] + f[..., 1:]), f[..., :-1])
+    miss = np.where(in_mid & inside[..., :-1], np.abs(f_mid - lin), 0.0)  # (side, theta, a, seg)
+    w_az = _azimuth_row_weights_for(azimuth, problem.quad)
+    ind_block = (np.einsum("ptak,a->ptk", miss, w_az) * (problem.measure(mid_r) * 0.5 * np.diff(radial))
+                 / norm[..., None])
+    in_core = core[..., :-1] & core[..., 1:]
+    peak_r = np.any(in_core & in_mid & (f_mid > limit), axis=(0, 1, 2))
+    return _RadialCheck(f, inside, f_done, tis_coarse, norm, core, limit, mid_r, err_r, ind_block, peak_r)
+
+
+def _azimuth_check(problem: _PolarProblem, radial: NDArray, azimuth: NDArray, rc: _RadialCheck) -> _AzimuthCheck:
+    """The TIS change and the peaks of halving the azimuth step."""
+    mid_a = problem.azimuth_midpoints(azimuth)
+    f_a, in_a = problem.evaluate(radial, mid_a)
+    both_a = np.sort(np.concatenate([azimuth, mid_a]))
+    order = np.argsort(np.concatenate([azimuth, mid_a]), kind="stable")
+    f_a_done = problem.done(f_a, radial, mid_a)
+    tis_a = problem.quad(np.concatenate([rc.f_done, f_a_done], axis=-2)[..., order, :], radial, both_a)
+    err_a = np.abs(tis_a - rc.tis_coarse) / rc.norm
+    core_a = rc.core[..., : mid_a.size, :] & np.roll(rc.core, -1, axis=-2)[..., : mid_a.size, :]
+    return _AzimuthCheck(mid_a, f_a, in_a, f_a_done, err_a, core_a)
+
+
+def _bisected_radial(radial: NDArray, rc: _RadialCheck, fix_r: NDArray, min_step: float) -> NDArray:
+    """The radial nodes with the segments that hide a higher peak or carry the TIS error bisected."""
+    long_enough = np.diff(radial) >= 2.0 * min_step
+    flag = rc.peak_r.copy()
+    if np.any(fix_r):  # the segments that carry the error of the blocks that miss the tolerance
+        flag |= bulk_marking(np.where(long_enough, rc.ind_block[fix_r], 0.0))
+    flag &= long_enough
+    if np.any(flag):
+        radial = np.sort(np.concatenate([radial, rc.mid_r[flag]]))
+    return radial
+
+
+def _bisected_azimuth(problem: _PolarProblem, radial: NDArray, azimuth: NDArray, checks: tuple, fix_a: NDArray,
+                      cap: int) -> NDArray:
+    """The azimuths with the intervals that carry more than their share of the TIS change or hide a higher peak
+    bisected, the worst first up to ``cap``; ``checks`` the round's (radial, azimuth) checks."""
+    rc, ac = checks
+    mid_a = ac.mid_a
+    # interval k adds (Δ_k/2)·[I(f_mid) − (I(f_k) + I(f_k+1))/2] (trapezoid rule, I = row integral)
+    rows = np.stack([problem.quad(rc.f_done[..., k:k + 1, :], radial, azimuth[k:k + 1])
+                     for k in range(azimuth.size)], -1)
+    rows_mid = np.stack([problem.quad(ac.f_a_done[..., k:k + 1, :], radial, mid_a[k:k + 1])
+                         for k in range(mid_a.size)], -1)
+    width = np.radians(np.diff(np.append(azimuth, azimuth[0] + 360.0)))[: mid_a.size]
+    change = (width / 2.0) * np.abs(rows_mid - 0.5 * (rows[..., : mid_a.size]
+                                                      + np.roll(rows, -1, axis=-1)[..., : mid_a.size]))
+    change_block = change / (2.0 * np.pi) / rc.norm[..., None]  # (side, theta, interval)
+    change = np.max(change_block, axis=(0, 1))  # (interval,)
+    flag_a = np.any(ac.core_a & ac.in_a & (ac.f_a > rc.limit), axis=(0, 1, 3))
+    if np.any(fix_a):
+        flag_a |= bulk_marking(change_block[fix_a])
+    room = cap - azimuth.size
+    if np.count_nonzero(flag_a) > room:  # the cap: the worst intervals first
+        flag_a &= change >= np.sort(change)[-room]
+    return np.sort(np.concatenate([azimuth, mid_a[flag_a]]))
+
+
+def _refine_polar(problem: _PolarProblem, radial: NDArray[np.float64], azimuth: NDArray[np.float64],
+                  tolerance: GridTolerance, limits: _RefineLimits
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Coarse-to-fine choice of a polar table's radial and azimuth nodes (shared by both geometries).
+
+    Each round evaluates ``problem`` (:class:`_PolarProblem`) at the radial midpoints and at the azimuth midpoints
+    of the current grid. It stops when (i) bisecting every radial segment changes no block's TIS by more than
     ``tis_rtol``/2, (ii) halving the azimuth step changes none by more than ``tis_rtol``/2, and (iii) the
     linear table misses the callable at no midpoint by more than ``peak_rtol`` × the block's peak.
     Otherwise it bisects the radial segments that miss (iii) and, in each block that misses (i), the segments that
     carry half its estimated TIS error (:func:`bulk_marking` of Σ_a w_a |f_mid − f_lin| · measure(r_mid) · Δr/2,
     the quadrature of the miss), and likewise the azimuth intervals when (ii) or (iii) fails in azimuth.
-    Deterministic; no node finer than ``min_step``. ``finish(values, r, a)``, if given, turns the point samples
-    of a candidate grid into the values the table would hold (edge values: :func:`harvey_shack_edge_values`);
-    the TIS criteria compare finished tables, each grid finished on its own axes.
-    Returns None as soon as the grid would hold more than ``max_nodes`` radial × azimuth nodes.
-    ``tis_criteria=False`` drops (i) and (ii): a table of cell averages (:func:`harvey_shack_cell_grid`) integrates
-    to the callable's TIS on any axes, so its grid is as fine as the lobe's shape (iii) needs.
+    Deterministic; no node finer than ``limits.min_step``. With ``problem.finish`` the TIS criteria compare
+    finished tables, each grid finished on its own axes.
+    Returns None as soon as the grid would hold more than ``limits.max_nodes`` radial × azimuth nodes.
+    ``limits.tis_criteria=False`` drops (i) and (ii): a table of cell averages (:func:`harvey_shack_cell_grid`)
+    integrates to the callable's TIS on any axes, so its grid is as fine as the lobe's shape (iii) needs.
     """
-    half = 0.5 * tolerance.tis_rtol if tis_criteria else np.inf
+    half = 0.5 * tolerance.tis_rtol if limits.tis_criteria else np.inf
     for _ in range(int(tolerance.max_rounds)):
-        mid_r = 0.5 * (radial[:-1] + radial[1:])
-        both_r = np.sort(np.concatenate([radial, mid_r]))
-        f_both, in_both = evaluate(both_r, azimuth)
-        f, inside = f_both[..., ::2], in_both[..., ::2]
-        f_mid, in_mid = f_both[..., 1::2], in_both[..., 1::2]
-        core = _lobe_core(f, inside)
-        top = np.max(np.where(core, f, 0.0), axis=(-1, -2))[..., None, None]  # the lobe's peak per (side, theta)
-        limit = (1.0 + tolerance.peak_rtol) * top
-        done = finish or (lambda values, r, a: values)
-        f_done = done(f, radial, azimuth)  # the coarse table as written (its own edge values)
-        tis_fine = quad(done(f_both, both_r, azimuth), both_r, azimuth)
-        tis_coarse = quad(f_done, radial, azimuth)
-        norm = np.where(np.abs(tis_fine) > 0, np.abs(tis_fine), 1.0)
-        err_r = np.abs(tis_fine - tis_coarse) / norm
-        # the coarse table at the radial midpoints, as the quadratures interpolate it (held at the edge)
-        lin = np.where(inside[..., 1:], 0.5 * (f[..., :-1] + f[..., 1:]), f[..., :-1])
-        miss = np.where(in_mid & inside[..., :-1], np.abs(f_mid - lin), 0.0)  # (side, theta, a, seg)
-        w_az = _azimuth_row_weights_for(azimuth, quad)
-        ind_block = np.einsum("ptak,a->ptk", miss, w_az) * (measure(mid_r) * 0.5 * np.diff(radial)) / norm[..., None]
-        in_core = core[..., :-1] & core[..., 1:]
-        peak_r = np.any(in_core & in_mid & (f_mid > limit), axis=(0, 1, 2))  # (seg,): a higher peak in the segment
-        radial_ok = not np.any(peak_r)
-        # azimuth: halve the step, compare TIS and the peak
-        mid_a = azimuth_midpoints(azimuth)
-        f_a, in_a = evaluate(radial, mid_a)
-        both_a = np.sort(np.concatenate([azimuth, mid_a]))
-        order = np.argsort(np.concatenate([azimuth, mid_a]), kind="stable")
-        f_a_done = done(f_a, radial, mid_a)
-        tis_a = quad(np.concatenate([f_done, f_a_done], axis=-2)[..., order, :], radial, both_a)
-        err_a = np.abs(tis_a - tis_coarse) / norm
-        core_a = core[..., : mid_a.size, :] & np.roll(core, -1, axis=-2)[..., : mid_a.size, :]
-        peak_a = bool(np.any(core_a & in_a & (f_a > limit)))
-        fix_r, fix_a = err_r > half, err_a > half  # the blocks whose TIS changes by more than tis_rtol/2
-        radial_ok = radial_ok and not np.any(fix_r)
+        rc = _radial_check(problem, radial, azimuth, tolerance)
+        ac = _azimuth_check(problem, radial, azimuth, rc)
+        peak_a = bool(np.any(ac.core_a & ac.in_a & (ac.f_a > rc.limit)))
+        fix_r, fix_a = rc.err_r > half, ac.err_a > half  # the blocks whose TIS changes by more than tis_rtol/2
+        radial_ok = not np.any(rc.peak_r) and not np.any(fix_r)
         azimuth_ok = not peak_a and not np.any(fix_a)
         if radial_ok and azimuth_ok:
             break
         before, radial_now = (radial.size, azimuth.size), radial
         if not radial_ok:
-            long_enough = np.diff(radial) >= 2.0 * min_step
-            flag = peak_r.copy()
-            if np.any(fix_r):  # the segments that carry the error of the blocks that miss the tolerance
-                flag |= bulk_marking(np.where(long_enough, ind_block[fix_r], 0.0))
-            flag &= long_enough
-            if np.any(flag):
-                radial = np.sort(np.concatenate([radial, mid_r[flag]]))
-        if not azimuth_ok and azimuth.size < azimuth_cap:
-            # bisect the azimuth intervals that carry more than their share of the TIS change or hide a higher
-            # peak: interval k adds (Δ_k/2)·[I(f_mid) − (I(f_k) + I(f_k+1))/2] (trapezoid rule, I = row integral)
-            rows = np.stack([quad(f_done[..., k:k + 1, :], radial_now, azimuth[k:k + 1])
-                             for k in range(azimuth.size)], -1)
-            rows_mid = np.stack([quad(f_a_done[..., k:k + 1, :], radial_now, mid_a[k:k + 1])
-                                 for k in range(mid_a.size)], -1)
-            width = np.radians(np.diff(np.append(azimuth, azimuth[0] + 360.0)))[: mid_a.size]
-            change = (width / 2.0) * np.abs(rows_mid - 0.5 * (rows[..., : mid_a.size]
-                                                              + np.roll(rows, -1, axis=-1)[..., : mid_a.size]))
-            change_block = change / (2.0 * np.pi) / norm[..., None]  # (side, theta, interval)
-            change = np.max(change_block, axis=(0, 1))  # (interval,)
-            flag_a = np.any(core_a & in_a & (f_a > limit), axis=(0, 1, 3))
-            if np.any(fix_a):
-                flag_a |= bulk_marking(change_block[fix_a])
-            room = azimuth_cap - azimuth.size
-            if np.count_nonzero(flag_a) > room:  # the cap: the worst intervals first
-                flag_a &= change >= np.sort(change)[-room]
-            azimuth = np.sort(np.concatenate([azimuth, mid_a[flag_a]]))
+            radial = _bisected_radial(radial, rc, fix_r, limits.min_step)
+        if not azimuth_ok and azimuth.size < limits.azimuth_cap:
+            azimuth = _bisected_azimuth(problem, radial_now, azimuth, (rc, ac), fix_a, limits.azimuth_cap)
         if (radial.size, azimuth.size) == before:  # nothing left to refine (step floor, azimuth cap)
             break
-        if max_nodes is not None and radial.size * azimuth.size > max_nodes:
+        if limits.max_nodes is not None and radial.size * azimuth.size > limits.max_nodes:
             return None
     return radial, azimuth
 
@@ -1065,10 +1134,10 @@ def auto_harvey_shack_axes(
                                          HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg))
         return np.swapaxes(table, -1, -2)
 
-    chosen = _refine_polar(evaluate, quad, lambda r: r, _coarse_radial_round(1e-3, 2.0, 0.25),
-                           np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), azimuth_midpoints_deg, tolerance, 1e-7,
-                           int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average,
-                           finish=edges if edge_values else None)
+    problem = _PolarProblem(evaluate, quad, lambda r: r, azimuth_midpoints_deg, edges if edge_values else None)
+    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, 0.25),
+                           np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), tolerance,
+                           _RefineLimits(1e-7, int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average))
     if chosen is None:
         return None
     return HarveyShackAxes(_tidy(chosen[0]), _tidy(chosen[1]), zero_azimuth_deg)
@@ -1111,10 +1180,10 @@ def auto_specular_axes(
         start = np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS)
         cap = int(tolerance.max_azimuths)
 
-    chosen = _refine_polar(evaluate, quad, lambda r: np.sin(np.radians(r)) * (np.pi / 180.0),
-                           _coarse_radial(0.05, 180.0, 15.0), start,
-                           lambda a: azimuth_midpoints_deg(a, periodic=not plane_symmetric), tolerance, 1e-5, cap,
-                           max_nodes)
+    problem = _PolarProblem(evaluate, quad, lambda r: np.sin(np.radians(r)) * (np.pi / 180.0),
+                            lambda a: azimuth_midpoints_deg(a, periodic=not plane_symmetric))
+    chosen = _refine_polar(problem, _coarse_radial(0.05, 180.0, 15.0), start, tolerance,
+                           _RefineLimits(1e-5, cap, max_nodes))
     if chosen is None:
         return None
     return SpecularAxes(_tidy(chosen[0]), _tidy(chosen[1]))

@@ -136,9 +136,11 @@ def auto_normal_axes(
     theta = fixed_normal_axes()[0]
     start_phi = np.arange(grids.MIN_AZIMUTHS) * (360.0 / grids.MIN_AZIMUTHS)
     # min_step = the θs step: no θs segment is long enough to bisect, the rows stay
-    chosen = grids._refine_polar(evaluate, tis_normal_table, lambda r: np.sin(np.radians(r)) * np.cos(np.radians(r))
-                                 * (np.pi / 180.0), theta, start_phi, grids.azimuth_midpoints_deg, tolerance,
-                                 FIXED_THETA_STEP_DEG, int(tolerance.max_azimuths), max_nodes)
+    problem = grids._PolarProblem(evaluate, tis_normal_table,
+                                  lambda r: np.sin(np.radians(r)) * np.cos(np.radians(r)) * (np.pi / 180.0),
+                                  grids.azimuth_midpoints_deg)
+    chosen = grids._refine_polar(problem, theta, start_phi, tolerance,
+                                 grids._RefineLimits(FIXED_THETA_STEP_DEG, int(tolerance.max_azimuths), max_nodes))
     if chosen is None:
         return None
     return np.asarray(grids._tidy(chosen[0])), np.asarray(grids._tidy(chosen[1]))

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -161,6 +161,142 @@ def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
     return fn
 
 
+class _Asked(NamedTuple):
+    """What :func:`convert` was asked for about its source: its label and kind, the side, wavelength, band and
+    interaction."""
+
+    label: str
+    kind: str
+    side: str | None
+    wavelength: float | None
+    band: tuple[float, float] | None
+    interaction: str | None
+
+
+class _Sourced(NamedTuple):
+    """The source's BSDF per side, the incidences per side, the engine's TIS and its incidences (elastic
+    datasets), the wavelength written [nm] and the notes."""
+
+    fns: dict[str, Any]
+    theta_sets: list[set]
+    engine_tis: dict[str, list[float]] | None
+    src_t: dict[str, list[float]]
+    chosen_lambda: float | None
+    notes: list[str]
+
+
+def _source_dataset(source: str | Path | xr.Dataset, asked: _Asked, table_options: dict[str, Any]) -> xr.Dataset:
+    """The source as a calibrated dataset (a vendor file or text table ingested)."""
+    if asked.kind in VENDOR_FORMATS:
+        extra = {k: v for k, v in table_options.items() if v is not None}
+        if extra or asked.band is not None or asked.interaction is not None:
+            raise InputError("options apply to datasets and text tables, not to a vendor file", file=asked.label,
+                             field=", ".join([*extra, *(["band"] if asked.band else []),
+                                              *(["interaction"] if asked.interaction else [])]))
+        # a vendor file is integrated and written through the same reconstruction as its ingested dataset:
+        # what bsdfkit read and bsdfkit tis report for it is what the written table is checked against
+        return vendor_dataset(source, wavelength=asked.wavelength)
+    if isinstance(source, xr.Dataset):
+        return source
+    opts = {k: v for k, v in table_options.items() if v is not None}
+    if asked.kind == "table" and "side" not in opts and asked.side in ("reflection", "transmission"):
+        opts["side"] = asked.side
+    return ingest(source, **opts)
+
+
+def _source_fns(ds: xr.Dataset, asked: _Asked) -> _Sourced:
+    """The dataset's BSDF per asked side: the hemispherical engine's (elastic scatter) or an interaction's."""
+    label, side, wavelength, interaction = asked.label, asked.side, asked.wavelength, asked.interaction
+    sides_ds = [s for s in ("reflection", "transmission") if s in set(map(str, ds["side"].values))]
+    use_sides = sides_ds if side in (None, "both") else [side]
+    for s in use_sides:
+        if s not in sides_ds:
+            raise InputError("the source holds no data for this side", file=label, field="--side",
+                             expected=" or ".join(sides_ds), got=s)
+    fns, theta_sets = {}, []
+    if reduction_kind(ds) != "hemispherical":
+        if interaction is None:
+            raise InputError("a calibrated scan holds several interactions; choose one", file=label,
+                             field="--interaction", expected="bibs, biys or yiys")
+        for s in use_sides:
+            fns[s] = hemisphere_bsdf_fn(ds, interaction, s)
+            theta_sets.append(set(np.round(fns[s].incidences_deg, 9)))  # type: ignore[attr-defined]
+        return _Sourced(fns, theta_sets, None, {}, None,
+                        [f"interaction {interaction}, reconstructed by bsdfkit.reduction.tis.hemisphere_bsdf_fn"])
+    if interaction is not None:
+        raise InputError("--interaction applies to calibrated phosphor scans with blue/yellow "
+                         "configurations", file=label, field="--interaction", got=interaction)
+    if ds.sizes.get("wavelength", 0) == 1 and not np.isfinite(ds["wavelength"].values[0]) \
+            and wavelength is not None:
+        ds = ds.assign_coords(wavelength=[float(wavelength)])
+    src = elastic_source(ds, use_sides, wavelength, asked.band)
+    for s in use_sides:
+        fns[s] = src.fn
+        theta_sets.append(set(np.round(src.incidences_deg[s], 9)))
+    note = (f"values at {src.what}; reconstructed by the hemispherical engine "
+            "(bsdfkit.reduction.hemispherical: " + ", ".join(sorted(set(
+                m for ms in src.methods.values() for m in ms))) + ")")
+    return _Sourced(fns, theta_sets, src.tis, src.incidences_deg, src.wavelength_nm, [note])
+
+
+def _written_sides_and_incidences(to: str, asked: _Asked, sourced: _Sourced,
+                                  theta_i_deg: Sequence[float] | None) -> tuple[list[str], list[float]]:
+    """The sides and incidences [deg] to write: the source's common incidences, or those asked for."""
+    label, side, fns = asked.label, asked.side, sourced.fns
+    common = sorted(set.intersection(*sourced.theta_sets))
+    if not common:
+        raise InputError("the sides share no incidence", file=label, field="theta_i",
+                         expected="a common incidence, or --side")
+    thetas = [float(t) for t in common]
+    sides = list(fns) if side in (None, "both") else [side]
+    for s in sides:
+        if s not in fns:
+            raise InputError("the source holds no data for this side", file=label, field="--side",
+                             expected=" or ".join(fns), got=s)
+    if registry.get(to).sides_per_file == 1 and len(sides) > 1:
+        raise InputError(f"a {registry.get(to).title} file holds one side; the source has both", file=label,
+                         field="--side", expected="--side reflection or --side transmission", got="both")
+    if theta_i_deg is not None:
+        wanted = [float(t) for t in theta_i_deg]
+        missing = [t for t in wanted if not any(abs(t - u) <= _MATCH_DEG for u in thetas)]
+        if missing:
+            raise InputError("incidence not in the source", file=label, field="--incidences",
+                             expected="some of " + ", ".join(f"{t:g}" for t in thetas), got=missing[0])
+        thetas = sorted(wanted)
+    return sides, thetas
+
+
+def _table_settings(settings: ExportSettings, to: str, chosen_lambda: float | None, thetas: list[float],
+                    label: str) -> tuple[ExportSettings, list[str]]:
+    """The export settings of the converted table (incidences, wavelength label, comment) and a note on them."""
+    notes = []
+    tp = settings.tracepro
+    if chosen_lambda is not None and np.isfinite(chosen_lambda) and to == "tracepro":
+        tp = replace(tp, wavelength_um=float(chosen_lambda) / 1000.0)
+    elif to == "tracepro":
+        notes.append(f"wavelength unknown: TracePro Wavelength column set to {tp.wavelength_um:g} um")
+    if chosen_lambda is not None and np.isfinite(chosen_lambda) and settings.wavelength_nm is None:
+        settings = replace(settings, wavelength_nm=float(chosen_lambda))  # the label of a one-wavelength table
+    settings = replace(settings, theta_i_deg=tuple(thetas), tracepro=tp,
+                       comments=tuple(settings.comments) + (f"converted by bsdfkit from {Path(label).name}",))
+    return settings, notes
+
+
+def _worst_difference(tis_original: dict[str, list[float]], tis_written: dict[str, list[float]],
+                      thetas: list[float], read_thetas: list[float]) -> float:
+    """Largest |TIS written / TIS original − 1| over the sides and incidences (inf: written where 0 was)."""
+    worst = 0.0
+    for s in tis_original:
+        for k, t in enumerate(thetas):
+            j = int(np.argmin(np.abs(np.asarray(read_thetas) - t)))
+            a, b = tis_original[s][k], tis_written[s][j]
+            if abs(a) > 1e-12:
+                worst = max(worst, abs(b / a - 1.0))
+            elif abs(b) > 1e-9:
+                worst = max(worst, float("inf"))
+    return worst
+
+
 def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: bool = False, *,
             side: str | None = None, wavelength: float | None = None, band: tuple[float, float] | None = None,
             interaction: str | None = None, theta_i_deg: Sequence[float] | None = None,
@@ -203,89 +339,14 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     if settings is None and 0.0 < tolerance < 2.0:  # the auto grid's TIS error: half of the check it must pass
         settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)))
     settings = settings or ExportSettings()
-    notes: list[str] = []
-    engine_tis: dict[str, list[float]] | None = None
-    src_t: dict[str, list[float]] = {}
     label = "dataset" if isinstance(source, xr.Dataset) else str(source)
     kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
-    chosen_lambda: float | None = None
-    if kind in VENDOR_FORMATS:
-        extra = {k: v for k, v in table_options.items() if v is not None}
-        if extra or band is not None or interaction is not None:
-            raise InputError("options apply to datasets and text tables, not to a vendor file", file=label,
-                             field=", ".join([*extra, *(["band"] if band else []),
-                                              *(["interaction"] if interaction else [])]))
-        # a vendor file is integrated and written through the same reconstruction as its ingested dataset:
-        # what bsdfkit read and bsdfkit tis report for it is what the written table is checked against
-        ds = vendor_dataset(source, wavelength=wavelength)
-    elif isinstance(source, xr.Dataset):
-        ds = source
-    else:
-        opts = {k: v for k, v in table_options.items() if v is not None}
-        if kind == "table" and "side" not in opts and side in ("reflection", "transmission"):
-            opts["side"] = side
-        ds = ingest(source, **opts)
-    sides_ds = [s for s in ("reflection", "transmission") if s in set(map(str, ds["side"].values))]
-    use_sides = sides_ds if side in (None, "both") else [side]
-    for s in use_sides:
-        if s not in sides_ds:
-            raise InputError("the source holds no data for this side", file=label, field="--side",
-                             expected=" or ".join(sides_ds), got=s)
-    fns = {}
-    theta_sets = []
-    if reduction_kind(ds) == "hemispherical":
-        if interaction is not None:
-            raise InputError("--interaction applies to calibrated phosphor scans with blue/yellow "
-                             "configurations", file=label, field="--interaction", got=interaction)
-        if ds.sizes.get("wavelength", 0) == 1 and not np.isfinite(ds["wavelength"].values[0]) \
-                and wavelength is not None:
-            ds = ds.assign_coords(wavelength=[float(wavelength)])
-        src = elastic_source(ds, use_sides, wavelength, band)
-        chosen_lambda = src.wavelength_nm
-        for s in use_sides:
-            fns[s] = src.fn
-            theta_sets.append(set(np.round(src.incidences_deg[s], 9)))
-        engine_tis, src_t = src.tis, src.incidences_deg
-        notes.insert(0, f"values at {src.what}; reconstructed by the hemispherical engine "
-                        "(bsdfkit.reduction.hemispherical: " + ", ".join(sorted(set(
-                            m for ms in src.methods.values() for m in ms))) + ")")
-    else:
-        if interaction is None:
-            raise InputError("a calibrated scan holds several interactions; choose one", file=label,
-                             field="--interaction", expected="bibs, biys or yiys")
-        for s in use_sides:
-            fns[s] = hemisphere_bsdf_fn(ds, interaction, s)
-            theta_sets.append(set(np.round(fns[s].incidences_deg, 9)))  # type: ignore[attr-defined]
-        notes.append(f"interaction {interaction}, reconstructed by bsdfkit.reduction.tis.hemisphere_bsdf_fn")
-    common = sorted(set.intersection(*theta_sets))
-    if not common:
-        raise InputError("the sides share no incidence", file=label, field="theta_i",
-                         expected="a common incidence, or --side")
-    thetas = [float(t) for t in common]
-    sides = list(fns) if side in (None, "both") else [side]
-    for s in sides:
-        if s not in fns:
-            raise InputError("the source holds no data for this side", file=label, field="--side",
-                             expected=" or ".join(fns), got=s)
-    if registry.get(to).sides_per_file == 1 and len(sides) > 1:
-        raise InputError(f"a {registry.get(to).title} file holds one side; the source has both", file=label,
-                         field="--side", expected="--side reflection or --side transmission", got="both")
-    if theta_i_deg is not None:
-        wanted = [float(t) for t in theta_i_deg]
-        missing = [t for t in wanted if not any(abs(t - u) <= _MATCH_DEG for u in thetas)]
-        if missing:
-            raise InputError("incidence not in the source", file=label, field="--incidences",
-                             expected="some of " + ", ".join(f"{t:g}" for t in thetas), got=missing[0])
-        thetas = sorted(wanted)
-    tp = settings.tracepro
-    if chosen_lambda is not None and np.isfinite(chosen_lambda) and to == "tracepro":
-        tp = replace(tp, wavelength_um=float(chosen_lambda) / 1000.0)
-    elif to == "tracepro":
-        notes.append(f"wavelength unknown: TracePro Wavelength column set to {tp.wavelength_um:g} um")
-    if chosen_lambda is not None and np.isfinite(chosen_lambda) and settings.wavelength_nm is None:
-        settings = replace(settings, wavelength_nm=float(chosen_lambda))  # the label of a one-wavelength table
-    settings = replace(settings, theta_i_deg=tuple(thetas), tracepro=tp,
-                       comments=tuple(settings.comments) + (f"converted by bsdfkit from {Path(label).name}",))
+    asked = _Asked(label, kind, side, wavelength, band, interaction)
+    sourced = _source_fns(_source_dataset(source, asked, table_options), asked)
+    fns, engine_tis, src_t, chosen_lambda = sourced.fns, sourced.engine_tis, sourced.src_t, sourced.chosen_lambda
+    sides, thetas = _written_sides_and_incidences(to, asked, sourced, theta_i_deg)
+    settings, settings_notes = _table_settings(settings, to, chosen_lambda, thetas, label)
+    notes = sourced.notes + settings_notes
     result = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0], path,
                     force, settings=settings)
     dropped = [t for t in thetas if not any(abs(t - u) <= _MATCH_DEG for u in result.incidences_deg)]
@@ -299,15 +360,7 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         tis_original = {s: list(result.tis_source[s]) for s in sides}
     read_thetas = list(result.incidences_deg)  # export re-read the written file as bsdfkit read does
     tis_written = {s: [float(v) for v in result.tis_table[s]] for s in sides}
-    worst = 0.0
-    for s in sides:
-        for k, t in enumerate(thetas):
-            j = int(np.argmin(np.abs(np.asarray(read_thetas) - t)))
-            a, b = tis_original[s][k], tis_written[s][j]
-            if abs(a) > 1e-12:
-                worst = max(worst, abs(b / a - 1.0))
-            elif abs(b) > 1e-9:
-                worst = max(worst, float("inf"))
+    worst = _worst_difference(tis_original, tis_written, thetas, read_thetas)
     return ConvertResult(source=label, source_kind=kind, export=result, incidences_deg=tuple(thetas),
                          tis_original=tis_original, tis_written=tis_written, worst_relative_difference=worst,
                          tolerance=float(tolerance), wavelength_nm=chosen_lambda, notes=tuple(notes))

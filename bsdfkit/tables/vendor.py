@@ -75,6 +75,60 @@ def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray
     return d / np.linalg.norm(d, axis=-1, keepdims=True), vals[inside], np.degrees(a2[inside]), perp
 
 
+def _chosen_grids(vendor: VendorTable, path: str, quantity: str | None, side: str | None) -> list:
+    """The file's grids of the side asked for (all without one), after checking ``quantity`` and ``side``."""
+    sides_in = [g.side for g in vendor.grids]
+    if quantity is not None:
+        q = normalise_quantity(quantity, field="--quantity")
+        q_side = side_of_quantity(q)
+        if q not in ("brdf", "btdf", "bsdf") or (q_side is not None and q_side not in sides_in):
+            raise InputError("the file states another quantity than --quantity", file=path, field="--quantity",
+                             expected=" or ".join("brdf" if s == "reflection" else "btdf" for s in sides_in), got=q)
+        side = side or q_side
+    if side is not None:
+        if side not in sides_in:
+            raise InputError("the file holds no data for this side", file=path, field="--side",
+                             expected=" or ".join(sides_in), got=side)
+    return [g for g in vendor.grids if side is None or g.side == side]
+
+
+def _checked_wavelength(stated: float | None, wavelength: float | None, path: str) -> float | None:
+    """The table's wavelength [nm]: the file's, else ``wavelength`` (which must agree with the file's)."""
+    if wavelength is None:
+        return stated
+    if not (np.isfinite(wavelength) and wavelength > 0):
+        raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
+    if stated is not None and abs(stated - wavelength) > 1e-6:
+        raise InputError("the file states another wavelength", file=path, field="--wavelength",
+                         expected=f"{stated:g} nm (or no --wavelength)", got=wavelength)
+    return float(wavelength)
+
+
+def _node_columns(chosen: list) -> dict[str, list]:
+    """Per unique node above the horizon of the chosen grids: incidence, direction [deg], side, value, arc and
+    basis solid angle (columns of lists)."""
+    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc", "psa")}
+    for grid in chosen:
+        for k, theta in enumerate(grid.theta_i):
+            d, v, _, perp = _grid_nodes(grid, k)
+            th, ph = frames.angles_from_direction(d)
+            th_deg = np.degrees(th)
+            ph_deg = np.where(th_deg < 1e-9, 0.0, np.mod(np.round(np.degrees(ph), 9), 360.0))
+            key = np.round(np.stack([th_deg, ph_deg], axis=-1), 7)
+            first, inverse, _ = unique_rows(key)
+            cols["psa"] += _merged_solid_angle(grid, k, first, np.asarray(inverse).ravel())
+            order = np.argsort(first)
+            first = first[order]
+            arcs = _arc_of(theta, th_deg[first], ph_deg[first], perp[first])
+            cols["theta_i"] += [float(theta)] * first.size
+            cols["theta_s"] += th_deg[first].tolist()
+            cols["phi_s"] += ph_deg[first].tolist()
+            cols["side"] += [grid.side] * first.size
+            cols["value"] += v[first].tolist()
+            cols["arc"] += arcs.tolist()
+    return cols
+
+
 def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | None = None,
                    relative_std: float | None = None, *, wavelength: float | None = None, zeros: str = "keep",
                    sample: str | None = None, table: VendorTable | None = None) -> xr.Dataset:
@@ -107,50 +161,13 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if zeros not in ZERO_POLICIES:
         raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
     vendor = table if table is not None else _read_vendor(path)
-    sides_in = [g.side for g in vendor.grids]
-    if quantity is not None:
-        q = normalise_quantity(quantity, field="--quantity")
-        q_side = side_of_quantity(q)
-        if q not in ("brdf", "btdf", "bsdf") or (q_side is not None and q_side not in sides_in):
-            raise InputError("the file states another quantity than --quantity", file=path, field="--quantity",
-                             expected=" or ".join("brdf" if s == "reflection" else "btdf" for s in sides_in), got=q)
-        side = side or q_side
-    if side is not None:
-        if side not in sides_in:
-            raise InputError("the file holds no data for this side", file=path, field="--side",
-                             expected=" or ".join(sides_in), got=side)
-    chosen = [g for g in vendor.grids if side is None or g.side == side]
-    lam = vendor.wavelength_nm
-    if wavelength is not None:
-        if not (np.isfinite(wavelength) and wavelength > 0):
-            raise InputError("wavelength must be positive", field="--wavelength", expected="> 0 nm", got=wavelength)
-        if lam is not None and abs(lam - wavelength) > 1e-6:
-            raise InputError("the file states another wavelength", file=path, field="--wavelength",
-                             expected=f"{lam:g} nm (or no --wavelength)", got=wavelength)
-        lam = float(wavelength)
+    chosen = _chosen_grids(vendor, path, quantity, side)
+    lam = _checked_wavelength(vendor.wavelength_nm, wavelength, path)
     rel = DEFAULT_RELATIVE_STD if relative_std is None else float(relative_std)
     if not (np.isfinite(rel) and rel > 0):
         raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
                          expected="> 0", got=relative_std)
-    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc", "psa")}
-    for grid in chosen:
-        for k, theta in enumerate(grid.theta_i):
-            d, v, _, perp = _grid_nodes(grid, k)
-            th, ph = frames.angles_from_direction(d)
-            th_deg = np.degrees(th)
-            ph_deg = np.where(th_deg < 1e-9, 0.0, np.mod(np.round(np.degrees(ph), 9), 360.0))
-            key = np.round(np.stack([th_deg, ph_deg], axis=-1), 7)
-            first, inverse, _ = unique_rows(key)
-            cols["psa"] += _merged_solid_angle(grid, k, first, np.asarray(inverse).ravel())
-            order = np.argsort(first)
-            first = first[order]
-            arcs = _arc_of(theta, th_deg[first], ph_deg[first], perp[first])
-            cols["theta_i"] += [float(theta)] * first.size
-            cols["theta_s"] += th_deg[first].tolist()
-            cols["phi_s"] += ph_deg[first].tolist()
-            cols["side"] += [grid.side] * first.size
-            cols["value"] += v[first].tolist()
-            cols["arc"] += arcs.tolist()
+    cols = _node_columns(chosen)
     f = np.asarray(cols["value"], dtype=np.float64)
     if zeros == "missing" or zeros == "auto":
         f = np.where(f == 0.0, np.nan, f)
