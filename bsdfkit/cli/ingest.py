@@ -11,7 +11,7 @@ import argparse
 
 from bsdfkit import api
 from bsdfkit.cli._common import check_options, emit_json, warn_dark
-from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, ZERO_POLICIES
+from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, SIDES, ZERO_POLICIES
 from bsdfkit.io import atomic
 from bsdfkit.io.text import existing_source
 from bsdfkit.tables import registry
@@ -47,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quantity", choices=QUANTITIES, default=None, type=str.lower,
                    help="what a table holds where the file does not say (never guessed); brdf/btdf also fix the "
                         "side, cosine-corrected values are divided by cos(theta_s), factors by pi")
-    p.add_argument("--side", choices=("reflection", "transmission"), default=None,
+    p.add_argument("--side", choices=SIDES, default=None,
                    help="scattering side where neither a side column nor the quantity says")
     p.add_argument("--relative-std", type=float, default=None, metavar="R",
                    help=f"standard uncertainty as a fraction of the value when the table has none "

@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FitError, InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.fit import lm, plausibility
@@ -931,7 +932,7 @@ def _profile_fields(profile: xr.Dataset) -> tuple[dict[str, np.ndarray], str]:
     names = ("bsdf", "bsdf_std", "theta_i", "phi_i", "theta_s", "phi_s", "side")
     fields = {n: _profile_field(profile, n) for n in names}
     sides = np.unique(fields["side"].astype(str))
-    if sides.size != 1 or sides[0] not in ("reflection", "transmission"):
+    if sides.size != 1 or sides[0] not in SIDES:
         raise InputError("fit one side at a time", field="side", expected="a single 'reflection' or "
                          "'transmission'", got=sides.tolist())
     # messages name the scan and, where the records came from a text file, its line

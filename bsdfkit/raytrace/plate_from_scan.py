@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.fit.least_squares import fit_bsdf
 from bsdfkit.io.recipe_head import read_recipe_head
 from bsdfkit.measurement.calibrate import calibrate
@@ -101,7 +102,7 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
     values: dict[str, np.ndarray] = {}
     dists: dict[str, list] = {}
     for inter in ("bibs", "biys", "yiys"):
-        for side in ("reflection", "transmission"):
+        for side in SIDES:
             key = f"{inter}_{side}"
             meas = {t: float(np.clip(tis["tis"].sel(interaction=inter, side=side, theta_i=t), 0.0, 1.0))
                     for t in measured}
@@ -126,7 +127,7 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
             values[key] = np.clip(np.asarray(row), 0.0, 1.0)
             dists[key] = [shape[lo if t < lo else hi if t > hi else t] for t in grid]
     for colour in (("bibs", "biys"), ("yiys",)):
-        keys = [f"{i}_{s}" for i in colour for s in ("reflection", "transmission")]
+        keys = [f"{i}_{s}" for i in colour for s in SIDES]
         total = sum(values[k] for k in keys)
         scale = np.where(total > 1.0, 1.0 / np.maximum(total, 1.0), 1.0)  # extrapolated points only can exceed 1
         for k in keys:

@@ -21,6 +21,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic, netcdf
 from bsdfkit.io.text import existing_source
@@ -199,7 +200,7 @@ def _source_dataset(source: str | Path | xr.Dataset, asked: _Asked, table_option
     if isinstance(source, xr.Dataset):
         return source
     opts = {k: v for k, v in table_options.items() if v is not None}
-    if asked.kind == "table" and "side" not in opts and asked.side in ("reflection", "transmission"):
+    if asked.kind == "table" and "side" not in opts and asked.side in SIDES:
         opts["side"] = asked.side
     return ingest(source, **opts)
 
@@ -207,7 +208,7 @@ def _source_dataset(source: str | Path | xr.Dataset, asked: _Asked, table_option
 def _source_fns(ds: xr.Dataset, asked: _Asked) -> _Sourced:
     """The dataset's BSDF per asked side: the hemispherical engine's (elastic scatter) or an interaction's."""
     label, side, wavelength, interaction = asked.label, asked.side, asked.wavelength, asked.interaction
-    sides_ds = [s for s in ("reflection", "transmission") if s in set(map(str, ds["side"].values))]
+    sides_ds = [s for s in SIDES if s in set(map(str, ds["side"].values))]
     use_sides = sides_ds if side in (None, "both") else [side]
     for s in use_sides:
         if s not in sides_ds:

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
@@ -156,7 +157,7 @@ def speos_text(bsdf: SpeosBsdf) -> str:
     str
         The ``.anisotropicbsdf`` text.
     """
-    sides = [s for s in ("reflection", "transmission") if s in bsdf.tables]
+    sides = [s for s in SIDES if s in bsdf.tables]
     out = [MAGIC, "0", bsdf.comment, str(len(bsdf.description)), bsdf.description, "0\t1\t0",
            f"{int('reflection' in sides)}\t{int('transmission' in sides)}", "0" if bsdf.intensity else "1"]
     for s in sides:
@@ -298,7 +299,7 @@ def read_speos(path: str | Path) -> SpeosBsdf:
     description = r.next("description").strip()
     r.numbers("anisotropy vector", 3)
     flags = r.numbers("bReflection bTransmission", 2)
-    sides = [s for s, f in zip(("reflection", "transmission"), flags) if f == 1]
+    sides = [s for s, f in zip(SIDES, flags) if f == 1]
     if not sides or not np.all(np.isin(flags, (0, 1))):
         raise FormatError("no side flagged", file=path, line=r.k, field="bReflection bTransmission",
                           expected="1 for at least one side", got=" ".join(f"{f:g}" for f in flags))

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
@@ -125,7 +126,7 @@ def speos_brdf_text(b: SpeosBrdf) -> str:
     str
         The ``.brdf`` text.
     """
-    sides = [s for s in ("reflection", "transmission") if s in b.tables]
+    sides = [s for s in SIDES if s in b.tables]
     description = "bsdfkit export"
     out = [MAGIC, "0", b.comment, str(len(description)), description,
            f"{int('reflection' in sides)}\t{int('transmission' in sides)}", "0" if b.intensity else "1",
@@ -190,7 +191,7 @@ def read_speos_brdf(path: str | Path) -> SpeosBrdf:
     r.integer("description length", 0, 10**6)
     r.next("description")
     flags = r.numbers("bReflection bTransmission", 2)
-    sides = [s for s, f in zip(("reflection", "transmission"), flags) if f == 1]
+    sides = [s for s, f in zip(SIDES, flags) if f == 1]
     if not sides or not np.all(np.isin(flags, (0, 1))):
         raise FormatError("no side flagged", file=path, line=r.k, field="bReflection bTransmission",
                           expected="1 for at least one side", got=" ".join(f"{f:g}" for f in flags))
