@@ -626,6 +626,22 @@ def _read_header(lines: list[str], path: str) -> tuple[dict[str, str], int]:
     return header, index
 
 
+def _section_rows(lines: list[str], index: int, path: str, columns: Sequence[str], no_header: tuple[str, str],
+                  no_rows: tuple[str, str]) -> tuple[NDArray[np.float64], list[int], int]:
+    """The numeric rows under the 'Temperature ...' column header at line ``index``, their 1-based lines and the
+    index after them; ``no_header``/``no_rows``: (message, field) of the one-line error when either is missing."""
+    if index >= len(lines) or not lines[index].strip().startswith("Temperature"):
+        raise FormatError(no_header[0], file=path, line=min(index + 1, len(lines)), field=no_header[1],
+                          expected="a line starting with 'Temperature'",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    texts, row_lines, index = _numeric_block(lines, index + 1)
+    if not texts:
+        raise FormatError(no_rows[0], file=path, line=min(index + 1, len(lines)), field=no_rows[1],
+                          expected=f"rows of {len(columns)} numbers",
+                          got=lines[index].strip() if index < len(lines) else "end of file")
+    return _rows(texts, row_lines, columns, path), row_lines, index
+
+
 def _surface_rows(lines: list[str], index: int, path: str) -> tuple[NDArray[np.float64], list[int], int]:
     """The surface-data rows from line ``index`` on (one Temperature/Wavelength, IncAngle strictly increasing in
     [0, 90)), their 1-based lines and the index of the line after them."""
@@ -634,16 +650,9 @@ def _surface_rows(lines: list[str], index: int, path: str) -> tuple[NDArray[np.f
     if index < len(lines) and lines[index].strip().startswith(("Side1_Data", "Side2_Data")):
         raise FormatError("direction-sensitive properties are not supported", file=path, line=index + 1,
                           field="Side1_Data", expected="a single-sided property", got=lines[index].strip())
-    if index >= len(lines) or not lines[index].strip().startswith("Temperature"):
-        raise FormatError("missing surface-data column header", file=path, line=min(index + 1, len(lines)),
-                          field="Temperature", expected="a line starting with 'Temperature'",
-                          got=lines[index].strip() if index < len(lines) else "end of file")
-    surface_texts, surface_lines, index = _numeric_block(lines, index + 1)
-    if not surface_texts:
-        raise FormatError("no surface-data rows", file=path, line=min(index + 1, len(lines)),
-                          field="surface data", expected=f"rows of {len(SURFACE_COLUMNS)} numbers",
-                          got=lines[index].strip() if index < len(lines) else "end of file")
-    rows = _rows(surface_texts, surface_lines, SURFACE_COLUMNS, path)
+    rows, surface_lines, index = _section_rows(lines, index, path, SURFACE_COLUMNS,
+                                               ("missing surface-data column header", "Temperature"),
+                                               ("no surface-data rows", "surface data"))
     temperature, wavelength = rows[0, 0], rows[0, 1]
     for k in range(1, rows.shape[0]):
         if rows[k, 0] != temperature or rows[k, 1] != wavelength:
@@ -722,16 +731,9 @@ def _read_table(
 ) -> tuple[xr.DataArray, int]:
     while index < len(lines) and not lines[index].strip():
         index += 1
-    if index >= len(lines) or not lines[index].strip().startswith("Temperature"):
-        raise FormatError("missing Table_BSDF_Data column header", file=path, line=min(index + 1, len(lines)),
-                          field="Table_BSDF_Data", expected="a line starting with 'Temperature'",
-                          got=lines[index].strip() if index < len(lines) else "end of file")
-    texts, row_lines, index = _numeric_block(lines, index + 1)
-    if not texts:
-        raise FormatError("empty Table_BSDF_Data section", file=path, line=min(index + 1, len(lines)),
-                          field="Table_BSDF_Data", expected=f"rows of {len(TABLE_COLUMNS)} numbers",
-                          got=lines[index].strip() if index < len(lines) else "end of file")
-    rows = _rows(texts, row_lines, TABLE_COLUMNS, path)
+    rows, row_lines, index = _section_rows(lines, index, path, TABLE_COLUMNS,
+                                           ("missing Table_BSDF_Data column header", "Table_BSDF_Data"),
+                                           ("empty Table_BSDF_Data section", "Table_BSDF_Data"))
     bad = (rows[:, 0] != temperature) | (rows[:, 1] != wavelength)
     if np.any(bad):
         k = int(np.argmax(bad))
