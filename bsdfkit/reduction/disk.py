@@ -99,8 +99,22 @@ CENTER_TOL = 1e-7
 
 def horizon_distance(center: tuple[float, float], psi: NDArray[np.float64],
                      cos_sin: tuple[NDArray, NDArray] | None = None) -> NDArray[np.float64]:
-    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ [rad];
-    ``cos_sin``: (cos ψ, sin ψ) when already known."""
+    """Distance t_max(ψ) from ``center`` (inside the unit disk) to the unit circle along azimuth ψ.
+
+    Parameters
+    ----------
+    center : tuple of float
+        Centre (βx, βy) in direction cosines [-], inside the unit disk.
+    psi : ndarray
+        Azimuths about the centre [rad].
+    cos_sin : tuple of ndarray, optional
+        (cos ψ, sin ψ) [-] when already known.
+
+    Returns
+    -------
+    ndarray
+        t_max per azimuth, in direction cosines [-].
+    """
     cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
     bu = center[0] * cos_psi + center[1] * sin_psi
     return unit_disk_reach(bu, center[0] ** 2 + center[1] ** 2)
@@ -128,7 +142,18 @@ class PolarInterpolant:
     direction_polar: float | None = None
 
     def matrix(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> sp.csr_matrix:
-        """M (m × n, sparse) such that the interpolant at β = (x, y) is M @ values."""
+        """M (m × n, sparse) such that the interpolant at β = (x, y) is M @ values.
+
+        Parameters
+        ----------
+        x, y : ndarray
+            Points βx, βy in direction cosines [-] (flattened; m of them).
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix
+            m × n, rows zero beyond a bounded domain.
+        """
         psi, r = self._polar(x, y)
         return self._matrix_polar(psi, r)
 
@@ -191,7 +216,20 @@ class PolarInterpolant:
 
         The node values first, then each point's three (N·v at the triangle's nodes): the same number as
         ``matrix(x, y) @ values`` up to rounding, without building the m × n matrix (an exported table evaluates
-        hundreds of chunks of directions)."""
+        hundreds of chunks of directions).
+
+        Parameters
+        ----------
+        values : ndarray
+            One value per record (a BSDF [1/sr]).
+        x, y : ndarray
+            Points βx, βy in direction cosines [-] (flattened).
+
+        Returns
+        -------
+        ndarray
+            The interpolant at each point, in the unit of ``values``; 0 beyond a bounded domain.
+        """
         psi, r = self._polar(x, y)
         bary, cols, inside = self._located(psi, r)
         at_nodes = self.nodes @ np.asarray(values, dtype=np.float64)
@@ -277,8 +315,21 @@ class PolarInterpolant:
         return np.asarray(self.nodes.T @ w_nodes).ravel()
 
     def integral(self, values: NDArray[np.float64], mode: str = "linear") -> float:
-        """∬ f dβ of the interpolant of ``values``; ``mode="log"`` interpolates ln f on triangles whose three
-        nodes are positive (a 7-point degree-5 rule per triangle), f elsewhere."""
+        """∬ f dβ of the interpolant of ``values`` over its domain.
+
+        Parameters
+        ----------
+        values : ndarray
+            One value per record (a BSDF [1/sr]).
+        mode : str
+            ``"linear"`` (``weights() @ values``) or ``"log"``: ln f interpolated on triangles whose three nodes
+            are positive (a 7-point degree-5 rule per triangle), f elsewhere.
+
+        Returns
+        -------
+        float
+            The integral: the unit of ``values`` times [sr] (a BSDF gives a fraction of the incident power [-]).
+        """
         if mode == "linear":
             return float(self.weights() @ values)
         if not self._flat_top:
@@ -404,6 +455,18 @@ def barycentric_transforms(points: NDArray[np.float64], simplices: NDArray[np.in
     scipy computes them lazily with one LU factorisation and condition estimate per triangle; with a threaded BLAS
     on a loaded 2-core machine that took 0.5-4 s for 28 000 triangles (0.2 s single-threaded), this closed form
     a few milliseconds. Every :func:`~scipy.spatial.Delaunay.find_simplex` needs it.
+
+    Parameters
+    ----------
+    points : ndarray
+        Vertex coordinates (N, 2), in the units of the triangulated plane.
+    simplices : ndarray
+        Vertex indices of the triangles (K, 3).
+
+    Returns
+    -------
+    ndarray
+        (K, 3, 2) transforms, NaN for degenerate triangles.
     """
     p = points[simplices]  # (K, 3, 2)
     t = np.stack([p[:, 0] - p[:, 2], p[:, 1] - p[:, 2]], axis=2)  # (K, 2, 2): columns p0 − p2, p1 − p2
@@ -657,8 +720,26 @@ def _with_spokes(center: tuple[float, float], psi: NDArray, r: NDArray, off: NDA
 def direction_polar(center: tuple[float, float], psi: NDArray, r: NDArray, theta_i_deg: float,
                     cos_sin: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(azimuth about the specular direction, angle from it) [rad] of the points at polar (ψ, r) about
-    ``center`` in β (the frame of the incidence: +x toward the specular side); ``cos_sin``: (cos ψ, sin ψ) when
-    already known."""
+    ``center`` in β (the frame of the incidence: +x toward the specular side).
+
+    Parameters
+    ----------
+    center : tuple of float
+        Polar centre (βx, βy) in direction cosines [-].
+    psi : ndarray
+        Azimuths about the centre [rad].
+    r : ndarray
+        Distances from the centre in direction cosines [-].
+    theta_i_deg : float
+        Incidence angle [deg], which fixes the specular direction.
+    cos_sin : tuple of ndarray, optional
+        (cos ψ, sin ψ) [-] when already known.
+
+    Returns
+    -------
+    tuple of ndarray
+        Azimuth about the specular direction [rad] and polar angle from it [rad].
+    """
     cos_psi, sin_psi = (np.cos(psi), np.sin(psi)) if cos_sin is None else cos_sin
     x = center[0] + r * cos_psi
     y = center[1] + r * sin_psi

@@ -132,7 +132,25 @@ class Geometry:
     def dataset(self, keep: NDArray[np.int64], values: NDArray[np.float64] | None = None,
                 extra: list[tuple[float, float]] = (), theta_i: float | None = None) -> xr.Dataset:
         """A profile dataset of the records ``keep`` plus virtual in-plane records (θs, φs) in ``extra``;
-        ``theta_i`` (deg) overrides the incidence, which places the specular centre of a reconstruction."""
+        ``theta_i`` (deg) overrides the incidence, which places the specular centre of a reconstruction.
+
+        Parameters
+        ----------
+        keep : ndarray of int
+            Indices of the records to keep.
+        values : ndarray, optional
+            ``bsdf`` per output record [1/sr] (default: zeros).
+        extra : list of tuple of float
+            Virtual in-plane records (θs, φs) [deg].
+        theta_i : float, optional
+            Incidence [deg] (default: the profile's).
+
+        Returns
+        -------
+        xarray.Dataset
+            ``bsdf`` over ``record`` with coordinates ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s`` [deg], ``side``,
+            ``arc``.
+        """
         ts = np.concatenate([self.theta_s[keep], [e[0] for e in extra]])
         ps = np.concatenate([self.phi_s[keep], [e[1] for e in extra]])
         arc = np.concatenate([self.arc[keep], ["in_plane"] * len(extra)])
@@ -156,7 +174,19 @@ class Region:
     arcs: tuple = ()  # (record order along the arc, index of the lower edge, of the upper edge) per arc
 
     def grown(self, geom: Geometry, k: int) -> "Region":
-        """The region with every edge moved outward by k samples (inward for k < 0)."""
+        """The region with every edge moved outward by k samples (inward for k < 0).
+
+        Parameters
+        ----------
+        geom : Geometry
+            Per-record directions of the profile.
+        k : int
+            Number of samples each edge moves outward (inward for k < 0).
+
+        Returns
+        -------
+        Region
+        """
         return _region(geom, list(self.arcs), self.center_deg, k)
 
 
@@ -318,7 +348,24 @@ def _edges(x: NDArray, g: NDArray, s: NDArray, p: int, tail_excess: float) -> tu
 
 def find_region(geom: Geometry, g: NDArray[np.float64], s: NDArray[np.float64],
                 tail_excess: float = TAIL_EXCESS) -> Region:
-    """The lobe region of a profile from its band-mean values ``g`` and their uncertainties ``s`` (module doc)."""
+    """The lobe region of a profile from its band-mean values ``g`` and their uncertainties ``s`` (module doc).
+
+    Parameters
+    ----------
+    geom : Geometry
+        Per-record directions of the profile.
+    g : ndarray
+        Band-mean BSDF per record [1/sr] (NaN = no data).
+    s : ndarray
+        Standard uncertainty of ``g`` [1/sr].
+    tail_excess : float
+        Relative excess over the outward secant that marks a lobe tail [-].
+
+    Returns
+    -------
+    Region
+        Record indices of the lobe and its extent [deg].
+    """
     x, y = geom.frame()
     x0 = np.sin(np.radians(geom.theta_i))
     ok = np.isfinite(g)
@@ -710,7 +757,20 @@ def sampling_method(geom: Geometry, finite: NDArray[np.bool_]) -> str:
     finite record lies on the in-plane arc or the perpendicular arc through the specular
     direction (half-profiles about the normal and the specular point, with the in-plane lobe rules: under-sampled
     and unresolved lobes), else ``disk`` (polar interpolation of every record over the projected disk,
-    :mod:`bsdfkit.reduction.disk`): grids, C-planes, other planes, a φs = 90/270° arc, scattered records."""
+    :mod:`bsdfkit.reduction.disk`): grids, C-planes, other planes, a φs = 90/270° arc, scattered records.
+
+    Parameters
+    ----------
+    geom : Geometry
+        Per-record directions of the profile.
+    finite : ndarray of bool
+        Which records hold finite data.
+
+    Returns
+    -------
+    str
+        ``basis``, ``arcs`` or ``disk``.
+    """
     if geom.basis_psa is not None and basis.covers_hemisphere(geom.basis_psa[finite]):
         return "basis"
     on_arcs = np.isin(geom.arc[finite], ("in_plane", "perpendicular"))
@@ -721,7 +781,26 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
                 n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
     """Central weights and alternatives for one profile (module docstring); ``ref`` is the band-mean profile
     (NaN = record without data), ``ref_std`` its standard uncertainty. The method follows
-    :func:`sampling_method`. ``errors=False`` skips the alternative reconstructions (the value only)."""
+    :func:`sampling_method`. ``errors=False`` skips the alternative reconstructions (the value only).
+
+    Parameters
+    ----------
+    geom : Geometry
+        Per-record directions of the profile.
+    ref : ndarray
+        Band-mean BSDF per record [1/sr] (NaN = no data).
+    ref_std : ndarray
+        Standard uncertainty of ``ref`` [1/sr].
+    n_psi, n_r : int
+        Quadrature nodes in azimuth and radius of the polar grids.
+    errors : bool
+        Compute the alternative reconstructions (the reconstruction error).
+
+    Returns
+    -------
+    Reconstruction
+        Weights per record [sr] of the central value and of every alternative.
+    """
     finite = np.isfinite(ref)
     if not finite.any():
         raise InputError("no usable records to reconstruct the hemisphere", field="bsdf",
@@ -991,7 +1070,20 @@ def _reconstruct_arcs(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
 
 # ------------------------------------------------------------------------------------------- disk sampling
 def direction_frame(geom: Geometry, directions: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
-    """(x, y) of unit vectors (..., 3) in the sample frame, in the frame of :meth:`Geometry.frame`."""
+    """(x, y) of unit vectors (..., 3) in the sample frame, in the frame of :meth:`Geometry.frame`.
+
+    Parameters
+    ----------
+    geom : Geometry
+        Per-record directions of the profile.
+    directions : ndarray
+        Unit vectors (..., 3) in the sample frame [-].
+
+    Returns
+    -------
+    tuple of ndarray
+        x and y direction cosines [-], flattened.
+    """
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     u = np.radians(geom.phi_i) - np.pi
     a, b = d[:, 0], d[:, 1]
@@ -1427,7 +1519,20 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
 def band_selection(wl: NDArray[np.float64], band: tuple[float, float] | None
                    ) -> tuple[NDArray[np.bool_], float, float]:
     """The wavelengths [nm] of a closed band (low, high) [nm] (default: all of ``wl``) and its edges; one line
-    naming the band when it is empty or holds no measured wavelength."""
+    naming the band when it is empty or holds no measured wavelength.
+
+    Parameters
+    ----------
+    wl : ndarray
+        Wavelengths [nm].
+    band : tuple of float, optional
+        (low, high) [nm], closed (default: all of ``wl``).
+
+    Returns
+    -------
+    tuple
+        Mask of ``wl`` in the band, and its low and high edges [nm].
+    """
     lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
     if not hi >= lo:
         raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
@@ -1513,6 +1618,15 @@ class HemisphericalResult:
                 "the table's quantity (--quantity) or the sampling of the specular lobe", *self.notes]
 
     def as_dict(self) -> dict:
+        """The result as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``incidence_deg`` [deg], ``side``, ``config``, ``wavelength_nm`` [nm]; ``value``, ``std``,
+            ``std_measurement``, ``std_reconstruction`` and ``lobe`` [fractions] per wavelength; ``method``,
+            ``lobe_region_deg`` and ``extrapolated_beyond_deg`` [deg], ``assumptions`` and ``warnings``.
+        """
         return {"incidence_deg": self.theta_i, "side": self.side, "config": self.config,
                 "wavelength_nm": self.wavelength, "value": self.value, "std": self.std,
                 "std_measurement": self.std_measurement, "std_reconstruction": self.std_reconstruction,
@@ -1557,7 +1671,18 @@ class ProfileModel:
     assumptions: tuple[str, ...] = ()  # made on the records before the reconstruction (a mirrored half)
 
     def band_weights(self, band: tuple[float, float] | None = None) -> NDArray[np.float64]:
-        """Δλ weights (summing to 1) over ``cols`` of the band mean (every finite wavelength by default)."""
+        """Δλ weights (summing to 1) over ``cols`` of the band mean (every finite wavelength by default).
+
+        Parameters
+        ----------
+        band : tuple of float, optional
+            (low, high) [nm], closed (default: every finite wavelength).
+
+        Returns
+        -------
+        ndarray
+            Weights [-] over ``cols``, summing to 1 (equal weights without wavelengths).
+        """
         wl = self.wavelength[self.cols]
         if not np.all(np.isfinite(wl)):
             return np.full(wl.size, 1.0 / wl.size)
@@ -1568,7 +1693,20 @@ class ProfileModel:
 
     def bsdf_at(self, weights: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """The reconstructed BSDF [1/sr] of the weighted wavelength mean (``weights`` over ``cols``) at unit
-        vectors (..., 3) in the sample frame: the function whose integral :func:`hemispherical_profile` reports."""
+        vectors (..., 3) in the sample frame: the function whose integral :func:`hemispherical_profile` reports.
+
+        Parameters
+        ----------
+        weights : ndarray
+            Wavelength weights [-] over ``cols`` (e.g. :meth:`band_weights`).
+        directions : ndarray
+            Unit vectors (..., 3) in the sample frame [-].
+
+        Returns
+        -------
+        ndarray
+            BSDF [1/sr], shape ``directions.shape[:-1]``, clipped at 0.
+        """
         d = np.asarray(directions, dtype=np.float64)
         out = np.zeros(d.shape[:-1]).ravel()
         fz = np.nan_to_num(self.f[:, self.cols])
@@ -1585,7 +1723,18 @@ def unique_rows(key: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np
     """``np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)`` of an (n, 2) float
     array without its row-view sort (0.8 s of 52 calls on a 130 000-record table; a lexsort is a few ms): the
     first index of each distinct row (rows ordered by column 0, then 1), each row's group, the group sizes. −0.0
-    and 0.0 are one value."""
+    and 0.0 are one value.
+
+    Parameters
+    ----------
+    key : ndarray
+        (n, 2) float array.
+
+    Returns
+    -------
+    tuple of ndarray
+        First index of each distinct row, each row's group index, group sizes.
+    """
     k = np.asarray(key, dtype=np.float64) + 0.0
     if k.shape[0] == 0:
         empty = np.zeros(0, dtype=np.int64)
@@ -1683,7 +1832,19 @@ def _mirrored_half(geom: Geometry, f: NDArray, u: NDArray) -> tuple[Geometry, ND
 def label_mask(values: object, label: str) -> NDArray[np.bool_]:
     """``values == label`` for a coordinate of string labels (``config``, ``side``): an object or unicode array is
     compared as it is; ``astype(str)`` of the 130 000 labels of a large vendor table cost 30-60 ms per call, and
-    a reduction asks per configuration, incidence and side."""
+    a reduction asks per configuration, incidence and side.
+
+    Parameters
+    ----------
+    values : array_like
+        Labels of a coordinate.
+    label : str
+        Label to match.
+
+    Returns
+    -------
+    ndarray of bool
+    """
     arr = np.asarray(values)
     if arr.dtype.kind in "OU":
         return np.asarray(arr == label, dtype=bool)
@@ -1691,14 +1852,44 @@ def label_mask(values: object, label: str) -> NDArray[np.bool_]:
 
 
 def label_set(values: object) -> list[str]:
-    """The distinct string labels of a coordinate, sorted (``sorted(set(values.astype(str)))``, without the copy)."""
+    """The distinct string labels of a coordinate, sorted (``sorted(set(values.astype(str)))``, without the copy).
+
+    Parameters
+    ----------
+    values : array_like
+        Labels of a coordinate.
+
+    Returns
+    -------
+    list of str
+    """
     return sorted({str(v) for v in set(np.asarray(values).ravel().tolist())})
 
 
 def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
                   n_r: int = 400, errors: bool = True) -> ProfileModel:
     """The records of one configuration, incidence [deg] and side, merged and reconstructed (:class:`ProfileModel`);
-    ``errors=False`` gives the value without the reconstruction error (no alternative reconstructions)."""
+    ``errors=False`` gives the value without the reconstruction error (no alternative reconstructions).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated dataset (see :func:`hemispherical_profile`).
+    config : str
+        Configuration name.
+    theta_i : float
+        Incidence angle [deg], a measured one.
+    side : str
+        ``"reflection"`` or ``"transmission"``.
+    n_psi, n_r : int
+        Quadrature nodes in azimuth and radius of the polar grids.
+    errors : bool
+        Compute the reconstruction error (alternative reconstructions).
+
+    Returns
+    -------
+    ProfileModel
+    """
     sel = label_mask(ds["config"].values, config) & (ds["side"].values == side) & np.isclose(
         ds["theta_i"].values, theta_i, atol=1e-6, rtol=0)
     if not sel.any():
@@ -1771,7 +1962,17 @@ def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str
 
 
 def result_of(model: ProfileModel) -> HemisphericalResult:
-    """The :class:`HemisphericalResult` of a :class:`ProfileModel`: every wavelength one dot product."""
+    """The :class:`HemisphericalResult` of a :class:`ProfileModel`: every wavelength one dot product.
+
+    Parameters
+    ----------
+    model : ProfileModel
+        Merged and reconstructed records of one configuration, incidence and side.
+
+    Returns
+    -------
+    HemisphericalResult
+    """
     cols, f, u, scale = model.cols, model.f, model.u, model.scale
     out = {k: np.full(cols.size, np.nan) for k in ("value", "meas", "rec", "lobe")}
     comps: dict[str, NDArray] = {}
@@ -1856,6 +2057,16 @@ def reduction_kind(ds: xr.Dataset) -> str:
     holds a bi-spectral BSDF (variable ``bsdf_bispectral`` with finite values), configurations named ``blue``
     and ``yellow``, records on both sides, and is not marked elastic (``attrs['elastic']``, set by the table
     reader). Any other dataset is reduced as elastic scatter: hemispherical reflectance/transmittance.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated dataset.
+
+    Returns
+    -------
+    str
+        ``"interactions"`` or ``"hemispherical"``.
     """
     if int(ds.attrs.get("elastic", 0) or 0):
         return "hemispherical"

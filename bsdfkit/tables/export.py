@@ -81,7 +81,25 @@ GRID_MODES: tuple[str, ...] = ("auto", "fixed")
 
 
 def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
-    """``value`` [nm] if it is a wavelength an optical BSDF table can hold; else one clear error."""
+    """``value`` [nm] if it is a wavelength an optical BSDF table can hold; else one clear error.
+
+    Parameters
+    ----------
+    value : float
+        Wavelength [nm].
+    field : str
+        Option named in the error.
+
+    Returns
+    -------
+    float
+        ``value`` [nm], within :data:`bsdfkit.core.conventions.WAVELENGTH_RANGE_NM`.
+
+    Raises
+    ------
+    ValidationError
+        When ``value`` is not finite or lies outside that range.
+    """
     lo, hi = WAVELENGTH_RANGE_NM
     if not (np.isfinite(value) and lo <= value <= hi):
         raise ValidationError("wavelength out of range", field=field, expected=f"a wavelength in {lo:g}-{hi:g} nm",
@@ -202,6 +220,14 @@ class ExportResult:
         return max((v for vals in self.peak_error.values() for v in vals), default=0.0)
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            The fields (``incidences_deg`` [deg], TIS values [-], ``size_bytes``, ``grid``, peaks [1/sr] and
+            peak errors [-]) and ``worst_peak_error`` [-].
+        """
         return {"format": self.format, "path": self.path, "sides": list(self.sides),
                 "incidences_deg": list(self.incidences_deg), "tis_source": self.tis_source,
                 "tis_table": self.tis_table, "plane_symmetry_deviation": self.plane_symmetry_deviation,
@@ -297,7 +323,22 @@ def _model_bsdf_fn(model: str, params: Mapping[float, Mapping[str, float]], side
 
 
 def fit_bsdf_fn(ds: xr.Dataset, interaction: str, side: str) -> BsdfFn:
-    """BSDF callable of a fit result (see the module docstring for the dataset layout)."""
+    """BSDF callable of a fit result (see the module docstring for the dataset layout).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Fit result with attribute ``model`` and parameter variables over ``theta_i`` [deg].
+    interaction : str
+        Interaction selected along the ``interaction`` dimension (or checked against the attribute).
+    side : str
+        ``reflection`` or ``transmission``, selected likewise.
+
+    Returns
+    -------
+    callable
+        ``bsdf_fn(theta_i_deg, side, directions)`` → BSDF [1/sr] of the fitted model.
+    """
     model = str(ds.attrs.get("model", ""))
     if model not in FIT_MODELS:
         raise ValidationError("unknown fit model", field="model", expected=" | ".join(FIT_MODELS), got=model)
@@ -653,6 +694,31 @@ def export(
     Returns the TIS of the source (the hemispherical engine's value for a measured dataset, else the direct
     integral :func:`bsdfkit.tables.grids.tis_reference`) and of the written table as :func:`read_any` integrates
     it (the value ``bsdfkit read`` reports), so that grid adequacy is visible.
+
+    Parameters
+    ----------
+    source
+        A BSDF callable ``bsdf_fn(theta_i_deg, side, directions)`` [1/sr] (incidences then required in
+        ``settings``), a fit result or calibrated scan as a Dataset, or a netCDF path (module docstring).
+    to
+        Target format (a name of :func:`bsdfkit.tables.registry.writable`).
+    interaction
+        Interaction to select in a fit result or to reconstruct from a phosphor scan (e.g. bibs, biys, yiys).
+    side
+        ``reflection``, ``transmission`` or ``both``.
+    path
+        Output file.
+    force
+        Replace an existing file.
+    settings
+        Further choices (:class:`ExportSettings`; default: its documented defaults).
+    generated_at
+        Time stamp of formats that write one (default: now).
+
+    Returns
+    -------
+    ExportResult
+        Sides, incidences [deg], TIS of source and table [-], file size, grid and peak check.
     """
     settings = settings or ExportSettings()
     fmt = _format_for(to, side)
@@ -710,7 +776,21 @@ def file_tis(path: str | Path, incidences_deg: Sequence[float],
     """Hemispherical TIS per side and incidence of a vendor file by the engine of
     :mod:`bsdfkit.reduction.hemispherical` on the file's nodes (:func:`bsdfkit.tables.vendor.vendor_dataset`): the
     same integral ``bsdfkit tis`` computes for the ingested file. A side the file leaves all zero gives 0.
-    ``table``: the file's nodes when already read by its format's reader."""
+
+    Parameters
+    ----------
+    path
+        The vendor file.
+    incidences_deg
+        Incidences [deg] of the result's lists; each reduced incidence goes to the nearest one.
+    table
+        The file's nodes when already read by its format's reader (not read again).
+
+    Returns
+    -------
+    dict of str to list of float
+        Side → TIS [-] per entry of ``incidences_deg`` (band average over the file's wavelengths).
+    """
     ds = vendor_dataset(path, table=table)
     out: dict[str, list[float]] = {}
     for res in hemispherical(ds, errors=False):
@@ -727,6 +807,16 @@ def read_any(path: str | Path) -> FileSummary:
     ``tis_computed`` is the engine's integral of the file's nodes (:func:`file_tis`, one number for one BSDF
     whatever the path); the format's own quadrature on its native grid is kept in
     ``details['tis_format_quadrature']`` (files with several Zemax sample rotations use it as ``tis_computed``).
+
+    Parameters
+    ----------
+    path
+        The table file (format sniffed by content).
+
+    Returns
+    -------
+    FileSummary
+        Format, incidences [deg] and TIS [-] computed and, where the file states it, stated.
     """
     return _read_any(path)[0]
 

@@ -165,6 +165,23 @@ class HarveyShackAxes:
 
         The defaults give 187 radii × 72 azimuths; docs/exports.md lists the resulting table-TIS errors
         for Lambertian, Gaussian and ABg lobes (all < 0.25 %).
+
+        Parameters
+        ----------
+        rho_first : float
+            First non-zero radius ρ in direction cosines [-].
+        ratio : float
+            Ratio of consecutive geometric radial steps [-].
+        max_step : float
+            Largest radial step in direction cosines [-]; the linear step beyond the geometric part.
+        azimuth_step_deg : float
+            Azimuth step [deg].
+        zero_azimuth_deg : float
+            Sample-frame azimuth of the table's 0 azimuth [deg].
+
+        Returns
+        -------
+        HarveyShackAxes
         """
         rho = _geometric_then_linear(rho_first, ratio, max_step, 2.0)
         return cls(tuple(rho), _uniform_azimuths(azimuth_step_deg), zero_azimuth_deg)
@@ -199,7 +216,25 @@ class SpecularAxes:
     ) -> SpecularAxes:
         """radial = 0, geometric nodes from ``radial_first_deg`` with ``ratio`` until the step reaches
         ``max_step_deg``, then linear up to 180° (the horizon lies up to 90° + θi from the specular
-        direction); azimuths 0…180 (plane symmetric, both ends included) or 0…360 − step."""
+        direction); azimuths 0…180 (plane symmetric, both ends included) or 0…360 − step.
+
+        Parameters
+        ----------
+        plane_symmetric : bool
+            Azimuths over the half circle 0…180° (else the full circle).
+        radial_first_deg : float
+            First non-zero radial angle [deg].
+        ratio : float
+            Ratio of consecutive geometric radial steps [-].
+        max_step_deg : float
+            Largest radial step [deg]; the linear step beyond the geometric part.
+        azimuth_step_deg : float
+            Azimuth step [deg].
+
+        Returns
+        -------
+        SpecularAxes
+        """
         radial = _geometric_then_linear(radial_first_deg, ratio, max_step_deg, 180.0)
         full = _uniform_azimuths(azimuth_step_deg)
         azimuth = tuple(a for a in full if a <= 180.0) + ((180.0,) if 180.0 not in full else ())
@@ -219,6 +254,22 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
 
     Raises :class:`~bsdfkit.core.errors.ValidationError` naming the incidence, side and offending value
     (exporters need a finite, non-negative BSDF; tools reject or mis-sample anything else).
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : float
+        Incidence angle [deg].
+    side : str
+        ``reflection`` or ``transmission``.
+    directions : ndarray
+        Unit scatter directions (..., 3) in the sample frame [-].
+
+    Returns
+    -------
+    ndarray
+        BSDF [1/sr], shape ``directions.shape[:-1]``.
     """
     if directions.shape[:-1] == (0,) or directions.size == 0:
         return np.zeros(directions.shape[:-1])
@@ -271,7 +322,20 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:
     """Distance from β0 = (sin θi, 0) to the unit circle along sample-frame azimuth ψ:
-    ρmax = −b cos ψ + √(1 − b² sin² ψ), b = sin θi (broadcast; :func:`bsdfkit.core.hemisphere.unit_disk_reach`)."""
+    ρmax = −b cos ψ + √(1 − b² sin² ψ), b = sin θi (broadcast; :func:`bsdfkit.core.hemisphere.unit_disk_reach`).
+
+    Parameters
+    ----------
+    theta_i_deg : array_like
+        Incidence angle θi [deg].
+    sample_azimuth_deg : array_like
+        Sample-frame azimuth ψ about β0 [deg].
+
+    Returns
+    -------
+    ndarray
+        ρmax in direction cosines [-], broadcast shape of the inputs.
+    """
     b = np.sin(np.radians(np.asarray(theta_i_deg, dtype=np.float64)))
     psi = np.radians(np.asarray(sample_azimuth_deg, dtype=np.float64))
     return unit_disk_reach(b * np.cos(psi), b * b)
@@ -280,7 +344,20 @@ def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np
 def horizon_radial(theta_i_deg: ArrayLike, azimuth_deg: ArrayLike) -> NDArray[np.float64]:
     """Radial angle (radians) of the horizon about a specular direction at θ0, along azimuth a:
     r_h = atan2(cos θ0, −cos a · sin θ0), where ω_z = cos r cos θ0 + sin r cos a sin θ0 = 0 (broadcast).
-    r_h = 90° + θ0 toward the normal (a = 0) and 90° − θ0 away from it (a = 180°)."""
+    r_h = 90° + θ0 toward the normal (a = 0) and 90° − θ0 away from it (a = 180°).
+
+    Parameters
+    ----------
+    theta_i_deg : array_like
+        Specular angle θ0 [deg].
+    azimuth_deg : array_like
+        Azimuth a about the specular direction [deg].
+
+    Returns
+    -------
+    ndarray
+        r_h [rad], broadcast shape of the inputs.
+    """
     t = np.radians(np.asarray(theta_i_deg, dtype=np.float64))
     a = np.radians(np.asarray(azimuth_deg, dtype=np.float64))
     return np.arctan2(np.cos(t), -np.cos(a) * np.sin(t))
@@ -318,6 +395,22 @@ def harvey_shack_grid(
 
     Node (ρ, ψ) is the direction β = β0 + ρ(cos ψs, sin ψs), ψs = ψ + ``axes.zero_azimuth_deg`` (sample
     frame); nodes with |β| > 1 hold 0.
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : sequence of float
+        Incidence angles [deg].
+    sides : str or sequence of str
+        ``reflection`` and/or ``transmission``, without repeats.
+    axes : HarveyShackAxes
+        Table axes: ρ = |β − β0| [-] and table-frame azimuths [deg].
+
+    Returns
+    -------
+    xarray.DataArray
+        BSDF [1/sr] on the nodes.
     """
     thetas = _check_incidences(theta_i_deg)
     sides = _check_sides(sides)
@@ -352,7 +445,24 @@ def harvey_shack_row_weights(rho: NDArray[np.float64], azimuth_deg: NDArray[np.f
                              zero_azimuth_deg: float) -> NDArray[np.float64]:
     """W[k, j] [sr, projected]: the weight of node (ρ_j, ψ_k) in :func:`tis_harvey_shack_table`, which is linear
     in the values: TIS = Σ W·f. Row k: ∫ hat_j(ρ) ρ dρ over the segments wholly inside the disk, and for the
-    last inside node also ½(ρmax² − ρ_J²) (held to the edge); times the periodic trapezoid weight of ψ_k."""
+    last inside node also ½(ρmax² − ρ_J²) (held to the edge); times the periodic trapezoid weight of ψ_k.
+
+    Parameters
+    ----------
+    rho : ndarray
+        Radial nodes ρ in direction cosines [-], increasing.
+    azimuth_deg : ndarray
+        Table-frame azimuths [deg].
+    theta_i_deg : float
+        Incidence angle [deg].
+    zero_azimuth_deg : float
+        Sample-frame azimuth of the table's 0 azimuth [deg].
+
+    Returns
+    -------
+    ndarray
+        W (azimuth × ρ) [sr, projected].
+    """
     w_row = _azimuth_row_weights(azimuth_deg, plane_symmetric=False)
     rmax = np.minimum(rho_max(theta_i_deg, azimuth_deg + zero_azimuth_deg), rho[-1])  # (psi,)
     r0, r1 = rho[:-1], rho[1:]
@@ -384,6 +494,24 @@ def harvey_shack_cell_grid(
     reconstruction took 7 MB (docs/exports.md, "Grid resolution"). Where the
     BSDF is linear across a node's cells the average is the point value; a peak is smoothed over its cells,
     which the auto grid's peak criterion keeps within ``peak_rtol``. Nodes outside the disk hold 0.
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : sequence of float
+        Incidence angles [deg].
+    sides : str or sequence of str
+        ``reflection`` and/or ``transmission``, without repeats.
+    axes : HarveyShackAxes
+        Table axes: ρ = |β − β0| [-] and table-frame azimuths [deg].
+    order : int
+        Gauss–Legendre points per cell along each of ρ and ψ.
+
+    Returns
+    -------
+    xarray.DataArray
+        Weighted cell averages of the BSDF [1/sr] on the nodes.
     """
     thetas = _check_incidences(theta_i_deg)
     sides = _check_sides(sides)
@@ -520,7 +648,24 @@ def harvey_shack_edge_grid(
     bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str, axes: HarveyShackAxes
 ) -> xr.DataArray:
     """:func:`harvey_shack_grid` with each row's last node inside the disk holding its edge value
-    (:func:`harvey_shack_edge_values`), dims ``(side, theta_i, rho, psi)`` [1/sr]."""
+    (:func:`harvey_shack_edge_values`), dims ``(side, theta_i, rho, psi)`` [1/sr].
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : sequence of float
+        Incidence angles [deg].
+    sides : str or sequence of str
+        ``reflection`` and/or ``transmission``, without repeats.
+    axes : HarveyShackAxes
+        Table axes: ρ = |β − β0| [-] and table-frame azimuths [deg].
+
+    Returns
+    -------
+    xarray.DataArray
+        BSDF [1/sr] on the nodes.
+    """
     grid = harvey_shack_grid(bsdf_fn, theta_i_deg, sides, axes)
     values = harvey_shack_edge_values(grid.values, bsdf_fn, grid["theta_i"].values, tuple(grid["side"].values), axes)
     return grid.copy(data=values).assign_attrs(values="point samples, edge values at the disk's edge")
@@ -534,6 +679,22 @@ def specular_grid(
     Node (radial, azimuth) is :func:`bsdfkit.core.frames.direction_from_specular`; nodes below the horizon
     (ω_z < 0) hold 0. ``theta_i`` is the specular (= direct-transmission) angle, which is what Zemax
     calls AngleOfIncidence ([Zemax-BSDF]; docs/exports.md §2.2).
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : sequence of float
+        Specular angles [deg].
+    sides : str or sequence of str
+        ``reflection`` and/or ``transmission``, without repeats.
+    axes : SpecularAxes
+        Radial angles [deg] and azimuths [deg] about the specular direction.
+
+    Returns
+    -------
+    xarray.DataArray
+        BSDF [1/sr] on the nodes.
     """
     thetas = _check_incidences(theta_i_deg)
     sides = _check_sides(sides)
@@ -614,6 +775,24 @@ def tis_harvey_shack_table(
     inside node to the edge; ρmax from :func:`rho_max` at sample azimuth ψ_k + ``zero_azimuth_deg``;
     w_k periodic trapezoid weights in ψ (radians). This is ∫∫_{|β|≤1} BSDF dβx dβy of docs/exports.md §3.
     Used by the TracePro and ASAP-style writers and readers.
+
+    Parameters
+    ----------
+    values : array_like
+        BSDF [1/sr], last three axes (theta_i, rho, psi).
+    rho : array_like
+        Radial nodes ρ in direction cosines [-], increasing.
+    azimuth_deg : array_like
+        Table-frame azimuths [deg].
+    theta_i_deg : array_like
+        Incidence angles [deg].
+    zero_azimuth_deg : float
+        Sample-frame azimuth of the table's 0 azimuth [deg].
+
+    Returns
+    -------
+    ndarray
+        TIS [-], shape ``values.shape[:-2]``.
     """
     f = np.asarray(values, dtype=np.float64)
     rho = np.asarray(rho, dtype=np.float64)
@@ -657,6 +836,24 @@ def tis_specular_table(
     (exact to rounding for this smooth weight); w_k are periodic trapezoid weights in azimuth, plane
     symmetric rows counting for a and 360° − a. Beyond the last radial node the table says nothing and
     contributes nothing. Used by the Zemax writer (TIS line) and reader.
+
+    Parameters
+    ----------
+    values : array_like
+        BSDF [1/sr], last three axes (theta_i, azimuth, radial).
+    radial_deg : array_like
+        Radial angles from the specular direction [deg], increasing.
+    azimuth_deg : array_like
+        Azimuths about the specular direction [deg].
+    theta_i_deg : array_like
+        Specular angles θ0 [deg].
+    plane_symmetric : bool
+        Rows stand for a and 360° − a (PlaneSymmetrical tables).
+
+    Returns
+    -------
+    ndarray
+        TIS [-], shape ``values.shape[:-2]``.
     """
     f = np.asarray(values, dtype=np.float64)
     r = np.radians(np.asarray(radial_deg, dtype=np.float64))
@@ -709,6 +906,26 @@ def tis_reference(
     done with ``n_panels`` 8-point Gauss–Legendre panels over s ∈ [ln t_min, 0] plus a Gauss–Legendre
     panel in ρ over [0, t_min·ρmax]. This resolves lobes from the specular point to the disk edge
     without knowing where they are. It is the reference against which table TIS are checked.
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : float
+        Incidence angle [deg].
+    side : str
+        ``reflection`` or ``transmission``.
+    n_azimuth : int
+        Number of azimuths ψ.
+    n_panels : int
+        Number of Gauss–Legendre panels in s = ln(ρ/ρmax).
+    t_min : float
+        Smallest ρ/ρmax of the logarithmic panels [-].
+
+    Returns
+    -------
+    float
+        TIS [-].
     """
     side = _check_sides((side,))[0]
     psi = (np.arange(n_azimuth) + 0.5) * (2.0 * np.pi / n_azimuth)
@@ -825,14 +1042,40 @@ def bulk_marking(indicators: ArrayLike, share: float = BULK_SHARE) -> NDArray[np
 
 def quantize(values: ArrayLike, fmt: str) -> NDArray[np.float64]:
     """``values`` as a table writes them with the format spec ``fmt`` and reads them back (float64, same shape):
-    the writers' TIS and checks are computed from what the file holds."""
+    the writers' TIS and checks are computed from what the file holds.
+
+    Parameters
+    ----------
+    values : array_like
+        Values as computed (a BSDF [1/sr] or any other table entry).
+    fmt : str
+        Format spec of the writer (as in ``format(v, fmt)``).
+
+    Returns
+    -------
+    ndarray
+        The values as read back from their text, same shape and unit.
+    """
     flat = np.asarray(values, dtype=np.float64).ravel()
     return np.array([format(v, fmt) for v in flat], dtype=np.float64).reshape(np.shape(values))
 
 
 def azimuth_midpoints_deg(azimuth_deg: ArrayLike, periodic: bool = True) -> NDArray[np.float64]:
     """Midpoints [deg] of consecutive azimuths ``azimuth_deg`` [deg] (increasing from 0); ``periodic``: the last one
-    between the last azimuth and 360° (full circle), else only between neighbours (a half plane, 0…180°)."""
+    between the last azimuth and 360° (full circle), else only between neighbours (a half plane, 0…180°).
+
+    Parameters
+    ----------
+    azimuth_deg : array_like
+        Azimuths [deg], increasing from 0.
+    periodic : bool
+        Add the midpoint between the last azimuth and 360°.
+
+    Returns
+    -------
+    ndarray
+        Midpoints [deg].
+    """
     a = np.asarray(azimuth_deg, dtype=np.float64)
     inner = 0.5 * (a[:-1] + a[1:])
     return np.append(inner, 0.5 * (a[-1] + 360.0)) if periodic else inner
@@ -1016,7 +1259,20 @@ def lobe_core(values: ArrayLike, inside: ArrayLike) -> NDArray[np.bool_]:
     """Nodes of a polar table ``values[..., azimuth, radial]`` (radial node 0 = the specular direction) in the
     core of the lobe: along each azimuth row, from the specular node outward up to the first node (exclusive)
     where the BSDF falls below half its specular value or leaves the domain (``inside``). The *peak of the lobe*
-    is the largest BSDF there (docs/exports.md, "Grid resolution")."""
+    is the largest BSDF there (docs/exports.md, "Grid resolution").
+
+    Parameters
+    ----------
+    values : array_like
+        BSDF [1/sr] of a polar table, last two axes (azimuth, radial).
+    inside : array_like
+        Whether each node lies in the domain (broadcast against ``values``).
+
+    Returns
+    -------
+    ndarray of bool
+        True for nodes in the lobe's core, shape of ``values``.
+    """
     f = np.asarray(values, dtype=np.float64)
     half_spec = 0.5 * f[..., :1]
     keep = (f >= half_spec) & np.asarray(inside, dtype=bool)
@@ -1115,6 +1371,30 @@ def auto_harvey_shack_axes(
     (:func:`_refine_polar`): radial segments are bisected where needed (down to 1e-7 in ρ), the azimuth
     step halved. One pair of axes serves every side and incidence (as TracePro requires). None when meeting
     the tolerance takes more than ``max_nodes`` radial × azimuth nodes.
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : sequence of float
+        Incidence angles [deg].
+    sides : str or sequence of str
+        ``reflection`` and/or ``transmission``, without repeats.
+    tolerance : GridTolerance, optional
+        What the grid must reproduce (default: :class:`GridTolerance` defaults).
+    zero_azimuth_deg : float
+        Sample-frame azimuth of the table's 0 azimuth [deg].
+    max_nodes : int, optional
+        Largest number of radial × azimuth nodes (default: no limit).
+    cell_average : bool
+        Axes for a table of cell averages.
+    edge_values : bool
+        Axes for a table whose rows end in their edge values.
+
+    Returns
+    -------
+    HarveyShackAxes or None
+        The refined axes, or None beyond ``max_nodes``.
     """
     tolerance = tolerance or GridTolerance()
     thetas = _check_incidences(theta_i_deg)
@@ -1158,6 +1438,26 @@ def auto_specular_axes(
     segments bisected where needed (down to 1e-5°), the azimuth step halved. For a plane-symmetric table
     the callable is evaluated on 0…180° only (the writer averages the mirror images). None when meeting the
     tolerance takes more than ``max_nodes`` radial × azimuth nodes.
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr] (:data:`BsdfFn`).
+    theta_i_deg : sequence of float
+        Specular angles [deg].
+    sides : str or sequence of str
+        ``reflection`` and/or ``transmission``, without repeats.
+    tolerance : GridTolerance, optional
+        What the grid must reproduce (default: :class:`GridTolerance` defaults).
+    plane_symmetric : bool
+        Azimuths 0…180° for a PlaneSymmetrical table (else the full circle).
+    max_nodes : int, optional
+        Largest number of radial × azimuth nodes (default: no limit).
+
+    Returns
+    -------
+    SpecularAxes or None
+        The refined axes, or None beyond ``max_nodes``.
     """
     tolerance = tolerance or GridTolerance()
     thetas = _check_incidences(theta_i_deg)

@@ -54,8 +54,19 @@ BsdfFn = Callable[[float, str, NDArray[np.float64]], NDArray[np.float64]]
 
 # ------------------------------------------------------------------------------------------- sniffing
 def source_kind(path: str | Path) -> str:
-    """``raw-scan`` | ``netcdf`` | a registered table format (``zemax``, ``tracepro``, ``asap`` …,
-    :mod:`bsdfkit.tables.registry`) | ``table`` (any other text file)."""
+    """What kind of source ``path`` is, sniffed from its contents.
+
+    Parameters
+    ----------
+    path
+        A file or a raw export folder.
+
+    Returns
+    -------
+    str
+        ``raw-scan`` (a folder) | ``netcdf`` | a registered table format (``zemax``, ``tracepro``, ``asap`` …,
+        :mod:`bsdfkit.tables.registry`) | ``table`` (any other text file).
+    """
     p = existing_source(path)
     if p.is_dir():
         return "raw-scan"
@@ -76,7 +87,21 @@ def source_kind(path: str | Path) -> str:
 def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     """Any measurement into the calibrated BSDF dataset: a raw export folder (read + calibrate), a text table
     (:func:`bsdfkit.measurement.table.read_table`), a vendor file (:func:`vendor_dataset`) or a bsdfkit
-    netCDF dataset. ``options`` (:data:`TABLE_OPTIONS`) apply to tables and vendor files only."""
+    netCDF dataset.
+
+    Parameters
+    ----------
+    path
+        The source (kind sniffed by :func:`source_kind`).
+    **options
+        Reader options (:data:`TABLE_OPTIONS`; ``None`` values are dropped), for text tables and vendor files
+        only; vendor files take no ``incidence`` or ``phi_i``.
+
+    Returns
+    -------
+    xarray.Dataset
+        The calibrated BSDF dataset (``bsdf``/``bsdf_std`` [1/sr], angles [deg]).
+    """
     kind = source_kind(path)
     given = {k: v for k, v in options.items() if v is not None}
     unknown = [k for k in given if k not in TABLE_OPTIONS]
@@ -142,6 +167,15 @@ class ConvertResult:
         return self.worst_relative_difference <= self.tolerance
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            The fields (``incidences_deg`` [deg], ``wavelength_nm`` [nm], TIS values [-]), ``ok``, and the
+            export's ``format``, ``path``, ``sides``, ``size_bytes``, ``grid``, peak errors and
+            ``tis_reference_of_callable``.
+        """
         return {"source": self.source, "source_kind": self.source_kind, "format": self.export.format,
                 "path": self.export.path, "sides": list(self.export.sides),
                 "incidences_deg": list(self.incidences_deg), "tis_original": self.tis_original,
@@ -326,11 +360,15 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         Further :class:`bsdfkit.tables.export.ExportSettings` (axes, grid, Zemax symmetry, TracePro options).
         Without settings the auto grid's TIS tolerance is half of ``tolerance`` (docs/exports.md, Grid resolution).
     tolerance
-        Largest accepted |TIS written / TIS original − 1| (reported in the result; default 0.01).
+        Largest accepted |TIS written / TIS original − 1| [-] (reported in the result; default 0.01).
+    **table_options
+        Reader options for a text table or raw export, passed to :func:`ingest` (``None`` values dropped);
+        refused for a vendor file.
 
     Returns
     -------
     ConvertResult
+        What was written and the TIS of the written table against the source's.
     """
     if to not in FORMATS:
         raise ValidationError("unknown target format", field="--to", expected=" | ".join(FORMATS), got=to)

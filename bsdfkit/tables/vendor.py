@@ -148,6 +148,8 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
         Wavelength [nm] of a Monochrome Zemax or an ASAP-style file (TracePro files state theirs).
     zeros
         ``keep`` (default: a table value 0 is a value) | ``missing`` | ``auto`` (as for text tables).
+    sample
+        Sample name stored in ``attrs['sample_name']`` (default: the file name without its suffix).
     table
         The file's nodes when already read by its format's registry hook (not read again).
 
