@@ -813,15 +813,32 @@ class _Report:
         return _section("fits", "BSDF and emission fits", body)
 
     def sec_trace(self) -> str:
+        """The module-trace section: Table 1's flux split, the device, the trends and the paper's study points."""
         tr = self.s.get("trace") or {}
         dev = tr.get("device") or {}
         se = tr.get("device_std_err") or {}
         if not dev:
             return _section("trace", "Module trace ([Cylindrical-module])", _missing("No trace in summary.json."))
-        v = self.v
         cm = self.cm
-        defs = cm["definitions_section5_1"]
-        t1 = cm["table1_flux_W"]
+        # the verdicts are booked in the order of the page: Table 1, the device, the study points, the trends
+        t1tab, t1note = self._table1_flux(se)
+        devtab = self._device_table(dev, se)
+        ptab = self._study_point_table()
+        ttab = self.trend_table(tr.get("trends") or {})
+        first = cm["first_interaction_percent_section4"]
+        body = (_pair(devtab, t1tab + t1note) + self.run_png("trace_studies.png")
+                + f'<div class="wide">{ttab}</div>' + f'<div class="wide">{ptab}</div>'
+                + f'<p class="note">[Cylindrical-module] §4: after the first plate interaction {first["forward"]} % '
+                  f"forward and {first['backward']} % backward; {first['extracted_total']} % extracted in total. The "
+                  "paper's device: r = 35 mm, h = 43 mm, wall ρ = 0.985 with 1.5 % specular, four Lambertian LEDs. "
+                  "Study points equal to the device (h = 43 mm; FWHM 120°, which is a Lambertian LED's) are the "
+                  "device's trace.</p>")
+        return _section("trace", "Module trace ([Cylindrical-module])", body)
+
+    def _table1_flux(self, se: dict) -> tuple[str, str]:
+        """The extracted flux beside Table 1 of [Cylindrical-module] and its note with the yellow/blue checks."""
+        v = self.v
+        t1 = self.cm["table1_flux_W"]
         ms = self.s.get("module_spectrum") or {}
         flux = ms.get("flux_W") or (self.trace_json.get("device") or {}).get("extracted") or {}
         b, y = _num(flux.get("blue")), _num(flux.get("yellow"))
@@ -847,7 +864,13 @@ class _Report:
                        + v.check("yellow/blue vs Table 1 measurement", y / b,
                                  t1["measurement"]["yellow"] / t1["measurement"]["blue"], se.get("YBR"),
                                  half_unit=0.005, note="ratio of the printed Table 1 fluxes") + ".</p>")
-        extracted = cm["first_interaction_percent_section4"]["extracted_total"]
+        return t1tab, t1note
+
+    def _device_table(self, dev: dict, se: dict) -> str:
+        """The traced device's LER (checked against §4's 53 %), YBR, non-uniformity, ledger error and rays."""
+        v = self.v
+        defs = self.cm["definitions_section5_1"]
+        extracted = self.cm["first_interaction_percent_section4"]["extracted_total"]
         ler = _num(dev.get("LER"))
         ler_se = _num(se.get("LER"))
         dev_rows = [
@@ -864,10 +887,13 @@ class _Report:
              "|emitted − extracted − absorbed − terminated| / emitted"],
             ["rays", _esc(dev.get("rays")), f"in {_f(dev.get('elapsed_s'), 1)} s"],
         ]
-        devtab = _table(["device", "this run (± 1σ)", "definition"], dev_rows, "The traced device", text_cols=[2])
-        points = self.study_points()
+        return _table(["device", "this run (± 1σ)", "definition"], dev_rows, "The traced device", text_cols=[2])
+
+    def _study_point_table(self) -> str:
+        """The study points the paper prints an LER or YBR for, each checked against this run's."""
+        v = self.v
         p_rows = []
-        for p in points:
+        for p in self.study_points():
             r = p["run"]
             for q, unit, scale in (("LER", "%", 100.0), ("YBR", "", 1.0)):  # non-uniformity: the maps' section
                 if p["paper"].get(q) is None:
@@ -884,21 +910,12 @@ class _Report:
                                v.check(f"{p['short']} {q}", None if run_val is None else run_val * scale, p["paper"][q],
                                        None if _num(std) is None else _num(std) * scale, unit, 1),
                                _f((r.get("plate_incidence") or {}).get("extrapolated"), 0, 100.0) + " %"])
-        ptab = _table(["study point", "quantity", "this run (± 1σ)", "paper", "where in the paper", "comparison",
+        if not p_rows:
+            return _missing("trace.json with the studies is not in the run folder.")
+        return _table(["study point", "quantity", "this run (± 1σ)", "paper", "where in the paper", "comparison",
                        "plate power on extrapolated incidences"],
                       p_rows, "Study points the paper prints an LER or YBR for (non-uniformity: see the irradiance "
-                              "maps)", text_cols=[1, 4]) if p_rows else _missing(
-            "trace.json with the studies is not in the run folder.")
-        ttab = self.trend_table(tr.get("trends") or {})
-        first = cm["first_interaction_percent_section4"]
-        body = (_pair(devtab, t1tab + t1note) + self.run_png("trace_studies.png")
-                + f'<div class="wide">{ttab}</div>' + f'<div class="wide">{ptab}</div>'
-                + f'<p class="note">[Cylindrical-module] §4: after the first plate interaction {first["forward"]} % '
-                  f"forward and {first['backward']} % backward; {first['extracted_total']} % extracted in total. The "
-                  "paper's device: r = 35 mm, h = 43 mm, wall ρ = 0.985 with 1.5 % specular, four Lambertian LEDs. "
-                  "Study points equal to the device (h = 43 mm; FWHM 120°, which is a Lambertian LED's) are the "
-                  "device's trace.</p>")
-        return _section("trace", "Module trace ([Cylindrical-module])", body)
+                              "maps)", text_cols=[1, 4])
 
     def trend_table(self, trends: dict) -> str:
         """The §5 trends: the paper's size (or the reading of its words), this run's with σ, the criterion, the
