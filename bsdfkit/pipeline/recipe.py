@@ -203,7 +203,18 @@ def _ranged(value: Any, path: Path, dotted: str, lo: float, hi: float, lo_open: 
 
 
 def load_recipe(path: str | Path) -> Recipe:
-    """Parse and validate a recipe TOML file (types and ranges of every option, and its trace scene)."""
+    """Parse and validate a recipe TOML file (types and ranges of every option, and its trace scene).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The recipe TOML file; relative paths inside it are resolved against its folder.
+
+    Returns
+    -------
+    Recipe
+        The validated recipe.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError("recipe not found", file=path, expected="a TOML recipe file")
@@ -344,7 +355,18 @@ def _check_ranges(r: Recipe) -> None:
 
 
 def expected_outputs(recipe: Recipe) -> list[str]:
-    """The files a run of ``recipe`` writes (relative to the output folder), known before computing."""
+    """The files a run of ``recipe`` writes (relative to the output folder), known before computing.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        A validated recipe.
+
+    Returns
+    -------
+    list of str
+        Output file names, relative to the output folder.
+    """
     e = recipe.exports
     names = ["scan.nc", "inplane_bsdf.png", "tis.nc", "interaction_tables.json", "module_budget.png"]
     names += [f"exports/{i}_{s}.{EXPORT_SUFFIX[f]}" for i in e.interactions for s in e.sides for f in e.formats]
@@ -393,7 +415,13 @@ class RunState:
 
 
 def stage_ingest(state: RunState) -> None:
-    """Read the raw export, calibrate it, and queue ``scan.nc``."""
+    """Read the raw export, calibrate it, and queue ``scan.nc``.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (its recipe's measurement); the calibrated scan and its summary are added.
+    """
 
     state.scan = calibrate(read_scan(state.recipe.measurement))
     scan = state.scan
@@ -408,7 +436,13 @@ def stage_ingest(state: RunState) -> None:
 
 
 def stage_report(state: RunState) -> None:
-    """Queue the in-plane BSDF figure (Fig. 6 analogue)."""
+    """Queue the in-plane BSDF figure (Fig. 6 analogue).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's figure configuration and wavelength [nm], the calibrated scan).
+    """
 
     opts = state.recipe.report
     fig = in_plane_bsdf_figure(state.scan, opts.figure_config, opts.figure_wavelength_nm)
@@ -416,7 +450,14 @@ def stage_report(state: RunState) -> None:
 
 
 def stage_reductions(state: RunState) -> None:
-    """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget."""
+    """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[reductions]``, the calibrated scan); the TIS, interaction tables,
+        budgets and their summary are added.
+    """
 
     opts = state.recipe.reductions
     scan = state.scan
@@ -462,6 +503,11 @@ def stage_exports(state: RunState) -> None:
     The tables go into OUT/exports/. Their writer runs with the other outputs (atomic, no clobbering); it
     records, per file, the source TIS (direct integral of the reconstructed hemisphere) and the TIS recomputed
     from the file as read back, and fails the run if they differ by more than the recipe's tolerance.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[exports]``, the calibrated scan); the table writers are queued.
     """
 
     opts = state.recipe.exports
@@ -554,6 +600,24 @@ def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FAC
     k·:data:`MAP_SEED_OFFSET`) and the sub-maps are merged (:func:`bsdfkit.raytrace.tallies.merge_maps`), up to
     ``factor`` × ``rays`` rays in the map. Only the map changes (``map_rays`` says how many rays it holds); LER,
     YBR and the ledger stay those of ``result``. A result without sub-maps, or converged already, is returned as is.
+
+    Parameters
+    ----------
+    scene : Scene
+        The traced scene.
+    result : TraceResult
+        Its trace of ``rays`` rays with seed ``seed``.
+    rays : int
+        Rays per extra trace [-].
+    seed : int
+        Seed of ``result``'s trace.
+    factor : int
+        Most rays in the map, in multiples of ``rays`` [-].
+
+    Returns
+    -------
+    TraceResult
+        ``result`` with the merged map and ``map_rays``, or ``result`` itself.
     """
     conv = result.non_uniformity_converged
     if result.irradiance_parts is None or conv is None or conv["converged"]:
@@ -574,6 +638,18 @@ def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, flo
     From the tracer's incidence histogram (power per 90/bins-degree bin, blue and yellow): a bin counts as
     measured when its centre lies in ``measured_deg`` (inclusive). Returns the shares [1] of the total power
     on the plate and the power-weighted mean incidence [deg] of the blue light reaching it.
+
+    Parameters
+    ----------
+    result : TraceResult
+        A trace with an incidence histogram (blue, yellow over incidence bins).
+    measured_deg : tuple of float
+        (first, last) measured incidence [deg].
+
+    Returns
+    -------
+    dict
+        ``measured`` and ``extrapolated`` [-], ``mean_blue_incidence_deg`` [deg]; NaN where nothing reaches the plate.
     """
     hist = np.asarray(result.incidence_histogram, dtype=float)
     centres = (np.arange(hist.shape[1]) + 0.5) * 90.0 / hist.shape[1]
@@ -925,7 +1001,14 @@ def _finish_trends(out: dict[str, dict], spec: list[dict]) -> None:
 
 def stage_fits(state: RunState) -> None:
     """Lobe fits of every elastic interaction and side (aperture-averaged), a Lambert fit of the converted light,
-    and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper)."""
+    and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[fits]``, the calibrated scan and TIS); the fits, emission fit, their
+        summary and outputs are added.
+    """
 
     opts = state.recipe.fits
     scan, tis = state.scan, state.tis
@@ -987,7 +1070,14 @@ def stage_fits(state: RunState) -> None:
 
 def stage_spectrum(state: RunState) -> None:
     """The module's absolute spectrum from the two-wavelength result (§4.2, Fig. 7 of the cylindrical-module
-    paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR."""
+    paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the emission fit; the device trace's extracted flux [W], else the recipe's
+        ``fits.fallback_flux_W``); the module spectrum [W/nm], its colour and outputs are added.
+    """
 
     opts = state.recipe.fits
     if not state.emission:
@@ -1028,7 +1118,14 @@ def stage_spectrum(state: RunState) -> None:
 
 def stage_spectral_comparison(state: RunState) -> None:
     """Both tracer modes on one plate from the ``[spectral]`` measurement (issue 17; module
-    :mod:`bsdfkit.pipeline.spectral_comparison`)."""
+    :mod:`bsdfkit.pipeline.spectral_comparison`).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[spectral]``; nothing is done without one); the comparison's summary,
+        lines and outputs are added.
+    """
     opts = state.recipe.spectral
     if opts is None:
         return
@@ -1057,6 +1154,24 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
 
     ``log(message)`` receives one line per stage; ``progress(task, done, total)`` is called as the stages
     (task ``"stages"``) and the traces of the trace stage (task ``"trace"``) complete.
+
+    Parameters
+    ----------
+    recipe : Recipe or str or pathlib.Path
+        A recipe, or its TOML file.
+    out_dir : str or pathlib.Path
+        Output folder.
+    force : bool
+        Overwrite existing outputs.
+    log : callable
+        ``log(message)``, called with one line per stage.
+    progress : callable, optional
+        ``progress(task, done, total)``, called as stages and traces complete.
+
+    Returns
+    -------
+    dict
+        The run summary (as written to summary.json).
     """
     recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
     out_dir = Path(out_dir)

@@ -181,7 +181,21 @@ READINGS = {"slightly_pp": 2.0, "slightly_relative": 2.0 / 61.0, "negligible_pp"
 
 def agreement_criterion(half_unit: float, std: Any = None) -> float:
     """Largest |run − paper| that agrees: sqrt(half_unit² + (K_SIGMA σ)²), σ = 0 when the run gives none [unit of
-    the value]."""
+    the value].
+
+    Parameters
+    ----------
+    half_unit : float
+        Half the last printed digit of the paper's value, or the half-width of a reading of its words [unit of the
+        value].
+    std : float, optional
+        The run's standard uncertainty [unit of the value]; None or NaN counts as 0.
+
+    Returns
+    -------
+    float
+        The criterion [unit of the value].
+    """
     s = _num(std)
     return math.hypot(half_unit, K_SIGMA * (s or 0.0))
 
@@ -189,7 +203,28 @@ def agreement_criterion(half_unit: float, std: Any = None) -> float:
 def magnitude_verdict(diff: float, std: Any, paper: float, half_unit: float, reading: str, unit: str) -> dict:
     """A trend's size against the paper's: this run's difference ``diff`` (σ ``std``, NaN or None when the run
     gives none) vs ``paper`` (a printed difference, or the centre of a reading of the paper's words, of half-width
-    ``half_unit``), with :func:`agreement_criterion`. Units as given [pp or 1]."""
+    ``half_unit``), with :func:`agreement_criterion`. Units as given [pp or 1].
+
+    Parameters
+    ----------
+    diff : float
+        This run's difference [pp or 1].
+    std : float or None
+        Its standard uncertainty [pp or 1]; NaN or None when the run gives none.
+    paper : float
+        The paper's difference, or the centre of the reading [pp or 1].
+    half_unit : float
+        Half-width of the paper's value [pp or 1].
+    reading : str
+        How the paper's value was read from it (shown in the report).
+    unit : str
+        Unit label of the values (``"pp"`` or ``""``).
+
+    Returns
+    -------
+    dict
+        The run's value and σ, the paper's, the reading, the unit, the criterion and ``agrees``.
+    """
     crit = agreement_criterion(half_unit, std)
     d = _num(diff)
     return {"run": d, "run_std": _num(std), "paper": float(paper), "half_unit": float(half_unit), "criterion": crit,
@@ -214,7 +249,30 @@ class Verdicts:
 
     def check(self, what: str, run: Any, paper: Any, std: Any = None, unit: str = "", digits: int = 2,
               half_unit: float | None = None, note: str = "") -> str:
-        """HTML verdict: 'agrees (|Δ| ≤ criterion)' or 'differs by Δ (z σ; criterion c)' (remembered)."""
+        """HTML verdict: 'agrees (|Δ| ≤ criterion)' or 'differs by Δ (z σ; criterion c)' (remembered).
+
+        Parameters
+        ----------
+        what : str
+            What is compared (the label in the list of disagreements).
+        run, paper : float or None
+            This run's value and the paper's [``unit``]; "—" when either is missing.
+        std : float, optional
+            The run's standard uncertainty [``unit``].
+        unit : str
+            Unit label of the values.
+        digits : int
+            Decimals shown.
+        half_unit : float, optional
+            Half-width of the paper's value [``unit``]; None takes half the last printed digit of ``paper``.
+        note : str
+            Added to the disagreement's line.
+
+        Returns
+        -------
+        str
+            HTML of the verdict.
+        """
         r, p = _num(run), _num(paper)
         if r is None or p is None:
             return "—"
@@ -235,7 +293,20 @@ class Verdicts:
 
     def trend(self, name: str, t: dict) -> str:
         """HTML verdict of a trend (:func:`bsdfkit.pipeline.recipe._trends`): 'holds' only with the paper's
-        direction and, where the paper gives one, its size within the criterion (remembered)."""
+        direction and, where the paper gives one, its size within the criterion (remembered).
+
+        Parameters
+        ----------
+        name : str
+            The trend's name (the label in the list of disagreements).
+        t : dict
+            The trend's entry in trace.json (``direction``, ``magnitude``, ...).
+
+        Returns
+        -------
+        str
+            HTML of the verdict.
+        """
         m = t.get("magnitude")
         direction = t.get("direction", t.get("holds"))
         size_ok = m is None or bool(m.get("agrees"))
@@ -1400,6 +1471,18 @@ def write_report(run_dir: str | Path, force: bool = False) -> Path:
     reference), written atomically; an existing report is replaced only with ``force``. Needs
     ``run_dir/summary.json``; every other input (PNG figures, ``trace.json``, ``trace_*.nc`` maps) is used
     when present and said to be missing otherwise.
+
+    Parameters
+    ----------
+    run_dir : str or pathlib.Path
+        Folder of a finished run.
+    force : bool
+        Replace an existing report.
+
+    Returns
+    -------
+    pathlib.Path
+        The report written.
     """
     run_dir = Path(run_dir)
     target = check_writable(run_dir / REPORT_NAME, force)
