@@ -36,6 +36,7 @@ COVERED = [
     "measurement/calibrate.py", "measurement/describe.py", "measurement/instrument.py", "measurement/manifest.py",
     "measurement/raw_scan.py", "measurement/schema.py", "measurement/table.py",
     "models/functions.py", "models/led.py", "models/registry.py",
+    "pipeline/recipe.py", "pipeline/report.py", "pipeline/spectral_comparison.py",
     "plotting/figures.py", "plotting/layout.py", "plotting/maps.py", "plotting/spectra.py",
     "raytrace/effects.py", "raytrace/geometry.py", "raytrace/kernel.py", "raytrace/oracles/numpy_reference.py",
     "raytrace/oracles/radiosity.py", "raytrace/oracles/spectral_budget.py", "raytrace/plate.py",
@@ -43,6 +44,7 @@ COVERED = [
     "raytrace/scene.py", "raytrace/sweep.py", "raytrace/tallies.py", "raytrace/tracer.py",
     "raytrace/spectral.py",
     "reduction/any_sample.py", "reduction/basis.py", "reduction/budget.py", "reduction/colorimetry.py",
+    "reduction/excitation_emission.py",
     "reduction/spectral.py", "reduction/spectrum_metrics.py", "reduction/tis.py", "reduction/disk.py",
     "reduction/hemispherical.py",
     "simulation/truth.py", "simulation/virtual_goniometer.py",
@@ -56,8 +58,6 @@ COVERED = [
 
 # pending: docstrings not yet complete
 PENDING = [
-    "pipeline/recipe.py", "pipeline/report.py", "pipeline/spectral_comparison.py",
-    "reduction/excitation_emission.py",
 ]
 
 # a name's suffix states its unit, which its description must give in brackets

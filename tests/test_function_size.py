@@ -12,11 +12,6 @@ MAX_PARAMETERS = 8  # self and cls not counted
 
 # "module:qualname" -> why this function stays longer or wider than the limits. Keep it short.
 EXCEPTIONS = {
-    # pending: split on another branch
-    "bsdfkit.pipeline.recipe:stage_trace": "pending: split on another branch",
-    "bsdfkit.pipeline.report:_Report.sec_trace": "pending: split on another branch",
-    "bsdfkit.pipeline.spectral_comparison:_summary": "pending: split on another branch",
-    "bsdfkit.reduction.excitation_emission:_model_dataset": "pending: split on another branch",
     # public entry points whose keywords callers pass by name (fit.spectrum, the command line, the pipeline, tests):
     # their bodies are split, a config object would only move the count
     "bsdfkit.fit.least_squares:least_squares": "public signature: data, start, parameters, sigma, mask, options and "

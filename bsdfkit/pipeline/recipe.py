@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -203,7 +203,18 @@ def _ranged(value: Any, path: Path, dotted: str, lo: float, hi: float, lo_open: 
 
 
 def load_recipe(path: str | Path) -> Recipe:
-    """Parse and validate a recipe TOML file (types and ranges of every option, and its trace scene)."""
+    """Parse and validate a recipe TOML file (types and ranges of every option, and its trace scene).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The recipe TOML file; relative paths inside it are resolved against its folder.
+
+    Returns
+    -------
+    Recipe
+        The validated recipe.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError("recipe not found", file=path, expected="a TOML recipe file")
@@ -344,7 +355,18 @@ def _check_ranges(r: Recipe) -> None:
 
 
 def expected_outputs(recipe: Recipe) -> list[str]:
-    """The files a run of ``recipe`` writes (relative to the output folder), known before computing."""
+    """The files a run of ``recipe`` writes (relative to the output folder), known before computing.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        A validated recipe.
+
+    Returns
+    -------
+    list of str
+        Output file names, relative to the output folder.
+    """
     e = recipe.exports
     names = ["scan.nc", "inplane_bsdf.png", "tis.nc", "interaction_tables.json", "module_budget.png"]
     names += [f"exports/{i}_{s}.{EXPORT_SUFFIX[f]}" for i in e.interactions for s in e.sides for f in e.formats]
@@ -393,7 +415,13 @@ class RunState:
 
 
 def stage_ingest(state: RunState) -> None:
-    """Read the raw export, calibrate it, and queue ``scan.nc``."""
+    """Read the raw export, calibrate it, and queue ``scan.nc``.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (its recipe's measurement); the calibrated scan and its summary are added.
+    """
 
     state.scan = calibrate(read_scan(state.recipe.measurement))
     scan = state.scan
@@ -408,7 +436,13 @@ def stage_ingest(state: RunState) -> None:
 
 
 def stage_report(state: RunState) -> None:
-    """Queue the in-plane BSDF figure (Fig. 6 analogue)."""
+    """Queue the in-plane BSDF figure (Fig. 6 analogue).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's figure configuration and wavelength [nm], the calibrated scan).
+    """
 
     opts = state.recipe.report
     fig = in_plane_bsdf_figure(state.scan, opts.figure_config, opts.figure_wavelength_nm)
@@ -416,7 +450,14 @@ def stage_report(state: RunState) -> None:
 
 
 def stage_reductions(state: RunState) -> None:
-    """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget."""
+    """TIS with error bars, the Table-2-style interaction tables, EQE, and the iterative module budget.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[reductions]``, the calibrated scan); the TIS, interaction tables,
+        budgets and their summary are added.
+    """
 
     opts = state.recipe.reductions
     scan = state.scan
@@ -462,6 +503,11 @@ def stage_exports(state: RunState) -> None:
     The tables go into OUT/exports/. Their writer runs with the other outputs (atomic, no clobbering); it
     records, per file, the source TIS (direct integral of the reconstructed hemisphere) and the TIS recomputed
     from the file as read back, and fails the run if they differ by more than the recipe's tolerance.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[exports]``, the calibrated scan); the table writers are queued.
     """
 
     opts = state.recipe.exports
@@ -554,6 +600,24 @@ def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FAC
     k·:data:`MAP_SEED_OFFSET`) and the sub-maps are merged (:func:`bsdfkit.raytrace.tallies.merge_maps`), up to
     ``factor`` × ``rays`` rays in the map. Only the map changes (``map_rays`` says how many rays it holds); LER,
     YBR and the ledger stay those of ``result``. A result without sub-maps, or converged already, is returned as is.
+
+    Parameters
+    ----------
+    scene : Scene
+        The traced scene.
+    result : TraceResult
+        Its trace of ``rays`` rays with seed ``seed``.
+    rays : int
+        Rays per extra trace [-].
+    seed : int
+        Seed of ``result``'s trace.
+    factor : int
+        Most rays in the map, in multiples of ``rays`` [-].
+
+    Returns
+    -------
+    TraceResult
+        ``result`` with the merged map and ``map_rays``, or ``result`` itself.
     """
     conv = result.non_uniformity_converged
     if result.irradiance_parts is None or conv is None or conv["converged"]:
@@ -574,6 +638,18 @@ def incidence_shares(result, measured_deg: tuple[float, float]) -> dict[str, flo
     From the tracer's incidence histogram (power per 90/bins-degree bin, blue and yellow): a bin counts as
     measured when its centre lies in ``measured_deg`` (inclusive). Returns the shares [1] of the total power
     on the plate and the power-weighted mean incidence [deg] of the blue light reaching it.
+
+    Parameters
+    ----------
+    result : TraceResult
+        A trace with an incidence histogram (blue, yellow over incidence bins).
+    measured_deg : tuple of float
+        (first, last) measured incidence [deg].
+
+    Returns
+    -------
+    dict
+        ``measured`` and ``extrapolated`` [-], ``mean_blue_incidence_deg`` [deg]; NaN where nothing reaches the plate.
     """
     hist = np.asarray(result.incidence_histogram, dtype=float)
     centres = (np.arange(hist.shape[1]) + 0.5) * 90.0 / hist.shape[1]
@@ -594,6 +670,12 @@ def stage_trace(state: RunState) -> None:
     a Lambertian LED = FWHM 120°) reuses the device's trace. Each study's maps and incidence histograms are
     saved (``trace_<study>.nc``). Trends of the cylindrical-module paper are checked and reported, not assumed
     (:func:`_trends`).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far: its recipe's ``[trace]`` table (nothing is done without a scene), calibrated scan, TIS
+        and fits. The device trace, the ``trace`` summary, the run lines and the outputs are added to it.
     """
     opts = state.recipe.trace
     if opts.scene is None:
@@ -605,6 +687,31 @@ def stage_trace(state: RunState) -> None:
     scene = with_values(_scene_with_plate(opts.scene, plate),
                         {"tallies.irradiance_map": True, "tallies.map_bins": MAP_STUDY_BINS,
                          "tallies.incidence_histogram": True})
+    traced = _trace_points(state, scene, measured)
+    device, studies = traced.device, traced.studies
+    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured)} | _nu(device)}
+    results["studies"] = studies
+    results["trends"] = _trends(device, studies)
+    results["plate"] = _plate_summary(plate, state.tis, measured, [results["device"]]
+                                      + [r for rs in studies.values() for r in rs])
+    state.summary["trace"] = _trace_summary(results)
+    _queue_trace_outputs(state, plate, traced, results, measured)
+    lines = _trace_lines(opts.rays, device, results, measured)
+    state.summary.setdefault("report_lines", []).extend(lines)
+
+
+class _Traced(NamedTuple):
+    """The traces of :func:`stage_trace`: the device's and every study point's."""
+
+    device: Any                                # the device's TraceResult (map converged where rays allow)
+    studies: dict[str, list[dict]]             # study → one JSON row per study value
+    datasets: dict[str, list[xr.Dataset]]      # study → one trace dataset per study value
+    blue_on_plate: dict[str, np.ndarray]       # height label → blue incidence histogram on the plate [W per bin]
+
+
+def _trace_points(state: RunState, scene, measured: tuple[float, float]) -> _Traced:
+    """Trace the device (stored as ``state.device``) and every study point, reporting progress per trace."""
+    opts = state.recipe.trace
     points = [(study, v) for study in STUDIES for v in getattr(opts, study) if not _is_device_value(scene, study, v)]
     total = 1 + len(points)
     state.progress("trace", 0, total)
@@ -612,10 +719,7 @@ def stage_trace(state: RunState) -> None:
     done = 1
     state.progress("trace", done, total)
     state.device = device
-    results = {"device": device.to_dict() | {"plate_incidence": incidence_shares(device, measured)} | _nu(device)}
-    studies: dict[str, list[dict]] = {}
-    datasets: dict[str, list[xr.Dataset]] = {}
-    blue_on_plate: dict[str, np.ndarray] = {}
+    traced = _Traced(device, {}, {}, {})
     for study in STUDIES:
         keys, dim = STUDIES[study]
         for value in getattr(opts, study):
@@ -631,54 +735,71 @@ def stage_trace(state: RunState) -> None:
                    "YBR_std": r.std_err["YBR"], **_nu(r), "ledger_error": r.ledger_error,
                    "clamped_share": r.clamped_interactions / r.plate_interactions if r.plate_interactions else 0.0,
                    "plate_incidence": incidence_shares(r, measured), "same_trace_as_device": same}
-            studies.setdefault(study, []).append(row)
-            datasets.setdefault(study, []).append(r.to_dataset().expand_dims({dim: [value]}))
+            traced.studies.setdefault(study, []).append(row)
+            traced.datasets.setdefault(study, []).append(r.to_dataset().expand_dims({dim: [value]}))
             if study == "height_mm" and r.incidence_histogram is not None:
-                blue_on_plate[f"h = {value:g} mm" + (" (device)" if same else "")] = r.incidence_histogram[0]
-    results["studies"] = studies
-    results["trends"] = _trends(device, studies)
-    rows = [results["device"]] + [r for rs in studies.values() for r in rs]
+                traced.blue_on_plate[f"h = {value:g} mm" + (" (device)" if same else "")] = r.incidence_histogram[0]
+    return traced
+
+
+def _plate_summary(plate, tis: xr.Dataset, measured: tuple[float, float], rows: list[dict]) -> dict:
+    """The ``plate`` entry of trace.json: its incidences, clamped and extrapolated shares over ``rows`` (the
+    device's first) and its TIS per channel."""
     worst_clamped = max(r["clamped_share"] if "clamped_share" in r else
                         r["clamped_incidences"]["fraction_of_plate_interactions"] for r in rows)
     worst_extra = max(rows, key=lambda r: r["plate_incidence"]["extrapolated"])
-    results["plate"] = {
-        "measured_incidences_deg": [float(t) for t in state.tis["theta_i"].values],
+    return {
+        "measured_incidences_deg": [float(t) for t in tis["theta_i"].values],
         "grid_deg": list(plate.theta_i_deg), "notes": plate.notes,
         "extrapolated_incidences_deg": [t for t in plate.theta_i_deg if not measured[0] <= t <= measured[1]],
         "clamped_share_max": worst_clamped,
-        "device_extrapolated_power_share": results["device"]["plate_incidence"]["extrapolated"],
+        "device_extrapolated_power_share": rows[0]["plate_incidence"]["extrapolated"],
         "extrapolated_power_share_max": worst_extra["plate_incidence"]["extrapolated"],
         "extrapolated_power_share_max_at": worst_extra.get("values", "device"),
         "tis": {c: list(plate.channel(c).tis) for c in CHANNELS}}
-    state.summary["trace"] = {"device": {k: results["device"][k] for k in (
-                                  "LER", "YBR", "non_uniformity", "non_uniformity_bins", "non_uniformity_converged",
-                                  "non_uniformity_change", "non_uniformity_change_std", "non_uniformity_symmetric",
-                                  "non_uniformity_map", "ledger_error", "rays", "elapsed_s", "interactions_per_s")},
-                              "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")}
-                              | {"non_uniformity": results["device"]["non_uniformity_std"]},
-                              "YBR_definition": RAY_YBR_DEFINITION,
-                              "plate": {k: results["plate"][k] for k in (
-                                  "measured_incidences_deg", "extrapolated_incidences_deg", "clamped_share_max",
-                                  "device_extrapolated_power_share", "extrapolated_power_share_max")},
-                              "trends": results["trends"]}
+
+
+def _trace_summary(results: dict) -> dict:
+    """The run summary's ``trace`` entry: the device's numbers, the plate's shares and the trends."""
+    return {"device": {k: results["device"][k] for k in (
+                "LER", "YBR", "non_uniformity", "non_uniformity_bins", "non_uniformity_converged",
+                "non_uniformity_change", "non_uniformity_change_std", "non_uniformity_symmetric",
+                "non_uniformity_map", "ledger_error", "rays", "elapsed_s", "interactions_per_s")},
+            "device_std_err": {k: results["device"]["std_err"][k] for k in ("LER", "YBR")}
+            | {"non_uniformity": results["device"]["non_uniformity_std"]},
+            "YBR_definition": RAY_YBR_DEFINITION,
+            "plate": {k: results["plate"][k] for k in (
+                "measured_incidences_deg", "extrapolated_incidences_deg", "clamped_share_max",
+                "device_extrapolated_power_share", "extrapolated_power_share_max")},
+            "trends": results["trends"]}
+
+
+def _queue_trace_outputs(state: RunState, plate, traced: _Traced, results: dict,
+                         measured: tuple[float, float]) -> None:
+    """Queue trace.json, the traces' netCDF files and the studies' and incidences' figures."""
+    device = traced.device
     state.outputs["trace.json"] = lambda p, force: write_text(p, dumps(results), force)
     device_ds = device.to_dataset()
     state.outputs["trace_device.nc"] = lambda p, force: netcdf.save(device_ds, p, force)
-    for study, parts in datasets.items():
+    for study, parts in traced.datasets.items():
         ds = xr.concat(parts, dim=STUDIES[study][1], combine_attrs="override")
         state.outputs[f"trace_{study}.nc"] = lambda p, force, ds=ds: netcdf.save(ds, p, force)
-    fig = trace_studies_figure(device, studies, _paper_study_points())
+    fig = trace_studies_figure(device, traced.studies, _paper_study_points())
     state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
     tis = state.tis
     meas = {f"{i}_{side}": (tis["theta_i"].values, tis["tis"].sel(interaction=i, side=side).values,
                             tis["tis_std"].sel(interaction=i, side=side).values)
             for i in ("bibs", "biys") for side in ("reflection", "transmission")}
-    inc_fig = plate_incidence_figure(blue_on_plate or {"device": device.incidence_histogram[0]}, measured,
+    inc_fig = plate_incidence_figure(traced.blue_on_plate or {"device": device.incidence_histogram[0]}, measured,
                                      plate.theta_i_deg, results["plate"]["tis"], meas,
                                      title=f"plate {plate.name}: incidences of the traces and the plate's TIS")
     state.outputs["trace_incidence.png"] = lambda p, force: save_figure(inc_fig, p, force)
-    dev = results["device"]
-    lines = [f"module trace ({opts.rays} rays, plate from this run): "
+
+
+def _trace_lines(rays: int, device, results: dict, measured: tuple[float, float]) -> list[str]:
+    """The run log's lines for the module trace: the device's numbers, the plate's incidences and the trends."""
+    dev, plate = results["device"], results["plate"]
+    lines = [f"module trace ({rays} rays, plate from this run): "
              f"LER {device.LER:.4f} ± {device.std_err['LER']:.4f}, "
              f"YBR {device.YBR:.2f} ± {device.std_err['YBR']:.2f} (yellow / blue extracted ray power), "
              f"non-uniformity {dev['non_uniformity']:.3f} ± {dev['non_uniformity_std']:.3f} "
@@ -689,12 +810,12 @@ def stage_trace(state: RunState) -> None:
              f"{device.non_uniformity_map:.3f}), "
              f"ledger error {device.ledger_error:.1e}",
              f"  plate incidences: measured {measured[0]:g}-{measured[1]:g} deg, model-extrapolated elsewhere; "
-             f"clamped {100 * worst_clamped:.1f} % of plate interactions (largest of all traces); power on "
-             f"extrapolated incidences {100 * results['plate']['device_extrapolated_power_share']:.1f} % (device), "
-             f"at most {100 * results['plate']['extrapolated_power_share_max']:.1f} %"]
+             f"clamped {100 * plate['clamped_share_max']:.1f} % of plate interactions (largest of all traces); power "
+             f"on extrapolated incidences {100 * plate['device_extrapolated_power_share']:.1f} % (device), "
+             f"at most {100 * plate['extrapolated_power_share_max']:.1f} %"]
     lines += [f"  trend {name}: {'holds' if t['holds'] else 'DOES NOT HOLD'} ({_trend_size(t)}{t['detail']})"
               for name, t in results["trends"].items()]
-    state.summary.setdefault("report_lines", []).extend(lines)
+    return lines
 
 
 def _trend_size(t: dict) -> str:
@@ -880,7 +1001,14 @@ def _finish_trends(out: dict[str, dict], spec: list[dict]) -> None:
 
 def stage_fits(state: RunState) -> None:
     """Lobe fits of every elastic interaction and side (aperture-averaged), a Lambert fit of the converted light,
-    and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper)."""
+    and an emission-spectrum fit of the measured converted light (eq. (3) of the cylindrical-module paper).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[fits]``, the calibrated scan and TIS); the fits, emission fit, their
+        summary and outputs are added.
+    """
 
     opts = state.recipe.fits
     scan, tis = state.scan, state.tis
@@ -942,7 +1070,14 @@ def stage_fits(state: RunState) -> None:
 
 def stage_spectrum(state: RunState) -> None:
     """The module's absolute spectrum from the two-wavelength result (§4.2, Fig. 7 of the cylindrical-module
-    paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR."""
+    paper) and its colour (colour-science): x, y, CCT, Duv, luminous efficacy of radiation, YBR.
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the emission fit; the device trace's extracted flux [W], else the recipe's
+        ``fits.fallback_flux_W``); the module spectrum [W/nm], its colour and outputs are added.
+    """
 
     opts = state.recipe.fits
     if not state.emission:
@@ -983,7 +1118,14 @@ def stage_spectrum(state: RunState) -> None:
 
 def stage_spectral_comparison(state: RunState) -> None:
     """Both tracer modes on one plate from the ``[spectral]`` measurement (issue 17; module
-    :mod:`bsdfkit.pipeline.spectral_comparison`)."""
+    :mod:`bsdfkit.pipeline.spectral_comparison`).
+
+    Parameters
+    ----------
+    state : RunState
+        The run so far (the recipe's ``[spectral]``; nothing is done without one); the comparison's summary,
+        lines and outputs are added.
+    """
     opts = state.recipe.spectral
     if opts is None:
         return
@@ -1012,6 +1154,24 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
 
     ``log(message)`` receives one line per stage; ``progress(task, done, total)`` is called as the stages
     (task ``"stages"``) and the traces of the trace stage (task ``"trace"``) complete.
+
+    Parameters
+    ----------
+    recipe : Recipe or str or pathlib.Path
+        A recipe, or its TOML file.
+    out_dir : str or pathlib.Path
+        Output folder.
+    force : bool
+        Overwrite existing outputs.
+    log : callable
+        ``log(message)``, called with one line per stage.
+    progress : callable, optional
+        ``progress(task, done, total)``, called as stages and traces complete.
+
+    Returns
+    -------
+    dict
+        The run summary (as written to summary.json).
     """
     recipe = recipe if isinstance(recipe, Recipe) else load_recipe(recipe)
     out_dir = Path(out_dir)

@@ -181,7 +181,21 @@ READINGS = {"slightly_pp": 2.0, "slightly_relative": 2.0 / 61.0, "negligible_pp"
 
 def agreement_criterion(half_unit: float, std: Any = None) -> float:
     """Largest |run − paper| that agrees: sqrt(half_unit² + (K_SIGMA σ)²), σ = 0 when the run gives none [unit of
-    the value]."""
+    the value].
+
+    Parameters
+    ----------
+    half_unit : float
+        Half the last printed digit of the paper's value, or the half-width of a reading of its words [unit of the
+        value].
+    std : float, optional
+        The run's standard uncertainty [unit of the value]; None or NaN counts as 0.
+
+    Returns
+    -------
+    float
+        The criterion [unit of the value].
+    """
     s = _num(std)
     return math.hypot(half_unit, K_SIGMA * (s or 0.0))
 
@@ -189,7 +203,28 @@ def agreement_criterion(half_unit: float, std: Any = None) -> float:
 def magnitude_verdict(diff: float, std: Any, paper: float, half_unit: float, reading: str, unit: str) -> dict:
     """A trend's size against the paper's: this run's difference ``diff`` (σ ``std``, NaN or None when the run
     gives none) vs ``paper`` (a printed difference, or the centre of a reading of the paper's words, of half-width
-    ``half_unit``), with :func:`agreement_criterion`. Units as given [pp or 1]."""
+    ``half_unit``), with :func:`agreement_criterion`. Units as given [pp or 1].
+
+    Parameters
+    ----------
+    diff : float
+        This run's difference [pp or 1].
+    std : float or None
+        Its standard uncertainty [pp or 1]; NaN or None when the run gives none.
+    paper : float
+        The paper's difference, or the centre of the reading [pp or 1].
+    half_unit : float
+        Half-width of the paper's value [pp or 1].
+    reading : str
+        How the paper's value was read from it (shown in the report).
+    unit : str
+        Unit label of the values (``"pp"`` or ``""``).
+
+    Returns
+    -------
+    dict
+        The run's value and σ, the paper's, the reading, the unit, the criterion and ``agrees``.
+    """
     crit = agreement_criterion(half_unit, std)
     d = _num(diff)
     return {"run": d, "run_std": _num(std), "paper": float(paper), "half_unit": float(half_unit), "criterion": crit,
@@ -214,7 +249,30 @@ class Verdicts:
 
     def check(self, what: str, run: Any, paper: Any, std: Any = None, unit: str = "", digits: int = 2,
               half_unit: float | None = None, note: str = "") -> str:
-        """HTML verdict: 'agrees (|Δ| ≤ criterion)' or 'differs by Δ (z σ; criterion c)' (remembered)."""
+        """HTML verdict: 'agrees (|Δ| ≤ criterion)' or 'differs by Δ (z σ; criterion c)' (remembered).
+
+        Parameters
+        ----------
+        what : str
+            What is compared (the label in the list of disagreements).
+        run, paper : float or None
+            This run's value and the paper's [``unit``]; "—" when either is missing.
+        std : float, optional
+            The run's standard uncertainty [``unit``].
+        unit : str
+            Unit label of the values.
+        digits : int
+            Decimals shown.
+        half_unit : float, optional
+            Half-width of the paper's value [``unit``]; None takes half the last printed digit of ``paper``.
+        note : str
+            Added to the disagreement's line.
+
+        Returns
+        -------
+        str
+            HTML of the verdict.
+        """
         r, p = _num(run), _num(paper)
         if r is None or p is None:
             return "—"
@@ -235,7 +293,20 @@ class Verdicts:
 
     def trend(self, name: str, t: dict) -> str:
         """HTML verdict of a trend (:func:`bsdfkit.pipeline.recipe._trends`): 'holds' only with the paper's
-        direction and, where the paper gives one, its size within the criterion (remembered)."""
+        direction and, where the paper gives one, its size within the criterion (remembered).
+
+        Parameters
+        ----------
+        name : str
+            The trend's name (the label in the list of disagreements).
+        t : dict
+            The trend's entry in trace.json (``direction``, ``magnitude``, ...).
+
+        Returns
+        -------
+        str
+            HTML of the verdict.
+        """
         m = t.get("magnitude")
         direction = t.get("direction", t.get("holds"))
         size_ok = m is None or bool(m.get("agrees"))
@@ -813,15 +884,32 @@ class _Report:
         return _section("fits", "BSDF and emission fits", body)
 
     def sec_trace(self) -> str:
+        """The module-trace section: Table 1's flux split, the device, the trends and the paper's study points."""
         tr = self.s.get("trace") or {}
         dev = tr.get("device") or {}
         se = tr.get("device_std_err") or {}
         if not dev:
             return _section("trace", "Module trace ([Cylindrical-module])", _missing("No trace in summary.json."))
-        v = self.v
         cm = self.cm
-        defs = cm["definitions_section5_1"]
-        t1 = cm["table1_flux_W"]
+        # the verdicts are booked in the order of the page: Table 1, the device, the study points, the trends
+        t1tab, t1note = self._table1_flux(se)
+        devtab = self._device_table(dev, se)
+        ptab = self._study_point_table()
+        ttab = self.trend_table(tr.get("trends") or {})
+        first = cm["first_interaction_percent_section4"]
+        body = (_pair(devtab, t1tab + t1note) + self.run_png("trace_studies.png")
+                + f'<div class="wide">{ttab}</div>' + f'<div class="wide">{ptab}</div>'
+                + f'<p class="note">[Cylindrical-module] §4: after the first plate interaction {first["forward"]} % '
+                  f"forward and {first['backward']} % backward; {first['extracted_total']} % extracted in total. The "
+                  "paper's device: r = 35 mm, h = 43 mm, wall ρ = 0.985 with 1.5 % specular, four Lambertian LEDs. "
+                  "Study points equal to the device (h = 43 mm; FWHM 120°, which is a Lambertian LED's) are the "
+                  "device's trace.</p>")
+        return _section("trace", "Module trace ([Cylindrical-module])", body)
+
+    def _table1_flux(self, se: dict) -> tuple[str, str]:
+        """The extracted flux beside Table 1 of [Cylindrical-module] and its note with the yellow/blue checks."""
+        v = self.v
+        t1 = self.cm["table1_flux_W"]
         ms = self.s.get("module_spectrum") or {}
         flux = ms.get("flux_W") or (self.trace_json.get("device") or {}).get("extracted") or {}
         b, y = _num(flux.get("blue")), _num(flux.get("yellow"))
@@ -847,7 +935,13 @@ class _Report:
                        + v.check("yellow/blue vs Table 1 measurement", y / b,
                                  t1["measurement"]["yellow"] / t1["measurement"]["blue"], se.get("YBR"),
                                  half_unit=0.005, note="ratio of the printed Table 1 fluxes") + ".</p>")
-        extracted = cm["first_interaction_percent_section4"]["extracted_total"]
+        return t1tab, t1note
+
+    def _device_table(self, dev: dict, se: dict) -> str:
+        """The traced device's LER (checked against §4's 53 %), YBR, non-uniformity, ledger error and rays."""
+        v = self.v
+        defs = self.cm["definitions_section5_1"]
+        extracted = self.cm["first_interaction_percent_section4"]["extracted_total"]
         ler = _num(dev.get("LER"))
         ler_se = _num(se.get("LER"))
         dev_rows = [
@@ -864,10 +958,13 @@ class _Report:
              "|emitted − extracted − absorbed − terminated| / emitted"],
             ["rays", _esc(dev.get("rays")), f"in {_f(dev.get('elapsed_s'), 1)} s"],
         ]
-        devtab = _table(["device", "this run (± 1σ)", "definition"], dev_rows, "The traced device", text_cols=[2])
-        points = self.study_points()
+        return _table(["device", "this run (± 1σ)", "definition"], dev_rows, "The traced device", text_cols=[2])
+
+    def _study_point_table(self) -> str:
+        """The study points the paper prints an LER or YBR for, each checked against this run's."""
+        v = self.v
         p_rows = []
-        for p in points:
+        for p in self.study_points():
             r = p["run"]
             for q, unit, scale in (("LER", "%", 100.0), ("YBR", "", 1.0)):  # non-uniformity: the maps' section
                 if p["paper"].get(q) is None:
@@ -884,21 +981,12 @@ class _Report:
                                v.check(f"{p['short']} {q}", None if run_val is None else run_val * scale, p["paper"][q],
                                        None if _num(std) is None else _num(std) * scale, unit, 1),
                                _f((r.get("plate_incidence") or {}).get("extrapolated"), 0, 100.0) + " %"])
-        ptab = _table(["study point", "quantity", "this run (± 1σ)", "paper", "where in the paper", "comparison",
+        if not p_rows:
+            return _missing("trace.json with the studies is not in the run folder.")
+        return _table(["study point", "quantity", "this run (± 1σ)", "paper", "where in the paper", "comparison",
                        "plate power on extrapolated incidences"],
                       p_rows, "Study points the paper prints an LER or YBR for (non-uniformity: see the irradiance "
-                              "maps)", text_cols=[1, 4]) if p_rows else _missing(
-            "trace.json with the studies is not in the run folder.")
-        ttab = self.trend_table(tr.get("trends") or {})
-        first = cm["first_interaction_percent_section4"]
-        body = (_pair(devtab, t1tab + t1note) + self.run_png("trace_studies.png")
-                + f'<div class="wide">{ttab}</div>' + f'<div class="wide">{ptab}</div>'
-                + f'<p class="note">[Cylindrical-module] §4: after the first plate interaction {first["forward"]} % '
-                  f"forward and {first['backward']} % backward; {first['extracted_total']} % extracted in total. The "
-                  "paper's device: r = 35 mm, h = 43 mm, wall ρ = 0.985 with 1.5 % specular, four Lambertian LEDs. "
-                  "Study points equal to the device (h = 43 mm; FWHM 120°, which is a Lambertian LED's) are the "
-                  "device's trace.</p>")
-        return _section("trace", "Module trace ([Cylindrical-module])", body)
+                              "maps)", text_cols=[1, 4])
 
     def trend_table(self, trends: dict) -> str:
         """The §5 trends: the paper's size (or the reading of its words), this run's with σ, the criterion, the
@@ -1383,6 +1471,18 @@ def write_report(run_dir: str | Path, force: bool = False) -> Path:
     reference), written atomically; an existing report is replaced only with ``force``. Needs
     ``run_dir/summary.json``; every other input (PNG figures, ``trace.json``, ``trace_*.nc`` maps) is used
     when present and said to be missing otherwise.
+
+    Parameters
+    ----------
+    run_dir : str or pathlib.Path
+        Folder of a finished run.
+    force : bool
+        Replace an existing report.
+
+    Returns
+    -------
+    pathlib.Path
+        The report written.
     """
     run_dir = Path(run_dir)
     target = check_writable(run_dir / REPORT_NAME, force)

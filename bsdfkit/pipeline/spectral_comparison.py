@@ -144,9 +144,11 @@ class SpectralComparison:
 
     @property
     def difference_std(self) -> np.ndarray:
+        """Standard error of :attr:`difference` [W/nm] (the traces are independent)."""
         return np.hypot(self.two_wavelength_std, self.spectral_std)
 
     def to_csv(self) -> str:
+        """The spectra, their σ and their difference as CSV text, one row per bin (wavelength [nm], W/nm)."""
         rows = zip(self.wavelength_nm, self.spectral, self.spectral_std, self.two_wavelength, self.two_wavelength_std,
                    self.difference, self.difference_std)
         return ("wavelength_nm,spectral_W_per_nm,spectral_std_W_per_nm,two_wavelength_W_per_nm,"
@@ -160,6 +162,20 @@ def emission_shape(scan: xr.Dataset, wavelength_nm: np.ndarray, incidence_deg: f
     The measured converted light of the blue configuration at ``incidence_deg``, both hemispheres
     (:func:`bsdfkit.reduction.tis.hemispherical_spectrum`), above the blue filter's upper edge (below it the
     elastic pump dominates), negative noise set to 0, normalised to Σ shape·Δλ = 1.
+
+    Parameters
+    ----------
+    scan : xarray.Dataset
+        Calibrated excitation-emission scan with a ``blue`` configuration.
+    wavelength_nm : numpy.ndarray
+        Uniform bin centres [nm].
+    incidence_deg : float
+        Measured incidence the shape is taken at [deg].
+
+    Returns
+    -------
+    numpy.ndarray
+        The shape on the bins [1/nm].
     """
     density = sum(angular.hemispherical_spectrum(scan, "blue", incidence_deg, side) for side in SIDES)
     values = np.where(density["wavelength"].values > EXCITATION_BAND_NM[1], np.clip(density.values, 0.0, None), 0.0)
@@ -180,6 +196,7 @@ def _at_incidences(scan: xr.Dataset, incidence_deg: tuple[float, ...], source: P
 
 
 def _in_band(wavelength_nm: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """Which bins [nm] lie inside ``band`` (edges included)."""
     return (wavelength_nm >= band[0]) & (wavelength_nm <= band[1])
 
 
@@ -264,6 +281,18 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
 
     ``scene_with_plate(path, plate)`` returns the scene at ``path`` with its phosphor top's plate replaced (the
     recipe's :func:`bsdfkit.pipeline.recipe._scene_with_plate`). See the module docstring for what is computed.
+
+    Parameters
+    ----------
+    options : SpectralComparisonOptions
+        The recipe's ``[spectral]`` table.
+    scene_with_plate : callable
+        ``(path, plate) -> Scene``, the device scene with its phosphor top's plate replaced.
+
+    Returns
+    -------
+    SpectralComparison
+        Both module spectra on the spectral trace's bins [nm] in W/nm and the JSON-ready summary.
     """
     clock = _Clock()
     measured, plate, model_ds, model = _plates(options, clock)
@@ -290,27 +319,18 @@ def compare_tracer_modes(options: SpectralComparisonOptions,
     ablated = ablations(options, two_scene, spec_scene, model_ds, model, recon, clock,
                         widths={"two_wavelength": emission_width(two.chunk), "spectral": emission_width(spec.chunk)})
     shares = anti_stokes_shares(model, plate, options.temperature_K)
-    summary = _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, clock.seconds)
+    results = {"bands": bands, "direction_check": _direction_check(bands), "ablations": ablated,
+               "two_wavelength": _two_wavelength_summary(two, recon, sr),
+               "spectral": _spectral_summary(spec, options.temperature_K, shares)}
+    summary = _summary(options, leds, plate, sr, results, clock.seconds)
     return SpectralComparison(lam, sr.spectrum_W_per_nm, sr.spectrum_std_err, *recon.spectrum(), summary)
 
 
-def _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, seconds) -> dict:
-    """The stage's JSON-ready summary (see the module docstring)."""
-    sr = spec.spectral
+def _summary(options: SpectralComparisonOptions, leds, plate: PhosphorPlate, sr, results: dict,
+             seconds: dict[str, float]) -> dict:
+    """The stage's JSON-ready summary (see the module docstring); ``results`` holds its bands, direction check,
+    ablations and both modes' entries, in that order."""
     lam, step = sr.wavelength_nm, sr.step_nm
-    over = bands["near_pump"]["relative_difference"] > 0
-    under = bands["yellow"]["relative_difference"] < 0
-    # the direction holds only where no sub-band with a paper direction goes against it beyond its σ (issue #27:
-    # the 460-500 nm headline must not hide the 465-475 nm band the paper names)
-    against = [k for k, b in bands.items() if b["contradicts_paper"]]
-    blue2, blue2_std = recon.band(MODULE_BLUE_BAND_NM)
-    yellow2, yellow2_std = recon.band(MODULE_YELLOW_BAND_NM)
-    spectrum2 = recon.spectrum()[0]
-
-    def efficacy(values: np.ndarray, name: str) -> float:
-        return luminous_efficacy_of_radiation(SpectralDistribution(dict(zip(lam.tolist(), values.tolist())),
-                                                                   name=name))
-
     return {
         "measurement": str(options.measurement),
         "scene": str(options.scene),
@@ -322,36 +342,77 @@ def _summary(options, leds, plate, two, spec, recon, bands, ablated, shares, sec
                            f" deg, both hemispheres, above {EXCITATION_BAND_NM[1]:g} nm, unit integral"),
         "bins_nm": [float(lam[0]), float(lam[-1]), step],
         "plate_incidences_deg": list(plate.theta_i_deg),
-        "bands": bands,
-        "direction_check": {"observation": PAPER_OBSERVATION, "near_pump_overestimated": bool(over),
-                            "yellow_underestimated": bool(under), "holds": bool(over and under and not against),
-                            "contradicting_bands": against},
-        "ablations": ablated,
-        "two_wavelength": {
-            "extracted_W": dict(two.extracted), "std_err_W": {"blue": recon.blue_se, "yellow": recon.yellow_se},
-            "LER": two.LER, "LER_std": two.std_err["LER"],
-            "YBR_rays": two.YBR, "YBR_rays_std": two.std_err["YBR"], "YBR_rays_definition": RAY_YBR_DEFINITION,
-            "YBR_spectrum": yellow2 / blue2,
-            "YBR_spectrum_std": yellow2 / blue2 * math.hypot(yellow2_std / yellow2, blue2_std / blue2),
-            "YBR_spectrum_definition": SPECTRAL_YBR_DEFINITION.replace("spectral mode", "reconstructed spectrum"),
-            "luminous_efficacy_lm_per_W": efficacy(spectrum2, "two-wavelength module spectrum"),
-            "spectrum_integral_W": float(spectrum2.sum() * step), "ledger_error": two.ledger_error},
-        "spectral": {
-            "extracted_W": dict(spec.extracted), "LER": spec.LER, "LER_std": spec.std_err["LER"],
-            "YBR": spec.YBR, "YBR_std": spec.std_err["YBR"], "YBR_definition": SPECTRAL_YBR_DEFINITION,
-            "luminous_efficacy_lm_per_W": efficacy(sr.spectrum_W_per_nm, "spectral-mode module spectrum"),
-            "spectrum_integral_W": float(sr.spectrum_W_per_nm.sum() * step), "ledger": sr.ledger,
-            "photon_capped_cells": len(sr.capped), "extrapolated_bins_nm": sr.to_dict()["extrapolated_bins_nm"],
-            "plate_temperature_K": options.temperature_K, "anti_stokes_share": shares},
+        **results,
         "LER_definition": "extracted / emitted LED power",
         "stage_seconds": seconds,
     }
 
 
+def _direction_check(bands: dict[str, dict]) -> dict:
+    """The §4.2 direction check of the band rows: near-pump over, yellow under, no sub-band against it."""
+    over = bands["near_pump"]["relative_difference"] > 0
+    under = bands["yellow"]["relative_difference"] < 0
+    # the direction holds only where no sub-band with a paper direction goes against it beyond its σ (issue #27:
+    # the 460-500 nm headline must not hide the 465-475 nm band the paper names)
+    against = [k for k, b in bands.items() if b["contradicts_paper"]]
+    return {"observation": PAPER_OBSERVATION, "near_pump_overestimated": bool(over),
+            "yellow_underestimated": bool(under), "holds": bool(over and under and not against),
+            "contradicting_bands": against}
+
+
+def _efficacy(lam: np.ndarray, values: np.ndarray, name: str) -> float:
+    """Luminous efficacy of radiation [lm/W] of a spectrum on the bins ``lam`` [nm]."""
+    return luminous_efficacy_of_radiation(SpectralDistribution(dict(zip(lam.tolist(), values.tolist())), name=name))
+
+
+def _two_wavelength_summary(two, recon: _Reconstruction, sr) -> dict:
+    """The summary's ``two_wavelength`` entry: the trace's powers and ratios and its reconstructed spectrum's."""
+    blue2, blue2_std = recon.band(MODULE_BLUE_BAND_NM)
+    yellow2, yellow2_std = recon.band(MODULE_YELLOW_BAND_NM)
+    spectrum2 = recon.spectrum()[0]
+    return {
+        "extracted_W": dict(two.extracted), "std_err_W": {"blue": recon.blue_se, "yellow": recon.yellow_se},
+        "LER": two.LER, "LER_std": two.std_err["LER"],
+        "YBR_rays": two.YBR, "YBR_rays_std": two.std_err["YBR"], "YBR_rays_definition": RAY_YBR_DEFINITION,
+        "YBR_spectrum": yellow2 / blue2,
+        "YBR_spectrum_std": yellow2 / blue2 * math.hypot(yellow2_std / yellow2, blue2_std / blue2),
+        "YBR_spectrum_definition": SPECTRAL_YBR_DEFINITION.replace("spectral mode", "reconstructed spectrum"),
+        "luminous_efficacy_lm_per_W": _efficacy(sr.wavelength_nm, spectrum2, "two-wavelength module spectrum"),
+        "spectrum_integral_W": float(spectrum2.sum() * sr.step_nm), "ledger_error": two.ledger_error}
+
+
+def _spectral_summary(spec, temperature_K: float, shares: dict) -> dict:
+    """The summary's ``spectral`` entry: the spectral trace's powers, ratios, ledgers and anti-Stokes shares."""
+    sr = spec.spectral
+    return {
+        "extracted_W": dict(spec.extracted), "LER": spec.LER, "LER_std": spec.std_err["LER"],
+        "YBR": spec.YBR, "YBR_std": spec.std_err["YBR"], "YBR_definition": SPECTRAL_YBR_DEFINITION,
+        "luminous_efficacy_lm_per_W": _efficacy(sr.wavelength_nm, sr.spectrum_W_per_nm,
+                                                "spectral-mode module spectrum"),
+        "spectrum_integral_W": float(sr.spectrum_W_per_nm.sum() * sr.step_nm), "ledger": sr.ledger,
+        "photon_capped_cells": len(sr.capped), "extrapolated_bins_nm": sr.to_dict()["extrapolated_bins_nm"],
+        "plate_temperature_K": temperature_K, "anti_stokes_share": shares}
+
+
 def anti_stokes_shares(model: SpectralPlateModel, plate: PhosphorPlate | None, temperature_K: float) -> dict:
     """Share of converted photons that leave at a shorter wavelength than they were absorbed at, per excitation
     wavelength of :data:`ANTI_STOKES_REPORTED_NM` (nearest bin): the data's emission rows (``data``) and the
-    conditional rows the tracer samples at ``temperature_K`` [K] (``conditional``)."""
+    conditional rows the tracer samples at ``temperature_K`` [K] (``conditional``).
+
+    Parameters
+    ----------
+    model : SpectralPlateModel
+        The tracer's spectral plate model.
+    plate : PhosphorPlate or None
+        Plate whose bins the model is put on (None: the model's own).
+    temperature_K : float
+        Plate temperature of the thermal tail [K].
+
+    Returns
+    -------
+    dict
+        ``excitation_nm`` [nm], ``data`` and ``conditional`` shares [-] and ``temperature_K`` [K].
+    """
     _, _, pdf = model_on_bins(model, plate)
     lam = model.emission_nm
     data, cond = anti_stokes_share(pdf), anti_stokes_share(conditional_emission_pdf(pdf, lam, temperature_K))
@@ -383,6 +444,20 @@ def ablated_model(model: SpectralPlateModel, kind: str, above_nm: float = ABLATI
     ``"conversion"``: nothing converts (the photons it converted are absorbed); ``"reabsorption"``: the plate
     does not absorb its own light — the photons it converted are scattered elastically instead, on the same side
     (its other losses are kept).
+
+    Parameters
+    ----------
+    model : SpectralPlateModel
+        The tracer's spectral plate model.
+    kind : str
+        ``"conversion"`` or ``"reabsorption"``.
+    above_nm : float
+        Excitation wavelength above which the cause is off [nm].
+
+    Returns
+    -------
+    SpectralPlateModel
+        The ablated model (no capped cells).
     """
     m = _with_excitations(model, (above_nm, above_nm + 1.0))
     off = (m.excitation_nm > above_nm)[None, None, :]
@@ -401,7 +476,23 @@ def ablated_model(model: SpectralPlateModel, kind: str, above_nm: float = ABLATI
 def led_averaged_plate(plate: PhosphorPlate, model_ds: xr.Dataset, led_spectrum) -> PhosphorPlate:
     """The two-wavelength plate with its pump channels (bibs, biys) scaled at every incidence so that at the
     model's incidence they equal the spectral model's TIS averaged over the LED spectrum instead of the blue
-    filter's (biys: converted light in :data:`~bsdfkit.core.conventions.CONVERSION_BAND_NM`, as measured)."""
+    filter's (biys: converted light in :data:`~bsdfkit.core.conventions.CONVERSION_BAND_NM`, as measured).
+
+    Parameters
+    ----------
+    plate : PhosphorPlate
+        The two-wavelength plate.
+    model_ds : xarray.Dataset
+        Plate spectral model dataset (:func:`~bsdfkit.reduction.excitation_emission.plate_spectral_model`); its
+        first incidence [deg] is where the TIS are matched.
+    led_spectrum : tuple of array_like
+        (wavelength [nm], relative spectral power [-]) of the LEDs.
+
+    Returns
+    -------
+    PhosphorPlate
+        The plate with its bibs and biys TIS [-] rescaled.
+    """
     wl, values = led_spectrum
     spectrum = xr.DataArray(np.asarray(values, dtype=np.float64), dims=["wavelength"],
                             coords={"wavelength": np.asarray(wl, dtype=np.float64)})
@@ -432,7 +523,30 @@ def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset
     ``reference``: both modes as in the main job; ``conversion`` / ``reabsorption``: the spectral plate without
     conversion / without re-absorption above :data:`ABLATION_ABOVE_NM` (:func:`ablated_model`); ``led_spectrum``:
     the two-wavelength plate with its pump TIS averaged over the LED spectrum instead of the blue filter
-    (:func:`led_averaged_plate`). The σ of a row are those of its own two traces."""
+    (:func:`led_averaged_plate`). The σ of a row are those of its own two traces.
+
+    Parameters
+    ----------
+    options : SpectralComparisonOptions
+        The recipe's ``[spectral]`` table (``ablation_rays``, ``seed``).
+    two_scene, spec_scene : Scene
+        The main traces' scenes, two-wavelength and spectral mode.
+    model_ds : xarray.Dataset
+        Plate spectral model dataset.
+    model : SpectralPlateModel
+        The same model as the tracer uses it.
+    recon : _Reconstruction
+        The main two-wavelength reconstruction (its shapes [1/nm] and bins [nm] are reused).
+    clock : _Clock
+        Books the seconds [s] of each ablation.
+    widths : dict, optional
+        Mode → emission width of the main trace's kernel [-]; None compiles kernels of their own width.
+
+    Returns
+    -------
+    dict
+        Row name → description, rays, seeds and the band rows of :data:`BANDS`.
+    """
     n = options.ablation_rays
     seeds = {"two_wavelength": options.seed, "spectral": options.seed + 1}
     widths = widths or {}
@@ -469,7 +583,18 @@ def ablations(options, two_scene: Scene, spec_scene: Scene, model_ds: xr.Dataset
 
 
 def comparison_outputs(result: SpectralComparison) -> dict[str, Callable[[Path, bool], object]]:
-    """The stage's files (name → writer(path, force)): the figure and the spectra as CSV."""
+    """The stage's files (name → writer(path, force)): the figure and the spectra as CSV.
+
+    Parameters
+    ----------
+    result : SpectralComparison
+        Result of :func:`compare_tracer_modes`.
+
+    Returns
+    -------
+    dict
+        File name → ``writer(path, force)``.
+    """
     fig = mode_spectra_figure(result.wavelength_nm, result.spectral, result.spectral_std, result.two_wavelength,
                               result.two_wavelength_std, {"near 470 nm": NEAR_PUMP_BAND_NM,
                                                           "module yellow": MODULE_YELLOW_BAND_NM})
@@ -479,7 +604,18 @@ def comparison_outputs(result: SpectralComparison) -> dict[str, Callable[[Path, 
 
 
 def comparison_lines(summary: dict) -> list[str]:
-    """The run log's lines for the comparison (sizes with σ, direction check, ledger, seconds)."""
+    """The run log's lines for the comparison (sizes with σ, direction check, ledger, seconds).
+
+    Parameters
+    ----------
+    summary : dict
+        ``SpectralComparison.summary``.
+
+    Returns
+    -------
+    list of str
+        The lines, without newlines.
+    """
     b, chk = summary["bands"], summary["direction_check"]
     sp, tw = summary["spectral"], summary["two_wavelength"]
     led = sp["ledger"]["power_W"]

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -59,7 +60,20 @@ MODEL_VARIABLES = ("elastic_tis", "elastic_tis_std", "converted_tis", "converted
 
 # ------------------------------------------------------------------------------------- the matrix
 def series_configurations(ds: xr.Dataset, series: str | None = None) -> list[str]:
-    """Configurations of one band series, sorted by band centre (the only series unless ``series`` names one)."""
+    """Configurations of one band series, sorted by band centre (the only series unless ``series`` names one).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated scan with ``band_series`` and ``excitation_wavelength`` [nm] per configuration.
+    series : str, optional
+        Name of the band series; None takes the only one (an InputError when there are several).
+
+    Returns
+    -------
+    list of str
+        Configuration names, sorted by excitation band centre [nm].
+    """
     source = ds.attrs.get("source")
     if "excitation_wavelength" not in ds or "band_series" not in ds:
         raise InputError("no band series in the dataset", file=source, field="band_series",
@@ -81,6 +95,7 @@ def series_configurations(ds: xr.Dataset, series: str | None = None) -> list[str
 
 
 def _position_keys(sub: xr.Dataset) -> list[tuple]:
+    """One hashable key per record: its rounded detector position and side."""
     return [(round(float(a), 6), round(float(b) % 360.0, 6), round(float(c), 6),
              0.0 if c < 1e-9 else round(float(d) % 360.0, 6), str(e))
             for a, b, c, d, e in zip(sub["theta_i"].values, sub["phi_i"].values, sub["theta_s"].values,
@@ -97,6 +112,19 @@ def bispectral_matrix(ds: xr.Dataset, series: str | None = None) -> xr.Dataset:
     band — and per band ``incident_spectrum`` [1/nm], ``incident_valid`` and ``incident_power_relative_std``.
     :func:`bsdfkit.reduction.spectral.bispectral_weighted_mean` reduces it to ⟨q_λ⟩ for any excitation spectrum.
     Every band must hold the same detector positions.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated excitation-emission scan (``bsdfkit.ingest``) with a ``[[band_series]]``.
+    series : str, optional
+        Name of the band series; None takes the only one.
+
+    Returns
+    -------
+    xarray.Dataset
+        The matrix described above: ``bsdf_donaldson`` [1/(sr nm)] over (record, wavelength_i [nm],
+        wavelength [nm]) with its per-band incident spectra.
     """
     names = series_configurations(ds, series)
     source = ds.attrs.get("source")
@@ -208,6 +236,18 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
     is more than its noise explains (noise is removed and its share kept in ``emission_pdf_clipped_mass``).
     A band whose converted TIS is not above CHECK_SIGMA·σ at every incidence converts nothing measurable: its
     pdf row, converted TIS and photon yield are 0.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Calibrated excitation-emission scan with a ``[[band_series]]``.
+    series : str, optional
+        Name of the band series; None takes the only one.
+
+    Returns
+    -------
+    xarray.Dataset
+        The plate model described above (TIS [-], ``emission_pdf`` [1/nm], ``photon_yield`` [-]).
     """
     source = ds.attrs.get("source", "")
     matrix = bispectral_matrix(ds, series)
@@ -285,7 +325,7 @@ def plate_spectral_model(ds: xr.Dataset, series: str | None = None) -> xr.Datase
     if not (np.isfinite(el).all() and np.isfinite(cv).all()):
         raise NumericalError("a TIS could not be reconstructed", file=source, field="elastic_tis/converted_tis",
                              expected="finite values at every side, incidence and excitation")
-    return _model_dataset(ds, matrix, angles, el, el_s, cv, cv_s, pdf, yield_, clipped)
+    return _model_dataset(ds, matrix, angles, _ModelArrays(el, el_s, cv, cv_s, pdf, yield_, clipped))
 
 
 def _check_budget(el: NDArray, el_s: NDArray, conv: NDArray, conv_s: NDArray, yield_: NDArray,
@@ -308,8 +348,21 @@ def _check_budget(el: NDArray, el_s: NDArray, conv: NDArray, conv_s: NDArray, yi
                                   got=round(float(yield_[a]), 4))
 
 
-def _model_dataset(ds: xr.Dataset, matrix: xr.Dataset, angles: list[float], el: NDArray, el_s: NDArray,
-                   cv: NDArray, cv_s: NDArray, pdf: NDArray, yield_: NDArray, clipped: NDArray) -> xr.Dataset:
+class _ModelArrays(NamedTuple):
+    """The reduced arrays of :func:`plate_spectral_model`, in the layout of its dataset."""
+
+    el: NDArray       # elastic TIS (side, incidence, excitation) [-]
+    el_s: NDArray     # its standard uncertainty [-]
+    cv: NDArray       # converted TIS (side, incidence, excitation) [-]
+    cv_s: NDArray     # its standard uncertainty [-]
+    pdf: NDArray      # emission photon pdf (excitation, emission) [1/nm]
+    yield_: NDArray   # photon yield (incidence, excitation) [-]
+    clipped: NDArray  # negative share removed from each pdf row (excitation) [-]
+
+
+def _model_dataset(ds: xr.Dataset, matrix: xr.Dataset, angles: list[float], arrays: _ModelArrays) -> xr.Dataset:
+    """The plate model dataset of docs/spectral.md from the reduced arrays, with units and provenance."""
+    el, el_s, cv, cv_s, pdf, yield_, clipped = arrays
     dims = ("side", "incidence", "excitation")
     manifest = json.loads(ds.attrs.get("manifest_json", "{}"))
     provenance = {
@@ -361,6 +414,20 @@ def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band: 
     ``emission_band`` only the converted power emitted inside it (the biys of eq. (13) of [Power-budget] uses
     470-740 nm). Returns ``elastic_tis`` and ``converted_tis`` (side, incidence) [1]. E must lie inside the
     excitation range of the model.
+
+    Parameters
+    ----------
+    model : xarray.Dataset
+        Plate model of :func:`plate_spectral_model`.
+    spectrum : SpectrumLike
+        Incident spectral power E over wavelength [nm] (any scale: it is normalised).
+    emission_band : tuple of float, optional
+        (low, high) emission wavelengths [nm] that the converted power is counted in; None counts all of it.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``elastic_tis`` and ``converted_tis`` over (side, incidence [deg]) [-].
     """
     centres = model["excitation"].values
     lam = np.arange(centres[0], centres[-1] + 1e-9, 0.5)
@@ -388,19 +455,46 @@ def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band: 
 
 # ----------------------------------------------------------------------------------------- file I/O
 def save_plate_spectral_model(model: xr.Dataset, path: str | Path, force: bool = False) -> Path:
-    """Write the model as netCDF (atomic; refuses to overwrite without ``force``): docs/spectral.md."""
+    """Write the model as netCDF (atomic; refuses to overwrite without ``force``): docs/spectral.md.
+
+    Parameters
+    ----------
+    model : xarray.Dataset
+        Plate model of :func:`plate_spectral_model`; its schema is checked first.
+    path : str or pathlib.Path
+        Destination file.
+    force : bool
+        Overwrite an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+    """
     _check_schema(model, str(path))
     return netcdf.save(model, path, force)
 
 
 def load_plate_spectral_model(path: str | Path) -> xr.Dataset:
-    """Read a model written by :func:`save_plate_spectral_model`; a file of another schema is a FormatError."""
+    """Read a model written by :func:`save_plate_spectral_model`; a file of another schema is a FormatError.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        netCDF file of a plate spectral model.
+
+    Returns
+    -------
+    xarray.Dataset
+        The plate model, as :func:`plate_spectral_model` returns it.
+    """
     model = netcdf.load(path, quantity=QUANTITY)
     _check_schema(model, str(path))
     return model
 
 
 def _check_schema(model: xr.Dataset, source: str) -> None:
+    """A FormatError unless ``model`` has this format version, every model variable and both sides."""
     if model.attrs.get("format_version") != FORMAT_VERSION:
         raise FormatError("unsupported plate spectral model version", file=source, field="format_version",
                           expected=str(FORMAT_VERSION), got=model.attrs.get("format_version"))
