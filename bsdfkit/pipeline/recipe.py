@@ -27,6 +27,7 @@ from bsdfkit.core.conventions import (
     COLORIMETRY_BLUE_BAND_NM,
     COLORIMETRY_YELLOW_BAND_NM,
     RAY_YBR_DEFINITION,
+    SIDES,
     band_label,
 )
 from bsdfkit.core.errors import FormatError, InputError, NumericalError, ValidationError
@@ -112,7 +113,7 @@ class ExportOptions:
     """Which tables the run writes (into OUT/exports/) and the TIS agreement each re-read must show."""
 
     interactions: tuple[str, ...] = ("bibs", "biys", "yiys")
-    sides: tuple[str, ...] = ("reflection", "transmission")
+    sides: tuple[str, ...] = SIDES
     formats: tuple[str, ...] = ("tracepro", "zemax")
     tolerance: float = 0.005  # relative: re-read table TIS vs the source's TIS
 
@@ -238,7 +239,7 @@ def load_recipe(path: str | Path) -> Recipe:
     exp = data.get("exports", {})
     exports = ExportOptions(
         interactions=tuple(_choices(exp, "interactions", ("bibs", "biys", "yiys"), path)),
-        sides=tuple(_choices(exp, "sides", ("reflection", "transmission"), path)),
+        sides=tuple(_choices(exp, "sides", SIDES, path)),
         formats=tuple(_choices(exp, "formats", registry.writable(), path, default=("tracepro", "zemax"))),
         tolerance=float(_typed(exp, "tolerance", (int, float), path, "exports.tolerance", 0.005)),
     )
@@ -789,7 +790,7 @@ def _queue_trace_outputs(state: RunState, plate, traced: _Traced, results: dict,
     tis = state.tis
     meas = {f"{i}_{side}": (tis["theta_i"].values, tis["tis"].sel(interaction=i, side=side).values,
                             tis["tis_std"].sel(interaction=i, side=side).values)
-            for i in ("bibs", "biys") for side in ("reflection", "transmission")}
+            for i in ("bibs", "biys") for side in SIDES}
     inc_fig = plate_incidence_figure(traced.blue_on_plate or {"device": device.incidence_histogram[0]}, measured,
                                      plate.theta_i_deg, results["plate"]["tis"], meas,
                                      title=f"plate {plate.name}: incidences of the traces and the plate's TIS")
@@ -1015,7 +1016,7 @@ def stage_fits(state: RunState) -> None:
     rows = []
     for inter in ("bibs", "biys", "yiys"):
         model = "lambert" if inter == "biys" else opts.bsdf_model
-        for side in ("reflection", "transmission"):
+        for side in SIDES:
             prof = spectral.interaction_profile(scan, inter, side)
             prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
             fit = fit_bsdf(prof, model)
@@ -1037,7 +1038,7 @@ def stage_fits(state: RunState) -> None:
                              "gate_reasons": [r[len(where):] for r in verdict.reasons if r.startswith(where)]})
     # the converted light's spectrum, both hemispheres, at the chosen incidence
     th = opts.emission_incidence_deg
-    density = sum(angular.hemispherical_spectrum(scan, "blue", th, side) for side in ("reflection", "transmission"))
+    density = sum(angular.hemispherical_spectrum(scan, "blue", th, side) for side in SIDES)
     lam = density["wavelength"].values
     region = (lam >= 470.0) & (lam <= 780.0)
     peak = float(density.values[region].max())
