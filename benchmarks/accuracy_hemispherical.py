@@ -4,7 +4,8 @@
     .venv/bin/python benchmarks/accuracy_hemispherical.py --noise    # 2 % and 5 % noise, 4032 values (~8 min)
 
 Truth: a Lambertian body ρ plus a Harvey–Shack Gaussian lobe (TIS t, width σ in direction cosines), whose
-hemispherical integral is exact (the truths and the goniometer plans are those of ``tests/test_hemispherical.py``).
+hemispherical integral is exact (the truths and the goniometer plans are those of
+``tests/reduction/test_hemispherical.py``).
 The noise-free grid: ρ 0.3/0.8, t 0.02/0.2, σ 0.01/0.05/0.2, in-plane or two arcs, reflection or transmission,
 uniform 2°, 5° or 10° steps with or without 1° steps within ±10° of specular, incidences 0-80°. The noisy grid:
 reflection, 2° and 5° steps, σ 0.02/0.05/0.2, 2 % and 5 % relative noise per record, three wavelengths, two

@@ -64,7 +64,7 @@ def pytest_xdist_make_scheduler(config, log):
         return None
     from xdist.scheduler import LoadScopeScheduling
 
-    grouped = {f"tests/{p.name}" for p in Path(__file__).parent.glob("test_*.py")
+    grouped = {p.relative_to(ROOT).as_posix() for p in Path(__file__).resolve().parent.rglob("test_*.py")
                if _SHARES_A_FIXTURE.search(p.read_text(encoding="utf-8"))}
 
     class SharedFixtureScheduling(LoadScopeScheduling):

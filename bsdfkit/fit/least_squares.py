@@ -4,7 +4,7 @@
 = "lm"``, :mod:`bsdfkit.fit.lm`) evaluates residuals and Jacobians of the whole batch in one compiled
 ``jax.vmap``/``jax.jacfwd`` kernel and runs the Levenberg–Marquardt iteration on the host; ``solver =
 "jaxopt"`` runs :class:`jaxopt.LevenbergMarquardt` under ``jax.jit(jax.vmap(...))``. Both give the same
-solutions (tests/test_lm.py); the measured costs are in docs/fitting.md §8. :func:`fit_bsdf` builds on it
+solutions (tests/fit/test_lm.py); the measured costs are in docs/fitting.md §8. :func:`fit_bsdf` builds on it
 for goniometer profiles.
 
 How a fit is set up (docs/fitting.md has the derivations):

@@ -4,7 +4,7 @@ Every reader that gives a BSDF dataset builds it with :func:`new_bsdf_dataset` (
 <bsdfkit.measurement.calibrate.calibrate>` from a raw scan, :func:`records_dataset
 <bsdfkit.measurement.table.records_dataset>` for measured tables and vendor files) and the ``ds.bsdf``
 accessor checks any dataset with :func:`validate_bsdf_dataset`. ``docs/architecture.md`` ("The calibrated BSDF
-dataset") documents the same table; ``tests/test_schema.py`` compares the two.
+dataset") documents the same table; ``tests/measurement/test_schema.py`` compares the two.
 
 Dimensions: ``record`` (one detector position of one configuration), ``wavelength`` [nm] (the scattered,
 detected wavelength), ``configuration`` (one incident-light set-up) and ``band_edge`` (``low``, ``high``).

@@ -18,7 +18,7 @@ from bsdfkit.tables.export import read_any
 from bsdfkit.tables.formats import tracepro
 from bsdfkit.tables.to_dataset import convert, vendor_dataset
 
-DATA = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf"
+DATA = Path(__file__).parent.parent / "data" / "ansys-radiant-zemax-bsdf"
 RADIANT = DATA / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
 ANSYS_CSV = DATA / "inplane_spectral_goniometric_2D_data.csv"
 

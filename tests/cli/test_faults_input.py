@@ -239,6 +239,6 @@ def test_library_warnings_never_reach_stderr():
             "t._run = lambda args: int(np.isinf(np.float64(1e308) * np.float64(10.0))) - 1\n"
             "from bsdfkit.cli.main import main\nraise SystemExit(main(['tis', 'x.nc']))\n")
     done = subprocess.run([sys.executable, "-W", "default", "-c", code], capture_output=True, text=True, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+                          env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
     assert done.returncode == 0, done.stderr
     assert done.stderr == "", done.stderr

@@ -14,7 +14,8 @@ from bsdfkit.cli.main import main
 from bsdfkit.tables import grids
 from bsdfkit.tables.export import fit_bsdf_fn
 
-REAL = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
+REAL = Path(__file__).parent.parent / "data" / "ansys-radiant-zemax-bsdf" / (
+    "radiant_imaging_sphere_planesymmetric_BRDF.bsdf")
 THETA = [0.0, 30.0, 60.0]
 
 

@@ -6,7 +6,7 @@ a lobe measured on the in-plane arc only is assumed rotationally symmetric (an e
 measured), one or two arcs cannot see a body's azimuthal anisotropy at oblique incidence, and several planes
 through the specular point leave azimuths near the normal unmeasured (the gap is stated, and the body's azimuthal
 variation measured elsewhere enters the error bar: the truth within 3 σ, not within 1 %). Two arcs are reduced
-by the half-profile method (tests/test_hemispherical.py holds its transmission cases).
+by the half-profile method (tests/reduction/test_hemispherical.py holds its transmission cases).
 """
 import numpy as np
 import pytest

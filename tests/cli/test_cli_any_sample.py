@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import cli
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parent.parent / "data"
 ANSYS = DATA / "ansys-radiant-zemax-bsdf" / "inplane_spectral_goniometric_2D_data.csv"
 SPECTRALON = DATA / "grit-spectralon" / "Spectralon_Num4.txt"
 

@@ -19,7 +19,8 @@ from bsdfkit.io import netcdf
 from bsdfkit.measurement.table import read_table
 from bsdfkit.reduction.hemispherical import hemispherical, hemispherical_profile, reduction_kind
 
-ANSYS_CSV = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf" / "inplane_spectral_goniometric_2D_data.csv"
+ANSYS_CSV = Path(__file__).parent.parent / "data" / "ansys-radiant-zemax-bsdf" / (
+    "inplane_spectral_goniometric_2D_data.csv")
 GRID = {"n_psi": 128, "n_r": 200}  # half the library's default per axis: the tests stay fast
 INCIDENCES = (0.0, 10.0, 30.0, 45.0, 60.0, 70.0, 80.0)
 

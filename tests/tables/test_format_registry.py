@@ -47,8 +47,9 @@ def test_registry_names_match_the_modules_and_unknown_names_are_refused(tmp_path
         registry.sniff_format(junk)
 
 
-ZEMAX = Path(__file__).parent / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
-SPEOS = (Path(__file__).parent / "data" / "ansys-speos-anisotropicbsdf"
+ZEMAX = Path(__file__).parent.parent / "data" / "ansys-radiant-zemax-bsdf" / (
+    "radiant_imaging_sphere_planesymmetric_BRDF.bsdf")
+SPEOS = (Path(__file__).parent.parent / "data" / "ansys-speos-anisotropicbsdf"
          / "test_13_planesymmetric_brdf_speos_reference.anisotropicbsdf")
 
 

@@ -28,8 +28,8 @@ from bsdfkit.raytrace.spectral import (
     spectral_plate_from_two_colour,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-SPECTRALON = Path(__file__).parent / "data" / "grit-spectralon" / "Spectralon_Num4.txt"
+ROOT = Path(__file__).resolve().parents[2]
+SPECTRALON = Path(__file__).parent.parent / "data" / "grit-spectralon" / "Spectralon_Num4.txt"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
           "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
 CHUNK, LANES = 50_000, 1024

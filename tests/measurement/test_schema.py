@@ -12,7 +12,7 @@ from bsdfkit.measurement import schema
 from bsdfkit.measurement.table import read_table
 from bsdfkit.tables.to_dataset import ingest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOC = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
 DATA = ROOT / "tests" / "data"
 

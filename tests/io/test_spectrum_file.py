@@ -11,7 +11,7 @@ from bsdfkit.cli.main import main
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io.spectrum_file import read_spectrum, read_spectrum_arrays, read_spectrum_table, select_columns
 
-BENKNER = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
+BENKNER = Path(__file__).resolve().parent.parent / "data" / "benkner-led-spectra"
 
 
 def write(tmp_path, text, name="s.txt", encoding="utf-8"):

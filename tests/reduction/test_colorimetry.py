@@ -11,7 +11,7 @@ from bsdfkit.cli.main import main
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.reduction import colorimetry
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parent.parent / "data"
 CIE_CSV = DATA / "colour-cie-nist-led-spd" / "cie_led_illuminants_and_nist_cqs_led_spd_5nm.csv"
 # tests/data/colour-cie-nist-led-spd/PROVENANCE.md (CIE 015:2018 Table 12 LED illuminants)
 REFERENCE = {

@@ -278,7 +278,7 @@ def test_fit_bsdf_cli_on_bundled_measurement(capsys):
 
     from bsdfkit.cli.main import main
 
-    scan = Path(__file__).resolve().parents[1] / "measurements" / "cl830-synthetic"
+    scan = Path(__file__).resolve().parents[2] / "measurements" / "cl830-synthetic"
     assert main(["fit", "bsdf", str(scan), "--interaction", "bibs", "--side", "reflection",
                  "--model", "lambert+gaussian", "--incidence", "45", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -15,7 +15,7 @@ from bsdfkit.tables import grids
 from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats import zemax
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).parent.parent
 GOLDEN = HERE / "data" / "golden"
 REAL = HERE / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
 DOCS = HERE.parent / "docs" / "exports.md"
@@ -44,7 +44,7 @@ def golden_lambert_brdf() -> zemax.ZemaxBsdf:
 
     Hand check: rows hold 0.1/pi up to the horizon (90 deg at AOI 0; 130/90/50 deg for azimuth 0/90/180
     at AOI 40). TIS 0.1 at AOI 0 (exact) and 0.09904 at 40 (the coarse 4-azimuth rule, see
-    tests/test_grids.py::test_specular_quadrature_of_a_coarse_table_by_hand).
+    tests/tables/test_grids.py::test_specular_quadrature_of_a_coarse_table_by_hand).
     """
     axes = grids.SpecularAxes((0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0), (0.0, 90.0, 180.0))
     grid = grids.specular_grid(lambert(0.1), [0.0, 40.0], "reflection", axes)

@@ -9,7 +9,7 @@ from bsdfkit.core.errors import InputError
 from bsdfkit.fit.lambertian import at_wavelength, band_weighted_reflectance, lambertian_from_reflectance
 from bsdfkit.tables.export import export, read_any
 
-SPECTRALON = Path(__file__).parent / "data" / "grit-spectralon" / "Spectralon_Num4.txt"
+SPECTRALON = Path(__file__).parent.parent / "data" / "grit-spectralon" / "Spectralon_Num4.txt"
 
 
 @pytest.fixture(scope="module")

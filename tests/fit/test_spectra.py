@@ -11,7 +11,7 @@ from bsdfkit.fit import spectrum as spectra
 from bsdfkit.io.spectrum_file import read_spectrum_arrays
 from bsdfkit.models import functions as models
 
-DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
+DATA = Path(__file__).resolve().parent.parent / "data" / "benkner-led-spectra"
 WL = np.arange(380.0, 781.0)  # 1 nm grid, 380-780 nm
 # Table 2 of the cylindrical-module paper
 BLUE = dict(peak_nm=450.1, fwhm_nm=22.9)

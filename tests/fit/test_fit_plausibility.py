@@ -194,7 +194,7 @@ def test_fit_bsdf_cli_reports_the_gate(capsys):
 
     from bsdfkit.cli.main import main
 
-    scan = Path(__file__).resolve().parents[1] / "measurements" / "cl830-synthetic"
+    scan = Path(__file__).resolve().parents[2] / "measurements" / "cl830-synthetic"
     argv = ["fit", "bsdf", str(scan), "--interaction", "biys", "--side", "reflection", "--model", "lambert",
             "--incidence", "56"]
     assert main(argv + ["--json"]) == 0

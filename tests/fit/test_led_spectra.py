@@ -29,11 +29,11 @@ from bsdfkit.reduction import spectrum_metrics as metrics
 from bsdfkit.reduction.colorimetry import cct_duv, check_power_spectrum, chromaticity_xy, colorimetric_summary
 from bsdfkit.reduction.spectral import band_sum
 
-DATA = Path(__file__).resolve().parent / "data" / "benkner-led-spectra"
+DATA = Path(__file__).resolve().parent.parent / "data" / "benkner-led-spectra"
 BLUE = ("blue_010mA", "blue_100mA", "blue_3")
 WHITES = ("white_1", "white_2", "white_2700K", "white_3000K", "white_4000K", "white_6500K")
 VISIBLE = (380.0, 780.0)
-CIE_NIST = Path(__file__).resolve().parent / "data" / "colour-cie-nist-led-spd" / \
+CIE_NIST = Path(__file__).resolve().parent.parent / "data" / "colour-cie-nist-led-spd" / \
     "cie_led_illuminants_and_nist_cqs_led_spd_5nm.csv"
 
 
