@@ -127,21 +127,22 @@ def _trace_batch(scene: Scene, tab: PlateTables | None, rng: np.random.Generator
     ext = np.zeros(n)  # per-ray extracted, for the standard error
     idx = np.arange(n)
     interactions = 0
+    led = scene.led_surface  # wall, base, LED surface: reflectance and specular fraction by surface index
+    rho = np.array([scene.wall.reflectance, scene.base.reflectance, led.reflectance])
+    specular = np.array([scene.wall.specular_fraction, scene.base.specular_fraction, led.specular_fraction])
     while idx.size:
         interactions += idx.size
         x, y, z, on_top, on_base, on_wall, on_led = _next_surface((x, y, z), (dx, dy, dz), scene)
         cav = ~on_top
         # cavity reflection
         surf = np.where(on_wall, 0, np.where(on_led, 2, 1))
-        led = scene.led_surface
-        w_ref = w * np.array([scene.wall.reflectance, scene.base.reflectance, led.reflectance])[surf]
+        w_ref = w * rho[surf]
         absorbed = np.where(cav, w - w_ref, 0.0)
         sums["wall"] += absorbed[on_wall].sum()
         sums["base"] += absorbed[on_base & ~on_led].sum()
         sums["leds"] += absorbed[on_led].sum()
         u = rng.random((4, idx.size))
-        spec = np.array([scene.wall.specular_fraction, scene.base.specular_fraction, led.specular_fraction])
-        ndx, ndy, ndz = _reflect(x, y, (dx, dy, dz), cav & (u[0] < spec[surf]), on_wall, u, scene.cavity.radius_mm)
+        ndx, ndy, ndz = _reflect(x, y, (dx, dy, dz), cav & (u[0] < specular[surf]), on_wall, u, scene.cavity.radius_mm)
         new_w = np.where(cav, w_ref, 0.0)
         alive = cav.copy()
         if tab is None:
