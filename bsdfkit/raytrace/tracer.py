@@ -13,7 +13,7 @@ import numpy as np
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
-from bsdfkit.raytrace import kernel
+from bsdfkit.raytrace import kernel, sampling
 from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
 from bsdfkit.raytrace.programs import cached_program
 from bsdfkit.raytrace.scene import (
@@ -162,9 +162,10 @@ def _sizes(scene: Scene, rays: int, seed: int, chunk: int | None, lanes: int | N
 
 def _check_effects(scene: Scene, eff: Effects) -> None:
     """The limits the compiled effects set on the scene: lobe sampling's counter, the exact tallies' magnitude."""
-    if eff.plate_lobe and scene.trace.max_events >= 2 ** 22:
+    limit = 2 ** 32 // sampling.LOBE_ATTEMPTS  # events whose attempt counter event·LOBE_ATTEMPTS + a fits in 32 bits
+    if eff.plate_lobe and scene.trace.max_events >= limit:
         raise ValidationError("lobe sampling needs fewer events per ray for its random-number counter",
-                              file=scene.path, field="trace.max_events", expected="< 2**22",
+                              file=scene.path, field="trace.max_events", expected=f"< 2**{limit.bit_length() - 1}",
                               got=scene.trace.max_events)
     # a spectral ray's power weight can grow by λ_max/λ_min at anti-Stokes conversions (its photons cannot)
     lam = spectral_grid(scene) if eff.spectral else None
