@@ -221,7 +221,6 @@ def load_recipe(path: str | Path) -> Recipe:
         raise InputError("recipe not found", file=path, expected="a TOML recipe file")
     data = read_toml(path, expected="a recipe TOML file")
     _check_keys(data, path)
-    head = data.get("recipe", {})
     name, measurement = recipe_head(data, path)
     rep = data.get("report", {})
     report = ReportOptions(
@@ -270,7 +269,8 @@ def load_recipe(path: str | Path) -> Recipe:
         fallback_flux_W=(float(fallback[0]), float(fallback[1])),
     )
     recipe = Recipe(path=path, name=name, measurement=measurement,
-                    description=_typed(head, "description", str, path, "recipe.description", ""), report=report,
+                    description=_typed(data["recipe"], "description", str, path, "recipe.description", ""),
+                    report=report,
                     reductions=reductions, exports=exports, trace=trace, fits=fits,
                     spectral=_spectral_options(data.get("spectral"), path, trace, fits), raw=data)
     _check_ranges(recipe)

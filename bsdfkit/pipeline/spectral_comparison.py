@@ -38,7 +38,6 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-from colour import SpectralDistribution
 
 from bsdfkit.core.conventions import (
     CONVERSION_BAND_NM,
@@ -72,7 +71,7 @@ from bsdfkit.raytrace.spectral import (
 from bsdfkit.raytrace.tallies import SPECTRAL_YBR_DEFINITION
 from bsdfkit.raytrace.tracer import emission_width
 from bsdfkit.reduction import tis as angular
-from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation
+from bsdfkit.reduction.colorimetry import luminous_efficacy_of_radiation, spectral_distribution
 from bsdfkit.reduction.excitation_emission import band_averaged_tis, plate_spectral_model
 
 #: Where §4.2 of [Cylindrical-module] sees the two-wavelength spectrum too high ("near 470 nm") [nm]: the pump's
@@ -362,7 +361,7 @@ def _direction_check(bands: dict[str, dict]) -> dict:
 
 def _efficacy(lam: np.ndarray, values: np.ndarray, name: str) -> float:
     """Luminous efficacy of radiation [lm/W] of a spectrum on the bins ``lam`` [nm]."""
-    return luminous_efficacy_of_radiation(SpectralDistribution(dict(zip(lam.tolist(), values.tolist())), name=name))
+    return luminous_efficacy_of_radiation(spectral_distribution(lam, values, name))
 
 
 def _two_wavelength_summary(two, recon: _Reconstruction, sr) -> dict:
