@@ -161,15 +161,10 @@ class PolarInterpolant:
         dx, dy = np.ravel(x) - self.center[0], np.ravel(y) - self.center[1]
         return np.arctan2(dy, dx), np.hypot(dx, dy)
 
-    def _barycentric(self, psi: NDArray[np.float64], r: NDArray[np.float64]
-                     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """Barycentric coordinates (m, 3) and node indices (m, 3) of polar points (clipped to the domain)."""
-        bary, nodes, _ = self._located(psi, r)
-        return bary, nodes
-
     def _located(self, psi: NDArray[np.float64], r: NDArray[np.float64], repeats: int = 1
                  ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
-        """:meth:`_barycentric` and whether each point lies inside the domain (a lobe is zero beyond it).
+        """Barycentric coordinates (m, 3) and node indices (m, 3) of polar points (clipped to the domain), and
+        whether each point lies inside the domain (a lobe is zero beyond it).
         ``repeats`` > 1 says that ψ comes in blocks of that many equal values (the polar quadrature grid, ψ repeated
         over the radii): what depends on ψ alone is computed once per block (the same numbers)."""
         psi_u = np.mod(psi[::repeats] + np.pi, 2.0 * np.pi) - np.pi

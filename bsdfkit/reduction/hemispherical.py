@@ -82,6 +82,7 @@ from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import InputError
 from bsdfkit.core.hemisphere import linear_weights
 from bsdfkit.core.records import incidences
+from bsdfkit.core.spectra import band_mask
 from bsdfkit.reduction import basis, disk
 from bsdfkit.reduction.tis import HALVES, Hemisphere, polar_grid
 
@@ -1536,7 +1537,7 @@ def band_selection(wl: NDArray[np.float64], band: tuple[float, float] | None
     lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
     if not hi >= lo:
         raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
-    sel = (wl >= lo - 1e-9) & (wl <= hi + 1e-9)
+    sel = band_mask(wl, (lo, hi))
     if not sel.any():
         raise InputError("no measured wavelength in the band", field="band",
                          expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))

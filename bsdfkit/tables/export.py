@@ -581,7 +581,7 @@ def _doubled(settings: ExportSettings, axes: Any) -> ExportSettings | None:
     if isinstance(axes, grids.SpecularAxes):
         plane = settings.zemax_symmetry == "PlaneSymmetrical"
         both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a, periodic=not plane)]))
-        fixed = grids.SpecularAxes.default(plane_symmetric=settings.zemax_symmetry == "PlaneSymmetrical")
+        fixed = grids.SpecularAxes.default(plane_symmetric=plane)
         if len(axes.radial_deg) * both.size > len(fixed.radial_deg) * len(fixed.azimuth_deg):
             return None
         return replace(settings, specular_axes=grids.SpecularAxes(axes.radial_deg, tuple(both.tolist())))
@@ -639,7 +639,7 @@ def _recheck(job: _Job, settings: ExportSettings, first: _Written) -> _Rechecked
     best = min(range(len(tried)), key=lambda i: tried[i][0])
     if best != len(tried) - 1:  # an earlier table was closer to the source: written again
         written = _write(job, tried[best][1], True, written.deviation)
-        summary = None
+        summary = nodes = None  # both belong to the last file read, which is no longer on disk
     grid_info = dict(tried[best][2])
     if len(tried) > 1:
         grid_info["recheck_worst"] = float(tried[best][0])
