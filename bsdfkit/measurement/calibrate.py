@@ -223,15 +223,10 @@ def calibrate(raw: xr.Dataset) -> xr.Dataset:
 
 
 def _attributes(raw: xr.Dataset, instrument: Instrument, below_dark: np.ndarray, source: str) -> dict[str, Any]:
-    """The dataset attributes of a calibrated scan: the schema's, the gain and the below-dark counts."""
+    """The dataset attributes of a calibrated scan the schema does not fix: the gain, the below-dark counts."""
     geometry = {k: raw.attrs[k] for k in ("detector_distance_mm", "aperture_diameter_mm", "beam_diameter_mm")}
     return dict(
-        quantity="bsdf",
-        frame="sample",
         side="reflection transmission",
-        units="1/sr",
-        angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
-                         "transmission angles from the back normal",
         sample_name=raw.attrs.get("sample_name", ""),
         synthetic=raw.attrs.get("synthetic", 0),
         source=source,

@@ -114,10 +114,14 @@ ATTRIBUTES: tuple[str, ...] = (
 )
 #: Attributes whose value is fixed.
 FIXED_ATTRIBUTES: dict[str, str] = {"quantity": "bsdf", "frame": "sample", "units": "1/sr"}
+#: The angle convention every BSDF dataset states.
+ANGLE_CONVENTION = ("sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
+                    "transmission angles from the back normal")
 
 
 def new_bsdf_dataset(data: Mapping[str, Any], coords: Mapping[str, Any], attrs: Mapping[str, Any]) -> xr.Dataset:
-    """A BSDF dataset from its values: dims and ``units`` from :data:`VARIABLES`, validated.
+    """A BSDF dataset from its values: dims and ``units`` from :data:`VARIABLES`, the fixed attributes
+    (:data:`FIXED_ATTRIBUTES`, :data:`ANGLE_CONVENTION`), validated.
 
     Parameters
     ----------
@@ -125,7 +129,7 @@ def new_bsdf_dataset(data: Mapping[str, Any], coords: Mapping[str, Any], attrs: 
         Values by name: arrays (given the schema's dims) or DataArrays (kept with their attributes); only names
         of :data:`VARIABLES`, in the order to write them.
     attrs
-        The dataset's attributes (at least :data:`ATTRIBUTES`).
+        The dataset's attributes: those of :data:`ATTRIBUTES` not fixed by the schema, and any more.
 
     Returns
     -------
@@ -138,7 +142,8 @@ def new_bsdf_dataset(data: Mapping[str, Any], coords: Mapping[str, Any], attrs: 
         return (_BY_NAME[name].dims, value)
 
     ds = xr.Dataset({k: entry(k, v) for k, v in data.items()},
-                    coords={k: entry(k, v) for k, v in coords.items()}, attrs=dict(attrs))
+                    coords={k: entry(k, v) for k, v in coords.items()},
+                    attrs={**FIXED_ATTRIBUTES, "angle_convention": ANGLE_CONVENTION, **attrs})
     for name in (*data, *coords):
         units = _BY_NAME[name].units
         if units is not None and ds[name].attrs.get("units") != units:

@@ -87,7 +87,6 @@ _QUANTITY_SIDE = {"brdf": "reflection", "ccbrdf": "reflection", "reflectance-fac
 CONFIG_NAME = "measured"
 _MISSING = {"", "nan", "-nan", "+nan", "na", "n/a", "n.a.", "-", "--", "---", "—", "–", "null", "none", "missing",
             "?", "#n/a", "#value!", "nv", "n.v."}
-_ANGLE_ATOL = 1e-9
 #: Direction-cosine tolerance of the in-plane and perpendicular arcs (:func:`arc_labels`).
 ARC_TOL = 1e-5
 
@@ -947,7 +946,8 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     k_header, delim, columns, preamble = _find_header(text)
     _refuse_cut_end(source, path, delim)
     header_line = text.lines[k_header][0]
-    meta = _metadata([c for c in text.comments if c[0] < header_line] + preamble)
+    comments = [c for c in text.comments if c[0] < header_line]
+    meta = _metadata(comments + preamble)
     data, units_line = _data_head(text, k_header, delim, columns)
     roles = _roles_of(columns, path, header_line)
     _check_header_layout(columns, roles, path, header_line, wavelength, incidence)
@@ -962,9 +962,8 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
                           expected="a theta_i / AOI / incidence column, '# incidence: 10 deg', or --incidence",
                           got=[c.header for c in columns][:8])
     defaults = replace(defaults, side=_default_side(meta, side, path))
-    rel = relative_std if relative_std is not None else (meta_rel if meta_rel is not None else None)
+    rel = relative_std if relative_std is not None else meta_rel
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
-    comments = [c for c in text.comments if c[0] < header_line]
     layout = _layout(path, delim, columns, roles, decimal_comma, _fields(text.lines[k_header][1], delim))
     rows = _parse_rows(_events(source, header_line, units_line, comments), layout, defaults,
                        _rows_estimate(path, data))
@@ -1999,12 +1998,9 @@ def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf
 
 
 def _records_attributes(origin: RecordsOrigin, sides: list[str]) -> dict[str, Any]:
-    """The dataset attributes of elastic records: the schema's, with NaN instrument geometry."""
+    """The dataset attributes of elastic records the schema does not fix, with NaN instrument geometry."""
     return dict(
-        quantity="bsdf", frame="sample", side=" ".join(sides), units="1/sr",
-        angle_convention="sample frame; source at phi_i (deg), specular at phi_s = phi_i - 180; "
-                         "transmission angles from the back normal",
-        sample_name="", synthetic=0, source=str(origin.source), elastic=1,
+        side=" ".join(sides), sample_name="", synthetic=0, source=str(origin.source), elastic=1,
         bsdf_std_origin=origin.std_origin,
         solid_angle_sr=np.nan, aperture_half_angle_deg=np.nan, gain_e_per_count=np.nan,
         detector_distance_mm=np.nan, aperture_diameter_mm=np.nan, beam_diameter_mm=np.nan,
