@@ -85,7 +85,7 @@ def test_the_ansys_scan_through_the_api_equals_the_cli_number_for_number(ansys, 
     assert json.loads(table.attrs["warnings"]) == out["warnings"] == []
     # the accessor forwards; the layout is that of the library's results
     via_accessor = ansys.bsdf.tis()
-    for r in hemispherical(ansys, theta_i=[10.0, 80.0]):
+    for r in hemispherical(ansys, theta_i_deg=[10.0, 80.0]):
         at = via_accessor.sel(config=r.config, side=r.side, theta_i=r.theta_i, wavelength=r.wavelength)
         np.testing.assert_array_equal(at["tis"].values, r.value)
         np.testing.assert_array_equal(at["tis_std"].values, r.std)

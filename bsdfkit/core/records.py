@@ -7,7 +7,7 @@ import xarray as xr
 from bsdfkit.core.errors import InputError
 
 
-def select(ds: xr.Dataset, *, config: str | None = None, theta_i: float | None = None, side: str | None = None,
+def select(ds: xr.Dataset, *, config: str | None = None, theta_i_deg: float | None = None, side: str | None = None,
            arc: str | None = None, atol_deg: float = 1e-6) -> xr.Dataset:
     """Records matching every given label; raises :class:`InputError` naming the label when none match.
 
@@ -17,7 +17,7 @@ def select(ds: xr.Dataset, *, config: str | None = None, theta_i: float | None =
         Scan dataset with a ``record`` dimension (angles in degrees).
     config : str, optional
         Configuration label (e.g. ``"blue"``); None matches all.
-    theta_i : float, optional
+    theta_i_deg : float, optional
         Angle of incidence from the sample normal [deg]; None matches all.
     side : {"reflection", "transmission"}, optional
         Scattering side; None matches all.
@@ -38,11 +38,11 @@ def select(ds: xr.Dataset, *, config: str | None = None, theta_i: float | None =
             if not mask.any():
                 raise InputError("no records with this label", file=ds.attrs.get("source"), field=name,
                                  expected="one of " + ", ".join(sorted(set(map(str, ds[name].values)))), got=value)
-    if theta_i is not None:
-        mask &= np.isclose(ds["theta_i"].values, theta_i, atol=atol_deg, rtol=0)
+    if theta_i_deg is not None:
+        mask &= np.isclose(ds["theta_i"].values, theta_i_deg, atol=atol_deg, rtol=0)
         if not mask.any():
             raise InputError("no records at this incidence", file=ds.attrs.get("source"), field="theta_i",
-                             expected="one of " + ", ".join(f"{t:g}" for t in incidences(ds)) + " deg", got=theta_i)
+                             expected="one of " + ", ".join(f"{t:g}" for t in incidences(ds)) + " deg", got=theta_i_deg)
     return ds.isel(record=np.flatnonzero(mask))
 
 

@@ -121,7 +121,7 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
     axes = fig.subplots(1, 2, sharey=True)
     for ax, side, tag in ((axes[0], "reflection", "R"), (axes[1], "transmission", "T")):
         for th in incidences(ds):
-            sub = select(ds, config=config, theta_i=th, side=side, arc="in_plane")
+            sub = select(ds, config=config, theta_i_deg=th, side=side, arc="in_plane")
             x = signed_in_plane_theta(sub)
             order = np.argsort(x)
             y = sub["bsdf"].sel(wavelength=wavelength_nm, method="nearest").values[order]

@@ -158,7 +158,7 @@ def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | 
     if kind == "interactions":
         refuse_band_for_interactions(band)
         require_phosphor_scan(ds)  # a forced mode on elastic data: say why, not "no records for 'blue'"
-        table = tis_table(ds, theta_i=None if theta is None else [theta])
+        table = tis_table(ds, theta_i_deg=None if theta is None else [theta])
         table.attrs["reduction"] = "interactions"
     else:
         table = hemispherical_table(ds, theta, band)
@@ -254,7 +254,7 @@ def hemispherical_table(ds: xr.Dataset, incidence: float | None = None,
             for side in QUANTITY:
                 on = ds.isel(record=np.flatnonzero((names == config) & (sides == side)))
                 if on.sizes["record"] and any(abs(t - incidence) < 1e-6 for t in incidences(on)):
-                    results += hemispherical(ds, theta_i=[incidence], sides=(side,), configs=[config])
+                    results += hemispherical(ds, theta_i_deg=[incidence], sides=(side,), configs=[config])
     return _table(ds, results, band)
 
 

@@ -124,9 +124,9 @@ def require_phosphor_scan(ds: xr.Dataset) -> None:
                          file=ds.attrs.get("source") or None)
 
 
-def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = None,
+def interaction_table(ds: xr.Dataset, theta_i_deg: float, tis: xr.Dataset | None = None,
                       bands: InteractionBands | None = None) -> InteractionTable:
-    """Table 2 of the power-budget paper at incidence ``theta_i`` (deg) from a calibrated scan.
+    """Table 2 of the power-budget paper at incidence ``theta_i_deg`` [deg] from a calibrated scan.
 
     ``bands`` (default: the power-budget filters) reach both the TIS and the photon ratios; a given ``tis``
     (:func:`bsdfkit.reduction.tis.tis_table`) must have been computed with the same bands. A dataset that is not a
@@ -136,10 +136,10 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
     ----------
     ds : xarray.Dataset
         Calibrated phosphor scan.
-    theta_i : float
+    theta_i_deg : float
         Angle of incidence [deg]; must be in ``tis`` when given.
     tis : xarray.Dataset, optional
-        A precomputed :func:`bsdfkit.reduction.tis.tis_table`; None computes it at ``theta_i``.
+        A precomputed :func:`bsdfkit.reduction.tis.tis_table`; None computes it at ``theta_i_deg``.
     bands : InteractionBands, optional
         Excitation and conversion bands [nm]; None for the power-budget filters.
 
@@ -151,22 +151,22 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
     Raises
     ------
     InputError
-        If ``ds`` is not a phosphor scan, ``tis`` used other bands or lacks ``theta_i``.
+        If ``ds`` is not a phosphor scan, ``tis`` used other bands or lacks ``theta_i_deg``.
     NumericalError
         If no blue light is absorbed (EQE undefined).
     """
     require_phosphor_scan(ds)
     bands = bands or InteractionBands()
     if tis is None:
-        tis = angular.tis_table(ds, theta_i=[theta_i], bands=bands)
+        tis = angular.tis_table(ds, theta_i_deg=[theta_i_deg], bands=bands)
     for name, band in (("blue_band_nm", bands.blue_nm), ("yellow_band_nm", bands.yellow_nm)):
         used = tuple(float(v) for v in tis.attrs.get(name, band))
         if used != tuple(band):
             raise InputError("the TIS table was computed with other bands", file=ds.attrs.get("source") or None,
                              field=f"tis.attrs['{name}']", expected=list(band), got=list(used))
-    sel = tis.sel(theta_i=theta_i, method="nearest")
-    if abs(float(sel["theta_i"]) - theta_i) > 1e-6:
-        raise InputError("incidence not in the TIS table", field="theta_i", got=theta_i)
+    sel = tis.sel(theta_i=theta_i_deg, method="nearest")
+    if abs(float(sel["theta_i"]) - theta_i_deg) > 1e-6:
+        raise InputError("incidence not in the TIS table", field="theta_i", got=theta_i_deg)
     power, power_std = {}, {}
     for inter in ("bibs", "biys", "yiys"):
         for tag, side in zip("BF", SIDES):  # back (reflection), forward (transmission)
@@ -176,7 +176,7 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
     incident = spectral.incident_spectrum(ds, "blue")
     ratio = {}
     for tag, side in zip("BF", SIDES):  # back (reflection), forward (transmission)
-        scattered = angular.hemispherical_spectrum(ds, "blue", theta_i, side, "biys", bands.yellow_nm)
+        scattered = angular.hemispherical_spectrum(ds, "blue", theta_i_deg, side, "biys", bands.yellow_nm)
         ratio[tag] = spectral.photon_ratio(incident, bands.blue_nm, scattered, bands.yellow_nm)
     photons = dict(power)
     photons_std = dict(power_std)
@@ -194,7 +194,7 @@ def interaction_table(ds: xr.Dataset, theta_i: float, tis: xr.Dataset | None = N
     eqe = emitted / absorbed
     eqe_std = eqe * float(np.hypot(np.hypot(photons_std["B_biys"], photons_std["F_biys"]) / emitted,
                                    np.hypot(photons_std["B_bibs"], photons_std["F_bibs"]) / absorbed))
-    return InteractionTable(theta_i=float(theta_i), power=power, power_std=power_std, photons=photons,
+    return InteractionTable(theta_i=float(theta_i_deg), power=power, power_std=power_std, photons=photons,
                             photons_std=photons_std, eqe=eqe, eqe_std=eqe_std, photon_ratio=ratio)
 
 

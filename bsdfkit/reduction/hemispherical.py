@@ -131,9 +131,9 @@ class Geometry:
         return x, y
 
     def dataset(self, keep: NDArray[np.int64], values: NDArray[np.float64] | None = None,
-                extra: list[tuple[float, float]] = (), theta_i: float | None = None) -> xr.Dataset:
-        """A profile dataset of the records ``keep`` plus virtual in-plane records (θs, φs) in ``extra``;
-        ``theta_i`` (deg) overrides the incidence, which places the specular centre of a reconstruction.
+                extra_deg: list[tuple[float, float]] = (), theta_i_deg: float | None = None) -> xr.Dataset:
+        """A profile dataset of the records ``keep`` plus virtual in-plane records (θs, φs) in ``extra_deg``;
+        ``theta_i_deg`` [deg] overrides the incidence, which places the specular centre of a reconstruction.
 
         Parameters
         ----------
@@ -141,9 +141,9 @@ class Geometry:
             Indices of the records to keep.
         values : ndarray, optional
             ``bsdf`` per output record [1/sr] (default: zeros).
-        extra : list of tuple of float
+        extra_deg : list of tuple of float
             Virtual in-plane records (θs, φs) [deg].
-        theta_i : float, optional
+        theta_i_deg : float, optional
             Incidence [deg] (default: the profile's).
 
         Returns
@@ -152,13 +152,14 @@ class Geometry:
             ``bsdf`` over ``record`` with coordinates ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s`` [deg], ``side``,
             ``arc``.
         """
-        ts = np.concatenate([self.theta_s[keep], [e[0] for e in extra]])
-        ps = np.concatenate([self.phi_s[keep], [e[1] for e in extra]])
-        arc = np.concatenate([self.arc[keep], ["in_plane"] * len(extra)])
+        ts = np.concatenate([self.theta_s[keep], [e[0] for e in extra_deg]])
+        ps = np.concatenate([self.phi_s[keep], [e[1] for e in extra_deg]])
+        arc = np.concatenate([self.arc[keep], ["in_plane"] * len(extra_deg)])
         n = ts.size
         v = np.zeros(n) if values is None else np.asarray(values, dtype=np.float64)
+        th = self.theta_i if theta_i_deg is None else theta_i_deg
         return xr.Dataset({"bsdf": ("record", v)},
-                          coords={"theta_i": ("record", np.full(n, self.theta_i if theta_i is None else theta_i)),
+                          coords={"theta_i": ("record", np.full(n, th)),
                                   "phi_i": ("record", np.full(n, self.phi_i)),
                                   "theta_s": ("record", ts), "phi_s": ("record", ps),
                                   "side": ("record", np.array([self.side] * n)), "arc": ("record", arc)})
@@ -642,7 +643,7 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
     region = reg.records
     outside = np.setdiff1d(np.flatnonzero(finite), region)
     extra, t, ends = _tail_rows(geom, outside, finite, x, opts.rule, ref)
-    body = Hemisphere.from_profile(geom.dataset(outside, extra=extra), center=opts.body_center)
+    body = Hemisphere.from_profile(geom.dataset(outside, extra_deg=extra), center=opts.body_center)
     if opts.azimuth != "mean":
         body = _with_perpendicular(body, opts.azimuth)
     wb = _weights(body, opts.n_psi, opts.n_r, opts.p)
@@ -667,7 +668,7 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
         pos = np.searchsorted(lobe_keep, region)
         lobe_values[pos] = resid @ np.nan_to_num(ref)
         center = min(max(reg.center_deg if reg.center_deg is not None else geom.theta_i, 0.0), 89.0)
-        lobe = Hemisphere.from_profile(geom.dataset(lobe_keep, lobe_values, theta_i=center), center="specular")
+        lobe = Hemisphere.from_profile(geom.dataset(lobe_keep, lobe_values, theta_i_deg=center), center="specular")
         if opts.azimuth != "mean":
             lobe = _with_perpendicular(lobe, opts.azimuth)
         wl = _weights(lobe, opts.n_psi, opts.n_r, opts.p)
@@ -682,13 +683,13 @@ def _body_and_lobe(geom: Geometry, reg: Region, finite: NDArray[np.bool_], ref: 
 
     def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64], k: float = 1.0) -> NDArray:
         v = np.nan_to_num(np.asarray(values, dtype=np.float64))
-        d = geom.dataset(outside, np.concatenate([v[outside], t @ v]), extra=extra)
+        d = geom.dataset(outside, np.concatenate([v[outside], t @ v]), extra_deg=extra)
         out = Hemisphere.from_profile(d, center=opts.body_center).bsdf(directions)
         if lobe_parts is not None and k != 0.0:
             keep, at, res, centre = lobe_parts
             lv = np.zeros(keep.size)
             lv[at] = res @ v
-            out = out + k * Hemisphere.from_profile(geom.dataset(keep, lv, theta_i=centre),
+            out = out + k * Hemisphere.from_profile(geom.dataset(keep, lv, theta_i_deg=centre),
                                                     center="specular").bsdf(directions)
         return out
 
@@ -1867,7 +1868,7 @@ def label_set(values: object) -> list[str]:
     return sorted({str(v) for v in set(np.asarray(values).ravel().tolist())})
 
 
-def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
+def profile_model(ds: xr.Dataset, config: str, theta_i_deg: float, side: str, n_psi: int = 256,
                   n_r: int = 400, errors: bool = True) -> ProfileModel:
     """The records of one configuration, incidence [deg] and side, merged and reconstructed (:class:`ProfileModel`);
     ``errors=False`` gives the value without the reconstruction error (no alternative reconstructions).
@@ -1878,7 +1879,7 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
         Calibrated dataset (see :func:`hemispherical_profile`).
     config : str
         Configuration name.
-    theta_i : float
+    theta_i_deg : float
         Incidence angle [deg], a measured one.
     side : str
         ``"reflection"`` or ``"transmission"``.
@@ -1892,10 +1893,10 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
     ProfileModel
     """
     sel = label_mask(ds["config"].values, config) & (ds["side"].values == side) & np.isclose(
-        ds["theta_i"].values, theta_i, atol=1e-6, rtol=0)
+        ds["theta_i"].values, theta_i_deg, atol=1e-6, rtol=0)
     if not sel.any():
         raise InputError("no records for this configuration, incidence and side", file=ds.attrs.get("source"),
-                         field="theta_i", expected=f"records of '{config}' at {theta_i:g} deg, {side}")
+                         field="theta_i", expected=f"records of '{config}' at {theta_i_deg:g} deg, {side}")
     idx = np.flatnonzero(sel)
     f = np.atleast_2d(ds["bsdf"].values[idx].reshape(idx.size, -1)).astype(np.float64)
     u = (ds["bsdf_std"].values[idx].reshape(idx.size, -1).astype(np.float64) if "bsdf_std" in ds
@@ -1908,7 +1909,7 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
     arc = (np.asarray(ds["arc"].values[idx]).astype(str) if "arc" in ds.coords
            else np.full(idx.size, "in_plane"))
     psa = (ds[basis.COORD].values[idx].astype(np.float64) if basis.COORD in ds.coords else None)
-    geom = Geometry(theta_i=float(theta_i), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
+    geom = Geometry(theta_i=float(theta_i_deg), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
                     phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side, basis_psa=psa)
     label = str(ds.attrs.get("source", "dataset"))
     geom, f, u, warnings = _merge_duplicates(geom, f, u, label)
@@ -1917,7 +1918,7 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
     cols = np.flatnonzero(finite.any(axis=0))
     if cols.size == 0:
         raise InputError("no finite BSDF values", file=ds.attrs.get("source"), field="bsdf",
-                         expected=f"values for '{config}' at {theta_i:g} deg, {side}")
+                         expected=f"values for '{config}' at {theta_i_deg:g} deg, {side}")
     # wavelengths with the same set of finite records share one reconstruction
     patterns: dict[bytes, list[int]] = {}
     for j, c in enumerate(cols):
@@ -1929,12 +1930,12 @@ def profile_model(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi:
         ref = np.where(mask, np.nan_to_num(sub).mean(axis=1), np.nan)
         ref_std = np.sqrt(np.mean(np.nan_to_num(u[:, cols[js]]) ** 2, axis=1) / len(js))
         parts.append((np.asarray(js, dtype=np.int64), reconstruct(geom, ref, ref_std, n_psi, n_r, errors)))
-    return ProfileModel(config=config, theta_i=float(theta_i), side=side, geom=geom, f=f, u=u, wavelength=wl,
+    return ProfileModel(config=config, theta_i=float(theta_i_deg), side=side, geom=geom, f=f, u=u, wavelength=wl,
                         cols=cols, parts=tuple(parts), scale=_scale_std(ds, config, wl.size),
                         warnings=tuple(warnings), assumptions=tuple(stated))
 
 
-def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str, n_psi: int = 256,
+def hemispherical_profile(ds: xr.Dataset, config: str, theta_i_deg: float, side: str, n_psi: int = 256,
                           n_r: int = 400) -> HemisphericalResult:
     """Directional-hemispherical reflectance or transmittance ρ(λ) of one configuration, incidence and side.
 
@@ -1945,7 +1946,7 @@ def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str
         ``theta_i``, ``phi_i``, ``theta_s``, ``phi_s`` [deg], ``side``, ``arc``, ``config``).
     config
         Configuration name (the ``config`` label of the records).
-    theta_i
+    theta_i_deg
         Incidence angle [deg], a measured one.
     side
         ``"reflection"`` or ``"transmission"``.
@@ -1959,7 +1960,7 @@ def hemispherical_profile(ds: xr.Dataset, config: str, theta_i: float, side: str
         reconstruction standard uncertainties [fraction], the lobe part, the components of the error, the
         method and the assumptions (module docstring).
     """
-    return result_of(profile_model(ds, config, theta_i, side, n_psi, n_r))
+    return result_of(profile_model(ds, config, theta_i_deg, side, n_psi, n_r))
 
 
 def result_of(model: ProfileModel) -> HemisphericalResult:
@@ -2004,7 +2005,7 @@ def result_of(model: ProfileModel) -> HemisphericalResult:
                                notes=model.warnings)
 
 
-def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tuple[str, ...] | None = None,
+def hemispherical(ds: xr.Dataset, theta_i_deg: list[float] | None = None, sides: tuple[str, ...] | None = None,
                   configs: list[str] | None = None, n_psi: int = 256, n_r: int = 400,
                   errors: bool = True) -> list[HemisphericalResult]:
     """Directional-hemispherical reflectance/transmittance for every configuration, incidence and side.
@@ -2013,7 +2014,7 @@ def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tup
     ----------
     ds
         Calibrated dataset (see :func:`hemispherical_profile`).
-    theta_i
+    theta_i_deg
         Incidence angles [deg] to reduce; default: every measured one (per configuration and side).
     sides
         Sides to reduce; default: those the dataset holds.
@@ -2042,7 +2043,7 @@ def hemispherical(ds: xr.Dataset, theta_i: list[float] | None = None, sides: tup
             on_side = in_cfg & (side_of == side)
             if not on_side.any():
                 continue
-            for th in theta_i if theta_i is not None else sorted(set(theta_of[on_side].tolist())):
+            for th in theta_i_deg if theta_i_deg is not None else sorted(set(theta_of[on_side].tolist())):
                 out.append(result_of(profile_model(ds, config, th, side, n_psi, n_r, errors)))
     if not out:
         raise InputError("no records to reduce", file=ds.attrs.get("source"), field="side",
@@ -2122,7 +2123,7 @@ def _spectral_weights(model: ProfileModel, wavelength: float | None, band: tuple
 
 def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelength: float | None = None,
                    band: tuple[float, float] | None = None, config: str | None = None,
-                   theta_i: list[float] | None = None) -> ElasticSource:
+                   theta_i_deg: list[float] | None = None) -> ElasticSource:
     """The engine's reconstruction of elastic data as a BSDF callable, and its hemispherical values.
 
     Parameters
@@ -2137,7 +2138,7 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
         (low, high) [nm]: the Δλ-weighted mean over the band (as :meth:`HemisphericalResult.band_average`).
     config
         Configuration (default: the only one).
-    theta_i
+    theta_i_deg
         Incidences [deg] (default: every measured one, per side).
 
     Returns
@@ -2164,7 +2165,7 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
                                            & label_mask(ds["config"].values, config)))
         if on.sizes["record"] == 0:
             raise InputError("the source holds no data for this side", file=label, field="--side", got=side)
-        angles = theta_i if theta_i is not None else incidences(on)
+        angles = theta_i_deg if theta_i_deg is not None else incidences(on)
         out_t[side], out_tis[side], methods[side] = [], [], []
         for th in angles:
             model = profile_model(ds, config, float(th), side, errors=False)  # the value is what is checked

@@ -557,7 +557,7 @@ def tis_from_profile(profile: xr.Dataset, n_psi: int = 256, n_r: int = 400, cent
 
 
 def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "yiys"),
-              theta_i: list[float] | None = None, bands: InteractionBands | None = None) -> xr.Dataset:
+              theta_i_deg: list[float] | None = None, bands: InteractionBands | None = None) -> xr.Dataset:
     """TIS per interaction, side and incidence from a calibrated scan: a Dataset with ``tis``, ``tis_std``,
     ``tis_std_measurement``, ``tis_std_reconstruction`` (fractions) over (interaction, side, theta_i).
 
@@ -571,7 +571,7 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
         Calibrated scan.
     interactions : tuple of str, optional
         Interactions to reduce (``"bibs"``, ``"biys"``, ``"yiys"``, ``"elastic"``).
-    theta_i : list of float, optional
+    theta_i_deg : list of float, optional
         Angles of incidence [deg]; None for every measured incidence.
     bands : InteractionBands, optional
         The bands [nm]; None for the power-budget filters.
@@ -589,7 +589,7 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
     """
 
     bands = bands or InteractionBands()
-    angles = theta_i if theta_i is not None else incidences(ds)
+    angles = theta_i_deg if theta_i_deg is not None else incidences(ds)
     sides = list(SIDES)
     shape = (len(interactions), len(sides), len(angles))
     arrays = {k: np.full(shape, np.nan) for k in ("tis", "tis_std", "tis_std_measurement", "tis_std_reconstruction")}
@@ -616,7 +616,7 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
     return out
 
 
-def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: str,
+def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i_deg: float, side: str,
                            interaction: str = "biys", band: tuple[float, float] = CONVERSION_BAND_NM) -> xr.DataArray:
     """Spectral TIS density (1/nm): the bi-spectral BSDF integrated over the hemisphere at each λs.
 
@@ -629,7 +629,7 @@ def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: st
         Calibrated phosphor scan with ``bsdf_bispectral``.
     config : str
         Excitation configuration (e.g. ``"blue"``).
-    theta_i : float
+    theta_i_deg : float
         Angle of incidence [deg], a measured one.
     side : str
         ``"reflection"`` or ``"transmission"``.
@@ -644,13 +644,13 @@ def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i: float, side: st
         Spectral TIS density [1/nm] over ``wavelength`` [nm].
     """
 
-    sub = select(ds, config=config, theta_i=theta_i, side=side)
+    sub = select(ds, config=config, theta_i_deg=theta_i_deg, side=side)
     prof = bispectral_band_integral(sub, config, band)
     hemi = Hemisphere.from_profile(prof, center=CENTER.get(interaction, "specular"))
     w = hemi.weights()
     density = np.nan_to_num(sub["bsdf_bispectral"].values, nan=0.0).T @ w
     out = xr.DataArray(density, dims=["wavelength"], coords={"wavelength": ds["wavelength"].values})
-    out.attrs.update(units="1/nm", long_name=f"hemispherical spectral TIS density, {side}, θi = {theta_i:g}°")
+    out.attrs.update(units="1/nm", long_name=f"hemispherical spectral TIS density, {side}, θi = {theta_i_deg:g}°")
     return out
 
 

@@ -439,7 +439,7 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
             raise InputError("the source holds no data for this side", file=label, field="--side",
                              expected=" or ".join(have), got=s)
     src = elastic_source(ds, sides, wavelength=wavelength_nm,
-                         theta_i=None if theta_i_deg is None else [float(t) for t in theta_i_deg])
+                         theta_i_deg=None if theta_i_deg is None else [float(t) for t in theta_i_deg])
     common = sorted(set.intersection(*[set(np.round(src.incidences_deg[s], 9)) for s in sides]))
     if not common:
         raise InputError("the sides share no measured incidence", file=label, field="theta_i",

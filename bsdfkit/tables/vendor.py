@@ -227,7 +227,7 @@ def _normalised(ds: xr.Dataset, vendor: VendorTable, path: str) -> xr.Dataset:
             rows = (sides == side) & (np.abs(thetas - theta) <= 1e-6)
             if not rows.any():
                 continue
-            res = hemispherical(ds, theta_i=[float(theta)], sides=(side,), errors=False)
+            res = hemispherical(ds, theta_i_deg=[float(theta)], sides=(side,), errors=False)
             raw = float(res[0].band_average()["value"]) if res else 0.0
             if not raw > 0:
                 if stated > 0:
@@ -243,7 +243,7 @@ def _normalised(ds: xr.Dataset, vendor: VendorTable, path: str) -> xr.Dataset:
         if not np.any(np.abs(have - theta) <= 1e-6):
             raise FormatError("the spectrum's incidence is not one of the table's", file=path,
                               field=f"{side}: spectrum incidence", expected=f"one of {have.tolist()}", got=theta)
-        res = hemispherical(ds, theta_i=[float(theta)], sides=(side,), errors=False)
+        res = hemispherical(ds, theta_i_deg=[float(theta)], sides=(side,), errors=False)
         raw = float(res[0].band_average()["value"]) if res else 0.0
         if not raw > 0:
             raise FormatError("the table integrates to zero where the spectrum is stated", file=path,

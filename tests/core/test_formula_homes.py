@@ -74,10 +74,10 @@ def test_linear_weights_reproduce_numpy_interp():
 
 def test_the_bands_reach_the_tis_and_the_photon_ratio(bundled_scan):
     bands = InteractionBands(yellow_nm=(480.0, 740.0))
-    narrow = angular.tis_table(bundled_scan, ("biys",), theta_i=[45.0], bands=bands)
+    narrow = angular.tis_table(bundled_scan, ("biys",), theta_i_deg=[45.0], bands=bands)
     table = budget.interaction_table(bundled_scan, 45.0, bands=bands)
     assert table.power["B_biys"] == pytest.approx(100 * float(narrow["tis"].sel(side="reflection")[0, 0]), rel=1e-12)
-    default = angular.tis_table(bundled_scan, ("biys",), theta_i=[45.0])
+    default = angular.tis_table(bundled_scan, ("biys",), theta_i_deg=[45.0])
     assert float(narrow["tis"].sum()) < float(default["tis"].sum())  # less of the converted band
     with pytest.raises(InputError, match="other bands"):
         budget.interaction_table(bundled_scan, 45.0, tis=default, bands=bands)
