@@ -5,7 +5,7 @@ Every CLI verb is a thin wrapper over one of these functions, and ``import bsdfk
 
 >>> import bsdfkit
 >>> ds = bsdfkit.ingest("measurements/cl830-synthetic")            # doctest: +SKIP
->>> table = bsdfkit.tis(ds, incidence=45)                          # doctest: +SKIP
+>>> table = bsdfkit.tis(ds, incidence_deg=45)                      # doctest: +SKIP
 >>> fit = bsdfkit.fit_bsdf(ds, "bibs", "reflection")               # doctest: +SKIP
 >>> bsdfkit.export(fit, "zemax", "bibs", "reflection", "out.bsdf")  # doctest: +SKIP
 """
@@ -71,7 +71,7 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     return _ingest_any(path, **options)
 
 
-def tis(ds: xr.Dataset, incidence: float | None = None,
+def tis(ds: xr.Dataset, incidence_deg: float | None = None,
         band: tuple[float, float] | None = None) -> xr.Dataset:
     """TIS [fraction] of any sample: the hemispherical values of elastic data, the interaction TIS of a phosphor
     plate; the same function as ``bsdfkit tis`` (:func:`bsdfkit.reduction.any_sample.tis`).
@@ -83,7 +83,7 @@ def tis(ds: xr.Dataset, incidence: float | None = None,
     ----------
     ds
         Calibrated dataset from :func:`ingest`.
-    incidence
+    incidence_deg
         Incidence angle [deg], one of the measured ones: only that incidence is reduced and ``theta_i`` is a
         scalar coordinate of the result. ``None`` reduces every measured incidence.
     band
@@ -110,10 +110,10 @@ def tis(ds: xr.Dataset, incidence: float | None = None,
     """
     from bsdfkit.reduction.any_sample import tis as _tis_any
 
-    return _tis_any(ds, incidence, band)
+    return _tis_any(ds, incidence_deg, band)
 
 
-def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
+def budget(ds: xr.Dataset, incidence_deg: float) -> InteractionTable:
     """Table 2 of the power-budget paper [1]_ at one measured incidence: TIS in % of the initial power
     and photons per interaction and side, losses and EQE.
 
@@ -123,7 +123,7 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
         A calibrated phosphor scan (configurations ``blue`` and ``yellow``, both sides, bi-spectral BSDF).
         Elastic data is refused with one line saying why (:class:`~bsdfkit.core.errors.InputError`): its
         hemispherical values are :func:`tis`.
-    incidence
+    incidence_deg
         Incidence angle [deg], one of the measured ones.
 
     Returns
@@ -137,7 +137,7 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
     """
     from bsdfkit.reduction.any_sample import budget as _budget_any
 
-    return _budget_any(ds, incidence)
+    return _budget_any(ds, incidence_deg)
 
 
 def profile(ds: xr.Dataset, interaction: str, side: str | None = None) -> xr.Dataset:

@@ -96,9 +96,9 @@ def test_an_incidence_reduces_only_that_incidence(ansys, monkeypatch, capsys):
     calls = []
     real = any_sample.hemispherical
 
-    def spy(ds, theta_i=None, sides=None, configs=None):
-        results = real(ds, theta_i=theta_i, sides=sides, configs=configs)
-        calls.append((theta_i, [r.theta_i for r in results]))
+    def spy(ds, theta_i_deg=None, sides=None, configs=None):
+        results = real(ds, theta_i_deg=theta_i_deg, sides=sides, configs=configs)
+        calls.append((theta_i_deg, [r.theta_i for r in results]))
         return results
 
     monkeypatch.setattr(any_sample, "hemispherical", spy)
@@ -186,9 +186,9 @@ def test_a_phosphor_plate_reduces_one_incidence_and_refuses_a_band(bundled_scan,
     calls = []
     real = any_sample.tis_table
 
-    def spy(ds, theta_i=None):
-        calls.append(theta_i)
-        return real(ds, theta_i=theta_i)
+    def spy(ds, theta_i_deg=None):
+        calls.append(theta_i_deg)
+        return real(ds, theta_i_deg=theta_i_deg)
 
     monkeypatch.setattr(any_sample, "tis_table", spy)
     table = bsdfkit.tis(bundled_scan, 45)

@@ -1845,19 +1845,20 @@ def _check_angles(path: str, line: int, th_i: float, ph_i: float, th_s: float, p
 
 
 # ------------------------------------------------------------------------------------------- dataset
-def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArray) -> NDArray[np.object_]:
+def arc_labels(theta_i_deg: NDArray, phi_i_deg: NDArray, theta_s_deg: NDArray,
+               phi_s_deg: NDArray) -> NDArray[np.object_]:
     """``in_plane`` (φs on the specular or source side, or θs = 0), ``perpendicular`` (the great circle
     through the specular direction normal to the plane of incidence) or ``other``, per record (degrees).
 
     Parameters
     ----------
-    theta_i : ndarray
+    theta_i_deg : ndarray
         Angle of incidence of each record [deg].
-    phi_i : ndarray
+    phi_i_deg : ndarray
         Source azimuth of each record [deg].
-    theta_s : ndarray
+    theta_s_deg : ndarray
         Scatter polar angle of each record [deg].
-    phi_s : ndarray
+    phi_s_deg : ndarray
         Scatter azimuth of each record [deg].
 
     Returns
@@ -1866,7 +1867,8 @@ def arc_labels(theta_i: NDArray, phi_i: NDArray, theta_s: NDArray, phi_s: NDArra
         ``"in_plane"``, ``"perpendicular"`` or ``"other"`` per record (tolerance :data:`ARC_TOL` on direction
         cosines).
     """
-    ti, pi_, ts, ps = (np.radians(np.asarray(a, dtype=np.float64)) for a in (theta_i, phi_i, theta_s, phi_s))
+    ti, pi_, ts, ps = (np.radians(np.asarray(a, dtype=np.float64))
+                       for a in (theta_i_deg, phi_i_deg, theta_s_deg, phi_s_deg))
     rel = np.mod(ps - (pi_ - np.pi) + np.pi, 2 * np.pi) - np.pi  # φs relative to the specular azimuth
     # tolerance ARC_TOL (1e-5 rad ≈ 0.0006°): angles written in radians or with few decimals are not exact
     in_plane = (np.abs(np.sin(rel)) * np.sin(ts) < ARC_TOL) | (ts < 1e-12)

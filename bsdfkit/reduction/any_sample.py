@@ -76,14 +76,14 @@ def check_band(band: Sequence[float] | None, field: str = "band") -> tuple[float
     return lo, hi
 
 
-def check_incidence(ds: xr.Dataset, incidence: float | None, field: str = "incidence") -> float | None:
-    """The measured incidence [deg] matching ``incidence`` (within 1e-6 deg), ``None`` for ``None``.
+def check_incidence(ds: xr.Dataset, incidence_deg: float | None, field: str = "incidence") -> float | None:
+    """The measured incidence [deg] matching ``incidence_deg`` (within 1e-6 deg), ``None`` for ``None``.
 
     Parameters
     ----------
     ds : xarray.Dataset
         Calibrated dataset (:func:`bsdfkit.ingest`).
-    incidence : float or None
+    incidence_deg : float or None
         Requested angle of incidence [deg].
     field : str, optional
         Option named in the error.
@@ -93,17 +93,17 @@ def check_incidence(ds: xr.Dataset, incidence: float | None, field: str = "incid
     float or None
         The measured angle of incidence [deg], or None.
     """
-    if incidence is None:
+    if incidence_deg is None:
         return None
     measured = incidences(ds)
     try:
-        value = float(incidence)
+        value = float(incidence_deg)
     except (TypeError, ValueError):
         value = math.nan
     match = [t for t in measured if abs(t - value) < 1e-6]
     if not match:
         raise InputError("no records at this incidence", file=ds.attrs.get("source"), field=field,
-                         expected="one of " + ", ".join(f"{t:g}" for t in measured) + " deg", got=incidence)
+                         expected="one of " + ", ".join(f"{t:g}" for t in measured) + " deg", got=incidence_deg)
     return match[0]
 
 
@@ -125,7 +125,7 @@ def refuse_band_for_interactions(band: tuple[float, float] | None, field: str = 
                                   "hemispherical)", got=band)
 
 
-def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | None = None,
+def tis(ds: xr.Dataset, incidence_deg: float | None = None, band: Sequence[float] | None = None,
         mode: str = "auto") -> xr.Dataset:
     """TIS [fraction] of any sample: hemispherical values of elastic data, the interaction TIS of a phosphor plate.
 
@@ -133,7 +133,7 @@ def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | 
     ----------
     ds
         Calibrated dataset (:func:`bsdfkit.ingest`).
-    incidence
+    incidence_deg
         Incidence angle [deg], one of the measured ones: only that incidence is reduced and ``theta_i`` becomes
         a scalar coordinate. ``None`` reduces every measured incidence.
     band
@@ -153,7 +153,7 @@ def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | 
     if mode not in MODES:
         raise InputError("unknown reduction", field="mode", expected=" or ".join(MODES), got=mode)
     band = check_band(band)
-    theta = check_incidence(ds, incidence)
+    theta = check_incidence(ds, incidence_deg)
     kind = reduction_kind(ds) if mode == "auto" else mode
     if kind == "interactions":
         refuse_band_for_interactions(band)
@@ -165,7 +165,7 @@ def tis(ds: xr.Dataset, incidence: float | None = None, band: Sequence[float] | 
     return table if theta is None else table.isel(theta_i=0)
 
 
-def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence: float) -> tuple[float, float]:
+def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence_deg: float) -> tuple[float, float]:
     """The data's TIS [fraction] and its standard uncertainty beside a fit of one interaction profile: what
     :func:`tis` reports for that interaction (phosphor plate) or the band average over the measured range of
     the dataset's only configuration (``elastic``), at one measured incidence [deg] and side.
@@ -178,7 +178,7 @@ def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence: float) 
         Interaction of a phosphor plate (ignored for elastic data).
     side : {"reflection", "transmission"}
         Scattering side.
-    incidence : float
+    incidence_deg : float
         A measured angle of incidence [deg].
 
     Returns
@@ -188,7 +188,7 @@ def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence: float) 
     std : float
         Its standard uncertainty [-].
     """
-    table = tis(ds, incidence)
+    table = tis(ds, incidence_deg)
     if table.attrs.get("reduction") == "interactions":
         row = table.sel(interaction=interaction, side=side)
         return float(row["tis"]), float(row["tis_std"])
@@ -196,7 +196,7 @@ def measured_tis(ds: xr.Dataset, interaction: str, side: str, incidence: float) 
     return float(row["tis_band"]), float(row["tis_band_std"])
 
 
-def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
+def budget(ds: xr.Dataset, incidence_deg: float) -> InteractionTable:
     """Table 2 of the power-budget paper at one measured incidence [deg] (a phosphor scan only).
 
     Elastic data is refused with one line saying why (:func:`bsdfkit.reduction.budget.require_phosphor_scan`).
@@ -205,7 +205,7 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
     ----------
     ds : xarray.Dataset
         Calibrated phosphor scan (configurations ``blue`` and ``yellow``).
-    incidence : float
+    incidence_deg : float
         A measured angle of incidence [deg].
 
     Returns
@@ -214,10 +214,10 @@ def budget(ds: xr.Dataset, incidence: float) -> InteractionTable:
         Power and photon TIS of every interaction and side [%].
     """
     require_phosphor_scan(ds)
-    return interaction_table(ds, check_incidence(ds, incidence))
+    return interaction_table(ds, check_incidence(ds, incidence_deg))
 
 
-def hemispherical_table(ds: xr.Dataset, incidence: float | None = None,
+def hemispherical_table(ds: xr.Dataset, incidence_deg: float | None = None,
                         band: tuple[float, float] | None = None) -> xr.Dataset:
     """Directional-hemispherical reflectance/transmittance of elastic data as one labelled Dataset.
 
@@ -225,7 +225,7 @@ def hemispherical_table(ds: xr.Dataset, incidence: float | None = None,
     ----------
     ds
         Calibrated dataset (record × wavelength; :func:`bsdfkit.reduction.hemispherical.hemispherical_profile`).
-    incidence
+    incidence_deg
         A measured incidence [deg] (see :func:`check_incidence`): only it is reduced, for every configuration
         and side measured at it. ``None``: every incidence.
     band
@@ -244,7 +244,7 @@ def hemispherical_table(ds: xr.Dataset, incidence: float | None = None,
         lobe_region_deg, extrapolated_beyond_deg, band_nm, wavelengths in the band, band-averaged
         components of the error, warnings) and ``warnings`` (JSON list).
     """
-    if incidence is None:
+    if incidence_deg is None:
         results = hemispherical(ds)
     else:
         results = []
@@ -253,8 +253,8 @@ def hemispherical_table(ds: xr.Dataset, incidence: float | None = None,
         for config in sorted(set(names)):
             for side in QUANTITY:
                 on = ds.isel(record=np.flatnonzero((names == config) & (sides == side)))
-                if on.sizes["record"] and any(abs(t - incidence) < 1e-6 for t in incidences(on)):
-                    results += hemispherical(ds, theta_i_deg=[incidence], sides=(side,), configs=[config])
+                if on.sizes["record"] and any(abs(t - incidence_deg) < 1e-6 for t in incidences(on)):
+                    results += hemispherical(ds, theta_i_deg=[incidence_deg], sides=(side,), configs=[config])
     return _table(ds, results, band)
 
 

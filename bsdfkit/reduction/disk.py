@@ -584,7 +584,7 @@ def _rim_rows(stage0: PolarInterpolant, tri0: Delaunay, rim: Rim, rim_psi: NDArr
 
 def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, float], *,
           rim: Rim | None = None, azimuth_weight: float = AZIMUTH_WEIGHT, spokes: bool = False,
-          about_direction: float | None = None) -> PolarInterpolant:
+          about_direction_deg: float | None = None) -> PolarInterpolant:
     """The polar interpolant of records at β = (x, y) about ``center``.
 
     Parameters
@@ -601,7 +601,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
         The records are a polar grid about ``center`` (straight spokes in β, as a Harvey–Shack table): each spoke
         is held at its outermost value beyond it (as the table's own readers do), instead of a rim; the horizon
         then cuts a domain that the spokes fill.
-    about_direction
+    about_direction_deg
         With ``spokes``: the incidence [deg] of a grid whose spokes are great circles through the specular
         *direction* (a Zemax table: radial angle and azimuth about it); interpolated in those coordinates.
 
@@ -613,7 +613,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     n = x.size
-    psi, r, at_center, off = _polar_records(x, y, center, about_direction)
+    psi, r, at_center, off = _polar_records(x, y, center, about_direction_deg)
     rim_psi = _rim_psi()
     i_center = n
     # stage 1: records + centre line
@@ -623,7 +623,7 @@ def build(x: NDArray[np.float64], y: NDArray[np.float64], center: tuple[float, f
     rows_c = sp.csr_matrix(_center_row(r, at_center, off)[None, :])
     base = sp.vstack([sp.identity(n, format="csr"), rows_c]).tocsr()
     if spokes:
-        return _with_spokes(center, psi, r, off, base, azimuth_weight, about_direction)
+        return _with_spokes(center, psi, r, off, base, azimuth_weight, about_direction_deg)
     pp, rr, nn = _periodic(p0, r0, n0, n)
     try:
         tri0 = _triangulate(pp, rr, azimuth_weight)

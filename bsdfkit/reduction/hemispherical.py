@@ -1146,7 +1146,7 @@ def _body_interpolant(x: NDArray[np.float64], y: NDArray[np.float64], center: tu
     specular direction when ``about_direction`` gives the incidence [deg])."""
     if spokes:
         return disk.build(x, y, center, rim=disk.Rim(rim, normal_centered=False, reference=reference), spokes=True,
-                          about_direction=about_direction)
+                          about_direction_deg=about_direction)
     return disk.build(x, y, center, rim=disk.Rim(rim, normal_centered=True, reference=reference),
                       azimuth_weight=_body_azimuth_weight(x, y))
 

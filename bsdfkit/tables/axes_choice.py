@@ -19,7 +19,7 @@ BsdfFn = grids.BsdfFn
 
 
 def plane_symmetric_grid(
-    fn: BsdfFn, theta: NDArray, side: str, axes: grids.SpecularAxes, tolerance: float
+    fn: BsdfFn, theta_deg: NDArray, side: str, axes: grids.SpecularAxes, tolerance: float
 ) -> tuple[xr.DataArray, float]:
     """Specular grid for a PlaneSymmetrical file: the mirror average (f(a) + f(360° − a))/2 of the source.
 
@@ -32,7 +32,7 @@ def plane_symmetric_grid(
     ----------
     fn : callable
         The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
-    theta : ndarray
+    theta_deg : ndarray
         Incidences of the table (the specular angle) [deg].
     side : str
         The side tabulated, ``reflection`` or ``transmission``.
@@ -49,8 +49,8 @@ def plane_symmetric_grid(
         The largest deviation found, relative to the block maximum [-].
     """
     mirrored = tuple(sorted({float(np.mod(360.0 - a, 360.0)) for a in axes.azimuth_deg}))
-    half = grids.specular_grid(fn, theta, side, axes)
-    full = grids.specular_grid(fn, theta, side, grids.SpecularAxes(axes.radial_deg, mirrored))
+    half = grids.specular_grid(fn, theta_deg, side, axes)
+    full = grids.specular_grid(fn, theta_deg, side, grids.SpecularAxes(axes.radial_deg, mirrored))
     mirror = np.stack([full.sel(azimuth=float(np.mod(360.0 - a, 360.0))).values for a in axes.azimuth_deg], axis=-2)
     scale = np.max(half.values, axis=(-1, -2), keepdims=True)
     deviation = np.abs(half.values - mirror) / np.where(scale > 0, scale, 1.0)
@@ -59,7 +59,8 @@ def plane_symmetric_grid(
         _, t, k, _ = np.unravel_index(int(np.argmax(deviation)), deviation.shape)
         a = axes.azimuth_deg[k]
         raise ValidationError(
-            f"source is not plane-symmetric at theta_i={theta[t]:g} deg (azimuth {a:g} vs {np.mod(360 - a, 360):g})",
+            f"source is not plane-symmetric at theta_i={theta_deg[t]:g} deg "
+            f"(azimuth {a:g} vs {np.mod(360 - a, 360):g})",
             field="zemax_symmetry", expected=f"deviation <= {tolerance:g} of the block maximum, or Asymmetrical",
             got=f"{worst:.3g}",
         )
@@ -106,7 +107,7 @@ def grid_info(mode: str, n_radial: int, n_azimuth: int, settings: Any) -> dict[s
     return info
 
 
-def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], settings: Any,
+def harvey_shack_axes(fn: BsdfFn, theta_deg: NDArray[np.float64], sides: Sequence[str], settings: Any,
                        zero_azimuth_deg: float) -> tuple[grids.HarveyShackAxes, dict[str, Any]]:
     """The Harvey–Shack axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven; for a table
     of cell averages, ``settings.node_values == "cell"``, refined by the lobe's peak only:
@@ -116,7 +117,7 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
     ----------
     fn : callable
         The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
-    theta : ndarray
+    theta_deg : ndarray
         Incidences of the table [deg].
     sides : sequence of str
         Sides the axes serve (``reflection``, ``transmission``).
@@ -141,14 +142,14 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
         values = settings.node_values
         # cell averages: TIS is the source's on any axes, so only the lobe's peak refines them; edge values: the
         # TIS compared is that of each candidate table with its own edge values
-        auto = grids.auto_harvey_shack_axes(fn, theta, sides, settings.grid_tolerance, zero_azimuth_deg,
+        auto = grids.auto_harvey_shack_axes(fn, theta_deg, sides, settings.grid_tolerance, zero_azimuth_deg,
                                             max_nodes=len(fixed.rho) * len(fixed.azimuth_deg),
                                             cell_average=values == "cell", edge_values=values == "edge")
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     return axes, grid_info(mode, len(axes.rho), len(axes.azimuth_deg), settings)
 
 
-def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
+def harvey_shack_table(fn: BsdfFn, theta_deg: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
                        info: dict[str, Any], settings: Any) -> xr.DataArray:
     """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``
     (:data:`VALUES_LABEL`): ``settings.node_values`` ``point`` (default: point samples), ``edge`` (point samples,
@@ -160,7 +161,7 @@ def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[s
     ----------
     fn : callable
         The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
-    theta : ndarray
+    theta_deg : ndarray
         Incidences of the table [deg].
     sides : sequence of str
         Sides tabulated (``reflection``, ``transmission``).
@@ -179,10 +180,10 @@ def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[s
     values = settings.node_values
     info["values"] = VALUES_LABEL[values]
     if values == "cell":
-        return grids.harvey_shack_cell_grid(fn, theta, sides, axes)
+        return grids.harvey_shack_cell_grid(fn, theta_deg, sides, axes)
     if values == "edge":
-        return grids.harvey_shack_edge_grid(fn, theta, sides, axes)
-    return grids.harvey_shack_grid(fn, theta, sides, axes)
+        return grids.harvey_shack_edge_grid(fn, theta_deg, sides, axes)
+    return grids.harvey_shack_grid(fn, theta_deg, sides, axes)
 
 
 #: ``grid['values']`` of an export by ``node_values`` (and back: the re-check rewrites with the same values)
@@ -190,7 +191,7 @@ VALUES_LABEL = {"point": "point samples", "edge": "point samples, edge values at
                 "cell": "cell averages"}
 
 
-def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
+def specular_axes(fn: BsdfFn, theta_deg: NDArray[np.float64], sides: Sequence[str],
                    settings: Any) -> tuple[grids.SpecularAxes, dict[str, Any]]:
     """The Zemax axes of an export: given, fixed (the fine defaults) or auto (tolerance-driven).
 
@@ -198,7 +199,7 @@ def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
     ----------
     fn : callable
         The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
-    theta : ndarray
+    theta_deg : ndarray
         Incidences of the table (the specular angle) [deg].
     sides : sequence of str
         Sides the axes serve (``reflection``, ``transmission``).
@@ -219,7 +220,7 @@ def specular_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
         axes, mode = grids.SpecularAxes.default(plane_symmetric=symmetric), "fixed"
     else:
         fixed = grids.SpecularAxes.default(plane_symmetric=symmetric)
-        auto = grids.auto_specular_axes(fn, theta, sides, settings.grid_tolerance, symmetric,
+        auto = grids.auto_specular_axes(fn, theta_deg, sides, settings.grid_tolerance, symmetric,
                                         max_nodes=len(fixed.radial_deg) * len(fixed.azimuth_deg))
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     return axes, grid_info(mode, len(axes.radial_deg), len(axes.azimuth_deg), settings)

@@ -104,8 +104,10 @@ def auto_normal_axes(
     ----------
     bsdf_fn
         The source, ``bsdf_fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
-    theta_i_deg, sides
-        Incidences [deg] and sides the axes serve (one pair of axes for all, as a LightTools file requires).
+    theta_i_deg
+        Incidences [deg] the axes serve (one pair of axes for all, as a LightTools file requires).
+    sides
+        Sides the axes serve.
     tolerance
         TIS and peak tolerances (:class:`bsdfkit.tables.grids.GridTolerance`); the TIS compared is
         :func:`tis_normal_table`.
@@ -146,7 +148,7 @@ def auto_normal_axes(
     return np.asarray(grids._tidy(chosen[0])), np.asarray(grids._tidy(chosen[1]))
 
 
-def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[str],
+def normal_axes(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: Sequence[str],
                 settings: Any) -> tuple[NDArray[np.float64], NDArray[np.float64], dict]:
     """The θs and φs axes [deg] of an export about the normal (``settings`` an ``ExportSettings``): ``grid`` fixed,
     or auto (:func:`auto_normal_axes`; the fixed grid when the tolerance needs more nodes than it), and the
@@ -156,7 +158,7 @@ def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
     ----------
     fn : callable
         The source, ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr] (:data:`bsdfkit.tables.grids.BsdfFn`).
-    theta : ndarray
+    theta_deg : ndarray
         Incidences of the file [deg].
     sides : sequence of str
         Sides the axes serve (``reflection``, ``transmission``).
@@ -177,7 +179,7 @@ def normal_axes(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
     axes, mode = fixed, "fixed"
     tol = settings.grid_tolerance
     if settings.grid == "auto":
-        auto = auto_normal_axes(fn, theta, sides, tol, max_nodes=fixed[0].size * fixed[1].size)
+        auto = auto_normal_axes(fn, theta_deg, sides, tol, max_nodes=fixed[0].size * fixed[1].size)
         axes, mode = (auto, "auto") if auto is not None else (fixed, FALLBACK)
     info: dict = {"mode": mode, "theta": int(axes[0].size), "phi": int(axes[1].size)}
     if mode != "fixed":

@@ -104,7 +104,7 @@ def test_ansys_scan_at_550nm_agrees_with_pyradiance(tmp_path):
     centres = sorted(held)
     rad = dict(zip(centres, radiance_direct_hemi(out, centres)["reflection"]["front"]))
     for t in res.incidences_deg:
-        value = float(bsdfkit.tis(ds, incidence=t)["tis"].sel(wavelength=550.0).squeeze())
+        value = float(bsdfkit.tis(ds, incidence_deg=t)["tis"].sel(wavelength=550.0).squeeze())
         for centre in [c for c, s in held.items() if s == t]:
             assert rad[centre] == pytest.approx(value, rel=0.01), (t, centre)
 

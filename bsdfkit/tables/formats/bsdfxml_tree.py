@@ -77,14 +77,14 @@ def lobe_fwhm_deg(fn: grids.BsdfFn, theta_deg: float, side: str) -> float | None
     return float(np.degrees(np.arcsin(edges[1]) - np.arcsin(edges[0])))
 
 
-def narrowest_lobe_deg(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: tuple[str, ...]) -> float | None:
+def narrowest_lobe_deg(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[str, ...]) -> float | None:
     """The smallest :func:`lobe_fwhm_deg` [deg] over the incidences [deg] and sides (None: no lobe anywhere).
 
     Parameters
     ----------
     fn : callable
         ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
-    theta : ndarray
+    theta_deg : ndarray
         Incidences [deg].
     sides : tuple of str
         Sides to look at.
@@ -94,11 +94,11 @@ def narrowest_lobe_deg(fn: grids.BsdfFn, theta: NDArray[np.float64], sides: tupl
     float or None
         FWHM [deg], or None.
     """
-    widths = [w for s in sides for t in theta if (w := lobe_fwhm_deg(fn, float(t), s)) is not None]
+    widths = [w for s in sides for t in theta_deg if (w := lobe_fwhm_deg(fn, float(t), s)) is not None]
     return min(widths) if widths else None
 
 
-def tree_grids(fn: grids.BsdfFn, theta: NDArray[np.float64], side: str, log2_cells: int = tensortree.LOG2_CELLS
+def tree_grids(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], side: str, log2_cells: int = tensortree.LOG2_CELLS
                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The full (n, n, n) TT3 grid [1/sr] of one side (incident cells ≥ n/2 zero: Radiance does not use them) and
     the source incidence [deg] each incident cell holds (the nearest to its centre).
@@ -107,7 +107,7 @@ def tree_grids(fn: grids.BsdfFn, theta: NDArray[np.float64], side: str, log2_cel
     ----------
     fn : callable
         ``fn(theta_i_deg, side, directions) -> bsdf`` [1/sr].
-    theta : ndarray
+    theta_deg : ndarray
         Source incidences, ascending [deg].
     side : str
         ``reflection`` or ``transmission``.
@@ -123,7 +123,7 @@ def tree_grids(fn: grids.BsdfFn, theta: NDArray[np.float64], side: str, log2_cel
     """
     n = 2**log2_cells
     centre = np.degrees(np.arcsin(1.0 - 2.0 * (np.arange(n // 2) + 0.5) / n))
-    held = np.array([theta[int(np.argmin(np.abs(theta - c)))] for c in centre])
+    held = np.array([theta_deg[int(np.argmin(np.abs(theta_deg - c)))] for c in centre])
     grid = np.zeros((n, n, n))
     cache: dict[float, NDArray[np.float64]] = {}
     for ix, t in enumerate(held):
