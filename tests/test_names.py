@@ -1,0 +1,155 @@
+"""One name, one unit: a public function's parameter in degrees ends in ``_deg``, one in nanometres in ``_nm``, and a
+name with either suffix is documented in that unit; a bare angle name (``theta_i``, ``phi_s`` …) is radians.
+
+The unit of a parameter is the one unit in brackets of its numpydoc description (test_docstrings.py requires it).
+A description with several bracketed units describes several quantities (a pair of axes, records, a spectrum as
+(wavelength [nm], values [-])), each labelled in the text, and a parameter of a labelled type (an xarray object,
+a colour-science distribution, a dataclass whose fields carry their units) names its quantities itself: neither is
+one quantity with one unit, so neither is checked. Dataset coordinates (``theta_i`` [deg] on ``record``) keep their
+labelled names; only function parameters are named here.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+from scipy._lib._docscrape import NumpyDocString
+from test_docstrings import COVERED, PACKAGE, UNIT, _documented, _public_functions, _signature
+
+SUFFIX = {"[deg]": "_deg", "[nm]": "_nm"}
+# annotations of a plain number, array or sequence of numbers: the unit is the parameter's alone
+PLAIN_TYPES = {"float", "int", "None", "ArrayLike", "NDArray", "np", "ndarray", "float64", "tuple", "list", "Sequence",
+               "Band"}
+
+# parameters that keep a name without the suffix, each with its reason: (module, function, parameter) → reason
+EXCEPTIONS = {
+    ("measurement/table.py", "read_table", "incidence"):
+        "an ingest option (bsdfkit.ingest(**options), TABLE_OPTIONS) whose name is also the CLI flag --incidence "
+        "named in the refusal messages of tables/to_dataset.py; renamed with the ingest options and flags",
+    ("measurement/table.py", "read_table", "phi_i"):
+        "an ingest option like incidence (the CLI flag --phi-i); renamed with the ingest options and flags",
+}
+
+# modules whose wavelengths [nm] are still named without _nm (``wavelength``, ``band``, ``peak`` …): the degrees rule
+# holds in them; each moves off this list when its nm parameters are renamed
+NM_PENDING = [
+    "accessor.py", "api.py", "cli/fit.py", "core/conventions.py", "core/spectra.py",
+    "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
+    "fit/spectrum/solver.py", "fit/spectrum/starts.py",
+    "measurement/table.py", "models/functions.py", "models/led.py", "models/registry.py",
+    "plotting/figures.py",
+    "raytrace/spectral.py", "raytrace/tallies.py",
+    "reduction/any_sample.py", "reduction/colorimetry.py", "reduction/excitation_emission.py",
+    "reduction/hemispherical.py", "reduction/spectral.py", "reduction/spectrum_metrics.py", "reduction/tis.py",
+    "simulation/truth.py", "simulation/virtual_goniometer.py",
+    "tables/export.py", "tables/to_dataset.py", "tables/vendor.py",
+]
+
+
+def _annotations(node: ast.FunctionDef) -> dict[str, ast.expr | None]:
+    a = node.args
+    return {x.arg: x.annotation for x in (*a.posonlyargs, *a.args, *a.kwonlyargs)}
+
+
+def _plain(annotation: ast.expr | None) -> bool:
+    """True for no annotation or one of plain numbers, arrays and sequences only."""
+    if annotation is None:
+        return True
+    if isinstance(annotation, ast.Constant) and isinstance(annotation.value, str):  # a string annotation
+        annotation = ast.parse(annotation.value, mode="eval").body
+    names = {n.id for n in ast.walk(annotation) if isinstance(n, ast.Name)}
+    names |= {n.attr for n in ast.walk(annotation) if isinstance(n, ast.Attribute)}
+    return names <= PLAIN_TYPES
+
+
+def problems(path: Path, label: str, nm: bool = True) -> list[str]:
+    """Parameters of ``path``'s public functions whose name and documented unit disagree, one line each."""
+    found = []
+    for qualname, node in _public_functions(ast.parse(path.read_text(), filename=str(path))):
+        documented = _documented(NumpyDocString(ast.get_docstring(node) or ""))
+        annotations = _annotations(node)
+        for name in _signature(node):
+            bare = name.lstrip("*")
+            units = UNIT.findall(documented.get(bare, ""))
+            where = f"{label}:{node.lineno} {qualname}({bare})"
+            for unit, suffix in SUFFIX.items():
+                if bare.endswith(suffix) and unit not in units:
+                    found.append(f"{where}: named {suffix} but documented in {', '.join(units) or 'no unit'}")
+            if bare.endswith("_deg") and "[deg]" in units and "[rad]" in units:
+                found.append(f"{where}: named _deg but documented in [rad] too")
+            if len(units) != 1 or units[0] not in SUFFIX or not _plain(annotations.get(bare)):
+                continue
+            if bare.endswith(SUFFIX[units[0]]) or (label, qualname, bare) in EXCEPTIONS:
+                continue
+            if units[0] == "[nm]" and not nm:
+                continue
+            found.append(f"{where}: documented in {units[0]}, so named …{SUFFIX[units[0]]}")
+    return found
+
+
+@pytest.mark.parametrize("module", COVERED)
+def test_parameter_names_state_their_unit(module):
+    assert problems(PACKAGE / module, module, nm=module not in NM_PENDING) == []
+
+
+@pytest.mark.parametrize("module", NM_PENDING)
+def test_a_pending_module_still_has_unsuffixed_wavelengths(module):
+    assert module in COVERED
+    assert problems(PACKAGE / module, module), f"{module} names every [nm] parameter …_nm: take it off NM_PENDING"
+
+
+def test_every_exception_is_still_needed():
+    for module, function, parameter in EXCEPTIONS:
+        node = next(n for q, n in _public_functions(ast.parse((PACKAGE / module).read_text())) if q == function)
+        assert parameter in _signature(node), (module, function, parameter)
+        unexcused = problems(PACKAGE / module, "elsewhere.py", nm=False)
+        assert any(f" {function}({parameter})" in line for line in unexcused), (module, function, parameter)
+
+
+def test_the_checker_finds_a_unit_its_name_does_not_state(tmp_path):
+    sample = tmp_path / "sample.py"
+    sample.write_text('''
+def angles(theta_i, phi_i_deg, wavelength, band_nm, tilt_deg, lean_deg, theta, axes, spectrum, grid: Grid,
+           kept_nm=None):
+    """Summary.
+
+    Parameters
+    ----------
+    theta_i : float
+        Angle of incidence [deg].
+    phi_i_deg : float
+        Source azimuth [deg].
+    wavelength : float
+        Wavelength [nm].
+    band_nm : tuple of float
+        (low, high) [um].
+    tilt_deg : float
+        Tilt [rad].
+    lean_deg : float
+        Lean [deg], that is π/180 [rad].
+    theta : ndarray
+        Parameter vector θ of a fit [nm], [-].
+    axes : tuple
+        (θs [deg], φs [deg]).
+    spectrum : tuple
+        (wavelength [nm], values [-]).
+    grid : Grid
+        Axes of the table [deg].
+    kept_nm : float, optional
+        Kept wavelength [nm].
+    """
+''')
+    assert [line.split(" ", 1)[1] for line in problems(sample, "sample.py")] == [
+        "angles(theta_i): documented in [deg], so named …_deg",
+        "angles(wavelength): documented in [nm], so named …_nm",
+        "angles(band_nm): named _nm but documented in [um]",
+        "angles(tilt_deg): named _deg but documented in [rad]",
+        "angles(lean_deg): named _deg but documented in [rad] too",
+    ]
+    assert [line.split(" ", 1)[1] for line in problems(sample, "sample.py", nm=False)] == [
+        "angles(theta_i): documented in [deg], so named …_deg",
+        "angles(band_nm): named _nm but documented in [um]",
+        "angles(tilt_deg): named _deg but documented in [rad]",
+        "angles(lean_deg): named _deg but documented in [rad] too",
+    ]
