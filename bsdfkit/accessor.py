@@ -29,7 +29,7 @@ class BsdfAccessor:
     def __init__(self, ds: xr.Dataset) -> None:
         self._ds = ds
 
-    def tis(self, incidence_deg: float | None = None, band: tuple[float, float] | None = None) -> xr.Dataset:
+    def tis(self, incidence_deg: float | None = None, band_nm: tuple[float, float] | None = None) -> xr.Dataset:
         """TIS [fraction]: hemispherical values of elastic data, the interaction TIS of a phosphor plate
         (:func:`bsdfkit.tis`).
 
@@ -37,7 +37,7 @@ class BsdfAccessor:
         ----------
         incidence_deg : float, optional
             One measured angle of incidence [deg]: only it is reduced. ``None`` reduces every incidence.
-        band : tuple of float, optional
+        band_nm : tuple of float, optional
             (low, high) [nm]: the band of the band average of elastic data (refused for a phosphor plate);
             the measured range by default.
 
@@ -49,7 +49,7 @@ class BsdfAccessor:
         """
         from bsdfkit import api
 
-        return api.tis(self._ds, incidence_deg, band)
+        return api.tis(self._ds, incidence_deg, band_nm)
 
     def profile(self, interaction: str, side: str | None = None) -> xr.Dataset:
         """Band-averaged BSDF profile [1/sr] of one interaction (:func:`bsdfkit.profile`).

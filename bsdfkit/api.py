@@ -58,8 +58,8 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
         (:func:`bsdfkit.tables.to_dataset.vendor_dataset`) or a netCDF file written by bsdfkit.
     **options
         For text tables and vendor files: ``quantity`` (brdf, btdf, ccbrdf, ccbtdf, reflectance-factor,
-        transmittance-factor), ``side``, ``relative_std``, ``wavelength`` [nm], ``incidence`` / ``phi_i`` [deg],
-        ``zeros`` (auto, keep, missing), ``sample``; refused for raw exports and netCDF files.
+        transmittance-factor), ``side``, ``relative_std``, ``wavelength_nm`` [nm], ``incidence_deg`` /
+        ``phi_i_deg`` [deg], ``zeros`` (auto, keep, missing), ``sample``; refused for raw exports and netCDF files.
 
     Returns
     -------
@@ -72,7 +72,7 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
 
 
 def tis(ds: xr.Dataset, incidence_deg: float | None = None,
-        band: tuple[float, float] | None = None) -> xr.Dataset:
+        band_nm: tuple[float, float] | None = None) -> xr.Dataset:
     """TIS [fraction] of any sample: the hemispherical values of elastic data, the interaction TIS of a phosphor
     plate; the same function as ``bsdfkit tis`` (:func:`bsdfkit.reduction.any_sample.tis`).
 
@@ -86,7 +86,7 @@ def tis(ds: xr.Dataset, incidence_deg: float | None = None,
     incidence_deg
         Incidence angle [deg], one of the measured ones: only that incidence is reduced and ``theta_i`` is a
         scalar coordinate of the result. ``None`` reduces every measured incidence.
-    band
+    band_nm
         (low, high) [nm], closed. Elastic data: the band of the Δλ-weighted band average (default: the measured
         range). A phosphor plate: refused (:class:`~bsdfkit.core.errors.InputError`, field ``band``), since
         each of its interactions has its own band (bibs 450-470 nm, biys and yiys 470-740 nm).
@@ -110,7 +110,7 @@ def tis(ds: xr.Dataset, incidence_deg: float | None = None,
     """
     from bsdfkit.reduction.any_sample import tis as _tis_any
 
-    return _tis_any(ds, incidence_deg, band)
+    return _tis_any(ds, incidence_deg, band_nm)
 
 
 def budget(ds: xr.Dataset, incidence_deg: float) -> InteractionTable:

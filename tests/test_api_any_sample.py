@@ -131,7 +131,7 @@ def test_a_side_not_measured_at_the_incidence_is_left_out_and_nan_filled():
 
 def test_a_band_gives_the_delta_lambda_weighted_mean_of_the_per_wavelength_values():
     ds = lambertian_scan({"reflection": (30.0,)})  # 500, 510, 530, 560, 600 nm: unequal Δλ
-    table = bsdfkit.tis(ds, 30.0, band=(505.0, 600.0))
+    table = bsdfkit.tis(ds, 30.0, band_nm=(505.0, 600.0))
     assert json.loads(table.attrs["band_nm"]) == [505.0, 600.0]
     at = table.sel(config="lamp", side="reflection")
     wl = at["wavelength"].values
@@ -151,9 +151,9 @@ def test_a_band_gives_the_delta_lambda_weighted_mean_of_the_per_wavelength_value
     assert json.loads(default.attrs["entries"])[0]["band_nm"] == [500.0, 600.0]
     assert float(default["tis_band"].sel(config="lamp", side="reflection")) != float(at["tis_band"])
     with pytest.raises(InputError, match="field 'band': no measured wavelength in the band"):
-        bsdfkit.tis(ds, band=(700.0, 800.0))
+        bsdfkit.tis(ds, band_nm=(700.0, 800.0))
     with pytest.raises(InputError, match="field 'band': option out of range"):
-        ds.bsdf.tis(band=(600.0, 500.0))
+        ds.bsdf.tis(band_nm=(600.0, 500.0))
 
 
 def test_a_monochrome_scan_without_a_wavelength_coordinate():
@@ -198,7 +198,7 @@ def test_a_phosphor_plate_reduces_one_incidence_and_refuses_a_band(bundled_scan,
     # the manifest's exact truth at 45°: bibs reflection 10.9 % (Table 2 of the power-budget paper)
     assert float(table["tis"].sel(interaction="bibs", side="reflection")) == pytest.approx(0.109, abs=0.002)
     with pytest.raises(InputError, match="field 'band': a band does not apply to a phosphor plate's interaction"):
-        bsdfkit.tis(bundled_scan, 45, band=(450.0, 470.0))
+        bsdfkit.tis(bundled_scan, 45, band_nm=(450.0, 470.0))
     with pytest.raises(InputError, match="no records at this incidence"):
         bundled_scan.bsdf.tis(33.0)
     path = netcdf.save(bundled_scan, tmp_path / "plate.nc")

@@ -22,28 +22,17 @@ SUFFIX = {"[deg]": "_deg", "[nm]": "_nm"}
 PLAIN_TYPES = {"float", "int", "None", "ArrayLike", "NDArray", "np", "ndarray", "float64", "tuple", "list", "Sequence",
                "Band"}
 
-# parameters that keep a name without the suffix, each with its reason: (module, function, parameter) → reason
-EXCEPTIONS = {
-    ("measurement/table.py", "read_table", "incidence"):
-        "an ingest option (bsdfkit.ingest(**options), TABLE_OPTIONS) whose name is also the CLI flag --incidence "
-        "named in the refusal messages of tables/to_dataset.py; renamed with the ingest options and flags",
-    ("measurement/table.py", "read_table", "phi_i"):
-        "an ingest option like incidence (the CLI flag --phi-i); renamed with the ingest options and flags",
-}
-
 # modules whose wavelengths [nm] are still named without _nm (``wavelength``, ``band``, ``peak`` …): the degrees rule
 # holds in them; each moves off this list when its nm parameters are renamed
 NM_PENDING = [
-    "accessor.py", "api.py", "cli/fit.py", "core/conventions.py", "core/spectra.py",
+    "cli/fit.py", "core/conventions.py", "core/spectra.py",
     "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
     "fit/spectrum/solver.py", "fit/spectrum/starts.py",
     "measurement/table.py", "models/functions.py", "models/led.py", "models/registry.py",
-    "plotting/figures.py",
-    "raytrace/spectral.py", "raytrace/tallies.py",
-    "reduction/any_sample.py", "reduction/colorimetry.py", "reduction/excitation_emission.py",
-    "reduction/hemispherical.py", "reduction/spectral.py", "reduction/spectrum_metrics.py", "reduction/tis.py",
-    "simulation/truth.py", "simulation/virtual_goniometer.py",
-    "tables/export.py", "tables/to_dataset.py", "tables/vendor.py",
+    "plotting/figures.py", "raytrace/spectral.py", "raytrace/tallies.py",
+    "reduction/colorimetry.py", "reduction/excitation_emission.py", "reduction/hemispherical.py",
+    "reduction/spectral.py", "reduction/spectrum_metrics.py", "reduction/tis.py",
+    "simulation/truth.py", "simulation/virtual_goniometer.py", "tables/export.py",
 ]
 
 
@@ -80,7 +69,7 @@ def problems(path: Path, label: str, nm: bool = True) -> list[str]:
                 found.append(f"{where}: named _deg but documented in [rad] too")
             if len(units) != 1 or units[0] not in SUFFIX or not _plain(annotations.get(bare)):
                 continue
-            if bare.endswith(SUFFIX[units[0]]) or (label, qualname, bare) in EXCEPTIONS:
+            if bare.endswith(SUFFIX[units[0]]):
                 continue
             if units[0] == "[nm]" and not nm:
                 continue
@@ -97,14 +86,6 @@ def test_parameter_names_state_their_unit(module):
 def test_a_pending_module_still_has_unsuffixed_wavelengths(module):
     assert module in COVERED
     assert problems(PACKAGE / module, module), f"{module} names every [nm] parameter …_nm: take it off NM_PENDING"
-
-
-def test_every_exception_is_still_needed():
-    for module, function, parameter in EXCEPTIONS:
-        node = next(n for q, n in _public_functions(ast.parse((PACKAGE / module).read_text())) if q == function)
-        assert parameter in _signature(node), (module, function, parameter)
-        unexcused = problems(PACKAGE / module, "elsewhere.py", nm=False)
-        assert any(f" {function}({parameter})" in line for line in unexcused), (module, function, parameter)
 
 
 def test_the_checker_finds_a_unit_its_name_does_not_state(tmp_path):

@@ -100,8 +100,8 @@ def run(args: argparse.Namespace) -> int:
                               grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)),
                               node_values=args.node_values)
     result = convert(
-        args.source, args.to, args.output, args.force, side=args.side, wavelength=args.wavelength,
-        band=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
+        args.source, args.to, args.output, args.force, side=args.side, wavelength_nm=args.wavelength,
+        band_nm=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
         theta_i_deg=_floats(args.incidences, "--incidences") if args.incidences else None, settings=settings,
         tolerance=args.tis_tolerance, quantity=args.quantity, relative_std=args.relative_std, zeros=args.zeros,
     )

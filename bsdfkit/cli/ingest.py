@@ -70,7 +70,7 @@ def _run(args: argparse.Namespace) -> int:
     existing_source(args.path)  # before the engine is imported: a mistyped path is answered at once
     atomic.check_writable(args.output, args.force, inputs=[args.path])
     ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
-                wavelength=args.wavelength, incidence=args.incidence, phi_i=args.phi_i, zeros=args.zeros,
+                wavelength_nm=args.wavelength, incidence_deg=args.incidence, phi_i_deg=args.phi_i, zeros=args.zeros,
                 sample=args.sample)
     api.save(ds, args.output, args.force)
     warn_dark(ds, "ingest")

@@ -905,8 +905,8 @@ def _data_head(text: _Text, k_header: int, delim: str | None, columns: list[_Col
 
 
 def read_table(path: str | Path, quantity: str | None = None, side: str | None = None,
-               relative_std: float | None = None, *, wavelength: float | None = None,
-               incidence: float | None = None, phi_i: float | None = None, zeros: str = "auto",
+               relative_std: float | None = None, *, wavelength_nm: float | None = None,
+               incidence_deg: float | None = None, phi_i_deg: float | None = None, zeros: str = "auto",
                sample: str | None = None) -> xr.Dataset:
     """Read a measured BSDF text table into the calibrated BSDF dataset schema.
 
@@ -922,10 +922,10 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     relative_std
         Standard uncertainty as a fraction of the value when the table has no uncertainty column
         (default: the file's ``# relative_std:``, else :data:`DEFAULT_RELATIVE_STD` = 0.05).
-    wavelength
+    wavelength_nm
         Wavelength [nm] of a monochrome table (one without wavelength columns); without it such a table gets
         a single NaN wavelength and the attribute ``wavelength_note``.
-    incidence, phi_i
+    incidence_deg, phi_i_deg
         θi and φi [deg] when the table has no such column (default φi = 180°, the specular side at φs = 0).
     zeros
         ``auto`` | ``keep`` | ``missing``: what an exact 0 means (module docstring).
@@ -940,7 +940,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
         ``attrs['source_quantity']``.
     """
     path = str(path)
-    _check_options(zeros, side, relative_std, wavelength)
+    _check_options(zeros, side, relative_std, wavelength_nm)
     source = _Source(path)
     text = _load_text(path, source)  # the head of the file; the data rows are streamed by _parse_rows
     k_header, delim, columns, preamble = _find_header(text)
@@ -950,10 +950,10 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     meta = _metadata(comments + preamble)
     data, units_line = _data_head(text, k_header, delim, columns)
     roles = _roles_of(columns, path, header_line)
-    _check_header_layout(columns, roles, path, header_line, wavelength, incidence)
+    _check_header_layout(columns, roles, path, header_line, wavelength_nm, incidence_deg)
     _resolve_quantity(columns, meta, quantity, path, header_line)
     _pair_std(columns, path, header_line)
-    defaults = _row_defaults(meta, path, wavelength, incidence, phi_i)
+    defaults = _row_defaults(meta, path, wavelength_nm, incidence_deg, phi_i_deg)
     meta_rel = _meta_number(meta, "relative_std", path, {"": 1.0, "%": 0.01}, "")
     wide_inc = any(c.incidence is not None for c in roles.get("value", []))
     if "theta_i" not in roles and not wide_inc and defaults.theta_i is None \

@@ -49,12 +49,12 @@ BAND_AVERAGED = {"tis_band": "value", "tis_band_std": "std", "tis_band_std_measu
 MODES = ("auto", "interactions", "hemispherical")
 
 
-def check_band(band: Sequence[float] | None, field: str = "band") -> tuple[float, float] | None:
+def check_band(band_nm: Sequence[float] | None, field: str = "band") -> tuple[float, float] | None:
     """A wavelength band (low, high) [nm] with finite limits, 0 < low < high ≤ 1e6, or ``None``.
 
     Parameters
     ----------
-    band : sequence of float or None
+    band_nm : sequence of float or None
         (low, high) wavelengths [nm].
     field : str, optional
         Option named in the error.
@@ -64,15 +64,15 @@ def check_band(band: Sequence[float] | None, field: str = "band") -> tuple[float
     tuple of float or None
         (low, high) [nm], or None.
     """
-    if band is None:
+    if band_nm is None:
         return None
     try:
-        lo, hi = (float(b) for b in band)
+        lo, hi = (float(b) for b in band_nm)
     except (TypeError, ValueError):
-        raise InputError("not a wavelength band", field=field, expected="(LO, HI) in nm", got=band) from None
+        raise InputError("not a wavelength band", field=field, expected="(LO, HI) in nm", got=band_nm) from None
     if not (all(math.isfinite(b) and 0 < b <= 1e6 for b in (lo, hi)) and lo < hi):
         raise InputError("option out of range", field=field, expected="LO < HI, finite wavelengths in nm > 0",
-                         got=tuple(band))
+                         got=tuple(band_nm))
     return lo, hi
 
 
@@ -107,25 +107,25 @@ def check_incidence(ds: xr.Dataset, incidence_deg: float | None, field: str = "i
     return match[0]
 
 
-def refuse_band_for_interactions(band: tuple[float, float] | None, field: str = "band") -> None:
+def refuse_band_for_interactions(band_nm: tuple[float, float] | None, field: str = "band") -> None:
     """Refuse a user band for the interaction table (one line): each interaction has its own band.
 
     Parameters
     ----------
-    band : tuple of float or None
+    band_nm : tuple of float or None
         (low, high) wavelengths [nm] the user asked for; None passes.
     field : str, optional
         Option named in the error.
     """
-    if band is not None:
+    if band_nm is not None:
         raise InputError("a band does not apply to a phosphor plate's interaction table, whose interactions each "
                          f"have their own band (bibs {band_label(EXCITATION_BAND_NM)}, biys and yiys "
                          f"{band_label(CONVERSION_BAND_NM)})", field=field,
                          expected="no band, or the hemispherical reduction per wavelength (bsdfkit tis --mode "
-                                  "hemispherical)", got=band)
+                                  "hemispherical)", got=band_nm)
 
 
-def tis(ds: xr.Dataset, incidence_deg: float | None = None, band: Sequence[float] | None = None,
+def tis(ds: xr.Dataset, incidence_deg: float | None = None, band_nm: Sequence[float] | None = None,
         mode: str = "auto") -> xr.Dataset:
     """TIS [fraction] of any sample: hemispherical values of elastic data, the interaction TIS of a phosphor plate.
 
@@ -136,7 +136,7 @@ def tis(ds: xr.Dataset, incidence_deg: float | None = None, band: Sequence[float
     incidence_deg
         Incidence angle [deg], one of the measured ones: only that incidence is reduced and ``theta_i`` becomes
         a scalar coordinate. ``None`` reduces every measured incidence.
-    band
+    band_nm
         (low, high) [nm], closed: the band of the band average of the hemispherical reduction (default: the
         measured range of each configuration, side and incidence). Refused for the interaction table.
     mode
@@ -152,7 +152,7 @@ def tis(ds: xr.Dataset, incidence_deg: float | None = None, band: Sequence[float
     """
     if mode not in MODES:
         raise InputError("unknown reduction", field="mode", expected=" or ".join(MODES), got=mode)
-    band = check_band(band)
+    band = check_band(band_nm)
     theta = check_incidence(ds, incidence_deg)
     kind = reduction_kind(ds) if mode == "auto" else mode
     if kind == "interactions":
@@ -218,7 +218,7 @@ def budget(ds: xr.Dataset, incidence_deg: float) -> InteractionTable:
 
 
 def hemispherical_table(ds: xr.Dataset, incidence_deg: float | None = None,
-                        band: tuple[float, float] | None = None) -> xr.Dataset:
+                        band_nm: tuple[float, float] | None = None) -> xr.Dataset:
     """Directional-hemispherical reflectance/transmittance of elastic data as one labelled Dataset.
 
     Parameters
@@ -228,7 +228,7 @@ def hemispherical_table(ds: xr.Dataset, incidence_deg: float | None = None,
     incidence_deg
         A measured incidence [deg] (see :func:`check_incidence`): only it is reduced, for every configuration
         and side measured at it. ``None``: every incidence.
-    band
+    band_nm
         (low, high) [nm] of the band average; ``None``: the measured range of each entry.
 
     Returns
@@ -255,7 +255,7 @@ def hemispherical_table(ds: xr.Dataset, incidence_deg: float | None = None,
                 on = ds.isel(record=np.flatnonzero((names == config) & (sides == side)))
                 if on.sizes["record"] and any(abs(t - incidence_deg) < 1e-6 for t in incidences(on)):
                     results += hemispherical(ds, theta_i_deg=[incidence_deg], sides=(side,), configs=[config])
-    return _table(ds, results, band)
+    return _table(ds, results, band_nm)
 
 
 def _table(ds: xr.Dataset, results: list[HemisphericalResult], band: tuple[float, float] | None) -> xr.Dataset:

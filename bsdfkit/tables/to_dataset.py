@@ -45,7 +45,8 @@ __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "
 #: the readable formats of the registry (:mod:`bsdfkit.tables.registry`)
 VENDOR_FORMATS: tuple[str, ...] = registry.names()
 #: Options :func:`ingest` passes to the text-table and vendor readers.
-TABLE_OPTIONS = ("quantity", "side", "relative_std", "wavelength", "incidence", "phi_i", "zeros", "sample")
+TABLE_OPTIONS = ("quantity", "side", "relative_std", "wavelength_nm", "incidence_deg", "phi_i_deg", "zeros",
+                 "sample")
 _NETCDF_MAGIC = (b"\x89HDF", b"CDF\x01", b"CDF\x02")
 _MATCH_DEG = 1e-6
 
@@ -95,7 +96,7 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
         The source (kind sniffed by :func:`source_kind`).
     **options
         Reader options (:data:`TABLE_OPTIONS`; ``None`` values are dropped), for text tables and vendor files
-        only; vendor files take no ``incidence`` or ``phi_i``.
+        only; vendor files take no ``incidence_deg`` or ``phi_i_deg``.
 
     Returns
     -------
@@ -109,18 +110,23 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
         raise InputError("unknown ingest option", field=", ".join(unknown), expected=", ".join(TABLE_OPTIONS))
     if kind in ("raw-scan", "netcdf") and given:
         raise InputError(f"options apply to text tables and vendor files, not to a {kind}", file=path,
-                         field=", ".join(f"--{k.replace('_', '-')}" for k in given), expected="no options")
+                         field=", ".join(_flag(k) for k in given), expected="no options")
     if kind == "raw-scan":
         return calibrate(read_scan(path))
     if kind == "netcdf":
         return _check_magnitudes(netcdf.load(path, quantity="bsdf"), path)
     if kind in VENDOR_FORMATS:
-        bad = [k for k in given if k in ("incidence", "phi_i")]
+        bad = [k for k in given if k in ("incidence_deg", "phi_i_deg")]
         if bad:
             raise InputError("vendor files state their incidences", file=path, field=", ".join(bad),
                              expected="no --incidence/--phi-i")
         return vendor_dataset(path, **given)
     return read_table(path, **given)
+
+
+def _flag(option: str) -> str:
+    """The command-line flag of an ingest option: ``incidence_deg`` → ``--incidence`` (the flag states no unit)."""
+    return "--" + option.removesuffix("_deg").removesuffix("_nm").replace("_", "-")
 
 
 def _check_magnitudes(ds: xr.Dataset, path: str | Path) -> xr.Dataset:
@@ -230,7 +236,7 @@ def _source_dataset(source: str | Path | xr.Dataset, asked: _Asked, table_option
                                               *(["interaction"] if asked.interaction else [])]))
         # a vendor file is integrated and written through the same reconstruction as its ingested dataset:
         # what bsdfkit read and bsdfkit tis report for it is what the written table is checked against
-        return vendor_dataset(source, wavelength=asked.wavelength)
+        return vendor_dataset(source, wavelength_nm=asked.wavelength)
     if isinstance(source, xr.Dataset):
         return source
     opts = {k: v for k, v in table_options.items() if v is not None}
@@ -333,7 +339,7 @@ def _worst_difference(tis_original: dict[str, list[float]], tis_written: dict[st
 
 
 def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: bool = False, *,
-            side: str | None = None, wavelength: float | None = None, band: tuple[float, float] | None = None,
+            side: str | None = None, wavelength_nm: float | None = None, band_nm: tuple[float, float] | None = None,
             interaction: str | None = None, theta_i_deg: Sequence[float] | None = None,
             settings: ExportSettings | None = None, tolerance: float = 0.01,
             **table_options: Any) -> ConvertResult:
@@ -348,9 +354,9 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         Target format and file; an existing file is replaced only with ``force``.
     side
         ``reflection`` | ``transmission`` | ``both`` (default: every side of the source; Zemax holds one).
-    wavelength, band
+    wavelength_nm, band_nm
         For spectral datasets: the wavelength [nm] to write, or a (low, high) band whose wavelengths are
-        averaged; a monochrome table without wavelength takes ``wavelength`` as its label.
+        averaged; a monochrome table without wavelength takes ``wavelength_nm`` as its label.
     interaction
         For calibrated raw scans (configurations blue/yellow): bibs, biys or yiys, reconstructed by
         :func:`bsdfkit.reduction.tis.hemisphere_bsdf_fn`.
@@ -380,7 +386,7 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     settings = settings or ExportSettings()
     label = "dataset" if isinstance(source, xr.Dataset) else str(source)
     kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
-    asked = _Asked(label, kind, side, wavelength, band, interaction)
+    asked = _Asked(label, kind, side, wavelength_nm, band_nm, interaction)
     sourced = _source_fns(_source_dataset(source, asked, table_options), asked)
     fns, engine_tis, src_t, chosen_lambda = sourced.fns, sourced.engine_tis, sourced.src_t, sourced.chosen_lambda
     sides, thetas = _written_sides_and_incidences(to, asked, sourced, theta_i_deg)

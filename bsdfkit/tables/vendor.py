@@ -130,7 +130,7 @@ def _node_columns(chosen: list) -> dict[str, list]:
 
 
 def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | None = None,
-                   relative_std: float | None = None, *, wavelength: float | None = None, zeros: str = "keep",
+                   relative_std: float | None = None, *, wavelength_nm: float | None = None, zeros: str = "keep",
                    sample: str | None = None, table: VendorTable | None = None) -> xr.Dataset:
     """A Zemax, TracePro (Scatter 5) or ASAP-style table as a calibrated BSDF dataset.
 
@@ -144,7 +144,7 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     relative_std
         Standard uncertainty as a fraction of the value (vendor tables state none; default
         :data:`bsdfkit.measurement.table.DEFAULT_RELATIVE_STD`).
-    wavelength
+    wavelength_nm
         Wavelength [nm] of a Monochrome Zemax or an ASAP-style file (TracePro files state theirs).
     zeros
         ``keep`` (default: a table value 0 is a value) | ``missing`` | ``auto`` (as for text tables).
@@ -164,7 +164,7 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
         raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
     vendor = table if table is not None else _read_vendor(path)
     chosen = _chosen_grids(vendor, path, quantity, side)
-    lam = _checked_wavelength(vendor.wavelength_nm, wavelength, path)
+    lam = _checked_wavelength(vendor.wavelength_nm, wavelength_nm, path)
     rel = DEFAULT_RELATIVE_STD if relative_std is None else float(relative_std)
     if not (np.isfinite(rel) and rel > 0):
         raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",

@@ -95,7 +95,7 @@ def test_wide_in_plane_comma_reflection_exact(tmp_path):
     np.testing.assert_allclose(ds["bsdf_std"].values, DEFAULT_RELATIVE_STD * np.abs(ds["bsdf"].values))
     # a table with its own incidences refuses --incidence instead of ignoring it silently
     with pytest.raises(InputError, match="--incidence"):
-        read_table(tmp_path / "wide.csv", incidence=45.0)
+        read_table(tmp_path / "wide.csv", incidence_deg=45.0)
 
 
 def test_long_two_arcs_semicolon_decimal_comma_transmission_exact(tmp_path):
@@ -136,7 +136,7 @@ def test_reflectance_factor_percent_and_quantity_option(tmp_path):
     path = write(tmp_path / "rf.csv", lines)
     with pytest.raises(InputError, match="does not say which quantity"):
         read_table(path)
-    ds = read_table(path, quantity="reflectance-factor", wavelength=550.0)
+    ds = read_table(path, quantity="reflectance-factor", wavelength_nm=550.0)
     check_truth(ds)
     assert ds["wavelength"].values.tolist() == [550.0]
 
@@ -161,7 +161,7 @@ def test_side_column_bsdf_radians_and_std_columns(tmp_path):
             f = float(truth(45.0, ts, ps, 550.0))
             lines.append(",".join([repr(math.radians(45.0)), repr(math.radians(ts)), repr(math.radians(ps)), side,
                                    repr(f), repr(0.01 * f)]))
-    ds = read_table(write(tmp_path / "sides.csv", lines), wavelength=550.0)
+    ds = read_table(write(tmp_path / "sides.csv", lines), wavelength_nm=550.0)
     assert sorted(set(ds["side"].values)) == ["reflection", "transmission"]
     np.testing.assert_allclose(ds["theta_i"].values, 45.0, rtol=1e-14)
     expected = truth(ds["theta_i"].values, ds["theta_s"].values, ds["phi_s"].values, 550.0)
@@ -348,7 +348,7 @@ def test_other_instrument_layouts(tmp_path, name, text, encoding, options, _):
 
 def test_brdf_and_btdf_columns_give_both_sides(tmp_path):
     path = write(tmp_path / "both.csv", ["theta_i,theta_s,BRDF,BTDF", "10,5,0.1,0.05", "10,-20,0.2,"])
-    ds = read_table(path, wavelength=550.0)
+    ds = read_table(path, wavelength_nm=550.0)
     assert ds["side"].values.tolist() == ["reflection", "transmission", "reflection"]
     assert ds["bsdf"].values[:, 0].tolist() == [0.1, 0.05, 0.2]
 
@@ -396,7 +396,7 @@ def test_angles_in_radians_with_few_decimals_stay_on_their_arcs(tmp_path):
     for ts, ps in two_arcs(20.0):
         rows.append(f"{math.radians(20.0):.8f},{math.radians(ts):.8f},{math.radians(ps):.8f},"
                     f"{truth(20.0, ts, ps, 550.0):.10g}")
-    ds = read_table(write(tmp_path / "rad.csv", rows), wavelength=550.0)
+    ds = read_table(write(tmp_path / "rad.csv", rows), wavelength_nm=550.0)
     arcs = ds["arc"].values.tolist()
     assert arcs.count("in_plane") == len(in_plane(20.0)) and arcs.count("perpendicular") == 12
 
@@ -409,7 +409,7 @@ def test_full_sphere_polar_angles_from_the_front_normal(tmp_path):
             f = float(truth(ti, ts, ps, 550.0))  # a number, not an np.float64 repr (refused as text)
             rows.append(f"{ti!r},{ts!r},{ps!r},{f!r}")
             rows.append(f"{ti!r},{180.0 - ts!r},{ps!r},{2 * f!r}")
-    ds = read_table(write(tmp_path / "sphere.csv", rows), wavelength=550.0)
+    ds = read_table(write(tmp_path / "sphere.csv", rows), wavelength_nm=550.0)
     refl = ds["side"].values == "reflection"
     assert refl.sum() == (~refl).sum() > 0
     check_truth(ds.isel(record=np.flatnonzero(refl)))
@@ -424,7 +424,7 @@ def test_full_sphere_polar_angles_from_the_front_normal(tmp_path):
 ])
 def test_polar_angles_beyond_90_that_contradict(tmp_path, rows, message):
     with pytest.raises(BsdfkitError, match=message):
-        read_table(write(tmp_path / "bad.csv", rows), wavelength=550.0)
+        read_table(write(tmp_path / "bad.csv", rows), wavelength_nm=550.0)
 
 
 def test_a_direction_measured_twice_is_kept_for_the_engine_to_merge(tmp_path):

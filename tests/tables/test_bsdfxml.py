@@ -97,7 +97,7 @@ def test_pyradiance_loads_it_and_agrees_with_bsdfkit(written):
 @pytest.mark.slow
 def test_ansys_scan_at_550nm_agrees_with_pyradiance(tmp_path):
     out = tmp_path / "ansys.xml"
-    res = convert(ANSYS, "bsdfxml", out, wavelength=550.0, quantity="reflectance-factor")
+    res = convert(ANSYS, "bsdfxml", out, wavelength_nm=550.0, quantity="reflectance-factor")
     assert res.ok
     ds = bsdfkit.ingest(ANSYS, quantity="reflectance-factor")
     held = res.export.grid["klems_incidence_map_deg"]

@@ -203,7 +203,7 @@ def test_xml_converts_to_every_format_and_passes_its_tis_check(path, to, tmp_pat
     from bsdfkit.tables.to_dataset import convert
 
     both = registry.get(to).sides_per_file == 2
-    res = convert(path, to, tmp_path / f"out.{to}", side="both" if both else "reflection", wavelength=550.0)
+    res = convert(path, to, tmp_path / f"out.{to}", side="both" if both else "reflection", wavelength_nm=550.0)
     assert res.ok, res.notes
     own = read_any(path).tis_computed
     read_theta = read_any(path).incidences_deg

@@ -81,7 +81,7 @@ def radiant_converted(tmp_path_factory):
 def ansys_tracepro(tmp_path_factory):
     """The ansys scan at 550 nm written as TracePro: ``(ConvertResult, path)``."""
     path = tmp_path_factory.mktemp("ansys") / "a.txt"
-    return convert(ANSYS_CSV, "tracepro", path, wavelength=550.0, quantity="reflectance-factor"), path
+    return convert(ANSYS_CSV, "tracepro", path, wavelength_nm=550.0, quantity="reflectance-factor"), path
 
 
 @pytest.mark.parametrize("to", fast_lane(["tracepro", "asap"], {"asap"}))
@@ -98,7 +98,7 @@ def test_radiant_bsdf_converted_tis_within_half_a_percent(radiant_converted, rad
 
 
 def test_radiant_vendor_dataset_records(tmp_path):
-    ds = vendor_dataset(RADIANT, wavelength=550.0)
+    ds = vendor_dataset(RADIANT, wavelength_nm=550.0)
     assert ds.attrs["quantity"] == "bsdf" and ds.attrs["source_format"] == "zemax"
     assert set(ds["side"].values) == {"reflection"} and ds["wavelength"].values.tolist() == [550.0]
     assert sorted(set(ds["theta_i"].values.tolist())) == list(np.arange(15.0, 76.0, 5.0))
@@ -182,7 +182,7 @@ def test_convert_errors_are_one_line(tmp_path, capsys, ansys_tracepro):
     assert main(["convert", str(RADIANT), "--to", "asap", "-o", str(tmp_path / "y"), "--incidences", "12"]) == 2
     assert "incidence not in the source" in capsys.readouterr().err
     with pytest.raises(InputError, match="another wavelength"):
-        vendor_dataset(ansys_tracepro[1], wavelength=600.0)  # a TracePro table at 550 nm
+        vendor_dataset(ansys_tracepro[1], wavelength_nm=600.0)  # a TracePro table at 550 nm
     with pytest.raises(BsdfkitError, match="no such file"):
         convert(tmp_path / "absent.csv", "asap", tmp_path / "z")
 
@@ -234,7 +234,7 @@ def test_full_hemisphere_long_table_converts_as_scattered_data(tmp_path, half):
                 lines.append(f"{ti:g},180,{ts:g},{ps:g},{float(_lobe_dir(ti, d))!r}")
     path = tmp_path / "full.csv"
     path.write_text("\n".join(lines) + "\n")
-    result = convert(path, "asap", tmp_path / "full.asap.txt", wavelength=550.0)
+    result = convert(path, "asap", tmp_path / "full.asap.txt", wavelength_nm=550.0)
     exact = [grids.tis_reference(lambda t, s, d: _lobe_dir(t, d), t, "reflection") for t in (0.0, 30.0)]
     rel = np.array(result.tis_written["reflection"]) / np.array(exact) - 1.0
     assert np.all(np.abs(rel) < 0.011), rel
@@ -244,5 +244,5 @@ def test_full_hemisphere_long_table_converts_as_scattered_data(tmp_path, half):
     assert any("disk" in n for n in result.notes)  # every record over the projected disk, not two arcs
     from bsdfkit.reduction.hemispherical import hemispherical
     from bsdfkit.tables.to_dataset import ingest
-    stated = [a for r in hemispherical(ingest(path, wavelength=550.0), errors=False) for a in r.assumptions]
+    stated = [a for r in hemispherical(ingest(path, wavelength_nm=550.0), errors=False) for a in r.assumptions]
     assert any("mirrored" in a for a in stated) == half

@@ -66,7 +66,7 @@ def test_exported_tables_pass_their_tis_check_within_a_megabyte(tmp_path, source
     if source == "radiant":
         result = convert(RADIANT, to, out)
     else:
-        result = convert(ANSYS, to, out, wavelength=550.0, quantity="reflectance-factor")
+        result = convert(ANSYS, to, out, wavelength_nm=550.0, quantity="reflectance-factor")
     assert result.ok, (result.worst_relative_difference, result.export.grid)
     assert result.export.size_bytes == out.stat().st_size
     assert result.export.size_bytes <= OVER.get((source, to), LIMIT), result.export.grid
