@@ -216,14 +216,14 @@ def _std(value: float | None) -> str:
     return "n/a" if value is None or not math.isfinite(value) else format(value, ".2g")
 
 
-def select_wavelength(ds: xr.Dataset, nm: float, scan: str) -> xr.Dataset:
+def select_wavelength(ds: xr.Dataset, wavelength_nm: float, scan: str) -> xr.Dataset:
     """The dataset at the measured wavelength nearest ``nm`` [nm], within :data:`WAVELENGTH_TOLERANCE_NM`.
 
     Parameters
     ----------
     ds : xarray.Dataset
         A calibrated BSDF dataset (dimension ``wavelength`` [nm]).
-    nm : float
+    wavelength_nm : float
         The wavelength asked for [nm].
     scan : str
         The scan's path, for the message.
@@ -246,15 +246,16 @@ def select_wavelength(ds: xr.Dataset, nm: float, scan: str) -> xr.Dataset:
     if finite.size == 0:
         raise InputError("the scan does not state its wavelength", file=scan, field="--wavelength",
                          expected="a scan with a stated wavelength (ingest a monochrome table with --wavelength NM)",
-                         got=nm)
-    k = int(finite[np.argmin(np.abs(lam[finite] - nm))])
-    if not abs(lam[k] - nm) <= WAVELENGTH_TOLERANCE_NM:
+                         got=wavelength_nm)
+    k = int(finite[np.argmin(np.abs(lam[finite] - wavelength_nm))])
+    if not abs(lam[k] - wavelength_nm) <= WAVELENGTH_TOLERANCE_NM:
         measured = np.unique(lam[finite])
         available = (", ".join(f"{w:g}" for w in measured.tolist()) + " nm" if measured.size <= 8 else
                      f"one of the {measured.size} measured wavelengths {measured[0]:g}..{measured[-1]:g} nm")
         raise InputError(f"no measured wavelength within {WAVELENGTH_TOLERANCE_NM:g} nm of --wavelength",
                          file=scan, field="--wavelength",
-                         expected=available + (f" (nearest {lam[k]:g} nm)" if measured.size > 1 else ""), got=nm)
+                         expected=available + (f" (nearest {lam[k]:g} nm)" if measured.size > 1 else ""),
+                         got=wavelength_nm)
     return ds.isel(wavelength=[k])
 
 

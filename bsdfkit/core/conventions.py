@@ -68,12 +68,12 @@ RAY_YBR_DEFINITION = ("extracted yellow-ray power / extracted blue-ray power (tw
                       f"converted light, {CONVERSION_BAND_NM[0]:g}-{CONVERSION_BAND_NM[1]:g} nm)")
 
 
-def band_label(band: tuple[float, float]) -> str:
+def band_label(band_nm: tuple[float, float]) -> str:
     """``"380-500 nm"``: how a band is written next to every ratio that uses it.
 
     Parameters
     ----------
-    band : tuple of float
+    band_nm : tuple of float
         Lower and upper wavelength of the band [nm].
 
     Returns
@@ -81,7 +81,7 @@ def band_label(band: tuple[float, float]) -> str:
     str
         The band as text, e.g. ``"380-500 nm"``.
     """
-    return f"{band[0]:g}-{band[1]:g} nm"
+    return f"{band_nm[0]:g}-{band_nm[1]:g} nm"
 
 #: Information criteria of a spectrum fit with ``model="best"`` (:func:`bsdfkit.fit.spectrum.analyse_spectra`);
 #: here so that the command line offers them without importing the fits (JAX, colour-science)

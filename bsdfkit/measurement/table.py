@@ -1934,7 +1934,7 @@ def _flat_incident(lam: NDArray[np.float64]) -> tuple[NDArray[np.float64], list[
     return np.ones(lam.size), [float(lam[0]), float(lam[0])]
 
 
-def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf: NDArray[np.float64],
+def records_dataset(records: RecordDirections, wavelength_nm: Sequence[float], bsdf: NDArray[np.float64],
                     bsdf_std: NDArray[np.float64], origin: RecordsOrigin) -> xr.Dataset:
     """The BSDF dataset (:mod:`bsdfkit.measurement.schema`) of per-record directions and BSDF values [1/sr]
     (records × wavelengths [nm], NaN = gap).
@@ -1947,7 +1947,7 @@ def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf
     ----------
     records : RecordDirections
         Per-record angles [deg], side, and optionally arc and source line.
-    wavelength : sequence of float
+    wavelength_nm : sequence of float
         Wavelengths [nm] (one NaN when the source states none).
     bsdf : ndarray
         BSDF [1/sr], records × wavelengths (reshaped to it), NaN for a gap.
@@ -1962,7 +1962,7 @@ def records_dataset(records: RecordDirections, wavelength: Sequence[float], bsdf
         Validated BSDF dataset of one configuration, with ``source_sha256`` when the source file can be read.
     """
     n = len(records.theta_i)
-    lam = np.asarray(wavelength, dtype=np.float64)
+    lam = np.asarray(wavelength_nm, dtype=np.float64)
     th_i, ph_i, th_s, ph_s = (np.asarray(a, dtype=np.float64) for a in (records.theta_i, records.phi_i,
                                                                         records.theta_s, records.phi_s))
     arcs = np.asarray(records.arc, dtype=object) if records.arc is not None else arc_labels(th_i, ph_i, th_s, ph_s)

@@ -520,14 +520,14 @@ class SpectralResult:
     def step_nm(self) -> float:
         return float(self.wavelength_nm[1] - self.wavelength_nm[0])
 
-    def band_power(self, band: tuple[float, float]) -> tuple[float, float]:
+    def band_power(self, band_nm: tuple[float, float]) -> tuple[float, float]:
         """Extracted power [W] of the bins whose centres lie in ``band`` (inclusive) and its standard error (the
         bins' errors add in quadrature: a ray is extracted in one bin, so bins are nearly independent; the
         covariance −x̄_i x̄_j/N is neglected, conservative).
 
         Parameters
         ----------
-        band : tuple of float
+        band_nm : tuple of float
             (low, high) band edges [nm].
 
         Returns
@@ -535,7 +535,7 @@ class SpectralResult:
         power, se : float
             Band power and its standard error [W].
         """
-        inside = band_mask(self.wavelength_nm, band)
+        inside = band_mask(self.wavelength_nm, band_nm)
         p = float(self.spectrum_W_per_nm[inside].sum() * self.step_nm)
         return p, float(np.sqrt(np.sum(self.spectrum_std_err[inside] ** 2)) * self.step_nm)
 

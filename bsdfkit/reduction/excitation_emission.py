@@ -406,7 +406,7 @@ def _model_dataset(ds: xr.Dataset, matrix: xr.Dataset, angles: list[float], arra
 
 
 # ----------------------------------------------------------------------------------- band averages
-def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band: tuple[float, float] | None = None
+def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band_nm: tuple[float, float] | None = None
                       ) -> xr.Dataset:
     """The model's TIS for a broadband incident spectrum E (any SpectrumLike of :mod:`.spectral`).
 
@@ -421,7 +421,7 @@ def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band: 
         Plate model of :func:`plate_spectral_model`.
     spectrum : SpectrumLike
         Incident spectral power E over wavelength [nm] (any scale: it is normalised).
-    emission_band : tuple of float, optional
+    emission_band_nm : tuple of float, optional
         (low, high) emission wavelengths [nm] that the converted power is counted in; None counts all of it.
 
     Returns
@@ -440,11 +440,11 @@ def band_averaged_tis(model: xr.Dataset, spectrum: SpectrumLike, emission_band: 
     step = np.gradient(lam)
     w = xr.DataArray(weight * step / np.sum(weight * step), dims=["excitation"], coords={"excitation": lam})
     converted = model["converted_tis"]
-    if emission_band is not None:
+    if emission_band_nm is not None:
         em = model["emission"].values
         power = model["emission_pdf"].values / em  # converted power spectrum ∝ photons/λ
         grid = (float(em[0]), float(em[-1]))
-        share = np.array([band_sum(em, p, emission_band) / band_sum(em, p, grid) if p.any() else 0.0 for p in power])
+        share = np.array([band_sum(em, p, emission_band_nm) / band_sum(em, p, grid) if p.any() else 0.0 for p in power])
         converted = converted * xr.DataArray(share, dims=["excitation"], coords={"excitation": centres})
     out = xr.Dataset({"elastic_tis": (model["elastic_tis"].interp(excitation=lam) * w).sum("excitation"),
                       "converted_tis": (converted.interp(excitation=lam) * w).sum("excitation")})

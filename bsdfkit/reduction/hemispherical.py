@@ -1518,30 +1518,31 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
 
 
 # ------------------------------------------------------------------------------------------- datasets
-def band_selection(wl: NDArray[np.float64], band: tuple[float, float] | None
+def band_selection(wavelength_nm: NDArray[np.float64], band_nm: tuple[float, float] | None
                    ) -> tuple[NDArray[np.bool_], float, float]:
-    """The wavelengths [nm] of a closed band (low, high) [nm] (default: all of ``wl``) and its edges; one line
-    naming the band when it is empty or holds no measured wavelength.
+    """The wavelengths [nm] of a closed band (low, high) [nm] (default: all of ``wavelength_nm``) and its edges;
+    one line naming the band when it is empty or holds no measured wavelength.
 
     Parameters
     ----------
-    wl : ndarray
+    wavelength_nm : ndarray
         Wavelengths [nm].
-    band : tuple of float, optional
-        (low, high) [nm], closed (default: all of ``wl``).
+    band_nm : tuple of float, optional
+        (low, high) [nm], closed (default: all of ``wavelength_nm``).
 
     Returns
     -------
     tuple
-        Mask of ``wl`` in the band, and its low and high edges [nm].
+        Mask of ``wavelength_nm`` in the band, and its low and high edges [nm].
     """
-    lo, hi = band if band is not None else (float(wl.min()), float(wl.max()))
+    lo, hi = band_nm if band_nm is not None else (float(wavelength_nm.min()), float(wavelength_nm.max()))
     if not hi >= lo:
         raise InputError("empty wavelength band", field="band", expected="LO <= HI (nm)", got=(lo, hi))
-    sel = band_mask(wl, (lo, hi))
+    sel = band_mask(wavelength_nm, (lo, hi))
     if not sel.any():
         raise InputError("no measured wavelength in the band", field="band",
-                         expected=f"a band overlapping {wl.min():g}-{wl.max():g} nm", got=(lo, hi))
+                         expected=f"a band overlapping {wavelength_nm.min():g}-{wavelength_nm.max():g} nm",
+                         got=(lo, hi))
     return sel, float(lo), float(hi)
 
 
@@ -1569,12 +1570,12 @@ class HemisphericalResult:
     def std(self) -> NDArray[np.float64]:
         return np.hypot(self.std_measurement, self.std_reconstruction)
 
-    def band_average(self, band: tuple[float, float] | None = None) -> dict:
+    def band_average(self, band_nm: tuple[float, float] | None = None) -> dict:
         """Δλ-weighted mean of ρ over a wavelength band (an equal-energy spectrum).
 
         Parameters
         ----------
-        band
+        band_nm
             (low, high) [nm], closed; default: every wavelength with data.
 
         Returns
@@ -1587,7 +1588,7 @@ class HemisphericalResult:
         wl = self.wavelength
         if not np.all(np.isfinite(wl)):  # a monochrome dataset without a wavelength coordinate
             return self._summary(np.ones(wl.size, dtype=bool), None)
-        sel, lo, hi = band_selection(wl, band)
+        sel, lo, hi = band_selection(wl, band_nm)
         return self._summary(sel, [lo, hi])
 
     def _summary(self, sel: NDArray[np.bool_], band: list[float] | None) -> dict:
@@ -1672,12 +1673,12 @@ class ProfileModel:
     warnings: tuple[str, ...] = ()
     assumptions: tuple[str, ...] = ()  # made on the records before the reconstruction (a mirrored half)
 
-    def band_weights(self, band: tuple[float, float] | None = None) -> NDArray[np.float64]:
+    def band_weights(self, band_nm: tuple[float, float] | None = None) -> NDArray[np.float64]:
         """Δλ weights (summing to 1) over ``cols`` of the band mean (every finite wavelength by default).
 
         Parameters
         ----------
-        band : tuple of float, optional
+        band_nm : tuple of float, optional
             (low, high) [nm], closed (default: every finite wavelength).
 
         Returns
@@ -1688,7 +1689,7 @@ class ProfileModel:
         wl = self.wavelength[self.cols]
         if not np.all(np.isfinite(wl)):
             return np.full(wl.size, 1.0 / wl.size)
-        sel, _, _ = band_selection(wl, band)
+        sel, _, _ = band_selection(wl, band_nm)
         w = np.zeros(wl.size)
         w[sel] = np.gradient(wl[sel]) if sel.sum() > 1 else 1.0
         return w / w.sum()
@@ -2121,8 +2122,8 @@ def _spectral_weights(model: ProfileModel, wavelength: float | None, band: tuple
     return w, float(wl[k]), f"{wl[k]:g} nm"
 
 
-def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelength: float | None = None,
-                   band: tuple[float, float] | None = None, config: str | None = None,
+def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelength_nm: float | None = None,
+                   band_nm: tuple[float, float] | None = None, config: str | None = None,
                    theta_i_deg: list[float] | None = None) -> ElasticSource:
     """The engine's reconstruction of elastic data as a BSDF callable, and its hemispherical values.
 
@@ -2132,9 +2133,9 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
         Calibrated dataset of one configuration (elastic scatter).
     sides
         Sides to reconstruct.
-    wavelength
+    wavelength_nm
         Wavelength [nm] to write from a spectral dataset (a monochrome one takes it as its label).
-    band
+    band_nm
         (low, high) [nm]: the Δλ-weighted mean over the band (as :meth:`HemisphericalResult.band_average`).
     config
         Configuration (default: the only one).
@@ -2169,7 +2170,7 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
         out_t[side], out_tis[side], methods[side] = [], [], []
         for th in angles:
             model = profile_model(ds, config, float(th), side, errors=False)  # the value is what is checked
-            w, chosen, what = _spectral_weights(model, wavelength, band, label)
+            w, chosen, what = _spectral_weights(model, wavelength_nm, band_nm, label)
             res = result_of(model)
             key = (side, round(float(th), 6))
             models[key], weights[key] = model, w

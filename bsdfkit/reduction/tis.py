@@ -616,8 +616,8 @@ def tis_table(ds: xr.Dataset, interactions: tuple[str, ...] = ("bibs", "biys", "
     return out
 
 
-def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i_deg: float, side: str,
-                           interaction: str = "biys", band: tuple[float, float] = CONVERSION_BAND_NM) -> xr.DataArray:
+def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i_deg: float, side: str, interaction: str = "biys",
+                           band_nm: tuple[float, float] = CONVERSION_BAND_NM) -> xr.DataArray:
     """Spectral TIS density (1/nm): the bi-spectral BSDF integrated over the hemisphere at each λs.
 
     The hemisphere weights of the band-integrated profile are linear in the data, so one reconstruction
@@ -635,7 +635,7 @@ def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i_deg: float, side
         ``"reflection"`` or ``"transmission"``.
     interaction : str, optional
         Interaction whose reconstruction centre is used (:data:`CENTER`).
-    band : tuple of float, optional
+    band_nm : tuple of float, optional
         (low, high) emission band [nm] of the profile that sets the hemisphere weights.
 
     Returns
@@ -645,7 +645,7 @@ def hemispherical_spectrum(ds: xr.Dataset, config: str, theta_i_deg: float, side
     """
 
     sub = select(ds, config=config, theta_i_deg=theta_i_deg, side=side)
-    prof = bispectral_band_integral(sub, config, band)
+    prof = bispectral_band_integral(sub, config, band_nm)
     hemi = Hemisphere.from_profile(prof, center=CENTER.get(interaction, "specular"))
     w = hemi.weights()
     density = np.nan_to_num(sub["bsdf_bispectral"].values, nan=0.0).T @ w

@@ -80,12 +80,12 @@ ExportFormat = str
 GRID_MODES: tuple[str, ...] = ("auto", "fixed")
 
 
-def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
+def check_wavelength_nm(wavelength_nm: float, field: str = "--wavelength-nm") -> float:
     """``value`` [nm] if it is a wavelength an optical BSDF table can hold; else one clear error.
 
     Parameters
     ----------
-    value : float
+    wavelength_nm : float
         Wavelength [nm].
     field : str
         Option named in the error.
@@ -101,10 +101,10 @@ def check_wavelength_nm(value: float, field: str = "--wavelength-nm") -> float:
         When ``value`` is not finite or lies outside that range.
     """
     lo, hi = WAVELENGTH_RANGE_NM
-    if not (np.isfinite(value) and lo <= value <= hi):
+    if not (np.isfinite(wavelength_nm) and lo <= wavelength_nm <= hi):
         raise ValidationError("wavelength out of range", field=field, expected=f"a wavelength in {lo:g}-{hi:g} nm",
-                              got=value)
-    return float(value)
+                              got=wavelength_nm)
+    return float(wavelength_nm)
 
 
 #: what a Harvey–Shack table holds at its nodes (:attr:`ExportSettings.node_values`)
@@ -438,7 +438,7 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
         if s not in have:
             raise InputError("the source holds no data for this side", file=label, field="--side",
                              expected=" or ".join(have), got=s)
-    src = elastic_source(ds, sides, wavelength=wavelength_nm,
+    src = elastic_source(ds, sides, wavelength_nm=wavelength_nm,
                          theta_i_deg=None if theta_i_deg is None else [float(t) for t in theta_i_deg])
     common = sorted(set.intersection(*[set(np.round(src.incidences_deg[s], 9)) for s in sides]))
     if not common:
