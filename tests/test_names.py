@@ -25,12 +25,9 @@ PLAIN_TYPES = {"float", "int", "None", "ArrayLike", "NDArray", "np", "ndarray", 
 # modules whose wavelengths [nm] are still named without _nm (``wavelength``, ``band``, ``peak`` …): the degrees rule
 # holds in them; each moves off this list when its nm parameters are renamed
 NM_PENDING = [
-    "core/spectra.py",
     "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
     "fit/spectrum/solver.py", "fit/spectrum/starts.py",
     "models/functions.py", "models/led.py", "models/registry.py",
-    "plotting/figures.py", "raytrace/spectral.py", "raytrace/tallies.py",
-    "reduction/colorimetry.py", "reduction/spectral.py", "reduction/spectrum_metrics.py",
     "simulation/truth.py", "simulation/virtual_goniometer.py",
 ]
 

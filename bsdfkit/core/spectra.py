@@ -42,13 +42,13 @@ FWHM_PER_SIGMA: float = math.sqrt(8.0 * math.log(2.0))
 Band = tuple[float, float]
 
 
-def gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> NDArray[np.float64]:
+def gaussian(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> NDArray[np.float64]:
     """Relative Gaussian spectrum with peak 1, S(λ) = exp(−C((λ − λp)/Δλ)²) with C = 4 ln 2 (eq. (2) of the
     cylindrical-module paper; Δλ is the true FWHM) [1].
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelengths at which to evaluate [nm].
     peak_nm : array_like
         Peak wavelength λp [nm].
@@ -60,17 +60,17 @@ def gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> N
     ndarray
         S(λ), 1 at the peak [-].
     """
-    return np.exp(-C_FWHM * ((wavelength - peak_nm) / fwhm_nm) ** 2)
+    return np.exp(-C_FWHM * ((wavelength_nm - peak_nm) / fwhm_nm) ** 2)
 
 
-def split_gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
+def split_gaussian(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
                    ) -> NDArray[np.float64]:
     """Asymmetric Gaussian of eq. (3) of the cylindrical-module paper [1]: the width Δλ(1 + sign(λ − λp)·α) on
     each side of the peak (the total FWHM stays Δλ), α in (−1, 1).
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelengths at which to evaluate [nm].
     peak_nm : array_like
         Peak wavelength λp [nm].
@@ -84,18 +84,18 @@ def split_gaussian(wavelength: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike
     ndarray
         S(λ), 1 at the peak [-].
     """
-    offset = wavelength - peak_nm
+    offset = wavelength_nm - peak_nm
     return np.exp(-C_FWHM * (offset / (fwhm_nm * (1.0 + np.sign(offset) * alpha))) ** 2)
 
 
-def band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
+def band_mask(wavelength_nm: NDArray[np.float64], band_nm: Band) -> NDArray[np.bool_]:
     """The samples inside the closed ``band`` [nm] (1e-9 nm slack for grids built by float steps).
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Sample wavelengths [nm].
-    band : tuple of float
+    band_nm : tuple of float
         (low, high) limits [nm], inclusive, low ≤ high.
 
     Returns
@@ -108,13 +108,13 @@ def band_mask(wavelength: NDArray[np.float64], band: Band) -> NDArray[np.bool_]:
     InputError
         If high < low or a limit is NaN.
     """
-    lo, hi = band
+    lo, hi = band_nm
     if not hi >= lo:  # [λ, λ] is the band of one wavelength (a monochrome scan); NaN edges are refused
-        raise InputError("empty wavelength band", field="band", expected="(low, high) with low <= high", got=band)
-    return (wavelength >= lo - 1e-9) & (wavelength <= hi + 1e-9)
+        raise InputError("empty wavelength band", field="band", expected="(low, high) with low <= high", got=band_nm)
+    return (wavelength_nm >= lo - 1e-9) & (wavelength_nm <= hi + 1e-9)
 
 
-def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band) -> float:
+def band_sum(wavelength_nm: NDArray[np.float64], values: NDArray[np.float64], band_nm: Band) -> float:
     """Σ_band values(λ)·Δλ with Δλ the central-difference sample spacing (:func:`numpy.gradient`), band closed:
     the sums of eqs. (4)-(16) of the power-budget paper and §4.2 of the cylindrical-module paper.
 
@@ -123,11 +123,11 @@ def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band:
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Sample wavelengths [nm], increasing, at least 2 samples.
     values : ndarray
         Spectral density at each sample, same shape as ``wavelength`` (e.g. [W/nm]).
-    band : tuple of float
+    band_nm : tuple of float
         (low, high) limits [nm], inclusive.
 
     Returns
@@ -135,23 +135,23 @@ def band_sum(wavelength: NDArray[np.float64], values: NDArray[np.float64], band:
     float
         The band integral, in the unit of ``values`` times nm (e.g. [W]).
     """
-    wl = np.asarray(wavelength, dtype=np.float64)
-    inside = band_mask(wl, band)
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    inside = band_mask(wl, band_nm)
     return float(np.sum(np.asarray(values, dtype=np.float64)[inside] * np.gradient(wl)[inside]))
 
 
-def mean_wavelength_nm(wavelength: NDArray[np.float64], values: NDArray[np.float64], band: Band | None = None
+def mean_wavelength_nm(wavelength_nm: NDArray[np.float64], values: NDArray[np.float64], band_nm: Band | None = None
                        ) -> float:
     """Power-weighted mean (centroid) wavelength λ̄ = Σ S λ Δλ / Σ S Δλ [nm] over ``band`` (None: the whole grid),
     by the sums of :func:`band_sum` (eqs. (14)-(16) of the power-budget paper).
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Sample wavelengths [nm], increasing.
     values : ndarray
         Spectral power density S at each sample (any unit, e.g. [W/nm]).
-    band : tuple of float, optional
+    band_nm : tuple of float, optional
         (low, high) limits [nm], inclusive; None for the whole grid.
 
     Returns
@@ -164,15 +164,15 @@ def mean_wavelength_nm(wavelength: NDArray[np.float64], values: NDArray[np.float
     NumericalError
         If the spectrum carries no positive power in the band.
     """
-    wl = np.asarray(wavelength, dtype=np.float64)
-    band = (float(wl[0]), float(wl[-1])) if band is None else band
-    total = band_sum(wl, values, band)
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    band_nm = (float(wl[0]), float(wl[-1])) if band_nm is None else band_nm
+    total = band_sum(wl, values, band_nm)
     if not total > 0:
-        raise NumericalError("spectrum carries no power in the band", field="band", got=band)
-    return band_sum(wl, np.asarray(values, dtype=np.float64) * wl, band) / total
+        raise NumericalError("spectrum carries no power in the band", field="band", got=band_nm)
+    return band_sum(wl, np.asarray(values, dtype=np.float64) * wl, band_nm) / total
 
 
-def photon_pdf_from_power(wavelength_nm: NDArray[np.float64], power: NDArray[np.float64], band: Band | None = None
+def photon_pdf_from_power(wavelength_nm: NDArray[np.float64], power: NDArray[np.float64], band_nm: Band | None = None
                           ) -> NDArray[np.float64]:
     """Photon-number pdf [1/nm] of a power spectrum, p ∝ S(λ)·λ with Σ p Δλ = 1.
 
@@ -185,7 +185,7 @@ def photon_pdf_from_power(wavelength_nm: NDArray[np.float64], power: NDArray[np.
         Sample wavelengths [nm], increasing.
     power : ndarray
         Spectral power density S at each sample (any unit, e.g. [W/nm]).
-    band : tuple of float, optional
+    band_nm : tuple of float, optional
         (low, high) normalisation band [nm], inclusive; None for a uniform grid normalised over every sample.
 
     Returns
@@ -200,7 +200,7 @@ def photon_pdf_from_power(wavelength_nm: NDArray[np.float64], power: NDArray[np.
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     photons = np.asarray(power, dtype=np.float64) * wl
-    total = photons.sum() * (wl[1] - wl[0]) if band is None else band_sum(wl, photons, band)
+    total = photons.sum() * (wl[1] - wl[0]) if band_nm is None else band_sum(wl, photons, band_nm)
     if not total > 0:
         raise ValidationError("emission spectrum has no power", field="emission_spectrum", expected="some S > 0")
     return photons / total

@@ -369,13 +369,13 @@ def bsdf_fits_figure(fits: dict) -> Figure:
     return fig
 
 
-def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> Figure:
+def module_spectrum_figure(wavelength_nm, s_blue, s_yellow, emission: dict, sd) -> Figure:
     """Fig. 7 of the cylindrical-module paper: normalised blue and yellow spectra (left) and the
     reconstructed absolute spectral flux of the module (right).
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Wavelength grid of the two spectra [nm].
     s_blue, s_yellow : ndarray
         Normalised blue and yellow spectra [-] (peak 1).
@@ -391,8 +391,8 @@ def module_spectrum_figure(wavelength, s_blue, s_yellow, emission: dict, sd) -> 
     """
     fig = Figure(figsize=(10, 3.8))
     left, right = fig.subplots(1, 2)
-    left.plot(wavelength, s_blue, label="S_blue (LED, Gaussian)")
-    left.plot(wavelength, s_yellow, label="S_yellow (fitted split Gaussian)")
+    left.plot(wavelength_nm, s_blue, label="S_blue (LED, Gaussian)")
+    left.plot(wavelength_nm, s_yellow, label="S_yellow (fitted split Gaussian)")
     conv = np.asarray(emission["wavelength"]) >= 470.0  # below: the elastic blue band of the same spectrum
     left.plot(np.asarray(emission["wavelength"])[conv], np.asarray(emission["measured"])[conv], ":", lw=1.5,
               label="measured converted light (hemisphere)")

@@ -482,7 +482,7 @@ def _thermal_exponent(excitation_nm, emission_nm, temperature_K: float) -> np.nd
     return np.where(em < ex, np.clip(C2_NM_K / temperature_K * (1.0 / em - 1.0 / ex), 0.0, None), 0.0)
 
 
-def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: float) -> np.ndarray:
+def conditional_emission_pdf(pdf: np.ndarray, lam_nm: np.ndarray, temperature_K: float) -> np.ndarray:
     """Rows of ``pdf`` (excitation bin k = row k, on the bins ``lam`` [nm]) weighted by the Boltzmann factor
     B = exp(−(hc/λ_em − hc/λ_ex)/(k_B T)) below the excitation wavelength (1 above) and renormalised to their own
     sums (zero rows stay zero): the emission pdf given the excitation bin [1/nm].
@@ -494,7 +494,7 @@ def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: fl
     ----------
     pdf : ndarray
         (K, K) emission pdf, row = excitation bin [1/nm].
-    lam : ndarray
+    lam_nm : ndarray
         Bin centres [nm].
     temperature_K : float
         Plate temperature [K], > 0.
@@ -508,7 +508,7 @@ def conditional_emission_pdf(pdf: np.ndarray, lam: np.ndarray, temperature_K: fl
     positive = pdf > 0
     with np.errstate(divide="ignore"):
         log_w = np.where(positive, np.log(np.where(positive, pdf, 1.0)), -np.inf) \
-            - _thermal_exponent(lam, lam, temperature_K)
+            - _thermal_exponent(lam_nm, lam_nm, temperature_K)
     top = log_w.max(axis=1, keepdims=True)
     weighted = np.where(positive, np.exp(log_w - np.where(np.isfinite(top), top, 0.0)), 0.0)
     old, new = pdf.sum(axis=1), weighted.sum(axis=1)
@@ -597,14 +597,14 @@ class SpectralTables:
     temperature_K: float = PLATE_TEMPERATURE_K
 
 
-def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, source: str | None = None) -> np.ndarray:
+def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam_nm: np.ndarray, source: str | None = None) -> np.ndarray:
     """Fractions of the LED power in each bin; refuses a spectrum with more than 0.1 % outside the grid.
 
     Parameters
     ----------
     spectrum : tuple of ndarray
-        (wavelength [nm], power spectrum, any scale) of the LEDs.
-    lam : ndarray
+        (wavelength [nm], power spectrum [any scale]) of the LEDs.
+    lam_nm : ndarray
         Bin centres [nm].
     source : str, optional
         The scene file, named in errors.
@@ -618,17 +618,17 @@ def led_bin_power(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, sour
     if np.any(np.asarray(values) < 0):
         raise ValidationError("LED spectrum has negative power", file=source, field="leds.spectrum",
                               expected="values >= 0", got=float(np.min(values)))
-    p = bin_powers(wl, values, lam)
+    p = bin_powers(wl, values, lam_nm)
     total = float(np.sum(0.5 * (values[1:] + values[:-1]) * np.diff(wl)))
     if not total > 0 or p.sum() < (1.0 - 1e-3) * total:
-        edges = bin_edges(lam)
+        edges = bin_edges(lam_nm)
         raise ValidationError("LED spectrum reaches outside the spectral grid", file=source, field="leds.spectrum",
                               expected=f"its power within {edges[0]:g}-{edges[-1]:g} nm",
                               got=f"{100 * (1 - p.sum() / total) if total > 0 else 100:.2g} % outside")
     return p / p.sum()
 
 
-def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | None, lam: np.ndarray,
+def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | None, lam_nm: np.ndarray,
                     led_spectrum: tuple[np.ndarray, np.ndarray], *, source: str | None = None,
                     temperature_K: float = PLATE_TEMPERATURE_K) -> SpectralTables:
     """The kernel tables of a spectral scene: bins ``lam`` (the model's emission grid), plate (or exit top), the
@@ -643,10 +643,10 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
         The plate's spectral model; None for an exit top.
     plate : PhosphorPlate or None
         The two-wavelength plate (angular shapes; yiys above the excitation grid).
-    lam : ndarray
+    lam_nm : ndarray
         Bin centres [nm].
     led_spectrum : tuple of ndarray
-        (wavelength [nm], power spectrum, any scale) of the LEDs.
+        (wavelength [nm], power spectrum [any scale]) of the LEDs.
     source : str, optional
         The scene file, named in errors.
     temperature_K : float
@@ -657,11 +657,11 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     SpectralTables
         The kernel's tables.
     """
-    lam = np.asarray(lam, dtype=np.float64)
+    lam_nm = np.asarray(lam_nm, dtype=np.float64)
     blue, yellow = MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
-    band = np.where(band_mask(lam, blue), 0, np.where(band_mask(lam, yellow), 1, 2)).astype(np.int32)
-    shape = np.where(band_mask(lam, blue), 0, 2).astype(np.int32)  # plate.BACK_BIBS, BACK_YIYS
-    led = led_bin_power(led_spectrum, lam, source)
+    band = np.where(band_mask(lam_nm, blue), 0, np.where(band_mask(lam_nm, yellow), 1, 2)).astype(np.int32)
+    shape = np.where(band_mask(lam_nm, blue), 0, 2).astype(np.int32)  # plate.BACK_BIBS, BACK_YIYS
+    led = led_bin_power(led_spectrum, lam_nm, source)
     cdf = np.cumsum(led)
     cdf[-1] = 1.0
     tis = prob = index = tabs = grid = cond = None
@@ -669,14 +669,14 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     from_plate: tuple[float, ...] = ()
     if model is not None:
         elastic, converted, pdf = model_on_bins(model, plate)
-        ph = _photon_tis(elastic, converted, pdf[None, None], lam, lam, model.step_nm)  # (2, I, K, 2)
+        ph = _photon_tis(elastic, converted, pdf[None, None], lam_nm, lam_nm, model.step_nm)  # (2, I, K, 2)
         # rows (g, k) → [elastic R, elastic T, converted R, converted T]
         tis = np.stack([ph[0, :, :, 0], ph[1, :, :, 0], ph[0, :, :, 1], ph[1, :, :, 1]], axis=-1).reshape(-1, 4)
         # the model has ≤ 1 photon out per photon in at its excitations; interpolation between two excitations
         # can exceed it by rounding-level amounts (the harmonic mean of a mixed pdf row is not linear): cap
         total = tis.sum(axis=1)
         tis = tis / np.maximum(total, 1.0)[:, None]
-        cond = conditional_emission_pdf(pdf, lam, temperature_K)  # the photon yields above keep the data's rows
+        cond = conditional_emission_pdf(pdf, lam_nm, temperature_K)  # the photon yields above keep the data's rows
         p, a = alias_table(cond * model.step_nm)
         prob, index = p.reshape(-1), a.reshape(-1).astype(np.int32)
         grid = model.incidence_deg
@@ -685,15 +685,15 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
             tis = np.concatenate([tis, tis])
         tabs = plate_tables(shape_plate_on_grid(plate, grid))
         x = model.excitation_nm
-        extrapolated = tuple(float(v) for v in lam[(lam < x[0]) | ((lam > x[-1]) & (plate is None))])
-        from_plate = tuple(float(v) for v in lam[(lam > x[-1]) & (plate is not None)])
-    return SpectralTables(lam=lam, photon_scale=lam / lam[-1], band=band, elastic_shape=shape, tis=tis,
+        extrapolated = tuple(float(v) for v in lam_nm[(lam_nm < x[0]) | ((lam_nm > x[-1]) & (plate is None))])
+        from_plate = tuple(float(v) for v in lam_nm[(lam_nm > x[-1]) & (plate is not None)])
+    return SpectralTables(lam=lam_nm, photon_scale=lam_nm / lam_nm[-1], band=band, elastic_shape=shape, tis=tis,
                           alias_prob=prob, alias_index=index, led_power=led, led_cdf=cdf, plate=tabs, grid_deg=grid,
                           extrapolated_nm=extrapolated, capped=() if model is None else model.capped,
                           yiys_nm=from_plate, emission_pdf=cond, temperature_K=float(temperature_K))
 
 
-def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np.ndarray, field_name: str,
+def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam_nm: np.ndarray, field_name: str,
                                 source: str | None = None) -> np.ndarray:
     """A surface's reflectance ρ(λ) at the bin centres (linear interpolation; the bins must be inside).
 
@@ -701,7 +701,7 @@ def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np
     ----------
     spectrum : tuple of ndarray
         (wavelength [nm], reflectance [-]).
-    lam : ndarray
+    lam_nm : ndarray
         Bin centres [nm].
     field_name : str
         The scene key, named in errors.
@@ -714,7 +714,8 @@ def surface_reflectance_on_bins(spectrum: tuple[np.ndarray, np.ndarray], lam: np
         Reflectance at the bin centres [-].
     """
     wl, rho = spectrum
-    if lam[0] < wl[0] or lam[-1] > wl[-1]:
+    if lam_nm[0] < wl[0] or lam_nm[-1] > wl[-1]:
         raise ValidationError("the reflectance spectrum does not cover the spectral grid", file=source,
-                              field=field_name, expected=f"{lam[0]:g}-{lam[-1]:g} nm", got=f"{wl[0]:g}-{wl[-1]:g} nm")
-    return np.interp(lam, wl, rho)
+                              field=field_name, expected=f"{lam_nm[0]:g}-{lam_nm[-1]:g} nm",
+                              got=f"{wl[0]:g}-{wl[-1]:g} nm")
+    return np.interp(lam_nm, wl, rho)

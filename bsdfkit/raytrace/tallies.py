@@ -424,7 +424,7 @@ POWER_LINES = ("extracted", "absorbed_wall", "absorbed_base", "absorbed_leds", "
                "roulette", "discarded", "truncated")
 
 
-def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.ndarray, lam: np.ndarray, n: int,
+def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.ndarray, lam_nm: np.ndarray, n: int,
                     power_W: float) -> dict[str, dict[str, float]]:
     """The spectral mode's ledger in power [W] and in photons [1/s], each with its relative closing error.
 
@@ -446,7 +446,7 @@ def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.nda
         Rays emitted per bin.
     photon_scale : ndarray
         λ_k / λ_max per bin [-].
-    lam : ndarray
+    lam_nm : ndarray
         Bin centres [nm].
     n : int
         Rays traced.
@@ -459,7 +459,7 @@ def spectral_ledger(col: dict[str, Fraction], emitted_bins, photon_scale: np.nda
         ``power_W`` and ``photons_per_s`` (line → value, plus ``error`` [-]) and, with conversion, ``conversions``.
     """
     scale = power_W / n
-    to_photons = scale * float(lam[-1]) * 1e-9 / (PLANCK_H * LIGHT_C)
+    to_photons = scale * float(lam_nm[-1]) * 1e-9 / (PLANCK_H * LIGHT_C)
     ext = col["extracted_blue"] + col["extracted_yellow"] + col["extracted_other"]
     p_lines = {"extracted": ext, **{k: col[k] for k in ("absorbed_wall", "absorbed_base", "absorbed_leds",
                                                        "absorbed_plate", "stokes", "roulette", "discarded",

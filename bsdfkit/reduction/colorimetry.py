@@ -109,12 +109,12 @@ CMF_SIGNIFICANT_NM: tuple[float, float] = (390.0, 694.0)
 END_FRACTION = 0.05
 
 
-def check_wavelengths_nm(wavelength, name: str) -> None:
+def check_wavelengths_nm(wavelength_nm, name: str) -> None:
     """Refuse a grid outside :data:`WAVELENGTH_RANGE_NM` (µm, m or Å values): one line naming ``name``.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelengths, expected in [nm].
     name : str
         What the message names (a file or spectrum name).
@@ -124,7 +124,7 @@ def check_wavelengths_nm(wavelength, name: str) -> None:
     ValidationError
         If a wavelength lies outside :data:`WAVELENGTH_RANGE_NM`.
     """
-    wl = np.asarray(wavelength, dtype=float)
+    wl = np.asarray(wavelength_nm, dtype=float)
     lo, hi = WAVELENGTH_RANGE_NM
     if wl.min() < lo or wl.max() > hi:
         unit = "µm or m" if wl.max() < lo else "Å or pm" if wl.min() > hi else "another unit"
@@ -133,7 +133,7 @@ def check_wavelengths_nm(wavelength, name: str) -> None:
                               got=f"{wl.min():g}..{wl.max():g}")
 
 
-def check_power_spectrum(wavelength, values, name: str, *, colorimetry: bool = True) -> None:
+def check_power_spectrum(wavelength_nm, values, name: str, *, colorimetry: bool = True) -> None:
     """Plausibility of a spectral *power* (an emission spectrum), or a one-line :class:`ValidationError`.
 
     Rules: wavelengths in nm (:func:`check_wavelengths_nm`); with ``colorimetry``, at least
@@ -144,14 +144,16 @@ def check_power_spectrum(wavelength, values, name: str, *, colorimetry: bool = T
 
     Parameters
     ----------
-    wavelength, values
-        1-D arrays of equal length, λ [nm] strictly increasing, values in any radiometric unit.
+    wavelength_nm
+        Wavelengths λ [nm], 1-D, strictly increasing.
+    values
+        Spectral values of the same length [any radiometric unit].
     name
         What the message names (a file or spectrum name).
     colorimetry
         Also require the samples a colorimetric result needs.
     """
-    wl = np.asarray(wavelength, dtype=float)
+    wl = np.asarray(wavelength_nm, dtype=float)
     values = np.asarray(values, dtype=float)
     check_wavelengths_nm(wl, name)
     visible = int(np.count_nonzero((wl >= 360.0) & (wl <= 830.0)))

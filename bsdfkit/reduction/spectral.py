@@ -46,14 +46,14 @@ def _is_spectral_distribution(spectrum: object) -> bool:
     return hasattr(spectrum, "wavelengths") and hasattr(spectrum, "values") and not isinstance(spectrum, xr.DataArray)
 
 
-def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
+def spectrum_on(spectrum: SpectrumLike, wavelength_nm: NDArray[np.float64]) -> NDArray[np.float64]:
     """Values of ``spectrum`` on ``wavelength`` (nm): linear interpolation, zero outside its domain.
 
     Parameters
     ----------
     spectrum : colour.SpectralDistribution or xarray.DataArray
         Spectrum over wavelength [nm] (a DataArray over ``wavelength``), any value unit.
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Wavelengths to sample at [nm].
 
     Returns
@@ -77,7 +77,7 @@ def spectrum_on(spectrum: SpectrumLike, wavelength: NDArray[np.float64]) -> NDAr
     values = np.asarray(values, dtype=np.float64)
     if not np.all(np.isfinite(values)):
         raise InputError("spectrum has non-finite values", field="spectrum", expected="finite values")
-    return np.interp(wavelength, wl, values, left=0.0, right=0.0)
+    return np.interp(wavelength_nm, wl, values, left=0.0, right=0.0)
 
 
 def to_spectral_distribution(da: xr.DataArray, name: str = "") -> colour.SpectralDistribution:
@@ -124,14 +124,14 @@ def _arrays(spectrum: SpectrumLike) -> tuple[NDArray[np.float64], NDArray[np.flo
     return spectrum["wavelength"].values, spectrum.values
 
 
-def band_integral(spectrum: SpectrumLike, band: Band) -> float:
+def band_integral(spectrum: SpectrumLike, band_nm: Band) -> float:
     """Σ_band S(λ) Δλ on the spectrum's own grid (:func:`band_sum`).
 
     Parameters
     ----------
     spectrum : colour.SpectralDistribution or xarray.DataArray
         Spectrum over wavelength [nm].
-    band : tuple of float
+    band_nm : tuple of float
         (low, high) band [nm], inclusive.
 
     Returns
@@ -139,10 +139,10 @@ def band_integral(spectrum: SpectrumLike, band: Band) -> float:
     float
         The integral, in the spectrum's unit times nm.
     """
-    return band_sum(*_arrays(spectrum), band)
+    return band_sum(*_arrays(spectrum), band_nm)
 
 
-def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
+def weighted_mean_bsdf(ds: xr.Dataset, config: str, band_nm: Band | None,
                        spectrum: SpectrumLike | None = None) -> xr.Dataset:
     """Spectrally weighted mean BSDF per record (eq. (5); eq. (8) for yellow), with propagated std.
 
@@ -157,7 +157,7 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
         Calibrated scan (``bsdf``, ``bsdf_std`` per record and wavelength, ``incident_spectrum``).
     config : str
         Configuration whose records are averaged.
-    band : tuple of float or None
+    band_nm : tuple of float or None
         (low, high) band [nm], inclusive; None for every measured wavelength.
     spectrum : colour.SpectralDistribution or xarray.DataArray, optional
         Weighting spectrum E over wavelength [nm] (relative shape only); None for the measured incident spectrum.
@@ -179,12 +179,12 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
     lam = sub["wavelength"].values
     weight = (sub["incident_spectrum"].sel(configuration=config).values if spectrum is None
               else spectrum_on(spectrum, lam))
-    in_band = np.ones(lam.size, dtype=bool) if band is None else band_mask(lam, band)
+    in_band = np.ones(lam.size, dtype=bool) if band_nm is None else band_mask(lam, band_nm)
     usable = in_band & sub["incident_valid"].sel(configuration=config).values & (weight > 0)
     if not usable.any():
         raise InputError("band with no signal: no wavelength in the band carries incident light",
                          file=ds.attrs.get("source"),
-                         field="band", expected=f"overlap with the incident light of '{config}'", got=band)
+                         field="band", expected=f"overlap with the incident light of '{config}'", got=band_nm)
     # one wavelength has no spacing (np.gradient needs two): its weight is 1, the mean is its value
     w = weight * (np.gradient(lam) if lam.size > 1 else np.ones(1)) * usable
     q = sub["bsdf"].values
@@ -194,7 +194,7 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
     with np.errstate(invalid="ignore"):
         mean = np.where(defined, np.nansum(q * w, axis=1) / norm, np.nan)
         std = np.where(defined, np.sqrt(np.nansum((s * w) ** 2, axis=1)) / norm, np.nan)
-    span = "the measured wavelengths" if band is None else f"{band[0]:g}-{band[1]:g} nm"
+    span = "the measured wavelengths" if band_nm is None else f"{band_nm[0]:g}-{band_nm[1]:g} nm"
     out = _profile(sub, mean, std, "1/sr", f"weighted mean BSDF over {span} (eq. 5)")
     if "incident_relative_std" in sub:
         # The reference beam divides every record alike: its noise is a common scale factor, which per-record
@@ -204,7 +204,7 @@ def weighted_mean_bsdf(ds: xr.Dataset, config: str, band: Band | None,
     return out
 
 
-def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSION_BAND_NM) -> xr.Dataset:
+def bispectral_band_integral(ds: xr.Dataset, config: str, band_nm: Band = CONVERSION_BAND_NM) -> xr.Dataset:
     """Σ_band ⟨q_λ⟩(λs) Δλs per record, in 1/sr: ⟨⟨q_λ⟩⟩·ΔΛs of eqs. (11)-(13).
 
     Parameters
@@ -213,7 +213,7 @@ def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSIO
         Calibrated phosphor scan with ``bsdf_bispectral`` [1/(sr nm)] and its std.
     config : str
         Configuration whose records are integrated (the excitation, e.g. ``"blue"``).
-    band : tuple of float, optional
+    band_nm : tuple of float, optional
         (low, high) emission band [nm], inclusive.
 
     Returns
@@ -229,22 +229,23 @@ def bispectral_band_integral(ds: xr.Dataset, config: str, band: Band = CONVERSIO
     """
     sub = ds.isel(record=np.flatnonzero(ds["config"].values == config))
     lam = sub["wavelength"].values
-    inside = band_mask(lam, band)
+    inside = band_mask(lam, band_nm)
     if not inside.any():
-        raise InputError("band outside the wavelength grid", field="band", got=band)
+        raise InputError("band outside the wavelength grid", field="band", got=band_nm)
     w = np.gradient(lam) * inside
     q = sub["bsdf_bispectral"].values
     s = sub["bsdf_bispectral_std"].values
     total = np.sum(np.where(inside, q, 0.0) * w, axis=1)
     total = np.where(np.isfinite(q[:, inside]).all(axis=1), total, np.nan)
     std = np.sqrt(np.sum(np.where(inside, s, 0.0) ** 2 * w**2, axis=1))
-    out = _profile(sub, total, std, "1/sr", f"bi-spectral BSDF integrated over {band[0]:g}-{band[1]:g} nm (eq. 13)")
+    out = _profile(sub, total, std, "1/sr",
+                   f"bi-spectral BSDF integrated over {band_nm[0]:g}-{band_nm[1]:g} nm (eq. 13)")
     if "incident_power_relative_std" in sub:
         out.attrs["common_relative_std"] = float(sub["incident_power_relative_std"].sel(configuration=config))
     return out
 
 
-def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = CONVERSION_BAND_NM) -> xr.Dataset:
+def bispectral_band_mean(ds: xr.Dataset, config: str, band_nm: Band = CONVERSION_BAND_NM) -> xr.Dataset:
     """⟨⟨q_λ⟩⟩ per record (eq. (12)), in 1/(sr·nm): the band integral divided by ΔΛs = high − low.
 
     Parameters
@@ -253,7 +254,7 @@ def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = CONVERSION_BA
         Calibrated phosphor scan with ``bsdf_bispectral`` [1/(sr nm)] and its std.
     config : str
         Configuration whose records are averaged (the excitation, e.g. ``"blue"``).
-    band : tuple of float, optional
+    band_nm : tuple of float, optional
         (low, high) emission band [nm], inclusive.
 
     Returns
@@ -261,8 +262,8 @@ def bispectral_band_mean(ds: xr.Dataset, config: str, band: Band = CONVERSION_BA
     xarray.Dataset
         ``bsdf`` and ``bsdf_std`` on ``record`` [1/(sr nm)], as :func:`bispectral_band_integral` otherwise.
     """
-    out = bispectral_band_integral(ds, config, band)
-    width = band[1] - band[0]
+    out = bispectral_band_integral(ds, config, band_nm)
+    width = band_nm[1] - band_nm[0]
     out["bsdf"] = out["bsdf"] / width
     out["bsdf_std"] = out["bsdf_std"] / width
     out["bsdf"].attrs.update(units="1/(sr nm)", long_name="<<q_lambda>> (eq. 12)")
@@ -304,7 +305,7 @@ def bispectral_weighted_mean(donaldson: xr.DataArray, excitation: SpectrumLike) 
     return out
 
 
-def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
+def mean_wavelength(spectrum: SpectrumLike, band_nm: Band) -> float:
     """Power-weighted mean wavelength λ̄ = Σ Φ_λ λ Δλ / Σ Φ_λ Δλ over ``band`` (nm)
     (:func:`bsdfkit.core.spectra.mean_wavelength_nm`).
 
@@ -312,7 +313,7 @@ def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
     ----------
     spectrum : colour.SpectralDistribution or xarray.DataArray
         Power spectrum over wavelength [nm].
-    band : tuple of float
+    band_nm : tuple of float
         (low, high) band [nm], inclusive.
 
     Returns
@@ -320,17 +321,17 @@ def mean_wavelength(spectrum: SpectrumLike, band: Band) -> float:
     float
         Mean wavelength λ̄ [nm].
     """
-    return mean_wavelength_nm(*_arrays(spectrum), band)
+    return mean_wavelength_nm(*_arrays(spectrum), band_nm)
 
 
-def mean_photon_energy(spectrum: SpectrumLike, band: Band) -> float:
+def mean_photon_energy(spectrum: SpectrumLike, band_nm: Band) -> float:
     """hc·ΣΦ_λΔλ / ΣΦ_λλΔλ in joules: the factor converting photon flux to power in eqs. (14)-(15).
 
     Parameters
     ----------
     spectrum : colour.SpectralDistribution or xarray.DataArray
         Power spectrum over wavelength [nm].
-    band : tuple of float
+    band_nm : tuple of float
         (low, high) band [nm], inclusive.
 
     Returns
@@ -338,21 +339,22 @@ def mean_photon_energy(spectrum: SpectrumLike, band: Band) -> float:
     float
         Mean photon energy hc/λ̄ [J].
     """
-    return PLANCK_H * LIGHT_C / (mean_wavelength(spectrum, band) * 1e-9)
+    return PLANCK_H * LIGHT_C / (mean_wavelength(spectrum, band_nm) * 1e-9)
 
 
-def photon_ratio(incident: SpectrumLike, incident_band: Band, scattered: SpectrumLike, scattered_band: Band) -> float:
+def photon_ratio(incident: SpectrumLike, incident_band_nm: Band, scattered: SpectrumLike,
+                 scattered_band_nm: Band) -> float:
     """TIS_photons / TIS_power for a converting interaction, eq. (16): E_ph,incident / E_ph,scattered = λ̄s/λ̄i.
 
     Parameters
     ----------
     incident : colour.SpectralDistribution or xarray.DataArray
         Incident power spectrum over wavelength [nm].
-    incident_band : tuple of float
+    incident_band_nm : tuple of float
         (low, high) band of ``incident`` [nm], inclusive.
     scattered : colour.SpectralDistribution or xarray.DataArray
         Scattered (converted) power spectrum over wavelength [nm].
-    scattered_band : tuple of float
+    scattered_band_nm : tuple of float
         (low, high) band of ``scattered`` [nm], inclusive.
 
     Returns
@@ -360,7 +362,7 @@ def photon_ratio(incident: SpectrumLike, incident_band: Band, scattered: Spectru
     float
         λ̄s/λ̄i [-].
     """
-    return mean_photon_energy(incident, incident_band) / mean_photon_energy(scattered, scattered_band)
+    return mean_photon_energy(incident, incident_band_nm) / mean_photon_energy(scattered, scattered_band_nm)
 
 
 def _profile(sub: xr.Dataset, value: NDArray, std: NDArray, units: str, name: str) -> xr.Dataset:

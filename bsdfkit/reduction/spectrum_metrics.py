@@ -83,7 +83,7 @@ def _grid(wavelength, values) -> tuple[np.ndarray, np.ndarray]:
     return wl, y
 
 
-def peak_wavelength(wavelength, values) -> tuple[float, float]:
+def peak_wavelength(wavelength_nm, values) -> tuple[float, float]:
     """(λp [nm], S(λp)) from the local quadratic: the vertex of the parabola through the maximum sample and its
     two neighbours (any spacing); the maximum sample itself on the range's edge or for a flat top.
 
@@ -92,7 +92,7 @@ def peak_wavelength(wavelength, values) -> tuple[float, float]:
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
     values : array_like
         Spectral values at ``wavelength``, any radiometric unit, some positive.
@@ -111,7 +111,7 @@ def peak_wavelength(wavelength, values) -> tuple[float, float]:
     NumericalError
         If no value is positive.
     """
-    wl, y = _grid(wavelength, values)
+    wl, y = _grid(wavelength_nm, values)
     i = int(np.argmax(y))
     if i == 0 or i == wl.size - 1:
         return float(wl[i]), float(y[i])
@@ -127,13 +127,13 @@ def peak_wavelength(wavelength, values) -> tuple[float, float]:
     return float(wl[i] + shift), float(y1 + b * shift + a * shift**2)
 
 
-def half_maximum_crossings(wavelength, values, level: float | None = None) -> tuple[float, float]:
+def half_maximum_crossings(wavelength_nm, values, level: float | None = None) -> tuple[float, float]:
     """(left, right) wavelengths [nm] where the spectrum crosses ``level`` (default: half the maximum
     sample) nearest the maximum, linearly interpolated; ``nan`` for a side without a crossing.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
     values : array_like
         Spectral values at ``wavelength``, any radiometric unit, some positive.
@@ -152,7 +152,7 @@ def half_maximum_crossings(wavelength, values, level: float | None = None) -> tu
     NumericalError
         If no value is positive.
     """
-    wl, y = _grid(wavelength, values)
+    wl, y = _grid(wavelength_nm, values)
     i = int(np.argmax(y))
     half = 0.5 * y[i] if level is None else float(level)
     left = right = math.nan
@@ -167,12 +167,12 @@ def half_maximum_crossings(wavelength, values, level: float | None = None) -> tu
     return left, right
 
 
-def centroid_wavelength(wavelength, values) -> float:
+def centroid_wavelength(wavelength_nm, values) -> float:
     """λc = ΣλSΔλ / ΣSΔλ [nm] over the whole grid: :func:`bsdfkit.core.spectra.mean_wavelength_nm`.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
     values : array_like
         Spectral values at ``wavelength``, any radiometric unit, some positive.
@@ -189,7 +189,7 @@ def centroid_wavelength(wavelength, values) -> float:
     NumericalError
         If no value is positive.
     """
-    return mean_wavelength_nm(*_grid(wavelength, values))
+    return mean_wavelength_nm(*_grid(wavelength_nm, values))
 
 
 @functools.lru_cache(maxsize=1)
@@ -206,7 +206,7 @@ def _locus_cmfs():
     return colour.MultiSpectralDistributions(values, fine, labels=cmfs.labels, name=f"{cmfs.name}, 0.1 nm")
 
 
-def dominant_wavelength_purity(wavelength, values,
+def dominant_wavelength_purity(wavelength_nm, values,
                                white_point: tuple[float, float] = WHITE_POINT_E) -> tuple[float, float]:
     """(λd [nm], excitation purity [1]) of the spectrum's CIE 1931 chromaticity against ``white_point``.
 
@@ -214,7 +214,7 @@ def dominant_wavelength_purity(wavelength, values,
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Sample wavelengths [nm], 1-D, strictly increasing, at least 3.
     values : array_like
         Spectral values at ``wavelength``, any radiometric unit, some positive.
@@ -230,7 +230,7 @@ def dominant_wavelength_purity(wavelength, values,
     """
     import colour
 
-    wl, y = _grid(wavelength, values)
+    wl, y = _grid(wavelength_nm, values)
     xy = np.array(chromaticity_xy(colour.SpectralDistribution(y, wl, name="spectrum")))
     cmfs = _locus_cmfs()
     xy_n = np.asarray(white_point, dtype=float)
@@ -242,14 +242,16 @@ def dominant_wavelength_purity(wavelength, values,
     return (wl_d if math.isfinite(wl_d) else math.nan), (purity if math.isfinite(purity) else math.nan)
 
 
-def spectrum_metrics(wavelength, values, *, colorimetry: bool = True,
+def spectrum_metrics(wavelength_nm, values, *, colorimetry: bool = True,
                      white_point: tuple[float, float] = WHITE_POINT_E) -> SpectrumMetrics:
     """All metrics of the module docstring for one spectrum (λ [nm], values in any unit).
 
     Parameters
     ----------
-    wavelength, values
-        Samples, strictly increasing wavelength [nm].
+    wavelength_nm
+        Sample wavelengths [nm], strictly increasing.
+    values
+        Spectral values at those wavelengths [any unit].
     colorimetry
         Also compute the dominant wavelength and purity (CIE 1931 2°; NaN when colour cannot be computed for this
         spectrum, e.g. no light in 360-830 nm); else None.
@@ -262,7 +264,7 @@ def spectrum_metrics(wavelength, values, *, colorimetry: bool = True,
         Peak, centroid, half-maximum crossings and FWHM [nm], peak value, and (with ``colorimetry``) λd [nm] and
         purity [-].
     """
-    wl, y = _grid(wavelength, values)
+    wl, y = _grid(wavelength_nm, values)
     peak, peak_value = peak_wavelength(wl, y)
     left, right = half_maximum_crossings(wl, y)
     dominant = purity = None
