@@ -1,5 +1,5 @@
 """One name, one unit: a public function's parameter in degrees ends in ``_deg``, one in nanometres in ``_nm``, and a
-name with either suffix is documented in that unit; a bare angle name (``theta_i``, ``phi_s`` …) is radians.
+name with either suffix is documented in that unit: a bare angle name (``theta_i``, ``phi_s`` …) is never degrees.
 
 The unit of a parameter is the one unit in brackets of its numpydoc description (test_docstrings.py requires it).
 A description with several bracketed units describes several quantities (a pair of axes, records, a spectrum as
@@ -22,15 +22,6 @@ SUFFIX = {"[deg]": "_deg", "[nm]": "_nm"}
 PLAIN_TYPES = {"float", "int", "None", "ArrayLike", "NDArray", "np", "ndarray", "float64", "tuple", "list", "Sequence",
                "Band"}
 
-# modules whose wavelengths [nm] are still named without _nm (``wavelength``, ``band``, ``peak`` …): the degrees rule
-# holds in them; each moves off this list when its nm parameters are renamed
-NM_PENDING = [
-    "fit/spectrum/models.py", "fit/spectrum/reconstruction.py", "fit/spectrum/reporting.py",
-    "fit/spectrum/solver.py", "fit/spectrum/starts.py",
-    "models/functions.py", "models/led.py", "models/registry.py",
-    "simulation/truth.py", "simulation/virtual_goniometer.py",
-]
-
 
 def _annotations(node: ast.FunctionDef) -> dict[str, ast.expr | None]:
     a = node.args
@@ -48,7 +39,7 @@ def _plain(annotation: ast.expr | None) -> bool:
     return names <= PLAIN_TYPES
 
 
-def problems(path: Path, label: str, nm: bool = True) -> list[str]:
+def problems(path: Path, label: str) -> list[str]:
     """Parameters of ``path``'s public functions whose name and documented unit disagree, one line each."""
     found = []
     for qualname, node in _public_functions(ast.parse(path.read_text(), filename=str(path))):
@@ -67,21 +58,13 @@ def problems(path: Path, label: str, nm: bool = True) -> list[str]:
                 continue
             if bare.endswith(SUFFIX[units[0]]):
                 continue
-            if units[0] == "[nm]" and not nm:
-                continue
             found.append(f"{where}: documented in {units[0]}, so named …{SUFFIX[units[0]]}")
     return found
 
 
 @pytest.mark.parametrize("module", COVERED)
 def test_parameter_names_state_their_unit(module):
-    assert problems(PACKAGE / module, module, nm=module not in NM_PENDING) == []
-
-
-@pytest.mark.parametrize("module", NM_PENDING)
-def test_a_pending_module_still_has_unsuffixed_wavelengths(module):
-    assert module in COVERED
-    assert problems(PACKAGE / module, module), f"{module} names every [nm] parameter …_nm: take it off NM_PENDING"
+    assert problems(PACKAGE / module, module) == []
 
 
 def test_the_checker_finds_a_unit_its_name_does_not_state(tmp_path):
@@ -120,12 +103,6 @@ def angles(theta_i, phi_i_deg, wavelength, band_nm, tilt_deg, lean_deg, theta, a
     assert [line.split(" ", 1)[1] for line in problems(sample, "sample.py")] == [
         "angles(theta_i): documented in [deg], so named …_deg",
         "angles(wavelength): documented in [nm], so named …_nm",
-        "angles(band_nm): named _nm but documented in [um]",
-        "angles(tilt_deg): named _deg but documented in [rad]",
-        "angles(lean_deg): named _deg but documented in [rad] too",
-    ]
-    assert [line.split(" ", 1)[1] for line in problems(sample, "sample.py", nm=False)] == [
-        "angles(theta_i): documented in [deg], so named …_deg",
         "angles(band_nm): named _nm but documented in [um]",
         "angles(tilt_deg): named _deg but documented in [rad]",
         "angles(lean_deg): named _deg but documented in [rad] too",

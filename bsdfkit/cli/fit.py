@@ -139,7 +139,7 @@ def _run_spectrum(args: argparse.Namespace) -> int:
             sources.append((str(file), name if len(table) > 1 else None))
     labels = [Path(f).name + (f" [{c}]" if c else "") for f, c in sources]
     ranges = [None if args.range is None else tuple(args.range)] * len(spectra)
-    records = analyse_spectra(spectra, args.model, ranges=ranges, labels=labels, criterion=args.criterion,
+    records = analyse_spectra(spectra, args.model, ranges_nm=ranges, labels=labels, criterion=args.criterion,
                               options=FitOptions(maxiter=args.maxiter), split_nm=args.split_nm)
     failed = 0
     for (file, column), label, rec in zip(sources, labels, records):

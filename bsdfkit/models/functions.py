@@ -130,7 +130,7 @@ def _safe_sqrt(x: ArrayLike) -> jnp.ndarray:
 # ------------------------------------------------------------------------------------------------
 # Spectrum models
 # ------------------------------------------------------------------------------------------------
-def gaussian_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -> jnp.ndarray:
+def gaussian_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> jnp.ndarray:
     """Relative Gaussian spectrum with peak 1: S(λ) = exp(−C((λ − λp)/Δλ)²), C = 4 ln 2.
 
     Eq. (2) of the cylindrical-module paper ("Impact of the geometrical and optical parameters on the
@@ -139,7 +139,7 @@ def gaussian_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -
 
     Parameters
     ----------
-    wavelength, peak, fwhm : array_like
+    wavelength_nm, peak_nm, fwhm_nm : array_like
         λ, λp and Δλ [nm] (broadcast together). Δλ = 0 gives a unit spike at λ = λp and 0 elsewhere;
         values below ~1e-308 are exactly 0 (the exponent is capped where exp underflows anyway).
 
@@ -148,12 +148,12 @@ def gaussian_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -
     jax.Array
         Relative spectral value in [0, 1] [-].
     """
-    z2 = _offset_over_width_squared(jnp.asarray(wavelength) - peak, fwhm)
+    z2 = _offset_over_width_squared(jnp.asarray(wavelength_nm) - peak_nm, fwhm_nm)
     return jnp.exp(-C_FWHM * z2)
 
 
 def split_gaussian_spectrum(
-    wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike, alpha: ArrayLike
+    wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
 ) -> jnp.ndarray:
     """Asymmetric ("split", "modified") Gaussian with peak 1, eq. (3) of the cylindrical-module paper.
 
@@ -165,7 +165,7 @@ def split_gaussian_spectrum(
 
     Parameters
     ----------
-    wavelength, peak, fwhm : array_like
+    wavelength_nm, peak_nm, fwhm_nm : array_like
         λ, λp, Δλ [nm] (broadcast together).
     alpha : array_like
         Asymmetry constant α [-]. Table 2 of the paper: α = −0.12 for the phosphor band.
@@ -175,18 +175,18 @@ def split_gaussian_spectrum(
     jax.Array
         Relative spectral value in [0, 1] [-].
     """
-    offset = jnp.asarray(wavelength) - peak
-    width = fwhm * (1.0 + jnp.sign(offset) * alpha)
+    offset = jnp.asarray(wavelength_nm) - peak_nm
+    width = fwhm_nm * (1.0 + jnp.sign(offset) * alpha)
     return jnp.exp(-C_FWHM * _offset_over_width_squared(offset, width))
 
 
 def two_band_spectrum(
-    wavelength: ArrayLike,
-    blue_peak: ArrayLike,
-    blue_fwhm: ArrayLike,
+    wavelength_nm: ArrayLike,
+    blue_peak_nm: ArrayLike,
+    blue_fwhm_nm: ArrayLike,
     blue_amplitude: ArrayLike,
-    yellow_peak: ArrayLike,
-    yellow_fwhm: ArrayLike,
+    yellow_peak_nm: ArrayLike,
+    yellow_fwhm_nm: ArrayLike,
     yellow_alpha: ArrayLike,
     yellow_amplitude: ArrayLike,
 ) -> jnp.ndarray:
@@ -198,13 +198,13 @@ def two_band_spectrum(
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelengths λ [nm].
-    blue_peak, blue_fwhm : array_like
+    blue_peak_nm, blue_fwhm_nm : array_like
         Peak λp1 and FWHM Δλ1 of the blue pump band [nm].
     blue_amplitude : array_like
         Blue amplitude a_b (e.g. [W/nm]).
-    yellow_peak, yellow_fwhm : array_like
+    yellow_peak_nm, yellow_fwhm_nm : array_like
         Peak λp2 and FWHM Δλ2 of the yellow phosphor band [nm].
     yellow_alpha : array_like
         Asymmetry α of the yellow band [-] (see :func:`split_gaussian_spectrum`).
@@ -216,8 +216,8 @@ def two_band_spectrum(
     jax.Array
         S(λ) in the unit of the amplitudes.
     """
-    return blue_amplitude * gaussian_spectrum(wavelength, blue_peak, blue_fwhm) + (
-        yellow_amplitude * split_gaussian_spectrum(wavelength, yellow_peak, yellow_fwhm, yellow_alpha)
+    return blue_amplitude * gaussian_spectrum(wavelength_nm, blue_peak_nm, blue_fwhm_nm) + (
+        yellow_amplitude * split_gaussian_spectrum(wavelength_nm, yellow_peak_nm, yellow_fwhm_nm, yellow_alpha)
     )
 
 

@@ -57,7 +57,7 @@ def _split_half_width(offset: jnp.ndarray, fwhm: ArrayLike, alpha: ArrayLike) ->
     return 0.5 * fwhm * (1.0 + jnp.sign(offset) * alpha)
 
 
-def ohno2005_spectrum(wavelength: ArrayLike, peak: ArrayLike, half_spectral_width: ArrayLike) -> jnp.ndarray:
+def ohno2005_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, half_spectral_width_nm: ArrayLike) -> jnp.ndarray:
     """Ohno (2005) single-LED model, S = (g + 2g⁵)/3 with g = exp(−((λ − λp)/w)²), peak value 1.
 
     Same definition and argument meaning as colour-science's ``sd_single_led_Ohno2005(peak_wavelength,
@@ -65,9 +65,9 @@ def ohno2005_spectrum(wavelength: ArrayLike, peak: ArrayLike, half_spectral_widt
 
     Parameters
     ----------
-    wavelength, peak
+    wavelength_nm, peak_nm
         λ and λp [nm].
-    half_spectral_width
+    half_spectral_width_nm
         w [nm] ("half spectral width" Δλ0.5 in colour-science). The FWHM is ``OHNO2005_FWHM_PER_WIDTH``·w
         (≈ 1.6151·w). w = 0 gives a unit spike at λp.
 
@@ -75,20 +75,20 @@ def ohno2005_spectrum(wavelength: ArrayLike, peak: ArrayLike, half_spectral_widt
     -------
     Dimensionless relative spectral value in [0, 1].
     """
-    z2 = ratio_squared(jnp.asarray(wavelength) - peak, half_spectral_width, _GAUSS_CAP)
+    z2 = ratio_squared(jnp.asarray(wavelength_nm) - peak_nm, half_spectral_width_nm, _GAUSS_CAP)
     return (jnp.exp(-z2) + 2.0 * jnp.exp(-5.0 * z2)) / 3.0
 
 
-def ohno2005_fwhm_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike) -> jnp.ndarray:
+def ohno2005_fwhm_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> jnp.ndarray:
     """:func:`ohno2005_spectrum` parameterised by its true FWHM Δλ [nm] (w = Δλ / OHNO2005_FWHM_PER_WIDTH).
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength λ [nm].
-    peak : array_like
+    peak_nm : array_like
         Peak wavelength λp [nm].
-    fwhm : array_like
+    fwhm_nm : array_like
         Full width at half maximum Δλ [nm].
 
     Returns
@@ -96,11 +96,11 @@ def ohno2005_fwhm_spectrum(wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLi
     jax.Array
         Relative spectral value, 1 at the peak [-].
     """
-    return ohno2005_spectrum(wavelength, peak, jnp.asarray(fwhm) / OHNO2005_FWHM_PER_WIDTH)
+    return ohno2005_spectrum(wavelength_nm, peak_nm, jnp.asarray(fwhm_nm) / OHNO2005_FWHM_PER_WIDTH)
 
 
 def split_pseudo_voigt_spectrum(
-    wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike, alpha: ArrayLike, eta: ArrayLike
+    wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike, eta: ArrayLike
 ) -> jnp.ndarray:
     """Split pseudo-Voigt line, peak value 1: S = η/(1 + z²) + (1 − η)·exp(−ln 2·z²), z = (λ − λp)/h.
 
@@ -109,7 +109,7 @@ def split_pseudo_voigt_spectrum(
 
     Parameters
     ----------
-    wavelength, peak, fwhm
+    wavelength_nm, peak_nm, fwhm_nm
         λ, λp and Δλ [nm].
     alpha
         Asymmetry α ∈ (−1, 1) [1]; α > 0 widens the long-wavelength side.
@@ -120,15 +120,15 @@ def split_pseudo_voigt_spectrum(
     -------
     Dimensionless relative spectral value (≤ 1).
     """
-    offset = jnp.asarray(wavelength) - peak
-    h = _split_half_width(offset, fwhm, alpha)
+    offset = jnp.asarray(wavelength_nm) - peak_nm
+    h = _split_half_width(offset, fwhm_nm, alpha)
     gauss = jnp.exp(-math.log(2.0) * ratio_squared(offset, h, _GAUSS_CAP))
     lorentz = 1.0 / (1.0 + ratio_squared(offset, h, _POWER_CAP))
     return eta * lorentz + (1.0 - eta) * gauss
 
 
 def split_pearson7_spectrum(
-    wavelength: ArrayLike, peak: ArrayLike, fwhm: ArrayLike, alpha: ArrayLike, m: ArrayLike
+    wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike, m: ArrayLike
 ) -> jnp.ndarray:
     """Split Pearson VII line, peak value 1: S = (1 + (2^{1/m} − 1)·z²)^{−m}, z = (λ − λp)/h.
 
@@ -137,7 +137,7 @@ def split_pearson7_spectrum(
 
     Parameters
     ----------
-    wavelength, peak, fwhm
+    wavelength_nm, peak_nm, fwhm_nm
         λ, λp and Δλ [nm].
     alpha
         Asymmetry α ∈ (−1, 1) [1].
@@ -148,8 +148,8 @@ def split_pearson7_spectrum(
     -------
     Dimensionless relative spectral value in [0, 1].
     """
-    offset = jnp.asarray(wavelength) - peak
-    h = _split_half_width(offset, fwhm, alpha)
+    offset = jnp.asarray(wavelength_nm) - peak_nm
+    h = _split_half_width(offset, fwhm_nm, alpha)
     m = jnp.asarray(m)
     c = jnp.expm1(math.log(2.0) / m)  # 2^{1/m} − 1
     return jnp.exp(-m * jnp.log1p(c * ratio_squared(offset, h, _POWER_CAP)))

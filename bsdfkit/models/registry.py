@@ -331,7 +331,7 @@ def _two_band(theta, wavelength):
     return f.two_band_spectrum(wavelength, theta[0], theta[1], theta[2], theta[3], theta[4], theta[5], theta[6])
 
 
-def pump_two_band(theta, wavelength):
+def pump_two_band(theta, wavelength_nm):
     """The pump (blue) component of ``two-band``: a Gaussian.
 
     Parameters
@@ -339,7 +339,7 @@ def pump_two_band(theta, wavelength):
     theta : jax.Array
         Parameter vector of the model: peaks, widths and offsets [nm], asymmetries [-], amplitudes in the
         unit of the spectrum.
-    wavelength : jax.Array
+    wavelength_nm : jax.Array
         Wavelength [nm].
 
     Returns
@@ -347,10 +347,10 @@ def pump_two_band(theta, wavelength):
     jax.Array
         Spectral value, in the unit of the amplitudes.
     """
-    return theta[2] * f.gaussian_spectrum(wavelength, theta[0], theta[1])
+    return theta[2] * f.gaussian_spectrum(wavelength_nm, theta[0], theta[1])
 
 
-def pump_two_band_led(theta, wavelength):
+def pump_two_band_led(theta, wavelength_nm):
     """The pump component of ``two-band-led``: a Gaussian line plus its Gaussian side band.
 
     Parameters
@@ -358,7 +358,7 @@ def pump_two_band_led(theta, wavelength):
     theta : jax.Array
         Parameter vector of the model: peaks, widths and offsets [nm], asymmetries [-], amplitudes in the
         unit of the spectrum.
-    wavelength : jax.Array
+    wavelength_nm : jax.Array
         Wavelength [nm].
 
     Returns
@@ -366,7 +366,8 @@ def pump_two_band_led(theta, wavelength):
     jax.Array
         Spectral value, in the unit of the amplitudes.
     """
-    return pump_two_band(theta, wavelength) + theta[5] * f.gaussian_spectrum(wavelength, theta[0] + theta[3], theta[4])
+    return pump_two_band(theta, wavelength_nm) + theta[5] * f.gaussian_spectrum(wavelength_nm, theta[0] + theta[3],
+                                                                                 theta[4])
 
 
 def _two_band_led(theta, wavelength):
@@ -374,7 +375,7 @@ def _two_band_led(theta, wavelength):
         wavelength, theta[6], theta[7], theta[8])
 
 
-def phosphor_two_band_wide(theta, wavelength):
+def phosphor_two_band_wide(theta, wavelength_nm):
     """The phosphor component of ``two-band-wide``: a split Gaussian plus a Gaussian at an offset from it (a
     second phosphor, or the long tail of one).
 
@@ -383,7 +384,7 @@ def phosphor_two_band_wide(theta, wavelength):
     theta : jax.Array
         Parameter vector of the model: peaks, widths and offsets [nm], asymmetries [-], amplitudes in the
         unit of the spectrum.
-    wavelength : jax.Array
+    wavelength_nm : jax.Array
         Wavelength [nm].
 
     Returns
@@ -391,8 +392,8 @@ def phosphor_two_band_wide(theta, wavelength):
     jax.Array
         Spectral value, in the unit of the amplitudes.
     """
-    return theta[9] * f.split_gaussian_spectrum(wavelength, theta[6], theta[7], theta[8]) + theta[12] * (
-        f.gaussian_spectrum(wavelength, theta[6] + theta[10], theta[11]))
+    return theta[9] * f.split_gaussian_spectrum(wavelength_nm, theta[6], theta[7], theta[8]) + theta[12] * (
+        f.gaussian_spectrum(wavelength_nm, theta[6] + theta[10], theta[11]))
 
 
 def _two_band_wide(theta, wavelength):

@@ -37,17 +37,17 @@ Side = Literal["reflection", "transmission"]
 
 
 # --------------------------------------------------------------------------------------------- spectra
-def split_gaussian(wavelength: ArrayLike, peak: float, fwhm: float, alpha: float = 0.0) -> NDArray[np.float64]:
+def split_gaussian(wavelength_nm: ArrayLike, peak_nm: float, fwhm_nm: float, alpha: float = 0.0) -> NDArray[np.float64]:
     """Eqs. (2)-(3) of [Cylindrical-module]: the registry's split Gaussian
     (:func:`bsdfkit.models.functions.split_gaussian_spectrum`) in float64 NumPy.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength [nm].
-    peak : float
+    peak_nm : float
         Peak wavelength [nm].
-    fwhm : float
+    fwhm_nm : float
         Full width at half maximum [nm].
     alpha : float, optional
         Asymmetry of the two halves [-].
@@ -58,7 +58,8 @@ def split_gaussian(wavelength: ArrayLike, peak: float, fwhm: float, alpha: float
         Relative spectral power, 1 at the peak [-].
     """
     with x64():
-        return np.asarray(split_gaussian_spectrum(jnp.asarray(wavelength, dtype=jnp.float64), peak, fwhm, alpha))
+        return np.asarray(split_gaussian_spectrum(jnp.asarray(wavelength_nm, dtype=jnp.float64), peak_nm, fwhm_nm,
+                                                  alpha))
 
 
 def smoothstep(x: ArrayLike) -> NDArray[np.float64]:
@@ -78,14 +79,14 @@ def smoothstep(x: ArrayLike) -> NDArray[np.float64]:
     return x * x * (3.0 - 2.0 * x)
 
 
-def xenon_lamp(wavelength: ArrayLike) -> NDArray[np.float64]:
+def xenon_lamp(wavelength_nm: ArrayLike) -> NDArray[np.float64]:
     """Relative spectral power of a collimated Xe arc: a 6000 K Planck shape, 1 at 560 nm.
 
     A smooth stand-in for a real lamp; real Xe lines lie mostly above 800 nm, outside the 380–780 nm grid.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength [nm].
 
     Returns
@@ -93,25 +94,26 @@ def xenon_lamp(wavelength: ArrayLike) -> NDArray[np.float64]:
     ndarray
         Relative spectral power, 1 at 560 nm [-].
     """
-    lam = np.asarray(wavelength, dtype=np.float64) * 1e-9
+    lam = np.asarray(wavelength_nm, dtype=np.float64) * 1e-9
     c2 = 1.438776877e-2  # second radiation constant, m·K
     planck = lam**-5 / np.expm1(c2 / (lam * 6000.0))
     ref = 560e-9**-5 / np.expm1(c2 / (560e-9 * 6000.0))
     return planck / ref
 
 
-def bandpass_filter(wavelength: ArrayLike, low: float, high: float, edge: float = 3.0) -> NDArray[np.float64]:
+def bandpass_filter(wavelength_nm: ArrayLike, low_nm: float, high_nm: float,
+                    edge_nm: float = 3.0) -> NDArray[np.float64]:
     """Interference filter transmittance: flat 0.9 inside, smooth edges of width ``edge`` nm, exactly 0 outside.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength [nm].
-    low : float
+    low_nm : float
         Lower edge of the pass band [nm].
-    high : float
+    high_nm : float
         Upper edge of the pass band [nm].
-    edge : float, optional
+    edge_nm : float, optional
         Width of each smooth edge [nm].
 
     Returns
@@ -119,20 +121,20 @@ def bandpass_filter(wavelength: ArrayLike, low: float, high: float, edge: float 
     ndarray
         Transmittance in [0, 0.9] [-].
     """
-    lam = np.asarray(wavelength, dtype=np.float64)
-    return 0.9 * smoothstep((lam - low) / edge) * smoothstep((high - lam) / edge)
+    lam = np.asarray(wavelength_nm, dtype=np.float64)
+    return 0.9 * smoothstep((lam - low_nm) / edge_nm) * smoothstep((high_nm - lam) / edge_nm)
 
 
-def longpass_filter(wavelength: ArrayLike, cut_on: float, edge: float = 5.0) -> NDArray[np.float64]:
+def longpass_filter(wavelength_nm: ArrayLike, cut_on_nm: float, edge_nm: float = 5.0) -> NDArray[np.float64]:
     """Cut-on filter transmittance: exactly 0 below ``cut_on`` nm, 0.92 above ``cut_on + edge``.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength [nm].
-    cut_on : float
+    cut_on_nm : float
         Wavelength below which nothing passes [nm].
-    edge : float, optional
+    edge_nm : float, optional
         Width of the rising edge [nm].
 
     Returns
@@ -140,21 +142,22 @@ def longpass_filter(wavelength: ArrayLike, cut_on: float, edge: float = 5.0) -> 
     ndarray
         Transmittance in [0, 0.92] [-].
     """
-    lam = np.asarray(wavelength, dtype=np.float64)
-    return 0.92 * smoothstep((lam - cut_on) / edge)
+    lam = np.asarray(wavelength_nm, dtype=np.float64)
+    return 0.92 * smoothstep((lam - cut_on_nm) / edge_nm)
 
 
-def monochromator_slit(wavelength: ArrayLike, center: float, fwhm: float, peak: float = 0.5) -> NDArray[np.float64]:
+def monochromator_slit(wavelength_nm: ArrayLike, center_nm: float, fwhm_nm: float,
+                       peak: float = 0.5) -> NDArray[np.float64]:
     """Slit function of a grating monochromator with equal entrance and exit slits: a triangle of full width
     at half maximum ``fwhm`` nm about ``center``, exactly 0 beyond ±fwhm; ``peak`` is its throughput.
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength [nm].
-    center : float
+    center_nm : float
         Centre wavelength [nm].
-    fwhm : float
+    fwhm_nm : float
         Full width at half maximum of the triangle [nm].
     peak : float, optional
         Throughput at the centre [-].
@@ -164,21 +167,21 @@ def monochromator_slit(wavelength: ArrayLike, center: float, fwhm: float, peak: 
     ndarray
         Throughput [-].
     """
-    lam = np.asarray(wavelength, dtype=np.float64)
-    return peak * np.clip(1.0 - np.abs(lam - center) / fwhm, 0.0, None)
+    lam = np.asarray(wavelength_nm, dtype=np.float64)
+    return peak * np.clip(1.0 - np.abs(lam - center_nm) / fwhm_nm, 0.0, None)
 
 
-def emission_shape(wavelength: ArrayLike, peak: float = 596.7, fwhm: float = 154.3, alpha: float = -0.12,
+def emission_shape(wavelength_nm: ArrayLike, peak_nm: float = 596.7, fwhm_nm: float = 154.3, alpha: float = -0.12,
                    onset_nm: tuple[float, float] = (470.0, 500.0)) -> NDArray[np.float64]:
     """Unnormalised phosphor emission: eq. (3) split Gaussian × smooth onset (0 below onset_nm[0]).
 
     Parameters
     ----------
-    wavelength : array_like
+    wavelength_nm : array_like
         Wavelength [nm].
-    peak : float, optional
+    peak_nm : float, optional
         Peak wavelength of the split Gaussian [nm].
-    fwhm : float, optional
+    fwhm_nm : float, optional
         Its full width at half maximum [nm].
     alpha : float, optional
         Its asymmetry [-].
@@ -190,9 +193,9 @@ def emission_shape(wavelength: ArrayLike, peak: float = 596.7, fwhm: float = 154
     ndarray
         Unnormalised relative spectral power [-].
     """
-    lam = np.asarray(wavelength, dtype=np.float64)
+    lam = np.asarray(wavelength_nm, dtype=np.float64)
     onset = smoothstep((lam - onset_nm[0]) / (onset_nm[1] - onset_nm[0]))
-    return split_gaussian(lam, peak, fwhm, alpha) * onset
+    return split_gaussian(lam, peak_nm, fwhm_nm, alpha) * onset
 
 
 # ------------------------------------------------------------------------------------------ the truth
@@ -306,12 +309,12 @@ class PhosphorPlateTruth:
         return _interp_table(self.theta_i_deg, self.biys[side], theta_i, ConversionParams, CONVERSION_FIELDS)
 
     # -- spectral factors --------------------------------------------------------------------------
-    def emission_density(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+    def emission_density(self, wavelength_nm: ArrayLike) -> NDArray[np.float64]:
         """e(λ) in 1/nm, normalised to ∫ e dλ = 1 over the yellow band 470–740 nm (fine grid).
 
         Parameters
         ----------
-        wavelength : array_like
+        wavelength_nm : array_like
             Wavelength [nm].
 
         Returns
@@ -324,14 +327,14 @@ class PhosphorPlateTruth:
         shape = lambda lam: emission_shape(lam, em["peak"], em["fwhm"], em["alpha"],  # noqa: E731
                                            (em["onset_start"], em["onset_end"]))
         norm = band_sum(fine, shape(fine), CONVERSION_BAND_NM)
-        return shape(wavelength) / norm
+        return shape(wavelength_nm) / norm
 
-    def excitation(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+    def excitation(self, wavelength_nm: ArrayLike) -> NDArray[np.float64]:
         """Relative conversion efficiency g(λi): 1 inside the excitation band, 0 outside.
 
         Parameters
         ----------
-        wavelength : array_like
+        wavelength_nm : array_like
             Incident (excitation) wavelength [nm].
 
         Returns
@@ -339,7 +342,7 @@ class PhosphorPlateTruth:
         ndarray
             g(λi), 0 or 1 [-].
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         lo, hi = self.excitation_band_nm
         return ((lam >= lo) & (lam <= hi)).astype(np.float64)
 
@@ -367,7 +370,7 @@ class PhosphorPlateTruth:
         return lobe_bsdf(self.lobe(interaction, side, theta_i), theta_i, directions)
 
     def elastic_spectral(self, interaction: str, side: str, theta_i: float,
-                         wavelength: ArrayLike) -> NDArray[np.float64]:
+                         wavelength_nm: ArrayLike) -> NDArray[np.float64]:
         """Wavelength factor m(λ) = 1 + κ(λ − λref)/100 nm of the elastic BSDF.
 
         Parameters
@@ -378,7 +381,7 @@ class PhosphorPlateTruth:
             Scattering side.
         theta_i : float
             Angle of incidence from the sample normal [rad].
-        wavelength : array_like
+        wavelength_nm : array_like
             Wavelength [nm].
 
         Returns
@@ -387,7 +390,7 @@ class PhosphorPlateTruth:
             m(λ) [-].
         """
         p = self.lobe(interaction, side, theta_i)
-        return 1.0 + p.kappa * (np.asarray(wavelength, dtype=np.float64) - p.lambda_ref) / 100.0
+        return 1.0 + p.kappa * (np.asarray(wavelength_nm, dtype=np.float64) - p.lambda_ref) / 100.0
 
     def conversion_angular(self, side: str, theta_i: float, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         """T/π · (1 + ε(cos θs − 2/3)) in 1/sr (multiply by e(λs) for the bi-spectral BSDF in 1/(sr nm)).
@@ -409,8 +412,8 @@ class PhosphorPlateTruth:
         p = self.conversion(side, theta_i)
         return p.T / np.pi * (1.0 + p.epsilon * (directions[..., 2] - 2.0 / 3.0))
 
-    def donaldson(self, side: str, theta_i: float, directions: NDArray[np.float64], wavelength_i: NDArray[np.float64],
-                  wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
+    def donaldson(self, side: str, theta_i: float, directions: NDArray[np.float64],
+                  wavelength_i_nm: NDArray[np.float64], wavelength_nm: NDArray[np.float64]) -> NDArray[np.float64]:
         """Bi-spectral BSDF matrix q_λ(λi → λs) in 1/(sr·nm), shape (..., n_λi, n_λs), on matching grids.
 
         Converted part g(λi)·f_conv·e(λs); the elastic part sits on the diagonal as f(λ)/Δλ, the discrete form
@@ -424,9 +427,9 @@ class PhosphorPlateTruth:
             Angle of incidence from the sample normal [rad].
         directions : ndarray, shape (..., 3)
             Unit scatter vectors in the frame of ``side``, z ≥ 0 [-].
-        wavelength_i : ndarray, shape (n_λi,)
+        wavelength_i_nm : ndarray, shape (n_λi,)
             Incident wavelength grid [nm].
-        wavelength : ndarray, shape (n_λs,)
+        wavelength_nm : ndarray, shape (n_λs,)
             Scattered wavelength grid [nm].
 
         Returns
@@ -434,8 +437,8 @@ class PhosphorPlateTruth:
         ndarray
             Bi-spectral BSDF, shape (..., n_λi, n_λs) [1/(sr nm)].
         """
-        lam_i = np.asarray(wavelength_i, dtype=np.float64)
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam_i = np.asarray(wavelength_i_nm, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         conv = self.conversion_angular(side, theta_i, directions)[..., None, None]
         out = conv * self.excitation(lam_i)[:, None] * self.emission_density(lam)[None, :]
         if lam_i.shape == lam.shape and np.allclose(lam_i, lam):
@@ -450,7 +453,7 @@ class PhosphorPlateTruth:
         return out
 
     def scattered_power(self, side: str, theta_i: float, directions: NDArray[np.float64], weights: NDArray[np.float64],
-                        wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> NDArray[np.float64]:
+                        wavelength_nm: NDArray[np.float64], incident: NDArray[np.float64]) -> NDArray[np.float64]:
         """Spectral power through the apertures (n_pos, n_λ) for the incident spectral power ``incident``.
 
         ``directions``/``weights`` are the aperture quadrature (weights include cos θs), θi in radians: the
@@ -466,7 +469,7 @@ class PhosphorPlateTruth:
             Quadrature directions over each aperture, unit vectors in the frame of ``side`` [-].
         weights : ndarray, shape (n_pos, n_dir)
             Projected-solid-angle weights of the directions (cos θs included) [sr].
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         incident : ndarray, shape (n_λ,)
             Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
@@ -476,7 +479,7 @@ class PhosphorPlateTruth:
         ndarray
             Scattered spectral power, shape (n_pos, n_λ), in the unit of ``incident``.
         """
-        lam = wavelength
+        lam = wavelength_nm
         s_b = (self.elastic_angular("bibs", side, theta_i, directions) * weights).sum(-1)
         s_y = (self.elastic_angular("yiys", side, theta_i, directions) * weights).sum(-1)
         s_c = (self.conversion_angular(side, theta_i, directions) * weights).sum(-1)
@@ -488,12 +491,12 @@ class PhosphorPlateTruth:
         converted = phi_exc * self.emission_density(lam) * s_c[:, None]
         return elastic + converted
 
-    def elastic_interaction(self, wavelength: ArrayLike) -> NDArray[np.str_]:
+    def elastic_interaction(self, wavelength_nm: ArrayLike) -> NDArray[np.str_]:
         """Which elastic parameter set applies at each wavelength: "bibs" below the split, "yiys" above.
 
         Parameters
         ----------
-        wavelength : array_like
+        wavelength_nm : array_like
             Wavelength [nm].
 
         Returns
@@ -501,7 +504,7 @@ class PhosphorPlateTruth:
         ndarray
             Interaction name per wavelength, ``"bibs"`` or ``"yiys"``.
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         return np.where(lam < self.elastic_split_nm, "bibs", "yiys")
 
     # -- exact integrals ---------------------------------------------------------------------------
@@ -611,19 +614,19 @@ def clipped_gaussian_lobe_tis(A: float, sigma: float, theta_i: float, n_psi: int
         return float(tis_gaussian_lobe(theta_i, A, sigma, n_psi))
 
 
-def weighted_mean(wavelength: NDArray[np.float64], values: NDArray[np.float64], weight: NDArray[np.float64],
-                  band: tuple[float, float]) -> float:
+def weighted_mean(wavelength_nm: NDArray[np.float64], values: NDArray[np.float64], weight: NDArray[np.float64],
+                  band_nm: tuple[float, float]) -> float:
     """⟨values⟩ weighted by ``weight`` over ``band`` (eq. (5) of the power-budget paper, trapezoid rule).
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Wavelength grid [nm].
     values : ndarray
         Values on the grid.
     weight : ndarray
         Weights on the grid (e.g. an incident spectrum, any scale).
-    band : tuple of float
+    band_nm : tuple of float
         Lower and upper wavelength of the band [nm].
 
     Returns
@@ -632,10 +635,10 @@ def weighted_mean(wavelength: NDArray[np.float64], values: NDArray[np.float64], 
         Weighted mean, in the unit of ``values``.
     """
     # the band sum of the reductions, so that the truth and the measurement integrate the same way
-    return band_sum(wavelength, values * weight, band) / band_sum(wavelength, weight, band)
+    return band_sum(wavelength_nm, values * weight, band_nm) / band_sum(wavelength_nm, weight, band_nm)
 
 
-def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: NDArray[np.float64],
+def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength_nm: NDArray[np.float64],
                     blue_incident: NDArray[np.float64], yellow_incident: NDArray[np.float64]) -> dict[str, float]:
     """Exact TIS (percent of incident power) of every interaction at one incidence.
 
@@ -649,7 +652,7 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
         The plate.
     theta_i_deg : float
         Angle of incidence [deg].
-    wavelength : ndarray, shape (n_λ,)
+    wavelength_nm : ndarray, shape (n_λ,)
         Wavelength grid [nm].
     blue_incident : ndarray, shape (n_λ,)
         Blue incident spectral power [W/nm] (any scale).
@@ -664,12 +667,12 @@ def exact_tis_table(truth: PhosphorPlateTruth, theta_i_deg: float, wavelength: N
     th = np.radians(theta_i_deg)
     out: dict[str, float] = {}
     for tag, side in (("B", "reflection"), ("F", "transmission")):
-        m_b = weighted_mean(wavelength, truth.elastic_spectral("bibs", side, th, wavelength), blue_incident,
+        m_b = weighted_mean(wavelength_nm, truth.elastic_spectral("bibs", side, th, wavelength_nm), blue_incident,
                             EXCITATION_BAND_NM)
         out[f"{tag}_bibs"] = 100 * m_b * truth.elastic_tis("bibs", side, th)
-        g = weighted_mean(wavelength, truth.excitation(wavelength), blue_incident, EXCITATION_BAND_NM)
+        g = weighted_mean(wavelength_nm, truth.excitation(wavelength_nm), blue_incident, EXCITATION_BAND_NM)
         out[f"{tag}_biys"] = 100 * g * truth.conversion(side, th).T
-        m_y = weighted_mean(wavelength, truth.elastic_spectral("yiys", side, th, wavelength), yellow_incident,
+        m_y = weighted_mean(wavelength_nm, truth.elastic_spectral("yiys", side, th, wavelength_nm), yellow_incident,
                             CONVERSION_BAND_NM)
         out[f"{tag}_yiys"] = 100 * m_y * truth.elastic_tis("yiys", side, th)
     out["blue_losses"] = 100 - out["B_bibs"] - out["F_bibs"] - out["B_biys"] - out["F_biys"]
@@ -733,12 +736,12 @@ class ExcitationEmissionTruth:
         return hash(self.to_json())
 
     # -- spectral factors --------------------------------------------------------------------------
-    def absorption(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+    def absorption(self, wavelength_nm: ArrayLike) -> NDArray[np.float64]:
         """a(λ): probability that an incident photon at λ is absorbed by the phosphor [1].
 
         Parameters
         ----------
-        wavelength : array_like
+        wavelength_nm : array_like
             Wavelength [nm].
 
         Returns
@@ -746,7 +749,7 @@ class ExcitationEmissionTruth:
         ndarray
             Absorption probability a(λ) [-].
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         return self.absorption_max / (1.0 + np.exp((lam - self.absorption_edge_nm) / self.absorption_width_nm))
 
     def _emission_shape(self, wavelength: ArrayLike) -> NDArray[np.float64]:
@@ -757,12 +760,12 @@ class ExcitationEmissionTruth:
         return np.where(inside, lam * emission_shape(lam, em["peak"], em["fwhm"], em["alpha"],
                                                      (em["onset_start"], em["onset_end"])), 0.0)
 
-    def emission_pdf(self, wavelength: ArrayLike) -> NDArray[np.float64]:
+    def emission_pdf(self, wavelength_nm: ArrayLike) -> NDArray[np.float64]:
         """e(λ) [1/nm]: photon-number pdf of the converted light, ∫ e dλ = 1 over ``emission_range_nm``.
 
         Parameters
         ----------
-        wavelength : array_like
+        wavelength_nm : array_like
             Wavelength [nm].
 
         Returns
@@ -771,7 +774,7 @@ class ExcitationEmissionTruth:
             Photon-number pdf e(λ) [1/nm].
         """
         fine = np.linspace(*self.emission_range_nm, 40001)
-        return self._emission_shape(wavelength) / band_sum(fine, self._emission_shape(fine), self.emission_range_nm)
+        return self._emission_shape(wavelength_nm) / band_sum(fine, self._emission_shape(fine), self.emission_range_nm)
 
     # -- angular parts -----------------------------------------------------------------------------
     def lobe(self, side: str, theta_i: float) -> LobeParams:
@@ -867,7 +870,7 @@ class ExcitationEmissionTruth:
 
     # -- the goniometer signal ---------------------------------------------------------------------
     def scattered_power(self, side: str, theta_i: float, directions: NDArray[np.float64], weights: NDArray[np.float64],
-                        wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> NDArray[np.float64]:
+                        wavelength_nm: NDArray[np.float64], incident: NDArray[np.float64]) -> NDArray[np.float64]:
         """Spectral power through the apertures (n_pos, n_λ) for the incident spectral power ``incident``.
 
         ``directions``/``weights`` are the aperture quadrature (weights include cos θs), θi in radians.
@@ -883,7 +886,7 @@ class ExcitationEmissionTruth:
             Quadrature directions over each aperture, unit vectors in the frame of ``side`` [-].
         weights : ndarray, shape (n_pos, n_dir)
             Projected-solid-angle weights of the directions (cos θs included) [sr].
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         incident : ndarray, shape (n_λ,)
             Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
@@ -893,7 +896,7 @@ class ExcitationEmissionTruth:
         ndarray
             Scattered spectral power, shape (n_pos, n_λ), in the unit of ``incident``.
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         s_el = (self.elastic_angular(side, theta_i, directions) * weights).sum(-1)
         s_c = (self.conversion_angular(side, theta_i, directions) * weights).sum(-1)
         elastic = incident * (1.0 - self.absorption(lam)) * s_el[:, None]
@@ -902,7 +905,7 @@ class ExcitationEmissionTruth:
         return elastic + converted
 
     # -- exact values for an incident spectrum -----------------------------------------------------
-    def elastic_tis(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
+    def elastic_tis(self, side: str, theta_i: float, wavelength_nm: NDArray[np.float64],
                     incident: NDArray[np.float64]) -> float:
         """Elastic TIS [1] for the incident spectrum (any scale): ⟨1 − a⟩·(ρ + lobe TIS).
 
@@ -912,7 +915,7 @@ class ExcitationEmissionTruth:
             Scattering side.
         theta_i : float
             Angle of incidence from the sample normal [rad].
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         incident : ndarray, shape (n_λ,)
             Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
@@ -922,12 +925,12 @@ class ExcitationEmissionTruth:
         float
             TIS [-] (fraction of the incident power).
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         band = (float(lam[0]), float(lam[-1]))
         mean = band_sum(lam, incident * (1.0 - self.absorption(lam)), band) / band_sum(lam, incident, band)
         return mean * self.elastic_tis_at_zero_absorption(side, theta_i)
 
-    def converted_density(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
+    def converted_density(self, side: str, theta_i: float, wavelength_nm: NDArray[np.float64],
                           incident: NDArray[np.float64]) -> NDArray[np.float64]:
         """Converted spectral power leaving into ``side`` per unit incident power [1/nm], on ``wavelength``.
 
@@ -937,7 +940,7 @@ class ExcitationEmissionTruth:
             Scattering side.
         theta_i : float
             Angle of incidence from the sample normal [rad].
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         incident : ndarray, shape (n_λ,)
             Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
@@ -947,13 +950,13 @@ class ExcitationEmissionTruth:
         ndarray
             Converted spectral power per incident power [1/nm].
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         band = (float(lam[0]), float(lam[-1]))
         absorbed = band_sum(lam, incident * self.absorption(lam) * lam, band) / band_sum(lam, incident, band)
         return self.quantum_yield * absorbed * self.share(side, theta_i).T * self.emission_pdf(lam) / lam
 
-    def converted_tis(self, side: str, theta_i: float, wavelength: NDArray[np.float64],
-                      incident: NDArray[np.float64], band: tuple[float, float] | None = None) -> float:
+    def converted_tis(self, side: str, theta_i: float, wavelength_nm: NDArray[np.float64],
+                      incident: NDArray[np.float64], band_nm: tuple[float, float] | None = None) -> float:
         """Converted power leaving into ``side`` per incident power [1] (within ``band``, default all).
 
         Parameters
@@ -962,11 +965,11 @@ class ExcitationEmissionTruth:
             Scattering side.
         theta_i : float
             Angle of incidence from the sample normal [rad].
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         incident : ndarray, shape (n_λ,)
             Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
-        band : tuple of float, optional
+        band_nm : tuple of float, optional
             Lower and upper wavelength of the band [nm]; the whole grid by default.
 
         Returns
@@ -974,16 +977,16 @@ class ExcitationEmissionTruth:
         float
             Converted power per incident power [-].
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
-        band = band or (float(lam[0]), float(lam[-1]))
-        return band_sum(lam, self.converted_density(side, theta_i, lam, incident), band)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
+        band_nm = band_nm or (float(lam[0]), float(lam[-1]))
+        return band_sum(lam, self.converted_density(side, theta_i, lam, incident), band_nm)
 
-    def photon_yield(self, wavelength: NDArray[np.float64], incident: NDArray[np.float64]) -> float:
+    def photon_yield(self, wavelength_nm: NDArray[np.float64], incident: NDArray[np.float64]) -> float:
         """Converted photons (both sides) per incident photon [1]: η⟨a⟩ with photon weights, ≤ η.
 
         Parameters
         ----------
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         incident : ndarray, shape (n_λ,)
             Incident spectral power on ``wavelength``, in any unit (e.g. [W/nm], or [counts/s] per pixel).
@@ -993,12 +996,12 @@ class ExcitationEmissionTruth:
         float
             Converted photons per incident photon [-].
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         band = (float(lam[0]), float(lam[-1]))
         return (self.quantum_yield * band_sum(lam, incident * lam * self.absorption(lam), band)
                 / band_sum(lam, incident * lam, band))
 
-    def two_colour_tis_percent(self, theta_i_deg: float, wavelength: NDArray[np.float64], blue: NDArray[np.float64],
+    def two_colour_tis_percent(self, theta_i_deg: float, wavelength_nm: NDArray[np.float64], blue: NDArray[np.float64],
                                yellow: NDArray[np.float64]) -> dict[str, float]:
         """Exact TIS of the two-wavelength interactions (percent, keys of Table 2 of [Power-budget]) for the
         blue and yellow incident spectra, as the measurement equation defines them: bibs the blue-weighted mean
@@ -1010,7 +1013,7 @@ class ExcitationEmissionTruth:
         ----------
         theta_i_deg : float
             Angle of incidence [deg].
-        wavelength : ndarray, shape (n_λ,)
+        wavelength_nm : ndarray, shape (n_λ,)
             Wavelength grid [nm].
         blue : ndarray, shape (n_λ,)
             Blue incident spectral power [W/nm] (any scale).
@@ -1022,7 +1025,7 @@ class ExcitationEmissionTruth:
         dict of str to float
             TIS in percent of the incident power [%], keys of Table 2 and the blue and yellow losses.
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         th = np.radians(theta_i_deg)
         whole = (float(lam[0]), float(lam[-1]))
         lit = np.where(yellow > 1e-3 * yellow.max(), 1.0, 0.0)  # calibration's incident_valid threshold

@@ -74,12 +74,12 @@ class Spectrometer:
         n = int(round((self.wavelength_max_nm - self.wavelength_min_nm) / self.wavelength_step_nm)) + 1
         return self.wavelength_min_nm + self.wavelength_step_nm * np.arange(n)
 
-    def responsivity(self, wavelength: NDArray[np.float64]) -> NDArray[np.float64]:
+    def responsivity(self, wavelength_nm: NDArray[np.float64]) -> NDArray[np.float64]:
         """Relative spectral responsivity (counts per unit spectral power), peak 1: a smooth CCD-like curve.
 
         Parameters
         ----------
-        wavelength : ndarray
+        wavelength_nm : ndarray
             Wavelength [nm].
 
         Returns
@@ -87,7 +87,7 @@ class Spectrometer:
         ndarray
             Relative responsivity [-], 1 at 600 nm.
         """
-        lam = np.asarray(wavelength, dtype=np.float64)
+        lam = np.asarray(wavelength_nm, dtype=np.float64)
         return 0.35 + 0.65 * np.exp(-(((lam - 600.0) / 230.0) ** 2))
 
 
@@ -102,12 +102,12 @@ class Configuration:
     incident_band_nm: tuple[float, float]
     reference_attenuation: float = 1e-3
 
-    def incident_power(self, wavelength: NDArray[np.float64], beam_scale: float) -> NDArray[np.float64]:
+    def incident_power(self, wavelength_nm: NDArray[np.float64], beam_scale: float) -> NDArray[np.float64]:
         """Spectral power of the beam at the sample (counts/s at unit responsivity per pixel).
 
         Parameters
         ----------
-        wavelength : ndarray
+        wavelength_nm : ndarray
             Wavelength [nm].
         beam_scale : float
             The lamp's spectral power at 560 nm before the filter, in the unit of the result (e.g. [counts/s] per
@@ -120,15 +120,15 @@ class Configuration:
         """
         kind = self.filter[0]
         if kind == "bandpass":
-            filt = synthetic.bandpass_filter(wavelength, self.filter[1], self.filter[2])
+            filt = synthetic.bandpass_filter(wavelength_nm, self.filter[1], self.filter[2])
         elif kind == "longpass":
-            filt = synthetic.longpass_filter(wavelength, self.filter[1])
+            filt = synthetic.longpass_filter(wavelength_nm, self.filter[1])
         elif kind == "monochromator":
-            filt = synthetic.monochromator_slit(wavelength, self.filter[1], self.filter[2])
+            filt = synthetic.monochromator_slit(wavelength_nm, self.filter[1], self.filter[2])
         else:
             raise ValidationError("unknown filter kind", field="filter", expected="bandpass, longpass or monochromator",
                                   got=kind)
-        return beam_scale * synthetic.xenon_lamp(wavelength) * filt
+        return beam_scale * synthetic.xenon_lamp(wavelength_nm) * filt
 
 
 BLUE = Configuration("blue", f"blue interference filter {band_label(EXCITATION_BAND_NM)}",

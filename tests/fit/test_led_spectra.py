@@ -151,14 +151,15 @@ def test_metrics_refuse_bad_input_and_report_truncated_lines_as_nan():
 @pytest.fixture(scope="module")
 def blue_best():
     spectra_ = [load(n) for n in BLUE]
-    return spectra.analyse_spectra(spectra_, "best", ranges=[VISIBLE] * len(spectra_), labels=list(BLUE))
+    return spectra.analyse_spectra(spectra_, "best", ranges_nm=[VISIBLE] * len(spectra_), labels=list(BLUE))
 
 
 @pytest.fixture(scope="module")
 def two_band_led():
     names = WHITES + ("red_2", "blue_3")
     spectra_ = [load(n) for n in names]
-    records = spectra.analyse_spectra(spectra_, "two-band-wide", ranges=[VISIBLE] * len(spectra_), labels=list(names))
+    records = spectra.analyse_spectra(spectra_, "two-band-wide", ranges_nm=[VISIBLE] * len(spectra_),
+                                      labels=list(names))
     return dict(zip(names, records))
 
 
@@ -277,7 +278,7 @@ def test_two_band_refuses_single_colour_leds(two_band_led):
 
 def test_negative_r2_and_bounds_are_flagged(capsys):
     """Issue: a Gaussian on white_2 gave R² = -1.18 without a warning."""
-    rec = spectra.analyse_spectra([load("white_2")], "gaussian", ranges=[VISIBLE])[0]
+    rec = spectra.analyse_spectra([load("white_2")], "gaussian", ranges_nm=[VISIBLE])[0]
     assert rec["r2"] < 0
     assert any(w.startswith("R² = ") and "< 0" in w for w in rec["warnings"])
     assert any("fitted FWHM" in w for w in rec["warnings"])

@@ -161,7 +161,7 @@ def _relative_parameters(model: str) -> tuple[Parameter, ...]:
     return tuple(out)
 
 
-def spectrum_model_values(model: str, params: dict[str, float], wavelength: np.ndarray) -> np.ndarray:
+def spectrum_model_values(model: str, params: dict[str, float], wavelength_nm: np.ndarray) -> np.ndarray:
     """Evaluate a fitted spectrum model (parameter names as in :func:`fit_spectrum`) at λ [nm].
 
     Parameters
@@ -171,7 +171,7 @@ def spectrum_model_values(model: str, params: dict[str, float], wavelength: np.n
     params : dict of str to float
         Model parameters by name (peaks and widths [nm], ``alpha`` and shape parameters [-], amplitudes in the
         spectrum's unit); extra keys are ignored.
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Wavelengths λ [nm].
 
     Returns
@@ -187,7 +187,7 @@ def spectrum_model_values(model: str, params: dict[str, float], wavelength: np.n
     if model not in SPECTRUM_MODELS:
         raise ValidationError("unknown spectrum model", field="model", expected=" | ".join(SPECTRUM_MODELS),
                               got=model)
-    wl = np.asarray(wavelength, dtype=float)
+    wl = np.asarray(wavelength_nm, dtype=float)
     names = [p.name for p in _parameters(model, float(wl.min()), float(wl.max()) + 1.0)]
     missing = [n for n in names if n not in params]
     if missing:

@@ -29,7 +29,7 @@ YELLOW_BAND_NM: tuple[float, float] = MODULE_YELLOW_BAND_NM
 MAX_CONDITION: float = 1e3
 
 
-def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[float, float]) -> float:
+def band_integral(wavelength_nm: np.ndarray, values: np.ndarray, band_nm: tuple[float, float]) -> float:
     """Σ values(λi)·Δλi over lo ≤ λi ≤ hi (inclusive), the band sum of §4.2 of the cylindrical-module paper.
 
     λ in nm; Δλi are the sample spacings (central differences): :func:`bsdfkit.reduction.spectral.band_sum` on a
@@ -37,7 +37,7 @@ def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[flo
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Grid [nm], strictly increasing.
     values : ndarray
         Spectral values on the grid (e.g. [W/nm]).
@@ -54,7 +54,7 @@ def band_integral(wavelength: np.ndarray, values: np.ndarray, band_nm: tuple[flo
     ValidationError
         If the band is empty or the grid is not in nm.
     """
-    wl = _nm_grid(wavelength)
+    wl = _nm_grid(wavelength_nm)
     lo, hi = band_nm
     if not lo < hi:
         raise ValidationError("empty band", field="band_nm", expected="lower < upper", got=band_nm)
@@ -72,7 +72,7 @@ class TwoBandGains:
 
 
 def two_band_gains(
-    wavelength: np.ndarray,
+    wavelength_nm: np.ndarray,
     s_blue: np.ndarray,
     s_yellow: np.ndarray,
     flux_blue_W: float,
@@ -90,7 +90,7 @@ def two_band_gains(
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Grid [nm], strictly increasing.
     s_blue, s_yellow : ndarray
         Normalised (peak 1) blue and yellow spectra on that grid [-].
@@ -112,7 +112,7 @@ def two_band_gains(
         Near-singular system (condition number above ``max_condition``) or a negative gain (a negative
         spectral flux is unphysical: the spectra do not fit the band fluxes).
     """
-    wl = _nm_grid(wavelength)
+    wl = _nm_grid(wavelength_nm)
     sb = np.asarray(s_blue, dtype=float)
     sy = np.asarray(s_yellow, dtype=float)
     for name, arr in (("s_blue", sb), ("s_yellow", sy)):
@@ -146,7 +146,7 @@ def two_band_gains(
 
 
 def reconstruct_two_band_spectrum(
-    wavelength: np.ndarray,
+    wavelength_nm: np.ndarray,
     s_blue: np.ndarray,
     s_yellow: np.ndarray,
     flux_blue_W: float,
@@ -162,7 +162,7 @@ def reconstruct_two_band_spectrum(
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Grid [nm], strictly increasing.
     s_blue, s_yellow : ndarray
         Normalised (peak 1) blue and yellow spectra on that grid [-].
@@ -187,9 +187,9 @@ def reconstruct_two_band_spectrum(
     """
     import colour
 
-    gains = two_band_gains(wavelength, s_blue, s_yellow, flux_blue_W, flux_yellow_W,
+    gains = two_band_gains(wavelength_nm, s_blue, s_yellow, flux_blue_W, flux_yellow_W,
                            blue_band_nm=bands_nm[0], yellow_band_nm=bands_nm[1],
                            max_condition=max_condition)
-    wl = np.asarray(wavelength, dtype=float)
+    wl = np.asarray(wavelength_nm, dtype=float)
     flux = gains.a1_W_per_nm * np.asarray(s_blue, float) + gains.a2_W_per_nm * np.asarray(s_yellow, float)
     return colour.SpectralDistribution(flux, wl, name=name)

@@ -210,7 +210,7 @@ def analyse_spectra(
     spectra: Sequence[tuple[np.ndarray, np.ndarray]],
     model: str = "best",
     *,
-    ranges: Sequence[tuple[float, float] | None] | None = None,
+    ranges_nm: Sequence[tuple[float, float] | None] | None = None,
     labels: Sequence[str] | None = None,
     criterion: str = "aicc",
     candidates: Sequence[str] = SINGLE_BAND_MODELS,
@@ -222,12 +222,12 @@ def analyse_spectra(
     Parameters
     ----------
     spectra
-        (wavelength [nm], values) pairs; grids may differ (they are padded and masked into one batch, so each
+        (wavelength [nm], values [any unit]) pairs; grids may differ (they are padded and masked into one batch, so each
         model is compiled once for all of them).
     model
         One of :data:`SPECTRUM_MODELS`, or 'best': every model of ``candidates`` is fitted and the one with the
         lowest ``criterion`` is reported (all candidates' criteria, R², peak and FWHM are in ``candidates``).
-    ranges
+    ranges_nm
         Per spectrum (lo, hi) [nm] inclusive fit range, or None for all samples.
     labels
         Names used in messages (default "spectrum 0", ...).
@@ -256,12 +256,12 @@ def analyse_spectra(
     _check_request(spectra, model, criterion, candidates)
     options = options or FitOptions()
     n_batch = len(spectra)
-    ranges = list(ranges) if ranges is not None else [None] * n_batch
+    ranges_nm = list(ranges_nm) if ranges_nm is not None else [None] * n_batch
     labels = list(labels) if labels is not None else [f"spectrum {b}" for b in range(n_batch)]
-    wl2, y2, m2 = _pad_spectra(spectra, ranges)
+    wl2, y2, m2 = _pad_spectra(spectra, ranges_nm)
     models_to_fit = list(candidates) if model == "best" else [model]
     n_parameters = {name: len(_parameters(name, 380.0, 780.0)) for name in models_to_fit}
-    records = _measured_records(spectra, ranges, labels, wl2, y2, m2, n_parameters)
+    records = _measured_records(spectra, ranges_nm, labels, wl2, y2, m2, n_parameters)
     alive_all = np.array([b for b in range(n_batch) if "error" not in records[b]], dtype=int)
     per_model = {name: _fit_model(name, alive_all, _PaddedSpectra(wl2, y2, m2, labels), records, n_parameters[name],
                                   options, split_nm, colorimetry=len(models_to_fit) == 1)

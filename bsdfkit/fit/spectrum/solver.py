@@ -439,7 +439,7 @@ def _fit_two_band(wl2, y_n, m, model, *, split_nm, batch: _Batch):
 
 
 def fit_spectra(
-    wavelength: np.ndarray,
+    wavelength_nm: np.ndarray,
     values: np.ndarray,
     model: str = "gaussian",
     *,
@@ -452,7 +452,7 @@ def fit_spectra(
 
     Parameters
     ----------
-    wavelength
+    wavelength_nm
         Grid [nm], shape (n,) shared by the batch or (batch, n) one per spectrum (pad shorter spectra with
         increasing wavelengths and mask the padding), strictly increasing (any spacing).
     values
@@ -500,7 +500,7 @@ def fit_spectra(
     y = np.asarray(values, dtype=float)
     if y.ndim != 2:
         raise InputError("spectra must have shape (batch, n)", field="values", expected="(batch, n)", got=y.shape)
-    wl2 = _validated_grids(wavelength, y.shape[0])
+    wl2 = _validated_grids(wavelength_nm, y.shape[0])
     if y.shape[1] != wl2.shape[1]:
         raise InputError("spectra must have shape (batch, n) matching the wavelength grid", field="values",
                          expected=f"(batch, {wl2.shape[1]})", got=y.shape)
@@ -517,7 +517,7 @@ def fit_spectra(
 
 
 def fit_spectrum(
-    wavelength: np.ndarray,
+    wavelength_nm: np.ndarray,
     values: np.ndarray,
     model: str = "gaussian",
     *,
@@ -530,7 +530,7 @@ def fit_spectrum(
 
     Parameters
     ----------
-    wavelength : ndarray, shape (n,)
+    wavelength_nm : ndarray, shape (n,)
         Grid [nm], strictly increasing.
     values : ndarray, shape (n,)
         The spectrum, any unit (relative or W/nm).
@@ -560,5 +560,5 @@ def fit_spectrum(
     if y.ndim != 1:
         raise InputError("a single spectrum must be 1-D", field="values", got=y.shape)
     # 1-D sigma/mask broadcast against the (1, n) batch.
-    ds = fit_spectra(wavelength, y[None, :], model, sigma=sigma, mask=mask, options=options, split_nm=split_nm)
+    ds = fit_spectra(wavelength_nm, y[None, :], model, sigma=sigma, mask=mask, options=options, split_nm=split_nm)
     return ds.isel(spectrum=0)

@@ -95,7 +95,7 @@ def _pump_and_valley(wl: np.ndarray, y: np.ndarray, below: np.ndarray, top: floa
     return -1, -1
 
 
-def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.ndarray | None = None, *,
+def find_two_band_split(wavelength_nm: np.ndarray, values: np.ndarray, region: np.ndarray | None = None, *,
                         label: str = "") -> TwoBandSplit:
     """Pump maximum, valley and phosphor maximum of a phosphor-converted spectrum, or a refusal.
 
@@ -108,7 +108,7 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
 
     Parameters
     ----------
-    wavelength : ndarray
+    wavelength_nm : ndarray
         Wavelengths [nm], increasing.
     values : ndarray
         Spectral values at ``wavelength``, any unit.
@@ -130,7 +130,7 @@ def find_two_band_split(wavelength: np.ndarray, values: np.ndarray, region: np.n
         reaches :data:`PHOSPHOR_MIN_FRACTION` of the maximum and rises :data:`PHOSPHOR_MIN_RISE` above the
         valley): a single-colour LED is not a two-band spectrum.
     """
-    wl = np.asarray(wavelength, dtype=float)
+    wl = np.asarray(wavelength_nm, dtype=float)
     y_all = np.asarray(values, dtype=float)
     keep = np.ones(wl.shape, bool) if region is None else np.asarray(region, bool)
     wl, y_raw = wl[keep], y_all[keep]
