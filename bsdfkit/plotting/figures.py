@@ -4,7 +4,6 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from pathlib import Path
 
 import numpy as np
 import xarray as xr
@@ -15,7 +14,6 @@ from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
 from bsdfkit.models.registry import bsdf_model
 from bsdfkit.plotting.layout import Margins, fixed_margins
-from bsdfkit.plotting.render import FigureFile
 from bsdfkit.plotting.ticks import log_y
 
 
@@ -37,26 +35,6 @@ def _model_curve(model: str, params: dict[str, float], theta_i_deg: float, theta
         return np.asarray(jitted(_model_fn(model))(
             bsdf_model(model).vector(params), math.radians(theta_i_deg), np.radians(theta_s_deg),
             np.radians(phi_s_deg)))
-
-
-def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
-    """Render ``fig`` to PNG atomically.
-
-    Parameters
-    ----------
-    fig : Figure
-        The figure.
-    path : str or Path
-        The PNG file to write.
-    force : bool
-        Replace an existing file.
-
-    Returns
-    -------
-    Path
-        The file written.
-    """
-    return FigureFile(fig)(path, force)
 
 
 def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: float = 460.0) -> Figure:
