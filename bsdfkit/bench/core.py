@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from bsdfkit.io.atomic import OutputSet, write_text
-from bsdfkit.plotting.figures import save_figure
+from bsdfkit.plotting.render import FigureFile
 
 
 @dataclass(frozen=True)
@@ -230,7 +230,7 @@ def write_report(studies: list[Study], folder: Path, command: str, quick: bool, 
         parts = [report_header(command, quick, elapsed_s)]
         for study in studies:
             name = figure_name(study.name)
-            save_figure(study_figure(study), out.path(name), True)
+            FigureFile(study_figure(study))(out.path(name), True)
             parts.append(study_markdown(study, name))
         write_text(out.path("accuracy.md"), "\n".join(parts), True)
     except BaseException:

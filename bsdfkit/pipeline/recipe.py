@@ -36,7 +36,7 @@ from bsdfkit.fit import plausibility
 from bsdfkit.fit.least_squares import fit_bsdf
 from bsdfkit.fit.spectrum import SPECTRUM_MODELS, fit_spectrum, reconstruct_two_band_spectrum, spectrum_model_values
 from bsdfkit.io import netcdf
-from bsdfkit.io.atomic import OutputSet, write_text
+from bsdfkit.io.atomic import OutputSet, write_bytes, write_text
 from bsdfkit.io.jsonout import dumps
 from bsdfkit.io.recipe_head import recipe_head
 from bsdfkit.io.text import read_toml
@@ -57,9 +57,9 @@ from bsdfkit.plotting.figures import (
     in_plane_bsdf_figure,
     module_spectrum_figure,
     plate_incidence_figure,
-    save_figure,
     trace_studies_figure,
 )
+from bsdfkit.plotting.render import FigureFile, PngRenderer
 from bsdfkit.raytrace import trace, with_values
 from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.plate_from_scan import plate_from_scan
@@ -447,7 +447,7 @@ def stage_report(state: RunState) -> None:
 
     opts = state.recipe.report
     fig = in_plane_bsdf_figure(state.scan, opts.figure_config, opts.figure_wavelength_nm)
-    state.outputs["inplane_bsdf.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["inplane_bsdf.png"] = FigureFile(fig)
 
 
 def stage_reductions(state: RunState) -> None:
@@ -485,7 +485,7 @@ def stage_reductions(state: RunState) -> None:
     state.outputs["tis.nc"] = lambda p, force: netcdf.save(tis, p, force)
     state.outputs["interaction_tables.json"] = lambda p, force: write_text(p, dumps(table_json), force)
     fig = budget_figure(power, photons)
-    state.outputs["module_budget.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["module_budget.png"] = FigureFile(fig)
     lines = [f"interaction table at {key} deg (percent of incident power / photons):"]
     for k in budget.KEYS:
         extra = f"   truth {truth[key][k]:6.2f}" if truth and key in truth else ""
@@ -786,7 +786,7 @@ def _queue_trace_outputs(state: RunState, plate, traced: _Traced, results: dict,
         ds = xr.concat(parts, dim=STUDIES[study][1], combine_attrs="override")
         state.outputs[f"trace_{study}.nc"] = lambda p, force, ds=ds: netcdf.save(ds, p, force)
     fig = trace_studies_figure(device, traced.studies, _paper_study_points())
-    state.outputs["trace_studies.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["trace_studies.png"] = FigureFile(fig)
     tis = state.tis
     meas = {f"{i}_{side}": (tis["theta_i"].values, tis["tis"].sel(interaction=i, side=side).values,
                             tis["tis_std"].sel(interaction=i, side=side).values)
@@ -794,7 +794,7 @@ def _queue_trace_outputs(state: RunState, plate, traced: _Traced, results: dict,
     inc_fig = plate_incidence_figure(traced.blue_on_plate or {"device": device.incidence_histogram[0]}, measured,
                                      plate.theta_i_deg, results["plate"]["tis"], meas,
                                      title=f"plate {plate.name}: incidences of the traces and the plate's TIS")
-    state.outputs["trace_incidence.png"] = lambda p, force: save_figure(inc_fig, p, force)
+    state.outputs["trace_incidence.png"] = FigureFile(inc_fig)
 
 
 def _trace_lines(rays: int, device, results: dict, measured: tuple[float, float]) -> list[str]:
@@ -1051,7 +1051,7 @@ def stage_fits(state: RunState) -> None:
     state.summary["emission_fit"] = emission
     state.outputs["bsdf_fits.json"] = lambda p, force: write_text(p, dumps(rows), force)
     fig = bsdf_fits_figure(state.fits)
-    state.outputs["bsdf_fits.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["bsdf_fits.png"] = FigureFile(fig)
     worst = max(rows, key=lambda r: abs(r["tis_difference_pp"]))
     failing = [r for r in rows if not r["plausible"]]
     gate = (f"{len(failing)}/{len(rows)} FAIL the plausibility gate (" + "; ".join(
@@ -1108,7 +1108,7 @@ def stage_spectrum(state: RunState) -> None:
                                                              for w, v in zip(sd.wavelengths, sd.values))
     state.outputs["module_spectrum.csv"] = lambda p, force: write_text(p, csv, force)
     fig = module_spectrum_figure(lam, s_blue, s_yellow, state.emission, sd)
-    state.outputs["module_spectrum.png"] = lambda p, force: save_figure(fig, p, force)
+    state.outputs["module_spectrum.png"] = FigureFile(fig)
     state.outputs["module_spectrum.json"] = lambda p, force: write_text(p, dumps(result), force)
     c = result["colour"]
     state.summary.setdefault("report_lines", []).append(
@@ -1199,16 +1199,35 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
     if progress is not None:
         state.progress = progress
     timings = {}
-    for k, (name, stage) in enumerate(STAGES):
-        start = time.perf_counter()
-        log(f"stage {name} ...")
-        state.progress("stages", k, len(STAGES))
-        stage(state)
-        timings[name] = round(time.perf_counter() - start, 3)
-    state.progress("stages", len(STAGES), len(STAGES))
+    # the figures are drawn by a helper process while this one writes the exports (re-reading each table) and
+    # builds the report: after the traces, one core did all of it while the other idled
+    with PngRenderer() as renderer:
+        for k, (name, stage) in enumerate(STAGES):
+            start = time.perf_counter()
+            log(f"stage {name} ...")
+            state.progress("stages", k, len(STAGES))
+            stage(state)
+            timings[name] = round(time.perf_counter() - start, 3)
+        state.progress("stages", len(STAGES), len(STAGES))
+        summary = _write_outputs(state, out, timings, renderer)
+        log("stage html report ...")
+        # reads the staged outputs; part of the same set
+        write_report(out.path("summary.json").parent, force=True, renderer=renderer)
+    return summary
+
+
+def _write_outputs(state: RunState, out: OutputSet, timings: dict, renderer: PngRenderer) -> dict:
+    """Every queued output and summary.json into the staging folder (moved into place when the set is complete);
+    the figures are drawn meanwhile by ``renderer``. Returns the summary."""
+    recipe = state.recipe
     names = list(state.outputs) + ["summary.json", "report.html"]
+    pending = {name: renderer.submit(w.figure, w.dpi) for name, w in state.outputs.items()
+               if isinstance(w, FigureFile)}
     for name, writer in state.outputs.items():
-        writer(out.path(name), True)  # into the staging folder; moved into place when the set is complete
+        if name not in pending:
+            writer(out.path(name), True)
+    for name, png in pending.items():
+        write_bytes(out.path(name), png.result(), True)
     checks = state.summary.get("export_checks")
     if checks:
         worst = max(checks, key=lambda c: c["relative_difference"])
@@ -1220,6 +1239,4 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
                "outputs": names, "stage_seconds": timings, **state.summary}
 
     write_text(out.path("summary.json"), dumps(summary), True)
-    log("stage html report ...")
-    write_report(out.path("summary.json").parent, force=True)  # reads the staged outputs; part of the same set
     return summary

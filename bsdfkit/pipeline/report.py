@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 import math
 import re
@@ -32,7 +31,6 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from bsdfkit.core.conventions import COLORIMETRY_BLUE_BAND_NM, COLORIMETRY_YELLOW_BAND_NM, band_label
@@ -47,6 +45,7 @@ from bsdfkit.plotting.maps import (
     irradiance_maps_figure,
     map_non_uniformity,
 )
+from bsdfkit.plotting.render import PendingPng, PngRenderer
 from bsdfkit.raytrace.tallies import non_uniformity_std, rebin_map
 
 __all__ = ["REPORT_NAME", "paper_values", "write_report"]
@@ -364,11 +363,8 @@ def _png_uri(data: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _fig_png(fig: Figure) -> bytes:
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    return buf.getvalue()
+#: resolution of the report's own figures [dots per inch]
+REPORT_DPI = 110
 
 
 def _figure(png: bytes, caption: str, alt: str) -> str:
@@ -561,8 +557,10 @@ def _relative_difference(row: dict) -> str:
 
 
 class _Report:
-    def __init__(self, run_dir: Path, summary: dict, pv: dict) -> None:
+    def __init__(self, run_dir: Path, summary: dict, pv: dict, renderer: PngRenderer | None = None) -> None:
         self.dir = run_dir
+        self.renderer = renderer or PngRenderer(helper=False)
+        self.pending: list[tuple[str, PendingPng, str, str]] = []  # (placeholder, png, caption, alt)
         self.s = summary
         self.pv = pv
         self.pb = pv["power_budget"]
@@ -587,7 +585,10 @@ class _Report:
         if fig is None:
             return ""
         self.images += 1
-        return _figure(_fig_png(fig), caption, alt)
+        # drawn while the rest of the report is built; the placeholder cannot occur in escaped HTML
+        token = f"\0figure-{len(self.pending)}\0"
+        self.pending.append((token, self.renderer.submit(fig, REPORT_DPI), caption, alt))
+        return token
 
     # -- pieces ------------------------------------------------------------------------------------
     def scan(self) -> dict:
@@ -1457,14 +1458,17 @@ class _Report:
         nav = "<nav><h2>Contents</h2><ol>" + "".join(f'<li><a href="#{a}">{_esc(t)}</a></li>' for a, t in titles) + \
               "</ol></nav>"
         title = _esc(f"bsdfkit report: {self.scan().get('sample') or self.s.get('recipe') or self.dir.name}")
-        return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        text = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
                 "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
                 f"<title>{title}</title><style>{_CSS}</style></head><body><main>\n"
                 + self.opening() + self.found() + dis + nav + "\n".join(sections)
                 + "\n</main></body></html>\n")
+        for token, png, caption, alt in self.pending:
+            text = text.replace(token, _figure(png.result(), caption, alt), 1)
+        return text
 
 
-def write_report(run_dir: str | Path, force: bool = False) -> Path:
+def write_report(run_dir: str | Path, force: bool = False, renderer: PngRenderer | None = None) -> Path:
     """Write ``run_dir/report.html`` from a finished run folder; return its path.
 
     One self-contained HTML file (figures as base64 PNG data URIs, inline CSS, no script, no external
@@ -1478,6 +1482,8 @@ def write_report(run_dir: str | Path, force: bool = False) -> Path:
         Folder of a finished run.
     force : bool
         Replace an existing report.
+    renderer : PngRenderer, optional
+        Draws the report's own figures (by default in this process).
 
     Returns
     -------
@@ -1496,5 +1502,5 @@ def write_report(run_dir: str | Path, force: bool = False) -> Path:
         raise InputError(f"summary.json cannot be read ({type(exc).__name__})", file=summary_path) from None
     if not isinstance(summary, dict):
         raise InputError("summary.json does not hold an object", file=summary_path, expected="a JSON object")
-    text = _Report(run_dir, summary, paper_values()).build()
+    text = _Report(run_dir, summary, paper_values(), renderer).build()
     return write_text(target, text, force)

@@ -52,7 +52,7 @@ from bsdfkit.core.errors import InputError
 from bsdfkit.io.atomic import write_text
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
-from bsdfkit.plotting.figures import save_figure
+from bsdfkit.plotting.render import FigureFile
 from bsdfkit.plotting.spectra import mode_spectra_figure
 from bsdfkit.raytrace import trace
 from bsdfkit.raytrace.plate import PhosphorPlate
@@ -598,7 +598,7 @@ def comparison_outputs(result: SpectralComparison) -> dict[str, Callable[[Path, 
                               result.two_wavelength_std, {"near 470 nm": NEAR_PUMP_BAND_NM,
                                                           "module yellow": MODULE_YELLOW_BAND_NM})
     csv = result.to_csv()
-    return {"spectral_comparison.png": lambda p, force: save_figure(fig, p, force),
+    return {"spectral_comparison.png": FigureFile(fig),
             "spectral_comparison.csv": lambda p, force: write_text(p, csv, force)}
 
 

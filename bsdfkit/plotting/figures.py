@@ -4,57 +4,17 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-import re
-from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
 
 from bsdfkit.core.jaxconfig import jitted, x64
 from bsdfkit.core.records import incidences, select, signed_in_plane_theta
-from bsdfkit.io.atomic import write_with
 from bsdfkit.models.registry import bsdf_model
 from bsdfkit.plotting.layout import Margins, fixed_margins
-
-_SUPERSCRIPTS = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
-
-
-def _decade_label(value: float, _pos: int | None = None) -> str:
-    """'10⁻²' at a power of ten, '' elsewhere: plain text (the default labels are mathtext, one parse each)."""
-    if not value > 0.0 or not math.isfinite(value):
-        return ""
-    exponent = math.log10(value)
-    if abs(exponent - round(exponent)) > 1e-9:
-        return ""
-    return "10" + str(int(round(exponent))).translate(_SUPERSCRIPTS)
-
-
-_MATHTEXT = re.compile(r"^\$\\mathdefault\{(?:(-?[0-9.e+-]+)\\times)?([0-9.]+)\^\{(-?\d+)\}\}\$$")
-
-
-class _PlainLogFormatter(LogFormatterSciNotation):
-    """matplotlib's minor-tick labels of a log axis ('3×10⁻²' where it labels one), in plain text: each
-    mathtext label is parsed once per figure, a sixth of the drawing time of a figure with six log axes."""
-
-    def __call__(self, x: float, pos: int | None = None) -> str:
-        label = super().__call__(x, pos)
-        match = _MATHTEXT.match(label)
-        if match is None:
-            return label
-        coeff, base, exponent = match.groups()
-        power = base + exponent.translate(_SUPERSCRIPTS)
-        return f"{coeff}×{power}" if coeff else power
-
-
-def _log_y(ax) -> None:
-    """A logarithmic y axis labelled in plain text (the default labels are mathtext: half of a log figure's
-    drawing time went into parsing them)."""
-    ax.set_yscale("log")
-    ax.yaxis.set_major_formatter(FuncFormatter(_decade_label))
-    ax.yaxis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False))
+from bsdfkit.plotting.ticks import log_y
 
 
 def _model_at(p, theta_i, theta_s, phi_s, *, model: str):
@@ -75,27 +35,6 @@ def _model_curve(model: str, params: dict[str, float], theta_i_deg: float, theta
         return np.asarray(jitted(_model_fn(model))(
             bsdf_model(model).vector(params), math.radians(theta_i_deg), np.radians(theta_s_deg),
             np.radians(phi_s_deg)))
-
-
-def save_figure(fig: Figure, path: str | Path, force: bool = False) -> Path:
-    """Render ``fig`` to PNG atomically.
-
-    Parameters
-    ----------
-    fig : Figure
-        The figure.
-    path : str or Path
-        The PNG file to write.
-    force : bool
-        Replace an existing file.
-
-    Returns
-    -------
-    Path
-        The file written.
-    """
-    FigureCanvasAgg(fig)
-    return write_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120), force)
 
 
 def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: float = 460.0) -> Figure:
@@ -129,7 +68,7 @@ def in_plane_bsdf_figure(ds: xr.Dataset, config: str = "blue", wavelength_nm: fl
             keep = np.isfinite(y) & (y > 0)
             ax.errorbar(x[order][keep], y[keep], yerr=e[keep], marker=".", ms=3, lw=1, capsize=0,
                         label=f"data, {tag}, θi = {th:g}° (± 1σ)")
-        _log_y(ax)
+        log_y(ax)
         ax.set_xlabel("in-plane θs (deg, + = specular side)")
         ax.set_title(f"{side} at {wavelength_nm:g} nm ({config})")
         ax.grid(True, which="both", alpha=0.3)
@@ -358,7 +297,7 @@ def bsdf_fits_figure(fits: dict) -> Figure:
             params = {p: float(fit[p].sel(theta_i=th)) for p in ("rho", "A", "sigma", "B", "g") if p in fit}
             y = _model_curve(model, params, th, np.abs(grid), np.where(grid >= 0, 0.0, 180.0))
             ax.plot(grid, y, "-", color=line.get_color(), lw=1, label=f"{model} model, θi = {th:g}°")
-        _log_y(ax)
+        log_y(ax)
         ax.set_title(f"{key[0]} {key[1]} ({model}, aperture-averaged fit)", fontsize=9)
         ax.set_xlabel("in-plane θs (deg, + = specular side)")
         ax.set_ylabel("BSDF (1/sr)")
