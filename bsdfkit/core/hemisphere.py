@@ -64,7 +64,9 @@ def linear_weights(samples: NDArray[np.float64], query: NDArray[np.float64]
         z = np.zeros(query.size, dtype=np.int64)
         return z, z, np.ones(query.size), np.zeros(query.size)
     q = np.clip(query, samples[0], samples[-1])
-    hi = np.clip(np.searchsorted(samples, q, side="right"), 1, m - 1)
+    # the upper neighbour among samples[1:m-1] (+1): searchsorted(samples, q, "right") clipped to [1, m − 1], as q
+    # lies in [samples[0], samples[-1]]; the interval widths from one np.diff (the same differences)
+    hi = np.searchsorted(samples[1:-1], q, side="right") + 1
     lo = hi - 1
-    t = (q - samples[lo]) / (samples[hi] - samples[lo])
+    t = (q - samples[lo]) / np.diff(samples)[lo]
     return lo, hi, 1.0 - t, t

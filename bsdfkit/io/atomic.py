@@ -43,7 +43,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import secrets
 import shutil
 import stat
 import threading
@@ -104,14 +103,20 @@ TEMP_PREFIX = ".bsdfkit-"
 NAME_MAX = 255
 
 
+def _token() -> str:
+    """8 random hex digits: ``secrets.token_hex(4)`` (os.urandom), without importing secrets (hmac, random, base64)
+    into every command."""
+    return os.urandom(4).hex()
+
+
 def _temp_name(suffix: str = ".part") -> str:
     """A short temporary name of this process: fits beside any valid output name."""
-    return f"{TEMP_PREFIX}{os.getpid()}.{secrets.token_hex(4)}{suffix}"
+    return f"{TEMP_PREFIX}{os.getpid()}.{_token()}{suffix}"
 
 
 def _beside_name(name: str, suffix: str) -> str:
     """``.<name>.<pid>.<8 hex><suffix>`` when it fits in :data:`NAME_MAX` bytes, else a :func:`_temp_name`."""
-    long = f".{name}.{os.getpid()}.{secrets.token_hex(4)}{suffix}"
+    long = f".{name}.{os.getpid()}.{_token()}{suffix}"
     return long if len(os.fsencode(long)) <= NAME_MAX else _temp_name(suffix)
 
 
@@ -694,7 +699,7 @@ class OutputSet:
         try:
             for entry in _stale(resolved, ".bsdfkit.", ".staging"):
                 _rmtree(entry)
-            self.staging = resolved / f".bsdfkit.{os.getpid()}.{secrets.token_hex(4)}.staging"
+            self.staging = resolved / f".bsdfkit.{os.getpid()}.{_token()}.staging"
             _PARTIAL.add(self.staging)
             self.staging.mkdir()
         except OSError as exc:

@@ -16,7 +16,6 @@ from __future__ import annotations
 import codecs
 import csv
 import re
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -223,6 +222,8 @@ def loads_toml(text: str, path: str | Path | None) -> dict:
     dict
         The parsed document.
     """
+    import tomllib  # here: only the verbs that read a recipe or a manifest parse TOML
+
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

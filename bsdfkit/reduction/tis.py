@@ -263,24 +263,30 @@ class Hemisphere:
         ca, sb = ca / norm, sb / norm
         c = np.cos(psi)
         sn = np.sin(psi)
-        coef = np.stack([np.where(c > 0, ca, 0.0), np.where(c <= 0, ca, 0.0),
-                         np.where(sn > 0, sb, 0.0), np.where(sn <= 0, sb, 0.0)], axis=1)
+        # one contiguous array per half-axis (the columns of the result): the same element-wise operations as
+        # on the (n, 4) array, without its strided columns (3.5x faster on the 102 400 nodes of polar_grid)
+        cols = [np.where(c > 0, ca, 0.0), np.where(c <= 0, ca, 0.0), np.where(sn > 0, sb, 0.0),
+                np.where(sn <= 0, sb, 0.0)]
         if repeats > 1:
-            coef = np.repeat(coef, repeats, axis=0)
+            cols = [np.repeat(col, repeats) for col in cols]
         if borrow:
-            lo = np.array([self.measured_range[h][0] for h in HALVES])
-            hi = np.array([self.measured_range[h][1] for h in HALVES])
-            measured = (r[:, None] >= lo[None, :] - 1e-12) & (r[:, None] <= hi[None, :] + 1e-12)
-            # the four columns summed in numpy's order for .sum(axis=1), without its strided row reduction
-            m = measured.T
+            lo = [self.measured_range[h][0] for h in HALVES]
+            hi = [self.measured_range[h][1] for h in HALVES]
+            m = [(r >= lo_k - 1e-12) & (r <= hi_k + 1e-12) for lo_k, hi_k in zip(lo, hi)]
+            # the four half-axes summed in numpy's order for a row sum
             n_measured = ((m[0].astype(np.int64) + m[1]) + m[2]) + m[3]
-            kept = np.where(measured, 0.0, coef).T
+            kept = [np.where(m_k, 0.0, col) for m_k, col in zip(m, cols)]
             lost = ((kept[0] + kept[1]) + kept[2]) + kept[3]
             share = np.where(n_measured > 0, lost / np.maximum(n_measured, 1), 0.0)
             # Beyond every sampled radius: the half-axis sampled farthest out holds its last value.
-            farthest = np.zeros(len(HALVES))
-            farthest[int(np.argmax(np.where(np.isfinite(lo), hi, -np.inf)))] = 1.0
-            coef = np.where(n_measured[:, None] > 0, np.where(measured, coef + share[:, None], 0.0), farthest[None, :])
+            farthest = int(np.argmax(np.where(np.isfinite(lo), hi, -np.inf)))
+            some = n_measured > 0
+            cols = [np.where(some, np.where(m_k, col + share, 0.0), float(k == farthest))
+                    for k, (m_k, col) in enumerate(zip(m, cols))]
+        # column-major: coef[:, k], the half-axis every caller reads, is contiguous
+        coef = np.empty((cols[0].size, len(HALVES)), order="F")
+        for k, col in enumerate(cols):
+            coef[:, k] = col
         return coef
 
     def evaluate_polar(self, r: NDArray, psi: NDArray, mode: str = "linear", p: float = 2.0,
@@ -371,16 +377,12 @@ class Hemisphere:
         ndarray, shape (n_records,)
             Weight per profile record [sr] (linear interpolation in f).
         """
-        grid, coef, rows = self._grid_coefficients(n_psi, n_r)
-        w = np.zeros(self.n_records)
-        for k, name in enumerate(HALVES):
-            idx = rows[k]
-            for h, share in self.halves[name]:
-                a = coef[idx, k] * share * grid.w[idx]
-                lo, hi, wl, wh = linear_weights(h.radius, grid.r[idx])
-                w += np.bincount(h.record[lo], weights=a * wl, minlength=self.n_records)
-                w += np.bincount(h.record[hi], weights=a * wh, minlength=self.n_records)
-        return w
+        # the weights depend on the sampled radii and records only, not on the values: a reduction that asks
+        # again for the same geometry (the lobe of every tail rule, a band series) gets them from the cache
+        halves = tuple(tuple((h.radius.tobytes(), h.record.tobytes(), h.record.dtype.str, float(share))
+                             for h, share in self.halves[name]) for name in HALVES)
+        ranges = tuple(self.measured_range[h] for h in HALVES)
+        return _record_weights(self.beta0, ranges, halves, self.n_records, n_psi, n_r).copy()
 
     def tis(self, mode: str = "linear", n_psi: int = 256, n_r: int = 400, p: float = 2.0, borrow: bool = True) -> float:
         """TIS of the reconstruction: ∫∫_{|β|≤1} f dβx dβy on the :func:`polar_grid` about β0.
@@ -442,12 +444,59 @@ def _grid_coefficients(beta0: tuple[float, float], ranges: tuple[tuple[float, fl
                        p: float, borrow: bool) -> tuple[QuadratureGrid, NDArray, tuple[NDArray, ...]]:
     # Depends only on the geometry (β0, the sampled radii per half-axis), not on the data: cached (read-only).
     hemi = Hemisphere(beta0=beta0, halves={}, n_records=0, measured_range=dict(zip(HALVES, ranges)))
-    grid = polar_grid((float(np.hypot(*beta0)), 0.0), n_psi, n_r)
+    grid = _polar_grid(float(np.hypot(*beta0)), n_psi, n_r)
     coef = hemi.coefficients(grid.r, grid.psi, p, borrow, repeats=n_r)
     rows = tuple(np.flatnonzero(coef[:, k]) for k in range(len(HALVES)))
     for a in (grid.r, grid.psi, grid.w, coef, *rows):
         a.setflags(write=False)
     return grid, coef, rows
+
+
+@functools.lru_cache(maxsize=8)
+def _polar_grid(b: float, n_psi: int, n_r: int) -> QuadratureGrid:
+    # the grid about (b, 0), shared by the blends and sampled ranges of one incidence (read-only)
+    grid = polar_grid((b, 0.0), n_psi, n_r)
+    for a in (grid.r, grid.psi, grid.w):
+        a.setflags(write=False)
+    return grid
+
+
+@functools.lru_cache(maxsize=64)
+def _record_weights(beta0: tuple[float, float], ranges: tuple[tuple[float, float], ...],
+                    halves: tuple[tuple[tuple[bytes, bytes, str, float], ...], ...], n_records: int, n_psi: int,
+                    n_r: int) -> NDArray[np.float64]:
+    # :meth:`Hemisphere.weights` from the half-profiles' radii and records (bytes, record dtype) and shares.
+    # Each node's share of coef·w goes to its two neighbouring samples, summed node by node per sample
+    # (np.bincount) and then added to the sample's record (records are unique within a half-profile).
+    grid, coef, rows = _grid_coefficients(beta0, ranges, n_psi, n_r, 2.0, True)
+    nodes = _half_axis_nodes(beta0, ranges, n_psi, n_r)
+    w = np.zeros(n_records)
+    for k, entries in enumerate(halves):
+        r, cw = nodes[k]
+        for radius, record, dtype, share in entries:
+            samples, rec = np.frombuffer(radius), np.frombuffer(record, dtype=dtype)
+            a = cw if share == 1.0 else coef[rows[k], k] * share * grid.w[rows[k]]
+            lo, _, wl, wh = linear_weights(samples, r)
+            w[rec] += np.bincount(lo, weights=a * wl, minlength=samples.size)
+            if samples.size > 1:  # the upper neighbour is lo + 1 (one sample: its weight is 0)
+                w[rec[1:]] += np.bincount(lo, weights=a * wh, minlength=samples.size - 1)
+    w.setflags(write=False)
+    return w
+
+
+@functools.lru_cache(maxsize=8)
+def _half_axis_nodes(beta0: tuple[float, float], ranges: tuple[tuple[float, float], ...], n_psi: int,
+                     n_r: int) -> tuple[tuple[NDArray, NDArray], ...]:
+    # per half-axis: the radii of the grid nodes it has a share in, and coef·w there (the blend of p = 2 with
+    # borrowing), gathered once per geometry for every half-profile weighted on it (read-only)
+    grid, coef, rows = _grid_coefficients(beta0, ranges, n_psi, n_r, 2.0, True)
+    out = []
+    for k, idx in enumerate(rows):
+        r, cw = grid.r[idx], coef[idx, k] * grid.w[idx]
+        for a in (r, cw):
+            a.setflags(write=False)
+        out.append((r, cw))
+    return tuple(out)
 
 
 def _interp(h: HalfProfile, r: NDArray, mode: str) -> NDArray[np.float64]:

@@ -108,6 +108,26 @@ def test_linear_weights_reproduce_linear_reconstruction():
     assert hemi.weights() @ f == pytest.approx(hemi.tis("linear"), rel=1e-12)
 
 
+@pytest.mark.parametrize("use", ["both", "in_plane"])
+def test_weights_of_one_geometry_are_shared_and_independent_of_the_values(use):
+    # the weights depend on the sampled directions only (cached by geometry): two profiles with the same records
+    # and other values get equal weights, each reproducing its own linear reconstruction, and each caller its own
+    # writable copy; "in_plane" fills the perpendicular half-axes with the mean of the in-plane halves (share 1/2)
+    radii = np.linspace(0.0, 0.9, 19)
+    ts, ps, arc = _dense_arcs(30.0, radii)
+    d = sample_direction(np.radians(ts), np.radians(ps))
+    lobe = 0.25 / np.pi + 3.0 * np.exp(-((d[:, 0] - 0.5) ** 2 + d[:, 1] ** 2) / 0.02)
+    flat = np.full(ts.size, 0.25 / np.pi)
+    hemis = [angular.Hemisphere.from_profile(_profile(30.0, ts, ps, arc, v), use=use) for v in (lobe, flat)]
+    w = [h.weights(128, 200) for h in hemis]
+    assert np.array_equal(w[0], w[1]) and w[0] is not w[1]
+    w[0][:] = 0.0  # a caller's own copy: the next call is not changed by it
+    assert np.array_equal(hemis[0].weights(128, 200), w[1])
+    for h, v in zip(hemis, (lobe, flat)):
+        assert h.weights(128, 200) @ v == pytest.approx(h.tis("linear", 128, 200), rel=1e-12)
+    assert w[1] @ flat == pytest.approx(0.25, rel=1e-3)  # a Lambertian's albedo, whatever the grid
+
+
 def test_bundled_tis_within_half_a_point_of_truth(bundled_scan):
     """Acceptance: every TIS entry at 5°, 45° and 56° within 0.5 percentage points of the recorded truth."""
     table = angular.tis_table(bundled_scan)
