@@ -770,6 +770,10 @@ def scene_spectral_tables(scene: Scene) -> SpectralTables:
                            source=source, temperature_K=scene.top.temperature_K)
 
 
+#: the cavity surfaces in the order of the kernel's per-surface inputs (reflectance rows, ``rho_table`` blocks)
+CAVITY_SURFACES = ("wall", "base", "leds")
+
+
 def surface_reflectance_table(scene: Scene) -> np.ndarray:
     """Reflectance of wall, base and LED disks per colour (two-wavelength: blue, yellow) or per bin (spectral),
     flattened row-major (surface, colour) for the kernel.
@@ -787,7 +791,9 @@ def surface_reflectance_table(scene: Scene) -> np.ndarray:
     rows = []
     spectral = scene.trace.mode == "spectral"
     lam = spectral_grid(scene) if spectral else None
-    for name, sf in (("wall", scene.wall), ("base", scene.base), ("leds", scene.led_surface)):
+    surfaces = {"wall": scene.wall, "base": scene.base, "leds": scene.led_surface}
+    for name in CAVITY_SURFACES:
+        sf = surfaces[name]
         if sf.spectrum is None:
             rows.append(np.full(lam.size if spectral else 2, sf.reflectance))
         elif spectral:
