@@ -51,6 +51,7 @@ if DEVICES_FLAG not in os.environ.get("XLA_FLAGS", ""):
 import jax  # noqa: E402  (after XLA_FLAGS)
 import numpy as np  # noqa: E402
 
+from bsdfkit.pipeline.plate_from_scan import plate_from_recipe  # noqa: E402
 from bsdfkit.raytrace import PhosphorPlate, load_scene, trace, with_values  # noqa: E402
 from bsdfkit.raytrace.oracles.numpy_reference import trace_numpy  # noqa: E402
 from bsdfkit.raytrace.oracles.radiosity import module_radiosity  # noqa: E402
@@ -207,7 +208,7 @@ def speed(rays: int, repeats: int, baseline: str | None, with_mitsuba: bool = Tr
 
 def phosphor(rays: int, repeats: int, baseline: str | None) -> None:
     """The full phosphor kernel of the main job: the test device with the recipe's own plate."""
-    scene = load_scene(DEVICE)
+    scene = load_scene(DEVICE, plate_resolver=plate_from_recipe)
     print(f"# phosphor kernel: {DEVICE.name} (plate from fitting/cl830.toml), {rays} rays, median of {repeats}")
     rows = []
     trace(scene, rays, seed=1)
@@ -337,7 +338,7 @@ def ab(rev: str, repeats: int) -> None:
     old = baseline_trace(rev)
     print(f"# interleaved A/B against {rev}, {repeats} pairs; {os.cpu_count()} CPUs (shared)")
     for path, rays in ((DEVICE, 200_000), (EXAMPLE, 1_000_000)):
-        s = load_scene(path)
+        s = load_scene(path, plate_resolver=plate_from_recipe)
         trace(s, rays, seed=1)
         old(s, rays, seed=1)
         t_new, t_old = [], []

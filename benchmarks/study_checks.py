@@ -36,9 +36,9 @@ import numpy as np  # noqa: E402
 
 from bsdfkit.measurement.calibrate import calibrate  # noqa: E402
 from bsdfkit.measurement.raw_scan import read_scan  # noqa: E402
+from bsdfkit.pipeline.plate_from_scan import plate_from_scan  # noqa: E402
 from bsdfkit.pipeline.recipe import STUDIES, _scene_with_plate, _trends, incidence_shares, load_recipe  # noqa: E402
 from bsdfkit.raytrace import trace, with_values  # noqa: E402
-from bsdfkit.raytrace.plate_from_scan import plate_from_scan  # noqa: E402
 from bsdfkit.raytrace.tallies import grid_study, non_uniformity_std  # noqa: E402
 from bsdfkit.reduction.tis import tis_table  # noqa: E402
 

@@ -63,11 +63,12 @@ def run(args: argparse.Namespace) -> int:
     int
         Exit status: 0 on success.
     """
+    from bsdfkit.cli.trace import recipe_plate
     from bsdfkit.plotting.figures import sweep_figure
     from bsdfkit.raytrace import load_scene
     from bsdfkit.raytrace.sweep import Cluster, run_sweep, sweep_spec
 
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene, plate_resolver=recipe_plate)
     defaults = scene.sweep
     params = args.param or (list(defaults.params) if defaults else [])
     if not params:

@@ -39,6 +39,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def recipe_plate(recipe: Path):
+    """The plate of a scene's ``[top] from = "<recipe>.toml"``: the scene parser's plate resolver for the verbs.
+
+    Building it reads, calibrates and fits the recipe's measurement (pipeline work, imported here only when a
+    scene names a recipe, so tracing any other scene does not import it).
+
+    Parameters
+    ----------
+    recipe : Path
+        The fitting recipe's TOML file.
+
+    Returns
+    -------
+    PhosphorPlate
+        The plate of the recipe's calibrated measurement.
+    """
+    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
+
+    return plate_from_recipe(recipe)
+
+
 def run(args: argparse.Namespace) -> int:
     # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX
     """Run ``bsdfkit trace`` with the parsed options.
@@ -55,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from bsdfkit.raytrace import load_scene, trace
 
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene, plate_resolver=recipe_plate)
     out = Path(args.output) if args.output else None
     # every file this verb writes is one output set, checked (existing, an input, writable) before tracing
     with (OutputSet(out.parent, [out.name], args.force, inputs=[args.scene]) if out

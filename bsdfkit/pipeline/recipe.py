@@ -44,6 +44,7 @@ from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
+from bsdfkit.pipeline.plate_from_scan import plate_from_scan
 from bsdfkit.pipeline.report import READINGS, magnitude_verdict, paper_values, write_report
 from bsdfkit.pipeline.spectral_comparison import (
     SpectralComparisonOptions,
@@ -62,7 +63,6 @@ from bsdfkit.plotting.figures import (
 from bsdfkit.plotting.render import FigureFile, PngRenderer
 from bsdfkit.raytrace import trace, with_values
 from bsdfkit.raytrace.plate import CHANNELS
-from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
 from bsdfkit.raytrace.tallies import map_fields, merge_maps
@@ -666,7 +666,7 @@ def stage_trace(state: RunState) -> None:
     """Trace the module with the plate built from this run's own results, and the §5 studies around it.
 
     The plate covers 0–90° (measured TIS at the measured incidences, model-extrapolated elsewhere,
-    :func:`bsdfkit.raytrace.plate_from_scan.plate_from_scan`); the shares of the plate's incident power on
+    :func:`bsdfkit.pipeline.plate_from_scan.plate_from_scan`); the shares of the plate's incident power on
     measured and extrapolated incidences are reported per trace. A study point equal to the device (h = 43 mm,
     a Lambertian LED = FWHM 120°) reuses the device's trace. Each study's maps and incidence histograms are
     saved (``trace_<study>.nc``). Trends of the cylindrical-module paper are checked and reported, not assumed

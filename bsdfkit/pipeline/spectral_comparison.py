@@ -2,7 +2,7 @@
 
 From ONE excitation-emission measurement (a raw export with a ``[[band_series]]``, docs/spectral.md) the stage
 builds both descriptions of the same plate — the two-wavelength plate of the papers from its blue and yellow
-configurations (:func:`bsdfkit.raytrace.plate_from_scan.plate_from_scan`) and the plate spectral model from its
+configurations (:func:`bsdfkit.pipeline.plate_from_scan.plate_from_scan`) and the plate spectral model from its
 monochromator scan (:func:`bsdfkit.reduction.excitation_emission.plate_spectral_model`) — traces the module
 device scene in both modes with the same LED spectrum, and compares the module spectra:
 
@@ -52,11 +52,11 @@ from bsdfkit.core.errors import InputError
 from bsdfkit.io.atomic import write_text
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
+from bsdfkit.pipeline.plate_from_scan import plate_from_scan
 from bsdfkit.plotting.render import FigureFile
 from bsdfkit.plotting.spectra import mode_spectra_figure
 from bsdfkit.raytrace import trace
 from bsdfkit.raytrace.plate import PhosphorPlate
-from bsdfkit.raytrace.plate_from_scan import plate_from_scan
 from bsdfkit.raytrace.scene import Scene
 from bsdfkit.raytrace.spectral import (
     PLATE_TEMPERATURE_K,

@@ -3,18 +3,23 @@
 The kernel (:mod:`bsdfkit.raytrace.kernel`) is specialised on an :class:`Effects` record passed as a static
 argument to ``jax.jit``: code for a feature the scene does not use is never traced, so a diffuse-only
 cavity with an exit top carries no specular, conversion, plate, map, histogram or budget code. Everything
-that is a number (reflectances, geometry, plate tables) goes into :func:`kernel_params`, a pytree of arrays,
-so sweeping a number reuses the compiled kernel.
+that is a number (reflectances, geometry, plate tables) goes into :func:`kernel_params`, a :class:`KernelParams`
+(named tuples: JAX pytrees of arrays), so sweeping a number reuses the compiled kernel. A part the effects do not
+use (ray file, surface spectra, spectral tables, plate) is None: an empty pytree, so it adds no kernel input.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 
 from bsdfkit.raytrace.plate import PhosphorPlate, PlateTables, plate_tables
-from bsdfkit.raytrace.scene import Scene, scene_spectral_tables, surface_reflectance_table
+from bsdfkit.raytrace.scene import CAVITY_SURFACES, Scene, scene_spectral_tables, surface_reflectance_table
+
+#: rows of :attr:`KernelParams.rho` and :attr:`KernelParams.spec` (and blocks of ``rho_table``)
+SURFACE_WALL, SURFACE_BASE, SURFACE_LEDS = (CAVITY_SURFACES.index(s) for s in ("wall", "base", "leds"))
 
 
 @dataclass(frozen=True)
@@ -126,8 +131,147 @@ def scene_effects(scene: Scene, full: bool = False) -> Effects:
     )
 
 
-def kernel_params(scene: Scene, effects: Effects) -> dict:
-    """Numeric kernel inputs (a pytree of NumPy arrays): geometry, surfaces, source, plate tables.
+class RayFileParams(NamedTuple):
+    """The source as a ray file (``effects.source == "rayfile"``), N rays.
+
+    Attributes
+    ----------
+    origin : array (N, 3)
+        Start points [mm].
+    direction : array (N, 3)
+        Unit directions [-].
+    cdf : array (N,)
+        Cumulative ray powers normalised to 1 (last entry exactly 1) [-], float64.
+    """
+
+    origin: Any
+    direction: Any
+    cdf: Any
+
+
+class SpectralParams(NamedTuple):
+    """Tables of the spectral mode (``effects.spectral``) on K wavelength bins; see
+    :class:`bsdfkit.raytrace.spectral.SpectralTables`.
+
+    Attributes
+    ----------
+    lam : array (K,)
+        Bin centres [nm].
+    photon_scale : array (K,)
+        λ_k / λ_K−1: photons per unit weight of a ray in bin k, in photons of the longest bin [-].
+    band : array (K,) of int32
+        :data:`~bsdfkit.raytrace.spectral.BAND_BLUE`, ``BAND_YELLOW`` or ``BAND_OTHER``.
+    elastic_shape : array (K,) of int32
+        Backward channel (:data:`~bsdfkit.raytrace.plate.BACK_BIBS` or ``BACK_YIYS``) whose angular
+        distribution elastic light of bin k takes.
+    led_cdf : array (K,)
+        Cumulative LED bin powers (last entry exactly 1) [-].
+    tis : array (G·K, 4) or None
+        Photons out per incident photon in :data:`~bsdfkit.raytrace.spectral.PHOTON_CHANNELS` order at (incidence
+        g, bin k) → row g·K + k [-]; None with an exit top.
+    alias_prob, alias_index : array (K·K,) or None
+        Alias tables of the conditional emission rows (probability [-], float64; bin index, int32); None with an
+        exit top.
+    """
+
+    lam: Any
+    photon_scale: Any
+    band: Any
+    elastic_shape: Any
+    led_cdf: Any
+    tis: Any = None
+    alias_prob: Any = None
+    alias_index: Any = None
+
+
+class PlateParams(NamedTuple):
+    """The plate's tables on its G incidence angles (``effects.top == "plate"``); see
+    :class:`bsdfkit.raytrace.plate.PlateTables`.
+
+    Attributes
+    ----------
+    grid : array (G,)
+        Incidence angles θi [rad].
+    range : array (2,)
+        Measured θi range [rad] (the clamping rule).
+    tis : array (G, 6)
+        TIS per channel in :data:`~bsdfkit.raytrace.plate.CHANNELS` order [-], float64.
+    kind : array (G, 3) of int
+        Distribution of each :data:`~bsdfkit.raytrace.plate.BACKWARD` channel (``LAMBERTIAN``,
+        ``LAMBERT_GAUSSIAN`` or ``TABULATED``).
+    lobe_share : array (G, 3)
+        TIS share of the Gaussian lobe [-].
+    sigma : array (G, 3)
+        Lobe width in projected direction cosines [-].
+    s_nodes, f_nodes, cdf : array (G, 3, T)
+        Tabulated distributions: nodes in s = sin²θs [-], density and cumulative distribution on them [-].
+    """
+
+    grid: Any
+    range: Any
+    tis: Any
+    kind: Any
+    lobe_share: Any
+    sigma: Any
+    s_nodes: Any
+    f_nodes: Any
+    cdf: Any
+
+
+class KernelParams(NamedTuple):
+    """Numeric inputs of the kernel (:func:`kernel_params`); float32 entries follow ``effects.precision``.
+
+    Attributes
+    ----------
+    radius, height : array ()
+        Cavity radius and height [mm].
+    rho : array (3,)
+        Total reflectance of wall, base and LED disks (:data:`SURFACE_WALL`, ``SURFACE_BASE``, ``SURFACE_LEDS``)
+        [-], float64.
+    spec : array (3,)
+        Specular fraction of that reflectance, same rows [-], float64.
+    led_grid : array () of int32
+        LEDs per side of the square LED grid.
+    pitch : array ()
+        LED pitch [mm].
+    emitter_radius : array ()
+        Radius of an LED's emitting disk [mm].
+    cos_exponent : array ()
+        Exponent n of the LEDs' cosⁿ intensity [-].
+    roulette_threshold, threshold : array ()
+        Ray-weight thresholds of the roulette and of the flux threshold [-], float64.
+    max_events : array () of int32
+        Interactions after which a ray is retired as truncated.
+    rays : RayFileParams or None
+        The ray-file source; None for LEDs.
+    rho_table : array (3·C,) or None
+        Reflectance per surface and colour (C = 2) or bin (C = K), row surface·C + colour [-], float64; None
+        without surface spectra.
+    spectral : SpectralParams or None
+        Spectral-mode tables; None in the two-wavelength mode.
+    plate : PlateParams or None
+        The plate on top; None for an exit top.
+    """
+
+    radius: Any
+    height: Any
+    rho: Any
+    spec: Any
+    led_grid: Any
+    pitch: Any
+    emitter_radius: Any
+    cos_exponent: Any
+    roulette_threshold: Any
+    threshold: Any
+    max_events: Any
+    rays: RayFileParams | None = None
+    rho_table: Any = None
+    spectral: SpectralParams | None = None
+    plate: PlateParams | None = None
+
+
+def kernel_params(scene: Scene, effects: Effects) -> KernelParams:
+    """Numeric kernel inputs (NumPy arrays): geometry, surfaces, source, plate tables.
 
     Parameters
     ----------
@@ -138,51 +282,40 @@ def kernel_params(scene: Scene, effects: Effects) -> dict:
 
     Returns
     -------
-    dict
-        Name → array (nested dicts for ``spectral`` and ``plate``); lengths in [mm], reflectances [-].
+    KernelParams
+        The arrays; the parts ``effects`` does not use are None.
     """
     dt = np.float32 if effects.precision == "float32" else np.float64
     leds, led = scene.leds, scene.led_surface
-    p: dict = {
-        "radius": np.asarray(scene.cavity.radius_mm, dt),
-        "height": np.asarray(scene.cavity.height_mm, dt),
-        "rho": np.asarray([scene.wall.reflectance, scene.base.reflectance, led.reflectance], np.float64),
-        "spec": np.asarray([scene.wall.specular_fraction, scene.base.specular_fraction, led.specular_fraction],
-                           np.float64),
-        "led_grid": np.asarray(leds.grid, np.int32),
-        "pitch": np.asarray(leds.pitch_mm, dt),
-        "emitter_radius": np.asarray(leds.emitter_radius_mm, dt),
-        "cos_exponent": np.asarray(leds.cos_exponent, dt),
-        "roulette_threshold": np.asarray(scene.trace.roulette_threshold, np.float64),
-        "threshold": np.asarray(scene.trace.threshold, np.float64),
-        "max_events": np.asarray(scene.trace.max_events, np.int32),
-    }
+    surfaces = {"wall": scene.wall, "base": scene.base, "leds": led}
+    rays = rho_table = spectral = plate = None
     if effects.source == "rayfile":
-        rays = leds.rays
-        cdf = np.cumsum(rays.power) / np.sum(rays.power)
+        cdf = np.cumsum(leds.rays.power) / np.sum(leds.rays.power)
         cdf[-1] = 1.0
-        p["ray_origin"] = rays.origin.astype(dt)
-        p["ray_direction"] = rays.direction.astype(dt)
-        p["ray_cdf"] = cdf
+        rays = RayFileParams(leds.rays.origin.astype(dt), leds.rays.direction.astype(dt), cdf)
     if effects.surface_spectra:
-        p["rho_table"] = surface_reflectance_table(scene)
+        rho_table = surface_reflectance_table(scene)
     if effects.spectral:
         sp = scene_spectral_tables(scene)
-        p["spectral"] = {"lam": sp.lam, "photon_scale": sp.photon_scale, "band": sp.band,
-                         "elastic_shape": sp.elastic_shape, "led_cdf": sp.led_cdf}
+        spectral = SpectralParams(sp.lam, sp.photon_scale, sp.band, sp.elastic_shape, sp.led_cdf)
         if sp.plate is not None:
-            p["spectral"].update(tis=sp.tis, alias_prob=sp.alias_prob, alias_index=sp.alias_index)
+            spectral = spectral._replace(tis=sp.tis, alias_prob=sp.alias_prob, alias_index=sp.alias_index)
     if effects.top == "plate":
         tab: PlateTables = sp.plate if effects.spectral else plate_tables(top_plate(scene))
-        p["plate"] = {
-            "grid": tab.grid.astype(dt),
-            "range": np.asarray(tab.theta_range, dt),
-            "tis": tab.tis,
-            "kind": tab.kind,
-            "lobe_share": tab.lobe_share,
-            "sigma": tab.sigma.astype(dt),
-            "s_nodes": tab.s_nodes,
-            "f_nodes": tab.f_nodes,
-            "cdf": tab.cdf,
-        }
-    return p
+        plate = PlateParams(grid=tab.grid.astype(dt), range=np.asarray(tab.theta_range, dt), tis=tab.tis,
+                            kind=tab.kind, lobe_share=tab.lobe_share, sigma=tab.sigma.astype(dt),
+                            s_nodes=tab.s_nodes, f_nodes=tab.f_nodes, cdf=tab.cdf)
+    return KernelParams(
+        radius=np.asarray(scene.cavity.radius_mm, dt),
+        height=np.asarray(scene.cavity.height_mm, dt),
+        rho=np.asarray([surfaces[s].reflectance for s in CAVITY_SURFACES], np.float64),
+        spec=np.asarray([surfaces[s].specular_fraction for s in CAVITY_SURFACES], np.float64),
+        led_grid=np.asarray(leds.grid, np.int32),
+        pitch=np.asarray(leds.pitch_mm, dt),
+        emitter_radius=np.asarray(leds.emitter_radius_mm, dt),
+        cos_exponent=np.asarray(leds.cos_exponent, dt),
+        roulette_threshold=np.asarray(scene.trace.roulette_threshold, np.float64),
+        threshold=np.asarray(scene.trace.threshold, np.float64),
+        max_events=np.asarray(scene.trace.max_events, np.int32),
+        rays=rays, rho_table=rho_table, spectral=spectral, plate=plate,
+    )

@@ -65,7 +65,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from bsdfkit.raytrace import geometry, sampling
-from bsdfkit.raytrace.effects import Effects
+from bsdfkit.raytrace.effects import SURFACE_BASE, SURFACE_LEDS, SURFACE_WALL, Effects, KernelParams, PlateParams
 from bsdfkit.raytrace.plate import (
     BACK_BIBS,
     BACK_BIYS,
@@ -74,9 +74,20 @@ from bsdfkit.raytrace.plate import (
     BIBS_T,
     BIYS_R,
     BIYS_T,
+    CHANNELS,
     TABULATED,
     YIYS_R,
     YIYS_T,
+)
+from bsdfkit.raytrace.spectral import (
+    BAND_BLUE,
+    BAND_OTHER,
+    BAND_YELLOW,
+    CONVERTED_R,
+    CONVERTED_T,
+    ELASTIC_R,
+    ELASTIC_T,
+    PHOTON_CHANNELS,
 )
 
 # per-ray float64 tallies, accumulated in lanes and summed when the ray retires
@@ -132,13 +143,13 @@ def _fixed(w):
     return jnp.round(w * FIXED_POINT).astype(jnp.int64)
 
 
-def emission(params, key_words, ray, effects: Effects):
+def emission(params: KernelParams, key_words, ray, effects: Effects):
     """Start points and directions of rays ``ray`` (global indices, uint32), event 0; in spectral mode also
     their wavelength bins.
 
     Parameters
     ----------
-    params : dict
+    params : KernelParams
         Numeric kernel inputs from :func:`bsdfkit.raytrace.effects.kernel_params` (lengths [mm]).
     key_words : jax.Array
         The two uint32 words of the seed's key (counter-based random numbers).
@@ -155,18 +166,18 @@ def emission(params, key_words, ray, effects: Effects):
     dt = effects.dtype
     u = sampling.event_uniforms(key_words, ray, jnp.zeros_like(ray), dt, 6 if effects.spectral else 5)
     if effects.spectral:  # the ray's wavelength bin, drawn from the LED's bin powers (word 5)
-        cdf = params["spectral"]["led_cdf"]
+        cdf = params.spectral.led_cdf
         k = jnp.clip(jnp.searchsorted(cdf, u[5].astype(jnp.float64), side="right"), 0, cdf.shape[0] - 1)
         return emission_geometry(params, u, effects) + (k.astype(jnp.int32),)
     return emission_geometry(params, u, effects)
 
 
-def emission_geometry(params, u, effects: Effects):
+def emission_geometry(params: KernelParams, u, effects: Effects):
     """Start points and directions from the emission uniforms ``u`` (words 0-4).
 
     Parameters
     ----------
-    params : dict
+    params : KernelParams
         Numeric kernel inputs (lengths [mm]).
     u : list of jax.Array
         Uniforms in [0, 1) of the emission event; words 0-4 are used [-].
@@ -180,22 +191,22 @@ def emission_geometry(params, u, effects: Effects):
     """
     dt = effects.dtype
     if effects.source == "rayfile":
-        idx = jnp.clip(jnp.searchsorted(params["ray_cdf"], u[0].astype(jnp.float64), side="right"), 0,
-                       params["ray_cdf"].shape[0] - 1)
-        o = params["ray_origin"][idx]
-        d = params["ray_direction"][idx]
+        rays = params.rays
+        idx = jnp.clip(jnp.searchsorted(rays.cdf, u[0].astype(jnp.float64), side="right"), 0, rays.cdf.shape[0] - 1)
+        o = rays.origin[idx]
+        d = rays.direction[idx]
         return o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2]
-    k = params["led_grid"]
+    k = params.led_grid
     count = k * k
     i = jnp.minimum(jnp.floor(u[0] * count).astype(jnp.int32), count - 1)
     half = (k - 1).astype(dt) / 2.0
-    cx = ((i // k).astype(dt) - half) * params["pitch"]
-    cy = ((i % k).astype(dt) - half) * params["pitch"]
-    r = params["emitter_radius"] * jnp.sqrt(u[1])
+    cx = ((i // k).astype(dt) - half) * params.pitch
+    cy = ((i % k).astype(dt) - half) * params.pitch
+    r = params.emitter_radius * jnp.sqrt(u[1])
     c_phi, s_phi = sampling.cos_sin_turn(u[2])
     x = cx + r * c_phi
     y = cy + r * s_phi
-    sin_t, cos_t, c_psi, s_psi = sampling.cos_power_angles(u[3], u[4], params["cos_exponent"])
+    sin_t, cos_t, c_psi, s_psi = sampling.cos_power_angles(u[3], u[4], params.cos_exponent)
     z = jnp.zeros_like(x)
     return x, y, z, sin_t * c_psi, sin_t * s_psi, cos_t
 
@@ -274,10 +285,10 @@ class _Tallies:
         self.cnt[counter] = self.cnt[counter] + mask.astype(jnp.int32)
 
 
-def _plate_interaction(params, key_words, hit: _Hit, lane, effects: Effects):
+def _plate_interaction(params: KernelParams, key_words, hit: _Hit, lane, effects: Effects):
     """Plate interaction of rays hitting the top (``hit.top``): returns weights, absorbed weights, forward,
     colours, directions, clamping and the Stokes loss (spectral mode; None otherwise)."""
-    P = params["plate"]
+    P = params.plate
     w, colour = lane["w"], lane["colour"]
     with jax.named_scope("plate"):
         t, j, clamped = _plate_incidence(P, key_words, lane["dz"], hit.top, effects)
@@ -292,13 +303,13 @@ def _plate_interaction(params, key_words, hit: _Hit, lane, effects: Effects):
     return w_out, absorbed, forward, new_colour, nx, ny, nz, clamped, stokes
 
 
-def _plate_incidence(P, key_words, dz, live, effects: Effects):
+def _plate_incidence(P: PlateParams, key_words, dz, live, effects: Effects):
     """θi of rays meeting the plate on its incidence grid: interval j and weight t (linear in θi, θi clamped to
     the grid), and the lanes outside the measured range (None unless ``effects.plate_clamp``)."""
-    grid = P["grid"]
+    grid = P.grid
     G = grid.shape[0]
     theta = jnp.arccos(jnp.clip(dz, 0.0, 1.0))
-    lo, hi = P["range"][0], P["range"][1]
+    lo, hi = P.range[0], P.range[1]
     clamped = live & ((theta < lo) | (theta > hi)) if effects.plate_clamp else None
     th = jnp.clip(theta, grid[0], grid[G - 1])
     j = jnp.zeros(th.shape, jnp.int32)
@@ -309,14 +320,15 @@ def _plate_incidence(P, key_words, dz, live, effects: Effects):
     return t, j, clamped
 
 
-def _plate_channel(P, key_words, u, w, colour, t, j, effects: Effects):
+def _plate_channel(P: PlateParams, key_words, u, w, colour, t, j, effects: Effects):
     """Two-wavelength plate: weight, forward, new colour, backward channel and grid point of rays of ``colour``
     at grid interval j (weight t); the channel drawn with probabilities TIS_c/S (uniform 0) and the grid point
     whose distribution is used with the channel's TIS share (uniform 4)."""
-    T0 = [_pick(P["tis"][:, c], j) for c in range(6)]
-    T1 = [_pick(P["tis"][:, c], j + 1) for c in range(6)]
+    T0 = [_pick(P.tis[:, c], j) for c in range(len(CHANNELS))]
+    T1 = [_pick(P.tis[:, c], j + 1) for c in range(len(CHANNELS))]
     tis = [(1.0 - t) * a + t * b for a, b in zip(T0, T1)]
-    if effects.conversion:  # outcomes: R and T of the ray's elastic channel, then biys R and T (blue rays only)
+    # outcomes in PHOTON_CHANNELS order: R and T of the ray's elastic channel, then biys R and T (blue rays only)
+    if effects.conversion:
         with jax.named_scope("phosphor_conversion"):
             yellow = colour == YELLOW
             zero = jnp.zeros_like(t)
@@ -333,15 +345,16 @@ def _plate_channel(P, key_words, u, w, colour, t, j, effects: Effects):
         acc = acc + pr
         edges.append(acc)
     outcome = sum((v >= e).astype(jnp.int32) for e in edges)
-    forward = (outcome % 2) == 1
+    forward = (outcome == ELASTIC_T) | (outcome == CONVERTED_T)
     if effects.conversion:
-        new_colour = jnp.where((colour == YELLOW) | (outcome >= 2), YELLOW, BLUE).astype(jnp.int32)
-        channel = jnp.where(colour == YELLOW, BACK_YIYS, jnp.where(outcome >= 2, BACK_BIYS, BACK_BIBS))
+        converted = outcome >= CONVERTED_R
+        new_colour = jnp.where((colour == YELLOW) | converted, YELLOW, BLUE).astype(jnp.int32)
+        channel = jnp.where(colour == YELLOW, BACK_YIYS, jnp.where(converted, BACK_BIYS, BACK_BIBS))
         q0 = jnp.where(channel == BACK_BIBS, T0[BIBS_R], jnp.where(channel == BACK_BIYS, T0[BIYS_R], T0[YIYS_R]))
         q1 = jnp.where(channel == BACK_BIBS, T1[BIBS_R], jnp.where(channel == BACK_BIYS, T1[BIYS_R], T1[YIYS_R]))
     else:
         new_colour = colour
-        channel = jnp.zeros_like(outcome)  # BACK_BIBS
+        channel = jnp.full_like(outcome, BACK_BIBS)
         q0, q1 = T0[BIBS_R], T1[BIBS_R]
     # grid point whose angular distribution is used (linear interpolation of the BSDF in θi)
     q0 = (1.0 - t) * q0
@@ -352,7 +365,7 @@ def _plate_channel(P, key_words, u, w, colour, t, j, effects: Effects):
         key_words, [w_out, forward, new_colour.astype(jnp.int32), channel.astype(jnp.int32), g])
 
 
-def _backward_direction(P, key_words, hit: _Hit, lane, backward, channel, g, effects: Effects):
+def _backward_direction(P: PlateParams, key_words, hit: _Hit, lane, backward, channel, g, effects: Effects):
     """Direction of a backward-scattered ray: the distribution of backward channel ``channel`` (:data:`BACK_BIBS`,
     :data:`BACK_BIYS` or :data:`BACK_YIYS`) at grid point ``g`` (Lambertian, tabulated or Lambert + lobe;
     uniforms 1, 2 and 5)."""
@@ -372,18 +385,18 @@ def _backward_direction(P, key_words, hit: _Hit, lane, backward, channel, g, eff
         nz = -cos_t
         if effects.plate_table:
             with jax.named_scope("table_sampling"):
-                is_table = per_channel(P["kind"]) == TABULATED
-                s = sampling.table_s(u[1].astype(jnp.float64), per_channel(P["s_nodes"]),
-                                     per_channel(P["f_nodes"]), per_channel(P["cdf"])).astype(dt)
+                is_table = per_channel(P.kind) == TABULATED
+                s = sampling.table_s(u[1].astype(jnp.float64), per_channel(P.s_nodes),
+                                     per_channel(P.f_nodes), per_channel(P.cdf)).astype(dt)
                 ts, tc = jnp.sqrt(s), jnp.sqrt(1.0 - s)
                 nx = jnp.where(is_table, ts * c_phi, nx)
                 ny = jnp.where(is_table, ts * s_phi, ny)
                 nz = jnp.where(is_table, -tc, nz)
         if effects.plate_lobe:
             with jax.named_scope("lobe_sampling"):
-                use_lobe = backward & (u[5].astype(jnp.float64) < per_channel(P["lobe_share"]))
+                use_lobe = backward & (u[5].astype(jnp.float64) < per_channel(P.lobe_share))
                 bx, by, ok = sampling.lobe_beta(key_words, hit.ray, hit.event, use_lobe, lane["dx"], lane["dy"],
-                                                per_channel(P["sigma"]), dt)
+                                                per_channel(P.sigma), dt)
                 bz = -jnp.sqrt(jnp.maximum(1.0 - bx * bx - by * by, 0.0))
                 nx = jnp.where(ok, bx, nx)
                 ny = jnp.where(ok, by, ny)
@@ -391,7 +404,7 @@ def _backward_direction(P, key_words, hit: _Hit, lane, backward, channel, g, eff
         return nx, ny, nz
 
 
-def _spectral_channel(params, key_words, u, w, k, t, j):
+def _spectral_channel(params: KernelParams, key_words, u, w, k, t, j):
     """Spectral plate: channel, new bin and weight of rays in bin ``k`` at grid interval j (weight t).
 
     Channels elastic R/T and converted R/T are chosen with probabilities ∝ their photon TIS (interpolated
@@ -400,41 +413,41 @@ def _spectral_channel(params, key_words, u, w, k, t, j):
     (same photon, new energy). Returns (w_out, absorbed, (stokes, photons converted, photons converted to a shorter
     bin, power created by those), forward, new bin, backward channel, grid point).
     """
-    sp = params["spectral"]
-    K = sp["lam"].shape[0]
+    sp = params.spectral
+    K = sp.lam.shape[0]
     with jax.named_scope("spectral_conversion"):
-        T0 = sp["tis"][j * K + k]  # (L, 4): elastic R, elastic T, converted R, converted T
-        T1 = sp["tis"][(j + 1) * K + k]
-        probs = [(1.0 - t) * T0[:, c] + t * T1[:, c] for c in range(4)]
+        T0 = sp.tis[j * K + k]  # (L, 4): PHOTON_CHANNELS
+        T1 = sp.tis[(j + 1) * K + k]
+        probs = [(1.0 - t) * T0[:, c] + t * T1[:, c] for c in range(len(PHOTON_CHANNELS))]
         S = sum(probs)
         v = u[0].astype(jnp.float64) * S
         edges = [probs[0], probs[0] + probs[1], probs[0] + probs[1] + probs[2]]
-        outcome = sum((v >= e).astype(jnp.int32) for e in edges)
-        forward = (outcome % 2) == 1
-        converted = outcome >= 2
+        outcome = sum((v >= e).astype(jnp.int32) for e in edges)  # the PHOTON_CHANNELS index
+        forward = (outcome == ELASTIC_T) | (outcome == CONVERTED_T)
+        converted = outcome >= CONVERTED_R
         i = jnp.minimum(jnp.floor(u[6].astype(jnp.float64) * K).astype(jnp.int32), K - 1)
         cell = k * K + i
-        drawn = jnp.where(u[7].astype(jnp.float64) < sp["alias_prob"][cell], i, sp["alias_index"][cell])
+        drawn = jnp.where(u[7].astype(jnp.float64) < sp.alias_prob[cell], i, sp.alias_index[cell])
         new_k = jnp.where(converted, drawn, k).astype(jnp.int32)
         w_kept = w * S
-        w_out = jnp.where(converted, w_kept * (sp["lam"][k] / sp["lam"][new_k]), w_kept)
-        channel = jnp.where(converted, BACK_BIYS, sp["elastic_shape"][k]).astype(jnp.int32)
-        q0 = jnp.where(outcome == 0, T0[:, 0], jnp.where(outcome == 1, T0[:, 1],
-                                                         jnp.where(outcome == 2, T0[:, 2], T0[:, 3])))
-        q1 = jnp.where(outcome == 0, T1[:, 0], jnp.where(outcome == 1, T1[:, 1],
-                                                         jnp.where(outcome == 2, T1[:, 2], T1[:, 3])))
+        w_out = jnp.where(converted, w_kept * (sp.lam[k] / sp.lam[new_k]), w_kept)
+        channel = jnp.where(converted, BACK_BIYS, sp.elastic_shape[k]).astype(jnp.int32)
+        q0, q1 = ((jnp.where(outcome == ELASTIC_R, T[:, ELASTIC_R],
+                             jnp.where(outcome == ELASTIC_T, T[:, ELASTIC_T],
+                                       jnp.where(outcome == CONVERTED_R, T[:, CONVERTED_R], T[:, CONVERTED_T]))))
+                  for T in (T0, T1))
         q0 = (1.0 - t) * q0
         q1 = t * q1
         g = jnp.where(u[4].astype(jnp.float64) * (q0 + q1) < q0, j, j + 1)
         w_kept, w_out, forward, new_k, channel, g = sampling.materialise(
             key_words, [w_kept, w_out, forward, new_k, channel, g])
     anti = converted & (new_k < k)
-    conversions = (w_kept - w_out, jnp.where(converted, w_kept * sp["photon_scale"][k], 0.0),
-                   jnp.where(anti, w_kept * sp["photon_scale"][k], 0.0), jnp.where(anti, w_out - w_kept, 0.0))
+    conversions = (w_kept - w_out, jnp.where(converted, w_kept * sp.photon_scale[k], 0.0),
+                   jnp.where(anti, w_kept * sp.photon_scale[k], 0.0), jnp.where(anti, w_out - w_kept, 0.0))
     return w_out, w - w_kept, conversions, forward, new_k, channel, g
 
 
-def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
+def interaction(params: KernelParams, key_words, start_u, lane, arrays, effects: Effects):
     """One interaction of every live lane (the body of the kernel; also used by the benchmark).
 
     ``lane``: dict of per-lane arrays (ids, live, px … dz, w, colour, acc, cnt); ``arrays``: (map, histogram,
@@ -442,7 +455,7 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
 
     Parameters
     ----------
-    params : dict
+    params : KernelParams
         Numeric kernel inputs from :func:`bsdfkit.raytrace.effects.kernel_params` (lengths [mm]).
     key_words : jax.Array
         The two uint32 words of the seed's key (counter-based random numbers).
@@ -492,10 +505,10 @@ def interaction(params, key_words, start_u, lane, arrays, effects: Effects):
     return lane, (new_map, new_hist, new_budget)
 
 
-def _next_hit(params, key_words, start_u, lane, effects: Effects) -> _Hit:
+def _next_hit(params: KernelParams, key_words, start_u, lane, effects: Effects) -> _Hit:
     """The surface every lane's ray meets next, and the uniforms of this event."""
     dt = effects.dtype
-    R, H = params["radius"], params["height"]
+    R, H = params.radius, params.height
     live = lane["live"]
     ray = start_u + jnp.where(live, lane["ids"], 0).astype(jnp.uint32)
     event = lane["cnt"][CNT_EVENTS] + 1
@@ -506,25 +519,26 @@ def _next_hit(params, key_words, start_u, lane, effects: Effects) -> _Hit:
     top = live & (surf == geometry.TOP)
     wall = live & (surf == geometry.WALL)
     base_any = live & (surf == geometry.BASE)
-    led = base_any & geometry.on_led(x, y, params["led_grid"].astype(dt), params["pitch"],
-                                     params["emitter_radius"])
+    led = base_any & geometry.on_led(x, y, params.led_grid.astype(dt), params.pitch,
+                                     params.emitter_radius)
     return _Hit(ray, event, u, x, y, z, top, wall, base_any & ~led, led, wall | base_any)
 
 
-def _cavity(params, key_words, hit: _Hit, lane, effects: Effects) -> _Cavity:
+def _cavity(params: KernelParams, key_words, hit: _Hit, lane, effects: Effects) -> _Cavity:
     """Reflection at the cavity surfaces (wall, base, LEDs): weight wρ, Lambertian or mirror direction."""
     dt = effects.dtype
     wall, led, u, colour = hit.wall, hit.led, hit.u, lane["colour"]
     if effects.surface_spectra:  # reflectance per colour (two-wavelength) or per bin (spectral): row s·C + colour
         with jax.named_scope("surface_spectra"):
-            C = params["rho_table"].shape[0] // 3
-            s_idx = jnp.where(wall, 0, jnp.where(led, 2, 1))
-            rho = params["rho_table"][s_idx * C + colour]
+            C = params.rho_table.shape[0] // 3
+            s_idx = jnp.where(wall, SURFACE_WALL, jnp.where(led, SURFACE_LEDS, SURFACE_BASE))
+            rho = params.rho_table[s_idx * C + colour]
     else:
-        rho = jnp.where(wall, params["rho"][0], jnp.where(led, params["rho"][2], params["rho"][1]))
+        rho = jnp.where(wall, params.rho[SURFACE_WALL],
+                        jnp.where(led, params.rho[SURFACE_LEDS], params.rho[SURFACE_BASE]))
     w_ref = lane["w"] * rho
     absorbed = lane["w"] - w_ref
-    inv_r = 1.0 / params["radius"]
+    inv_r = 1.0 / params.radius
     nx = jnp.where(wall, -hit.x * inv_r, 0.0).astype(dt)
     ny = jnp.where(wall, -hit.y * inv_r, 0.0).astype(dt)
     nz = jnp.where(wall, 0.0, 1.0).astype(dt)
@@ -535,7 +549,8 @@ def _cavity(params, key_words, hit: _Hit, lane, effects: Effects) -> _Cavity:
                                                                                    ny, nz)))
     if effects.specular:
         with jax.named_scope("specular_reflection"):
-            spec = jnp.where(wall, params["spec"][0], jnp.where(led, params["spec"][2], params["spec"][1]))
+            spec = jnp.where(wall, params.spec[SURFACE_WALL],
+                             jnp.where(led, params.spec[SURFACE_LEDS], params.spec[SURFACE_BASE]))
             mirror = u[0].astype(jnp.float64) < spec
             mdx, mdy, mdz = sampling.mirror(lane["dx"], lane["dy"], lane["dz"], nx, ny, nz)
             cdx = jnp.where(mirror, mdx, cdx)
@@ -544,7 +559,7 @@ def _cavity(params, key_words, hit: _Hit, lane, effects: Effects) -> _Cavity:
     return _Cavity(w_ref, absorbed, cdx, cdy, cdz)
 
 
-def _tally_cavity(params, hit: _Hit, colour, absorbed, tallies: _Tallies, effects: Effects):
+def _tally_cavity(params: KernelParams, hit: _Hit, colour, absorbed, tallies: _Tallies, effects: Effects):
     """Tally the weight the cavity surfaces absorbed; returns the photons per unit weight of the bin each ray
     arrived in (spectral mode; None otherwise)."""
     zero = tallies.zero
@@ -553,14 +568,14 @@ def _tally_cavity(params, hit: _Hit, colour, absorbed, tallies: _Tallies, effect
     tallies.add(ABS_LED, jnp.where(hit.led, absorbed, zero))
     if not effects.spectral:
         return None
-    ph_in = params["spectral"]["photon_scale"][colour]
+    ph_in = params.spectral.photon_scale[colour]
     tallies.add(PH_WALL, jnp.where(hit.wall, absorbed * ph_in, zero))
     tallies.add(PH_BASE, jnp.where(hit.base, absorbed * ph_in, zero))
     tallies.add(PH_LED, jnp.where(hit.led, absorbed * ph_in, zero))
     return ph_in
 
 
-def _plate_top(params, key_words, hit: _Hit, lane, cavity: _Cavity, tallies: _Tallies, ph_in,
+def _plate_top(params: KernelParams, key_words, hit: _Hit, lane, cavity: _Cavity, tallies: _Tallies, ph_in,
                effects: Effects) -> _Outcome:
     """The plate on top: rays meeting it are extracted (forward) or scattered back (or absorbed); the others
     keep their cavity reflection."""
@@ -590,19 +605,19 @@ def _plate_top(params, key_words, hit: _Hit, lane, cavity: _Cavity, tallies: _Ta
     return _Outcome(ext_w, p_colour, new_w, alive, new_colour, ndx, ndy, ndz, plate_abs, stokes)
 
 
-def _extracted(params, out: _Outcome, tallies: _Tallies, effects: Effects):
+def _extracted(params: KernelParams, out: _Outcome, tallies: _Tallies, effects: Effects):
     """Tally the extracted weight by band: returns (blue, yellow, outside both bands or None, photons per unit
     weight of the ray's new bin from here on or None)."""
     zero, ext_w, ext_colour = tallies.zero, out.ext_w, out.ext_colour
     ext_o = ph_out = None
     if effects.spectral:  # bands of the bin extracted in; photons of the ray's (new) bin from here on
-        band = params["spectral"]["band"][ext_colour]
-        ph_out = params["spectral"]["photon_scale"][out.new_colour]
-        ext_b = jnp.where(band == 0, ext_w, zero)
-        ext_y = jnp.where(band == 1, ext_w, zero)
-        ext_o = jnp.where(band == 2, ext_w, zero)
+        band = params.spectral.band[ext_colour]
+        ph_out = params.spectral.photon_scale[out.new_colour]
+        ext_b = jnp.where(band == BAND_BLUE, ext_w, zero)
+        ext_y = jnp.where(band == BAND_YELLOW, ext_w, zero)
+        ext_o = jnp.where(band == BAND_OTHER, ext_w, zero)
         tallies.add(EXT_O, ext_o)
-        tallies.add(PH_EXT, ext_w * params["spectral"]["photon_scale"][ext_colour])
+        tallies.add(PH_EXT, ext_w * params.spectral.photon_scale[ext_colour])
     elif effects.conversion:
         ext_b = jnp.where(ext_colour == BLUE, ext_w, zero)
         ext_y = jnp.where(ext_colour == BLUE, zero, ext_w)
@@ -613,12 +628,12 @@ def _extracted(params, out: _Outcome, tallies: _Tallies, effects: Effects):
     return ext_b, ext_y, ext_o, ph_out
 
 
-def _terminate(params, u, live, alive, new_w, ph_out, tallies: _Tallies, effects: Effects):
+def _terminate(params: KernelParams, u, live, alive, new_w, ph_out, tallies: _Tallies, effects: Effects):
     """Roulette or threshold on the new weights, then the event cap: returns (weight, alive, weight removed)."""
     zero = tallies.zero
     other = zero
     if effects.termination == "roulette":
-        tau = params["roulette_threshold"]
+        tau = params.roulette_threshold
         low = alive & (new_w < tau)
         survive = u[3].astype(jnp.float64) * tau < new_w
         killed = low & ~survive
@@ -630,7 +645,7 @@ def _terminate(params, u, live, alive, new_w, ph_out, tallies: _Tallies, effects
         new_w = jnp.where(low, jnp.where(survive, tau, zero), new_w)
         alive = alive & ~killed
     else:
-        low = alive & (new_w < params["threshold"])
+        low = alive & (new_w < params.threshold)
         dropped = jnp.where(low, new_w, zero)
         tallies.add(DISCARDED, dropped)
         if effects.spectral:
@@ -639,7 +654,7 @@ def _terminate(params, u, live, alive, new_w, ph_out, tallies: _Tallies, effects
         new_w = jnp.where(low, zero, new_w)
         alive = alive & ~low
     tallies.count(CNT_EVENTS, live)
-    capped = alive & (tallies.cnt[CNT_EVENTS] >= params["max_events"])
+    capped = alive & (tallies.cnt[CNT_EVENTS] >= params.max_events)
     trunc = jnp.where(capped, new_w, zero)
     tallies.add(TRUNCATED, trunc)
     if effects.spectral:
@@ -648,21 +663,22 @@ def _terminate(params, u, live, alive, new_w, ph_out, tallies: _Tallies, effects
     return new_w, alive & ~capped, other
 
 
-def _map_tally(params, hit: _Hit, w, new_map, effects: Effects):
+def _map_tally(params: KernelParams, hit: _Hit, w, new_map, effects: Effects):
     """Deposit the weight of the rays meeting the top into the irradiance sub-map of each ray."""
     with jax.named_scope("irradiance_map"):
         part = (hit.ray % jnp.uint32(MAP_PARTS)).astype(jnp.int32) * (effects.map_bins ** 2)
-        idx = geometry.map_index(hit.x, hit.y, params["radius"], effects.map_bins) + part
+        idx = geometry.map_index(hit.x, hit.y, params.radius, effects.map_bins) + part
         return new_map.at[jnp.where(hit.top, idx, new_map.shape[0])].add(_fixed(w), mode="drop")
 
 
-def _histogram_tally(params, top, lane, new_hist, effects: Effects):
+def _histogram_tally(params: KernelParams, top, lane, new_hist, effects: Effects):
     """Deposit the weight of the rays meeting the top into the histogram of their incidence (per band)."""
     with jax.named_scope("incidence_histogram"):
         theta = jnp.arccos(jnp.clip(lane["dz"], 0.0, 1.0))
         hb = effects.histogram_bins
         colour = lane["colour"]
-        hue = jnp.minimum(params["spectral"]["band"][colour], 1) if effects.spectral else colour
+        # light outside both bands is binned with yellow (BAND_OTHER → BAND_YELLOW)
+        hue = jnp.minimum(params.spectral.band[colour], BAND_YELLOW) if effects.spectral else colour
         b = jnp.clip(jnp.floor(theta / (jnp.pi / 2) * hb), 0, hb - 1).astype(jnp.int32) + hue * hb
         return new_hist.at[jnp.where(top, b, new_hist.shape[0])].add(_fixed(lane["w"]), mode="drop")
 
@@ -706,8 +722,8 @@ def active_columns(effects: Effects) -> tuple[bool, ...]:
     return tuple(on[c] for c in COLUMNS)
 
 
-def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: int, chunk: int | None = None,
-                substeps: int = SUBSTEPS):
+def trace_chunk(params: KernelParams, key_words, start, n_valid, *, effects: Effects, lanes: int,
+                chunk: int | None = None, substeps: int = SUBSTEPS):
     """Trace rays ``start … start + n_valid − 1`` (``n_valid`` ≤ ``chunk``) and return their summed tallies.
 
     ``start`` and ``n_valid`` are traced values; ``chunk`` (static, default ``lanes``) is the number of
@@ -728,7 +744,7 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
 
     Parameters
     ----------
-    params : dict
+    params : KernelParams
         Numeric kernel inputs from :func:`bsdfkit.raytrace.effects.kernel_params` (lengths [mm]).
     key_words : jax.Array
         The two uint32 words of the seed's key (counter-based random numbers).
@@ -757,7 +773,7 @@ def trace_chunk(params, key_words, start, n_valid, *, effects: Effects, lanes: i
     with jax.named_scope("emission"):
         emitted = emission(params, key_words, start_u + jnp.arange(C, dtype=jnp.uint32), effects)
     if effects.spectral:
-        K = params["spectral"]["lam"].shape[0]
+        K = params.spectral.lam.shape[0]
         valid = jnp.arange(C) < n_valid
         emitted_bins = jnp.zeros(K, jnp.int64).at[jnp.where(valid, emitted[6], K)].add(1, mode="drop")
     else:

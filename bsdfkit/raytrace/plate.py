@@ -602,7 +602,7 @@ def plate_tables(plate: PhosphorPlate) -> PlateTables:
                 f_nodes[g, c] = 1.0
                 cdf[g, c] = np.linspace(0.0, 1.0, T)
     lo, hi = float(plate.theta_i_deg[0]), float(plate.theta_i_deg[-1])
-    conversion = bool(np.any(tis[:, 2:4] > 0))
+    conversion = bool(np.any(tis[:, [BIYS_R, BIYS_T]] > 0))
     return PlateTables(
         grid=np.radians(grid_deg), tis=tis, kind=kind, lobe_share=share, sigma=sigma, s_nodes=s_nodes,
         f_nodes=f_nodes, cdf=cdf, theta_range=(math.radians(lo), math.radians(hi)),

@@ -31,14 +31,13 @@ what was found; unknown keys are errors.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-import bsdfkit.raytrace.plate_from_scan as plate_source
 from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.core.spectra import gaussian
@@ -159,8 +158,9 @@ class Top:
 
     ``exit``: all light reaching it leaves the module. ``lambertian``: a non-converting diffuser with
     ``reflectance`` and ``transmittance`` (both Lambertian). ``phosphor``: the plate of
-    :mod:`bsdfkit.raytrace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe resolved
-    by :func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`) or given inline. In the spectral mode
+    :mod:`bsdfkit.raytrace.plate`, from ``plate_file`` (JSON), ``plate_recipe`` (a fitting recipe, resolved
+    by the caller's :data:`PlateResolver`, e.g. :func:`bsdfkit.pipeline.plate_from_scan.plate_from_recipe`) or
+    given inline. In the spectral mode
     ``spectral_model`` is the plate spectral model (:mod:`bsdfkit.raytrace.spectral`), from ``spectral_file``
     (netCDF; the plate is then optional and gives only the angular distributions, Lambertian without it) or built
     from the plate with a Gaussian emission spectrum ``spectral_emission`` = (peak, FWHM, start, stop, step) [nm].
@@ -362,12 +362,19 @@ def _resolve(path_text: str, base_dir: Path | None) -> Path:
     return p
 
 
+#: Turns the fitting recipe a scene's ``[top] from`` names (its path, resolved against the scene's folder) into
+#: the plate. The tracer reads no measurements: the layer that owns recipes passes one in
+#: (:func:`bsdfkit.pipeline.plate_from_scan.plate_from_recipe`, by ``bsdfkit trace`` and ``bsdfkit sweep``).
+PlateResolver = Callable[[Path], PhosphorPlate]
+
+
 def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
-                preloaded: Mapping[str, Any] | None = None) -> Scene:
+                preloaded: Mapping[str, Any] | None = None, plate_resolver: PlateResolver | None = None) -> Scene:
     """Build a :class:`Scene` from a TOML mapping; relative paths resolve against ``file``'s folder.
 
     ``preloaded`` may hold ``{"ray_file": (text, RaySet), "plate": (key, PhosphorPlate)}`` to skip
-    re-reading unchanged files (used by sweeps).
+    re-reading unchanged files (used by sweeps). A ``[top] from = "<recipe>.toml"`` not in ``preloaded`` needs
+    ``plate_resolver``; without one it is refused in one line naming ``top.from``.
 
     Parameters
     ----------
@@ -377,6 +384,8 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
         The scene file, named in errors.
     preloaded : mapping, optional
         Files already read, keyed as above.
+    plate_resolver : PlateResolver, optional
+        Builds the plate of the recipe a ``[top] from`` names.
 
     Returns
     -------
@@ -399,7 +408,7 @@ def parse_scene(data: Mapping[str, Any], file: str | Path | None = None, *,
                     r.number("height_mm", lo=0, lo_open=True, required=True))
     wall, base = (_surface(data[name], name, file, base_dir) for name in ("wall", "base"))
     leds = _leds(data["leds"], cavity, file, base_dir, preloaded)
-    top = _top(data["top"], file, base_dir, preloaded)
+    top = _top(data["top"], file, base_dir, preloaded, plate_resolver)
     trace = _trace_options(data["trace"], file) if "trace" in data else TraceOptions()
     tallies = _tallies(data["tallies"], file) if "tallies" in data else Tallies()
     sweep = None
@@ -484,7 +493,8 @@ def _leds(table: Any, cavity: Cavity, file: str | Path | None, base_dir: Path | 
     return leds
 
 
-def _top(table: Any, file: str | Path | None, base_dir: Path | None, preloaded: Mapping[str, Any]) -> Top:
+def _top(table: Any, file: str | Path | None, base_dir: Path | None, preloaded: Mapping[str, Any],
+         plate_resolver: PlateResolver | None) -> Top:
     """The [top] section: an exit, a Lambertian diffuser or a phosphor plate (:func:`_phosphor_top`)."""
     r = _Reader(table, "top", file, {"kind", "reflectance", "transmittance", "plate", "from", "spectral",
                                      "temperature_K"})
@@ -514,13 +524,15 @@ def _top(table: Any, file: str | Path | None, base_dir: Path | None, preloaded: 
                                   expected=f"<= {1 - rho:g}", got=tau)
         top = Top("lambertian", reflectance=rho, transmittance=tau)
     else:
-        top = _phosphor_top(r, file, base_dir, preloaded)
+        top = _phosphor_top(r, file, base_dir, preloaded, plate_resolver)
     return top
 
 
-def _phosphor_top(r: _Reader, file: str | Path | None, base_dir: Path | None, preloaded: Mapping[str, Any]) -> Top:
-    """A phosphor top: its plate from exactly one of a plate file, a recipe, an inline [top.plate] (or a spectral
-    model alone), reused from ``preloaded`` when unchanged; and the spectral plate model if given."""
+def _phosphor_top(r: _Reader, file: str | Path | None, base_dir: Path | None, preloaded: Mapping[str, Any],
+                  plate_resolver: PlateResolver | None) -> Top:
+    """A phosphor top: its plate from exactly one of a plate file, a recipe (built by ``plate_resolver``), an
+    inline [top.plate] (or a spectral model alone), reused from ``preloaded`` when unchanged; and the spectral
+    plate model if given."""
     for key in ("reflectance", "transmittance"):
         if r.has(key):
             raise InputError("a phosphor top takes its TIS from the plate", file=file, field=f"top.{key}",
@@ -552,8 +564,13 @@ def _phosphor_top(r: _Reader, file: str | Path | None, base_dir: Path | None, pr
                   plate_recipe=value if key == "from" else None)
     elif key == "plate":
         top = Top("phosphor", plate=load_plate(_resolve(value, base_dir)), plate_file=value)
+    elif plate_resolver is None:
+        raise InputError("a plate from a fitting recipe is built by the caller that owns recipes", file=file,
+                         field="top.from", expected="plate = 'file.json' or [top.plate] here (or bsdfkit trace / "
+                         "sweep, or load_scene(..., plate_resolver=bsdfkit.pipeline.plate_from_scan."
+                         "plate_from_recipe))", got=value)
     else:
-        top = Top("phosphor", plate=plate_from_recipe(_resolve(value, base_dir), file), plate_recipe=value)
+        top = Top("phosphor", plate=plate_resolver(_resolve(value, base_dir)), plate_recipe=value)
     if r.has("spectral"):
         top = _spectral_top(top, r, base_dir, preloaded)
         top = replace(top, temperature_K=r.number("temperature_K", PLATE_TEMPERATURE_K, lo=0, lo_open=True))
@@ -770,6 +787,10 @@ def scene_spectral_tables(scene: Scene) -> SpectralTables:
                            source=source, temperature_K=scene.top.temperature_K)
 
 
+#: the cavity surfaces in the order of the kernel's per-surface inputs (reflectance rows, ``rho_table`` blocks)
+CAVITY_SURFACES = ("wall", "base", "leds")
+
+
 def surface_reflectance_table(scene: Scene) -> np.ndarray:
     """Reflectance of wall, base and LED disks per colour (two-wavelength: blue, yellow) or per bin (spectral),
     flattened row-major (surface, colour) for the kernel.
@@ -787,7 +808,9 @@ def surface_reflectance_table(scene: Scene) -> np.ndarray:
     rows = []
     spectral = scene.trace.mode == "spectral"
     lam = spectral_grid(scene) if spectral else None
-    for name, sf in (("wall", scene.wall), ("base", scene.base), ("leds", scene.led_surface)):
+    surfaces = {"wall": scene.wall, "base": scene.base, "leds": scene.led_surface}
+    for name in CAVITY_SURFACES:
+        sf = surfaces[name]
         if sf.spectrum is None:
             rows.append(np.full(lam.size if spectral else 2, sf.reflectance))
         elif spectral:
@@ -834,25 +857,7 @@ def _check_sizes(cavity: Cavity, leds: Leds, trace: TraceOptions, tallies: Talli
                              got=f"float32 with extent {extent:g} mm, emitter {feature:g} mm")
 
 
-def plate_from_recipe(recipe: Path, scene_file: str | Path | None) -> PhosphorPlate:
-    """The plate of a fitting recipe (:func:`bsdfkit.raytrace.plate_from_scan.plate_from_recipe`).
-
-    Parameters
-    ----------
-    recipe : Path
-        The fitting recipe's TOML file.
-    scene_file : str or Path or None
-        The scene file that names the recipe (not used).
-
-    Returns
-    -------
-    PhosphorPlate
-        The plate of the recipe's calibrated measurement.
-    """
-    return plate_source.plate_from_recipe(recipe)
-
-
-def loads_scene(text: str, file: str | Path | None = None) -> Scene:
+def loads_scene(text: str, file: str | Path | None = None, *, plate_resolver: PlateResolver | None = None) -> Scene:
     """Parse scene TOML text (``file`` is used for messages and relative paths).
 
     Parameters
@@ -861,22 +866,26 @@ def loads_scene(text: str, file: str | Path | None = None) -> Scene:
         The scene TOML text.
     file : str or Path, optional
         The file it came from.
+    plate_resolver : PlateResolver, optional
+        Builds the plate of the recipe a ``[top] from`` names (:func:`parse_scene`).
 
     Returns
     -------
     Scene
         The validated scene.
     """
-    return parse_scene(loads_toml(text, file), file)
+    return parse_scene(loads_toml(text, file), file, plate_resolver=plate_resolver)
 
 
-def load_scene(path: str | Path) -> Scene:
+def load_scene(path: str | Path, *, plate_resolver: PlateResolver | None = None) -> Scene:
     """Read a scene TOML file.
 
     Parameters
     ----------
     path : str or Path
         The scene TOML file.
+    plate_resolver : PlateResolver, optional
+        Builds the plate of the recipe a ``[top] from`` names (:func:`parse_scene`).
 
     Returns
     -------
@@ -884,7 +893,7 @@ def load_scene(path: str | Path) -> Scene:
         The validated scene.
     """
     path = Path(path)
-    return loads_scene(read_text(path, expected="a scene TOML file"), path)
+    return loads_scene(read_text(path, expected="a scene TOML file"), path, plate_resolver=plate_resolver)
 
 
 # ---- writing ----------------------------------------------------------------------------------------------

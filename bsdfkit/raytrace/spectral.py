@@ -53,7 +53,15 @@ from bsdfkit.core.conventions import MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM,
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.core.spectra import band_mask, gaussian, photon_pdf_from_power
 from bsdfkit.io import netcdf
-from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, PlateChannel, PlateTables, plate_tables
+from bsdfkit.raytrace.plate import (
+    BACK_BIBS,
+    BACK_YIYS,
+    CHANNELS,
+    PhosphorPlate,
+    PlateChannel,
+    PlateTables,
+    plate_tables,
+)
 
 FORMAT = "bsdfkit-plate-spectral-model"
 #: Tolerances: pdf rows sum to 1, photons kept per incident photon ≤ 1, bin widths equal.
@@ -68,6 +76,13 @@ MAX_BINS = 1024
 #: Default plate temperature [K] of the thermal (anti-Stokes) tail: 40 °C, the upper bound of the phosphor
 #: temperature during the module measurements (§5 of "Power and photon budget of a remote phosphor LED module").
 PLATE_TEMPERATURE_K = 313.15
+#: columns of :attr:`SpectralTables.tis`, photons out per incident photon: at the incident wavelength (elastic) or
+#: converted, each reflected (backward) or transmitted (forward)
+PHOTON_CHANNELS = ("elastic_reflection", "elastic_transmission", "converted_reflection", "converted_transmission")
+ELASTIC_R, ELASTIC_T, CONVERTED_R, CONVERTED_T = range(len(PHOTON_CHANNELS))
+#: codes of :attr:`SpectralTables.band`: the module's blue and yellow bands, and neither
+BANDS = ("blue", "yellow", "other")
+BAND_BLUE, BAND_YELLOW, BAND_OTHER = range(len(BANDS))
 #: Second radiation constant c₂ = hc/k_B [nm·K] (CODATA 2018, exact).
 C2_NM_K = 1.438776877e7
 
@@ -570,9 +585,10 @@ class SpectralTables:
     """Numeric tables of the spectral kernel (NumPy).
 
     ``lam`` (K,) bin centres [nm]; ``photon_scale`` λ_k / λ_K−1 (photon tallies are in units of photons of a
-    unit-weight ray at the longest bin); ``band`` (K,) 0 blue, 1 yellow, 2 neither; ``elastic_shape`` (K,) the
-    backward channel whose distribution elastic light takes (0 bibs, 2 yiys); ``tis`` (G·K, 4) photons per
-    incident photon: elastic R, elastic T, converted R, converted T at (incidence g, bin k) → row g·K + k;
+    unit-weight ray at the longest bin); ``band`` (K,) :data:`BAND_BLUE`, :data:`BAND_YELLOW` or :data:`BAND_OTHER`;
+    ``elastic_shape`` (K,) the backward channel whose distribution elastic light takes (``plate.BACK_BIBS`` or
+    ``BACK_YIYS``); ``tis`` (G·K, 4) photons per incident photon in :data:`PHOTON_CHANNELS` order at (incidence g,
+    bin k) → row g·K + k;
     ``alias_prob``, ``alias_index`` (K·K,) the emission rows' alias tables; ``led_cdf`` (K,) cumulative LED
     bin powers; ``plate`` the angular tables on the model's incidence grid (None for an exit top);
     ``emission_pdf`` (K, K) the conditional emission pdf p' the alias tables sample (module docstring) and
@@ -659,8 +675,9 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     """
     lam_nm = np.asarray(lam_nm, dtype=np.float64)
     blue, yellow = MODULE_BLUE_BAND_NM, MODULE_YELLOW_BAND_NM
-    band = np.where(band_mask(lam_nm, blue), 0, np.where(band_mask(lam_nm, yellow), 1, 2)).astype(np.int32)
-    shape = np.where(band_mask(lam_nm, blue), 0, 2).astype(np.int32)  # plate.BACK_BIBS, BACK_YIYS
+    band = np.where(band_mask(lam_nm, blue), BAND_BLUE,
+                    np.where(band_mask(lam_nm, yellow), BAND_YELLOW, BAND_OTHER)).astype(np.int32)
+    shape = np.where(band_mask(lam_nm, blue), BACK_BIBS, BACK_YIYS).astype(np.int32)
     led = led_bin_power(led_spectrum, lam_nm, source)
     cdf = np.cumsum(led)
     cdf[-1] = 1.0
@@ -670,7 +687,7 @@ def spectral_tables(model: SpectralPlateModel | None, plate: PhosphorPlate | Non
     if model is not None:
         elastic, converted, pdf = model_on_bins(model, plate)
         ph = _photon_tis(elastic, converted, pdf[None, None], lam_nm, lam_nm, model.step_nm)  # (2, I, K, 2)
-        # rows (g, k) → [elastic R, elastic T, converted R, converted T]
+        # rows (g, k) → PHOTON_CHANNELS (ph: side (SIDES order: reflection, transmission), g, k, elastic/converted)
         tis = np.stack([ph[0, :, :, 0], ph[1, :, :, 0], ph[0, :, :, 1], ph[1, :, :, 1]], axis=-1).reshape(-1, 4)
         # the model has ≤ 1 photon out per photon in at its excitations; interpolation between two excitations
         # can exceed it by rounding-level amounts (the harmonic mean of a mixed pdf row is not linear): cap

@@ -14,7 +14,7 @@ import numpy as np
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
 from bsdfkit.raytrace import kernel, sampling
-from bsdfkit.raytrace.effects import Effects, kernel_params, scene_effects
+from bsdfkit.raytrace.effects import Effects, KernelParams, kernel_params, scene_effects
 from bsdfkit.raytrace.programs import cached_program
 from bsdfkit.raytrace.scene import (
     Scene,
@@ -101,6 +101,7 @@ def trace(
         params = jax.tree_util.tree_map(jax.numpy.asarray, kernel_params(scene, eff))
         key_words = jax.random.key_data(jax.random.key(seed)).astype(jax.numpy.uint32)
         compiled = compiled_kernel(eff, lanes, width, _signature(params), n_dev)
+        leaves = tuple(jax.tree_util.tree_leaves(params))
         compile_s = time.perf_counter() - t0
         starts = list(range(0, rays, chunk))
         # one call traces n_dev chunks, one per device; a call is dispatched before the previous one is read
@@ -123,7 +124,7 @@ def trace(
         for group in calls:
             first = np.asarray(group + [rays] * (n_dev - len(group)), np.uint32)
             n_valid = np.asarray([min(chunk, rays - g) for g in group] + [0] * (n_dev - len(group)), np.int32)
-            pending.append((compiled(params, key_words, first, n_valid), min(group[-1] + chunk, rays)))
+            pending.append((compiled(leaves, key_words, first, n_valid), min(group[-1] + chunk, rays)))
             if len(pending) == 2:
                 absorb(*pending.pop(0))
         for item in pending:
@@ -206,7 +207,8 @@ def emission_width(chunk: int) -> int:
     return max(1024, 1 << max(chunk - 1, 1).bit_length())
 
 
-def _signature(params) -> tuple:
+def _signature(params: KernelParams) -> tuple:
+    """The tree structure of ``params`` and the (shape, dtype) of its leaves: what a compiled kernel depends on."""
     leaves, treedef = jax.tree_util.tree_flatten(params)
     return treedef, tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
 
@@ -240,14 +242,17 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
     Returns
     -------
     callable
-        The compiled program ``(params, key_words, starts, n_valid) → dict of arrays``.
+        The compiled program ``(leaves, key_words, starts, n_valid) → dict of arrays``; ``leaves`` is the tuple
+        of the parameters' leaves (``jax.tree_util.tree_leaves``): the exported program's calling convention
+        holds no :class:`KernelParams` (``jax.export`` serialises only the pytree types it knows).
     """
     treedef, shapes = signature
     mesh = jax.sharding.Mesh(np.asarray(jax.local_devices()[:n_devices]), ("chunks",))
     replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
     split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("chunks"))
 
-    def per_device(params, key_words, starts, n_valid):
+    def per_device(leaves, key_words, starts, n_valid):
+        params = jax.tree_util.tree_unflatten(treedef, leaves)
         out = kernel.trace_chunk(params, key_words, starts[0], n_valid[0], effects=effects, lanes=lanes,
                                  chunk=width)
         return jax.tree_util.tree_map(lambda a: a[None], out)
@@ -255,8 +260,7 @@ def compiled_kernel(effects: Effects, lanes: int, width: int, signature: tuple, 
     spec = jax.sharding.PartitionSpec
     program = jax.jit(jax.shard_map(per_device, mesh=mesh, in_specs=(spec(), spec(), spec("chunks"), spec("chunks")),
                                     out_specs=spec("chunks"), check_vma=False))
-    abstract = jax.tree_util.tree_unflatten(treedef, [jax.ShapeDtypeStruct(s, d, sharding=replicated)
-                                                      for s, d in shapes])
+    abstract = tuple(jax.ShapeDtypeStruct(s, d, sharding=replicated) for s, d in shapes)
     args = (abstract, jax.ShapeDtypeStruct((2,), "uint32", sharding=replicated),
             jax.ShapeDtypeStruct((n_devices,), "uint32", sharding=split),
             jax.ShapeDtypeStruct((n_devices,), "int32", sharding=split))

@@ -2,7 +2,7 @@
 
 The bundled measurement has incidences 5, 45 and 56 deg; the cavity lights the plate from 0 to 90 deg. The plate
 keeps the measured TIS where measured and takes the fitted models' incidence dependence elsewhere
-(:func:`bsdfkit.raytrace.plate_from_scan.extrapolated_tis`), so the tracer never clamps.
+(:func:`bsdfkit.pipeline.plate_from_scan.extrapolated_tis`), so the tracer never clamps.
 """
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
+from bsdfkit.pipeline.plate_from_scan import EXTRAPOLATED_NOTE, extrapolated_tis, plate_from_scan
 from bsdfkit.raytrace.plate import CHANNELS, PhosphorPlate, plate_tables
-from bsdfkit.raytrace.plate_from_scan import EXTRAPOLATED_NOTE, extrapolated_tis, plate_from_scan
 from bsdfkit.reduction.tis import tis_table
 from bsdfkit.simulation import truth as synthetic
 from bsdfkit.simulation.virtual_goniometer import BLUE, YELLOW, VirtualGoniometer, cl830_truth

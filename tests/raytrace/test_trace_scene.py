@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -127,32 +128,52 @@ def test_unknown_section_and_missing_section(tmp_path):
         loads_scene("[cavity\n", "s.toml")
 
 
-def test_phosphor_from_recipe_is_resolved_by_the_plate_builder(tmp_path, monkeypatch):
-    import bsdfkit.raytrace.plate_from_scan as plate_source
+FROM_RECIPE = EXAMPLE.replace('kind = "exit"                # all light reaching the top leaves the module',
+                              'kind = "phosphor"\nfrom = "fitting/cl830.toml"')
 
-    text = EXAMPLE.replace('kind = "exit"                # all light reaching the top leaves the module',
-                           'kind = "phosphor"\nfrom = "fitting/cl830.toml"')
+
+def test_phosphor_from_recipe_is_resolved_by_the_callers_plate_resolver(tmp_path):
     calls = []
 
     def from_recipe(path):
         calls.append(path)
         return PhosphorPlate.constant(TABLE2, name="from recipe")
 
-    monkeypatch.setattr(plate_source, "plate_from_recipe", from_recipe)
-    s = loads_scene(text, tmp_path / "s.toml")
+    s = loads_scene(FROM_RECIPE, tmp_path / "s.toml", plate_resolver=from_recipe)
     assert s.top.plate.name == "from recipe" and s.top.plate_recipe == "fitting/cl830.toml"
-    assert str(calls[0]).endswith("cl830.toml")
+    assert calls == [Path("fitting/cl830.toml")]  # resolved against the scene's folder (not there: as written)
     assert tomllib.loads(dumps_scene(s))["top"]["from"] == "fitting/cl830.toml"
+    # a sweep point reuses the plate: no second resolution, none needed
+    assert with_values(s, {"cavity.height_mm": 20.0}).top.plate is s.top.plate and len(calls) == 1
+
+
+def test_a_recipe_plate_without_a_resolver_is_refused_in_one_line_naming_top_from(tmp_path):
+    with pytest.raises(InputError) as err:
+        loads_scene(FROM_RECIPE, tmp_path / "s.toml")
+    msg = str(err.value)
+    assert "\n" not in msg and "top.from" in msg and "s.toml" in msg and "fitting/cl830.toml" in msg
+    assert "plate_resolver" in msg  # what would be accepted
 
 
 def test_a_recipe_without_a_measurement_gives_one_clear_error(tmp_path):
-    import bsdfkit.raytrace.plate_from_scan as plate_source
+    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
 
     (tmp_path / "r.toml").write_text('[recipe]\nname = "x"\n')
     with pytest.raises(InputError, match="recipe.measurement"):
-        plate_source.plate_from_recipe(tmp_path / "r.toml")
+        plate_from_recipe(tmp_path / "r.toml")
     with pytest.raises(InputError, match="recipe not found"):
-        plate_source.plate_from_recipe(tmp_path / "missing.toml")
+        plate_from_recipe(tmp_path / "missing.toml")
+
+
+def test_the_trace_verb_resolves_a_recipe_plate(tmp_path, capsys):
+    """``bsdfkit trace`` passes the pipeline's resolver: a faulty recipe is reported as the recipe's fault."""
+    from bsdfkit.cli.main import main
+
+    (tmp_path / "r.toml").write_text('[recipe]\nname = "x"\n')
+    (tmp_path / "s.toml").write_text(FROM_RECIPE.replace("fitting/cl830.toml", "r.toml"))
+    assert main(["trace", str(tmp_path / "s.toml"), "--rays", "100"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "recipe.measurement" in err and "r.toml" in err
 
 
 def test_plate_json_round_trip_with_every_distribution_kind(tmp_path):

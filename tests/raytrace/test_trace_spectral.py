@@ -9,6 +9,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -133,8 +134,7 @@ def test_photons_never_increase_at_a_plate_interaction():
     L = 20_000
     rng = np.random.default_rng(5)
     with x64():
-        params = {k: v for k, v in kernel_params(s, eff).items()}
-        sp = {k: jnp.asarray(v) for k, v in params["spectral"].items()}
+        params = jax.tree_util.tree_map(jnp.asarray, kernel_params(s, eff))
         u = [jnp.asarray(rng.random(L)) for _ in range(8)]
         k = jnp.asarray(rng.integers(0, wl.size, L), jnp.int32)
         w = jnp.asarray(rng.random(L) + 0.05)
@@ -142,9 +142,9 @@ def test_photons_never_increase_at_a_plate_interaction():
         j = jnp.zeros(L, jnp.int32)
         key = jnp.zeros(2, jnp.uint32)
         w_out, absorbed, conversions, forward, new_k, channel, g = kernel._spectral_channel(
-            {"spectral": sp}, key, u, w, k, t, j)
+            params, key, u, w, k, t, j)
     stokes = conversions[0]
-    lam = np.asarray(params["spectral"]["lam"])
+    lam = np.asarray(params.spectral.lam)
     w, w_out, k, new_k = (np.asarray(a) for a in (w, w_out, k, new_k))
     photons_in, photons_out = w * lam[k], w_out * lam[new_k]
     assert np.all(photons_out <= photons_in * (1 + 1e-15))

@@ -1,9 +1,12 @@
 """The tracer's phosphor plate from a measurement: the toolkit's own TIS and BSDF fits per interaction and side.
 
-This is where a scene's ``[top] from = "fitting/<recipe>.toml"`` is resolved, and where the main job builds the
-plate it traces. The plate is made of the two-arc TIS of each interaction (bibs, biys, yiys), side and measured
-incidence, with angular shapes from lambert+gaussian fits for the elastic interactions and a Lambertian
-distribution for the converted light (§4.2 of [Power-budget], ``docs/references.md``).
+This is where a scene's ``[top] from = "fitting/<recipe>.toml"`` is resolved (:func:`plate_from_recipe`, the
+:data:`bsdfkit.raytrace.scene.PlateResolver` that ``bsdfkit trace`` and ``bsdfkit sweep`` pass to the scene
+parser: reading, calibrating, reducing and fitting a measurement is pipeline work, which the tracer never
+imports), and where the main job builds the plate it traces. The plate is made of the two-arc TIS of each
+interaction (bibs, biys, yiys), side and measured incidence, with angular shapes from lambert+gaussian fits for
+the elastic interactions and a Lambertian distribution for the converted light (§4.2 of [Power-budget],
+``docs/references.md``).
 
 Beyond the measured incidences (a goniometer measures a few, e.g. 5°, 45° and 56° in [Power-budget] §2, while
 the cavity lights the plate from 0° to grazing) the plate's grid is extended from the fitted models
@@ -144,7 +147,8 @@ def plate_from_scan(scan: xr.Dataset, tis: xr.Dataset | None = None, name: str =
 
 
 def plate_from_recipe(recipe: str | Path) -> PhosphorPlate:
-    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``).
+    """The phosphor plate of a recipe's measurement (for scenes with ``[top] from = "fitting/<recipe>.toml"``;
+    a :data:`bsdfkit.raytrace.scene.PlateResolver`).
 
     Parameters
     ----------
