@@ -541,7 +541,11 @@ print(base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, ds.sizes["record
 @pytest.mark.slow
 def test_saving_a_large_dataset_needs_about_one_matrix_more(tmp_path):
     """netcdf.save stores the record × wavelength matrices one at a time: writing six 32 MB matrices raises the
-    peak by at most 2.5 of them (1.7 measured; in one xarray call every encoded copy existed at once: 6.7)."""
+    peak by at most 2.5 of them (1.0-1.5 measured; in one xarray call every encoded copy existed at once: 6.0).
+
+    The matrices hold a repeating ramp, not random numbers: xarray's encoded copies are as large whatever the
+    values, but zlib spends about 7× longer on incompressible doubles (measured 12-14 s against 1.8 s for the
+    save), and the ramp, distinct at every position of a 1021-element period, still checks the round trip."""
     out = tmp_path / "big.nc"
     measure = f"""
 import resource
@@ -550,7 +554,8 @@ from bsdfkit.io import netcdf
 n_rec, n_wl = 40_000, 100
 rng = np.random.default_rng(1)
 names = ["bsdf", "bsdf_std", "noise_floor", "bsdf_bispectral", "bsdf_bispectral_std", "noise_floor_bispectral"]
-ds = xr.Dataset({{k: (("record", "wavelength"), rng.random((n_rec, n_wl))) for k in names}},
+ramp = np.arange(n_rec * n_wl).reshape(n_rec, n_wl) % 1021 / 1024.0
+ds = xr.Dataset({{k: (("record", "wavelength"), ramp + j) for j, k in enumerate(names)}},
                 coords={{"wavelength": np.linspace(380.0, 780.0, n_wl), "theta_s": ("record", rng.random(n_rec))}})
 netcdf.save(ds.isel(record=slice(0, 10)), {str(tmp_path / "warm.nc")!r})
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
