@@ -509,16 +509,17 @@ def test_streamed_reader_memory_is_a_small_multiple_of_the_file(tmp_path):
     """Peak RSS of read_table above the interpreter that has read a tiny table (bsdfkit and its lazy imports
     loaded) stays ≤ 3× the file (a 20 MB table: 2.4× with the streaming reader, 22× before it)."""
     path = tmp_path / "large.csv"
-    code = f"""
-import numpy as np
-ts, ps, lam = np.arange(0.0, 90.0), np.arange(0.0, 360.0, 5.0), np.linspace(380.0, 780.0, 98)
-T, P, L = np.meshgrid(ts, ps, lam, indexing="ij")
-f = 0.1 + 0.01 * np.cos(np.radians(T)) * (L / 550.0)
-np.savetxt({str(path)!r}, np.column_stack([np.full(T.size, 10.0), T.ravel(), P.ravel(), L.ravel(), f.ravel()]),
-           delimiter=",", fmt=["%g", "%g", "%g", "%.6g", "%.7e"], header="theta_i,theta_s,phi_s,wavelength,brdf",
-           comments="")
-"""
-    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+    # the lines np.savetxt(fmt=["%g", "%g", "%g", "%.6g", "%.7e"]) writes for θs × φs × λ (90 × 72 × 98), byte for
+    # byte, but each distinct number formatted once (10x faster than savetxt's per-row formatting)
+    ts, ps, lam = np.arange(0.0, 90.0), np.arange(0.0, 360.0, 5.0), np.linspace(380.0, 780.0, 98)
+    f = 0.1 + 0.01 * np.cos(np.radians(ts))[:, None] * (lam / 550.0)  # θs × λ: the brdf repeats over φs
+    lam_txt = ["%.6g" % x for x in lam]
+    with open(path, "w") as out:
+        out.write("theta_i,theta_s,phi_s,wavelength,brdf\n")
+        for i, t in enumerate(ts):
+            tail = [f"{w},{v:.7e}\n" for w, v in zip(lam_txt, f[i])]
+            for p in ps:
+                out.write("".join(f"10,{t:g},{p:g}," + x for x in tail))
     tiny = write(tmp_path / "tiny.csv", ["theta_i,theta_s,phi_s,wavelength,brdf", "10,5,0,550,0.1", "10,10,0,550,0.2"])
     measure = f"""
 import resource
