@@ -61,10 +61,13 @@ def _solve_eps(s0, r):
 
 
 def _integrate_model(theta_i, fn, radii, interaction="bibs"):
+    """TIS on the default quadrature grid (256 x 400, as tis_from_profile): the closed forms below are met to
+    rounding (Lambertian) and within 8.4e-6 (Gaussian lobe), 7.2e-6 (ABG), errors set by the arcs' sampling: on a
+    512 x 2000 grid (5-10x slower) they were 8.3e-6 and 7.1e-6."""
     ts, ps, arc = _dense_arcs(theta_i, radii)
     d = sample_direction(np.radians(ts), np.radians(ps))
     prof = _profile(theta_i, ts, ps, arc, fn(d), interaction=interaction)
-    return angular.Hemisphere.from_profile(prof).tis("log", n_psi=512, n_r=2000)
+    return angular.Hemisphere.from_profile(prof).tis("log", n_psi=256, n_r=400)
 
 
 def test_lambertian_integrates_to_rho():
