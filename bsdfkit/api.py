@@ -24,15 +24,15 @@ if TYPE_CHECKING:  # the names of the signatures only; each function imports its
     from bsdfkit.fit.spectrum import fit_spectrum
     from bsdfkit.measurement.describe import describe
     from bsdfkit.pipeline.recipe import run
-    from bsdfkit.raytrace import TraceResult, load_scene
+    from bsdfkit.raytrace import TraceResult
     from bsdfkit.raytrace.scene import Scene
     from bsdfkit.reduction.budget import InteractionTable
     from bsdfkit.tables.export import ExportResult, ExportSettings, FileSummary
 
 #: public names that are another module's function, imported on first use (PEP 562) so that ``bsdfkit.ingest``
-#: loads neither JAX nor matplotlib: ``run`` pulls in the pipeline and its report, ``load_scene`` the tracer
+#: loads neither JAX nor matplotlib: ``run`` pulls in the pipeline and its report
 _REEXPORTS = {"describe": "bsdfkit.measurement.describe", "fit_spectrum": "bsdfkit.fit.spectrum",
-              "run": "bsdfkit.pipeline.recipe", "load_scene": "bsdfkit.raytrace"}
+              "run": "bsdfkit.pipeline.recipe"}
 
 
 def __getattr__(name: str) -> Any:
@@ -316,11 +316,30 @@ def trace(scene: Scene | str | Path, rays: int, seed: int = 0, **options: Any) -
     TraceResult
         Extracted power [W], budget, tallies and timings.
     """
-    from bsdfkit.raytrace import load_scene
     from bsdfkit.raytrace import trace as _trace
     from bsdfkit.raytrace.scene import Scene
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     return _trace(scene, rays, seed, **options)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """A scene TOML file as a :class:`bsdfkit.raytrace.scene.Scene`; a phosphor top given as ``from =
+    "<recipe>.toml"`` gets the plate of that fitting recipe's measurement (read, calibrated and fitted).
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene TOML file.
+
+    Returns
+    -------
+    Scene
+        The scene, validated.
+    """
+    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
+    from bsdfkit.raytrace import load_scene as _load_scene
+
+    return _load_scene(path, plate_resolver=plate_from_recipe)
 

@@ -56,3 +56,14 @@ def test_trace_from_a_scene_path():
     result = bsdfkit.trace(ROOT / "fitting" / "scenes" / "example.toml", rays=20_000, seed=1)
     assert 0.0 < result.LER < 1.0
     assert abs(result.ledger_error) < 1e-9
+
+
+def test_load_scene_builds_a_recipe_plate_as_the_trace_verb_does():
+    """A scene whose phosphor top names a fitting recipe (`from = ...`) loads through the API with the plate of
+    that recipe's measurement: the plate the pipeline module builds from the same recipe, channel for channel."""
+    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
+
+    scene = bsdfkit.load_scene(ROOT / "fitting" / "scenes" / "cl830_device.toml")
+    direct = plate_from_recipe(ROOT / "fitting" / "cl830.toml")
+    assert scene.top.kind == "phosphor"
+    assert scene.top.plate == direct

@@ -1,7 +1,8 @@
 """The head of a fitting recipe: its name and the measurement folder it reduces.
 
-A recipe's ``[recipe]`` table is read in two places: by the main job, which parses the whole recipe, and by the
-tracer, whose scenes may take their phosphor plate from a recipe (``[top] from = "fitting/<recipe>.toml"``).
+A recipe's ``[recipe]`` table is read in two places: by the main job, which parses the whole recipe, and by
+:func:`bsdfkit.pipeline.plate_from_scan.plate_from_recipe`, the plate resolver of scenes whose phosphor top comes
+from a recipe (``[top] from = "fitting/<recipe>.toml"``).
 Both read it here, so a recipe's measurement resolves, and a faulty head is refused, the same way in both.
 """
 from __future__ import annotations
