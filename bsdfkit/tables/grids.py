@@ -337,7 +337,10 @@ def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np
         ρmax in direction cosines [-], broadcast shape of the inputs.
     """
     b = np.sin(np.radians(np.asarray(theta_i_deg, dtype=np.float64)))
-    psi = np.radians(np.asarray(sample_azimuth_deg, dtype=np.float64))
+    # ψ reduced to [−180°, 180°) first: mirror azimuths ±ψ (a plane-symmetric table's, whose table azimuths are
+    # offset by its zero azimuth) then meet the same edge to the last bit (cos is even), so a node on the edge
+    # is inside on both sides or on neither (cos(450°) and cos(−90°) differ by 3e-16)
+    psi = np.radians(np.remainder(np.asarray(sample_azimuth_deg, dtype=np.float64) + 180.0, 360.0) - 180.0)
     return unit_disk_reach(b * np.cos(psi), b * b)
 
 
