@@ -179,10 +179,16 @@ def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[s
     values = settings.node_values
     info["values"] = VALUES_LABEL[values]
     if values == "cell":
-        return grids.harvey_shack_cell_grid(fn, theta, sides, axes)
-    if values == "edge":
-        return grids.harvey_shack_edge_grid(fn, theta, sides, axes)
-    return grids.harvey_shack_grid(fn, theta, sides, axes)
+        grid = grids.harvey_shack_cell_grid(fn, theta, sides, axes)
+    elif values == "edge":
+        grid = grids.harvey_shack_edge_grid(fn, theta, sides, axes)
+    else:
+        grid = grids.harvey_shack_grid(fn, theta, sides, axes)
+    if info.get("mode") == "auto":  # as many digits as the TIS tolerance needs (a round-off budget far below it)
+        digits = grids.value_digits(settings.grid_tolerance.tis_rtol)
+        info["value_digits"] = digits
+        grid = grid.copy(data=grids.quantize(grid.values, f".{digits}g"))
+    return grid
 
 
 #: ``grid['values']`` of an export by ``node_values`` (and back: the re-check rewrites with the same values)

@@ -148,11 +148,11 @@ class ExportSettings:
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
-    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``point`` samples (default), ``edge``
-    #: (point samples, each row's last node inside the disk holding its edge value,
-    #: :func:`grids.harvey_shack_edge_values`) or ``cell`` averages (:func:`grids.harvey_shack_cell_grid`; auto axes
-    #: then refined by the lobe's peak only)
-    node_values: str = "point"
+    #: what a Harvey–Shack table (TracePro, ASAP-style) holds at its nodes: ``edge`` (default: point samples, each
+    #: row's last node inside the disk holding its edge value, :func:`grids.harvey_shack_edge_values`), ``point``
+    #: samples or ``cell`` averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the lobe's peak
+    #: only)
+    node_values: str = "edge"
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
