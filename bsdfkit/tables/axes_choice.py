@@ -151,10 +151,11 @@ def harvey_shack_axes(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[st
 def harvey_shack_table(fn: BsdfFn, theta: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
                        info: dict[str, Any], settings: Any) -> xr.DataArray:
     """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``
-    (:data:`VALUES_LABEL`): ``settings.node_values`` ``point`` (default: point samples), ``edge`` (point samples,
-    each row's last node inside the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`) or
+    (:data:`VALUES_LABEL`): ``settings.node_values`` ``edge`` (default: point samples, each row's last node inside
+    the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`), ``point`` (point samples) or
     ``cell`` (cell averages: the table's TIS by its format's rule is the source's on any axes,
-    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`).
+    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`). On auto axes the values are printed with the digits the TIS
+    tolerance needs (:func:`bsdfkit.tables.grids.value_digits`, recorded in ``info['value_digits']``).
 
     Parameters
     ----------

@@ -1500,7 +1500,8 @@ def auto_harvey_shack_axes(
     Starts from ρ = 0, 1e-3·2^k (below 0.25), then 0.25, 0.5, … 2, and
     :data:`MIN_AZIMUTHS` uniform azimuths (15°), and refines
     (:func:`_refine_polar`): radial segments are bisected where needed (down to 1e-7 in ρ), the azimuth
-    step halved. One pair of axes serves every side and incidence (as TracePro requires). None when meeting
+    step halved; then the radial nodes the table does not need are removed (:func:`_coarsened_radial`; not for cell
+    averages). One pair of axes serves every side and incidence (as TracePro requires). None when meeting
     the tolerance takes more than ``max_nodes`` radial × azimuth nodes.
 
     Parameters
