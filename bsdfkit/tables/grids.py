@@ -1310,7 +1310,7 @@ COARSEN_PEAK_SHARE = 0.5
 
 
 def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimuth: NDArray[np.float64],
-                      tolerance: GridTolerance) -> NDArray[np.float64]:
+                      tolerance: GridTolerance, max_step: float) -> NDArray[np.float64]:
     """The refined radial nodes without those the table does not need (coarsening after refinement).
 
     Bisection only adds nodes: the starting nodes a narrow lobe would need (ρ = 1e-3·2^k) and the intermediate
@@ -1322,7 +1322,9 @@ def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimu
     ``peak_rtol`` and (iii) no midpoint of the kept segments in the lobe's core holds more than (1 + ``peak_rtol``)
     × the kept table's peak (the refinement's own peak criterion). The peak is taken as the export's check of the
     written file takes it: over :func:`lobe_core` of the finished values, without a row's last node inside the
-    domain when it holds a finished (edge) value.
+    domain when it holds a finished (edge) value. No segment grows wider than ``max_step``, the start grid's
+    (the refinement checked no wider one; and the engine behind ``bsdfkit read`` needs records along every spoke:
+    a constant source left with the specular node alone is read as scattered records and fails its re-check).
     """
     f, inside = problem.evaluate(radial, azimuth)
 
@@ -1346,6 +1348,8 @@ def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimu
 
     def acceptable(keep: NDArray[np.bool_]) -> bool:
         r = radial[keep]
+        if np.max(np.diff(r)) > max_step * (1.0 + 1e-12):
+            return False
         finished = problem.done(f[..., keep], r, azimuth)
         core, top = peak(keep, finished)
         if not np.all(top >= floor) or change_of(keep, finished) > budget:
@@ -1479,6 +1483,10 @@ class _NodeValues:
         return out
 
 
+#: Largest radial step of the Harvey–Shack start grid (ρ = 0.25, 0.5, … 2), which coarsening never exceeds
+COARSE_STEP = 0.25
+
+
 def auto_harvey_shack_axes(
     bsdf_fn: BsdfFn,
     theta_i_deg: Sequence[float],
@@ -1549,12 +1557,12 @@ def auto_harvey_shack_axes(
         return np.swapaxes(table, -1, -2)
 
     problem = _PolarProblem(evaluate, quad, lambda r: r, azimuth_midpoints_deg, edges if edge_values else None)
-    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, 0.25),
+    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, COARSE_STEP),
                            np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), tolerance,
                            _RefineLimits(1e-7, int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average))
     if chosen is None:
         return None
-    radial = chosen[0] if cell_average else _coarsened_radial(problem, chosen[0], chosen[1], tolerance)
+    radial = chosen[0] if cell_average else _coarsened_radial(problem, chosen[0], chosen[1], tolerance, COARSE_STEP)
     return HarveyShackAxes(_tidy(radial), _tidy(chosen[1]), zero_azimuth_deg)
 
 
