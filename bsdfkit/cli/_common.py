@@ -136,9 +136,9 @@ def add_grid_arguments(p: Any, tis_tolerance_help: str) -> None:
                    help="auto grid: largest miss of the table at its cell midpoints, relative to the lobe peak "
                         "(default 0.01); also the limit of the peak re-check of the written file")
     # the choices are bsdfkit.tables.export.NODE_VALUES (not imported here: that module loads numpy)
-    p.add_argument("--node-values", default="point", choices=("point", "edge", "cell"),
-                   help="TracePro, ASAP-style tables: point samples of the source (default), edge (point samples, "
-                        "each row's last node inside the disk the value that makes the strip up to the disk's edge "
-                        "integrate as the source does: smaller auto grids) or cell averages (the table's TIS by its "
+    p.add_argument("--node-values", default="edge", choices=("point", "edge", "cell"),
+                   help="TracePro, ASAP-style tables: edge (default: point samples, each row's last node inside the "
+                        "disk the value that makes the strip up to the disk's edge integrate as the source does: "
+                        "smaller auto grids), point samples of the source, or cell averages (the table's TIS by its "
                         "format's rule is the source's on any axes; --grid auto then refines by the lobe's peak only; "
                         "docs/exports.md, Grid resolution)")

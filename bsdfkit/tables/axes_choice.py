@@ -152,10 +152,11 @@ def harvey_shack_axes(fn: BsdfFn, theta_deg: NDArray[np.float64], sides: Sequenc
 def harvey_shack_table(fn: BsdfFn, theta_deg: NDArray[np.float64], sides: Sequence[str], axes: grids.HarveyShackAxes,
                        info: dict[str, Any], settings: Any) -> xr.DataArray:
     """The values a Harvey–Shack writer (TracePro, ASAP-style) puts on its axes, recorded in ``info['values']``
-    (:data:`VALUES_LABEL`): ``settings.node_values`` ``point`` (default: point samples), ``edge`` (point samples,
-    each row's last node inside the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`) or
+    (:data:`VALUES_LABEL`): ``settings.node_values`` ``edge`` (default: point samples, each row's last node inside
+    the disk its edge value, :func:`bsdfkit.tables.grids.harvey_shack_edge_values`), ``point`` (point samples) or
     ``cell`` (cell averages: the table's TIS by its format's rule is the source's on any axes,
-    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`).
+    :func:`bsdfkit.tables.grids.harvey_shack_cell_grid`). On auto axes the values are printed with the digits the TIS
+    tolerance needs (:func:`bsdfkit.tables.grids.value_digits`, recorded in ``info['value_digits']``).
 
     Parameters
     ----------
@@ -180,10 +181,16 @@ def harvey_shack_table(fn: BsdfFn, theta_deg: NDArray[np.float64], sides: Sequen
     values = settings.node_values
     info["values"] = VALUES_LABEL[values]
     if values == "cell":
-        return grids.harvey_shack_cell_grid(fn, theta_deg, sides, axes)
-    if values == "edge":
-        return grids.harvey_shack_edge_grid(fn, theta_deg, sides, axes)
-    return grids.harvey_shack_grid(fn, theta_deg, sides, axes)
+        grid = grids.harvey_shack_cell_grid(fn, theta_deg, sides, axes)
+    elif values == "edge":
+        grid = grids.harvey_shack_edge_grid(fn, theta_deg, sides, axes)
+    else:
+        grid = grids.harvey_shack_grid(fn, theta_deg, sides, axes)
+    if info.get("mode") == "auto":  # as many digits as the TIS tolerance needs (a round-off budget far below it)
+        digits = grids.value_digits(settings.grid_tolerance.tis_rtol)
+        info["value_digits"] = digits
+        grid = grid.copy(data=grids.quantize(grid.values, f".{digits}g"))
+    return grid
 
 
 #: ``grid['values']`` of an export by ``node_values`` (and back: the re-check rewrites with the same values)

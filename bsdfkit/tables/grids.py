@@ -69,6 +69,7 @@ __all__ = [
     "auto_specular_axes",
     "azimuth_midpoints_deg",
     "quantize",
+    "value_digits",
     "harvey_shack_cell_grid",
     "harvey_shack_grid",
     "harvey_shack_row_weights",
@@ -337,7 +338,10 @@ def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np
         ρmax in direction cosines [-], broadcast shape of the inputs.
     """
     b = np.sin(np.radians(np.asarray(theta_i_deg, dtype=np.float64)))
-    psi = np.radians(np.asarray(sample_azimuth_deg, dtype=np.float64))
+    # ψ reduced to [−180°, 180°) first: mirror azimuths ±ψ (a plane-symmetric table's, whose table azimuths are
+    # offset by its zero azimuth) then meet the same edge to the last bit (cos is even), so a node on the edge
+    # is inside on both sides or on neither (cos(450°) and cos(−90°) differ by 3e-16)
+    psi = np.radians(np.remainder(np.asarray(sample_azimuth_deg, dtype=np.float64) + 180.0, 360.0) - 180.0)
     return unit_disk_reach(b * np.cos(psi), b * b)
 
 
@@ -581,7 +585,7 @@ EDGE_ORDER = 16
 
 def harvey_shack_edge_values(
     values: ArrayLike, bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str,
-    axes: HarveyShackAxes, order: int = EDGE_ORDER,
+    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: dict | None = None,
 ) -> NDArray[np.float64]:
     """Point samples of a Harvey–Shack table with each row's last node inside the disk replaced by its *edge value*.
 
@@ -593,6 +597,9 @@ def harvey_shack_edge_values(
         The source [1/sr], incidences [deg], sides and axes the table was sampled with.
     order
         Gauss–Legendre points along each row's edge strip.
+    strips
+        Memo of the strips' integrals by (incidence, azimuth, strip start), filled here: the auto grid asks for the
+        edge values of many candidate axes that share most rows and strips.
 
     Returns
     -------
@@ -629,18 +636,28 @@ def harvey_shack_edge_values(
             continue
         j = last[rows]
         a, b, r_j = rho[j - 1], rmax[rows], rho[j]
-        r = a[:, None] + (b - a)[:, None] * x[None, :]
-        psi_s = np.radians(az[rows] + zero)
-        beta = frames.beta0(np.radians(theta)) + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None]
-        norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
-        beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
-        directions = frames.direction_from_beta(beta.reshape(-1, 2))
+        keys = [(float(theta), float(az[k]), float(a_)) for k, a_ in zip(rows, a)]
+        known = strips if strips is not None else {}
+        new = np.array([key not in known for key in keys], dtype=bool)
+        if new.any():
+            an, bn = a[new], b[new]
+            r = an[:, None] + (bn - an)[:, None] * x[None, :]
+            psi_s = np.radians(az[rows[new]] + zero)
+            beta = (frames.beta0(np.radians(theta))
+                    + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None])
+            norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
+            beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
+            directions = frames.direction_from_beta(beta.reshape(-1, 2))
+            integrals = np.stack([(bn - an) * np.sum(evaluate_bsdf(bsdf_fn, float(theta), side, directions)
+                                                     .reshape(r.shape) * r * w[None, :], axis=1)
+                                  for side in sides])  # (side, row)
+            for i, key in enumerate(k for k, n in zip(keys, new) if n):
+                known[key] = integrals[:, i]
+        strip = np.stack([known[key] for key in keys], axis=-1)  # (side, row)
         c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
         c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
-        for s, side in enumerate(sides):
-            f = evaluate_bsdf(bsdf_fn, float(theta), side, directions).reshape(r.shape)
-            strip = (b - a) * np.sum(f * r * w[None, :], axis=1)
-            out[s, t, j, rows] = np.maximum((strip - out[s, t, j - 1, rows] * c_prev) / c_last, 0.0)
+        for s in range(len(sides)):
+            out[s, t, j, rows] = np.maximum((strip[s] - out[s, t, j - 1, rows] * c_prev) / c_last, 0.0)
     return out
 
 
@@ -1040,6 +1057,35 @@ def bulk_marking(indicators: ArrayLike, share: float = BULK_SHARE) -> NDArray[np
     return flag
 
 
+#: Share of an auto grid's TIS tolerance that printing its values may take (:func:`value_digits`)
+PRINT_SHARE = 0.01
+
+
+def value_digits(tis_rtol: float, most: int = 7) -> int:
+    """Significant digits a table's values need so that printing them moves no TIS by more than
+    :data:`PRINT_SHARE` × ``tis_rtol``.
+
+    Rounding to d significant digits moves each value by at most 0.5·10^(1−d) of itself, so a TIS (a positive
+    weighted sum of the values) by at most as much: d is the smallest with 0.5·10^(1−d) ≤ PRINT_SHARE × tis_rtol
+    (0.005, ``convert``'s default: 5 digits, at most 5e-5; 0.001, ``export``'s: 6 digits), and at most ``most``
+    (the writer's own format).
+
+    Parameters
+    ----------
+    tis_rtol : float
+        The grid's TIS tolerance [1].
+    most : int
+        Digits of the writer's format.
+
+    Returns
+    -------
+    int
+        Significant digits.
+    """
+    need = int(np.ceil(1.0 - np.log10(2.0 * PRINT_SHARE * float(tis_rtol)) - 1e-12))
+    return max(1, min(int(most), need))
+
+
 def quantize(values: ArrayLike, fmt: str) -> NDArray[np.float64]:
     """``values`` as a table writes them with the format spec ``fmt`` and reads them back (float64, same shape):
     the writers' TIS and checks are computed from what the file holds.
@@ -1255,6 +1301,95 @@ def _refine_polar(problem: _PolarProblem, radial: NDArray[np.float64], azimuth: 
     return radial, azimuth
 
 
+#: Share of ``tis_rtol`` that removing radial nodes after the refinement may move any block's TIS
+#: (:func:`_coarsened_radial`)
+COARSEN_TIS_SHARE = 0.25
+#: Share of ``peak_rtol`` by which removing radial nodes may lower a block's peak of the lobe
+#: (:func:`_coarsened_radial`)
+COARSEN_PEAK_SHARE = 0.5
+
+
+def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimuth: NDArray[np.float64],
+                      tolerance: GridTolerance, max_step: float) -> NDArray[np.float64]:
+    """The refined radial nodes without those the table does not need (coarsening after refinement).
+
+    Bisection only adds nodes: the starting nodes a narrow lobe would need (ρ = 1e-3·2^k) and the intermediate
+    nodes of a chase toward a kink or of an edge strip stay although the final grid no longer needs them; on a ρ
+    list shared by every azimuth and incidence each costs a full ring of rows. Interior nodes are removed one at a
+    time (the smallest TIS change first) while (i) no block's TIS (the format's quadrature of the finished table,
+    each candidate with its own edge values) moves by more than :data:`COARSEN_TIS_SHARE` × ``tis_rtol`` from the
+    refined table's, (ii) the peak of the lobe of no block falls by more than :data:`COARSEN_PEAK_SHARE` ×
+    ``peak_rtol`` and (iii) no midpoint of the kept segments in the lobe's core holds more than (1 + ``peak_rtol``)
+    × the kept table's peak (the refinement's own peak criterion). The peak is taken as the export's check of the
+    written file takes it: over :func:`lobe_core` of the finished values, without a row's last node inside the
+    domain when it holds a finished (edge) value. No segment grows wider than ``max_step``, the start grid's
+    (the refinement checked no wider one; and the engine behind ``bsdfkit read`` needs records along every spoke:
+    a constant source left with the specular node alone is read as scattered records and fails its re-check).
+    """
+    f, inside = problem.evaluate(radial, azimuth)
+
+    def peak(keep: NDArray[np.bool_], finished: NDArray) -> tuple[NDArray, NDArray]:
+        """The lobe's core of the finished table on the kept nodes and its peak per block."""
+        ins = inside[..., keep]
+        core = _lobe_core(finished, ins)
+        if problem.finish is not None:  # a row's last node inside holds its edge value, no sample of the source
+            core &= ~(ins & (np.cumsum(ins, axis=-1) == np.sum(ins, axis=-1, keepdims=True)))
+        return core, np.max(np.where(core, finished, 0.0), axis=(-1, -2))
+
+    every = np.ones(radial.size, dtype=bool)
+    done = problem.done(f, radial, azimuth)
+    base = problem.quad(done, radial, azimuth)
+    norm = np.where(np.abs(base) > 0, np.abs(base), 1.0)
+    floor = (1.0 - COARSEN_PEAK_SHARE * tolerance.peak_rtol) * peak(every, done)[1]
+    budget = COARSEN_TIS_SHARE * tolerance.tis_rtol
+
+    def change_of(keep: NDArray[np.bool_], finished: NDArray) -> float:
+        return float(np.max(np.abs(problem.quad(finished, radial[keep], azimuth) - base) / norm))
+
+    def acceptable(keep: NDArray[np.bool_]) -> bool:
+        r = radial[keep]
+        if np.max(np.diff(r)) > max_step * (1.0 + 1e-12):
+            return False
+        finished = problem.done(f[..., keep], r, azimuth)
+        core, top = peak(keep, finished)
+        if not np.all(top >= floor) or change_of(keep, finished) > budget:
+            return False
+        f_mid, in_mid = problem.evaluate(0.5 * (r[:-1] + r[1:]), azimuth)
+        limit = (1.0 + tolerance.peak_rtol) * top[..., None, None]
+        return not bool(np.any(core[..., :-1] & core[..., 1:] & in_mid & (f_mid > limit)))
+
+    candidates = np.arange(1, radial.size - 1)
+    alone = []  # each node's TIS change alone, the finished values of the others as they are (an ordering only)
+    for j in candidates:
+        k = every.copy()
+        k[j] = False
+        alone.append(change_of(k, done[..., k]))
+    order = [int(j) for j in candidates[np.argsort(alone, kind="stable")]]
+    keep = every
+    while order:
+        # each candidate is tried once, in order, in batches at least 3 kept nodes apart: the source is evaluated for
+        # a batch at once (the edge strips and merged midpoints its removals need; a call costs the same for 1 or
+        # 1000 directions), and each removal is then tried on its own
+        position = np.cumsum(keep) - 1
+        batch: list[int] = []
+        for j in order:
+            if all(abs(position[j] - position[b]) >= 3 for b in batch):
+                batch.append(j)
+        order = [j for j in order if j not in batch]
+        k = keep.copy()
+        k[batch] = False
+        problem.done(f[..., k], radial[k], azimuth)
+        kept = np.flatnonzero(keep)
+        ends = [(kept[position[j] - 1], kept[position[j] + 1]) for j in batch]
+        problem.evaluate(np.array([0.5 * (radial[a] + radial[b]) for a, b in ends]), azimuth)
+        for j in batch:
+            k = keep.copy()
+            k[j] = False
+            if acceptable(k):
+                keep = k
+    return radial[keep]
+
+
 def lobe_core(values: ArrayLike, inside: ArrayLike) -> NDArray[np.bool_]:
     """Nodes of a polar table ``values[..., azimuth, radial]`` (radial node 0 = the specular direction) in the
     core of the lobe: along each azimuth row, from the specular node outward up to the first node (exclusive)
@@ -1348,6 +1483,10 @@ class _NodeValues:
         return out
 
 
+#: Largest radial step of the Harvey–Shack start grid (ρ = 0.25, 0.5, … 2), which coarsening never exceeds
+COARSE_STEP = 0.25
+
+
 def auto_harvey_shack_axes(
     bsdf_fn: BsdfFn,
     theta_i_deg: Sequence[float],
@@ -1369,7 +1508,8 @@ def auto_harvey_shack_axes(
     Starts from ρ = 0, 1e-3·2^k (below 0.25), then 0.25, 0.5, … 2, and
     :data:`MIN_AZIMUTHS` uniform azimuths (15°), and refines
     (:func:`_refine_polar`): radial segments are bisected where needed (down to 1e-7 in ρ), the azimuth
-    step halved. One pair of axes serves every side and incidence (as TracePro requires). None when meeting
+    step halved; then the radial nodes the table does not need are removed (:func:`_coarsened_radial`; not for cell
+    averages). One pair of axes serves every side and incidence (as TracePro requires). None when meeting
     the tolerance takes more than ``max_nodes`` radial × azimuth nodes.
 
     Parameters
@@ -1409,18 +1549,21 @@ def auto_harvey_shack_axes(
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)
 
+    strips: dict = {}  # the edge strips' integrals, shared by every candidate grid
+
     def edges(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         table = harvey_shack_edge_values(np.swapaxes(values, -1, -2), bsdf_fn, thetas, sides,
-                                         HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg))
+                                         HarveyShackAxes(tuple(r), tuple(a), zero_azimuth_deg), strips=strips)
         return np.swapaxes(table, -1, -2)
 
     problem = _PolarProblem(evaluate, quad, lambda r: r, azimuth_midpoints_deg, edges if edge_values else None)
-    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, 0.25),
+    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, COARSE_STEP),
                            np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), tolerance,
                            _RefineLimits(1e-7, int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average))
     if chosen is None:
         return None
-    return HarveyShackAxes(_tidy(chosen[0]), _tidy(chosen[1]), zero_azimuth_deg)
+    radial = chosen[0] if cell_average else _coarsened_radial(problem, chosen[0], chosen[1], tolerance, COARSE_STEP)
+    return HarveyShackAxes(_tidy(radial), _tidy(chosen[1]), zero_azimuth_deg)
 
 
 def auto_specular_axes(
