@@ -64,9 +64,11 @@ def test_materialise_is_the_identity():
 def test_lanes_and_chunks_do_not_change_a_single_bit(tmp_path):
     s = plate_scene(tmp_path, spec=0.2)
     ref = full(trace(s, 12_000, seed=11, chunk=12_000, lanes=16384))
-    for chunk, lanes in ((5_000, 256), (3_000, 1024), (12_000, 64), (7_001, 4096)):
+    # each (lanes, emission width) is a compilation (the cost of this test); chunks of 5000 (256 lanes, one loop
+    # level), 12 000 (64 lanes), 7001 (4096 lanes, a short last chunk) at their default widths
+    for chunk, lanes in ((5_000, 256), (12_000, 64), (7_001, 4096)):
         assert full(trace(s, 12_000, seed=11, chunk=chunk, lanes=lanes)) == ref, (chunk, lanes)
-    # a wider kernel than the chunk needs (unused emissions per call) traces the same rays
+    # chunks of 3000 in 1024 lanes, in a wider kernel than the chunk needs (unused emissions per call)
     assert full(trace(s, 12_000, seed=11, chunk=3_000, lanes=1024, width=16384)) == ref
     assert ref["ledger_error"] <= 1e-9
 
@@ -78,12 +80,17 @@ def test_substeps_and_tail_levels_do_not_change_the_sums(tmp_path, monkeypatch):
     with x64():
         params = jax.tree_util.tree_map(jnp.asarray, kernel_params(s, eff))
         key = jax.random.key_data(jax.random.key(3)).astype(jnp.uint32)
-        outs = []
-        for substeps, lanes in ((1, 1024), (2, 1024), (5, 4096), (3, 64)):
-            out = kernel.trace_chunk_jit(params, key, np.uint32(100), np.int32(3000), effects=eff, lanes=lanes,
-                                         chunk=4096, substeps=substeps)
-            outs.append({k: np.asarray(v).tolist() for k, v in out.items() if k != "iterations"})
-    assert all(o == outs[0] for o in outs[1:])
+        outs = {3000: [], 700: []}
+        # a compilation per (substeps, lanes) is the cost, a call is not: each kernel traces 3000 rays (more than
+        # its lanes: refills, then the tail levels 1024/64 or the single level 64) and 700 (1024 lanes hold them
+        # all from the first refill); substeps 1 (no inner loop), 2 and 3
+        for substeps, lanes in ((1, 1024), (2, 1024), (3, 64)):
+            for n in outs:
+                out = kernel.trace_chunk_jit(params, key, np.uint32(100), np.int32(n), effects=eff, lanes=lanes,
+                                             chunk=4096, substeps=substeps)
+                outs[n].append({k: np.asarray(v).tolist() for k, v in out.items() if k != "iterations"})
+    assert all(o == runs[0] for runs in outs.values() for o in runs[1:])
+    assert outs[3000][0] != outs[700][0]
 
 
 def _lobe_reference(key_words, ray, event, pending, b0x, b0y, sigma, dtype, max_attempts=1024):
