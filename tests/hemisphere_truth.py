@@ -33,10 +33,12 @@ class Truth:
         lobe = self.A * np.exp(-dx * dx / (2 * self.sx ** 2) - by * by / (2 * self.sy ** 2))
         return body + lobe
 
-    @functools.cache  # noqa: B019 (a frozen truth: 0.3 s per call on a 2.4M-point grid, asked for again by many tests)
+    @functools.cache  # noqa: B019 (a frozen truth: asked for again by many tests)
     def tis(self, theta_i: float) -> float:
+        # 1024 x 600 nodes: within 5e-14 of a 2048 x 1200 grid (4x the cost) for every truth of the tests, lobes
+        # 0.02-0.15 wide, at 0-89 deg; 512 x 400 is 1.6e-9 off
         x0 = float(np.sin(np.radians(theta_i)))
-        g = polar_grid((x0, 0.0), 2048, 1200)
+        g = polar_grid((x0, 0.0), 1024, 600)
         bx, by = x0 + g.r * np.cos(g.psi), g.r * np.sin(g.psi)
         lobe = self.A * np.exp(-(bx - x0) ** 2 / (2 * self.sx ** 2) - by ** 2 / (2 * self.sy ** 2))
         return self.rho * (1 - self.b / 2) + float(g.w @ lobe)
