@@ -14,6 +14,7 @@ from pathlib import Path
 from bsdfkit.bench.core import Row, Study
 from bsdfkit.raytrace import PhosphorPlate, Top, load_scene, trace, with_values
 from bsdfkit.raytrace.oracles.radiosity import module_radiosity
+from bsdfkit.raytrace.tracer import _sizes
 
 SCENES = Path(__file__).resolve().parents[2] / "fitting" / "scenes"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
@@ -26,6 +27,13 @@ def _example(plate: bool):
 
         scene = replace(scene, top=Top(kind="phosphor", plate=PhosphorPlate.constant(TABLE2, name="Table 2, 45°")))
     return scene
+
+
+def _compile(scene, rays: int) -> None:
+    """Compile the kernel that ``trace(scene, rays)`` runs (its lanes and emission width; the compiled kernels
+    are cached per process) by tracing a few rays through it, so that the timed trace excludes compilation."""
+    width = _sizes(scene, rays, 0, None, None, None)[2]
+    trace(scene, 2000, 0, width=width)
 
 
 def _error(result, oracle: float) -> float:
@@ -47,9 +55,9 @@ def rays(quick: bool) -> Study:
     """
     scene = _example(plate=True)
     oracle = module_radiosity(scene).LER
-    trace(scene, 2000, 0)  # compile outside the timings
     rows = []
     for n in ((10_000, 100_000, 400_000) if quick else (10_000, 100_000, 1_000_000, 4_000_000)):
+        _compile(scene, n)  # outside the timing
         start = time.perf_counter()
         r = trace(scene, n, 7)
         wall = time.perf_counter() - start
@@ -77,14 +85,14 @@ def termination(quick: bool) -> Study:
     oracle = module_radiosity(scene).LER
     n = 100_000 if quick else 1_000_000
     rows = []
-    trace(scene, 2000, 0)
+    _compile(scene, n)
     start = time.perf_counter()
     ref = trace(scene, n, 3)
     rows.append(Row("Russian roulette (unbiased)", _error(ref, oracle), time.perf_counter() - start, n,
                     {"group": "roulette", "bias": ref.LER - oracle}))
     for th in ((0.01, 0.1) if quick else (0.001, 0.01, 0.05, 0.1, 0.2)):
         sc = replace(scene, trace=replace(scene.trace, termination="threshold", threshold=th))
-        trace(sc, 2000, 0)
+        _compile(sc, n)
         start = time.perf_counter()
         r = trace(sc, n, 3)
         rows.append(Row(f"flux threshold Th = {th:g}", _error(r, oracle), time.perf_counter() - start, n,
@@ -114,7 +122,7 @@ def precision(quick: bool) -> Study:
     rows = []
     for prec in ("float32", "float64"):
         sc = replace(scene, trace=replace(scene.trace, precision=prec))
-        trace(sc, 2000, 0)
+        _compile(sc, n)
         start = time.perf_counter()
         r = trace(sc, n, 5)
         rows.append(Row(prec, _error(r, oracle), time.perf_counter() - start, n,
