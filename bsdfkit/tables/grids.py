@@ -1310,7 +1310,7 @@ COARSEN_PEAK_SHARE = 0.5
 
 
 def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimuth: NDArray[np.float64],
-                      tolerance: GridTolerance, max_step: float) -> NDArray[np.float64]:
+                      tolerance: GridTolerance) -> NDArray[np.float64]:
     """The refined radial nodes without those the table does not need (coarsening after refinement).
 
     Bisection only adds nodes: the starting nodes a narrow lobe would need (ρ = 1e-3·2^k) and the intermediate
@@ -1322,11 +1322,12 @@ def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimu
     ``peak_rtol`` and (iii) no midpoint of the kept segments in the lobe's core holds more than (1 + ``peak_rtol``)
     × the kept table's peak (the refinement's own peak criterion). The peak is taken as the export's check of the
     written file takes it: over :func:`lobe_core` of the finished values, without a row's last node inside the
-    domain when it holds a finished (edge) value. No segment grows wider than ``max_step``, the start grid's
-    (the refinement checked no wider one; and the engine behind ``bsdfkit read`` needs records along every spoke:
-    a constant source left with the specular node alone is read as scattered records and fails its re-check).
+    domain when it holds a finished (edge) value. Every row keeps a node inside the domain beyond the specular one:
+    the engine behind ``bsdfkit read`` needs records along every spoke (a constant source left with the specular
+    node alone was read as scattered records and failed its re-check).
     """
     f, inside = problem.evaluate(radial, azimuth)
+    floor_inside = np.minimum(np.sum(inside, axis=-1), 2)  # every row keeps a node inside beyond the specular one
 
     def peak(keep: NDArray[np.bool_], finished: NDArray) -> tuple[NDArray, NDArray]:
         """The lobe's core of the finished table on the kept nodes and its peak per block."""
@@ -1348,7 +1349,7 @@ def _coarsened_radial(problem: _PolarProblem, radial: NDArray[np.float64], azimu
 
     def acceptable(keep: NDArray[np.bool_]) -> bool:
         r = radial[keep]
-        if np.max(np.diff(r)) > max_step * (1.0 + 1e-12):
+        if np.any(np.sum(inside[..., keep], axis=-1) < floor_inside):
             return False
         finished = problem.done(f[..., keep], r, azimuth)
         core, top = peak(keep, finished)
@@ -1483,10 +1484,6 @@ class _NodeValues:
         return out
 
 
-#: Largest radial step of the Harvey–Shack start grid (ρ = 0.25, 0.5, … 2), which coarsening never exceeds
-COARSE_STEP = 0.25
-
-
 def auto_harvey_shack_axes(
     bsdf_fn: BsdfFn,
     theta_i_deg: Sequence[float],
@@ -1557,12 +1554,12 @@ def auto_harvey_shack_axes(
         return np.swapaxes(table, -1, -2)
 
     problem = _PolarProblem(evaluate, quad, lambda r: r, azimuth_midpoints_deg, edges if edge_values else None)
-    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, COARSE_STEP),
+    chosen = _refine_polar(problem, _coarse_radial_round(1e-3, 2.0, 0.25),
                            np.arange(MIN_AZIMUTHS) * (360.0 / MIN_AZIMUTHS), tolerance,
                            _RefineLimits(1e-7, int(tolerance.max_azimuths), max_nodes, tis_criteria=not cell_average))
     if chosen is None:
         return None
-    radial = chosen[0] if cell_average else _coarsened_radial(problem, chosen[0], chosen[1], tolerance, COARSE_STEP)
+    radial = chosen[0] if cell_average else _coarsened_radial(problem, chosen[0], chosen[1], tolerance)
     return HarveyShackAxes(_tidy(radial), _tidy(chosen[1]), zero_azimuth_deg)
 
 

@@ -98,12 +98,13 @@ def test_printed_values_stay_within_the_round_off_budget():
 
 
 def test_coarsening_keeps_what_a_lobe_needs_and_drops_the_rest():
-    """A constant needs no interior radial node (the 1e-3·2^k start nodes go); a narrow Gaussian lobe keeps the
-    small radii its TIS and peak need: TIS within tis_rtol of 2πσ²A + the constant's, peak kept."""
+    """A constant needs one radial node inside the disk beyond the specular one (which the engine behind read needs
+    on every spoke); a narrow Gaussian lobe keeps the small radii its TIS and peak need: TIS within tis_rtol of the
+    direct integral, peak kept."""
     tol = grids.GridTolerance(tis_rtol=0.005)
     flat = grids.auto_harvey_shack_axes(lambda t, s, d: np.full(d.shape[:-1], 0.2), (0.0, 30.0), "reflection", tol,
                                         edge_values=True)
-    assert min(r for r in flat.rho if r > 0) >= 0.25  # measured: no node below 0.25
+    assert len(flat.rho) == 3 and flat.rho[-1] == 2.0  # measured (0, 0.128, 2): 0.128 < 0.5, every row's edge
 
     def lobe(theta_i, side, d):
         bx = d[..., 0] - np.sin(np.radians(theta_i))
