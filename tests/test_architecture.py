@@ -6,6 +6,7 @@ import importlib.util
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import grimp
 from conftest import ROOT
@@ -168,3 +169,38 @@ def test_every_module_imports():
     assert len(names) > 60
     for name in names:
         importlib.import_module(name)
+
+
+#: tests of the package as a whole, at the top of tests/ (no single module is their subject)
+PACKAGE_WIDE_TESTS = {
+    "test_architecture.py": "layers, import contracts, global state, no pointer outside the repository",
+    "test_docstrings.py": "numpydoc Parameters with units on every public function",
+    "test_function_size.py": "function length and parameter count",
+    "test_imports.py": "what each command and public name imports",
+    "test_lock.py": "the locked installs",
+    "test_names.py": "one name and unit per quantity (_deg, _nm)",
+    "test_readme.py": "the README's two commands",
+}
+
+
+def _module_names(folder: Path) -> set[str]:
+    return ({p.stem for p in folder.glob("*.py") if p.stem != "__init__"}
+            | {p.name for p in folder.iterdir() if p.is_dir() and (p / "__init__.py").is_file()})
+
+
+def test_test_files_mirror_the_package():
+    """tests/<subpackage>/test_<module>.py or test_<module>_<topic>.py, with <module> a module (or subpackage) of
+    bsdfkit/<subpackage>/; at the top of tests/, bsdfkit's own top-level modules and the package-wide tests."""
+    tests = ROOT / "tests"
+    astray = []
+    for path in sorted(tests.rglob("test_*.py")):
+        rel = path.relative_to(tests)
+        folder = PACKAGE.joinpath(*rel.parts[:-1])
+        if len(rel.parts) == 1 and rel.name in PACKAGE_WIDE_TESTS:
+            continue
+        stem = path.stem.removeprefix("test_")
+        names = _module_names(folder) if folder.is_dir() else set()
+        if not any(stem == n or stem.startswith(n + "_") for n in names):
+            astray.append(rel.as_posix())
+    assert astray == []
+    assert all((tests / name).is_file() for name in PACKAGE_WIDE_TESTS)

@@ -13,7 +13,7 @@ device count). A changed kernel therefore never meets an old program. A file tha
 traced again and replaced; a cache folder that cannot be written leaves the program in this process only.
 With the cache on, the program always runs through its exported form, the first time included, so a result
 never depends on whether the file existed (and the exported form computes bit for bit what the traced
-program does; tests/raytrace/test_trace_programs.py).
+program does; tests/raytrace/test_programs.py).
 """
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 import xarray as xr
-from test_fit import make_profile
+from test_least_squares import make_profile
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.fit import plausibility

@@ -12,7 +12,7 @@ from bsdfkit.tables import registry
 from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats.speos import read_speos
 
-DATA = Path(__file__).parent.parent / "data"
+DATA = Path(__file__).parents[2] / "data"
 BRDF = DATA / "ansys-speos-anisotropicbsdf" / "test_13_planesymmetric_brdf_speos_reference.anisotropicbsdf"
 BTDF = DATA / "ansys-speos-anisotropicbsdf" / "test_13_planesymmetric_btdf_speos_reference.anisotropicbsdf"
 ZEMAX = DATA / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"

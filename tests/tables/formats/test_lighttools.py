@@ -13,7 +13,7 @@ from bsdfkit.tables import registry
 from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats.lighttools import read_lighttools
 
-ZEMAX = Path(__file__).parent.parent / "data" / "ansys-radiant-zemax-bsdf" / (
+ZEMAX = Path(__file__).parents[2] / "data" / "ansys-radiant-zemax-bsdf" / (
     "radiant_imaging_sphere_planesymmetric_BRDF.bsdf")
 THETA = (0.0, 45.0, 70.0)
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 from jax.extend.random import threefry_2x32
-from test_trace_kernel import TABLE2, scene
+from test_kernel import TABLE2, scene
 
 from bsdfkit.cli.main import compile_cache, compile_cache_dir, compile_cache_wanted
 from bsdfkit.core.errors import ValidationError

@@ -429,7 +429,7 @@ def test_polar_angles_beyond_90_that_contradict(tmp_path, rows, message):
 
 def test_a_direction_measured_twice_is_kept_for_the_engine_to_merge(tmp_path):
     """Repeated directions (every C-plane's nadir, a repeated point) are records, not an error: the
-    hemispherical engine merges them with their spread (tests/reduction/test_hemisphere_geometries.py)."""
+    hemispherical engine merges them with their spread (tests/reduction/test_hemispherical_geometries.py)."""
     path = write(tmp_path / "twice.csv", [GOOD_HEADER, "10,5,0.1,0.2", "10,6,0.1,0.2", "10,5,0.3,0.2"])
     ds = read_table(path, quantity="brdf")
     same = (ds["theta_s"].values == 5.0)

@@ -21,7 +21,7 @@ from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats import tensortree
 from bsdfkit.tables.formats.bsdfxml import TreeBsdf, read_bsdfxml
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TREES = ROOT / "tests" / "data" / "radiance-bsdf2ttree"
 KLEMS = ROOT / "tests" / "data" / "radiance-bsdf2klems" / "lambertian_r030_t060_klems_full.xml"
 TT3_FULL, TT3_CULLED = TREES / "tt3_quadratic_g4_full.xml", TREES / "tt3_quadratic_g4_culled.xml"

@@ -317,7 +317,7 @@ def test_spectral_budget_books_the_stokes_loss_with_the_plate():
     assert a.cumulative_budget()["extracted"][-1] == pytest.approx(a.extracted["total"], abs=1e-9)
 
 
-@pytest.mark.slow  # two more compilations; the fast lane's chunk invariance: test_trace_kernel.py (1e4 and 1e5)
+@pytest.mark.slow  # two more compilations; the fast lane's chunk invariance: test_kernel.py (1e4 and 1e5)
 def test_spectral_results_do_not_depend_on_chunks_or_the_full_kernel():
     """Exact fixed-point sums: chunking and compiling every optional branch change nothing, bit for bit."""
     s = _overlap_scene()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import jax
 import pytest
 from conftest import fast_lane
-from test_trace_batch import full, plate_scene
-from test_trace_kernel import scene
+from test_kernel import scene
+from test_tracer_batch import full, plate_scene
 
 from bsdfkit.raytrace import programs, trace
 from bsdfkit.raytrace.tracer import compiled_kernel

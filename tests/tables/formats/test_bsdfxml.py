@@ -19,7 +19,7 @@ from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats.bsdfxml import KLEMS_FULL, read_bsdfxml
 from bsdfkit.tables.to_dataset import convert
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 ANSYS = ROOT / "tests" / "data" / "ansys-radiant-zemax-bsdf" / "inplane_spectral_goniometric_2D_data.csv"
 CENTRES = tuple(float(c) for c in KLEMS_FULL.centres_deg)
 # diffuse body (1 - b|beta|^2) + Gaussian lobe about the specular / straight-through direction

@@ -15,7 +15,7 @@ from bsdfkit.tables import grids
 from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats import tracepro
 
-GOLDEN = Path(__file__).parent.parent / "data" / "golden"
+GOLDEN = Path(__file__).parents[2] / "data" / "golden"
 WHEN = datetime(2020, 1, 23, 15, 24, 9)
 
 

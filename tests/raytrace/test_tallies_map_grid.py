@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_trace_kernel import scene
+from test_kernel import scene
 
 from bsdfkit.raytrace import trace
 from bsdfkit.raytrace.rayfile import RaySet, format_rays

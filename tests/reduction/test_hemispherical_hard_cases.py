@@ -2,8 +2,8 @@
 
 Tracer hard cases (rays grazing the wall, aimed at the rim or seam, float32 vs float64) are at the end of this
 file. Model and fit hard cases live beside their models: α → ±1 and FWHM → 0 in spectrum fits and the
-near-singular two-band system in tests/fit/test_spectra.py; ABg with g, B → 0 and NaN-free gradients through every
-model (hypothesis) in tests/models/test_models.py.
+near-singular two-band system in tests/fit/test_spectrum.py; ABg with g, B → 0 and NaN-free gradients through every
+model (hypothesis) in tests/models/test_functions.py.
 """
 import numpy as np
 import pytest

@@ -61,7 +61,7 @@ def test_bad_percentage_refused_naming_the_line(tmp_path):
         read_speos_brdf(bad)
 
 
-LUMERICAL = (Path(__file__).resolve().parent.parent / "data" / "ansys-speos-anisotropicbsdf"
+LUMERICAL = (Path(__file__).resolve().parents[2] / "data" / "ansys-speos-anisotropicbsdf"
              / "test_13_brdf_one_wavelength_speos.brdf")
 
 

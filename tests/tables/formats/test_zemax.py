@@ -15,7 +15,7 @@ from bsdfkit.tables import grids
 from bsdfkit.tables.export import ExportSettings, export, read_any
 from bsdfkit.tables.formats import zemax
 
-HERE = Path(__file__).parent.parent
+HERE = Path(__file__).parents[2]
 GOLDEN = HERE / "data" / "golden"
 REAL = HERE / "data" / "ansys-radiant-zemax-bsdf" / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf"
 DOCS = HERE.parent / "docs" / "exports.md"
