@@ -1150,7 +1150,7 @@ STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
 
 def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         log: Callable[[str], None] = lambda message: None,
-        progress: Callable[[str, int, int], None] | None = None) -> dict:
+        progress: Callable[[str, int, int], None] | None = None, figure_helper: bool = False) -> dict:
     """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary.
 
     ``log(message)`` receives one line per stage; ``progress(task, done, total)`` is called as the stages
@@ -1168,6 +1168,10 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         ``log(message)``, called with one line per stage.
     progress : callable, optional
         ``progress(task, done, total)``, called as stages and traces complete.
+    figure_helper : bool
+        Draw the figures in a spawned helper process while this one writes the exports and the report (what the
+        command line does). A spawned process imports the caller's main script again, so a script that calls
+        this without an ``if __name__ == "__main__":`` guard would run twice: off by default.
 
     Returns
     -------
@@ -1181,7 +1185,7 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
     with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe),
                    whole_folder=True) as out:
-        return _run_stages(recipe, out, log, progress)
+        return _run_stages(recipe, out, log, progress, figure_helper)
 
 
 def _output_estimate(recipe: Recipe) -> int:
@@ -1194,21 +1198,22 @@ def _output_estimate(recipe: Recipe) -> int:
 
 
 def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
-                progress: Callable[[str, int, int], None] | None = None) -> dict:
+                progress: Callable[[str, int, int], None] | None = None, figure_helper: bool = False) -> dict:
     state = RunState(recipe=recipe, log=log)
     if progress is not None:
         state.progress = progress
     timings = {}
+    for k, (name, stage) in enumerate(STAGES):
+        start = time.perf_counter()
+        log(f"stage {name} ...")
+        state.progress("stages", k, len(STAGES))
+        stage(state)
+        timings[name] = round(time.perf_counter() - start, 3)
+    state.progress("stages", len(STAGES), len(STAGES))
     # the figures are drawn by a helper process while this one writes the exports (re-reading each table) and
-    # builds the report: after the traces, one core did all of it while the other idled
-    with PngRenderer() as renderer:
-        for k, (name, stage) in enumerate(STAGES):
-            start = time.perf_counter()
-            log(f"stage {name} ...")
-            state.progress("stages", k, len(STAGES))
-            stage(state)
-            timings[name] = round(time.perf_counter() - start, 3)
-        state.progress("stages", len(STAGES), len(STAGES))
+    # builds the report: after the traces, one core did all of it while the other idled. It starts here, not
+    # before the stages: its start-up (matplotlib, fonts) would take CPU from the trace kernels.
+    with PngRenderer(helper=figure_helper) as renderer:
         summary = _write_outputs(state, out, timings, renderer)
         log("stage html report ...")
         # reads the staged outputs; part of the same set
