@@ -338,8 +338,15 @@ def load_scene(path: str | Path) -> Scene:
     Scene
         The scene, validated.
     """
-    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
     from bsdfkit.raytrace import load_scene as _load_scene
 
-    return _load_scene(path, plate_resolver=plate_from_recipe)
+    return _load_scene(path, plate_resolver=_recipe_plate)
+
+
+def _recipe_plate(recipe: Path) -> Any:
+    # the plate resolver of scenes: the pipeline (read, calibrate, fit) is imported only when a scene names a
+    # recipe, so loading any other scene (and `bsdfkit trace` of it) does not import it
+    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
+
+    return plate_from_recipe(recipe)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bsdfkit import api
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.core.errors import InputError
 
@@ -63,12 +64,10 @@ def run(args: argparse.Namespace) -> int:
     int
         Exit status: 0 on success.
     """
-    from bsdfkit.cli.trace import recipe_plate
     from bsdfkit.plotting.figures import sweep_figure
-    from bsdfkit.raytrace import load_scene
     from bsdfkit.raytrace.sweep import Cluster, run_sweep, sweep_spec
 
-    scene = load_scene(args.scene, plate_resolver=recipe_plate)
+    scene = api.load_scene(args.scene)
     defaults = scene.sweep
     params = args.param or (list(defaults.params) if defaults else [])
     if not params:

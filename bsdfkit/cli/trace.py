@@ -6,12 +6,9 @@ import contextlib
 import sys
 from pathlib import Path
 
+from bsdfkit import api
 from bsdfkit.cli._common import Progress, emit_json
 from bsdfkit.io.atomic import OutputSet, write_with
-
-# the tracer's own entry points (what bsdfkit.api.trace calls), not bsdfkit.api: importing the whole API (fits,
-# plotting of spectra) would add time to every cold start of this verb
-
 
 #: a trace whose truncated power exceeds this fraction of the emitted power says so on stderr (one line)
 TRUNCATION_WARNING = 1e-3
@@ -39,27 +36,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def recipe_plate(recipe: Path):
-    """The plate of a scene's ``[top] from = "<recipe>.toml"``: the scene parser's plate resolver for the verbs.
-
-    Building it reads, calibrates and fits the recipe's measurement (pipeline work, imported here only when a
-    scene names a recipe, so tracing any other scene does not import it).
-
-    Parameters
-    ----------
-    recipe : Path
-        The fitting recipe's TOML file.
-
-    Returns
-    -------
-    PhosphorPlate
-        The plate of the recipe's calibrated measurement.
-    """
-    from bsdfkit.pipeline.plate_from_scan import plate_from_recipe
-
-    return plate_from_recipe(recipe)
-
-
 def run(args: argparse.Namespace) -> int:
     # here, not at the top: `bsdfkit --help` registers every verb and must not import JAX
     """Run ``bsdfkit trace`` with the parsed options.
@@ -74,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
     int
         Exit status: 0 on success.
     """
-    from bsdfkit.raytrace import load_scene, trace
+    from bsdfkit.raytrace import trace
 
-    scene = load_scene(args.scene, plate_resolver=recipe_plate)
+    scene = api.load_scene(args.scene)  # a phosphor top from a recipe resolved as the API does
     out = Path(args.output) if args.output else None
     # every file this verb writes is one output set, checked (existing, an input, writable) before tracing
     with (OutputSet(out.parent, [out.name], args.force, inputs=[args.scene]) if out
