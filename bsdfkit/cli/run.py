@@ -87,7 +87,7 @@ def run_feedback(quiet: bool, verbose: bool = False) -> Iterator[tuple[Callable[
 def _run(args: argparse.Namespace) -> int:
     with run_feedback(args.quiet, args.verbose) as (log, progress):
         # the command line is the main script, guarded: a spawned helper can draw the figures
-        summary = api.run(args.recipe, args.output, args.force, log=log, progress=progress, figure_helper=True)
+        summary = api.run(args.recipe, args.output, args.force, log=log, progress=progress, helper_processes=True)
     if args.json:
         emit_json(summary)
     else:

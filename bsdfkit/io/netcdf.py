@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import xarray as xr
+from xarray.backends.netCDF4_ import NETCDF4_PYTHON_LOCK  # the lock xarray itself takes for netCDF4-python
 
 from bsdfkit.core.errors import FormatError, InputError
 from bsdfkit.io.atomic import write_with
@@ -58,9 +59,16 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Pa
         # The record x wavelength matrices go one at a time (mode "a"): xarray encodes every variable of a
         # write before storing any, and each encoded copy of a matrix is as large as the matrix (a 200 MB
         # table's dataset needed 330 MB more to be written in one call, nothing more this way).
-        enc.drop_vars(deflated).to_netcdf(tmp, engine=ENGINE)
-        for name in deflated:
-            enc[[name]].to_netcdf(tmp, mode="a", engine=ENGINE)
+        # One open file for all of it, through xarray's netCDF4 store: ``to_netcdf`` would open and close the
+        # file once per matrix (about 45 ms each) and asks dask for its scheduler on every call (importing
+        # dask.distributed, about 0.9 s, in a process that holds no dask array).
+        store = xr.backends.NetCDF4DataStore.open(str(tmp), mode="w", lock=NETCDF4_PYTHON_LOCK)
+        try:
+            enc.drop_vars(deflated).dump_to_store(store)
+            for name in deflated:
+                enc[[name]].dump_to_store(store)
+        finally:
+            store.close()
 
     return write_with(path, writer, force, inputs)
 

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+import multiprocessing
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -47,6 +49,7 @@ from bsdfkit.models.registry import BSDF_MODELS
 from bsdfkit.pipeline.plate_from_scan import plate_from_scan
 from bsdfkit.pipeline.report import READINGS, magnitude_verdict, paper_values, write_report
 from bsdfkit.pipeline.spectral_comparison import (
+    SpectralComparison,
     SpectralComparisonOptions,
     compare_tracer_modes,
     comparison_lines,
@@ -413,6 +416,8 @@ class RunState:
     log: Callable[[str], None] = lambda message: None
     #: progress of a long stage: (task, done, total), e.g. ("trace", 3, 14) after the third of 14 traces
     progress: Callable[[str, int, int], None] = lambda task, done, total: None
+    #: the spectral comparison computed in a helper process since the run began (:func:`_spectral_ahead`)
+    spectral_ahead: Future | None = None
 
 
 def stage_ingest(state: RunState) -> None:
@@ -538,7 +543,24 @@ def stage_exports(state: RunState) -> None:
     for inter in opts.interactions:
         for side in opts.sides:
             for fmt in opts.formats:
-                state.outputs[f"exports/{inter}_{side}.{suffix[fmt]}"] = writer(inter, side, fmt)
+                state.outputs[f"exports/{inter}_{side}.{suffix[fmt]}"] = EarlyWriter(writer(inter, side, fmt))
+
+
+@dataclass(frozen=True)
+class EarlyWriter:
+    """An output that needs nothing from later stages: :func:`_run_stages` writes it (into the staging folder of
+    the output set) in a background thread while the later stages run, in the order queued.
+
+    Parameters
+    ----------
+    write : callable
+        ``write(path, force)``, the writer.
+    """
+
+    write: Callable[[Path, bool], object]
+
+    def __call__(self, path: Path, force: bool = False) -> object:
+        return self.write(path, force)
 
 
 #: The §5 studies of [Cylindrical-module]: recipe key → (the scene keys a study value sets, the dimension of its
@@ -1130,7 +1152,12 @@ def stage_spectral_comparison(state: RunState) -> None:
     opts = state.recipe.spectral
     if opts is None:
         return
-    result = compare_tracer_modes(opts, _scene_with_plate)
+    result = None
+    if state.spectral_ahead is not None:
+        with contextlib.suppress(Exception):  # the helper failed or died: computed here (a real error raised here)
+            result = state.spectral_ahead.result()
+    if result is None:
+        result = compare_tracer_modes(opts, _scene_with_plate)
     state.summary["spectral_comparison"] = result.summary
     state.outputs.update(comparison_outputs(result))
     state.summary.setdefault("report_lines", []).extend(comparison_lines(result.summary))
@@ -1150,7 +1177,7 @@ STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
 
 def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         log: Callable[[str], None] = lambda message: None,
-        progress: Callable[[str, int, int], None] | None = None, figure_helper: bool = False) -> dict:
+        progress: Callable[[str, int, int], None] | None = None, helper_processes: bool = False) -> dict:
     """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary.
 
     ``log(message)`` receives one line per stage; ``progress(task, done, total)`` is called as the stages
@@ -1168,10 +1195,12 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         ``log(message)``, called with one line per stage.
     progress : callable, optional
         ``progress(task, done, total)``, called as stages and traces complete.
-    figure_helper : bool
-        Draw the figures in a spawned helper process while this one writes the exports and the report (what the
-        command line does). A spawned process imports the caller's main script again, so a script that calls
-        this without an ``if __name__ == "__main__":`` guard would run twice: off by default.
+    helper_processes : bool
+        Use spawned helper processes (what the command line does): one computes the spectral comparison from
+        the start of the run, beside the stages before it (which use one core of two for most of their time),
+        and one draws the figures while this process writes the exports and the report. The results are those
+        of the same stages in this process. A spawned process imports the caller's main script again, so a
+        script that calls this without an ``if __name__ == "__main__":`` guard would run twice: off by default.
 
     Returns
     -------
@@ -1185,7 +1214,7 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
     # checked before computing: existing outputs (without force), outputs that are inputs, a writable folder
     with OutputSet(out_dir, expected_outputs(recipe), force, inputs, min_free_bytes=_output_estimate(recipe),
                    whole_folder=True) as out:
-        return _run_stages(recipe, out, log, progress, figure_helper)
+        return _run_stages(recipe, out, log, progress, helper_processes)
 
 
 def _output_estimate(recipe: Recipe) -> int:
@@ -1197,23 +1226,64 @@ def _output_estimate(recipe: Recipe) -> int:
     return 10 * size
 
 
+def _spectral_comparison(options: SpectralComparisonOptions) -> SpectralComparison:
+    """:func:`compare_tracer_modes` with this recipe module's scene builder (a module-level function: what a
+    spawned helper process is given to call)."""
+    return compare_tracer_modes(options, _scene_with_plate)
+
+
+@contextlib.contextmanager
+def _spectral_ahead(recipe: Recipe, enabled: bool) -> Iterator[Future | None]:
+    """The spectral comparison started in a spawned helper process (None when not ``enabled`` or the recipe has
+    no ``[spectral]`` table); the helper is stopped on exit, whatever it is doing.
+
+    It needs nothing from the other stages (its own measurement, plates and traces): started with the run, it
+    uses the core that ingest, reductions and fits leave idle, and its traces share both cores with the trace
+    stage's. The helper inherits this process's environment (JAX's compilation cache, the CPU device count).
+    """
+    if not enabled or recipe.spectral is None:
+        yield None
+        return
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        yield pool.submit(_spectral_comparison, recipe.spectral)
+    finally:
+        for process in list(getattr(pool, "_processes", {}).values()):
+            process.terminate()  # a finished helper is idle; an unfinished one's work is not wanted any more
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
-                progress: Callable[[str, int, int], None] | None = None, figure_helper: bool = False) -> dict:
+                progress: Callable[[str, int, int], None] | None = None, helper_processes: bool = False) -> dict:
     state = RunState(recipe=recipe, log=log)
     if progress is not None:
         state.progress = progress
     timings = {}
-    for k, (name, stage) in enumerate(STAGES):
-        start = time.perf_counter()
-        log(f"stage {name} ...")
-        state.progress("stages", k, len(STAGES))
-        stage(state)
-        timings[name] = round(time.perf_counter() - start, 3)
+    early: dict[str, Future] = {}
+    # the tables (auto grids, each re-read and checked: a quarter of the run's CPU after the stages) are written
+    # by a thread while the fits and traces run: the traces' kernels hold no interpreter lock
+    with ThreadPoolExecutor(1) as background, _spectral_ahead(recipe, helper_processes) as ahead:
+        state.spectral_ahead = ahead
+        try:
+            for k, (name, stage) in enumerate(STAGES):
+                start = time.perf_counter()
+                log(f"stage {name} ...")
+                state.progress("stages", k, len(STAGES))
+                stage(state)
+                timings[name] = round(time.perf_counter() - start, 3)
+                early.update({n: background.submit(w, out.path(n), True) for n, w in state.outputs.items()
+                              if isinstance(w, EarlyWriter) and n not in early})
+            for future in early.values():
+                future.result()  # a failed table fails the run here, as it would have when written below
+        except BaseException:
+            for future in early.values():
+                future.cancel()  # a failed run does not wait for the tables not yet begun
+            raise
     state.progress("stages", len(STAGES), len(STAGES))
     # the figures are drawn by a helper process while this one writes the exports (re-reading each table) and
     # builds the report: after the traces, one core did all of it while the other idled. It starts here, not
     # before the stages: its start-up (matplotlib, fonts) would take CPU from the trace kernels.
-    with PngRenderer(helper=figure_helper) as renderer:
+    with PngRenderer(helper=helper_processes) as renderer:
         summary = _write_outputs(state, out, timings, renderer)
         log("stage html report ...")
         # reads the staged outputs; part of the same set
@@ -1229,7 +1299,7 @@ def _write_outputs(state: RunState, out: OutputSet, timings: dict, renderer: Png
     pending = {name: renderer.submit(w.figure, w.dpi) for name, w in state.outputs.items()
                if isinstance(w, FigureFile)}
     for name, writer in state.outputs.items():
-        if name not in pending:
+        if name not in pending and not isinstance(writer, EarlyWriter):  # early writers have written already
             writer(out.path(name), True)
     for name, png in pending.items():
         write_bytes(out.path(name), png.result(), True)
