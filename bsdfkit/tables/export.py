@@ -419,7 +419,7 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
                                   expected="incidence angles (deg)", got=None)
         else:
             theta_i_deg = np.unique(np.asarray(ds["theta_i"].values, dtype=np.float64))
-    return _Source(fns, np.asarray(theta_i_deg, dtype=np.float64), (),
+    return _Source({s: grids.Pointwise(f) for s, f in fns.items()}, np.asarray(theta_i_deg, dtype=np.float64), (),
                    f"calibrated scan {label}, interaction {interaction}")
 
 
@@ -445,7 +445,7 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
         raise InputError("the sides share no measured incidence", file=label, field="theta_i",
                          expected="a common incidence, or one side")
     engine = {s: {round(t, 6): v for t, v in zip(src.incidences_deg[s], src.tis[s])} for s in sides}
-    return _Source({s: src.fn for s in sides}, np.asarray(common, dtype=np.float64), (),
+    return _Source({s: grids.Pointwise(src.fn) for s in sides}, np.asarray(common, dtype=np.float64), (),
                    f"measured dataset {label} at {src.what} (hemispherical engine)", engine_tis=engine)
 
 
@@ -453,7 +453,7 @@ def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
     def bsdf_fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
-    return bsdf_fn
+    return grids.Pointwise(bsdf_fn) if all(isinstance(f, grids.Pointwise) for f in fns.values()) else bsdf_fn
 
 
 # --------------------------------------------------------------------------------------------------

@@ -63,6 +63,7 @@ __all__ = [
     "BsdfFn",
     "GridTolerance",
     "HarveyShackAxes",
+    "Pointwise",
     "SpecularAxes",
     "evaluate_bsdf",
     "auto_harvey_shack_axes",
@@ -298,9 +299,31 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
 CHUNK = 4096
 
 
+@dataclass(frozen=True)
+class Pointwise:
+    """A BSDF callable (:data:`BsdfFn`) whose value at a direction depends on that direction alone, not on the
+    other directions of the call nor on their number (a NumPy reconstruction such as the hemispherical engine's).
+    :func:`evaluate_bsdf` calls it on the directions as they are, in chunks of at most :data:`CHUNK`, without
+    padding the last chunk: the padding serves JAX models (one compilation per array shape), and a NumPy source
+    would evaluate it (the auto grids ask for a few hundred directions at a time: padded to 4096, most of the
+    work of a reconstruction's table was the padding).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr].
+    """
+
+    fn: BsdfFn
+
+    def __call__(self, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> ArrayLike:
+        """``fn`` at the directions (unit vectors (..., 3) [-]) → BSDF [1/sr]."""
+        return self.fn(theta_i_deg, side, directions)
+
+
 def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray:
     """``bsdf_fn`` on the directions flattened, in chunks of :data:`CHUNK` (the last padded with the first
-    direction).
+    direction, unless the callable is :class:`Pointwise`).
 
     The auto grids evaluate the callable on arrays of ever new lengths; a JAX model compiles each operation
     once per array shape, so every call gets the same shape. The answer is reshaped to
@@ -308,6 +331,8 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
     """
     flat = directions.reshape(-1, 3)
     n = flat.shape[0]
+    if isinstance(bsdf_fn, Pointwise):
+        return _call_pointwise(bsdf_fn, theta_i_deg, side, flat, directions.shape[:-1])
     size = -(-n // CHUNK) * CHUNK
     padded = np.concatenate([flat, np.broadcast_to(flat[:1], (size - n, 3))]) if size > n else flat
     parts = []
@@ -319,6 +344,22 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
             return out  # the shape check of evaluate_bsdf names the mismatch
         parts.append(out)
     return np.concatenate(parts)[:n].reshape(directions.shape[:-1])
+
+
+def _call_pointwise(bsdf_fn: Pointwise, theta_i_deg: float, side: str, flat: NDArray[np.float64],
+                    shape: tuple[int, ...]) -> NDArray:
+    """A :class:`Pointwise` callable on the directions ``flat`` (n, 3) in chunks of at most :data:`CHUNK`, the answer
+    reshaped to ``shape`` (a scalar answer broadcast; a wrong shape returned as it is, for evaluate_bsdf to name)."""
+    n = flat.shape[0]
+    parts = []
+    for k in range(0, n, CHUNK):
+        out = np.asarray(bsdf_fn(float(theta_i_deg), side, flat[k:k + CHUNK]), dtype=np.float64)
+        if out.ndim == 0:
+            return np.broadcast_to(out, shape)
+        if out.shape != (min(CHUNK, n - k),):
+            return out
+        parts.append(out)
+    return np.concatenate(parts).reshape(shape)
 
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:
