@@ -620,13 +620,48 @@ def harvey_shack_cell_grid(
     )
 
 
+class _PolarMemo:
+    """Values ``[..., azimuth, radius]`` known at some (azimuth, radius) pairs of growing, sorted axes: the memo of
+    the auto grids, which ask again and again for values at nodes (and edge strips) they have already evaluated.
+    Looked up by index arrays, not key by key (a candidate grid asks for thousands of pairs)."""
+
+    def __init__(self, lead: tuple[int, ...]) -> None:
+        self.lead = lead
+        self.r = np.empty(0)
+        self.a = np.empty(0)
+        self.values = np.zeros(lead + (0, 0))
+        self.known = np.zeros((0, 0), dtype=bool)
+
+    def index(self, r: NDArray[np.float64], a: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Positions of the radii ``r`` and azimuths ``a`` on the memo's axes, which grow to hold them (equal floats
+        are one node)."""
+        at_r, at_a = np.searchsorted(self.r, r), np.searchsorted(self.a, a)
+        if _all_found(self.r, r, at_r) and _all_found(self.a, a, at_a):
+            return at_r, at_a
+        r_all, a_all = np.union1d(self.r, r), np.union1d(self.a, a)
+        pos_a, pos_r = np.searchsorted(a_all, self.a), np.searchsorted(r_all, self.r)
+        values = np.zeros(self.lead + (a_all.size, r_all.size))
+        known = np.zeros((a_all.size, r_all.size), dtype=bool)
+        values[..., pos_a[:, None], pos_r[None, :]] = self.values
+        known[pos_a[:, None], pos_r[None, :]] = self.known
+        self.r, self.a, self.values, self.known = r_all, a_all, values, known
+        return np.searchsorted(self.r, r), np.searchsorted(self.a, a)
+
+
+def _all_found(axis: NDArray[np.float64], values: NDArray[np.float64], at: NDArray[np.intp]) -> bool:
+    """Whether every value is on the sorted ``axis`` at its insertion position ``at``."""
+    if axis.size == 0:
+        return values.size == 0
+    return bool(np.all((at < axis.size) & (axis[np.minimum(at, axis.size - 1)] == values)))
+
+
 #: Gauss–Legendre points along a row's edge strip of :func:`harvey_shack_edge_values`
 EDGE_ORDER = 16
 
 
 def harvey_shack_edge_values(
     values: ArrayLike, bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str,
-    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: dict | None = None,
+    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: dict[float, _PolarMemo] | None = None,
 ) -> NDArray[np.float64]:
     """Point samples of a Harvey–Shack table with each row's last node inside the disk replaced by its *edge value*.
 
@@ -639,8 +674,8 @@ def harvey_shack_edge_values(
     order
         Gauss–Legendre points along each row's edge strip.
     strips
-        Memo of the strips' integrals by (incidence, azimuth, strip start), filled here: the auto grid asks for the
-        edge values of many candidate axes that share most rows and strips.
+        Memo of the strips' integrals (per incidence: by azimuth and strip start), filled here: the auto grid asks for
+        the edge values of many candidate axes that share most rows and strips.
 
     Returns
     -------
@@ -677,9 +712,10 @@ def harvey_shack_edge_values(
             continue
         j = last[rows]
         a, b, r_j = rho[j - 1], rmax[rows], rho[j]
-        keys = [(float(theta), float(az[k]), float(a_)) for k, a_ in zip(rows, a)]
-        known = strips if strips is not None else {}
-        new = np.array([key not in known for key in keys], dtype=bool)
+        memos = strips if strips is not None else {}
+        memo = memos.get(float(theta)) or memos.setdefault(float(theta), _PolarMemo((len(sides),)))
+        at_r, at_a = memo.index(a, az[rows])  # row i's strip: memo node (at_a[i], at_r[i])
+        new = ~memo.known[at_a, at_r]
         if new.any():
             an, bn = a[new], b[new]
             r = an[:, None] + (bn - an)[:, None] * x[None, :]
@@ -692,9 +728,9 @@ def harvey_shack_edge_values(
             integrals = np.stack([(bn - an) * np.sum(evaluate_bsdf(bsdf_fn, float(theta), side, directions)
                                                      .reshape(r.shape) * r * w[None, :], axis=1)
                                   for side in sides])  # (side, row)
-            for i, key in enumerate(k for k, n in zip(keys, new) if n):
-                known[key] = integrals[:, i]
-        strip = np.stack([known[key] for key in keys], axis=-1)  # (side, row)
+            memo.values[:, at_a[new], at_r[new]] = integrals
+            memo.known[at_a[new], at_r[new]] = True
+        strip = memo.values[:, at_a, at_r]  # (side, row)
         c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
         c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
         for s in range(len(sides)):
@@ -1489,18 +1525,15 @@ class _NodeValues:
 
     def __init__(self, bsdf_fn: BsdfFn, thetas: NDArray[np.float64], sides: tuple[str, ...], zero: float) -> None:
         self.fn, self.thetas, self.sides, self.zero = bsdf_fn, thetas, sides, zero
-        self.known: dict[float, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}  # ψ → (ρ sorted, f[s, t, ρ])
+        self.memo = _PolarMemo((len(sides), thetas.size))  # f[s, t, ψ, ρ]
 
     def __call__(self, r: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
         """f[side, theta, a, r] [1/sr] on the grid ``r`` × ``a`` (ρ, table azimuths [deg])."""
-        new_r, new_a = [], []
-        for psi in a:
-            have = self.known.get(float(psi))
-            missing = r if have is None else r[~np.isin(r, have[0])]
-            new_r.append(missing)
-            new_a.append(np.full(missing.size, psi))
-        r_p, a_p = np.concatenate(new_r), np.concatenate(new_a)
-        if r_p.size:
+        at_r, at_a = self.memo.index(r, a)
+        # the nodes not yet known, azimuth by azimuth in the order of a, each azimuth's radii in the order of r
+        k_a, k_r = np.nonzero(~self.memo.known[at_a[:, None], at_r[None, :]])
+        if k_a.size:
+            r_p, a_p = r[k_r], a[k_a]
             f_p = np.zeros((len(self.sides), self.thetas.size, r_p.size))
             psi_sample = np.radians(a_p + self.zero)
             unit = np.stack([np.cos(psi_sample), np.sin(psi_sample)], axis=-1)
@@ -1511,18 +1544,9 @@ class _NodeValues:
                 directions = frames.direction_from_beta(beta[inside])
                 for s, side in enumerate(self.sides):
                     f_p[s, t, inside] = evaluate_bsdf(self.fn, theta, side, directions)
-            for psi in np.unique(a_p):
-                on = a_p == psi
-                have = self.known.get(float(psi))
-                radii = r_p[on] if have is None else np.concatenate([have[0], r_p[on]])
-                values = f_p[..., on] if have is None else np.concatenate([have[1], f_p[..., on]], axis=-1)
-                order = np.argsort(radii)
-                self.known[float(psi)] = (radii[order], values[..., order])
-        out = np.empty((len(self.sides), self.thetas.size, a.size, r.size))
-        for j, psi in enumerate(a):
-            radii, values = self.known[float(psi)]
-            out[:, :, j, :] = values[..., np.searchsorted(radii, r)]
-        return out
+            self.memo.values[..., at_a[k_a], at_r[k_r]] = f_p
+            self.memo.known[at_a[k_a], at_r[k_r]] = True
+        return self.memo.values[:, :, at_a[:, None], at_r[None, :]]
 
 
 def auto_harvey_shack_axes(
@@ -1587,7 +1611,7 @@ def auto_harvey_shack_axes(
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)
 
-    strips: dict = {}  # the edge strips' integrals, shared by every candidate grid
+    strips: dict[float, _PolarMemo] = {}  # the edge strips' integrals, shared by every candidate grid
 
     def edges(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         table = harvey_shack_edge_values(np.swapaxes(values, -1, -2), bsdf_fn, thetas, sides,
