@@ -623,14 +623,16 @@ def harvey_shack_cell_grid(
 class _PolarMemo:
     """Values ``[..., azimuth, radius]`` known at some (azimuth, radius) pairs of growing, sorted axes: the memo of
     the auto grids, which ask again and again for values at nodes (and edge strips) they have already evaluated.
-    Looked up by index arrays, not key by key (a candidate grid asks for thousands of pairs)."""
+    Looked up by index arrays, not key by key (a candidate grid asks for thousands of pairs). ``lead``: the leading
+    dimensions of the values; ``known_lead``: those of the known-mask (the values of every side known at once, of
+    each incidence on its own or not)."""
 
-    def __init__(self, lead: tuple[int, ...]) -> None:
-        self.lead = lead
+    def __init__(self, lead: tuple[int, ...], known_lead: tuple[int, ...] = ()) -> None:
+        self.lead, self.known_lead = lead, known_lead
         self.r = np.empty(0)
         self.a = np.empty(0)
         self.values = np.zeros(lead + (0, 0))
-        self.known = np.zeros((0, 0), dtype=bool)
+        self.known = np.zeros(known_lead + (0, 0), dtype=bool)
 
     def index(self, r: NDArray[np.float64], a: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """Positions of the radii ``r`` and azimuths ``a`` on the memo's axes, which grow to hold them (equal floats
@@ -641,9 +643,9 @@ class _PolarMemo:
         r_all, a_all = np.union1d(self.r, r), np.union1d(self.a, a)
         pos_a, pos_r = np.searchsorted(a_all, self.a), np.searchsorted(r_all, self.r)
         values = np.zeros(self.lead + (a_all.size, r_all.size))
-        known = np.zeros((a_all.size, r_all.size), dtype=bool)
+        known = np.zeros(self.known_lead + (a_all.size, r_all.size), dtype=bool)
         values[..., pos_a[:, None], pos_r[None, :]] = self.values
-        known[pos_a[:, None], pos_r[None, :]] = self.known
+        known[..., pos_a[:, None], pos_r[None, :]] = self.known
         self.r, self.a, self.values, self.known = r_all, a_all, values, known
         return np.searchsorted(self.r, r), np.searchsorted(self.a, a)
 
@@ -661,7 +663,7 @@ EDGE_ORDER = 16
 
 def harvey_shack_edge_values(
     values: ArrayLike, bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str,
-    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: dict[float, _PolarMemo] | None = None,
+    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: _PolarMemo | None = None,
 ) -> NDArray[np.float64]:
     """Point samples of a Harvey–Shack table with each row's last node inside the disk replaced by its *edge value*.
 
@@ -674,8 +676,8 @@ def harvey_shack_edge_values(
     order
         Gauss–Legendre points along each row's edge strip.
     strips
-        Memo of the strips' integrals (per incidence: by azimuth and strip start), filled here: the auto grid asks for
-        the edge values of many candidate axes that share most rows and strips.
+        Memo of the strips' integrals ``[side, theta, azimuth, strip start]`` for these sides and incidences, filled
+        here: the auto grid asks for the edge values of many candidate axes that share most rows and strips.
 
     Returns
     -------
@@ -704,37 +706,41 @@ def harvey_shack_edge_values(
     zero = float(axes.zero_azimuth_deg)
     x, w = gauss_legendre(int(order))
     x, w = 0.5 * (x + 1.0), 0.5 * w
-    for t, theta in enumerate(thetas):
-        rmax = np.minimum(rho_max(theta, az + zero), rho[-1])
-        last = np.searchsorted(rho, rmax, side="right") - 1  # the reader's "inside" (ρ ≤ ρmax), as the quadrature
-        rows = np.flatnonzero((last >= 1) & (rho[np.maximum(last, 0)] < rmax))
-        if rows.size == 0:
-            continue
-        j = last[rows]
-        a, b, r_j = rho[j - 1], rmax[rows], rho[j]
-        memos = strips if strips is not None else {}
-        memo = memos.get(float(theta)) or memos.setdefault(float(theta), _PolarMemo((len(sides),)))
-        at_r, at_a = memo.index(a, az[rows])  # row i's strip: memo node (at_a[i], at_r[i])
-        new = ~memo.known[at_a, at_r]
-        if new.any():
-            an, bn = a[new], b[new]
-            r = an[:, None] + (bn - an)[:, None] * x[None, :]
-            psi_s = np.radians(az[rows[new]] + zero)
-            beta = (frames.beta0(np.radians(theta))
-                    + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None])
-            norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
-            beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
-            directions = frames.direction_from_beta(beta.reshape(-1, 2))
-            integrals = np.stack([(bn - an) * np.sum(evaluate_bsdf(bsdf_fn, float(theta), side, directions)
-                                                     .reshape(r.shape) * r * w[None, :], axis=1)
-                                  for side in sides])  # (side, row)
-            memo.values[:, at_a[new], at_r[new]] = integrals
-            memo.known[at_a[new], at_r[new]] = True
-        strip = memo.values[:, at_a, at_r]  # (side, row)
-        c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
-        c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
-        for s in range(len(sides)):
-            out[s, t, j, rows] = np.maximum((strip[s] - out[s, t, j - 1, rows] * c_prev) / c_last, 0.0)
+    # every incidence's rows at once; rho_max incidence by incidence, as the quadrature's and the grid's nodes take it
+    rmax = np.stack([np.minimum(rho_max(theta, az + zero), rho[-1]) for theta in thetas])  # (theta, psi)
+    last = np.searchsorted(rho, rmax, side="right") - 1  # the reader's "inside" (ρ ≤ ρmax), as the quadrature
+    t_of, rows = np.nonzero((last >= 1) & (rho[np.maximum(last, 0)] < rmax))  # incidence by incidence, rows in order
+    if rows.size == 0:
+        return out
+    j = last[t_of, rows]
+    a, b, r_j = rho[j - 1], rmax[t_of, rows], rho[j]
+    memo = strips if strips is not None else _PolarMemo((len(sides), thetas.size), (thetas.size,))
+    if memo.lead != (len(sides), thetas.size):
+        raise ValidationError("edge-strip memo of other incidences or sides", field="strips",
+                              expected=str((len(sides), thetas.size)), got=str(memo.lead))
+    at_r, at_a = memo.index(a, az[rows])  # the strip of (t_of[i], rows[i]): memo node (t_of[i], at_a[i], at_r[i])
+    new = ~memo.known[t_of, at_a, at_r]
+    for t in np.unique(t_of[new]):
+        theta = thetas[t]
+        now = new & (t_of == t)
+        an, bn = a[now], b[now]
+        r = an[:, None] + (bn - an)[:, None] * x[None, :]
+        psi_s = np.radians(az[rows[now]] + zero)
+        beta = (frames.beta0(np.radians(theta))
+                + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None])
+        norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
+        beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
+        directions = frames.direction_from_beta(beta.reshape(-1, 2))
+        integrals = np.stack([(bn - an) * np.sum(evaluate_bsdf(bsdf_fn, float(theta), side, directions)
+                                                 .reshape(r.shape) * r * w[None, :], axis=1)
+                              for side in sides])  # (side, row)
+        memo.values[:, t, at_a[now], at_r[now]] = integrals
+        memo.known[t, at_a[now], at_r[now]] = True
+    strip = memo.values[:, t_of, at_a, at_r]  # (side, row)
+    c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
+    c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
+    for s in range(len(sides)):
+        out[s, t_of, j, rows] = np.maximum((strip[s] - out[s, t_of, j - 1, rows] * c_prev) / c_last, 0.0)
     return out
 
 
@@ -1611,7 +1617,7 @@ def auto_harvey_shack_axes(
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)
 
-    strips: dict[float, _PolarMemo] = {}  # the edge strips' integrals, shared by every candidate grid
+    strips = _PolarMemo((len(sides), thetas.size), (thetas.size,))  # the edge strips' integrals, for every candidate
 
     def edges(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         table = harvey_shack_edge_values(np.swapaxes(values, -1, -2), bsdf_fn, thetas, sides,
