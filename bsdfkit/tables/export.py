@@ -836,15 +836,16 @@ def read_any(path: str | Path) -> FileSummary:
 
 def _read_any(path: str | Path) -> tuple[FileSummary, VendorTable | None]:
     """:func:`read_any` and the file's nodes the engine integrated (None when the format's own rule gives the TIS),
-    the file read once by each of its format's two readers."""
+    the file read once (``summary_and_table``) or once by each of its format's two readers."""
     fmt = sniff_format(path)
-    summary = _read_format(path, fmt)
+    both = registry.get(fmt).summary_and_table
+    summary, table = both(str(path)) if both is not None else (_read_format(path, fmt), None)
     if any("@rotation=" in k for k in summary.tis_computed):
         summary.details["tis_rule"] = "format quadrature (several sample rotations)"
         return summary, None
     if "tis_rule" in summary.details:  # the format's own rule (a TracePro ABg property holds no table)
         return summary, None
-    table = registry.get(fmt).vendor_table(str(path))
+    table = table if table is not None else registry.get(fmt).vendor_table(str(path))
     engine = file_tis(path, summary.incidences_deg, table)
     computed = {k: engine.get(k, [0.0] * len(summary.incidences_deg)) for k in summary.tis_computed
                 if k != "total"}
