@@ -419,7 +419,7 @@ def _resolve_source(source: Any, interaction: str, sides: tuple[str, ...],
                                   expected="incidence angles (deg)", got=None)
         else:
             theta_i_deg = np.unique(np.asarray(ds["theta_i"].values, dtype=np.float64))
-    return _Source(fns, np.asarray(theta_i_deg, dtype=np.float64), (),
+    return _Source({s: grids.Pointwise(f) for s, f in fns.items()}, np.asarray(theta_i_deg, dtype=np.float64), (),
                    f"calibrated scan {label}, interaction {interaction}")
 
 
@@ -445,7 +445,7 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
         raise InputError("the sides share no measured incidence", file=label, field="theta_i",
                          expected="a common incidence, or one side")
     engine = {s: {round(t, 6): v for t, v in zip(src.incidences_deg[s], src.tis[s])} for s in sides}
-    return _Source({s: src.fn for s in sides}, np.asarray(common, dtype=np.float64), (),
+    return _Source({s: grids.Pointwise(src.fn) for s in sides}, np.asarray(common, dtype=np.float64), (),
                    f"measured dataset {label} at {src.what} (hemispherical engine)", engine_tis=engine)
 
 
@@ -453,7 +453,7 @@ def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
     def bsdf_fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
-    return bsdf_fn
+    return grids.Pointwise(bsdf_fn) if all(isinstance(f, grids.Pointwise) for f in fns.values()) else bsdf_fn
 
 
 # --------------------------------------------------------------------------------------------------
@@ -836,15 +836,16 @@ def read_any(path: str | Path) -> FileSummary:
 
 def _read_any(path: str | Path) -> tuple[FileSummary, VendorTable | None]:
     """:func:`read_any` and the file's nodes the engine integrated (None when the format's own rule gives the TIS),
-    the file read once by each of its format's two readers."""
+    the file read once (``summary_and_table``) or once by each of its format's two readers."""
     fmt = sniff_format(path)
-    summary = _read_format(path, fmt)
+    both = registry.get(fmt).summary_and_table
+    summary, table = both(str(path)) if both is not None else (_read_format(path, fmt), None)
     if any("@rotation=" in k for k in summary.tis_computed):
         summary.details["tis_rule"] = "format quadrature (several sample rotations)"
         return summary, None
     if "tis_rule" in summary.details:  # the format's own rule (a TracePro ABg property holds no table)
         return summary, None
-    table = registry.get(fmt).vendor_table(str(path))
+    table = table if table is not None else registry.get(fmt).vendor_table(str(path))
     engine = file_tis(path, summary.incidences_deg, table)
     computed = {k: engine.get(k, [0.0] * len(summary.incidences_deg)) for k in summary.tis_computed
                 if k != "total"}

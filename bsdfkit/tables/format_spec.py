@@ -116,6 +116,9 @@ class TableFormat:
     sides_per_file: int = 2
     #: the grid a writer samples on (``harvey_shack`` | ``specular`` | ``klems`` …), for the export's re-check
     grid_kind: str = ""
+    #: ``summarise`` and ``vendor_table`` from one read of the file (the table None when the file holds no table of
+    #: nodes), for formats whose two readers would parse the same text: the export's re-check needs both
+    summary_and_table: Callable[[str], tuple[FileSummary, VendorTable | None]] | None = None
 
     @property
     def can_write(self) -> bool:

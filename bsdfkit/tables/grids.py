@@ -63,6 +63,7 @@ __all__ = [
     "BsdfFn",
     "GridTolerance",
     "HarveyShackAxes",
+    "Pointwise",
     "SpecularAxes",
     "evaluate_bsdf",
     "auto_harvey_shack_axes",
@@ -298,9 +299,31 @@ def evaluate_bsdf(bsdf_fn: BsdfFn, theta_i_deg: float, side: str,
 CHUNK = 4096
 
 
+@dataclass(frozen=True)
+class Pointwise:
+    """A BSDF callable (:data:`BsdfFn`) whose value at a direction depends on that direction alone, not on the
+    other directions of the call nor on their number (a NumPy reconstruction such as the hemispherical engine's).
+    :func:`evaluate_bsdf` calls it on the directions as they are, in chunks of at most :data:`CHUNK`, without
+    padding the last chunk: the padding serves JAX models (one compilation per array shape), and a NumPy source
+    would evaluate it (the auto grids ask for a few hundred directions at a time: padded to 4096, most of the
+    work of a reconstruction's table was the padding).
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta_i_deg, side, directions[..., 3])`` → BSDF [1/sr].
+    """
+
+    fn: BsdfFn
+
+    def __call__(self, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> ArrayLike:
+        """``fn`` at the directions (unit vectors (..., 3) [-]) → BSDF [1/sr]."""
+        return self.fn(theta_i_deg, side, directions)
+
+
 def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray:
     """``bsdf_fn`` on the directions flattened, in chunks of :data:`CHUNK` (the last padded with the first
-    direction).
+    direction, unless the callable is :class:`Pointwise`).
 
     The auto grids evaluate the callable on arrays of ever new lengths; a JAX model compiles each operation
     once per array shape, so every call gets the same shape. The answer is reshaped to
@@ -308,6 +331,8 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
     """
     flat = directions.reshape(-1, 3)
     n = flat.shape[0]
+    if isinstance(bsdf_fn, Pointwise):
+        return _call_pointwise(bsdf_fn, theta_i_deg, side, flat, directions.shape[:-1])
     size = -(-n // CHUNK) * CHUNK
     padded = np.concatenate([flat, np.broadcast_to(flat[:1], (size - n, 3))]) if size > n else flat
     parts = []
@@ -319,6 +344,22 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
             return out  # the shape check of evaluate_bsdf names the mismatch
         parts.append(out)
     return np.concatenate(parts)[:n].reshape(directions.shape[:-1])
+
+
+def _call_pointwise(bsdf_fn: Pointwise, theta_i_deg: float, side: str, flat: NDArray[np.float64],
+                    shape: tuple[int, ...]) -> NDArray:
+    """A :class:`Pointwise` callable on the directions ``flat`` (n, 3) in chunks of at most :data:`CHUNK`, the answer
+    reshaped to ``shape`` (a scalar answer broadcast; a wrong shape returned as it is, for evaluate_bsdf to name)."""
+    n = flat.shape[0]
+    parts = []
+    for k in range(0, n, CHUNK):
+        out = np.asarray(bsdf_fn(float(theta_i_deg), side, flat[k:k + CHUNK]), dtype=np.float64)
+        if out.ndim == 0:
+            return np.broadcast_to(out, shape)
+        if out.shape != (min(CHUNK, n - k),):
+            return out
+        parts.append(out)
+    return np.concatenate(parts).reshape(shape)
 
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:
@@ -579,13 +620,50 @@ def harvey_shack_cell_grid(
     )
 
 
+class _PolarMemo:
+    """Values ``[..., azimuth, radius]`` known at some (azimuth, radius) pairs of growing, sorted axes: the memo of
+    the auto grids, which ask again and again for values at nodes (and edge strips) they have already evaluated.
+    Looked up by index arrays, not key by key (a candidate grid asks for thousands of pairs). ``lead``: the leading
+    dimensions of the values; ``known_lead``: those of the known-mask (the values of every side known at once, of
+    each incidence on its own or not)."""
+
+    def __init__(self, lead: tuple[int, ...], known_lead: tuple[int, ...] = ()) -> None:
+        self.lead, self.known_lead = lead, known_lead
+        self.r = np.empty(0)
+        self.a = np.empty(0)
+        self.values = np.zeros(lead + (0, 0))
+        self.known = np.zeros(known_lead + (0, 0), dtype=bool)
+
+    def index(self, r: NDArray[np.float64], a: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Positions of the radii ``r`` and azimuths ``a`` on the memo's axes, which grow to hold them (equal floats
+        are one node)."""
+        at_r, at_a = np.searchsorted(self.r, r), np.searchsorted(self.a, a)
+        if _all_found(self.r, r, at_r) and _all_found(self.a, a, at_a):
+            return at_r, at_a
+        r_all, a_all = np.union1d(self.r, r), np.union1d(self.a, a)
+        pos_a, pos_r = np.searchsorted(a_all, self.a), np.searchsorted(r_all, self.r)
+        values = np.zeros(self.lead + (a_all.size, r_all.size))
+        known = np.zeros(self.known_lead + (a_all.size, r_all.size), dtype=bool)
+        values[..., pos_a[:, None], pos_r[None, :]] = self.values
+        known[..., pos_a[:, None], pos_r[None, :]] = self.known
+        self.r, self.a, self.values, self.known = r_all, a_all, values, known
+        return np.searchsorted(self.r, r), np.searchsorted(self.a, a)
+
+
+def _all_found(axis: NDArray[np.float64], values: NDArray[np.float64], at: NDArray[np.intp]) -> bool:
+    """Whether every value is on the sorted ``axis`` at its insertion position ``at``."""
+    if axis.size == 0:
+        return values.size == 0
+    return bool(np.all((at < axis.size) & (axis[np.minimum(at, axis.size - 1)] == values)))
+
+
 #: Gauss–Legendre points along a row's edge strip of :func:`harvey_shack_edge_values`
 EDGE_ORDER = 16
 
 
 def harvey_shack_edge_values(
     values: ArrayLike, bsdf_fn: BsdfFn, theta_i_deg: Sequence[float], sides: Sequence[str] | str,
-    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: dict | None = None,
+    axes: HarveyShackAxes, order: int = EDGE_ORDER, strips: _PolarMemo | None = None,
 ) -> NDArray[np.float64]:
     """Point samples of a Harvey–Shack table with each row's last node inside the disk replaced by its *edge value*.
 
@@ -598,8 +676,8 @@ def harvey_shack_edge_values(
     order
         Gauss–Legendre points along each row's edge strip.
     strips
-        Memo of the strips' integrals by (incidence, azimuth, strip start), filled here: the auto grid asks for the
-        edge values of many candidate axes that share most rows and strips.
+        Memo of the strips' integrals ``[side, theta, azimuth, strip start]`` for these sides and incidences, filled
+        here: the auto grid asks for the edge values of many candidate axes that share most rows and strips.
 
     Returns
     -------
@@ -628,36 +706,41 @@ def harvey_shack_edge_values(
     zero = float(axes.zero_azimuth_deg)
     x, w = gauss_legendre(int(order))
     x, w = 0.5 * (x + 1.0), 0.5 * w
-    for t, theta in enumerate(thetas):
-        rmax = np.minimum(rho_max(theta, az + zero), rho[-1])
-        last = np.searchsorted(rho, rmax, side="right") - 1  # the reader's "inside" (ρ ≤ ρmax), as the quadrature
-        rows = np.flatnonzero((last >= 1) & (rho[np.maximum(last, 0)] < rmax))
-        if rows.size == 0:
-            continue
-        j = last[rows]
-        a, b, r_j = rho[j - 1], rmax[rows], rho[j]
-        keys = [(float(theta), float(az[k]), float(a_)) for k, a_ in zip(rows, a)]
-        known = strips if strips is not None else {}
-        new = np.array([key not in known for key in keys], dtype=bool)
-        if new.any():
-            an, bn = a[new], b[new]
-            r = an[:, None] + (bn - an)[:, None] * x[None, :]
-            psi_s = np.radians(az[rows[new]] + zero)
-            beta = (frames.beta0(np.radians(theta))
-                    + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None])
-            norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
-            beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
-            directions = frames.direction_from_beta(beta.reshape(-1, 2))
-            integrals = np.stack([(bn - an) * np.sum(evaluate_bsdf(bsdf_fn, float(theta), side, directions)
-                                                     .reshape(r.shape) * r * w[None, :], axis=1)
-                                  for side in sides])  # (side, row)
-            for i, key in enumerate(k for k, n in zip(keys, new) if n):
-                known[key] = integrals[:, i]
-        strip = np.stack([known[key] for key in keys], axis=-1)  # (side, row)
-        c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
-        c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
-        for s in range(len(sides)):
-            out[s, t, j, rows] = np.maximum((strip[s] - out[s, t, j - 1, rows] * c_prev) / c_last, 0.0)
+    # every incidence's rows at once; rho_max incidence by incidence, as the quadrature's and the grid's nodes take it
+    rmax = np.stack([np.minimum(rho_max(theta, az + zero), rho[-1]) for theta in thetas])  # (theta, psi)
+    last = np.searchsorted(rho, rmax, side="right") - 1  # the reader's "inside" (ρ ≤ ρmax), as the quadrature
+    t_of, rows = np.nonzero((last >= 1) & (rho[np.maximum(last, 0)] < rmax))  # incidence by incidence, rows in order
+    if rows.size == 0:
+        return out
+    j = last[t_of, rows]
+    a, b, r_j = rho[j - 1], rmax[t_of, rows], rho[j]
+    memo = strips if strips is not None else _PolarMemo((len(sides), thetas.size), (thetas.size,))
+    if memo.lead != (len(sides), thetas.size):
+        raise ValidationError("edge-strip memo of other incidences or sides", field="strips",
+                              expected=str((len(sides), thetas.size)), got=str(memo.lead))
+    at_r, at_a = memo.index(a, az[rows])  # the strip of (t_of[i], rows[i]): memo node (t_of[i], at_a[i], at_r[i])
+    new = ~memo.known[t_of, at_a, at_r]
+    for t in np.unique(t_of[new]):
+        theta = thetas[t]
+        now = new & (t_of == t)
+        an, bn = a[now], b[now]
+        r = an[:, None] + (bn - an)[:, None] * x[None, :]
+        psi_s = np.radians(az[rows[now]] + zero)
+        beta = (frames.beta0(np.radians(theta))
+                + r[..., None] * np.stack([np.cos(psi_s), np.sin(psi_s)], -1)[:, None])
+        norm = np.hypot(beta[..., 0], beta[..., 1])  # rounding at the edge
+        beta = np.where((norm > 1.0)[..., None], beta / np.maximum(norm, 1.0)[..., None], beta)
+        directions = frames.direction_from_beta(beta.reshape(-1, 2))
+        integrals = np.stack([(bn - an) * np.sum(evaluate_bsdf(bsdf_fn, float(theta), side, directions)
+                                                 .reshape(r.shape) * r * w[None, :], axis=1)
+                              for side in sides])  # (side, row)
+        memo.values[:, t, at_a[now], at_r[now]] = integrals
+        memo.known[t, at_a[now], at_r[now]] = True
+    strip = memo.values[:, t_of, at_a, at_r]  # (side, row)
+    c_prev = (r_j - a) / 6.0 * (2.0 * a + r_j)  # weight of f_{J-1} in the strip's integral by the rule
+    c_last = (r_j - a) / 6.0 * (a + 2.0 * r_j) + 0.5 * (b * b - r_j * r_j)  # weight of the edge value
+    for s in range(len(sides)):
+        out[s, t_of, j, rows] = np.maximum((strip[s] - out[s, t_of, j - 1, rows] * c_prev) / c_last, 0.0)
     return out
 
 
@@ -1448,18 +1531,15 @@ class _NodeValues:
 
     def __init__(self, bsdf_fn: BsdfFn, thetas: NDArray[np.float64], sides: tuple[str, ...], zero: float) -> None:
         self.fn, self.thetas, self.sides, self.zero = bsdf_fn, thetas, sides, zero
-        self.known: dict[float, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}  # ψ → (ρ sorted, f[s, t, ρ])
+        self.memo = _PolarMemo((len(sides), thetas.size))  # f[s, t, ψ, ρ]
 
     def __call__(self, r: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
         """f[side, theta, a, r] [1/sr] on the grid ``r`` × ``a`` (ρ, table azimuths [deg])."""
-        new_r, new_a = [], []
-        for psi in a:
-            have = self.known.get(float(psi))
-            missing = r if have is None else r[~np.isin(r, have[0])]
-            new_r.append(missing)
-            new_a.append(np.full(missing.size, psi))
-        r_p, a_p = np.concatenate(new_r), np.concatenate(new_a)
-        if r_p.size:
+        at_r, at_a = self.memo.index(r, a)
+        # the nodes not yet known, azimuth by azimuth in the order of a, each azimuth's radii in the order of r
+        k_a, k_r = np.nonzero(~self.memo.known[at_a[:, None], at_r[None, :]])
+        if k_a.size:
+            r_p, a_p = r[k_r], a[k_a]
             f_p = np.zeros((len(self.sides), self.thetas.size, r_p.size))
             psi_sample = np.radians(a_p + self.zero)
             unit = np.stack([np.cos(psi_sample), np.sin(psi_sample)], axis=-1)
@@ -1470,18 +1550,9 @@ class _NodeValues:
                 directions = frames.direction_from_beta(beta[inside])
                 for s, side in enumerate(self.sides):
                     f_p[s, t, inside] = evaluate_bsdf(self.fn, theta, side, directions)
-            for psi in np.unique(a_p):
-                on = a_p == psi
-                have = self.known.get(float(psi))
-                radii = r_p[on] if have is None else np.concatenate([have[0], r_p[on]])
-                values = f_p[..., on] if have is None else np.concatenate([have[1], f_p[..., on]], axis=-1)
-                order = np.argsort(radii)
-                self.known[float(psi)] = (radii[order], values[..., order])
-        out = np.empty((len(self.sides), self.thetas.size, a.size, r.size))
-        for j, psi in enumerate(a):
-            radii, values = self.known[float(psi)]
-            out[:, :, j, :] = values[..., np.searchsorted(radii, r)]
-        return out
+            self.memo.values[..., at_a[k_a], at_r[k_r]] = f_p
+            self.memo.known[at_a[k_a], at_r[k_r]] = True
+        return self.memo.values[:, :, at_a[:, None], at_r[None, :]]
 
 
 def auto_harvey_shack_axes(
@@ -1546,7 +1617,7 @@ def auto_harvey_shack_axes(
     def quad(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         return tis_harvey_shack_table(np.swapaxes(values, -1, -2), r, a, thetas, zero_azimuth_deg)
 
-    strips: dict = {}  # the edge strips' integrals, shared by every candidate grid
+    strips = _PolarMemo((len(sides), thetas.size), (thetas.size,))  # the edge strips' integrals, for every candidate
 
     def edges(values: NDArray, r: NDArray, a: NDArray) -> NDArray:
         table = harvey_shack_edge_values(np.swapaxes(values, -1, -2), bsdf_fn, thetas, sides,

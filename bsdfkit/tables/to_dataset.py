@@ -35,7 +35,7 @@ from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import registry
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
-from bsdfkit.tables.grids import GridTolerance
+from bsdfkit.tables.grids import GridTolerance, Pointwise
 from bsdfkit.tables.registry import sniff_format
 from bsdfkit.tables.vendor import vendor_dataset
 
@@ -199,7 +199,9 @@ def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
                                   expected=" or ".join(fns), got=side)
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
-    return fn
+    # the sources here are NumPy reconstructions (the hemispherical engine, a phosphor scan's hemisphere): each
+    # direction's value is its own, so the grids evaluate them without padding
+    return Pointwise(fn)
 
 
 class _Asked(NamedTuple):

@@ -436,7 +436,19 @@ def _write_job(job: WriteJob) -> WriteOutcome:
 
 
 def _summarise(path: str) -> FileSummary:
+    return _summary(read_asap(path), path)
+
+
+def _vendor_table(path: str) -> VendorTable:
+    return _nodes(read_asap(path))
+
+
+def _summary_and_table(path: str) -> tuple[FileSummary, VendorTable | None]:
     table = read_asap(path)
+    return _summary(table, path), _nodes(table)
+
+
+def _summary(table: AsapTable, path: str) -> FileSummary:
     computed = table.tis_computed()
     sides = [str(s) for s in table.table["side"].values]
     return FileSummary(
@@ -448,8 +460,8 @@ def _summarise(path: str) -> FileSummary:
     )
 
 
-def _vendor_table(path: str) -> VendorTable:
-    table = read_asap(path).table
+def _nodes(asap_table: AsapTable) -> VendorTable:
+    table = asap_table.table
     out = [VendorGrid("harvey_shack", str(side), np.asarray(table["theta_i"].values, dtype=np.float64),
                       np.asarray(table["rho"].values, dtype=np.float64),
                       np.asarray(table["psi"].values, dtype=np.float64),
@@ -460,4 +472,5 @@ def _vendor_table(path: str) -> VendorTable:
 
 FORMAT = TableFormat(name="asap", title="bsdfkit ASAP-style", extensions=(".txt", ".asap"),
                      guess_can_open=first_line_is(MAGIC), summarise=_summarise, vendor_table=_vendor_table,
-                     write=_write_job, sides_per_file=2, grid_kind="harvey_shack")
+                     write=_write_job, sides_per_file=2, grid_kind="harvey_shack",
+                     summary_and_table=_summary_and_table)

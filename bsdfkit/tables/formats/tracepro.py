@@ -841,7 +841,19 @@ def _write_job(job: WriteJob) -> WriteOutcome:
 
 
 def _summarise(path: str) -> FileSummary:
+    return _summary(read_tracepro(path), path)
+
+
+def _vendor_table(path: str) -> VendorTable:
+    return _table(read_tracepro(path), path)
+
+
+def _summary_and_table(path: str) -> tuple[FileSummary, VendorTable | None]:
     prop = read_tracepro(path)
+    return _summary(prop, path), (_table(prop, path) if prop.scatter == 5 else None)
+
+
+def _summary(prop: TraceProProperty, path: str) -> FileSummary:
     computed = prop.tis_computed()
     theta = prop.theta_i_deg
     if prop.table is not None:
@@ -859,8 +871,7 @@ def _summarise(path: str) -> FileSummary:
     )
 
 
-def _vendor_table(path: str) -> VendorTable:
-    prop = read_tracepro(path)
+def _table(prop: TraceProProperty, path: str) -> VendorTable:
     if prop.scatter != 5 or prop.table is None:
         raise FormatError("only TracePro tables (Scatter 5) can be read as data", file=path, field="Scatter",
                           expected="5 (asymmetric table)", got=prop.scatter)
@@ -882,5 +893,6 @@ def _vendor_table(path: str) -> VendorTable:
 
 
 FORMAT = TableFormat(name="tracepro", title="TracePro", extensions=(".txt",), guess_can_open=first_line_is(MAGIC),
-                     summarise=_summarise, vendor_table=_vendor_table, write=_write_job, sides_per_file=2,
+                     summarise=_summarise, vendor_table=_vendor_table, summary_and_table=_summary_and_table,
+                     write=_write_job, sides_per_file=2,
                      grid_kind="harvey_shack")
