@@ -300,12 +300,17 @@ def _fits_of_the_run() -> dict:
     return out
 
 
-def test_fits_and_studies_figures_fixed_margins_keep_every_text_inside_and_apart():
-    from bsdfkit.plotting.figures import bsdf_fits_figure, trace_studies_figure
+def test_fits_figure_fixed_margins_keep_every_text_inside_and_apart():
+    from bsdfkit.plotting.figures import bsdf_fits_figure
 
     fig = bsdf_fits_figure(_fits_of_the_run())
     assert len(fig.axes) == 6
     _inside_and_apart(fig, 120)
+
+
+@pytest.mark.slow  # twelve panels drawn (3-4 s); its fast check: test_study_and_incidence_figures_label_every_...
+def test_studies_figure_fixed_margins_keep_every_text_inside_and_apart():
+    from bsdfkit.plotting.figures import trace_studies_figure
 
     class Device:
         LER, YBR, non_uniformity = 0.558, 8.46, 0.11

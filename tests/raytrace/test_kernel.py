@@ -113,19 +113,24 @@ def lowered_text(s, full=False, effects=None):
 
 def test_minimal_kernel_carries_no_optional_code():
     s = scene()  # diffuse cavity, exit top
-    eff, minimal = lowered_text(s, full=False)
+    _, minimal = lowered_text(s, full=False)
     _, full = lowered_text(s, full=True)
     for scope in SCOPES:
         assert scope not in minimal, scope
         assert scope in full, scope
-    # each switch of this scene's kernel brings in its own code and no other optional code
+    assert minimal.count("stablehlo.while") < full.count("stablehlo.while")  # lobe rejection loop
+    assert minimal.count("stablehlo.scatter") == 0 < full.count("stablehlo.scatter")
+    assert len(minimal) < 0.6 * len(full)
+
+
+@pytest.mark.slow  # four more kernels lowered (4 s); the fast lane's minimal and full kernels: the test above
+def test_each_switch_brings_in_its_own_code_and_no_other_optional_code():
+    s = scene()  # diffuse cavity, exit top
+    eff = scene_effects(s)
     for flag, scope in (("specular", "specular_reflection"), ("irradiance_map", "irradiance_map"),
                         ("incidence_histogram", "incidence_histogram"), ("interaction_budget", "interaction_budget")):
         _, one = lowered_text(s, effects=replace(eff, **{flag: True}))
         assert [name for name in SCOPES if name in one] == [scope], flag
-    assert minimal.count("stablehlo.while") < full.count("stablehlo.while")  # lobe rejection loop
-    assert minimal.count("stablehlo.scatter") == 0 < full.count("stablehlo.scatter")
-    assert len(minimal) < 0.6 * len(full)
 
 
 def test_effects_follow_the_scene(tmp_path):
