@@ -14,6 +14,7 @@ import errno
 import gzip
 import io
 import re
+import shutil
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -129,15 +130,21 @@ def tiny_plan() -> virtual.ScanPlan:
                             perpendicular_deg=(-20.0, 20.0), fine_halfwidth_deg=2.0, fine_step_deg=2.0)
 
 
-@pytest.fixture
-def tiny_export(tmp_path) -> Path:
-    """A small valid raw export (one incidence, few positions, 5 nm grid) written to a temp folder."""
+@pytest.fixture(scope="session")
+def _tiny_export_made(tmp_path_factory) -> Path:
+    """The small raw export, simulated once per session (0.1-1 s each time, for some 40 tests)."""
     gonio = tiny_gonio()
     truth = virtual.cl830_truth(gonio)
     export = virtual.simulate_scan(truth, tiny_plan(), gonio, seed=1)
-    folder = tmp_path / "tiny"
+    folder = tmp_path_factory.mktemp("tiny-made") / "tiny"
     virtual.write_raw_export(export, folder)
     return folder
+
+
+@pytest.fixture
+def tiny_export(tmp_path, _tiny_export_made) -> Path:
+    """A small valid raw export (one incidence, few positions, 5 nm grid) copied to a temp folder (to mutate)."""
+    return Path(shutil.copytree(_tiny_export_made, tmp_path / "tiny"))
 
 
 def read_gz_lines(path: Path) -> list[str]:

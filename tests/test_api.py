@@ -58,6 +58,8 @@ def test_trace_from_a_scene_path():
     assert abs(result.ledger_error) < 1e-9
 
 
+@pytest.mark.slow  # builds the plate of the cl830 measurement twice (6 s); the fast lane's route through the same
+# resolver (api.load_scene, as the trace verb loads scenes): test_scene.py::test_the_trace_verb_resolves_a_recipe_plate
 def test_load_scene_builds_a_recipe_plate_as_the_trace_verb_does():
     """A scene whose phosphor top names a fitting recipe (`from = ...`) loads through the API with the plate of
     that recipe's measurement: the plate the pipeline module builds from the same recipe, channel for channel."""

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import fast_lane
 
 from bsdfkit.cli.main import main
 from bsdfkit.tables import grids
@@ -41,7 +42,10 @@ def run(capsys, *argv: str) -> tuple[int, str, str]:
     return code, out, err
 
 
-@pytest.mark.parametrize(("to", "side"), [("tracepro", "both"), ("zemax", "transmission"), ("asap", "reflection")])
+# the verb's path in the fast lane with Zemax; TracePro (both sides, 4 s) and ASAP in the full suite (their writers'
+# fast checks: tests/tables/formats/test_tracepro.py and test_asap.py)
+@pytest.mark.parametrize(("to", "side"), fast_lane([("tracepro", "both"), ("zemax", "transmission"),
+                                                    ("asap", "reflection")], {("zemax", "transmission")}))
 def test_export_then_read_json(tmp_path, capsys, to, side):
     src = fit_result(tmp_path / "fit.nc")
     out = tmp_path / f"table.{to}"

@@ -181,6 +181,8 @@ sys.exit(main(["sweep", sys.argv[1], "--param", "wall.reflectance=0.5:0.9:50", "
 """
 
 
+@pytest.mark.slow  # a fresh interpreter killed mid-sweep (5 s); the fast lane's kill of an output set:
+# tests/io/test_atomic.py::test_killed_output_set_leaves_previous_set
 def test_killed_sweep_leaves_nothing_and_rerun_needs_no_force(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(_scene_text())

@@ -271,7 +271,7 @@ def test_batched_fit_equals_individual_fits():
         assert float(batch.k_std[b]) == pytest.approx(float(one.k_std), rel=1e-6)
 
 
-def test_fit_bsdf_cli_on_bundled_measurement(capsys):
+def test_fit_bsdf_cli_on_bundled_measurement(capsys, bundled_scan):
     """``bsdfkit fit bsdf`` end to end on the bundled synthetic measurement (lead's reductions module)."""
     import json
     from pathlib import Path
@@ -289,8 +289,8 @@ def test_fit_bsdf_cli_on_bundled_measurement(capsys):
     assert 0 < p["rho"] < 1 and p["A"] > 0 and 0 < p["sigma"] < 0.5
     # TIS = ρ + (clipped) lobe ≥ ρ, and below 1 for a passive sample
     assert p["rho"] <= row["tis"] < 1.0
-    # the data's TIS beside it: the interaction table `bsdfkit tis` reports
-    from bsdfkit import api
+    # the data's TIS beside it: the interaction table `bsdfkit tis` reports (of the session's ingest of the same
+    # folder: ingest is read_scan + calibrate)
     from bsdfkit.reduction.any_sample import tis
-    measured = tis(api.ingest(scan), 45.0).sel(interaction="bibs", side="reflection")
+    measured = tis(bundled_scan, 45.0).sel(interaction="bibs", side="reflection")
     assert row["data_tis"] == pytest.approx(float(measured["tis"]), rel=1e-12)

@@ -163,6 +163,9 @@ def two_band_led():
     return dict(zip(names, records))
 
 
+# slow lane: every single-band model compiled for a batch of three (9 s); the fast lane's check of the same acceptance
+# numbers on the same path: test_fit_spectrum_without_a_model_picks_the_best_line_shape_and_warns_on_the_gaussian
+@pytest.mark.slow
 @pytest.mark.parametrize("k", range(len(BLUE)))
 def test_best_model_reproduces_measured_peak_and_fwhm_of_blue_leds(blue_best, k, capsys):
     """Acceptance: FWHM within 5 % and peak within 0.5 nm of the measured ones (the Gaussian is 17-33 % wide)."""
@@ -236,6 +239,7 @@ SYNTHETIC = ((2700, 450.0, 540.0, 625.0), (3000, 452.0, 545.0, 620.0), (4000, 44
              (5000, 455.0, 552.0, 610.0), (6500, 445.0, 555.0, 605.0))
 
 
+@pytest.mark.slow  # further spectra of the two-band path (4 s); fast lane: test_two_band_finds_pump_and_phosphor_...
 def test_two_band_on_synthetic_pc_whites_from_2700_to_6500_K():
     """Known peaks: the pump line's peak and the phosphor curve's maximum. The fitted shapes (Gaussian pump line
     + side band, split Gaussian + Gaussian phosphor) are not the Ohno lines the spectra are built of."""
@@ -250,6 +254,7 @@ def test_two_band_on_synthetic_pc_whites_from_2700_to_6500_K():
         assert rec["r2"] > 0.99
 
 
+@pytest.mark.slow  # further spectra of the two-band path (10 s); fast lane: test_two_band_finds_pump_and_phosphor_...
 def test_two_band_on_the_cie_015_led_illuminants_and_a_nist_yag_white():
     """Other pc-whites (5 nm grid): CIE 015 LED-B1..B5 (2733-6598 K), LED-BH1 and NIST CQS "Phosphor LED YAG".
     On a 5 nm grid the measured pump maximum is the local quadratic through the largest sample and its

@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import BUNDLED
+from conftest import BUNDLED, fast_lane
 
 SLOW_WRITER = r"""
 import sys, time
@@ -30,7 +30,7 @@ def _wait_for_part(folder: Path, timeout: float = 60.0) -> None:
     raise AssertionError("writer never started")
 
 
-@pytest.mark.parametrize("existing", [True, False])
+@pytest.mark.parametrize("existing", fast_lane([True, False], {True}))  # a fresh interpreter each (2 s)
 def test_killed_writer_leaves_old_file_or_none(tmp_path, existing):
     target = tmp_path / "table.txt"
     if existing:

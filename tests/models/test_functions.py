@@ -115,9 +115,10 @@ def test_tis_gaussian_unclipped_and_clipped_against_brute_force():
     A, sigma = 3.0, 0.04
     inside = float(_np(models.tis_gaussian_lobe, math.radians(10.0), A, sigma))
     assert inside == pytest.approx(2 * math.pi * sigma**2 * A, rel=1e-12)
-    # Strongly clipped lobe: brute-force ∫∫ f cos θ sin θ dθ dφ over the hemisphere (midpoint rule).
+    # Strongly clipped lobe: brute-force ∫∫ f cos θ sin θ dθ dφ over the hemisphere (midpoint rule; on 600 x 1200
+    # nodes it is within 1e-6 of its 4000 x 8000 value, a tenth of the tolerance, at a sixth of 1500 x 3000's cost).
     ti, A, sigma = math.radians(70.0), 1.5, 0.2
-    n = 1500
+    n = 600
     th = (np.arange(n) + 0.5) * (math.pi / 2 / n)
     ph = (np.arange(2 * n) + 0.5) * (2 * math.pi / (2 * n)) - math.pi
     T, P = np.meshgrid(th, ph, indexing="ij")

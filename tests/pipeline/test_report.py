@@ -15,7 +15,7 @@ from html import unescape as html_unescape
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import ROOT
+from conftest import ROOT, fast_lane
 from matplotlib import image as mpimg
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -261,7 +261,7 @@ def _inside_and_apart(fig, dpi: float) -> None:
     assert all(_overlap(a, b) == 0.0 for k, a in enumerate(boxes) for b in boxes[k + 1:])
 
 
-@pytest.mark.parametrize("count, ncols", [(3, 3), (5, 3), (5, 5)])
+@pytest.mark.parametrize("count, ncols", fast_lane([(3, 3), (5, 3), (5, 5)], fast=[(5, 3)]))
 def test_irradiance_maps_fixed_margins_keep_every_text_inside_and_apart(count, ncols):
     """The map grid's fixed margins (no layout engine), at the report's dpi: panels with three-line titles and
     the shared colour bar with its two-line label."""
@@ -300,12 +300,17 @@ def _fits_of_the_run() -> dict:
     return out
 
 
-def test_fits_and_studies_figures_fixed_margins_keep_every_text_inside_and_apart():
-    from bsdfkit.plotting.figures import bsdf_fits_figure, trace_studies_figure
+def test_fits_figure_fixed_margins_keep_every_text_inside_and_apart():
+    from bsdfkit.plotting.figures import bsdf_fits_figure
 
     fig = bsdf_fits_figure(_fits_of_the_run())
     assert len(fig.axes) == 6
     _inside_and_apart(fig, 120)
+
+
+@pytest.mark.slow  # twelve panels drawn (3-4 s); its fast check: test_study_and_incidence_figures_label_every_...
+def test_studies_figure_fixed_margins_keep_every_text_inside_and_apart():
+    from bsdfkit.plotting.figures import trace_studies_figure
 
     class Device:
         LER, YBR, non_uniformity = 0.558, 8.46, 0.11
@@ -400,6 +405,10 @@ def _full_run(folder):
     return folder, trends
 
 
+# The tests of the full run are in the slow lane (its report draws the three map grids of the paper's figures: 9 s);
+# the fast lane writes and reads the report of the small run (`built`) and checks the criteria, trends and grid
+# check without it (test_readings_of_the_papers_words_are_stated_numbers, test_trends_follow_the_papers_direction,
+# test_maps_table_says_whether_halving_the_cells_moves_the_value_by_less_than_its_sigma).
 @pytest.fixture(scope="module")
 def full_run(tmp_path_factory):
     """The run folder of ``_full_run`` with its report written (``write_report``), and the report's comparisons
@@ -411,6 +420,7 @@ def full_run(tmp_path_factory):
     return folder, trends, html, (rep, rep.build())
 
 
+@pytest.mark.slow
 def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_uniformity(full_run):
     _, _, text, _ = full_run
     maps = text[text.index('<section id="maps">'):text.index('<section id="spectrum">')]
@@ -434,6 +444,7 @@ def test_report_sets_every_map_panel_of_figs_10_12_14_beside_the_papers_non_unif
                      r"<td class=\"\">—</td>", maps)
 
 
+@pytest.mark.slow
 def test_a_trend_the_run_does_not_reproduce_is_said_and_explained(full_run):
     _, trends, text, _ = full_run
     name = "YBR slightly lower for short cavities (Fig. 11)"
@@ -540,6 +551,7 @@ def test_study_and_incidence_figures_label_every_axis_with_units_and_name_data_a
 
 
 # ---- issue #27: every comparison states its criterion, and the verdicts follow it ----------------------------
+@pytest.mark.slow
 def test_every_verdict_follows_its_stated_criterion_and_every_difference_is_listed(full_run):
     """Rule: a value agrees iff |run − paper| ≤ sqrt(half_unit² + (kσ)²); a trend holds iff its direction is the
     paper's and its size agrees by the same rule; every other comparison is in the disagreement list, and no
@@ -570,6 +582,7 @@ def test_every_verdict_follows_its_stated_criterion_and_every_difference_is_list
         assert float(diff) <= float(crit)
 
 
+@pytest.mark.slow
 def test_table3_losses_are_the_papers_100_minus_extracted(full_run):
     folder, _, _, (rep, _) = full_run
     summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))

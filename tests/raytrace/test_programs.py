@@ -74,12 +74,14 @@ def test_damaged_program_file_is_traced_again_and_replaced(program_cache, tmp_pa
 
 
 def test_unwritable_program_folder_still_traces(monkeypatch, tmp_path):
+    """The minimal kernel's scene, as the fast lane's other program tests (the folder's handling does not depend on
+    what the kernel holds; the phosphor plate's kernel took 5-10 times as long to trace and compile)."""
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
     monkeypatch.setattr(programs, "program_folder", lambda: blocker / "programs")
     compiled_kernel.cache_clear()
     try:
-        result = trace(plate_scene(tmp_path), RAYS, seed=1)
+        result = trace(scene(), RAYS, seed=1)
     finally:
         compiled_kernel.cache_clear()
     assert result.ledger_error < 1e-12 and not (blocker / "programs").exists()

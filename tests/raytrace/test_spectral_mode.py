@@ -252,6 +252,8 @@ def test_spectralon_wall_band_weighted_in_two_wavelength_mode():
     assert 0.97 < blue < 1.0 and 0.97 < yellow < 1.0
 
 
+@pytest.mark.slow  # 60 000 rays against the spectral budget oracle (4 s); the fast lane's spectral traces:
+# test_spectral_budget_books_the_stokes_loss_with_the_plate and test_example_spectral_scene_runs_from_the_command_line
 def test_spectral_exit_top_with_spectralon_walls_matches_the_budget():
     """No plate: the extracted spectrum is the LED spectrum times the cavity's efficiency at each wavelength."""
     s = loads_scene(scene_text('kind = "exit"', wall=f'reflectance_spectrum = "{SPECTRALON}"',

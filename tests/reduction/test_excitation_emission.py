@@ -113,6 +113,8 @@ def test_set_regenerates_bit_for_bit(tmp_path):
     assert (tmp_path / "regen" / "manifest.toml").read_bytes() == (EEM / "manifest.toml").read_bytes()
 
 
+@pytest.mark.slow  # 27 bands x 3 incidences x 2 sides of the truth's integrals (4 s); the fast lane's check of the
+# same truth's energy and photon balance: test_small_set_conserves_energy_and_photons_and_recovers_the_truth
 def test_truth_is_physical(truth):
     lam = virtual.EEM_SPECTROMETER.wavelength
     # normalised on a fine grid; the 1 nm bin sum differs by the half bin at 780 nm where the pdf is not 0

@@ -110,6 +110,9 @@ def _labels(node):
     return [(p, v) for p, v in _leaves(node) if not isinstance(v, (int, float)) or isinstance(v, bool)]
 
 
+# slow lane: regenerates the whole bundled export (2-3 s); the fast lane's checks of the bundled set and the generator:
+# test_bundled_measurement_is_labelled_small_and_reproducible, test_same_seed_same_export_different_seed_differs
+@pytest.mark.slow
 def test_bundled_measurement_regenerates_bit_for_bit(tmp_path):
     provenance = tomllib.loads((BUNDLED / "manifest.toml").read_text())["provenance"]
     # Byte identity holds under the library versions that made the files (the locked ones, recorded in the

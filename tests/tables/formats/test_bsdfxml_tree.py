@@ -135,6 +135,8 @@ def test_read_and_ingest_tis_give_the_same_number(path):
         np.testing.assert_allclose(engine, read, rtol=0, atol=1e-12, err_msg=key)
 
 
+@pytest.mark.slow  # a Klems export, an ingest and a tis (4 s); the fast lane's one answer of read and ingest + tis:
+# test_read_and_ingest_tis_give_the_same_number, and of the Klems writer: test_bsdfxml.py
 def test_a_bsdfkit_written_xml_gives_one_answer(tmp_path):
     """A Klems XML written by bsdfkit from a diffuser with a specular lobe (not a flat file): read, ingest + tis
     (API) and ingest -o + tis (command line) agree to 1e-12."""
