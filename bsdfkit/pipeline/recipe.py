@@ -18,6 +18,7 @@ import multiprocessing
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -416,7 +417,7 @@ class RunState:
     log: Callable[[str], None] = lambda message: None
     #: progress of a long stage: (task, done, total), e.g. ("trace", 3, 14) after the third of 14 traces
     progress: Callable[[str, int, int], None] = lambda task, done, total: None
-    #: the spectral comparison computed in a helper process since the run began (:func:`_spectral_ahead`)
+    #: the spectral comparison being computed by the run's helper process (:func:`_spectral_ahead`)
     spectral_ahead: Future | None = None
 
 
@@ -1233,24 +1234,39 @@ def _spectral_comparison(options: SpectralComparisonOptions) -> SpectralComparis
 
 
 @contextlib.contextmanager
-def _spectral_ahead(recipe: Recipe, enabled: bool) -> Iterator[Future | None]:
-    """The spectral comparison started in a spawned helper process (None when not ``enabled`` or the recipe has
-    no ``[spectral]`` table); the helper is stopped on exit, whatever it is doing.
+def _helper_process(enabled: bool) -> Iterator[ProcessPoolExecutor | None]:
+    """One spawned helper process for the run (None when not ``enabled``): it computes the spectral comparison
+    from the start (:func:`_spectral_ahead`), then draws the figures (:class:`PngRenderer`), having imported
+    matplotlib with the pipeline already. On an error it is stopped at once, whatever it is doing."""
+    if not enabled:
+        yield None
+        return
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+    finished = False
+    try:
+        yield pool
+        finished = True
+    finally:
+        if not finished:
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()  # its unfinished work is not wanted any more
+        pool.shutdown(wait=finished, cancel_futures=True)
+
+
+def _spectral_ahead(recipe: Recipe, helper: ProcessPoolExecutor | None) -> Future | None:
+    """The spectral comparison started in the ``helper`` process (None without a helper or a ``[spectral]``
+    table).
 
     It needs nothing from the other stages (its own measurement, plates and traces): started with the run, it
     uses the core that ingest, reductions and fits leave idle, and its traces share both cores with the trace
     stage's. The helper inherits this process's environment (JAX's compilation cache, the CPU device count).
     """
-    if not enabled or recipe.spectral is None:
-        yield None
-        return
-    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+    if helper is None or recipe.spectral is None:
+        return None
     try:
-        yield pool.submit(_spectral_comparison, recipe.spectral)
-    finally:
-        for process in list(getattr(pool, "_processes", {}).values()):
-            process.terminate()  # a finished helper is idle; an unfinished one's work is not wanted any more
-        pool.shutdown(wait=True, cancel_futures=True)
+        return helper.submit(_spectral_comparison, recipe.spectral)
+    except (BrokenProcessPool, RuntimeError):
+        return None  # computed by the stage itself
 
 
 def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
@@ -1258,16 +1274,31 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
     state = RunState(recipe=recipe, log=log)
     if progress is not None:
         state.progress = progress
-    timings = {}
+    timings: dict[str, float] = {}
+    with _helper_process(helper_processes) as helper:
+        state.spectral_ahead = _spectral_ahead(recipe, helper)
+        _stages(state, out, timings)
+        # the figures are drawn by the helper process while this one writes the remaining outputs and builds the
+        # report (after the traces, one core did all of it while the other idled)
+        with PngRenderer(helper=helper_processes, pool=helper) as renderer:
+            summary = _write_outputs(state, out, timings, renderer)
+            log("stage html report ...")
+            # reads the staged outputs; part of the same set
+            write_report(out.path("summary.json").parent, force=True, renderer=renderer)
+    return summary
+
+
+def _stages(state: RunState, out: OutputSet, timings: dict[str, float]) -> None:
+    """Every stage in turn (their seconds into ``timings``); :class:`EarlyWriter` outputs are written by a
+    background thread as soon as their stage has queued them."""
     early: dict[str, Future] = {}
     # the tables (auto grids, each re-read and checked: a quarter of the run's CPU after the stages) are written
     # by a thread while the fits and traces run: the traces' kernels hold no interpreter lock
-    with ThreadPoolExecutor(1) as background, _spectral_ahead(recipe, helper_processes) as ahead:
-        state.spectral_ahead = ahead
+    with ThreadPoolExecutor(1) as background:
         try:
             for k, (name, stage) in enumerate(STAGES):
                 start = time.perf_counter()
-                log(f"stage {name} ...")
+                state.log(f"stage {name} ...")
                 state.progress("stages", k, len(STAGES))
                 stage(state)
                 timings[name] = round(time.perf_counter() - start, 3)
@@ -1280,15 +1311,6 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
                 future.cancel()  # a failed run does not wait for the tables not yet begun
             raise
     state.progress("stages", len(STAGES), len(STAGES))
-    # the figures are drawn by a helper process while this one writes the exports (re-reading each table) and
-    # builds the report: after the traces, one core did all of it while the other idled. It starts here, not
-    # before the stages: its start-up (matplotlib, fonts) would take CPU from the trace kernels.
-    with PngRenderer(helper=helper_processes) as renderer:
-        summary = _write_outputs(state, out, timings, renderer)
-        log("stage html report ...")
-        # reads the staged outputs; part of the same set
-        write_report(out.path("summary.json").parent, force=True, renderer=renderer)
-    return summary
 
 
 def _write_outputs(state: RunState, out: OutputSet, timings: dict, renderer: PngRenderer) -> dict:

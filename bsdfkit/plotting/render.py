@@ -9,6 +9,7 @@ JAX. A figure that does not pickle, or a helper that dies, is drawn in this proc
 """
 from __future__ import annotations
 
+import contextlib
 import io
 import multiprocessing
 import pickle
@@ -122,6 +123,9 @@ class PngRenderer:
     ----------
     helper : bool
         Use a helper process; False draws every figure in this process when its result is asked for.
+    pool : ProcessPoolExecutor, optional
+        A spawned helper the caller already runs (and shuts down itself), used instead of starting one: a process
+        that has imported matplotlib already saves the start-up.
 
     Notes
     -----
@@ -129,20 +133,22 @@ class PngRenderer:
     a command ended by a signal terminates it with its other child processes.
     """
 
-    def __init__(self, helper: bool = True) -> None:
+    def __init__(self, helper: bool = True, pool: ProcessPoolExecutor | None = None) -> None:
         self._helper = helper
+        self._given = pool
         self._pool: ProcessPoolExecutor | None = None
 
     def __enter__(self) -> PngRenderer:
         if self._helper:
-            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-            self._pool.submit(_ready)
+            self._pool = self._given or ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            with contextlib.suppress(BrokenProcessPool, RuntimeError):  # a dead helper: figures drawn here
+                self._pool.submit(_ready)
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._pool is not None:
+        if self._pool is not None and self._pool is not self._given:
             self._pool.shutdown(wait=exc[0] is None, cancel_futures=True)
-            self._pool = None
+        self._pool = None
 
     def submit(self, fig: Figure, dpi: int = FIGURE_DPI) -> PendingPng:
         """Start drawing ``fig``; the figure must not change afterwards.

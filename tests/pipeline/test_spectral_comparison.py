@@ -67,11 +67,12 @@ def stage():
 @pytest.mark.slow
 def test_the_helper_process_computes_what_this_process_does(stage):
     """The command line's run computes the comparison in a spawned helper process from the start of the run
-    (``_spectral_ahead``): the same numbers as the stage computed here (same seeds, same kernels), bit for bit;
-    only the step times differ."""
-    from bsdfkit.pipeline.recipe import _spectral_ahead
+    (``_spectral_ahead`` in ``_helper_process``): the same numbers as the stage computed here (same seeds, same
+    kernels), bit for bit; only the step times differ."""
+    from bsdfkit.pipeline.recipe import _helper_process, _spectral_ahead
 
-    with _spectral_ahead(load_recipe(RECIPE), enabled=True) as ahead:
+    with _helper_process(True) as pool:
+        ahead = _spectral_ahead(load_recipe(RECIPE), pool)
         assert ahead is not None
         helper = ahead.result().summary
     here = stage.summary["spectral_comparison"]
