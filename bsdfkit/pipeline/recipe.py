@@ -1155,8 +1155,10 @@ def stage_spectral_comparison(state: RunState) -> None:
         return
     result = None
     if state.spectral_ahead is not None:
-        with contextlib.suppress(Exception):  # the helper failed or died: computed here (a real error raised here)
+        try:
             result = state.spectral_ahead.result()
+        except Exception as exc:  # the helper failed or died: computed here (a real error is raised here)
+            state.log(f"spectral comparison: the helper process failed ({type(exc).__name__}); computing it here")
     if result is None:
         result = compare_tracer_modes(opts, _scene_with_plate)
     state.summary["spectral_comparison"] = result.summary

@@ -60,7 +60,7 @@ def _small_recipe(tmp_path):
 def test_run_writes_every_format_and_outputs_and_refuses_to_clobber(tmp_path):
     """One small main job (in this process: the run, not the process, is under test) with every registered
     writable table format requested (exports.formats): the default outputs, each format re-read and TIS-checked,
-    and no overwrite without --force."""
+    the spectral comparison of its helper process equal to this process's, and no overwrite without --force."""
     import tomllib
 
     from bsdfkit.io.toml_write import dumps
@@ -71,8 +71,9 @@ def test_run_writes_every_format_and_outputs_and_refuses_to_clobber(tmp_path):
     data = tomllib.loads(recipe.read_text())
     data["exports"]["formats"] = list(registry.writable())
     recipe.write_text(dumps(data))
-    proc = cli("run", recipe, "-o", out)
+    proc = cli("run", recipe, "-o", out, "--verbose")
     assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "stage trace ..." in proc.stderr and "helper process failed" not in proc.stderr
     summary = json.loads((out / "summary.json").read_text())
     expected = {"scan.nc", "inplane_bsdf.png", "tis.nc", "interaction_tables.json", "module_budget.png",
                 "exports/bibs_reflection.tracepro.txt", "exports/bibs_reflection.zemax.bsdf", "bsdf_fits.json",
@@ -90,6 +91,16 @@ def test_run_writes_every_format_and_outputs_and_refuses_to_clobber(tmp_path):
     assert 0.3 < summary["trace"]["device"]["LER"] < 0.8
     assert set(summary["module_spectrum"]["colour"]) >= {"x", "y", "cct_K", "duv", "luminous_efficacy_lm_per_W"}
     assert summary["spectral_comparison"]["spectral"]["ledger"]["power_W"]["error"] < 1e-9
+    # the command line computed the comparison in its helper process: the numbers of this process, bit for bit
+    from bsdfkit.io.jsonout import dumps as json_dumps
+    from bsdfkit.pipeline.recipe import _spectral_comparison, load_recipe
+
+    here = json.loads(json_dumps(_spectral_comparison(load_recipe(recipe).spectral).summary))
+
+    def untimed(s: dict) -> str:
+        return json.dumps({k: v for k, v in s.items() if k != "stage_seconds"}, sort_keys=True)
+
+    assert untimed(here) == untimed(summary["spectral_comparison"])
     assert (out / "spectral_comparison.png").stat().st_size > 0
     assert 'id="spectral-modes"' in (out / "report.html").read_text()
     proc = cli("run", recipe, "-o", out)

@@ -65,26 +65,6 @@ def stage():
 
 
 @pytest.mark.slow
-def test_the_helper_process_computes_what_this_process_does(stage):
-    """The command line's run computes the comparison in a spawned helper process from the start of the run
-    (``_spectral_ahead`` in ``_helper_process``): the same numbers as the stage computed here (same seeds, same
-    kernels), bit for bit; only the step times differ."""
-    from bsdfkit.pipeline.recipe import _helper_process, _spectral_ahead
-
-    with _helper_process(True) as pool:
-        ahead = _spectral_ahead(load_recipe(RECIPE), pool)
-        assert ahead is not None
-        helper = ahead.result().summary
-    here = stage.summary["spectral_comparison"]
-
-    def untimed(summary: dict) -> str:
-        return json.dumps({k: v for k, v in summary.items() if k != "stage_seconds"}, sort_keys=True)
-
-    assert untimed(helper) == untimed(here)
-    assert set(helper["stage_seconds"]) == set(here["stage_seconds"])
-
-
-@pytest.mark.slow
 def test_two_wavelength_mode_overestimates_the_power_near_470_nm(stage):
     """§4.2 of the cylindrical-module paper, first half: on the synthetic plate whose excitation and emission
     overlap, the two-wavelength spectrum is above the spectral one in 460-500 nm, by more than 3 σ."""
