@@ -56,7 +56,7 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Pa
     def writer(tmp: Path) -> None:
         # a failed write of the netCDF/HDF5 library (RuntimeError "NetCDF: HDF error") is told apart by
         # atomic_path: a full device is said as such, anything else names the library.
-        # The record x wavelength matrices go one at a time (mode "a"): xarray encodes every variable of a
+        # The record x wavelength matrices go one at a time, after the rest: xarray encodes every variable of a
         # write before storing any, and each encoded copy of a matrix is as large as the matrix (a 200 MB
         # table's dataset needed 330 MB more to be written in one call, nothing more this way).
         # One open file for all of it, through xarray's netCDF4 store: ``to_netcdf`` would open and close the

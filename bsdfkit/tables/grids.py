@@ -331,35 +331,19 @@ def _call_chunked(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, directions: ND
     """
     flat = directions.reshape(-1, 3)
     n = flat.shape[0]
-    if isinstance(bsdf_fn, Pointwise):
-        return _call_pointwise(bsdf_fn, theta_i_deg, side, flat, directions.shape[:-1])
-    size = -(-n // CHUNK) * CHUNK
+    # a Pointwise callable gets the directions as they are (its last chunk shorter); others a multiple of CHUNK
+    size = n if isinstance(bsdf_fn, Pointwise) else -(-n // CHUNK) * CHUNK
     padded = np.concatenate([flat, np.broadcast_to(flat[:1], (size - n, 3))]) if size > n else flat
     parts = []
     for k in range(0, size, CHUNK):
-        out = np.asarray(bsdf_fn(float(theta_i_deg), side, padded[k:k + CHUNK]), dtype=np.float64)
+        chunk = padded[k:k + CHUNK]
+        out = np.asarray(bsdf_fn(float(theta_i_deg), side, chunk), dtype=np.float64)
         if out.ndim == 0:
             return np.broadcast_to(out, directions.shape[:-1])
-        if out.shape != (CHUNK,):
+        if out.shape != (chunk.shape[0],):
             return out  # the shape check of evaluate_bsdf names the mismatch
         parts.append(out)
     return np.concatenate(parts)[:n].reshape(directions.shape[:-1])
-
-
-def _call_pointwise(bsdf_fn: Pointwise, theta_i_deg: float, side: str, flat: NDArray[np.float64],
-                    shape: tuple[int, ...]) -> NDArray:
-    """A :class:`Pointwise` callable on the directions ``flat`` (n, 3) in chunks of at most :data:`CHUNK`, the answer
-    reshaped to ``shape`` (a scalar answer broadcast; a wrong shape returned as it is, for evaluate_bsdf to name)."""
-    n = flat.shape[0]
-    parts = []
-    for k in range(0, n, CHUNK):
-        out = np.asarray(bsdf_fn(float(theta_i_deg), side, flat[k:k + CHUNK]), dtype=np.float64)
-        if out.ndim == 0:
-            return np.broadcast_to(out, shape)
-        if out.shape != (min(CHUNK, n - k),):
-            return out
-        parts.append(out)
-    return np.concatenate(parts).reshape(shape)
 
 
 def rho_max(theta_i_deg: ArrayLike, sample_azimuth_deg: ArrayLike) -> NDArray[np.float64]:
