@@ -33,6 +33,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from bsdfkit.core.collector import fewer_collections
 from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.core.version import __version__
 from bsdfkit.io.atomic import describe_os_error, remove_partial_outputs
@@ -230,7 +231,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = {signum: _on_signal(signum, _terminated) for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
         # xarray wraps arrays without importing dask (0.5-0.7 s; bsdfkit.io.xarray_dask), in this command only
-        with compile_cache(compile_cache_wanted(no_cache)), cpu_devices(), single_thread_blas(), deferred_dask():
+        with compile_cache(compile_cache_wanted(no_cache)), cpu_devices(), single_thread_blas(), deferred_dask(), \
+                fewer_collections():
             return _run(argv)
     except KeyboardInterrupt:  # a Ctrl-C that came before the handler above
         print("bsdfkit: interrupted", file=sys.stderr)

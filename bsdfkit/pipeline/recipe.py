@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
+from bsdfkit.core.collector import use_fewer_collections
 from bsdfkit.core.conventions import (
     COLORIMETRY_BLUE_BAND_NM,
     COLORIMETRY_YELLOW_BAND_NM,
@@ -64,7 +65,7 @@ from bsdfkit.plotting.figures import (
     plate_incidence_figure,
     trace_studies_figure,
 )
-from bsdfkit.plotting.render import FigureFile, PngRenderer
+from bsdfkit.plotting.render import FigureFile, PendingPng, PngRenderer, png_results
 from bsdfkit.raytrace import trace, with_values
 from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.scene import parse_scene
@@ -81,7 +82,7 @@ KNOWN_SECTIONS = {
     "report": {"figure_config", "figure_wavelength_nm"},
     "reductions": {"budget_incidence_deg", "eta_mc", "iterations"},
     "exports": {"interactions", "sides", "formats", "tolerance"},
-    "trace": {"scene", "rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
+    "trace": {"scene", "rays", "study_rays", "seed", "reflectance", "height_mm", "led_fwhm_deg", "specular_fraction"},
     "fits": {"bsdf_model", "emission_model", "emission_incidence_deg", "led_peak_nm", "led_fwhm_nm",
              "fallback_flux_W"},
     "spectral": {"measurement", "scene", "rays", "seed", "incidence_deg", "ablation_rays",
@@ -145,6 +146,9 @@ class TraceStudyOptions:
 
     scene: Path | None = None
     rays: int = 400_000
+    #: rays of each study point (None: ``rays``); a map that has not converged in the grid gets more
+    #: (:func:`converge_map`)
+    study_rays: int | None = None
     seed: int = 1
     reflectance: tuple[float, ...] = ()
     height_mm: tuple[float, ...] = ()
@@ -255,6 +259,7 @@ def load_recipe(path: str | Path) -> Recipe:
                              got=str(scene))
         trace = TraceStudyOptions(
             scene=scene, rays=int(_typed(tr, "rays", int, path, "trace.rays", 400_000)),
+            study_rays=_typed(tr, "study_rays", int, path, "trace.study_rays") if "study_rays" in tr else None,
             seed=int(_typed(tr, "seed", int, path, "trace.seed", 1)),
             **{k: tuple(float(v) for v in _numbers(tr, k, path)) for k in
                ("reflectance", "height_mm", "led_fwhm_deg", "specular_fraction")})
@@ -333,6 +338,8 @@ def _check_ranges(r: Recipe) -> None:
     t = r.trace
     if t.scene is not None:
         _ranged(t.rays, p, "trace.rays", 1, MAX_RAYS)
+        if t.study_rays is not None:
+            _ranged(t.study_rays, p, "trace.study_rays", 1, MAX_RAYS)
         _ranged(t.seed, p, "trace.seed", 0, 2**63 - 1)
         for key, lo, hi, lo_open in (("reflectance", 0.0, 1.0, False), ("specular_fraction", 0.0, 1.0, False),
                                      ("height_mm", 0.0, 10_000.0, True), ("led_fwhm_deg", 0.0, 180.0, True)):
@@ -721,6 +728,12 @@ def stage_trace(state: RunState) -> None:
     state.summary["trace"] = _trace_summary(results)
     _queue_trace_outputs(state, plate, traced, results, measured)
     lines = _trace_lines(opts.rays, device, results, measured)
+    if opts.study_rays is not None and any(getattr(opts, k) for k in STUDIES):
+        more = [f"{study} {r['values'][STUDIES[study][0][0]]:g}: {r['non_uniformity_rays']}"
+                for study, rs in studies.items() for r in rs
+                if not r["same_trace_as_device"] and (r["non_uniformity_rays"] or 0) > opts.study_rays]
+        lines.insert(2, f"  study points: {opts.study_rays} rays each ([trace] study_rays); maps traced further to "
+                        f"converge in the grid: {', '.join(more) or 'none'}")
     state.summary.setdefault("report_lines", []).extend(lines)
 
 
@@ -736,6 +749,7 @@ class _Traced(NamedTuple):
 def _trace_points(state: RunState, scene, measured: tuple[float, float]) -> _Traced:
     """Trace the device (stored as ``state.device``) and every study point, reporting progress per trace."""
     opts = state.recipe.trace
+    rays = opts.study_rays or opts.rays
     points = [(study, v) for study in STUDIES for v in getattr(opts, study) if not _is_device_value(scene, study, v)]
     total = 1 + len(points)
     state.progress("trace", 0, total)
@@ -752,10 +766,10 @@ def _trace_points(state: RunState, scene, measured: tuple[float, float]) -> _Tra
                 r, same = device, True
             else:
                 point = with_values(scene, values)
-                r, same = converge_map(point, trace(point, opts.rays, opts.seed), opts.rays, opts.seed), False
+                r, same = converge_map(point, trace(point, rays, opts.seed), rays, opts.seed), False
                 done += 1
                 state.progress("trace", done, total)
-            row = {"values": values, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
+            row = {"values": values, "rays": r.rays, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
                    "YBR_std": r.std_err["YBR"], **_nu(r), "ledger_error": r.ledger_error,
                    "clamped_share": r.clamped_interactions / r.plate_interactions if r.plate_interactions else 0.0,
                    "plate_incidence": incidence_shares(r, measured), "same_trace_as_device": same}
@@ -1243,7 +1257,7 @@ def _helper_process(enabled: bool) -> Iterator[ProcessPoolExecutor | None]:
     if not enabled:
         yield None
         return
-    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=use_fewer_collections)
     finished = False
     try:
         yield pool
@@ -1279,21 +1293,25 @@ def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
     timings: dict[str, float] = {}
     with _helper_process(helper_processes) as helper:
         state.spectral_ahead = _spectral_ahead(recipe, helper)
-        _stages(state, out, timings)
-        # the figures are drawn by the helper process while this one writes the remaining outputs and builds the
-        # report (after the traces, one core did all of it while the other idled)
+        # the figures are drawn by the helper process once it has computed the spectral comparison (each as soon
+        # as its stage has queued it), and by both processes after the stages (after the traces, one core drew
+        # them all while the other idled)
         with PngRenderer(helper=helper_processes, pool=helper) as renderer:
-            summary = _write_outputs(state, out, timings, renderer)
+            figures = _stages(state, out, timings, renderer)
+            summary = _write_outputs(state, out, timings, figures)
             log("stage html report ...")
             # reads the staged outputs; part of the same set
             write_report(out.path("summary.json").parent, force=True, renderer=renderer)
     return summary
 
 
-def _stages(state: RunState, out: OutputSet, timings: dict[str, float]) -> None:
+def _stages(state: RunState, out: OutputSet, timings: dict[str, float], renderer: PngRenderer
+            ) -> dict[str, PendingPng]:
     """Every stage in turn (their seconds into ``timings``); :class:`EarlyWriter` outputs are written by a
-    background thread as soon as their stage has queued them."""
+    background thread, and :class:`FigureFile` outputs submitted to ``renderer``, as soon as their stage has
+    queued them. Returns the figures being drawn."""
     early: dict[str, Future] = {}
+    figures: dict[str, PendingPng] = {}
     # the tables (auto grids, each re-read and checked: a quarter of the run's CPU after the stages) are written
     # by a thread while the fits and traces run: the traces' kernels hold no interpreter lock
     with ThreadPoolExecutor(1) as background:
@@ -1306,6 +1324,8 @@ def _stages(state: RunState, out: OutputSet, timings: dict[str, float]) -> None:
                 timings[name] = round(time.perf_counter() - start, 3)
                 early.update({n: background.submit(w, out.path(n), True) for n, w in state.outputs.items()
                               if isinstance(w, EarlyWriter) and n not in early})
+                figures.update({n: renderer.submit(w.figure, w.dpi) for n, w in state.outputs.items()
+                                if isinstance(w, FigureFile) and n not in figures})
             for future in early.values():
                 future.result()  # a failed table fails the run here, as it would have when written below
         except BaseException:
@@ -1313,20 +1333,19 @@ def _stages(state: RunState, out: OutputSet, timings: dict[str, float]) -> None:
                 future.cancel()  # a failed run does not wait for the tables not yet begun
             raise
     state.progress("stages", len(STAGES), len(STAGES))
+    return figures
 
 
-def _write_outputs(state: RunState, out: OutputSet, timings: dict, renderer: PngRenderer) -> dict:
+def _write_outputs(state: RunState, out: OutputSet, timings: dict, figures: dict[str, PendingPng]) -> dict:
     """Every queued output and summary.json into the staging folder (moved into place when the set is complete);
-    the figures are drawn meanwhile by ``renderer``. Returns the summary."""
+    ``figures`` are the figures being drawn. Returns the summary."""
     recipe = state.recipe
     names = list(state.outputs) + ["summary.json", "report.html"]
-    pending = {name: renderer.submit(w.figure, w.dpi) for name, w in state.outputs.items()
-               if isinstance(w, FigureFile)}
     for name, writer in state.outputs.items():
-        if name not in pending and not isinstance(writer, EarlyWriter):  # early writers have written already
+        if name not in figures and not isinstance(writer, EarlyWriter):  # early writers have written already
             writer(out.path(name), True)
-    for name, png in pending.items():
-        write_bytes(out.path(name), png.result(), True)
+    for name, png in zip(figures, png_results(list(figures.values()))):
+        write_bytes(out.path(name), png, True)
     checks = state.summary.get("export_checks")
     if checks:
         worst = max(checks, key=lambda c: c["relative_difference"])

@@ -45,7 +45,7 @@ from bsdfkit.plotting.maps import (
     irradiance_maps_figure,
     map_non_uniformity,
 )
-from bsdfkit.plotting.render import PendingPng, PngRenderer
+from bsdfkit.plotting.render import PendingPng, PngRenderer, png_results
 from bsdfkit.raytrace.tallies import non_uniformity_std, rebin_map
 
 __all__ = ["REPORT_NAME", "paper_values", "write_report"]
@@ -1463,8 +1463,8 @@ class _Report:
                 f"<title>{title}</title><style>{_CSS}</style></head><body><main>\n"
                 + self.opening() + self.found() + dis + nav + "\n".join(sections)
                 + "\n</main></body></html>\n")
-        for token, png, caption, alt in self.pending:
-            text = text.replace(token, _figure(png.result(), caption, alt), 1)
+        for (token, _, caption, alt), png in zip(self.pending, png_results([p[1] for p in self.pending])):
+            text = text.replace(token, _figure(png, caption, alt), 1)
         return text
 
 

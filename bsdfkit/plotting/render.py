@@ -13,6 +13,7 @@ import contextlib
 import io
 import multiprocessing
 import pickle
+from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from pathlib import Path
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from bsdfkit.core.collector import use_fewer_collections
 from bsdfkit.io.atomic import write_bytes
 
 #: resolution of the PNG files a run writes [dots per inch]
@@ -94,7 +96,8 @@ class FigureFile:
 
 @dataclass(frozen=True, eq=False)
 class PendingPng:
-    """A figure being drawn; :meth:`result` gives its PNG bytes (drawn here if the helper failed)."""
+    """A figure being drawn; :meth:`result` gives its PNG bytes (drawn here if the helper has not begun it, or
+    failed)."""
 
     figure: Figure
     dpi: int
@@ -108,12 +111,35 @@ class PendingPng:
         bytes
             The PNG file, the same bytes as :func:`png_bytes` of the figure.
         """
-        if self.future is not None:
+        if self.future is not None and not self.future.cancel():  # one the helper has not begun is drawn here
             try:
                 return self.future.result()
             except (BrokenProcessPool, pickle.UnpicklingError, EOFError, OSError):
                 pass  # the helper is gone: draw here
         return png_bytes(self.figure, self.dpi)
+
+
+def png_results(pending: Sequence[PendingPng]) -> list[bytes]:
+    """The PNG bytes of every figure of ``pending``, in order.
+
+    The helper draws from the first figure on; this process takes the others from the last backwards (those the
+    helper has not begun: :meth:`PendingPng.result`), so both processes draw until the two meet. After the
+    traces this halved the wait for the main job's figures.
+
+    Parameters
+    ----------
+    pending : sequence of PendingPng
+        Figures submitted to a :class:`PngRenderer`.
+
+    Returns
+    -------
+    list of bytes
+        The PNG files, the same bytes wherever each was drawn.
+    """
+    out: list[bytes] = [b""] * len(pending)
+    for k in reversed(range(len(pending))):
+        out[k] = pending[k].result()
+    return out
 
 
 class PngRenderer:
@@ -140,7 +166,8 @@ class PngRenderer:
 
     def __enter__(self) -> PngRenderer:
         if self._helper:
-            self._pool = self._given or ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = self._given or ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                                                initializer=use_fewer_collections)
             with contextlib.suppress(BrokenProcessPool, RuntimeError):  # a dead helper: figures drawn here
                 self._pool.submit(_ready)
         return self

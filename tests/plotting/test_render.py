@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
-from bsdfkit.plotting.render import FigureFile, PngRenderer, png_bytes
+from bsdfkit.plotting.render import FigureFile, PngRenderer, png_bytes, png_results
 from bsdfkit.plotting.ticks import decade_label, log_y
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -33,6 +33,12 @@ def test_helper_process_draws_the_same_png_as_this_process_and_a_figure_that_doe
         pending = [renderer.submit(f, 120) for f in figs]
         assert [p.future is not None for p in pending] == [True, True, False]  # pickled and sent, or drawn here
         got = [p.result() for p in pending]
+        # both processes draw: this one takes from the last backwards those the helper has not begun (the pool
+        # hands the helper at most two at a time, the first two at once: those are never drawn here)
+        many = [renderer.submit(figs[k % 2], 120) for k in range(6)]
+        both = png_results(many)
+        assert both == [expected[k % 2] for k in range(6)]
+        assert many[-1].future.cancelled() and not many[0].future.cancelled()
     assert got == expected and got[0].startswith(PNG)
     with PngRenderer(helper=False) as serial:
         assert serial.submit(figs[0], 120).result() == expected[0]
