@@ -71,6 +71,7 @@ from bsdfkit.raytrace.plate import CHANNELS
 from bsdfkit.raytrace.scene import parse_scene
 from bsdfkit.raytrace.spectral import PLATE_TEMPERATURE_K
 from bsdfkit.raytrace.tallies import map_fields, merge_maps
+from bsdfkit.raytrace.tracer import common_chunk
 from bsdfkit.reduction import budget, spectral
 from bsdfkit.reduction import tis as angular
 from bsdfkit.reduction.colorimetry import colorimetric_summary
@@ -623,7 +624,7 @@ MAP_RAYS_FACTOR = 4
 MAP_SEED_OFFSET = 1_000_003
 
 
-def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FACTOR):
+def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FACTOR, chunk: int | None = None):
     """``result`` with its irradiance map's non-uniformity converged in the grid, when more rays can do it.
 
     While :func:`bsdfkit.raytrace.tallies.converged_non_uniformity` finds no grid whose value changes by less than
@@ -644,6 +645,8 @@ def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FAC
         Seed of ``result``'s trace.
     factor : int
         Most rays in the map, in multiples of ``rays`` [-].
+    chunk : int, optional
+        Rays per device and call of the extra traces (:func:`bsdfkit.raytrace.tracer.trace`).
 
     Returns
     -------
@@ -656,7 +659,7 @@ def converge_map(scene, result, rays: int, seed: int, factor: int = MAP_RAYS_FAC
     fields, n, k = {"irradiance_parts": result.irradiance_parts}, rays, 0
     while not conv["converged"] and n + rays <= factor * rays:
         k += 1
-        more = trace(scene, rays, seed + k * MAP_SEED_OFFSET)
+        more = trace(scene, rays, seed + k * MAP_SEED_OFFSET, chunk=chunk)
         fields = map_fields(merge_maps(fields["irradiance_parts"], n, more.irradiance_parts, rays), conv["symmetric"])
         conv = fields["non_uniformity_converged"]
         n += rays
@@ -753,7 +756,8 @@ def _trace_points(state: RunState, scene, measured: tuple[float, float]) -> _Tra
     points = [(study, v) for study in STUDIES for v in getattr(opts, study) if not _is_device_value(scene, study, v)]
     total = 1 + len(points)
     state.progress("trace", 0, total)
-    device = converge_map(scene, trace(scene, opts.rays, opts.seed), opts.rays, opts.seed)
+    chunk = common_chunk(scene, (opts.rays, rays) if points else (opts.rays,))  # one kernel for every trace
+    device = converge_map(scene, trace(scene, opts.rays, opts.seed, chunk=chunk), opts.rays, opts.seed, chunk=chunk)
     done = 1
     state.progress("trace", done, total)
     state.device = device
@@ -766,7 +770,8 @@ def _trace_points(state: RunState, scene, measured: tuple[float, float]) -> _Tra
                 r, same = device, True
             else:
                 point = with_values(scene, values)
-                r, same = converge_map(point, trace(point, rays, opts.seed), rays, opts.seed), False
+                r, same = converge_map(point, trace(point, rays, opts.seed, chunk=chunk), rays, opts.seed,
+                                       chunk=chunk), False
                 done += 1
                 state.progress("trace", done, total)
             row = {"values": values, "rays": r.rays, "LER": r.LER, "LER_std": r.std_err["LER"], "YBR": r.YBR,
