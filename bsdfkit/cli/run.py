@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
+from bsdfkit.pipeline.helper import helper_process
 
 #: What the progress bars say for the run's progress tasks.
 TASKS = {"stages": "stages of the run", "trace": "module traces (device + studies)"}
@@ -85,9 +86,10 @@ def run_feedback(quiet: bool, verbose: bool = False) -> Iterator[tuple[Callable[
 
 
 def _run(args: argparse.Namespace) -> int:
-    with run_feedback(args.quiet, args.verbose) as (log, progress):
-        # the command line is the main script, guarded: a spawned helper can draw the figures
-        summary = api.run(args.recipe, args.output, args.force, log=log, progress=progress, helper_processes=True)
+    # the command line is the main script, guarded: a spawned helper can compute and draw beside it; started
+    # before the pipeline is imported here, it imports the pipeline at the same time on the other core
+    with helper_process(True) as helper, run_feedback(args.quiet, args.verbose) as (log, progress):
+        summary = api.run(args.recipe, args.output, args.force, log=log, progress=progress, helper_processes=helper)
     if args.json:
         emit_json(summary)
     else:

@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import contextlib
 import math
-import multiprocessing
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, replace
@@ -26,7 +25,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
-from bsdfkit.core.collector import use_fewer_collections
 from bsdfkit.core.conventions import (
     COLORIMETRY_BLUE_BAND_NM,
     COLORIMETRY_YELLOW_BAND_NM,
@@ -48,6 +46,7 @@ from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
+from bsdfkit.pipeline.helper import helper_process
 from bsdfkit.pipeline.plate_from_scan import plate_from_scan
 from bsdfkit.pipeline.report import READINGS, magnitude_verdict, paper_values, write_report
 from bsdfkit.pipeline.spectral_comparison import (
@@ -1199,7 +1198,8 @@ STAGES: tuple[tuple[str, Callable[[RunState], None]], ...] = (
 
 def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         log: Callable[[str], None] = lambda message: None,
-        progress: Callable[[str, int, int], None] | None = None, helper_processes: bool = False) -> dict:
+        progress: Callable[[str, int, int], None] | None = None,
+        helper_processes: bool | ProcessPoolExecutor = False) -> dict:
     """Run every stage of ``recipe`` and write its outputs into ``out_dir``; returns the run summary.
 
     ``log(message)`` receives one line per stage; ``progress(task, done, total)`` is called as the stages
@@ -1217,12 +1217,13 @@ def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False,
         ``log(message)``, called with one line per stage.
     progress : callable, optional
         ``progress(task, done, total)``, called as stages and traces complete.
-    helper_processes : bool
-        Use spawned helper processes (what the command line does): one computes the spectral comparison from
-        the start of the run, beside the stages before it (which use one core of two for most of their time),
-        and one draws the figures while this process writes the exports and the report. The results are those
-        of the same stages in this process. A spawned process imports the caller's main script again, so a
-        script that calls this without an ``if __name__ == "__main__":`` guard would run twice: off by default.
+    helper_processes : bool or ProcessPoolExecutor
+        Use a spawned helper process (what the command line does): it computes the spectral comparison from
+        the start of the run, beside the stages before it, then draws the figures with this process. The
+        results are those of the same stages in this process. A spawned process imports the caller's main
+        script again, so a script that calls this without an ``if __name__ == "__main__":`` guard would run
+        twice: off by default. A helper of :func:`bsdfkit.pipeline.helper.helper_process` is used as given
+        (the command line starts it before importing the pipeline; the caller ends it).
 
     Returns
     -------
@@ -1254,26 +1255,6 @@ def _spectral_comparison(options: SpectralComparisonOptions) -> SpectralComparis
     return compare_tracer_modes(options, _scene_with_plate)
 
 
-@contextlib.contextmanager
-def _helper_process(enabled: bool) -> Iterator[ProcessPoolExecutor | None]:
-    """One spawned helper process for the run (None when not ``enabled``): it computes the spectral comparison
-    from the start (:func:`_spectral_ahead`), then draws the figures (:class:`PngRenderer`), having imported
-    matplotlib with the pipeline already. On an error it is stopped at once, whatever it is doing."""
-    if not enabled:
-        yield None
-        return
-    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=use_fewer_collections)
-    finished = False
-    try:
-        yield pool
-        finished = True
-    finally:
-        if not finished:
-            for process in list(getattr(pool, "_processes", {}).values()):
-                process.terminate()  # its unfinished work is not wanted any more
-        pool.shutdown(wait=finished, cancel_futures=True)
-
-
 def _spectral_ahead(recipe: Recipe, helper: ProcessPoolExecutor | None) -> Future | None:
     """The spectral comparison started in the ``helper`` process (None without a helper or a ``[spectral]``
     table).
@@ -1291,17 +1272,19 @@ def _spectral_ahead(recipe: Recipe, helper: ProcessPoolExecutor | None) -> Futur
 
 
 def _run_stages(recipe: Recipe, out: OutputSet, log: Callable[[str], None],
-                progress: Callable[[str, int, int], None] | None = None, helper_processes: bool = False) -> dict:
+                progress: Callable[[str, int, int], None] | None = None,
+                helper_processes: bool | ProcessPoolExecutor = False) -> dict:
     state = RunState(recipe=recipe, log=log)
     if progress is not None:
         state.progress = progress
     timings: dict[str, float] = {}
-    with _helper_process(helper_processes) as helper:
+    given = helper_processes if isinstance(helper_processes, ProcessPoolExecutor) else None
+    with contextlib.nullcontext(given) if given else helper_process(bool(helper_processes)) as helper:
         state.spectral_ahead = _spectral_ahead(recipe, helper)
         # the figures are drawn by the helper process once it has computed the spectral comparison (each as soon
         # as its stage has queued it), and by both processes after the stages (after the traces, one core drew
         # them all while the other idled)
-        with PngRenderer(helper=helper_processes, pool=helper) as renderer:
+        with PngRenderer(helper=helper is not None, pool=helper) as renderer:
             figures = _stages(state, out, timings, renderer)
             summary = _write_outputs(state, out, timings, figures)
             log("stage html report ...")
