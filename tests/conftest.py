@@ -20,9 +20,13 @@ from types import SimpleNamespace
 
 import pytest
 
+from bsdfkit.core.collector import use_fewer_collections
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.simulation import virtual_goniometer as virtual
+
+# each test process runs Python's garbage collector as the command line's processes do (bsdfkit.core.collector)
+use_fewer_collections()
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "measurements" / "cl830-synthetic"
