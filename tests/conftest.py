@@ -80,6 +80,15 @@ def pytest_xdist_make_scheduler(config, log):
     return SharedFixtureScheduling(config, log)
 
 
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """The modules that hold slow tests first, each module's tests together and in their order (the sort is
+    stable): the long end-to-end tests start early instead of keeping one worker busy while the other idles at
+    the end of the run (longest first is the classic rule for two machines)."""
+    slow = {item.nodeid.split("::", 1)[0] for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.nodeid.split("::", 1)[0] not in slow)
+
+
 @pytest.fixture(scope="session")
 def bundled_raw():
     return read_scan(BUNDLED)
