@@ -2,6 +2,11 @@
 what the traced one does, is read back instead of traced, and a damaged or unwritable cache costs nothing."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import jax
 import pytest
 from conftest import fast_lane
@@ -93,3 +98,33 @@ def test_program_names_separate_what_the_program_is_made_from():
     assert a != programs.program_name(("trace_chunk", "effects B", 256))
     assert a != programs.program_name(("trace_chunk", "effects A", 512))
     assert a.endswith(programs.SUFFIX)
+
+
+def test_the_program_digest_covers_every_module_a_trace_loads_and_not_the_layers_above():
+    # what the tracer's import loads beyond the package's lazy API, and what tracing loads on first use (the
+    # test's own scene helpers not counted)
+    code = """
+import sys
+import bsdfkit
+base = set(sys.modules)
+from bsdfkit.raytrace import trace
+loaded = set(sys.modules) - base
+from test_kernel import scene
+sc = scene()
+before = set(sys.modules)
+trace(sc, 200, 0)
+loaded |= set(sys.modules) - before
+print("\\n".join(sys.modules[n].__file__ for n in loaded if (n == "bsdfkit" or n.startswith("bsdfkit."))
+                and getattr(sys.modules[n], "__file__", None)))
+"""
+    tests = Path(__file__).resolve().parent
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
+                          cwd=tests, env={**os.environ, "PYTHONPATH": os.pathsep.join([str(tests), str(tests.parent)])})
+    loaded = {Path(line).resolve() for line in done.stdout.split()}
+    covered = {p.resolve() for p in programs.traced_modules()}
+    assert "raytrace/kernel.py" in {p.as_posix()[-len("raytrace/kernel.py"):] for p in loaded}
+    assert loaded <= covered, sorted(map(str, loaded - covered))
+    root = Path(programs.__file__).resolve().parents[1]
+    names = {p.relative_to(root).as_posix() for p in covered}
+    assert {"raytrace/kernel.py", "raytrace/sampling.py", "raytrace/tracer.py", "core/jaxconfig.py"} <= names
+    assert not any(n.startswith(("pipeline/", "cli/", "plotting/", "tables/")) for n in names)
