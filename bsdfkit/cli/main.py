@@ -174,6 +174,26 @@ def single_thread_blas() -> Iterator[bool]:
             os.environ.pop(v, None)
 
 
+@contextlib.contextmanager
+def child_warnings_off() -> Iterator[None]:
+    """``PYTHONWARNINGS=ignore`` for the processes started in the block (Python reads it when it starts); the
+    environment is restored on exit.
+
+    Yields
+    ------
+    None
+    """
+    saved = os.environ.get("PYTHONWARNINGS")
+    os.environ["PYTHONWARNINGS"] = "ignore"
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop("PYTHONWARNINGS", None)
+        else:
+            os.environ["PYTHONWARNINGS"] = saved
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its usage errors on one line (exit status 2), like every other bsdfkit error."""
 
@@ -249,8 +269,10 @@ def _run(argv: list[str]) -> int:
         parser.error(f"no verb given; expected one of {', '.join(VERBS)}")
     try:
         # library warnings (numpy's RuntimeWarning with its source line, xarray, dask) never reach stderr: what
-        # a user must know is said by bsdfkit in its own one-line warnings, which do not use the warnings module
-        with prompt_signals(), warnings.catch_warnings():
+        # a user must know is said by bsdfkit in its own one-line warnings, which do not use the warnings module;
+        # nor from the processes the command starts (dask workers, the run's helper; JAX's compilation cache
+        # warned there of a concurrent write with an empty cache)
+        with prompt_signals(), warnings.catch_warnings(), child_warnings_off():
             warnings.simplefilter("ignore")
             from bsdfkit.cli._common import refuse_replacing_inputs  # a verb's module imported it already
             refuse_replacing_inputs(args)  # --force never replaces an input, for every verb

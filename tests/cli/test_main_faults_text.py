@@ -9,13 +9,16 @@ from __future__ import annotations
 
 import codecs
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import ROOT
 
-from bsdfkit.cli.main import main
+from bsdfkit.cli.main import child_warnings_off, main
 from bsdfkit.core.errors import FormatError
 from bsdfkit.io.spectrum_file import read_spectrum_arrays
 from bsdfkit.io.text import decode_text, refuse_cut_last_line, text_and_encoding
@@ -180,3 +183,14 @@ def test_blocks_of_their_own_sizes_are_read(tmp_path):
     # a shorter last block that is not the beginning of the others (or others that differ) is a measurement
     rows = BLOCKS[:-18] + [f"40,{t},0,0.3183" for t in range(0, 90, 10)]
     assert read_table(_write(tmp_path, "t.csv", ("\n".join(rows) + "\n").encode())).sizes["record"] == 36 + 9
+
+
+def test_processes_a_command_starts_print_no_library_warnings():
+    # dask workers and the run's helper inherit it: JAX warned in a sweep's workers of a concurrent write to an
+    # empty compilation cache, and the command's one error line became seven
+    before = os.environ.get("PYTHONWARNINGS")
+    with child_warnings_off():
+        done = subprocess.run([sys.executable, "-c", "import warnings; warnings.warn('a library warning')"],
+                              capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stderr == ""
+    assert os.environ.get("PYTHONWARNINGS") == before
