@@ -77,6 +77,22 @@ def compile_cache_wanted(flag_off: bool = False) -> bool:
 
 
 @contextlib.contextmanager
+def _environment(values: dict[str, str]) -> Iterator[None]:
+    """The environment variables ``values`` set for the duration of the block; each is restored on exit (or
+    removed, where it was not set)."""
+    saved = {key: os.environ.get(key) for key in values}
+    try:
+        os.environ.update(values)
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+@contextlib.contextmanager
 def compile_cache(enabled: bool) -> Iterator[Path | None]:
     """JAX's persistent compilation cache in :func:`compile_cache_dir` for the duration of the block.
 
@@ -100,16 +116,8 @@ def compile_cache(enabled: bool) -> Iterator[Path | None]:
         return
     settings = {"jax_compilation_cache_dir": os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(compile_cache_dir()),
                 **CACHE_SETTINGS}
-    saved = {k.upper(): os.environ.get(k.upper()) for k in settings}
-    try:
-        os.environ.update({k.upper(): str(v) for k, v in settings.items()})
+    with _environment({k.upper(): str(v) for k, v in settings.items()}):
         yield Path(settings["jax_compilation_cache_dir"])
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
 
 
 DEVICES_FLAG = "--xla_force_host_platform_device_count"
@@ -136,14 +144,8 @@ def cpu_devices() -> Iterator[int | None]:
     except AttributeError:  # not on Linux
         cores = os.cpu_count() or 1
     count = max(1, min(cores, MAX_CPU_DEVICES))
-    os.environ["XLA_FLAGS"] = f"{flags or ''} {DEVICES_FLAG}={count}".strip()
-    try:
+    with _environment({"XLA_FLAGS": f"{flags or ''} {DEVICES_FLAG}={count}".strip()}):
         yield count
-    finally:
-        if flags is None:
-            os.environ.pop("XLA_FLAGS", None)
-        else:
-            os.environ["XLA_FLAGS"] = flags
 
 
 #: the thread-pool sizes of the BLAS libraries numpy and scipy may load (OpenBLAS, MKL); OpenBLAS also reads
@@ -183,15 +185,8 @@ def child_warnings_off() -> Iterator[None]:
     ------
     None
     """
-    saved = os.environ.get("PYTHONWARNINGS")
-    os.environ["PYTHONWARNINGS"] = "ignore"
-    try:
+    with _environment({"PYTHONWARNINGS": "ignore"}):
         yield
-    finally:
-        if saved is None:
-            os.environ.pop("PYTHONWARNINGS", None)
-        else:
-            os.environ["PYTHONWARNINGS"] = saved
 
 
 class _Parser(argparse.ArgumentParser):
