@@ -200,7 +200,7 @@ def test_radians_under_a_degree_header_are_refused(tmp_path, capsys):
     lines = ["theta_i [deg],theta_s [deg],phi_s [deg],wavelength,brdf"]
     for th in np.linspace(0.0, 1.5, 16):
         for ph in np.linspace(0.0, 6.0, 12):
-            lines.append(f"0.17,{th!r},{ph!r},550,{0.5 / math.pi!r}")
+            lines.append(f"0.17,{float(th)!r},{float(ph)!r},550,{0.5 / math.pi!r}")
     (tmp_path / "rad.csv").write_text("\n".join(lines) + "\n")
     line = _one_line_error(*_cli(capsys, "ingest", str(tmp_path / "rad.csv"), "-o", str(tmp_path / "o.nc")),
                            "rad.csv:2:", "column 2 'theta_s [deg]'", "look like radians", "16 distinct")
