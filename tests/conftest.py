@@ -31,6 +31,11 @@ use_fewer_collections()
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "measurements" / "cl830-synthetic"
 
+#: Lanes and emission width of the in-process traces whose lanes and width are not what the test checks. Below 1024
+#: lanes a kernel has one loop level (bsdfkit.raytrace.kernel), half the XLA compilation of the default 16384 lanes,
+#: and one width lets the tests of an effects record share one compiled kernel; a result depends on neither.
+TRACE_LANES, TRACE_WIDTH = 512, 32768
+
 
 @pytest.fixture(scope="session", autouse=True)
 def shared_compile_cache():

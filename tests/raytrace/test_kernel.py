@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import TRACE_LANES, TRACE_WIDTH
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
@@ -65,12 +66,13 @@ def comparable(result):
 
 def test_same_seed_same_result_for_chunks_1e4_and_1e5():
     s = scene()
-    a = trace(s, 100_000, seed=9, chunk=10_000, lanes=512)
-    b = trace(s, 100_000, seed=9, chunk=100_000, lanes=512)
+    wide = 4 * TRACE_WIDTH  # one kernel for the four traces (chunks up to 1e5)
+    a = trace(s, 100_000, seed=9, chunk=10_000, lanes=TRACE_LANES, width=wide)
+    b = trace(s, 100_000, seed=9, chunk=100_000, lanes=TRACE_LANES, width=wide)
     assert comparable(a) == comparable(b)
     assert a.ledger_error <= 1e-9
-    c = trace(s, 20_000, seed=9, chunk=20_000, lanes=512)
-    d = trace(s, 20_000, seed=10, chunk=20_000, lanes=512)
+    c = trace(s, 20_000, seed=9, chunk=20_000, lanes=TRACE_LANES, width=wide)
+    d = trace(s, 20_000, seed=10, chunk=20_000, lanes=TRACE_LANES, width=wide)
     assert c.LER != d.LER  # the seed matters
 
 
@@ -78,8 +80,8 @@ def test_same_seed_same_result_for_chunks_1e4_and_1e5():
 def test_chunk_invariance_with_plate_map_and_budget(tmp_path):
     PhosphorPlate.constant(TABLE2).save(tmp_path / "p.json")
     s = scene(f'kind = "phosphor"\nplate = "{tmp_path / "p.json"}"', spec=0.3)
-    a = trace(s, 20_000, seed=3, chunk=5_000, lanes=512)
-    b = trace(s, 20_000, seed=3, chunk=20_000, lanes=512)
+    a = trace(s, 20_000, seed=3, chunk=5_000, lanes=TRACE_LANES, width=TRACE_WIDTH)
+    b = trace(s, 20_000, seed=3, chunk=20_000, lanes=TRACE_LANES, width=TRACE_WIDTH)
     assert comparable(a) == comparable(b)
     np.testing.assert_array_equal(a.irradiance, b.irradiance)
     np.testing.assert_array_equal(a.incidence_histogram, b.incidence_histogram)

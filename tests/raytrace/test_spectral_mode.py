@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import TRACE_LANES
 
 from bsdfkit.core.errors import InputError, ValidationError
 from bsdfkit.core.jaxconfig import x64
@@ -33,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SPECTRALON = Path(__file__).parent.parent / "data" / "grit-spectralon" / "Spectralon_Num4.txt"
 TABLE2 = {"bibs_reflection": 0.109, "bibs_transmission": 0.054, "biys_reflection": 0.263,
           "biys_transmission": 0.257, "yiys_reflection": 0.457, "yiys_transmission": 0.471}
-CHUNK, LANES = 50_000, 1024
+CHUNK, LANES = 50_000, TRACE_LANES
 PLATE_TOP = ('kind = "phosphor"\n[top.plate]\ntheta_i_deg = [0.0, 90.0]\n'
              + "".join(f'{i} = {{reflection = {{tis = [{TABLE2[i + "_reflection"]}, {TABLE2[i + "_reflection"]}]}}, '
                        f'transmission = {{tis = [{TABLE2[i + "_transmission"]}, {TABLE2[i + "_transmission"]}]}}}}\n'

@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import TRACE_LANES
 from scipy import constants
 
 from bsdfkit.core.errors import InputError, ValidationError
@@ -138,7 +139,7 @@ def test_traced_anti_stokes_share_is_the_thermal_tail(tmp_path, peak_nm, tempera
     data_share = anti_stokes_share(pdf)[k]
     assert share < 0.5 * data_share  # what the test tells apart (many σ apart, below)
 
-    r = trace(s, 120_000, 7, chunk=60_000, lanes=4096)
+    r = trace(s, 120_000, 7, chunk=60_000, lanes=TRACE_LANES)
     led = r.spectral.ledger
     assert led["power_W"]["error"] <= 1e-9 and led["photons_per_s"]["error"] <= 1e-9
     conv = led["conversions"]
@@ -167,7 +168,7 @@ def test_excitation_below_the_emission_band_samples_the_unconditional_spectrum(t
     _, _, pdf = model_on_bins(model)
     k = int(np.argmax(tab.led_power))
     np.testing.assert_allclose(tab.emission_pdf[k], pdf[k], rtol=1e-12, atol=0)
-    r = trace(s, 60_000, 3, chunk=60_000, lanes=4096)
+    r = trace(s, 60_000, 3, chunk=60_000, lanes=TRACE_LANES)
     got, se = r.spectral.spectrum_W_per_nm, r.spectral.spectrum_std_err
     power = pdf[k] / EMISSION
     total = float(got.sum())

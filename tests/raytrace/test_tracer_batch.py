@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, TRACE_LANES, TRACE_WIDTH
 from jax.extend.random import threefry_2x32
 from test_kernel import TABLE2, scene
 
@@ -65,9 +65,10 @@ def test_lanes_and_chunks_do_not_change_a_single_bit(tmp_path):
     s = plate_scene(tmp_path, spec=0.2)
     ref = full(trace(s, 12_000, seed=11, chunk=12_000, lanes=16384))
     # each (lanes, emission width) is a compilation (the cost of this test); chunks of 5000 (256 lanes, one loop
-    # level), 12 000 (64 lanes), 7001 (4096 lanes, a short last chunk) at their default widths
-    for chunk, lanes in ((5_000, 256), (12_000, 64), (7_001, 4096)):
+    # level), 12 000 (64 lanes) at their default widths, 7001 (a short last chunk) in the reference's kernel
+    for chunk, lanes in ((5_000, 256), (12_000, 64)):
         assert full(trace(s, 12_000, seed=11, chunk=chunk, lanes=lanes)) == ref, (chunk, lanes)
+    assert full(trace(s, 12_000, seed=11, chunk=7_001, lanes=16384, width=16384)) == ref
     # chunks of 3000 in 1024 lanes, in a wider kernel than the chunk needs (unused emissions per call)
     assert full(trace(s, 12_000, seed=11, chunk=3_000, lanes=1024, width=16384)) == ref
     assert ref["ledger_error"] <= 1e-9
@@ -140,10 +141,11 @@ def test_compacted_lobe_sampler_equals_plain_rejection():
 def test_specular_fraction_is_a_number_for_plate_scenes(tmp_path):
     diffuse, mirror = plate_scene(tmp_path, spec=0.0), plate_scene(tmp_path, spec=0.5)
     assert scene_effects(diffuse) == scene_effects(mirror)  # one compiled kernel for both
-    a = trace(diffuse, 8_000, seed=4, chunk=8_000)
-    b = trace(diffuse, 8_000, seed=4, chunk=8_000, effects=replace(scene_effects(diffuse), specular=False))
+    sizes = dict(chunk=8_000, lanes=TRACE_LANES, width=TRACE_WIDTH)
+    a = trace(diffuse, 8_000, seed=4, **sizes)
+    b = trace(diffuse, 8_000, seed=4, effects=replace(scene_effects(diffuse), specular=False), **sizes)
     assert full(a) == full(b)  # the mirror branch with fraction 0 changes nothing
-    assert trace(mirror, 8_000, seed=4, chunk=8_000).LER != a.LER
+    assert trace(mirror, 8_000, seed=4, **sizes).LER != a.LER
 
 
 def test_emission_width_buckets():
