@@ -16,7 +16,7 @@ import io
 import re
 import shutil
 from pathlib import Path
-from types import SimpleNamespace
+from types import MappingProxyType, SimpleNamespace
 
 import pytest
 
@@ -35,6 +35,7 @@ BUNDLED = ROOT / "measurements" / "cl830-synthetic"
 #: lanes a kernel has one loop level (bsdfkit.raytrace.kernel), half the XLA compilation of the default 16384 lanes,
 #: and one width lets the tests of an effects record share one compiled kernel; a result depends on neither.
 TRACE_LANES, TRACE_WIDTH = 512, 32768
+TRACE_SIZES = MappingProxyType({"lanes": TRACE_LANES, "width": TRACE_WIDTH})  # trace(..., **TRACE_SIZES)
 
 
 @pytest.fixture(scope="session", autouse=True)

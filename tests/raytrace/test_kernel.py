@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import TRACE_LANES, TRACE_WIDTH
+from conftest import TRACE_LANES, TRACE_SIZES, TRACE_WIDTH
 
 from bsdfkit.core.errors import ValidationError
 from bsdfkit.core.jaxconfig import x64
@@ -80,8 +80,8 @@ def test_same_seed_same_result_for_chunks_1e4_and_1e5():
 def test_chunk_invariance_with_plate_map_and_budget(tmp_path):
     PhosphorPlate.constant(TABLE2).save(tmp_path / "p.json")
     s = scene(f'kind = "phosphor"\nplate = "{tmp_path / "p.json"}"', spec=0.3)
-    a = trace(s, 20_000, seed=3, chunk=5_000, lanes=TRACE_LANES, width=TRACE_WIDTH)
-    b = trace(s, 20_000, seed=3, chunk=20_000, lanes=TRACE_LANES, width=TRACE_WIDTH)
+    a = trace(s, 20_000, seed=3, chunk=5_000, **TRACE_SIZES)
+    b = trace(s, 20_000, seed=3, chunk=20_000, **TRACE_SIZES)
     assert comparable(a) == comparable(b)
     np.testing.assert_array_equal(a.irradiance, b.irradiance)
     np.testing.assert_array_equal(a.incidence_histogram, b.incidence_histogram)

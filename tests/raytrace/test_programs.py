@@ -9,15 +9,14 @@ from pathlib import Path
 
 import jax
 import pytest
-from conftest import TRACE_LANES, TRACE_WIDTH, fast_lane
+from conftest import TRACE_SIZES, fast_lane
 from test_kernel import scene
 from test_tracer_batch import full, plate_scene
 
 from bsdfkit.raytrace import programs, trace
 from bsdfkit.raytrace.tracer import compiled_kernel
 
-RAYS = 3000
-SIZES = dict(lanes=TRACE_LANES, width=TRACE_WIDTH)  # the kernels of test_kernel.py
+RAYS = 3000  # in the kernels of test_kernel.py (TRACE_SIZES)
 #: The scenes whose programs are kept: the fast lane's the minimal kernel (a diffuse cavity, exit top; the program
 #: file's handling does not depend on what the kernel holds), the full suite's also the phosphor plate's (an
 #: interaction budget, the conversion and its while loops: 5-10 times the tracing and compilation)
@@ -53,9 +52,9 @@ def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path
     compiled_kernel.cache_clear()
     with monkeypatch.context() as m:
         m.setattr(programs, "program_folder", lambda: None)
-        traced = full(trace(sc, RAYS, seed=3, **SIZES))
+        traced = full(trace(sc, RAYS, seed=3, **TRACE_SIZES))
     compiled_kernel.cache_clear()
-    first = full(trace(sc, RAYS, seed=3, **SIZES))  # traces, exports, writes
+    first = full(trace(sc, RAYS, seed=3, **TRACE_SIZES))  # traces, exports, writes
     files = list(program_cache.glob("*" + programs.SUFFIX))
     assert len(files) == 1 and not list(program_cache.glob("*.part"))
     compiled_kernel.cache_clear()
@@ -64,18 +63,18 @@ def test_exported_program_is_bit_identical_and_read_back(program_cache, tmp_path
         raise AssertionError("the program was traced again instead of read back")
 
     monkeypatch.setattr(jax.export, "export", no_tracing)
-    again = full(trace(sc, RAYS, seed=3, **SIZES))
+    again = full(trace(sc, RAYS, seed=3, **TRACE_SIZES))
     assert traced == first == again
 
 
 @pytest.mark.parametrize("kind", SCENES)
 def test_damaged_program_file_is_traced_again_and_replaced(program_cache, tmp_path, kind):
     sc = make_scene(kind, tmp_path)
-    reference = full(trace(sc, RAYS, seed=5, **SIZES))
+    reference = full(trace(sc, RAYS, seed=5, **TRACE_SIZES))
     (path,) = program_cache.glob("*" + programs.SUFFIX)
     path.write_bytes(path.read_bytes()[:100])  # a cut file
     compiled_kernel.cache_clear()
-    assert full(trace(sc, RAYS, seed=5, **SIZES)) == reference
+    assert full(trace(sc, RAYS, seed=5, **TRACE_SIZES)) == reference
     jax.export.deserialize(bytearray(path.read_bytes()))  # replaced by a whole program
 
 
@@ -87,7 +86,7 @@ def test_unwritable_program_folder_still_traces(monkeypatch, tmp_path):
     monkeypatch.setattr(programs, "program_folder", lambda: blocker / "programs")
     compiled_kernel.cache_clear()
     try:
-        result = trace(scene(), RAYS, seed=1, **SIZES)
+        result = trace(scene(), RAYS, seed=1, **TRACE_SIZES)
     finally:
         compiled_kernel.cache_clear()
     assert result.ledger_error < 1e-12 and not (blocker / "programs").exists()

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import ROOT, TRACE_LANES, TRACE_WIDTH
+from conftest import ROOT, TRACE_SIZES
 from jax.extend.random import threefry_2x32
 from test_kernel import TABLE2, scene
 
@@ -141,7 +141,7 @@ def test_compacted_lobe_sampler_equals_plain_rejection():
 def test_specular_fraction_is_a_number_for_plate_scenes(tmp_path):
     diffuse, mirror = plate_scene(tmp_path, spec=0.0), plate_scene(tmp_path, spec=0.5)
     assert scene_effects(diffuse) == scene_effects(mirror)  # one compiled kernel for both
-    sizes = dict(chunk=8_000, lanes=TRACE_LANES, width=TRACE_WIDTH)
+    sizes = dict(chunk=8_000, **TRACE_SIZES)
     a = trace(diffuse, 8_000, seed=4, **sizes)
     b = trace(diffuse, 8_000, seed=4, effects=replace(scene_effects(diffuse), specular=False), **sizes)
     assert full(a) == full(b)  # the mirror branch with fraction 0 changes nothing

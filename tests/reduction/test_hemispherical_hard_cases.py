@@ -7,7 +7,7 @@ model (hypothesis) in tests/models/test_functions.py.
 """
 import numpy as np
 import pytest
-from conftest import TRACE_LANES, TRACE_WIDTH, fast_lane
+from conftest import TRACE_SIZES, fast_lane
 
 from bsdfkit.core.errors import BsdfkitError, InputError
 from bsdfkit.measurement.calibrate import calibrate
@@ -216,8 +216,8 @@ def test_float32_tracing_agrees_with_float64():
     from bsdfkit.raytrace import load_scene, trace
 
     scene = load_scene(ROOT / "fitting" / "scenes" / "example.toml")
-    sizes = dict(lanes=TRACE_LANES, width=TRACE_WIDTH)  # the kernels of tests/raytrace/test_kernel.py
-    r32 = trace(replace(scene, trace=replace(scene.trace, precision="float32")), 20000, 4, **sizes)
-    r64 = trace(replace(scene, trace=replace(scene.trace, precision="float64")), 20000, 4, **sizes)
+    # in the kernels of tests/raytrace/test_kernel.py (TRACE_SIZES)
+    r32 = trace(replace(scene, trace=replace(scene.trace, precision="float32")), 20000, 4, **TRACE_SIZES)
+    r64 = trace(replace(scene, trace=replace(scene.trace, precision="float64")), 20000, 4, **TRACE_SIZES)
     assert abs(r32.LER - r64.LER) <= 3 * np.hypot(r32.std_err["LER"], r64.std_err["LER"]) + 1e-12
     assert r32.ledger_error < 1e-9 and r64.ledger_error < 1e-9
