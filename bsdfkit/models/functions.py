@@ -17,11 +17,18 @@ Every model is written so that its value *and* its gradient with respect to ever
 at the edges of the parameter domain (zero widths, ABg exponent g → 0, B → 0, |β − β0| = 0), using the
 "double-where" idiom: the unsafe branch is fed a harmless dummy argument so that its (discarded)
 derivative cannot produce NaN.
+
+The spectrum and lobe models are ``jax.jit`` functions: called outside a trace (NumPy data, a simulation, a
+table's values) each runs as one compiled program per argument shape instead of one per elementwise operation
+(40 calls of ``split_gaussian_spectrum`` on new shapes: 0.8 s against 4.5 s with JAX's persistent cache filled,
+2.1 s against 25 s without it, the same bits); inside a trace the call is inlined.
 """
 from __future__ import annotations
 
 import math
+from functools import partial
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
@@ -71,6 +78,7 @@ def _tiny_width(*arrays) -> jnp.ndarray:
     return jnp.sqrt(jnp.finfo(jnp.result_type(*arrays, float)).tiny)
 
 
+@partial(jax.jit, static_argnames=("cap",))
 def ratio_squared(offset: ArrayLike, width: ArrayLike, cap: float = _RATIO_SQ_CAP) -> jnp.ndarray:
     """min((offset/width)², cap) with the width → 0 limit (0 on the peak, the cap elsewhere) taken
     safely: value and derivatives stay finite for any width ≥ 0, including 0 and subnormal widths.
@@ -130,6 +138,7 @@ def _safe_sqrt(x: ArrayLike) -> jnp.ndarray:
 # ------------------------------------------------------------------------------------------------
 # Spectrum models
 # ------------------------------------------------------------------------------------------------
+@jax.jit
 def gaussian_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike) -> jnp.ndarray:
     """Relative Gaussian spectrum with peak 1: S(λ) = exp(−C((λ − λp)/Δλ)²), C = 4 ln 2.
 
@@ -152,6 +161,7 @@ def gaussian_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: Arr
     return jnp.exp(-C_FWHM * z2)
 
 
+@jax.jit
 def split_gaussian_spectrum(
     wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike
 ) -> jnp.ndarray:
@@ -265,6 +275,7 @@ def specular_direction_cosines(theta_i: ArrayLike) -> tuple[jnp.ndarray, jnp.nda
     return jnp.sin(theta_i), jnp.zeros_like(theta_i)
 
 
+@jax.jit
 def delta_beta_squared(theta_i: ArrayLike, theta_s: ArrayLike, phi_s: ArrayLike) -> jnp.ndarray:
     """|β − β0|² for incidence θi (source at φi = π) and scatter direction (θs, φs), all in radians.
 
@@ -326,6 +337,7 @@ def lambert(rho: ArrayLike) -> jnp.ndarray:
     return jnp.asarray(rho) / jnp.pi
 
 
+@jax.jit
 def gaussian_lobe(dbeta: ArrayLike, amplitude: ArrayLike, sigma: ArrayLike) -> jnp.ndarray:
     """Gaussian lobe in direction cosines: f = A·exp(−|β − β0|²/(2σ²)) (docs/fitting.md §5).
 
@@ -346,6 +358,7 @@ def gaussian_lobe(dbeta: ArrayLike, amplitude: ArrayLike, sigma: ArrayLike) -> j
     return amplitude * jnp.exp(-0.5 * _offset_over_width_squared(dbeta, sigma))
 
 
+@jax.jit
 def abg(dbeta: ArrayLike, A: ArrayLike, B: ArrayLike, g: ArrayLike) -> jnp.ndarray:
     """ABg scatter model f = A/(B + |β − β0|^g) in sr⁻¹ ([TracePro-UM], [OpticStudio-Help]; docs/fitting.md §5).
 
@@ -533,6 +546,7 @@ def _radial_limit(b0: ArrayLike, psi: jnp.ndarray) -> jnp.ndarray:
     return unit_disk_reach(b0 * jnp.cos(psi), b0**2, jnp)
 
 
+@partial(jax.jit, static_argnames=("n_psi",))
 def tis_gaussian_lobe(theta_i: ArrayLike, A: ArrayLike, sigma: ArrayLike, n_psi: int = 1024) -> jnp.ndarray:
     """Exact TIS of a Gaussian lobe clipped by the unit disk (θi in radians, σ in direction cosines).
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
@@ -57,6 +58,7 @@ def _split_half_width(offset: jnp.ndarray, fwhm: ArrayLike, alpha: ArrayLike) ->
     return 0.5 * fwhm * (1.0 + jnp.sign(offset) * alpha)
 
 
+@jax.jit  # one compiled program per shape when called on data (bsdfkit.models.functions)
 def ohno2005_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, half_spectral_width_nm: ArrayLike) -> jnp.ndarray:
     """Ohno (2005) single-LED model, S = (g + 2g⁵)/3 with g = exp(−((λ − λp)/w)²), peak value 1.
 
@@ -99,6 +101,7 @@ def ohno2005_fwhm_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm
     return ohno2005_spectrum(wavelength_nm, peak_nm, jnp.asarray(fwhm_nm) / OHNO2005_FWHM_PER_WIDTH)
 
 
+@jax.jit  # one compiled program per shape when called on data (bsdfkit.models.functions)
 def split_pseudo_voigt_spectrum(
     wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike, eta: ArrayLike
 ) -> jnp.ndarray:
@@ -127,6 +130,7 @@ def split_pseudo_voigt_spectrum(
     return eta * lorentz + (1.0 - eta) * gauss
 
 
+@jax.jit  # one compiled program per shape when called on data (bsdfkit.models.functions)
 def split_pearson7_spectrum(
     wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike, m: ArrayLike
 ) -> jnp.ndarray:
