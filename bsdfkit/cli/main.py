@@ -36,7 +36,7 @@ from typing import NoReturn
 from bsdfkit.core.collector import fewer_collections
 from bsdfkit.core.errors import BsdfkitError
 from bsdfkit.core.version import __version__
-from bsdfkit.io.atomic import describe_os_error, remove_partial_outputs
+from bsdfkit.io.atomic import defer_until_committed, describe_os_error, remove_partial_outputs
 from bsdfkit.io.xarray_dask import deferred_dask
 
 VERBS = ("bench", "budget", "color", "convert", "export", "fit", "info", "ingest", "read", "run", "simulate", "sweep",
@@ -310,8 +310,10 @@ def exit_process(code: int) -> NoReturn:
 
 
 def _terminated(signum, frame) -> None:
-    # exit at once, whatever is running (an exception raised here could be swallowed by a library callback)
-    exit_now(signum)
+    # exit at once, whatever is running (an exception raised here could be swallowed by a library callback),
+    # except in the middle of moving an output set into place: then as soon as it is in place
+    if not defer_until_committed(lambda: exit_now(signum)):
+        exit_now(signum)
 
 
 def exit_now(signum: int) -> None:

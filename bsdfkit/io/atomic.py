@@ -52,7 +52,8 @@ from pathlib import Path
 from bsdfkit.core.errors import BsdfkitError, OutputError, OutputExistsError
 
 __all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_output_folder", "check_writable",
-           "describe_os_error", "refuse_inputs", "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
+           "defer_until_committed", "describe_os_error", "refuse_inputs", "remove_partial_outputs", "write_bytes",
+           "write_text", "write_with"]
 
 #: Temporary files and staging folders of this process that are not finished yet (removed on SIGTERM).
 _PARTIAL: set[Path] = set()
@@ -60,6 +61,32 @@ _PARTIAL: set[Path] = set()
 #: thread (bsdfkit.cli.main) never empties a staging folder that the main thread is committing; reentrant for a
 #: signal handler that interrupts the main thread inside a commit.
 _COMMIT_LOCK = threading.RLock()
+#: Threads moving an output set into place, and what a signal handler that interrupted one of them asked to run
+#: once the set is in place (defer_until_committed).
+_COMMITTING: set[int] = set()
+_AFTER_COMMIT: list[Callable[[], None]] = []
+
+
+def defer_until_committed(action: Callable[[], None]) -> bool:
+    """Run ``action`` when this thread's output-set commit ends, if one is in progress (a signal handler that
+    interrupted it): the set is then moved into place whole, or not at all, before the process ends. Without
+    this, a handler ending the process halfway left the staging folder behind, or a finished set beside the
+    message "unfinished outputs removed" (seen when SIGTERM met the end of ``bsdfkit simulate``).
+
+    Parameters
+    ----------
+    action : callable
+        What to run after the commit (typically: end the process).
+
+    Returns
+    -------
+    bool
+        True when ``action`` was deferred; False when no commit is in progress in this thread (run it now).
+    """
+    if threading.get_ident() not in _COMMITTING:
+        return False
+    _AFTER_COMMIT.append(action)
+    return True
 
 
 def remove_partial_outputs() -> None:
@@ -780,12 +807,17 @@ class OutputSet:
         stage, target = self.staging, self.folder.resolve()
         with _COMMIT_LOCK:
             _PARTIAL.discard(stage)
+            _COMMITTING.add(threading.get_ident())
             try:
                 self._commit(stage, target)
             except BaseException:
                 if self.staging is not None:
                     _PARTIAL.add(stage)
                 raise
+            finally:
+                _COMMITTING.discard(threading.get_ident())
+                while _AFTER_COMMIT:
+                    _AFTER_COMMIT.pop(0)()
 
     def _swap_in(self, stage: Path, target: Path, old: Path) -> None:
         """Second rename of a swap: the staged set into the place of the previous one (moved to ``old``)."""
