@@ -13,7 +13,6 @@ import contextlib
 import errno
 import gzip
 import io
-import re
 import shutil
 from pathlib import Path
 from types import MappingProxyType, SimpleNamespace
@@ -62,31 +61,6 @@ def shared_compile_cache():
     yield Path(folder)
     for key, value in before.items():
         jax.config.update(key, value)
-
-
-#: A module whose tests share an expensive module-scoped fixture (a conversion, an ingest, a traced stage: 5-40 s)
-_SHARES_A_FIXTURE = re.compile(r'@pytest\.fixture\(scope="module"')
-
-
-def pytest_xdist_make_scheduler(config, log):
-    """xdist's ``load`` distribution, except that the tests of a module with a module-scoped fixture go to one
-    worker as a whole, so that the fixture is made once per run, not once per worker. (``--dist loadgroup`` with
-    ``xdist_group`` marks would do it, but pytest-xdist 3.8 marks a group by rewriting ``item._nodeid``, which
-    pytest 9 no longer reads: the groups were silently spread over the workers.) The controller collects no
-    tests, so the modules are found in their source text."""
-    if config.getoption("dist") != "load":
-        return None
-    from xdist.scheduler import LoadScopeScheduling
-
-    grouped = {p.relative_to(ROOT).as_posix() for p in Path(__file__).resolve().parent.rglob("test_*.py")
-               if _SHARES_A_FIXTURE.search(p.read_text(encoding="utf-8"))}
-
-    class SharedFixtureScheduling(LoadScopeScheduling):
-        def _split_scope(self, nodeid: str) -> str:
-            module = nodeid.split("::", 1)[0]
-            return module if module in grouped else nodeid
-
-    return SharedFixtureScheduling(config, log)
 
 
 @pytest.hookimpl(trylast=True)
