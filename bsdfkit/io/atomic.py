@@ -58,8 +58,8 @@ __all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "chec
 #: Temporary files and staging folders of this process that are not finished yet (removed on SIGTERM).
 _PARTIAL: set[Path] = set()
 #: Held while partial outputs are removed and while an output set is moved into place, so that a signal watcher
-#: thread (bsdfkit.cli.main) never empties a staging folder that the main thread is committing; reentrant for a
-#: signal handler that interrupts the main thread inside a commit.
+#: thread (bsdfkit.cli.main) never empties a staging folder that the main thread is committing; reentrant for the
+#: exit a signal handler deferred to the end of a commit (defer_until_committed), which runs while it is held.
 _COMMIT_LOCK = threading.RLock()
 #: Threads moving an output set into place, and what a signal handler that interrupted one of them asked to run
 #: once the set is in place (defer_until_committed).

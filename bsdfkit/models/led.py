@@ -15,7 +15,8 @@ to it over the whole spectrum comes out too wide (docs/fitting.md §10). The sha
 
 Units: wavelengths, peaks and widths in nm; the shapes are dimensionless with peak value 1. Value and
 gradient stay finite for widths → 0 (a unit spike) and α → ±1 (a step), using the double-where idiom of
-:mod:`bsdfkit.models.functions`.
+:mod:`bsdfkit.models.functions`. The three shapes are ``jax.jit`` functions, as the models there are: on data
+outside a trace each runs as one compiled program per argument shape.
 """
 from __future__ import annotations
 
@@ -58,7 +59,7 @@ def _split_half_width(offset: jnp.ndarray, fwhm: ArrayLike, alpha: ArrayLike) ->
     return 0.5 * fwhm * (1.0 + jnp.sign(offset) * alpha)
 
 
-@jax.jit  # one compiled program per shape when called on data (bsdfkit.models.functions)
+@jax.jit
 def ohno2005_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, half_spectral_width_nm: ArrayLike) -> jnp.ndarray:
     """Ohno (2005) single-LED model, S = (g + 2g⁵)/3 with g = exp(−((λ − λp)/w)²), peak value 1.
 
@@ -101,7 +102,7 @@ def ohno2005_fwhm_spectrum(wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm
     return ohno2005_spectrum(wavelength_nm, peak_nm, jnp.asarray(fwhm_nm) / OHNO2005_FWHM_PER_WIDTH)
 
 
-@jax.jit  # one compiled program per shape when called on data (bsdfkit.models.functions)
+@jax.jit
 def split_pseudo_voigt_spectrum(
     wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike, eta: ArrayLike
 ) -> jnp.ndarray:
@@ -130,7 +131,7 @@ def split_pseudo_voigt_spectrum(
     return eta * lorentz + (1.0 - eta) * gauss
 
 
-@jax.jit  # one compiled program per shape when called on data (bsdfkit.models.functions)
+@jax.jit
 def split_pearson7_spectrum(
     wavelength_nm: ArrayLike, peak_nm: ArrayLike, fwhm_nm: ArrayLike, alpha: ArrayLike, m: ArrayLike
 ) -> jnp.ndarray:
