@@ -35,6 +35,7 @@ from typing import NoReturn
 
 from bsdfkit.core.collector import fewer_collections
 from bsdfkit.core.errors import BsdfkitError
+from bsdfkit.core.jaxconfig import DEVICES_FLAG
 from bsdfkit.core.version import __version__
 from bsdfkit.io.atomic import defer_until_committed, describe_os_error, remove_partial_outputs
 from bsdfkit.io.xarray_dask import deferred_dask
@@ -120,7 +121,6 @@ def compile_cache(enabled: bool) -> Iterator[Path | None]:
         yield Path(settings["jax_compilation_cache_dir"])
 
 
-DEVICES_FLAG = "--xla_force_host_platform_device_count"
 #: at most this many CPU devices (one chunk of rays runs on each at the same time)
 MAX_CPU_DEVICES = 8
 

@@ -58,6 +58,10 @@ MODULE_YELLOW_BAND_NM: tuple[float, float] = (501.0, 780.0)
 COLORIMETRY_BLUE_BAND_NM: tuple[float, float] = (380.0, 470.0)
 COLORIMETRY_YELLOW_BAND_NM: tuple[float, float] = (471.0, 780.0)
 
+#: Peak of the CIE photopic luminous efficiency V(λ) [nm]: the wavelength vendor files give their photopic
+#: (luminance, tristimulus Y) data and the one a many-wavelength vendor file is ingested at.
+PHOTOPIC_NM = 555.0
+
 #: Plausible wavelengths in nm, from the deep UV to the far IR: a grid in µm or m falls below, one in Å or pm above.
 WAVELENGTH_RANGE_NM: tuple[float, float] = (100.0, 20000.0)
 

@@ -10,6 +10,9 @@ import contextlib
 import functools
 from collections.abc import Callable, Iterator
 
+#: the ``XLA_FLAGS`` entry that sets how many CPU devices JAX's host platform has (one when it is absent)
+DEVICES_FLAG = "--xla_force_host_platform_device_count"
+
 
 @contextlib.contextmanager
 def x64(enabled: bool = True) -> Iterator[None]:

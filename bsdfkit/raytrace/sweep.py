@@ -38,6 +38,7 @@ import numpy as np
 import xarray as xr
 
 from bsdfkit.core.errors import BsdfkitError, InputError, ValidationError
+from bsdfkit.core.jaxconfig import DEVICES_FLAG
 from bsdfkit.io.atomic import OutputSet, write_with
 from bsdfkit.raytrace.scene import Scene, dumps_scene, with_values
 from bsdfkit.raytrace.tracer import trace
@@ -170,9 +171,6 @@ def trace_point(scene: Scene, values: dict, rays: int, seed: int, chunk: int | N
 
 def _describe(values: dict) -> str:
     return ", ".join(f"{k}={v}" for k, v in values.items()) or "the scene"
-
-
-DEVICES_FLAG = "--xla_force_host_platform_device_count"
 
 
 def _worker_env(workers: int) -> dict[str, str]:

@@ -1153,6 +1153,11 @@ def value_digits(tis_rtol: float, most: int = 7) -> int:
     return max(1, min(int(most), need))
 
 
+#: format spec of the angles every text table writer prints (``format(v, ANGLE_FORMAT)``): ten significant digits,
+#: within 5e-9 degree of the computed angle below 100 degrees
+ANGLE_FORMAT = ".10g"
+
+
 def quantize(values: ArrayLike, fmt: str) -> NDArray[np.float64]:
     """``values`` as a table writes them with the format spec ``fmt`` and reads them back (float64, same shape):
     the writers' TIS and checks are computed from what the file holds.

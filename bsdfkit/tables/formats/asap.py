@@ -62,7 +62,6 @@ MAGIC = "# bsdfkit ASAP-style Harvey-Shack BSDF table, version 1"
 _CODE = {"reflection": "R", "transmission": "T"}
 _SIDE = {v: k for k, v in _CODE.items()}
 _VALUE_FMT = ".7g"
-_ANGLE_FMT = ".10g"
 _DOC = """\
 # NO ASAP MANUAL WAS AVAILABLE to bsdfkit. This is NOT an ASAP command deck: the syntax of ASAP's
 # HARVEY, BSDDATA, MODELS and SCATTER MODEL commands could not be obtained. It is a plain table in the
@@ -172,8 +171,8 @@ def asap_table(
         if "\n" in text or "\r" in text:
             raise ValidationError("comments must be single lines", field="comments", got=text)
     values = grids.quantize(grid.values, _VALUE_FMT)
-    rho = grids.quantize(grid["rho"].values, _ANGLE_FMT)
-    psi = grids.quantize(grid["psi"].values, _ANGLE_FMT)
+    rho = grids.quantize(grid["rho"].values, grids.ANGLE_FORMAT)
+    psi = grids.quantize(grid["psi"].values, grids.ANGLE_FORMAT)
     theta = np.asarray(grid["theta_i"].values, dtype=np.float64)
     table = grid.copy(data=values).assign_coords(rho=rho, psi=psi)
     tis = grids.tis_harvey_shack_table(values, rho, psi, theta, 0.0)
@@ -206,18 +205,18 @@ def asap_text(asap: AsapTable, generated_at: datetime | None = None) -> str:
     theta = t["theta_i"].values
     for s, side in enumerate(sides):
         for i, th in enumerate(theta):
-            lines.append(f"tis {_CODE[side]} {f(th, _ANGLE_FMT)} {f(asap.tis_stated.values[s, i])}")
+            lines.append(f"tis {_CODE[side]} {f(th, grids.ANGLE_FORMAT)} {f(asap.tis_stated.values[s, i])}")
     for p in asap.abg:
-        lines.append(f"abg {_CODE[p.side]} {f(p.theta_i_deg, _ANGLE_FMT)} {f(p.a)} {f(p.b)} {f(p.g)}")
+        lines.append(f"abg {_CODE[p.side]} {f(p.theta_i_deg, grids.ANGLE_FORMAT)} {f(p.a)} {f(p.b)} {f(p.g)}")
     for p in asap.harvey:
-        lines.append(f"harvey {_CODE[p.side]} {f(p.theta_i_deg, _ANGLE_FMT)} {f(p.b0)} {f(p.s)} {f(p.l)}")
+        lines.append(f"harvey {_CODE[p.side]} {f(p.theta_i_deg, grids.ANGLE_FORMAT)} {f(p.b0)} {f(p.s)} {f(p.l)}")
     lines.append("side theta_i_deg rho psi_deg bsdf")
-    rho = [f(r, _ANGLE_FMT) for r in t["rho"].values]
-    psi = [f(p, _ANGLE_FMT) for p in t["psi"].values]
+    rho = [f(r, grids.ANGLE_FORMAT) for r in t["rho"].values]
+    psi = [f(p, grids.ANGLE_FORMAT) for p in t["psi"].values]
     values = t.values
     for s, side in enumerate(sides):
         for i, th in enumerate(theta):
-            head = f"{_CODE[side]} {f(th, _ANGLE_FMT)} "
+            head = f"{_CODE[side]} {f(th, grids.ANGLE_FORMAT)} "
             for j, r in enumerate(rho):
                 lines.extend(f"{head}{r} {p} {f(values[s, i, j, k])}" for k, p in enumerate(psi))
     lines.append("end")

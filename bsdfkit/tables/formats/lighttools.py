@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from bsdfkit.core.conventions import PHOTOPIC_NM
 from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
@@ -48,8 +49,6 @@ __all__ = ["LightToolsBsdf", "read_lighttools", "write_lighttools"]
 _VALUE_FMT = ".7g"
 _TYPE = {"reflection": "BRDF", "transmission": "BTDF"}
 _SIDE = {v: k for k, v in _TYPE.items()}
-#: wavelength label of the TrisY (photopic) blocks of an XYZ file [nm]
-PHOTOPIC_NM = 555.0
 
 
 @dataclass(frozen=True, eq=False)

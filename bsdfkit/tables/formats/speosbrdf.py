@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import SIDES
+from bsdfkit.core.conventions import PHOTOPIC_NM, SIDES
 from bsdfkit.core.errors import FormatError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
@@ -60,8 +60,6 @@ __all__ = ["MAGIC", "SpeosBrdf", "read_speos_brdf", "write_speos_brdf"]
 
 MAGIC = "OPTIS - brdf surface file v8.0"
 _VALUE_FMT = ".7g"
-#: the wavelength a many-wavelength file is ingested at [nm] (the photopic peak)
-PHOTOPIC_NM = 555.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -96,7 +96,6 @@ _MONTHS = ("January", "February", "March", "April", "May", "June", "July", "Augu
            "October", "November", "December")
 _ZERO_TAG = re.compile(r"\[bsdfkit zero_azimuth_deg=([-+0-9.eE]+)\]")
 _VALUE_FMT = ".7g"
-_ANGLE_FMT = ".10g"
 _ENERGY_SLACK = 1e-6
 
 
@@ -281,8 +280,8 @@ def table_property(
             full[k] = grids.quantize(grid.sel(side=side).values, _VALUE_FMT)
     table = xr.DataArray(
         full, dims=grid.dims,
-        coords={"side": list(SIDES), "theta_i": theta, "rho": grids.quantize(grid["rho"].values, _ANGLE_FMT),
-                "psi": grids.quantize(grid["psi"].values, _ANGLE_FMT)},
+        coords={"side": list(SIDES), "theta_i": theta, "rho": grids.quantize(grid["rho"].values, grids.ANGLE_FORMAT),
+                "psi": grids.quantize(grid["psi"].values, grids.ANGLE_FORMAT)},
         name="bsdf", attrs={"units": "1/sr", "frame": "harvey_shack", "zero_azimuth_deg": zero},
     )
     refl = _per_incidence("specular_reflectance", specular_reflectance, theta.size)
@@ -403,13 +402,13 @@ def tracepro_text(prop: TraceProProperty, generated_at: datetime | None = None) 
         "",
         "\t".join(SURFACE_COLUMNS),
     ]
-    prefix = f"{_fmt(o.temperature_K, _ANGLE_FMT)}\t{_fmt(o.wavelength_um, _ANGLE_FMT)}"
+    prefix = f"{_fmt(o.temperature_K, grids.ANGLE_FORMAT)}\t{_fmt(o.wavelength_um, grids.ANGLE_FORMAT)}"
     for t, theta in enumerate(prop.theta_i_deg):
         abg = np.zeros((2, 3)) if prop.abg is None else prop.abg.values[:, t, :]
         a_r, b_r, g_r = abg[0]
         a_t, b_t, g_t = abg[1]
         cells = [
-            _fmt(theta, _ANGLE_FMT), "0",
+            _fmt(theta, grids.ANGLE_FORMAT), "0",
             _fmt(prop.absorptance[t]), _fmt(prop.absorptance[t]),
             _fmt(prop.specular_reflectance[t]), _fmt(prop.specular_reflectance[t]),
             _fmt(prop.specular_transmittance[t]), _fmt(prop.specular_transmittance[t]),
@@ -421,11 +420,11 @@ def tracepro_text(prop: TraceProProperty, generated_at: datetime | None = None) 
     if prop.scatter == 5 and prop.table is not None:
         lines.append("Table_BSDF_Data")
         lines.append("\t".join(TABLE_COLUMNS))
-        rho = [_fmt(r, _ANGLE_FMT) for r in prop.table["rho"].values]
-        psi = [_fmt(p, _ANGLE_FMT) for p in prop.table["psi"].values]
+        rho = [_fmt(r, grids.ANGLE_FORMAT) for r in prop.table["rho"].values]
+        psi = [_fmt(p, grids.ANGLE_FORMAT) for p in prop.table["psi"].values]
         values = prop.table.values
         for t, theta in enumerate(prop.table["theta_i"].values):
-            head = f"{prefix}\t{_fmt(theta, _ANGLE_FMT)}\t0\t"
+            head = f"{prefix}\t{_fmt(theta, grids.ANGLE_FORMAT)}\t0\t"
             brdf, btdf = values[0, t], values[1, t]
             for j, r in enumerate(rho):
                 lines.extend(

@@ -59,7 +59,6 @@ _LIST_NAMES = {"samplerotation": "SampleRotation", "angleofincidence": "AngleOfI
                "scatterazimuth": "ScatterAzimuth", "scatterradial": "ScatterRadial"}
 _VALUE_FMT = ".6E"
 _TIS_FMT = ".7g"
-_ANGLE_FMT = ".10g"
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,8 +138,8 @@ def zemax_bsdf(
     side = str(grid["side"].values[0])
     values = grids.quantize(grid.values[0], _VALUE_FMT)[None]
     theta = np.asarray(grid["theta_i"].values, dtype=np.float64)
-    radial = grids.quantize(grid["radial"].values, _ANGLE_FMT)
-    azimuth = grids.quantize(azimuth, _ANGLE_FMT)
+    radial = grids.quantize(grid["radial"].values, grids.ANGLE_FORMAT)
+    azimuth = grids.quantize(azimuth, grids.ANGLE_FORMAT)
     table = xr.DataArray(values, dims=("sample_rotation", "theta_i", "azimuth", "radial"),
                          coords={"sample_rotation": [0.0], "theta_i": theta, "azimuth": azimuth, "radial": radial},
                          name="bsdf", attrs={"units": "1/sr", "frame": "specular"})
@@ -181,13 +180,13 @@ def zemax_text(bsdf: ZemaxBsdf, generated_at: datetime | None = None) -> str:
         "SpectralContent  Monochrome",
         f"ScatterType  {bsdf.scatter_type}",
         f"SampleRotation  {t.sizes['sample_rotation']}",
-        _join(t["sample_rotation"].values, _ANGLE_FMT),
+        _join(t["sample_rotation"].values, grids.ANGLE_FORMAT),
         f"AngleOfIncidence  {t.sizes['theta_i']}",
-        _join(t["theta_i"].values, _ANGLE_FMT),
+        _join(t["theta_i"].values, grids.ANGLE_FORMAT),
         f"ScatterAzimuth  {t.sizes['azimuth']}",
-        _join(t["azimuth"].values, _ANGLE_FMT),
+        _join(t["azimuth"].values, grids.ANGLE_FORMAT),
         f"ScatterRadial  {t.sizes['radial']}",
-        _join(t["radial"].values, _ANGLE_FMT),
+        _join(t["radial"].values, grids.ANGLE_FORMAT),
         "",
         "Monochrome",
         "DataBegin",
