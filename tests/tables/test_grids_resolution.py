@@ -128,3 +128,39 @@ def test_cli_reports_size_and_grid_and_refuses_bad_tolerance(tmp_path, capsys):
                  "--grid", "fixed", "--grid-peak-tolerance", "0.02"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "--grid" in err
+
+
+def test_when_no_table_passes_its_recheck_every_candidate_down_to_the_fixed_grid_is_tried_and_the_closest_kept(
+        tmp_path, monkeypatch):
+    """The re-check's last resort: with a limit no table can meet (0), the exporter writes the auto table, the
+    tighter ones, the doubled azimuths and the fixed grid in turn, and keeps (writes again) the one whose re-read
+    TIS is closest to the closed-form TIS of the source: the file on disk is that table."""
+    from bsdfkit.tables import export as export_module
+
+    written, deviations = [], []
+    real_write, real_read = export_module._write, export_module._read_any
+
+    def spy_write(job, settings, force, deviation=None):
+        written.append(settings.grid)
+        return real_write(job, settings, force, deviation)
+
+    def deviation(summary):
+        return float(np.max(np.abs(np.asarray(summary.tis_computed["reflection"]) / GAUSS_TIS - 1.0)))
+
+    def spy_read(path):
+        summary, nodes = real_read(path)
+        deviations.append(deviation(summary))
+        return summary, nodes
+
+    monkeypatch.setattr(export_module, "RECHECK_FACTOR", 0.0)
+    monkeypatch.setattr(export_module, "_write", spy_write)
+    monkeypatch.setattr(export_module, "_read_any", spy_read)
+    out = tmp_path / "t"
+    result = export(gaussian, "tracepro", "", "reflection", out, settings=ExportSettings(theta_i_deg=THETA))
+    tried = written[: 1 + written.index("fixed")]  # the candidates; a last write may repeat the closest one
+    assert tried[0] == "auto" and tried[-1] == "fixed" and len(tried) >= 3
+    assert len(written) - len(tried) in (0, 1) and len(deviations) >= len(tried)
+    closest = min(deviations[: len(tried)])
+    assert len(set(deviations[: len(tried)])) > 1  # the candidates differ, so keeping the closest is a choice
+    assert result.grid["recheck_worst"] == pytest.approx(closest, rel=1e-9, abs=1e-15)
+    assert deviation(read_any(out)) == pytest.approx(closest, rel=1e-6, abs=1e-12)  # and it is the file on disk
