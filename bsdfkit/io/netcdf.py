@@ -8,6 +8,7 @@ flat (nested metadata is stored as JSON text, e.g. ``manifest_json``), so ``load
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -54,10 +55,15 @@ def _encodable(ds: xr.Dataset) -> tuple[xr.Dataset, list[str]]:
 WRITE_CHUNK_CACHE_BYTES = 4 * 1024 ** 2
 
 
+#: one save at a time in a process: the HDF5 library of the netCDF4 wheels is not thread-safe (8 saves in 4 threads
+#: ended in "NetCDF: HDF error" or a segmentation fault), and the chunk cache of a save is a process-wide setting
+_SAVE_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def _write_chunk_cache() -> Iterator[None]:
     """netCDF4's chunk cache for new variables at :data:`WRITE_CHUNK_CACHE_BYTES` for the block, restored on exit
-    (a process-wide setting: a file another thread opens meanwhile gets the small cache, which costs it time only)."""
+    (process-wide: a file another thread opens meanwhile gets the small cache, which costs it time only)."""
     size, elements, preemption = netCDF4.get_chunk_cache()
     netCDF4.set_chunk_cache(WRITE_CHUNK_CACHE_BYTES, elements, preemption)
     try:
@@ -96,7 +102,7 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False, inputs=()) -> Pa
         # One open file for all of it, through xarray's netCDF4 store: ``to_netcdf`` would open and close the
         # file once per matrix (about 45 ms each) and asks dask for its scheduler on every call (importing
         # dask.distributed, about 0.9 s, in a process that holds no dask array).
-        with _write_chunk_cache():
+        with _SAVE_LOCK, _write_chunk_cache():
             store = xr.backends.NetCDF4DataStore.open(str(tmp), mode="w", lock=NETCDF4_PYTHON_LOCK)
             try:
                 enc.drop_vars(deflated).dump_to_store(store)
