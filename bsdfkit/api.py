@@ -59,7 +59,8 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     **options
         For text tables and vendor files: ``quantity`` (brdf, btdf, ccbrdf, ccbtdf, reflectance-factor,
         transmittance-factor), ``side``, ``relative_std``, ``wavelength_nm`` [nm], ``incidence_deg`` /
-        ``phi_i_deg`` [deg], ``zeros`` (auto, keep, missing), ``sample``; refused for raw exports and netCDF files.
+        ``phi_i_deg`` [deg], ``zeros`` (auto, keep, missing), ``sample``; ``face`` (front, back) for a BSDF XML
+        file that holds both faces; refused for raw exports and netCDF files.
 
     Returns
     -------
@@ -185,7 +186,8 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False) -> Path:
 
 
 def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+gaussian", *,
-             options: BsdfFitOptions | None = None, incidence_deg: float | None = None) -> xr.Dataset:
+             options: BsdfFitOptions | None = None, incidence_deg: float | None = None,
+             fallback: bool | None = None) -> xr.Dataset:
     """Fit a BSDF model to one interaction and side of a calibrated dataset, one fit per incidence.
 
     ``ds`` may also be a profile (a dataset on ``record`` with ``bsdf``, ``bsdf_std`` and one side), which is
@@ -205,21 +207,44 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
         Masks and weights of the fit (:class:`bsdfkit.fit.least_squares.BsdfFitOptions`).
     incidence_deg : float, optional
         Fit only the records at this angle of incidence [deg]; all incidences by default.
+    fallback : bool, optional
+        Whether a lobe model (``lambert+gaussian``, ``lambert+abg``) falls back to ``lambert`` when the data do not
+        determine its lobe at any incidence; default ``options.fallback`` (True). False: the requested model or an
+        error.
 
     Returns
     -------
     xarray.Dataset
         On ``theta_i`` [deg]: each parameter and its ``_std`` (ρ [-], A [1/sr], σ, B, g [-]), fit statistics,
-        ``tis`` and ``tis_std`` [-] and the plausibility verdict.
+        ``tis`` and ``tis_std`` [-] and the plausibility verdict. ``attrs['model']`` (and ``model_used``) is the model
+        fitted, ``attrs['model_requested']`` the one asked for, ``attrs['fallback_reason']`` why they differ ("" when
+        they do not).
+
+    Raises
+    ------
+    InputError
+        The data hold no finite BSDF value, or values the fit refuses (:func:`bsdfkit.fit.least_squares.fit_bsdf`).
+    FitError
+        Too few usable points, or a lobe the data show but do not determine (one line naming incidence and cause).
     """
+    import dataclasses
+
     import numpy as np
 
+    from bsdfkit.fit.least_squares import BsdfFitOptions as _Options
     from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
     from bsdfkit.reduction.spectral import interaction_profile
 
     prof = ds if "wavelength" not in ds.dims else interaction_profile(ds, interaction, side)
-    prof = prof.isel(record=np.flatnonzero(np.isfinite(prof["bsdf"].values)))
-    return _fit_bsdf_profile(prof, model, options=options, incidence_deg=incidence_deg)
+    finite = np.flatnonzero(np.isfinite(prof["bsdf"].values))
+    if prof.sizes.get("record", 0) and finite.size == 0:  # NaN are gaps of a spectral grid; all NaN is no data
+        raise InputError("no finite BSDF value to fit", file=str(ds.attrs.get("source", "")) or None, field="bsdf",
+                         expected=f"finite values of {interaction} {side}", got=f"NaN on all {prof.sizes['record']} "
+                         "records")
+    options = options or _Options()
+    if fallback is not None:
+        options = dataclasses.replace(options, fallback=fallback)
+    return _fit_bsdf_profile(prof.isel(record=finite), model, options=options, incidence_deg=incidence_deg)
 
 
 def export(source: Any, to: str, interaction: str, side: str, path: str | Path, force: bool = False, *,

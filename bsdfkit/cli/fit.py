@@ -10,7 +10,10 @@ side (:func:`bsdfkit.reduction.spectral.interaction_profile`) and fits a BSDF mo
 fitted peak or FWHM far from the measured) are reported with warning lines on stderr and, with ``--json``, in
 each record's ``warnings``; degenerate fits are one-line errors (exit status 2). A BSDF fit is judged by the
 plausibility gate (:mod:`bsdfkit.fit.plausibility`): each incidence says whether it passes and, if not, why
-(``plausible`` and ``reasons`` with ``--json``); exports refuse a fit that fails it.
+(``plausible`` and ``reasons`` with ``--json``); exports refuse a fit that fails it. A lobe model whose lobe the data
+do not determine at any incidence falls back to ``lambert`` (:func:`bsdfkit.fit.least_squares.fit_bsdf`): the header
+names the model used and the one requested, a one-line ``note:`` says why (``model``, ``model_requested`` and
+``fallback_reason`` with ``--json``); ``--no-fallback`` fits the requested model or fails.
 """
 from __future__ import annotations
 
@@ -78,7 +81,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--interaction", choices=INTERACTIONS, required=True,
                    help="bibs, biys, yiys (phosphor plates) or elastic (any sample)")
     b.add_argument("--side", choices=SIDES, required=True)
-    b.add_argument("--model", choices=BSDF_MODELS, default="lambert+gaussian")
+    b.add_argument("--model", choices=BSDF_MODELS, default="lambert+gaussian",
+                   help="default lambert+gaussian; a lobe model whose lobe the data do not determine at any incidence "
+                        "falls back to lambert, with a note saying why")
+    b.add_argument("--no-fallback", action="store_true",
+                   help="fit --model as asked: no fallback to lambert (an undetermined lobe is then an error)")
     b.add_argument("--incidence", type=float, metavar="DEG", help="fit only this incidence angle (degrees)")
     b.add_argument("--wavelength", type=float, metavar="NM",
                    help="elastic: fit only this measured wavelength [nm] (the nearest within "
@@ -261,7 +268,7 @@ def select_wavelength(ds: xr.Dataset, wavelength_nm: float, scan: str) -> xr.Dat
 
 def _run_bsdf(args: argparse.Namespace) -> int:
     from bsdfkit.fit import plausibility
-    from bsdfkit.fit.least_squares import fit_bsdf
+    from bsdfkit.fit.least_squares import BsdfFitOptions, fit_bsdf
     from bsdfkit.io import netcdf
     from bsdfkit.reduction.any_sample import measured_tis
     from bsdfkit.reduction.spectral import interaction_profile
@@ -281,8 +288,10 @@ def _run_bsdf(args: argparse.Namespace) -> int:
         ds = select_wavelength(ds, args.wavelength, args.scan)
     warn_dark(ds, "fit bsdf")
     profile = interaction_profile(ds, args.interaction, args.side)
-    result = fit_bsdf(profile, args.model, incidence_deg=args.incidence)
+    result = fit_bsdf(profile, args.model, incidence_deg=args.incidence,
+                      options=BsdfFitOptions(fallback=not args.no_fallback))
     result.attrs["interaction"] = args.interaction
+    used, fallback = str(result.attrs["model"]), str(result.attrs.get("fallback_reason", "")) or None
     if args.wavelength is not None:
         result.attrs["wavelength_nm"] = float(ds["wavelength"].values[0])
     warnings = json.loads(result.attrs.get("warnings", "[]"))
@@ -294,7 +303,7 @@ def _run_bsdf(args: argparse.Namespace) -> int:
     for k, theta in enumerate(result.theta_i.values):
         row = result.isel(theta_i=k)
         if not bool(row.converged):
-            _warn_unconverged(f"{args.model} fit at θi = {theta:g}°", int(row.iterations))
+            _warn_unconverged(f"{used} fit at θi = {theta:g}°", int(row.iterations))
         where = f"incidence {theta:g} deg: "
         data_tis, data_tis_std = measured_tis(ds, args.interaction, args.side, float(theta))
         fits.append({
@@ -310,12 +319,17 @@ def _run_bsdf(args: argparse.Namespace) -> int:
         })
     if args.json:
         emit_json({"scan": str(args.scan), "interaction": args.interaction, "side": args.side,
-                   "model": args.model, "residual": result.attrs["residual"], "fits": fits,
+                   "model": used, "model_requested": args.model, "model_used": used, "fallback_reason": fallback,
+                   "residual": result.attrs["residual"], "fits": fits,
                    "plausible": verdict.passed, "warnings": warnings, "output": args.output})
         return 0
     for w in warnings:
         print(f"bsdfkit fit: warning: {w}", file=sys.stderr)
-    print(f"{args.scan}: {args.interaction} {args.side}, model {args.model} ({result.attrs['residual']} residuals)")
+    requested = "" if used == args.model else f", requested {args.model}"
+    print(f"{args.scan}: {args.interaction} {args.side}, model {used}{requested} ({result.attrs['residual']} "
+          "residuals)")
+    if fallback:
+        print(f"  note: {fallback}")
     for f in fits:
         parts = ", ".join(f"{n} = {f['params'][n]:.4g} ± {_std(f['std'][n])}" for n in names)
         gate = ("passes the plausibility gate" if f["plausible"] else

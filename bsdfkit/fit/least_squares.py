@@ -30,7 +30,10 @@ How a fit is set up (docs/fitting.md has the derivations):
 
 Degenerate problems (fewer unmasked points than parameters + 1, all-zero data, a singular JᵀJ at the
 solution) raise :class:`bsdfkit.core.errors.FitError`; a fit that stops at ``maxiter`` is returned with
-``converged = False``. All work runs in float64 inside :func:`bsdfkit.core.jaxconfig.x64`.
+``converged = False``. With ``FitOptions.on_singular = "report"`` a fit whose JᵀJ is singular (or whose parameters
+went non-finite) is returned instead, with a NaN covariance and the message in the variable ``problem``: the caller
+decides (:func:`fit_bsdf` uses it to tell an absent lobe from a failed fit, docs/fitting.md "Fallback"). All work
+runs in float64 inside :func:`bsdfkit.core.jaxconfig.x64`.
 """
 from __future__ import annotations
 
@@ -111,6 +114,11 @@ class FitOptions:
         host-driven iteration over the fits still running — fast to compile (docs/fitting.md §8).
         'jaxopt': :class:`jaxopt.LevenbergMarquardt` under ``jax.jit(jax.vmap(...))``, the whole iteration
         compiled. Both use the same residuals, transforms, tolerances and result semantics.
+    on_singular
+        'raise' (default): a fit whose JᵀJ is singular or worse conditioned than ``max_condition``, or whose
+        parameters went non-finite, raises :class:`~bsdfkit.core.errors.FitError`. 'report': such fits are returned
+        with NaN covariance and standard errors, and the one-line message in the string variable ``problem`` ("" for
+        a sound fit); a model that is not finite at the start point still raises.
     """
 
     residual: ResidualKind = "absolute"
@@ -123,6 +131,7 @@ class FitOptions:
     gtol: float = 1e-10
     max_condition: float = 1e12
     solver: Literal["lm", "jaxopt"] = "lm"
+    on_singular: Literal["raise", "report"] = "raise"
 
     def __post_init__(self) -> None:
         if self.residual not in ("absolute", "relative", "log"):
@@ -143,6 +152,9 @@ class FitOptions:
                 raise ValidationError(f"{name} must be a finite number ≥ 0", field=name, got=value)
         if self.solver not in ("lm", "jaxopt"):
             raise ValidationError("unknown solver", field="solver", expected="lm or jaxopt", got=self.solver)
+        if self.on_singular not in ("raise", "report"):
+            raise ValidationError("unknown on_singular", field="on_singular", expected="raise or report",
+                                  got=self.on_singular)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -466,13 +478,14 @@ def least_squares(
     -------
     xarray.Dataset over ``batch_dim`` (and ``parameter``/``parameter_2`` for the covariance) with, for
     each parameter ``name``: ``name`` and ``name_std``; plus ``covariance``, ``at_bound`` (per parameter),
-    ``r2``, ``rms``, ``cost`` (½Σr̃²), ``n_points``, ``dof``, ``iterations`` and ``converged``. A 1-D ``y``
-    gives a result without the batch dimension.
+    ``r2``, ``rms``, ``cost`` (½Σr̃²), ``n_points``, ``dof``, ``iterations`` and ``converged`` (and ``problem``
+    with ``options.on_singular = "report"``). A 1-D ``y`` gives a result without the batch dimension.
 
     Raises
     ------
     FitError
-        Too few unmasked points, all-zero data, model not finite at ``p0``, singular JᵀJ.
+        Too few unmasked points, all-zero data, model not finite at ``p0``, singular JᵀJ (unless
+        ``options.on_singular = "report"``).
     InputError
         Non-finite data or uncertainty on an unmasked point, non-positive uncertainty, shape mismatch.
     """
@@ -487,10 +500,21 @@ def least_squares(
     y_t, w = _residual_space(y2, sigma, m, single, options)
     n_used = _check_enough_data(y2, m, len(parameters), where)
     out = _solve(model, x2, y_t, w, m, _to_unconstrained(p0, parameters), parameters, options)
-    _check_solution(out, names, p0, where)
-    cov = _covariance(out, names, n_used - len(parameters), where, options)
+    diverged = _check_solution(out, names, p0, where)
+    cov, unconstrained, ill = _covariance(out, names, n_used - len(parameters), where, options)
+    if options.on_singular == "raise":
+        # in the order the checks are made: the first diverged fit, else the first with a zero column, else the
+        # first ill-conditioned one (as a loop over the batch would find them)
+        for messages in (diverged, unconstrained, ill):
+            if any(messages):
+                raise FitError(next(msg for msg in messages if msg))
+    # one message per fit, the most basic first (a diverged fit's JᵀJ is not finite either)
+    problems = [a or b or c for a, b, c in zip(diverged, unconstrained, ill)]
     r2, rms = _goodness_of_fit(out["plain"], y2, y_t, m, n_used, options)
     ds = _fit_dataset(out, parameters, cov, r2, rms, n_used, options, batch_dim)
+    if options.on_singular == "report":
+        ds["problem"] = ((batch_dim,), np.asarray(problems, dtype=object),
+                         {"long_name": "why the covariance is not defined ('' for a sound fit)"})
     ds.attrs = {"model": model_name or getattr(model, "__name__", repr(model)), **ds.attrs}
     return ds.isel({batch_dim: 0}) if single else ds
 
@@ -602,7 +626,7 @@ def _solve(model, x2, y_t: np.ndarray, w: np.ndarray, m: np.ndarray, u0: np.ndar
         spec = _Spec(
             transforms=tuple(p.transform for p in parameters),
             # Only what the solver loop uses: post-processing options must not force a recompilation.
-            options=dataclasses.replace(options, absolute_sigma=False, max_condition=1e12),
+            options=dataclasses.replace(options, absolute_sigma=False, max_condition=1e12, on_singular="raise"),
         )
         u0_pad = np.concatenate([u0, np.repeat(u0[:1], b_pad - n_batch, axis=0)], axis=0)
         with x64():
@@ -625,49 +649,53 @@ def _solve(model, x2, y_t: np.ndarray, w: np.ndarray, m: np.ndarray, u0: np.ndar
 
 
 def _check_solution(out: dict[str, np.ndarray], names: Sequence[str], p0: np.ndarray,
-                    where: Callable[[int], str]) -> None:
-    """FitError for the first fit whose model was not finite at the start or whose parameters went non-finite."""
+                    where: Callable[[int], str]) -> list[str]:
+    """FitError for the first fit whose model was not finite at the start; the message of each fit whose parameters
+    went non-finite ("" for the others)."""
     bad_start = ~out["r0_finite"]
     if bad_start.any():
         b = int(np.argmax(bad_start))
         raise FitError(f"{where(b)}model is not finite at the initial parameters "
                        f"{dict(zip(names, p0[b].tolist()))}")
     diverged = ~np.isfinite(out["theta"]).all(axis=1)
-    if diverged.any():
-        b = int(np.argmax(diverged))
-        raise FitError(f"{where(b)}the solver produced non-finite parameters "
-                       "(singular normal equations during the iterations); the data do not determine "
-                       f"{', '.join(names)}")
+    return [f"{where(b)}the solver produced non-finite parameters (singular normal equations during the "
+            f"iterations); the data do not determine {', '.join(names)}" if diverged[b] else ""
+            for b in range(diverged.size)]
 
 
 def _covariance(out: dict[str, np.ndarray], names: Sequence[str], dof: np.ndarray, where: Callable[[int], str],
-                options: FitOptions) -> np.ndarray:
-    """Covariance C = s²(JᵀJ)⁻¹ of every fit, computed on the column-equilibrated matrix (all fits at once);
-    FitError for the first fit whose JᵀJ is singular or worse conditioned than ``options.max_condition``."""
+                options: FitOptions) -> tuple[np.ndarray, list[str], list[str]]:
+    """Covariance C = s²(JᵀJ)⁻¹ of every fit, computed on the column-equilibrated matrix (all fits at once), and
+    the messages of the fits whose JᵀJ has a zero or non-finite column, or a condition number above
+    ``options.max_condition`` ("" for the others); those fits get a NaN covariance."""
     jtj = out["jtj"]
     n_par = len(names)
     d = np.sqrt(np.abs(np.diagonal(jtj, axis1=1, axis2=2)))
     unconstrained = ~np.isfinite(jtj).all(axis=(1, 2)) | ~(d > 0).all(axis=1)
-    if unconstrained.any():
-        b = int(np.argmax(unconstrained))
+    zero_msgs = []
+    for b in range(jtj.shape[0]):
         zero = [names[k] for k in range(n_par) if not (np.isfinite(d[b, k]) and d[b, k] > 0)]
-        raise FitError(f"{where(b)}singular JᵀJ: the data do not constrain "
-                       f"{', '.join(zero) or 'the parameters (non-finite Jacobian)'}")
+        zero_msgs.append(f"{where(b)}singular JᵀJ: the data do not constrain "
+                         f"{', '.join(zero) or 'the parameters (non-finite Jacobian)'}" if unconstrained[b] else "")
+    # a unit matrix stands in for the unusable ones, so that the batched eigen-decomposition and inverse run
+    d = np.where(unconstrained[:, None], 1.0, d)
     outer = d[:, :, None] * d[:, None, :]
-    corr = jtj / outer
+    corr = np.where(unconstrained[:, None, None], np.eye(n_par), jtj / outer)
     ev, evec = np.linalg.eigh(corr)
     with np.errstate(divide="ignore"):
         cond = np.where(ev[:, 0] > 0, ev[:, -1] / np.where(ev[:, 0] > 0, ev[:, 0], 1.0), np.inf)
     singular = ~(cond <= options.max_condition)
-    if singular.any():
-        b = int(np.argmax(singular))
+    ill_msgs = []
+    for b in range(jtj.shape[0]):
         # The eigenvector of the smallest eigenvalue names the parameter combination left undetermined.
         weak = [names[k] for k in np.argsort(-np.abs(evec[b, :, 0])) if abs(evec[b, k, 0]) > 0.3]
-        raise FitError(f"{where(b)}singular JᵀJ (condition number {cond[b]:.3g} > "
-                       f"{options.max_condition:.3g}): {', '.join(weak)} not separately determined by these "
-                       "data; fix the model (fewer parameters) or the data (masks, range)")
+        ill_msgs.append(f"{where(b)}singular JᵀJ (condition number {cond[b]:.3g} > {options.max_condition:.3g}): "
+                        f"{', '.join(weak)} not separately determined by these data; fix the model (fewer "
+                        "parameters) or the data (masks, range)" if singular[b] else "")
+    bad = unconstrained | singular
     s2 = np.ones(jtj.shape[0]) if options.absolute_sigma else out["sum_sq"] / dof
-    return s2[:, None, None] * np.linalg.inv(corr) / outer
+    cov = s2[:, None, None] * np.linalg.inv(np.where(bad[:, None, None], np.eye(n_par), corr)) / outer
+    return np.where(bad[:, None, None], np.nan, cov), zero_msgs, ill_msgs
 
 
 def _goodness_of_fit(plain: np.ndarray, y2: np.ndarray, y_t: np.ndarray, m: np.ndarray, n_used: np.ndarray,
@@ -778,6 +806,10 @@ class BsdfFitOptions:
         (attributes ``detector_distance_mm`` and ``aperture_diameter_mm``); default True.
     fit
         :class:`FitOptions`; default log residuals (BSDFs span decades), linear loss.
+    fallback
+        Fit the lobe model's diffuse part alone (``lambert`` for ``lambert+gaussian`` and ``lambert+abg``) when the
+        data do not determine its lobe at any incidence, and say so in the result (:data:`FALLBACK_MODELS`,
+        docs/fitting.md "Fallback"); default True. False: the requested model or an error.
     """
 
     max_theta_s_deg: float = 85.0
@@ -785,6 +817,20 @@ class BsdfFitOptions:
     specular_core_deg: float = 0.0
     aperture: bool = True
     fit: FitOptions = field(default_factory=lambda: FitOptions(residual="log"))
+    fallback: bool = True
+
+
+#: The model that a lobe model falls back to when the data do not determine its lobe (:func:`fit_bsdf`): its
+#: diffuse part, which the lobe model contains (lobe amplitude A = 0).
+FALLBACK_MODELS: dict[str, str] = {"lambert+gaussian": "lambert", "lambert+abg": "lambert"}
+#: A lobe amplitude is consistent with zero when A < k·u(A) with this k [1]: 2, a two-sided 95 % interval that
+#: contains 0 (the gate's own "undetermined" is the looser 1·u(A)).
+LOBE_AMPLITUDE_K = 2.0
+#: Significance level [1] of the F-test of the lobe (the extra parameters of the lobe model against its diffuse
+#: part): a lobe whose fit improvement has a p-value below it is real, and the fit never falls back then. 1e-3: one
+#: fit in a thousand of a truly diffuse sample keeps its (undetermined) lobe and fails as before, rather than a real
+#: weak lobe being dropped.
+LOBE_SIGNIFICANCE = 1e-3
 
 
 def bsdf_model_values(model: str, params: dict[str, float], theta_i_deg, theta_s_deg, phi_s_deg) -> np.ndarray:
@@ -879,10 +925,23 @@ def fit_bsdf(
     ``converged``, ``iterations``, ``n_points`` and ``tis``: the model's total integrated scatter over
     the hemisphere (exact numerical integral of the lobe clipped by the unit disk), ``tis_std``, and the verdict
     of the plausibility gate (:mod:`bsdfkit.fit.plausibility`): ``physically_possible``, ``determined``,
-    ``plausible`` and the JSON list of reasons ``attrs['warnings']``.
+    ``plausible`` and the JSON list of reasons ``attrs['warnings']``. ``attrs['model']`` is the model fitted,
+    ``attrs['model_requested']`` the one asked for and ``attrs['fallback_reason']`` why they differ ("" when they do
+    not): a lobe model falls back to its diffuse part (:data:`FALLBACK_MODELS`) when at every incidence the data do
+    not determine the lobe (JᵀJ singular or ill-conditioned, amplitude at 0 or below :data:`LOBE_AMPLITUDE_K`
+    standard errors, or no convergence) *and* the lobe does not fit them significantly better (F-test at
+    :data:`LOBE_SIGNIFICANCE`); ``options.fallback = False`` turns this off.
+
+    Raises
+    ------
+    InputError
+        The profile lacks a variable, holds non-finite values or more than one side, or an angle is out of range.
+    FitError
+        Too few usable points, a model not finite at its start, or a lobe the data show but do not determine (the
+        message names the incidence and the cause).
     """
     options = options or BsdfFitOptions()
-    spec = bsdf_model(model)
+    bsdf_model(model)  # an unknown model is refused before the data are read
     fields, side = _profile_fields(profile)
     ti_all = np.round(fields["theta_i"], 6)
     incidences = np.unique(ti_all)
@@ -892,24 +951,37 @@ def fit_bsdf(
             raise InputError("no records at the requested incidence", field="incidence",
                              expected=f"one of {incidences.tolist()}", got=incidence_deg)
         incidences = incidences[sel]
-    x, f, s, m, p0 = _incidence_batch(fields, [np.flatnonzero(ti_all == t) for t in incidences], incidences, model,
-                                      options)
-    function = spec.function
+    groups = [np.flatnonzero(ti_all == t) for t in incidences]
     geometry = ("detector_distance_mm", "aperture_diameter_mm")
     # tables from other instruments may not state the geometry (NaN): then the point model is fitted
     with_aperture = options.aperture and all(
         k in profile.attrs and math.isfinite(float(profile.attrs[k])) for k in geometry)
-    if with_aperture:
-        x.update(_aperture_nodes(profile, x["theta_s"], x["phi_s"]))
-        function = _APERTURE_FUNCTIONS[spec.name]
-    ds = least_squares(function, x, f, p0, spec.parameters, sigma=s, mask=m, options=options.fit,
-                       batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
-                       model_name=model)
-    ds = ds.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
+
+    def run(name: str, fit_options: FitOptions) -> xr.Dataset:
+        x, f, s, m, p0 = _incidence_batch(fields, groups, incidences, name, options)
+        function = bsdf_model(name).function
+        if with_aperture:
+            x.update(_aperture_nodes(profile, x["theta_s"], x["phi_s"]))
+            function = _APERTURE_FUNCTIONS[name]
+        out = least_squares(function, x, f, p0, bsdf_model(name).parameters, sigma=s, mask=m, options=fit_options,
+                            batch_dim="theta_i", batch_labels=[f"incidence {t:g}°" for t in incidences],
+                            model_name=name)
+        return out.assign_coords(theta_i=("theta_i", incidences.astype(float), {"units": "degree"}))
+
+    target = FALLBACK_MODELS.get(model) if options.fallback else None
+    if target is None:
+        ds, used, reason = run(model, options.fit), model, ""
+    else:  # singular fits reported, not raised: an absent lobe is told from a failed fit by _lobe_or_fallback
+        ds = run(model, dataclasses.replace(options.fit, on_singular="report"))
+        ds, used, reason = _lobe_or_fallback(ds, model, target, lambda: run(target, options.fit))
+    spec = bsdf_model(used)
     tis = spec.total_integrated_scatter({p.name: np.atleast_1d(ds[p.name].values) for p in spec.parameters},
                                         incidences.astype(float))
     ds["tis"] = ("theta_i", tis, {"long_name": "total integrated scatter of the fitted model "
                                                             "(hemisphere, lobe clipped by the unit disk)"})
+    ds.attrs["model_requested"] = model
+    ds.attrs["model_used"] = used
+    ds.attrs["fallback_reason"] = reason
     ds.attrs["side"] = side
     ds.attrs["max_theta_s_deg"] = options.max_theta_s_deg
     ds.attrs["noise_floor_k"] = options.noise_floor_k
@@ -923,7 +995,90 @@ def fit_bsdf(
             if name in ds and f"{name}_std" in ds:
                 ds[f"{name}_std"] = np.hypot(ds[f"{name}_std"], common * np.abs(ds[name]))
         ds.attrs["common_relative_std"] = common
-    return _with_plausibility(ds, model, incidences.astype(float))
+    return _with_plausibility(ds, used, incidences.astype(float))
+
+
+def _lobe_undetermined(fit: xr.Dataset, problem: np.ndarray) -> list[str]:
+    """Why the data do not determine the lobe at each incidence of a lobe model's ``fit`` ("" where they do): a
+    singular or ill-conditioned JᵀJ (``problem``), an amplitude A at its bound 0 or within
+    :data:`LOBE_AMPLITUDE_K` standard errors of it, or a fit that did not converge."""
+    amp, amp_std = np.atleast_1d(fit["A"].values), np.atleast_1d(fit["A_std"].values)
+    param_a = next(p for p in bsdf_model(str(fit.attrs["model"])).parameters if p.name == "A")
+    out = []
+    for b in range(amp.size):
+        if problem[b]:
+            out.append("singular JᵀJ" if "singular" in problem[b] else "non-finite parameters")
+        elif bool(plausibility.at_bound(amp[b], param_a)):
+            out.append("A at its bound 0")
+        elif not (np.isfinite(amp_std[b]) and amp[b] >= LOBE_AMPLITUDE_K * amp_std[b]):
+            out.append(f"A = {amp[b]:.3g} ± {amp_std[b]:.2g} consistent with 0")
+        elif not bool(np.atleast_1d(fit["converged"].values)[b]):
+            out.append("not converged")
+        else:
+            out.append("")
+    return out
+
+
+def _lobe_p_value(full: xr.Dataset, diffuse: xr.Dataset) -> np.ndarray:
+    """p-value [1] of the F-test of the lobe at each incidence: the probability that a lobe-free sample lowers the
+    weighted residual sum of squares by as much as the lobe model's extra parameters did, F = ((S₀ − S₁)/Δp) /
+    (S₁/(n − p₁)) with S₀, S₁ the sums of the diffuse and lobe fits. 1 where the diffuse fit reproduces the data
+    (nothing left to explain), 0 where the lobe fit is exact and the diffuse one is not, NaN where the lobe fit has
+    no finite cost (the test cannot be made)."""
+    from scipy.special import fdtrc  # F distribution's survival function; scipy is imported only on this path
+
+    s1 = 2.0 * np.atleast_1d(full["cost"].values)
+    s0 = 2.0 * np.atleast_1d(diffuse["cost"].values)
+    dfn = full.sizes["parameter"] - diffuse.sizes["parameter"]
+    dfd = np.atleast_1d(full["dof"].values).astype(float)
+    exact0 = np.atleast_1d(diffuse["r2"].values) >= 1.0 - plausibility.EXACT_R2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        stat = np.maximum(s0 - s1, 0.0) / dfn / (s1 / dfd)
+        p = np.where(s1 > 0, fdtrc(dfn, dfd, np.where(np.isfinite(stat), stat, 0.0)), np.where(s0 > 0, 0.0, 1.0))
+    return np.where(exact0, 1.0, np.where(np.isfinite(s1), p, np.nan))
+
+
+def _lobe_or_fallback(full: xr.Dataset, model: str, target: str,
+                      fit_target: Callable[[], xr.Dataset]) -> tuple[xr.Dataset, str, str]:
+    """The lobe model's ``full`` fit (singular fits reported in ``problem``), or the fit of its diffuse part
+    ``target`` when the data determine the lobe at no incidence and the lobe is not significant at any; with the
+    model used and the reason. FitError (one line, naming incidence and cause) for a fit that is singular while
+    the lobe is real, or where only some incidences lack a lobe."""
+    problem = np.atleast_1d(full["problem"].values).astype(str)
+    full = full.drop_vars("problem")
+    why = _lobe_undetermined(full, problem)
+    if not any(why):
+        return full, model, ""
+    diffuse = fit_target()
+    p = _lobe_p_value(full, diffuse)
+    absent = np.array([bool(w) for w in why]) & (p >= LOBE_SIGNIFICANCE)
+    where = [f"{t:g}°" for t in np.atleast_1d(full["theta_i"].values)]
+    if absent.all():
+        causes: dict[str, list[str]] = {}
+        for w, t in zip(why, where):
+            causes.setdefault(w if "consistent" not in w else "A consistent with 0", []).append(t)
+        listed = "; ".join(f"{c} at {', '.join(ts) if len(ts) <= 6 else f'{len(ts)} incidences'}"
+                           for c, ts in causes.items())
+        reason = (f"{model} fell back to {target}: the data do not determine the lobe at any incidence ({listed}) "
+                  f"and it does not fit them significantly better (F-test p ≥ {LOBE_SIGNIFICANCE:g} everywhere, "
+                  f"lowest p = {np.nanmin(p):.2g})")
+        return diffuse, target, reason
+    bad = [b for b in range(problem.size) if problem[b]]
+    if not bad:
+        return full, model, ""  # a lobe everywhere or undetermined only in its standard errors: the gate judges it
+    b = bad[0]
+    at, cause = problem[b].split(": ", 1) if problem[b].startswith("incidence ") else ("", problem[b])
+    at = f"{at}: " if at else ""
+    if absent[b]:
+        raise FitError(f"{at}no lobe at {', '.join(t for t, a in zip(where, absent) if a)} ({cause}) but a real one "
+                       f"at {', '.join(t for t, a in zip(where, absent) if not a)}, so {target} cannot replace "
+                       f"{model} for the whole scan: fit the incidences separately (--incidence) or choose the "
+                       "model (--model)")
+    if not np.isfinite(p[b]):
+        raise FitError(f"{at}the {model} fit failed ({cause}) and has no finite residuals, so whether the data hold "
+                       f"a lobe cannot be tested: no fallback to {target}")
+    raise FitError(f"{at}the data hold a lobe ({model} fits them better than {target}: F-test p = {p[b]:.2g} < "
+                   f"{LOBE_SIGNIFICANCE:g}) but do not determine its parameters ({cause})")
 
 
 def _profile_fields(profile: xr.Dataset) -> tuple[dict[str, np.ndarray], str]:
@@ -1002,6 +1157,14 @@ def _incidence_batch(fields: dict[str, np.ndarray], groups: list[np.ndarray], in
             use &= np.degrees(np.arccos(np.clip(cos_dev, -1, 1))) > options.specular_core_deg
         m[b, :k] = use
         if use.sum() <= n_par:
+            # name the data's own fault where there is one: a BSDF mostly at or below 0 is no scatter to fit (a
+            # physical impossibility or a failed dark subtraction), not a numerical problem of the fit
+            negative = int(np.sum(f[b, :k] <= 0))
+            if 2 * negative > k:
+                raise ValidationError(f"incidence {incidences[b]:g}°: {negative} of {k} BSDF values are ≤ 0: no "
+                                      "scatter above the noise to fit", field="bsdf",
+                                      expected="a BSDF > 0 (check the dark subtraction and the calibration)",
+                                      got=f"{int(use.sum())} usable points for {n_par} parameters")
             raise FitError(f"incidence {incidences[b]:g}°: {int(use.sum())} usable points after masking "
                            f"(θs ≤ {options.max_theta_s_deg:g}°, bsdf ≥ {options.noise_floor_k:g}·bsdf_std) "
                            f"for {n_par} parameters")

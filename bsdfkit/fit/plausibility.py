@@ -9,7 +9,9 @@ gate* at an incidence when any of these holds (thresholds in :class:`Thresholds`
   surface and passes);
 * **undetermined**: a fitted parameter ends on a bound of its range (the covariance, hence every uncertainty, is then
   not valid), or its standard error is not finite or exceeds ``undetermined_ratio`` times its magnitude;
-* **does not describe the data**: the coefficient of determination R² is below ``min_r2`` (or undefined).
+* **does not describe the data**: the coefficient of determination R² is below ``min_r2`` (or undefined) and, for a
+  model without shape (``lambert``, see Notes), its residuals exceed the stated uncertainties: reduced χ² (weighted
+  by the data's standard uncertainties) above ``max_reduced_chi2``.
 
 :func:`evaluate` returns the flags and one-line reasons, :func:`annotate` stores them in the dataset (variables
 ``physically_possible``, ``determined``, ``plausible`` and the JSON list ``attrs['warnings']``) and
@@ -24,9 +26,12 @@ having finite uncertainties only.
 Notes
 -----
 R² compares the model with the best *constant*. For the ``lambert`` model, which *is* a constant at each
-incidence (up to the aperture average), R² of noisy Lambertian data is ≈ 0 however good the fit: the threshold
-then flags every Lambertian fit of noise-dominated data, which is the rule as stated in issue #23 (R² is not a
-goodness-of-fit test; a χ²/dof test would be one).
+incidence (up to the aperture average), R² of noisy Lambertian data is ≈ 0 however good the fit, so R² alone (the
+rule as stated in issue #23) flagged every Lambertian fit of noise-dominated data, including the fallback of a lobe
+model on a diffuse sample (:func:`bsdfkit.fit.least_squares.fit_bsdf`). For such a model the gate also asks the
+goodness-of-fit question R² cannot answer: a Lambertian fit with R² below ``min_r2`` still describes its data when
+the reduced χ² = Σr̃²/(n − p) of the residuals weighted by the stated uncertainties is at most
+``max_reduced_chi2``; a glossy sample fitted as Lambertian has χ²/dof in the hundreds and stays flagged.
 """
 from __future__ import annotations
 
@@ -42,6 +47,7 @@ from bsdfkit.core.errors import ValidationError
 from bsdfkit.models.registry import BSDF_MODELS, Parameter, bsdf_model
 
 __all__ = [
+    "SHAPELESS_MODELS",
     "Thresholds",
     "THRESHOLDS",
     "Verdict",
@@ -78,6 +84,11 @@ class Thresholds:
     undetermined_ratio
         A parameter is undetermined when its standard error exceeds this multiple of its magnitude [1]. Default
         1: the data then do not fix even the sign of the parameter (its 1σ interval contains 0).
+    max_reduced_chi2
+        Largest reduced χ² [1] (weighted by the data's stated standard uncertainties) with which a model without
+        shape (:data:`SHAPELESS_MODELS`) describes its data although R² < ``min_r2``. Default 4: residuals with an
+        RMS up to twice the stated uncertainty, since stated uncertainties are often estimates (ingest assumes
+        5 % where a file states none) and a factor 2 misstatement should not refuse a good Lambertian fit.
     """
 
     tis_sigma: float = 3.0
@@ -85,9 +96,10 @@ class Thresholds:
     bound_rtol: float = 1e-6
     bound_rtol_open: float = 1e-9
     undetermined_ratio: float = 1.0
+    max_reduced_chi2: float = 4.0
 
     def __post_init__(self) -> None:
-        for name in ("tis_sigma", "bound_rtol", "bound_rtol_open", "undetermined_ratio"):
+        for name in ("tis_sigma", "bound_rtol", "bound_rtol_open", "undetermined_ratio", "max_reduced_chi2"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValidationError("plausibility threshold must be a finite number >= 0", field=name, got=value)
@@ -102,6 +114,10 @@ THRESHOLDS = Thresholds()
 #: 1e-8 of their norm, :data:`bsdfkit.fit.least_squares._CONSTANT_DATA`): a parameter on its bound is then where
 #: the data put it (a solver stops a part in 10⁹ short of a bound) and is not flagged.
 EXACT_R2 = 1e-4
+
+#: Models that are a constant at each incidence (up to the aperture average): R² of their fits compares the model
+#: with itself, so the gate judges their description of the data by the reduced χ² (:class:`Thresholds`).
+SHAPELESS_MODELS = ("lambert",)
 
 
 @dataclass(frozen=True)
@@ -255,6 +271,16 @@ def _tis_and_std(fit: xr.Dataset, model: str, template: xr.DataArray) -> tuple[n
     return tis, tis_std(model, flat_t, flat_v, np.reshape(cov, (-1, len(names), len(names)))).reshape(shape)
 
 
+def _reduced_chi2(fit: xr.Dataset, template: xr.DataArray) -> np.ndarray | None:
+    """Σr̃²/(n − p) [1] of a least-squares result (``cost`` = ½Σr̃², ``dof``) over the parameter dims; None when the
+    fit does not state them (a dataset built by hand): then R² alone judges it."""
+    if "cost" not in fit or "dof" not in fit:
+        return None
+    dof = _values(fit, "dof", template)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(dof > 0, 2.0 * _values(fit, "cost", template) / dof, np.nan)
+
+
 def evaluate(fit: xr.Dataset, thresholds: Thresholds = THRESHOLDS) -> Verdict:
     """Judge a fit dataset by the gate (module docstring), everywhere along its parameter dimensions.
 
@@ -284,6 +310,7 @@ def evaluate(fit: xr.Dataset, thresholds: Thresholds = THRESHOLDS) -> Verdict:
     tis, u_tis = _tis_and_std(fit, model, template)
     is_fit = "r2" in fit
     r2 = _values(fit, "r2", template) if is_fit else None
+    chi2 = _reduced_chi2(fit, template) if is_fit and model in SHAPELESS_MODELS else None
     params = {p.name: _values(fit, p.name, template) for p in spec.parameters}
     stds = {p.name: _values(fit, f"{p.name}_std", template) if f"{p.name}_std" in fit else np.zeros(shape)
             for p in spec.parameters}
@@ -305,11 +332,13 @@ def evaluate(fit: xr.Dataset, thresholds: Thresholds = THRESHOLDS) -> Verdict:
         elif excess > 0:
             notes.append(f"{where}: model TIS {tis[index]:.4f} ± {u:.2g} exceeds 1 within {k:g} standard "
                          "uncertainties (consistent with energy conservation)")
-        if r2 is not None and not r2[index] >= thresholds.min_r2:
+        within_noise = chi2 is not None and bool(chi2[index] <= thresholds.max_reduced_chi2)
+        if r2 is not None and not r2[index] >= thresholds.min_r2 and not within_noise:
             describes[index] = False
             worse = ", worse than a constant" if r2[index] < 0 else ""
-            reasons.append(f"{where}: R² = {r2[index]:.3g} < {thresholds.min_r2:g}: the model does not describe "
-                           f"the data{worse}")
+            noise = "" if chi2 is None else f" and χ²/dof = {chi2[index]:.3g} > {thresholds.max_reduced_chi2:g}"
+            reasons.append(f"{where}: R² = {r2[index]:.3g} < {thresholds.min_r2:g}{noise}: the model does not "
+                           f"describe the data{worse}")
         # a fit that reproduces the data (R² within EXACT_R2 of 1) has its parameters where the data put them,
         # also on a bound (a noiseless white Lambertian: rho = 1): nothing pushes the model beyond its range
         exact = r2 is not None and bool(r2[index] >= 1.0 - EXACT_R2)
