@@ -111,8 +111,9 @@ class Progress:
 def add_table_arguments(p: Any) -> None:
     """The writers' options of ``export`` and ``convert``: ``--symmetry`` (Zemax), ``--xml-back``, ``--xml-basis``
     (BSDF XML) and ``--symmetry-tolerance``."""
-    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical"),
-                   help="Zemax symmetry (PlaneSymmetrical is checked against the source)")
+    p.add_argument("--symmetry", default="PlaneSymmetrical", choices=("PlaneSymmetrical", "Asymmetrical", "auto"),
+                   help="Zemax symmetry (PlaneSymmetrical is checked against the source; auto: PlaneSymmetrical "
+                        "when the source is, else Asymmetrical; convert's default)")
     p.add_argument("--xml-back", default="none", choices=("none", "mirror"),
                    help="BSDF XML: Back blocks none (default) or mirror (= the Front blocks: a sample symmetric "
                         "between its faces)")

@@ -3,7 +3,10 @@
 SOURCE is a fit result netCDF (attribute ``model``), a calibrated phosphor scan netCDF (an interaction, reconstructed
 by ``bsdfkit.reduction.tis.hemisphere_bsdf_fn``) or any other measured dataset (elastic scatter, reconstructed by the
 hemispherical engine of ``bsdfkit.reduction.hemispherical``: the table integrates to what ``bsdfkit tis`` reports);
-see :func:`bsdfkit.tables.export.export`.
+see :func:`bsdfkit.tables.export.export`. The table is written, re-checked and re-read under a hidden name in the
+folder of PATH (the auto grid's re-check may write it several times) and takes the name PATH only at the end
+(:class:`bsdfkit.io.atomic.StagedFile`): an interrupted or failed export leaves nothing there, and an earlier
+PATH (``--force``) stays until the finished table replaces it.
 """
 from __future__ import annotations
 
@@ -13,6 +16,7 @@ from dataclasses import replace
 from bsdfkit import api
 from bsdfkit.cli._common import add_grid_arguments, add_table_arguments, emit_json
 from bsdfkit.core.errors import ValidationError
+from bsdfkit.io.atomic import StagedFile
 from bsdfkit.tables import registry
 
 
@@ -155,8 +159,13 @@ def run(args: argparse.Namespace) -> int:
         grid_tolerance=grid_tolerance(args),
         node_values=args.node_values,
     )
-    result = api.export(args.source, args.to, args.interaction, args.side, args.output, args.force, settings=settings,
-                        wavelength_nm=args.wavelength_nm)
+    # PATH checked here, before computing; the table is written and re-read at the staging file (force: it is this
+    # process's own) and moved to PATH once complete
+    with StagedFile(args.output, args.force, inputs=[args.source]) as staged:
+        result = api.export(args.source, args.to, args.interaction, args.side, staged.path, True, settings=settings,
+                            wavelength_nm=args.wavelength_nm)
+        staged.commit()
+    result = replace(result, path=str(args.output))  # named by the output, not its staging file
     if args.json:
         emit_json(result.to_dict())
         return 0

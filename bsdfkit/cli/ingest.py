@@ -8,10 +8,14 @@ options say what the file does not: ``--quantity``, ``--side``, ``--relative-std
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+import warnings
 
 from bsdfkit import api
 from bsdfkit.cli._common import check_options, emit_json, warn_dark
 from bsdfkit.core.conventions import DEFAULT_RELATIVE_STD, QUANTITIES, SIDES, ZERO_POLICIES
+from bsdfkit.core.errors import StatedTisWarning
 from bsdfkit.io import atomic
 from bsdfkit.io.text import existing_source
 from bsdfkit.tables import registry
@@ -61,6 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeros", choices=ZERO_POLICIES, default=None,
                    help="exact zeros: auto (tables: a record zero at every wavelength is a gap), keep, missing")
     p.add_argument("--sample", default=None, help="sample name (default: from the file or its name)")
+    p.add_argument("--face", choices=("front", "back"), default=None,
+                   help="BSDF XML: the face of the sample to read (default: the front; a file with back blocks "
+                        "only: those)")
     p.add_argument("--json", action="store_true", help="print the dataset summary as JSON")
     p.set_defaults(func=_run)
 
@@ -69,16 +76,24 @@ def _run(args: argparse.Namespace) -> int:
     check_options(args, OPTION_RANGES)
     existing_source(args.path)  # before the engine is imported: a mistyped path is answered at once
     atomic.check_writable(args.output, args.force, inputs=[args.path])
-    ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
-                wavelength_nm=args.wavelength, incidence_deg=args.incidence, phi_i_deg=args.phi_i, zeros=args.zeros,
-                sample=args.sample)
+    # the CLI silences library warnings; a vendor file whose stated TIS disagrees with its data is said in one line
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", StatedTisWarning)
+        ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
+                        wavelength_nm=args.wavelength, incidence_deg=args.incidence, phi_i_deg=args.phi_i,
+                        zeros=args.zeros, sample=args.sample, face=args.face)
     api.save(ds, args.output, args.force)
     warn_dark(ds, "ingest")
+    for w in caught:
+        if issubclass(w.category, StatedTisWarning):
+            print(f"bsdfkit ingest: warning: {w.message}", file=sys.stderr)
     info = api.describe(ds)
     extra = {k: ds.attrs[k] for k in ("source_format", "source_layout", "source_quantity", "bsdf_std_origin",
                                       "gap_records_dropped", "zero_records_as_gaps", "wavelength_note",
-                                      "azimuth_note")
-             if k in ds.attrs}
+                                      "azimuth_note", "face", "faces_note")
+             if k in ds.attrs and ds.attrs[k] != ""}
+    if "tis_stated_json" in ds.attrs:  # stated vs integrated TIS of a vendor file (check_stated_tis)
+        extra["tis_stated"] = json.loads(ds.attrs["tis_stated_json"])
     if args.json:
         emit_json({**info, "output": str(args.output), **extra})
         return 0
@@ -94,6 +109,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"  bsdf_std: {extra.get('bsdf_std_origin', '')}")
         if "wavelength_note" in extra:
             print(f"  wavelength: {extra['wavelength_note']}")
+        if "faces_note" in extra:  # what else the file holds, never dropped in silence
+            print(f"  face: {extra.get('face', '')}; {extra['faces_note']}")
         if "azimuth_note" in extra:
             print(f"  azimuth: {extra['azimuth_note']}")
     return 0

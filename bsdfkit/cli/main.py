@@ -326,7 +326,7 @@ def exit_now(signum: int) -> None:
     signum : int
         Number of the signal that ends the process.
     """
-    remove_partial_outputs()
+    removed = remove_partial_outputs()
     # worker processes this process started (a sweep's dask LocalCluster) must not outlive it; os._exit below
     # skips the cluster's own shutdown. Their nannies stop their workers on SIGTERM.
     mp = sys.modules.get("multiprocessing")
@@ -343,7 +343,9 @@ def exit_now(signum: int) -> None:
         sys.stdout.flush()
     name = "interrupted" if signum == signal.SIGINT else "terminated"
     with contextlib.suppress(OSError):
-        os.write(2, f"bsdfkit: {name}; unfinished outputs removed\n".encode())
+        # an interrupt that came after the commit finds nothing unfinished, and says so
+        what = "unfinished outputs removed" if removed else "no unfinished output (what was written is complete)"
+        os.write(2, f"bsdfkit: {name}; {what}\n".encode())
     os._exit(128 + signum)
 
 

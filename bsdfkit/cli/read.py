@@ -3,13 +3,18 @@ content and report its TIS.
 
 JSON keys: ``format``, ``incidences_deg``, ``tis_computed`` and ``tis_stated`` (each a mapping from side
 — or ``total`` for TracePro's energy balance — to one value per incidence), plus ``path`` and ``details``.
+A stated TIS that disagrees with the computed one beyond the tolerance of
+:func:`bsdfkit.tables.vendor.check_stated_tis` gets one warning line on stderr.
 """
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
 
 from bsdfkit import api
 from bsdfkit.cli._common import emit_json
+from bsdfkit.core.errors import StatedTisWarning
 from bsdfkit.tables import registry
 
 
@@ -41,9 +46,19 @@ def run(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        Exit status: 0 on success.
+        Exit status: 0 on success, also when the file's stated TIS disagrees with its data (one warning line on
+        stderr, :func:`bsdfkit.tables.vendor.check_stated_tis`).
     """
-    summary = api.read(args.file)
+    from bsdfkit.tables.vendor import check_stated_tis  # the engine: imported by api.read anyway
+
+    # the CLI silences library warnings; a file whose stated TIS disagrees with its data is said in one line
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", StatedTisWarning)
+        summary = api.read(args.file)
+        check_stated_tis(summary)
+    for w in caught:
+        if issubclass(w.category, StatedTisWarning):
+            print(f"bsdfkit read: warning: {w.message}", file=sys.stderr)
     if args.json:
         emit_json(summary.to_dict())
         return 0
@@ -67,4 +82,6 @@ def run(args: argparse.Namespace) -> int:
             elif s:
                 row += f"  {'-':>10}  {'-':>8}"
         print(row)
+    for note in summary.details.get("notes", ()):  # what the numbers mean (an anisotropic file's azimuth)
+        print(f"note: {note}")
     return 0

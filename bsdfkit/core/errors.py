@@ -76,3 +76,22 @@ class OutputExistsError(BsdfkitError):
 
 class OutputError(BsdfkitError):
     """An output cannot be written (permission, read-only file system, no space, path is a folder, ...)."""
+
+
+class BsdfkitWarning(UserWarning):
+    """Base class of bsdfkit's own warnings: a one-line message naming the file and what bsdfkit did.
+
+    Library code raises them with :func:`warnings.warn`; the CLI (whose verbs silence library warnings) prints the
+    ones a verb asks for as ``bsdfkit VERB: warning: <message>`` on stderr and keeps exit status 0.
+    """
+
+    def __init__(self, message: str, *, file: str | Path | None = None, details: object = None) -> None:
+        self.file = None if file is None else str(file)
+        self.details = details
+        super().__init__(" ".join(str(message).split()))
+
+
+class StatedTisWarning(BsdfkitWarning):
+    """A table file's own stated TIS disagrees with the integral of its data beyond the tolerance of
+    :func:`bsdfkit.tables.vendor.check_stated_tis`; ``details`` holds the comparison (stated and integrated TIS
+    per key and incidence). bsdfkit keeps the data as they are."""

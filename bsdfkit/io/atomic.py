@@ -9,6 +9,12 @@ concurrent writers exactly one succeeds and the other gets :class:`OutputExistsE
 even if the process is killed mid-write. Temporary files of processes that no longer run are removed by the
 next write to the same target.
 
+**Checked files** (:class:`StagedFile`: ``bsdfkit convert``, ``export``). A file that must pass a check on
+what was written (the TIS of a re-read table) is written under a hidden name in its folder
+(``.bsdfkit-staged-<pid>.<8 hex><suffix>``), re-read and checked there, and placed as above only when it passed
+(or kept under a name that says it failed, :func:`failed_check_path`, when asked); otherwise it is removed, and an
+earlier output at the path, replaced only by a checked file, stays as it was.
+
 **Output sets** (:class:`OutputSet`: ``bsdfkit run``, ``simulate``, ``bench``, ``trace``, ``sweep``). The files
 are written into a staging folder ``.<folder>.<pid>.staging`` beside the target folder and moved into place at
 the end: a missing or empty target folder is replaced by one rename, a target holding only a previous set of
@@ -30,7 +36,8 @@ whole with it (swapped in by two renames), never when it is or holds an input of
 
 **Checks before computing.** :func:`check_writable` refuses, before any work is done, an existing output
 without ``force``, an output path that is a directory (or whose parent is a file), an output that is one of
-the command's own inputs (even with ``force``) and a destination that cannot be written (a probe file is
+the command's own inputs or exists and is not a regular file (a symbolic link, FIFO, device; both even with
+``force``) and a destination that cannot be written (a probe file is
 created and removed, which also catches read-only file systems when running as root).
 
 Operating-system faults (permission, read-only file system, no space, ...) become :class:`OutputError`: one
@@ -51,9 +58,9 @@ from pathlib import Path
 
 from bsdfkit.core.errors import BsdfkitError, OutputError, OutputExistsError
 
-__all__ = ["OutputError", "OutputExistsError", "OutputSet", "atomic_path", "check_output_folder", "check_writable",
-           "defer_until_committed", "describe_os_error", "refuse_inputs", "remove_partial_outputs", "write_bytes",
-           "write_text", "write_with"]
+__all__ = ["OutputError", "OutputExistsError", "OutputSet", "StagedFile", "atomic_path", "check_output_folder",
+           "check_writable", "defer_until_committed", "describe_os_error", "failed_check_path", "refuse_inputs",
+           "remove_partial_outputs", "write_bytes", "write_text", "write_with"]
 
 #: Temporary files and staging folders of this process that are not finished yet (removed on SIGTERM).
 _PARTIAL: set[Path] = set()
@@ -89,19 +96,42 @@ def defer_until_committed(action: Callable[[], None]) -> bool:
     return True
 
 
-def remove_partial_outputs() -> None:
+@contextlib.contextmanager
+def _commit_zone() -> Iterator[None]:
+    """Where this thread moves finished outputs into place: partial outputs are not removed meanwhile (the lock)
+    and a signal handler's exit waits until the end (:func:`defer_until_committed`), then runs."""
+    with _COMMIT_LOCK:
+        _COMMITTING.add(threading.get_ident())
+        try:
+            yield
+        finally:
+            _COMMITTING.discard(threading.get_ident())
+            while _AFTER_COMMIT:
+                _AFTER_COMMIT.pop(0)()
+
+
+def remove_partial_outputs() -> int:
     """Remove this process's unfinished temporary files and staging folders (for a signal handler).
 
     The lock is not released: the caller is about to end the process, and no commit may start meanwhile.
+
+    Returns
+    -------
+    int
+        How many unfinished outputs were removed (0: every output of the command is complete, or none was
+        begun; a handler then need not say that any were removed).
     """
     _COMMIT_LOCK.acquire()
+    count = 0
     for path in list(_PARTIAL):
         with contextlib.suppress(OSError):
+            count += os.path.lexists(path)  # registered before its first byte: nothing begun there yet
             if path.is_dir():
                 shutil.rmtree(path, ignore_errors=True)
             else:
                 path.unlink()
         _PARTIAL.discard(path)
+    return count
 
 PathLike = str | Path
 
@@ -128,6 +158,10 @@ _REASONS = {
 TEMP_PREFIX = ".bsdfkit-"
 #: the longest file name most file systems take (bytes of the encoded name)
 NAME_MAX = 255
+#: prefix of the files :class:`StagedFile` checks before committing: ``.bsdfkit-staged-<pid>.<8 hex><suffix>``
+STAGED_PREFIX = ".bsdfkit-staged-"
+#: what :func:`failed_check_path` puts before the suffix of a table kept after failing its check
+FAILED_CHECK_TAG = ".failed-check"
 
 
 def _token() -> str:
@@ -202,8 +236,9 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _stale(folder: Path, prefix: str, suffix: str) -> Iterator[Path]:
-    """Entries ``<prefix><pid>.<...><suffix>`` of ``folder`` whose process is gone."""
+def _stale(folder: Path, prefix: str, suffix: str, any_tail: bool = False) -> Iterator[Path]:
+    """Entries ``<prefix><pid>.<...><suffix>`` of ``folder`` whose process is gone (``any_tail``: whatever follows
+    ``<pid>.<8 hex>``, the output's own suffix of a staged file)."""
     try:
         entries = list(folder.iterdir())
     except OSError:
@@ -214,8 +249,9 @@ def _stale(folder: Path, prefix: str, suffix: str) -> Iterator[Path]:
             continue
         # exactly <pid>.<8 hex digits>[.probe]: not the temporary file of another target sharing the prefix
         parts = name[len(prefix):len(name) - len(suffix)].split(".")
-        if not (len(parts) in (2, 3) and parts[0].isdigit() and len(parts[1]) == 8
-                and all(c in "0123456789abcdef" for c in parts[1]) and parts[2:] in ([], ["probe"])):
+        if not (len(parts) >= 2 and parts[0].isdigit() and len(parts[1]) == 8
+                and all(c in "0123456789abcdef" for c in parts[1])
+                and (any_tail or parts[2:] in ([], ["probe"]))):
             continue
         if not _pid_alive(int(parts[0])):
             yield entry
@@ -228,6 +264,9 @@ def _remove_stale_temps(path: Path) -> None:
         for entry in _stale(path.parent, prefix, ".part"):
             with contextlib.suppress(OSError):
                 entry.unlink()
+    for entry in _stale(path.parent, STAGED_PREFIX, "", any_tail=True):  # StagedFile of a killed process
+        with contextlib.suppress(OSError):
+            entry.unlink()
 
 
 def refuse_inputs(output: PathLike, inputs: Iterable[PathLike | None]) -> None:
@@ -354,7 +393,8 @@ def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None
     """Check an output before computing it; return it as a Path.
 
     Raises :class:`OutputExistsError` if it exists and not ``force``, and :class:`OutputError` if it is a
-    folder, a parent is a file, it is one of ``inputs`` (even with ``force``) or its folder cannot be written.
+    folder, a parent is a file, it is one of ``inputs`` (even with ``force``), it exists and is not a regular
+    file (a symbolic link, FIFO, device or socket; even with ``force``) or its folder cannot be written.
 
     Parameters
     ----------
@@ -374,6 +414,7 @@ def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None
     if path.is_dir():
         raise OutputError("output path is a folder", file=path, expected="a file name")
     refuse_inputs(path, inputs)
+    _refuse_special(path)
     if (path.exists() or path.is_symlink()) and not force:
         raise OutputExistsError("output exists; pass --force (force=True) to overwrite", file=path)
     anchor = _nearest_existing(path.parent)
@@ -381,6 +422,23 @@ def check_writable(path: PathLike, force: bool, inputs: Iterable[PathLike | None
         raise OutputError("a parent of the output path is a file, not a folder", file=path, got=str(anchor))
     _probe(anchor, path.name, path)
     return path
+
+
+def _refuse_special(path: Path) -> None:
+    """Refuse an existing output that is not a regular file, even with ``force``: the rename that replaces it
+    would replace a symbolic link (not the file it points to), a FIFO another program reads, or a device node
+    (``-o /dev/null --force`` as root would replace /dev/null with a table: its temporary file is made in /dev)."""
+    try:
+        mode = path.lstat().st_mode
+    except OSError:
+        return  # missing (or unreadable: the probe and the write say why)
+    if stat.S_ISREG(mode):
+        return
+    kind = ("a symbolic link" if stat.S_ISLNK(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+            else "a socket" if stat.S_ISSOCK(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a special file")
+    raise OutputError(f"output is {kind}, not a regular file (refused even with --force)", file=path,
+                      expected="a new file name or an existing regular file")
 
 
 def _folder_anchor(folder: Path) -> Path:
@@ -623,6 +681,144 @@ def write_with(path: PathLike, writer: Callable[[Path], object], force: bool = F
 
 
 # --------------------------------------------------------------------------------------------------
+# one file checked before it is committed
+# --------------------------------------------------------------------------------------------------
+def failed_check_path(path: PathLike) -> Path:
+    """Where a table that failed its check is kept when asked: ``<stem>.failed-check<suffix>`` beside ``path``
+    (``out.txt`` -> ``out.failed-check.txt``): the name says it failed, and the suffix still says the format.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output the table was meant for.
+
+    Returns
+    -------
+    Path
+        The name of the failed table.
+
+    Raises
+    ------
+    OutputError
+        If that name is longer than :data:`NAME_MAX` bytes (said before computing, not when the table failed).
+    """
+    path = Path(path)
+    failed = path.with_name(f"{path.stem}{FAILED_CHECK_TAG}{path.suffix}")
+    if len(os.fsencode(failed.name)) > NAME_MAX:
+        raise OutputError("output name too long to keep a failed table beside it", file=path,
+                          expected=f"a name of at most {NAME_MAX - len(FAILED_CHECK_TAG)} bytes with --keep-failed",
+                          got=f"{len(os.fsencode(path.name))} bytes")
+    return failed
+
+
+class StagedFile:
+    """One output file written and checked under a hidden name in its folder, then committed or discarded.
+
+    For a writer that must re-read and check what it wrote before the file may take its name (``bsdfkit
+    convert``, ``bsdfkit export``): a table that fails its check never stands at the requested path, and an
+    earlier output there (``force``) stays until a checked one replaces it::
+
+        with StagedFile("out.txt", force, inputs=[source]) as staged:
+            write(staged.path)           # any number of times (with force=True): the name is this process's
+            if check(staged.path):
+                staged.commit()          # exclusive without force (no clobbering), os.replace with it
+        # not committed: the staged file is removed, the target is untouched
+
+    The target is checked on construction, before any computing (:func:`check_writable`). The staged file,
+    ``.bsdfkit-staged-<pid>.<8 hex><suffix>`` (the output's suffix: a reader that sniffs by extension reads it
+    as it will read the output), is an unfinished output until it is placed: removed when the block is left
+    without a commit (an exception), by a signal handler (:func:`remove_partial_outputs`), and, after a kill,
+    by the next write into the same folder. A signal arriving while it is placed ends the process once it is
+    in place (:func:`defer_until_committed`).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    force : bool, optional
+        Replace an existing output (a regular file that is not an input) when committing.
+    inputs : iterable of (str or Path or None), optional
+        Input files or folders the output must not replace (None entries are skipped).
+    """
+
+    def __init__(self, path: PathLike, force: bool = False, inputs: Iterable[PathLike | None] = ()) -> None:
+        self.target = check_writable(path, force, inputs)
+        self.force = force
+        # no folder is made here: a command refused after this check (a missing input) must leave no trace; the
+        # writer makes it (atomic_path), as for any output
+        _remove_stale_temps(self.target)
+        name = f"{STAGED_PREFIX}{os.getpid()}.{_token()}"
+        if len(os.fsencode(name + self.target.suffix)) <= NAME_MAX:
+            name += self.target.suffix
+        self._staged: Path | None = self.target.parent / name
+        self.placed: Path | None = None  # where the file went: the target, or the name it was kept under
+        _PARTIAL.add(self._staged)
+
+    @property
+    def path(self) -> Path:
+        """Where to write the file (hidden, in the output's folder; write it with ``force=True``)."""
+        if self._staged is None:
+            raise RuntimeError("staged output already committed or discarded")
+        return self._staged
+
+    def commit(self) -> Path:
+        """Move the checked file to the target.
+
+        Returns
+        -------
+        Path
+            The target.
+        """
+        return self.keep_as(self.target)
+
+    def keep_as(self, path: PathLike) -> Path:
+        """Move the file to ``path`` instead (a table kept under a name that says it failed its check).
+
+        Parameters
+        ----------
+        path : str or Path
+            Where to keep it; check it with :func:`check_writable` before computing. Replaced only with
+            ``force``.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
+        staged, dst = self.path, Path(path)
+        with _commit_zone():
+            try:
+                with open(staged, "rb+") as fh:
+                    os.fsync(fh.fileno())
+                _place(staged, dst, self.force)
+            except OSError as exc:
+                raise _fault(exc, dst) from None
+            # placed: no longer an unfinished output that a signal handler would remove
+            _PARTIAL.discard(staged)
+            self._staged, self.placed = None, dst
+            _fsync_dir(dst.parent)
+        return dst
+
+    def discard(self) -> None:
+        """Remove the staged file; the target is left untouched."""
+        if self._staged is not None:
+            with contextlib.suppress(OSError):
+                self._staged.unlink()
+            _PARTIAL.discard(self._staged)
+            self._staged = None
+
+    def __enter__(self) -> StagedFile:
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        staged = self._staged
+        self.discard()
+        if isinstance(exc, BsdfkitError) and staged is not None and str(staged) in str(exc):
+            # an error naming the hidden staged file names the requested output instead
+            raise type(exc)(str(exc).replace(str(staged), str(self.target))) from None
+
+
+# --------------------------------------------------------------------------------------------------
 # output sets
 # --------------------------------------------------------------------------------------------------
 def _rmtree(path: Path) -> None:
@@ -805,19 +1001,14 @@ class OutputSet:
         if self.staging is None:
             raise RuntimeError("output set already committed or aborted")
         stage, target = self.staging, self.folder.resolve()
-        with _COMMIT_LOCK:
+        with _commit_zone():
             _PARTIAL.discard(stage)
-            _COMMITTING.add(threading.get_ident())
             try:
                 self._commit(stage, target)
             except BaseException:
                 if self.staging is not None:
                     _PARTIAL.add(stage)
                 raise
-            finally:
-                _COMMITTING.discard(threading.get_ident())
-                while _AFTER_COMMIT:
-                    _AFTER_COMMIT.pop(0)()
 
     def _swap_in(self, stage: Path, target: Path, old: Path) -> None:
         """Second rename of a swap: the staged set into the place of the previous one (moved to ``old``)."""

@@ -6,19 +6,35 @@ the BSDF is constant over each cell. Its directional-hemispherical value is then
 which is what Radiance computes for such a file. The BSDF XML reader (``bsdfkit read``) and the hemispherical
 engine (``bsdfkit tis`` on an ingested file, whose records carry the coordinate :data:`COORD`) both call
 :func:`basis_sum`, so the two report one number.
+
+Pointwise, such a BSDF is the value of the cell a direction lies in. Ingested records also carry the index of
+their cell (coordinate :data:`CELL_COORD`) and the basis as a short text (its attribute ``basis``, written by
+:func:`klems_spec` or :func:`shirley_chiu_spec`); :func:`cell_index` finds the cell of any direction exactly, so a
+conversion samples the file's own piecewise-constant BSDF (a patch's value never leaks into its neighbour, as a
+nearest-record lookup lets a direct-transmission patch of 200/sr do). Cells are found in the projected disk
+(β = (sin θ cos φ, sin θ sin φ)):
+
+* Klems bands (``klems``): band b holds sin²θ in [sin²θ_b, sin²θ_b+1), patch j of its n_b the azimuths within
+  ±180°/n_b of j·360°/n_b (WINDOW's layout; the cells in file order, band by band);
+* the Shirley–Chiu square (``shirley-chiu``) of a tensor tree read on an m × m uniform grid: cell (a, b), row-major,
+  covers [a, a + 1)/m × [b, b + 1)/m of the square the concentric map :func:`disk_to_square` sends β to.
 """
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["COORD", "COVERAGE_RTOL", "basis_sum", "covers_hemisphere"]
+__all__ = ["CELL_COORD", "COORD", "COVERAGE_RTOL", "basis_sum", "cell_index", "covers_hemisphere", "disk_to_square",
+           "klems_spec", "shirley_chiu_spec", "square_to_disk"]
 
 #: name of the per-record coordinate [sr]: the projected solid angle of the basis cell (or of the part of it)
 #: the record stands for
 COORD = "basis_psa"
 #: Σ Λ over the records must equal π within this relative tolerance for the basis sum to be the hemispherical value
 COVERAGE_RTOL = 1e-6
+#: name of the per-record coordinate: the index of the basis cell the record lies in (attribute ``basis``: the
+#: basis, :func:`klems_spec` / :func:`shirley_chiu_spec`)
+CELL_COORD = "basis_cell"
 
 
 def basis_sum(values: NDArray[np.float64], psa: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -54,3 +70,140 @@ def covers_hemisphere(psa: NDArray[np.float64]) -> bool:
     p = np.asarray(psa, dtype=np.float64)
     return bool(p.size and np.all(np.isfinite(p)) and np.all(p > 0)
                 and abs(float(p.sum()) - np.pi) <= COVERAGE_RTOL * np.pi)
+
+
+def klems_spec(edges_deg: tuple[float, ...] | list[float], n_phi: tuple[int, ...] | list[int]) -> str:
+    """The text naming a Klems-type basis of theta bands (edges [deg], azimuth patches per band).
+
+    Parameters
+    ----------
+    edges_deg : sequence of float
+        Band edges θ [deg], from 0 to 90.
+    n_phi : sequence of int
+        Azimuth patches of each band.
+
+    Returns
+    -------
+    str
+        ``"klems edges=0,5,...,90 n_phi=1,8,..."``.
+    """
+    return ("klems edges=" + ",".join(f"{float(e):.12g}" for e in edges_deg)
+            + " n_phi=" + ",".join(str(int(n)) for n in n_phi))
+
+
+def shirley_chiu_spec(m: int) -> str:
+    """The text naming the m × m uniform grid of the Shirley–Chiu square.
+
+    Parameters
+    ----------
+    m : int
+        Cells per side.
+
+    Returns
+    -------
+    str
+        ``"shirley-chiu m=M"``.
+    """
+    return f"shirley-chiu m={int(m)}"
+
+
+def _parse_spec(spec: str) -> tuple[str, dict[str, list[float]]]:
+    kind, *fields = str(spec).split()
+    values = {}
+    for f in fields:
+        key, _, text = f.partition("=")
+        values[key] = [float(v) for v in text.split(",") if v]
+    if kind == "klems" and {"edges", "n_phi"} <= set(values) and len(values["edges"]) == len(values["n_phi"]) + 1:
+        return kind, values
+    if kind == "shirley-chiu" and len(values.get("m", ())) == 1 and values["m"][0] >= 1:
+        return kind, values
+    raise ValueError(f"unknown angle basis {spec!r}")
+
+
+def cell_index(spec: str, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The basis cell each direction (x, y) = β of the projected disk lies in (module docstring).
+
+    Parameters
+    ----------
+    spec : str
+        The basis (:func:`klems_spec`, :func:`shirley_chiu_spec`).
+    x, y : ndarray
+        Direction cosines [-] (|β| ≤ 1; points just beyond the rim are put on it).
+
+    Returns
+    -------
+    ndarray of int
+        Cell index (file order: Klems patches band by band; the tree grid row-major).
+
+    Raises
+    ------
+    ValueError
+        For a text that names no known basis.
+    """
+    kind, p = _parse_spec(spec)
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if kind == "shirley-chiu":
+        m = int(p["m"][0])
+        r = np.hypot(x, y)
+        scale = np.where(r > 1.0, 1.0 / np.where(r > 0, r, 1.0), 1.0)
+        a, b = disk_to_square(x * scale, y * scale)
+        ia = np.clip(np.floor(a * m).astype(np.int64), 0, m - 1)
+        ib = np.clip(np.floor(b * m).astype(np.int64), 0, m - 1)
+        return ia * m + ib
+    edges = np.sin(np.radians(np.asarray(p["edges"]))) ** 2
+    n_phi = np.asarray(p["n_phi"], dtype=np.int64)
+    first = np.concatenate([[0], np.cumsum(n_phi)[:-1]])
+    # sin²θ = |β|², compared without an arcsin (no loss of digits near the edges of the polar cap)
+    band = np.clip(np.searchsorted(edges, x * x + y * y, side="right") - 1, 0, n_phi.size - 1)
+    n = n_phi[band]
+    phi = np.mod(np.degrees(np.arctan2(y, x)), 360.0)
+    j = np.mod(np.floor(phi * n / 360.0 + 0.5).astype(np.int64), n)
+    return first[band] + j
+
+
+def square_to_disk(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Shirley–Chiu concentric map of the unit square onto the unit disk (area preserving up to the factor π).
+
+    Parameters
+    ----------
+    a, b : ndarray
+        Points of the unit square [-].
+
+    Returns
+    -------
+    x, y : ndarray
+        Points of the unit disk [-].
+    """
+    u, v = 2.0 * np.asarray(a, dtype=np.float64) - 1.0, 2.0 * np.asarray(b, dtype=np.float64) - 1.0
+    first = np.abs(u) > np.abs(v)  # the wedges about the x axis
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(first, u, v)
+        phi = np.where(first, np.pi / 4 * v / u, np.pi / 2 - np.pi / 4 * u / v)
+    phi = np.where(r == 0.0, 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def disk_to_square(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Inverse of :func:`square_to_disk`: unit-disk points to the unit square.
+
+    Parameters
+    ----------
+    x, y : ndarray
+        Points of the unit disk [-].
+
+    Returns
+    -------
+    a, b : ndarray
+        Points of the unit square [-].
+    """
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    r = np.hypot(x, y)
+    phi = np.arctan2(y, x)
+    phi = np.where(phi < -np.pi / 4, phi + 2 * np.pi, phi)  # in [-pi/4, 7pi/4]
+    # an angle a rounding below -pi/4 comes back as 7pi/4: it belongs to the +x wedge at t = -1, not at t = 7
+    phi = np.where(phi >= 7 * np.pi / 4, phi - 2 * np.pi, phi)
+    q = np.floor((phi + np.pi / 4) / (np.pi / 2)).astype(int) % 4  # wedge: +x, +y, -x, -y
+    t = (phi - q * np.pi / 2) / (np.pi / 4)  # in [-1, 1) within the wedge
+    a = np.select([q == 0, q == 1, q == 2], [r, -t * r, -r], t * r)
+    b = np.select([q == 0, q == 1, q == 2], [t * r, r, -t * r], -r)
+    return 0.5 * (a + 1.0), 0.5 * (b + 1.0)

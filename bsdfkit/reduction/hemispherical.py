@@ -110,6 +110,10 @@ class Geometry:
     #: projected solid angle [sr] of the basis cell each record stands for (records of a file in an angle basis,
     #: :mod:`bsdfkit.reduction.basis`), else None
     basis_psa: NDArray[np.float64] | None = None
+    #: index of the basis cell each record lies in, and the basis (:func:`bsdfkit.reduction.basis.cell_index`):
+    #: the file's BSDF is then evaluated by exact cell lookup; else None (nearest record)
+    basis_cell: NDArray[np.int64] | None = None
+    basis_spec: str | None = None
 
     @property
     def n(self) -> int:
@@ -818,9 +822,53 @@ def reconstruct(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.fl
 def _reconstruct_basis(geom: Geometry, finite: NDArray[np.bool_]) -> Reconstruction:
     """Records that are the cells of an angle basis: the central weights are the cells' projected solid angles
     (the basis sum, :func:`bsdfkit.reduction.basis.basis_sum`), exact for the piecewise-constant BSDF the file
-    defines, so no alternative reconstruction. The pointwise BSDF is the value of the nearest record in the
-    projected disk (the cell containing the direction, up to the cells' shapes)."""
+    defines, so no alternative reconstruction. The pointwise BSDF is the value of the cell the direction lies in:
+    found exactly when the records carry their cells (:func:`bsdfkit.reduction.basis.cell_index`), else the value
+    of the nearest record in the projected disk (the cell containing the direction, up to the cells' shapes)."""
     psa = np.where(finite, geom.basis_psa, 0.0)
+    evaluate = _cell_lookup(geom, finite)
+    if evaluate is None:
+        evaluate = _nearest_record(geom, finite)
+    return Reconstruction(central=psa, alternatives={}, comparisons={}, lobe=np.zeros(geom.n),
+                          region=Region(records=np.zeros(0, dtype=np.int64), in_plane_deg=None),
+                          extrapolated_beyond_deg=None,
+                          assumptions=["the records are the cells of the file's angle basis (Klems patches or "
+                                       "tensor-tree leaves): the BSDF is constant over each cell, its hemispherical "
+                                       "value the sum of value x projected solid angle over the cells (exact for "
+                                       "the file; Radiance's value)"],
+                          method="basis: sum of f x projected solid angle over the cells of the file's angle basis",
+                          evaluate=evaluate)
+
+
+def _cell_lookup(geom: Geometry, finite: NDArray[np.bool_]) -> Callable | None:
+    """Exact evaluation of a basis file's BSDF: each direction takes the mean value of the records of its cell
+    (a Klems patch's records share its value), 0 in a cell without finite records; None when the records do not
+    carry their cells."""
+    if geom.basis_cell is None or geom.basis_spec is None:
+        return None
+    cells = geom.basis_cell
+    try:
+        basis.cell_index(geom.basis_spec, np.zeros(1), np.zeros(1))
+    except ValueError:
+        return None
+    n_cells = int(cells.max()) + 1 if cells.size else 0
+    members = finite & (cells >= 0)
+    count = np.bincount(cells[members], minlength=n_cells).astype(np.float64)
+    records = np.flatnonzero(members)
+
+    def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        total = np.bincount(cells[records], weights=v[records], minlength=n_cells)
+        mean = np.divide(total, count, out=np.zeros(n_cells), where=count > 0)
+        dx, dy = direction_frame(geom, directions)
+        k = basis.cell_index(geom.basis_spec, dx, dy)
+        return np.where(k < n_cells, mean[np.minimum(k, n_cells - 1)], 0.0).reshape(np.shape(dx))
+
+    return evaluate
+
+
+def _nearest_record(geom: Geometry, finite: NDArray[np.bool_]) -> Callable:
+    """The value of the nearest finite record in the projected disk (records without their cells)."""
     x, y = geom.frame()
     nodes = np.stack([x[finite], y[finite]], axis=1)
     index = np.flatnonzero(finite)
@@ -836,15 +884,7 @@ def _reconstruct_basis(geom: Geometry, finite: NDArray[np.bool_]) -> Reconstruct
         _, k = trees[0].query(np.stack([np.ravel(dx), np.ravel(dy)], axis=1))
         return v[index[k]].reshape(np.shape(dx))
 
-    return Reconstruction(central=psa, alternatives={}, comparisons={}, lobe=np.zeros(geom.n),
-                          region=Region(records=np.zeros(0, dtype=np.int64), in_plane_deg=None),
-                          extrapolated_beyond_deg=None,
-                          assumptions=["the records are the cells of the file's angle basis (Klems patches or "
-                                       "tensor-tree leaves): the BSDF is constant over each cell, its hemispherical "
-                                       "value the sum of value x projected solid angle over the cells (exact for "
-                                       "the file; Radiance's value)"],
-                          method="basis: sum of f x projected solid angle over the cells of the file's angle basis",
-                          evaluate=evaluate)
+    return evaluate
 
 
 def _perpendicular_anisotropy(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
@@ -1265,6 +1305,199 @@ def _gap_anisotropy(geom: Geometry, finite: NDArray[np.bool_], ref: NDArray[np.f
     return w, delta
 
 
+#: Records within this azimuth [deg] about the normal lie on one half-plane of a planes layout (:func:`_gap_planes`).
+PLANE_TOL_DEG = 0.05
+#: A half-plane holds at least this many records off the normal.
+PLANE_MIN_RECORDS = 4
+#: A plane's excess over the body counts as a lobe flank where it exceeds this share of the body (and 3 u).
+FLANK_FLOOR = 0.05
+#: The Gaussian across a gap raises ln f above the chord between its flanks by at most this (the peak between
+#: two planes at most e³ ≈ 20 times its flanks' geometric mean): two planes cannot measure a lobe's width across
+#: them, and a lobe narrower across than along the planes would otherwise be raised without bound.
+BULGE_CAP = 3.0
+#: The ``between_planes`` alternative: a lobe this many times narrower across the planes than along them, in σ².
+GAP_NARROWER = 1.5
+#: Half-planes closer than this in azimuth [deg] (median gap) are a grid, interpolated across; from C-planes 15°
+#: apart on, a lobe can lie between planes unmeasured (:func:`_gap_planes`).
+GAP_MIN_DEG = 12.5
+#: Gauss–Legendre nodes across a gap, radial nodes per half-plane gap (:func:`_gap_integral`).
+GAP_U_NODES, GAP_R_NODES = 16, 240
+
+
+@dataclass(frozen=True)
+class _GapPlanes:
+    """A planes layout: every finite record off the normal on a half-plane through the normal (C-planes, a θs × φs
+    grid, an in-plane arc with a φs = 90/270° arc), and the lobe flanks each half-plane shows (:func:`_gap_planes`).
+
+    Per half-plane k (sorted by azimuth ``phi`` [rad] about the normal, in the frame of :meth:`Geometry.frame`):
+    its records sorted by radius (``members``, radii ``r`` [direction cosines]), the excess ``excess`` of the
+    band-mean values over the body (the median over the half-planes at that radius) [1/sr], the smallest excess
+    that counts as a lobe flank ``floor`` [1/sr], and ``sigma``: the lobe's Gaussian width along the plane
+    [direction cosines] (log-parabola through the highest flank sample and its neighbours; NaN: no lobe)."""
+
+    phi: NDArray[np.float64]
+    members: tuple
+    r: tuple
+    excess: tuple
+    floor: tuple
+    sigma: NDArray[np.float64]
+
+
+def _gap_planes(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64]) -> _GapPlanes | None:
+    """The half-planes of a planes layout with their lobe flanks; None when a finite record off the normal lies
+    on no half-plane of :data:`PLANE_MIN_RECORDS` or more records, or with fewer than three half-planes."""
+    finite = np.isfinite(ref)
+    x, y = geom.frame()
+    keep = np.flatnonzero(finite)
+    r_all = np.hypot(x[keep], y[keep])
+    off = keep[r_all > disk.CENTER_TOL]
+    if off.size < 3 * PLANE_MIN_RECORDS:
+        return None
+    az = np.mod(np.degrees(np.arctan2(y[off], x[off])), 360.0)
+    key = np.round(az / PLANE_TOL_DEG).astype(np.int64) % int(round(360.0 / PLANE_TOL_DEG))
+    uniq, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    if uniq.size < 3 or counts.min() < PLANE_MIN_RECORDS:
+        return None
+    inverse = np.asarray(inverse).ravel()
+    members, radii = [], []
+    for j in range(uniq.size):
+        m = off[inverse == j]
+        rr = np.hypot(x[m], y[m])
+        o = np.argsort(rr, kind="stable")
+        members.append(m[o])
+        radii.append(rr[o])
+    phi = np.radians(uniq * PLANE_TOL_DEG)
+    gaps = np.diff(np.concatenate([np.sort(phi), [np.sort(phi)[0] + 2.0 * np.pi]]))
+    if np.degrees(np.median(gaps)) < GAP_MIN_DEG:
+        # planes this close (a θs × φs grid of a vendor table, 1-10° in azimuth) are interpolated across, as any
+        # grid: a lobe cannot hide between them, and a flat-topped patch between two of them is no Gaussian
+        return None
+    v = np.nan_to_num(ref)
+    u = np.nan_to_num(ref_std)
+    # the body: the median over the half-planes at each radius (a lobe on a few planes leaves it), each plane
+    # interpolated along its radius (held beyond its ends)
+    excess, floor, sigma = [], [], np.full(uniq.size, np.nan)
+    for j in range(uniq.size):
+        at = np.stack([np.interp(radii[j], radii[i], v[members[i]]) for i in range(uniq.size)])
+        body = np.median(at, axis=0)
+        e = v[members[j]] - body
+        t = np.maximum(3.0 * u[members[j]], FLANK_FLOOR * np.abs(body))
+        excess.append(e)
+        floor.append(t)
+        flank = np.flatnonzero(e > t)
+        if flank.size:
+            p = int(flank[np.argmax(e[flank])])
+            fit = _log_parabola(radii[j], e, p)
+            if fit is not None and np.sqrt(-0.5 / fit[0]) < LOBE_MAX_RADIUS:
+                sigma[j] = float(np.sqrt(-0.5 / fit[0]))
+    return _GapPlanes(phi=phi, members=tuple(members), r=tuple(radii), excess=tuple(excess), floor=tuple(floor),
+                      sigma=sigma)
+
+
+def _gap_flank(planes: _GapPlanes, k: int, r: NDArray[np.float64]) -> tuple[NDArray, NDArray[np.bool_]]:
+    """Half-plane k's excess over the body at radii r [1/sr] (0 beyond its end) and where it is a lobe flank."""
+    k = k % planes.phi.size
+    e = np.interp(r, planes.r[k], planes.excess[k], right=0.0)
+    return e, e > np.interp(r, planes.r[k], planes.floor[k])
+
+
+def _gap_width(planes: _GapPlanes, a: int) -> float:
+    """Azimuth [rad] from half-plane a to the next."""
+    n = planes.phi.size
+    return float(np.mod(planes.phi[(a + 1) % n] - planes.phi[a % n], 2.0 * np.pi)) or 2.0 * np.pi
+
+
+def _gap_curvature(planes: _GapPlanes, a: int, r: NDArray[np.float64], la: NDArray, lb: NDArray,
+                   narrow: float = 1.0) -> NDArray:
+    """d²(ln L)/dt² across the gap from half-plane a to the next [1/direction cosines²] at radii r, t the distance
+    across: measured by the parabola through ln L on three neighbouring planes where the plane before a or after
+    the next shows the flank too (the mean of the two), else that of a Gaussian as wide across as along the planes
+    (−1/(σ_a σ_b), times ``narrow``: σ² across = σ_a σ_b / narrow); never above 0 (ln L is then interpolated
+    linearly across)."""
+    g = r * _gap_width(planes, a)
+    total, count = np.zeros(r.size), np.zeros(r.size)
+    for side in (-1, 1):
+        e3, f3 = _gap_flank(planes, a - 1 if side < 0 else a + 2, r)
+        g3 = r * _gap_width(planes, a - 1 if side < 0 else a + 1)
+        ok = f3 & (g > 0) & (g3 > 0)
+        if not ok.any():
+            continue
+        l3 = np.log(np.where(ok, e3, 1.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if side < 0:  # planes at −g3, 0, g
+                c = 2.0 * ((lb - la) / g - (la - l3) / g3) / (g + g3)
+            else:  # planes at 0, g, g + g3
+                c = 2.0 * ((l3 - lb) / g3 - (lb - la) / g) / (g + g3)
+        total += np.where(ok, c, 0.0)
+        count += ok
+    sa, sb = planes.sigma[a % planes.phi.size], planes.sigma[(a + 1) % planes.phi.size]
+    round_lobe = -narrow / (sa * sb) if np.isfinite(sa) and np.isfinite(sb) else 0.0
+    measured = np.divide(total, count, out=np.full(r.size, round_lobe), where=count > 0)
+    return np.minimum(measured, 0.0)
+
+
+def _gap_cell(planes: _GapPlanes, k: int, r: NDArray[np.float64], u: NDArray[np.float64], narrow: float = 1.0,
+              cap: float = BULGE_CAP) -> NDArray[np.float64]:
+    """The lobe across the gap from half-plane k to the next, less its linear interpolation across azimuth [1/sr],
+    at radii ``r`` and fractions ``u`` of the gap (arrays of one shape).
+
+    Where both planes show a flank at that radius, ln L is the chord between them raised by the parabola of a
+    Gaussian across the planes (:func:`_gap_curvature`: measured on three planes, else as wide across as along
+    them): exact for a Gaussian lobe wherever its peak lies, between the planes or on one. Where one plane shows a
+    flank, the lobe falls off from it as the Gaussian of its width along the plane (peaked on the plane: the least
+    it can hold). Elsewhere 0. ``narrow`` and ``cap``: the alternative of a lobe narrower across than along the
+    planes (:func:`_gap_curvature`) and the largest rise of ln L above the chord."""
+    ea, fa = _gap_flank(planes, k, r)
+    eb, fb = _gap_flank(planes, k + 1, r)
+    sa, sb = planes.sigma[k % planes.phi.size], planes.sigma[(k + 1) % planes.phi.size]
+    g = r * _gap_width(planes, k)  # the gap's width across at r [direction cosines]
+    out = np.zeros_like(r)
+    both = fa & fb & (np.isfinite(sa) | np.isfinite(sb))
+    if both.any():
+        la, lb = np.log(ea[both]), np.log(eb[both])
+        curv = _gap_curvature(planes, k, r[both], la, lb, narrow)
+        ub = u[both]
+        bulge = np.minimum(-curv * g[both] ** 2 / 8.0, cap) * 4.0 * ub * (1.0 - ub)
+        out[both] = np.exp((1.0 - ub) * la + ub * lb + bulge) - ((1.0 - ub) * ea[both] + ub * eb[both])
+    for flank, s, e, t in ((fa & ~fb, sa, ea, u), (fb & ~fa, sb, eb, 1.0 - u)):
+        if np.isfinite(s) and flank.any():  # one flank: the lobe falls off from its plane
+            # the other plane's (insignificant) excess stays interpolated linearly
+            out[flank] = e[flank] * (np.exp(-0.5 * (t[flank] * g[flank] / s) ** 2) - (1.0 - t[flank]))
+    return out
+
+
+def _gap_integral(planes: _GapPlanes, narrow: float = 1.0, cap: float = BULGE_CAP) -> tuple[float, float]:
+    """∬ over the gaps between the half-planes of :func:`_gap_cell` [fraction] (polar quadrature about the normal:
+    Gauss–Legendre across each gap, trapezoids in r out to the nearer plane end), and the largest ratio of the
+    lobe's peak across a gap to its higher flank (> 1: a peak between planes that no plane measures); ``narrow``
+    and ``cap`` as for :func:`_gap_cell`."""
+    xg, wg = np.polynomial.legendre.leggauss(GAP_U_NODES)
+    uu, wu = 0.5 * (xg + 1.0), 0.5 * wg
+    total, peak = 0.0, 1.0
+    n = planes.phi.size
+    for k in range(n):
+        b = (k + 1) % n
+        if not (np.isfinite(planes.sigma[k]) or np.isfinite(planes.sigma[b])):
+            continue
+        gap = float(np.mod(planes.phi[b] - planes.phi[k], 2.0 * np.pi)) or 2.0 * np.pi
+        rmax = min(planes.r[k][-1], planes.r[b][-1])
+        rr = np.linspace(0.0, rmax, GAP_R_NODES)
+        wr = np.full(rr.size, rr[1] - rr[0])
+        wr[[0, -1]] *= 0.5
+        r2, u2 = np.meshgrid(rr, uu, indexing="ij")
+        d = _gap_cell(planes, k, r2.ravel(), u2.ravel(), narrow, cap).reshape(r2.shape)
+        total += float(np.sum(d * (wr * rr)[:, None] * wu[None, :]) * gap)
+        ea = np.interp(rr, planes.r[k], planes.excess[k], right=0.0)
+        eb = np.interp(rr, planes.r[b], planes.excess[b], right=0.0)
+        hi = np.maximum(ea, eb)
+        lin = (1.0 - u2) * ea[:, None] + u2 * eb[:, None]
+        model = d + lin
+        ok = hi > 0
+        if ok.any():
+            peak = max(peak, float(np.max(model[ok].max(axis=1) / hi[ok])))
+    return total, peak
+
+
 @dataclass(frozen=True)
 class _DiskOptions:
     """One reconstruction over the disk (:func:`_disk_parts`): the body's centre ("normal" or "specular"), the
@@ -1355,13 +1588,16 @@ class _DiskFit:
     region: NDArray[np.int64]  # the records of the lobe region
 
 
-def _disk_fit(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64], errors: bool) -> _DiskFit:
-    """The lobe region, the body's centre and the central body and lobe weights over the disk."""
+def _disk_fit(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64], errors: bool,
+              lobe: bool = True) -> _DiskFit:
+    """The lobe region, the body's centre and the central body and lobe weights over the disk; ``lobe=False``:
+    everything about the normal (the lobe is then the planes' own, :func:`_gap_planes`)."""
     finite = np.isfinite(ref)
     no_lobe = (None, 0.0, np.zeros(0, dtype=np.int64))
     native = _native_grid(geom, finite)
     # a polar grid about the specular point or direction: integrated on its own spokes (no lobe region)
-    lobe_c, radius, in_plane_region = no_lobe if native else _disk_region(geom, ref, np.nan_to_num(ref_std))
+    lobe_c, radius, in_plane_region = (no_lobe if native or not lobe
+                                       else _disk_region(geom, ref, np.nan_to_num(ref_std)))
     resolved = lobe_c is not None and radius > LOBE_MAX_RADIUS
     if resolved:  # scatter rising over most of the disk is no specular lobe: integrated directly with the body
         lobe_c, radius, in_plane_region = no_lobe
@@ -1407,7 +1643,14 @@ def _disk_alternatives(geom: Geometry, ref: NDArray[np.float64], fit: _DiskFit, 
     if fit.beyond is not None:
         alt["tail"] = {rule: variant(rim=rule) for rule in ("hold", "zero")}
     if sparse_lobe:
-        alt["azimuth"] = {m: variant(mirror=m) for m in ("forward", "backward")}
+        mirrored = {}
+        for m in ("forward", "backward"):
+            try:
+                mirrored[m] = variant(mirror=m)
+            except InputError:  # a half with too few records off the lobe's centre: that alternative is void
+                continue
+        if mirrored:
+            alt["azimuth"] = mirrored
     if fit.region.size:
         sep = {}
         for k, factor in enumerate(DISK_WIDER):
@@ -1488,11 +1731,56 @@ def _disk_method(geom: Geometry, fit: _DiskFit, sparse_lobe: bool) -> tuple[str,
     return method, assumptions
 
 
+def _gap_weights(planes: _GapPlanes, ref: NDArray[np.float64], delta: float) -> NDArray[np.float64] | None:
+    """Weights over the records whose dot product with ``ref`` is ``delta`` [fraction], spread over the lobe
+    flanks the half-planes show (a lobe between planes scales with them at every wavelength); None without
+    flanks."""
+    m = np.zeros(ref.size)
+    for k in range(planes.phi.size):
+        if np.isfinite(planes.sigma[k]):
+            m[planes.members[k][planes.excess[k] > planes.floor[k]]] = 1.0
+    level = float(m @ np.nan_to_num(ref))
+    return m * (delta / level) if level > 0 else None
+
+
+def _gap_evaluate(planes: _GapPlanes, geom: Geometry, directions: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`_gap_cell` at unit vectors (..., 3) in the sample frame [1/sr] (on the band-mean profile)."""
+    dx, dy = direction_frame(geom, directions)
+    r = np.hypot(dx, dy)
+    phi = np.mod(np.arctan2(dy, dx), 2.0 * np.pi)
+    n = planes.phi.size
+    k = np.searchsorted(planes.phi, phi, side="right") - 1
+    k = np.where(k < 0, n - 1, k)
+    gaps = np.mod(np.roll(planes.phi, -1) - planes.phi, 2.0 * np.pi)
+    gaps = np.where(gaps > 0, gaps, 2.0 * np.pi)
+    u = np.mod(phi - planes.phi[k], 2.0 * np.pi) / gaps[k]
+    out = np.zeros(r.size)
+    for j in np.unique(k):
+        on = k == j
+        out[on] = _gap_cell(planes, int(j), r[on], u[on])
+    return out
+
+
+#: The lobe between planes is modelled when its Gaussian across a gap peaks this much above the higher flank
+#: (:func:`_gap_integral`): then no plane measures the lobe's peak.
+BETWEEN_PEAK = 1.05
+
+
 def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
                       n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
-    """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`)."""
+    """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`).
+
+    On a planes layout (:func:`_gap_planes`) whose lobe peaks between two half-planes, the lobe is not the
+    in-plane arc's: everything is interpolated about the normal and the lobe across every gap follows the Gaussian
+    the planes' flanks imply (:func:`_gap_cell`); the linear interpolation across azimuth is the alternative
+    (``between_planes`` in the error bar)."""
     finite = np.isfinite(ref)
-    fit = _disk_fit(geom, ref, ref_std, errors)
+    planes = _gap_planes(geom, ref, ref_std)
+    delta, peak = _gap_integral(planes) if planes is not None else (0.0, 1.0)
+    # only a peak between planes leaves the in-plane lobe model: a lobe on a measured plane keeps it
+    use_gap = planes is not None and peak > BETWEEN_PEAK
+    fit = _disk_fit(geom, ref, ref_std, errors, lobe=not use_gap)
+    w_gap = _gap_weights(planes, ref, delta) if use_gap else None
     sparse_lobe = _sparse_lobe(geom, fit)
     alt = _disk_alternatives(geom, ref, fit, sparse_lobe)
     comparisons = {"normal_centred": _disk_variant(geom, ref, fit, lobe_c=None, body_center="normal")}
@@ -1509,12 +1797,40 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
     center_deg = _lobe_center_deg(fit)
     reg = Region(fit.in_plane_region, None if center_deg is None else (center_deg, center_deg), None, center_deg, ())
     kappa, evaluate, beyond = fit.kappa, fit.evaluate, fit.beyond
-    return Reconstruction(central=fit.body + kappa * fit.lobe, alternatives=alt, comparisons=comparisons,
-                          lobe=kappa * fit.lobe, region=reg,
+    central = fit.body + kappa * fit.lobe
+    lobe = kappa * fit.lobe
+
+    def evaluated(values: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        return evaluate(values, directions, kappa)
+
+    if w_gap is not None:
+        alt = {g: {k: w + w_gap for k, w in a.items()} for g, a in alt.items()}
+        # two planes do not measure the lobe's width across them: as wide as along them (central), not raised
+        # at all (linear across), or narrower (σ² across ÷ GAP_NARROWER) with a rise of e more allowed
+        alt["between_planes"] = {"linear_across": central.copy()}
+        narrower = _gap_weights(planes, ref, _gap_integral(planes, GAP_NARROWER, BULGE_CAP + 1.0)[0])
+        if narrower is not None:
+            alt["between_planes"]["narrower_across"] = central + narrower
+        central = central + w_gap
+        lobe = lobe + w_gap
+        method = "disk: everything about the normal, the lobe between planes as the Gaussian its flanks imply"
+        stated.append(f"a lobe peaks between the measured planes ({peak:.3g} x the higher flank): across every gap "
+                      "the lobe is the Gaussian through the two planes' flanks as wide across the planes as along "
+                      "them (round in direction cosines; raised at most e^3 above its flanks), or falls off from "
+                      "the one plane that shows it (error bar: interpolated linearly across azimuth)")
+        level = float(w_gap @ np.nan_to_num(ref)) / delta if delta else 0.0
+        m = w_gap / delta * level if delta else w_gap
+
+        def evaluated(values: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:  # noqa: F811
+            v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+            scale = float(m @ v) / level if level > 0 else 0.0
+            return evaluate(values, directions, kappa) + scale * _gap_evaluate(planes, geom, directions)
+
+    return Reconstruction(central=central, alternatives=alt, comparisons=comparisons,
+                          lobe=lobe, region=reg,
                           extrapolated_beyond_deg=(None if beyond is None else
                                                    float(np.degrees(np.arcsin(min(beyond, 1.0))))),
-                          assumptions=assumptions + stated, method=method,
-                          evaluate=lambda values, directions: evaluate(values, directions, kappa))
+                          assumptions=assumptions + stated, method=method, evaluate=evaluated)
 
 
 # ------------------------------------------------------------------------------------------- datasets
@@ -1799,7 +2115,9 @@ def _merge_duplicates(geom: Geometry, f: NDArray, u: NDArray, label: str
         psa = np.zeros(m)
         np.add.at(psa, group, geom.basis_psa)
     merged = Geometry(theta_i=geom.theta_i, phi_i=geom.phi_i, theta_s=geom.theta_s[keep], phi_s=geom.phi_s[keep],
-                      arc=arc, side=geom.side, basis_psa=psa)
+                      arc=arc, side=geom.side, basis_psa=psa,
+                      basis_cell=None if geom.basis_cell is None else geom.basis_cell[keep],
+                      basis_spec=geom.basis_spec)
     n_dup = int(np.sum(counts > 1))
     if worst[0] > DUPLICATE_CHI2:
         g = worst[1]
@@ -1910,8 +2228,13 @@ def profile_model(ds: xr.Dataset, config: str, theta_i_deg: float, side: str, n_
     arc = (np.asarray(ds["arc"].values[idx]).astype(str) if "arc" in ds.coords
            else np.full(idx.size, "in_plane"))
     psa = (ds[basis.COORD].values[idx].astype(np.float64) if basis.COORD in ds.coords else None)
+    cell = spec = None
+    if psa is not None and basis.CELL_COORD in ds.coords:
+        cell = np.asarray(ds[basis.CELL_COORD].values[idx], dtype=np.int64)
+        spec = str(ds[basis.CELL_COORD].attrs.get("basis", "")) or None
     geom = Geometry(theta_i=float(theta_i_deg), phi_i=float(phi_i[0]), theta_s=ds["theta_s"].values[idx].astype(float),
-                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side, basis_psa=psa)
+                    phi_s=ds["phi_s"].values[idx].astype(float), arc=arc, side=side, basis_psa=psa,
+                    basis_cell=cell, basis_spec=spec)
     label = str(ds.attrs.get("source", "dataset"))
     geom, f, u, warnings = _merge_duplicates(geom, f, u, label)
     geom, f, u, stated = _mirrored_half(geom, f, u)
@@ -2093,6 +2416,36 @@ class ElasticSource:
     wavelength_nm: float | None
     what: str  # "550 nm", "mean over 12 wavelengths 500-600 nm", "single wavelength"
     methods: dict[str, list[str]]
+    #: the file's angle basis when every profile is one (:mod:`bsdfkit.reduction.basis`), else None
+    basis: str | None = None
+
+    @property
+    def piecewise_constant(self) -> bool:
+        """True when every profile is a file's angle basis (integrated by its basis sum): ``fn`` is then constant
+        over each cell of the basis."""
+        return all(m.startswith("basis") for ms in self.methods.values() for m in ms)
+
+    def exact_tis(self, theta_i_deg: float, side: str) -> float:
+        """The engine's hemispherical value [-] at a reconstructed incidence [deg] and side.
+
+        Parameters
+        ----------
+        theta_i_deg : float
+            Incidence [deg], one of :attr:`incidences_deg`.
+        side : str
+            ``reflection`` or ``transmission``.
+
+        Returns
+        -------
+        float
+            TIS [-].
+        """
+        t = round(float(theta_i_deg), 6)
+        for u, v in zip(self.incidences_deg.get(side, ()), self.tis.get(side, ())):
+            if round(float(u), 6) == t:
+                return float(v)
+        raise InputError("incidence not in the source", field="theta_i",
+                         expected=", ".join(f"{u:g}" for u in self.incidences_deg.get(side, [])), got=theta_i_deg)
 
 
 def _spectral_weights(model: ProfileModel, wavelength: float | None, band: tuple[float, float] | None,
@@ -2186,5 +2539,6 @@ def elastic_source(ds: xr.Dataset, sides: tuple[str, ...] | list[str], wavelengt
                              got=theta_i_deg)
         return models[key].bsdf_at(weights[key], directions)
 
+    specs = {m.geom.basis_spec for m in models.values()}
     return ElasticSource(fn=fn, incidences_deg=out_t, tis=out_tis, wavelength_nm=chosen,
-                         what=what, methods=methods)
+                         what=what, methods=methods, basis=specs.pop() if len(specs) == 1 else None)

@@ -124,9 +124,10 @@ class ExportSettings:
     ``peak_rtol`` is also the limit of the peak re-check of the written file (``ExportResult.peak_error``).
     ``harvey_shack_axes`` / ``specular_axes``: explicit table axes (override ``grid``).
     ``zemax_symmetry``: ``PlaneSymmetrical`` (the mirror average of the source, refused when the source
-    deviates from plane symmetry by more than ``symmetry_tolerance`` of the block maximum) or
-    ``Asymmetrical``. ``tracepro_scatter``: ``table`` (Scatter 5) or ``abg`` (Scatter 1, ABg fit results
-    only). ``specular_reflectance``/``specular_transmittance`` enter TracePro's energy balance.
+    deviates from plane symmetry by more than ``symmetry_tolerance`` of the block maximum),
+    ``Asymmetrical`` or ``auto`` (PlaneSymmetrical when the source is, else Asymmetrical; ``convert``'s
+    default). ``tracepro_scatter``: ``table`` (Scatter 5) or ``abg`` (Scatter 1, ABg fit results only).
+    ``specular_reflectance``/``specular_transmittance`` enter TracePro's energy balance.
     """
 
     theta_i_deg: tuple[float, ...] | None = None
@@ -145,6 +146,9 @@ class ExportSettings:
     grid_tolerance: grids.GridTolerance = field(default_factory=grids.GridTolerance)
     #: BSDF XML: ``none`` (front blocks only) or ``mirror`` (Back blocks = Front: a sample symmetric between faces)
     xml_back: str = "none"
+    #: BSDF XML: the BSDF of the back face, ``fn(theta_i_deg, side, directions)`` [1/sr] (a source file's own Back
+    #: blocks, which ``convert`` passes on), written as the Back blocks; None: ``xml_back`` decides
+    xml_back_fn: Any = None
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
@@ -161,15 +165,19 @@ class ExportSettings:
         if self.xml_back not in ("none", "mirror"):
             raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
                                   got=self.xml_back)
+        if self.xml_back_fn is not None and (self.xml_back != "none" or not callable(self.xml_back_fn)):
+            raise ValidationError("the back face is either the source's own or the front mirrored",
+                                  field="xml_back_fn", expected="a BSDF callable with xml_back = none",
+                                  got=self.xml_back)
         if self.node_values not in NODE_VALUES:
             raise ValidationError("unknown node values", field="node_values", expected=" or ".join(NODE_VALUES),
                                   got=self.node_values)
         if self.xml_basis not in ("klems", "tree", "auto"):
             raise ValidationError("unknown BSDF XML basis", field="xml_basis", expected="klems, tree or auto",
                                   got=self.xml_basis)
-        if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical"):
+        if self.zemax_symmetry not in ("PlaneSymmetrical", "Asymmetrical", "auto"):
             raise ValidationError("unsupported Zemax symmetry", field="zemax_symmetry",
-                                  expected="PlaneSymmetrical or Asymmetrical", got=self.zemax_symmetry)
+                                  expected="PlaneSymmetrical, Asymmetrical or auto", got=self.zemax_symmetry)
         if self.tracepro_scatter not in ("table", "abg"):
             raise ValidationError("unknown TracePro scatter mode", field="tracepro_scatter",
                                   expected="table or abg", got=self.tracepro_scatter)
@@ -445,7 +453,9 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
         raise InputError("the sides share no measured incidence", file=label, field="theta_i",
                          expected="a common incidence, or one side")
     engine = {s: {round(t, 6): v for t, v in zip(src.incidences_deg[s], src.tis[s])} for s in sides}
-    return _Source({s: grids.Pointwise(src.fn) for s in sides}, np.asarray(common, dtype=np.float64), (),
+    fns = {s: grids.PiecewiseConstant(src.fn, src.exact_tis, src.basis) if src.piecewise_constant
+           else grids.Pointwise(src.fn) for s in sides}
+    return _Source(fns, np.asarray(common, dtype=np.float64), (),
                    f"measured dataset {label} at {src.what} (hemispherical engine)", engine_tis=engine)
 
 
@@ -453,6 +463,14 @@ def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
     def bsdf_fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
+    if all(isinstance(f, grids.PiecewiseConstant) for f in fns.values()):
+        def exact(theta_i_deg: float, side: str) -> float:
+            f = fns[side]
+            return (f.exact_tis(theta_i_deg, side) if f.exact_tis is not None
+                    else grids.tis_reference(grids.Pointwise(f), theta_i_deg, side))
+
+        bases = {f.basis for f in fns.values()}
+        return grids.PiecewiseConstant(bsdf_fn, exact, bases.pop() if len(bases) == 1 else None)
     return grids.Pointwise(bsdf_fn) if all(isinstance(f, grids.Pointwise) for f in fns.values()) else bsdf_fn
 
 
@@ -579,7 +597,8 @@ def _doubled(settings: ExportSettings, axes: Any) -> ExportSettings | None:
         return replace(settings, harvey_shack_axes=grids.HarveyShackAxes(
             axes.rho, tuple(both.tolist()), axes.zero_azimuth_deg))
     if isinstance(axes, grids.SpecularAxes):
-        plane = settings.zemax_symmetry == "PlaneSymmetrical"
+        plane = settings.zemax_symmetry == "PlaneSymmetrical" or (
+            settings.zemax_symmetry == "auto" and float(a.max(initial=0.0)) <= 180.0 + 1e-9)
         both = np.sort(np.concatenate([a, grids.azimuth_midpoints_deg(a, periodic=not plane)]))
         fixed = grids.SpecularAxes.default(plane_symmetric=plane)
         if len(axes.radial_deg) * both.size > len(fixed.radial_deg) * len(fixed.azimuth_deg):
@@ -739,6 +758,9 @@ def export(
     src = _resolve_source(source, interaction, sides, settings.theta_i_deg, settings.wavelength_nm)
     theta = np.asarray(src.theta_i_deg, dtype=np.float64)
     fn = _dispatch(src.fns)
+    if isinstance(fn, grids.PiecewiseConstant) and settings.node_values == "edge":
+        # a file's cells: Harvey–Shack nodes hold cell means (steps point-sampled integrate 1-4 % off)
+        settings = replace(settings, node_values="cell")
     job = _Job(fmt=fmt, fn=fn, theta=theta, side=side, sides=tuple(sides), src=src,
                comments=(f"source: {src.description}",) + tuple(settings.comments), path=path,
                generated_at=generated_at)

@@ -57,6 +57,13 @@ class VendorGrid:
     #: the part of it) each node stands for, summing to π per incidence; the ingested records carry it
     #: (:mod:`bsdfkit.reduction.basis`) and the hemispherical engine integrates them by the basis sum
     solid_angle: Any = None
+    #: directions in an angle basis: (theta_i, node) index of the basis cell each node lies in, and the basis
+    #: (:func:`bsdfkit.reduction.basis.klems_spec` / ``shirley_chiu_spec``): the ingested records carry both, and
+    #: a conversion evaluates the file's BSDF by exact cell lookup (:func:`bsdfkit.reduction.basis.cell_index`)
+    cell: Any = None
+    basis: str | None = None
+    #: the face of the sample the light is incident on: ``front`` or ``back`` (a BSDF XML file holds both)
+    face: str = "front"
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,44 @@ def normal_directions(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float6
     return d
 
 
+def node_values(bsdf_fn: grids.BsdfFn, theta_i_deg: float, side: str, theta_deg: NDArray[np.float64],
+                phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The BSDF [1/sr] a table about the normal holds at its nodes (φ, θ): point values, or for a piecewise-constant
+    source (:class:`bsdfkit.tables.grids.PiecewiseConstant`) each node's mean over its hat function in sin θs and
+    φs (:func:`bsdfkit.tables.grids.node_means`: the engine behind ``bsdfkit read`` interpolates such tables
+    linearly in sin θs, so the table integrates to the source's value).
+
+    Parameters
+    ----------
+    bsdf_fn : callable
+        ``bsdf_fn(theta_i_deg, side, directions)`` → BSDF [1/sr].
+    theta_i_deg : float
+        Incidence [deg].
+    side : str
+        ``reflection`` or ``transmission``.
+    theta_deg, phi_deg : ndarray
+        The table's axes [deg] (φs over the full circle).
+
+    Returns
+    -------
+    ndarray
+        BSDF [1/sr], shape ``(phi_deg.size, theta_deg.size)``.
+    """
+    theta = np.asarray(theta_deg, dtype=np.float64)
+    phi = np.asarray(phi_deg, dtype=np.float64)
+    if not isinstance(bsdf_fn, grids.PiecewiseConstant):
+        return grids.evaluate_bsdf(bsdf_fn, float(theta_i_deg), side, normal_directions(theta, phi))
+
+    def directions(t_deg: NDArray, a_deg: NDArray) -> NDArray:
+        t, a = np.radians(t_deg), np.radians(a_deg)
+        return np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.maximum(np.cos(t), 0.0)], axis=-1)
+
+    def density(t_deg: NDArray, a_deg: NDArray, d: NDArray) -> NDArray:  # dΛ = ρ dρ dφ, ρ = sin θs
+        return np.sin(np.radians(t_deg))
+
+    return grids.node_means(bsdf_fn, float(theta_i_deg), side, theta, phi, directions, "sin", density)
+
+
 def tis_normal_table(values: NDArray[np.float64], theta_deg: NDArray[np.float64],
                      phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
     """TIS [-] of tables ``values[..., phi, theta]`` [1/sr] about the normal: per azimuth row the piecewise-linear
@@ -131,8 +169,7 @@ def auto_normal_axes(
     sides = grids._check_sides(sides)
 
     def evaluate(r: NDArray, a: NDArray) -> tuple[NDArray, NDArray]:
-        d = normal_directions(r, a)
-        out = np.stack([np.stack([grids.evaluate_bsdf(bsdf_fn, float(t), s, d) for t in thetas]) for s in sides])
+        out = np.stack([np.stack([node_values(bsdf_fn, float(t), s, r, a) for t in thetas]) for s in sides])
         return out, np.ones((thetas.size, a.size, r.size), dtype=bool)
 
     theta = fixed_normal_axes()[0]

@@ -34,10 +34,10 @@ from bsdfkit.measurement.table import (
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import registry
-from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export
-from bsdfkit.tables.grids import GridTolerance, Pointwise
+from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export, read_any
+from bsdfkit.tables.grids import GridTolerance, PiecewiseConstant, Pointwise, tis_reference
 from bsdfkit.tables.registry import sniff_format
-from bsdfkit.tables.vendor import vendor_dataset
+from bsdfkit.tables.vendor import checked_vendor_dataset, vendor_dataset
 
 __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "ingest",
            "convert", "TABLE_OPTIONS"]
@@ -46,7 +46,7 @@ __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "
 VENDOR_FORMATS: tuple[str, ...] = registry.names()
 #: Options :func:`ingest` passes to the text-table and vendor readers.
 TABLE_OPTIONS = ("quantity", "side", "relative_std", "wavelength_nm", "incidence_deg", "phi_i_deg", "zeros",
-                 "sample")
+                 "sample", "face")
 _NETCDF_MAGIC = (b"\x89HDF", b"CDF\x01", b"CDF\x02")
 _MATCH_DEG = 1e-6
 
@@ -101,7 +101,10 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     Returns
     -------
     xarray.Dataset
-        The calibrated BSDF dataset (``bsdf``/``bsdf_std`` [1/sr], angles [deg]).
+        The calibrated BSDF dataset (``bsdf``/``bsdf_std`` [1/sr], angles [deg]). A vendor file that states a
+        TIS gets ``attrs['tis_stated_json']``, stated vs integrated, and a
+        :class:`bsdfkit.core.errors.StatedTisWarning` where they disagree
+        (:func:`bsdfkit.tables.vendor.check_stated_tis`).
     """
     kind = source_kind(path)
     given = {k: v for k, v in options.items() if v is not None}
@@ -120,7 +123,11 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
         if bad:
             raise InputError("vendor files state their incidences", file=path, field=", ".join(bad),
                              expected="no --incidence/--phi-i")
-        return vendor_dataset(path, **given)
+        # a file whose own TIS lines disagree with its data warns (StatedTisWarning) and records both
+        return checked_vendor_dataset(path, **given)
+    if "face" in given:
+        raise InputError("a measured table holds one face", file=path, field="--face",
+                         expected="no --face (it chooses the face of a BSDF XML file)", got=given["face"])
     return read_table(path, **given)
 
 
@@ -155,6 +162,10 @@ class ConvertResult:
     tis`` and ``bsdfkit read`` report it; a phosphor interaction: the direct integral of its reconstruction);
     ``tis_written`` the same for the re-read output. ``worst_relative_difference`` is the largest |written/original − 1|
     over sides and incidences with a TIS above 1e-12.
+
+    The table is checked before it takes its name: ``committed`` is True when it passed and stands at
+    ``export.path`` (the requested output); after a failed check nothing was written there (an earlier file is
+    untouched), and the table is either gone or, when asked for, kept at ``failed_path``.
     """
 
     source: str
@@ -167,9 +178,14 @@ class ConvertResult:
     tolerance: float
     wavelength_nm: float | None
     notes: tuple[str, ...] = ()
+    #: True when the table passed its check and was moved to ``export.path``
+    committed: bool = True
+    #: where a table that failed its check was kept (``keep_failed``), else None
+    failed_path: str | None = None
 
     @property
     def ok(self) -> bool:
+        """True when every TIS of the written table is within ``tolerance`` of the source's."""
         return self.worst_relative_difference <= self.tolerance
 
     def to_dict(self) -> dict[str, Any]:
@@ -178,16 +194,17 @@ class ConvertResult:
         Returns
         -------
         dict
-            The fields (``incidences_deg`` [deg], ``wavelength_nm`` [nm], TIS values [-]), ``ok``, and the
-            export's ``format``, ``path``, ``sides``, ``size_bytes``, ``grid``, peak errors and
-            ``tis_reference_of_callable``.
+            The fields (``incidences_deg`` [deg], ``wavelength_nm`` [nm], TIS values [-]), ``ok``,
+            ``committed`` and ``failed_path``, and the export's ``format``, ``path`` (the requested output),
+            ``sides``, ``size_bytes``, ``grid``, peak errors and ``tis_reference_of_callable``.
         """
         return {"source": self.source, "source_kind": self.source_kind, "format": self.export.format,
                 "path": self.export.path, "sides": list(self.export.sides),
                 "incidences_deg": list(self.incidences_deg), "tis_original": self.tis_original,
                 "tis_written": self.tis_written, "tis_reference_of_callable": self.export.tis_source,
                 "worst_relative_difference": self.worst_relative_difference, "tolerance": self.tolerance,
-                "ok": self.ok, "wavelength_nm": self.wavelength_nm, "notes": list(self.notes),
+                "ok": self.ok, "committed": self.committed, "failed_path": self.failed_path,
+                "wavelength_nm": self.wavelength_nm, "notes": list(self.notes),
                 "size_bytes": self.export.size_bytes, "grid": self.export.grid,
                 "peak_error": self.export.peak_error, "worst_peak_error": self.export.worst_peak_error}
 
@@ -200,7 +217,14 @@ def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
     # the sources here are NumPy reconstructions (the hemispherical engine, a phosphor scan's hemisphere): each
-    # direction's value is its own, so the grids evaluate them without padding
+    # direction's value is its own, so the grids evaluate them without padding; a basis file's cells stay cells
+    if all(isinstance(f, PiecewiseConstant) for f in fns.values()):
+        def exact(theta_i_deg: float, side: str) -> float:
+            tis = fns[side].exact_tis
+            return tis(theta_i_deg, side) if tis is not None else tis_reference(Pointwise(fns[side]), theta_i_deg, side)
+
+        bases = {f.basis for f in fns.values()}
+        return PiecewiseConstant(fn, exact, bases.pop() if len(bases) == 1 else None)
     return Pointwise(fn)
 
 
@@ -232,13 +256,14 @@ def _source_dataset(source: str | Path | xr.Dataset, asked: _Asked, table_option
     """The source as a calibrated dataset (a vendor file or text table ingested)."""
     if asked.kind in VENDOR_FORMATS:
         extra = {k: v for k, v in table_options.items() if v is not None}
+        face = extra.pop("face", None)  # the face of a BSDF XML file
         if extra or asked.band is not None or asked.interaction is not None:
             raise InputError("options apply to datasets and text tables, not to a vendor file", file=asked.label,
                              field=", ".join([*extra, *(["band"] if asked.band else []),
                                               *(["interaction"] if asked.interaction else [])]))
         # a vendor file is integrated and written through the same reconstruction as its ingested dataset:
         # what bsdfkit read and bsdfkit tis report for it is what the written table is checked against
-        return vendor_dataset(source, wavelength_nm=asked.wavelength)
+        return vendor_dataset(source, wavelength_nm=asked.wavelength, face=face)
     if isinstance(source, xr.Dataset):
         return source
     opts = {k: v for k, v in table_options.items() if v is not None}
@@ -273,13 +298,39 @@ def _source_fns(ds: xr.Dataset, asked: _Asked) -> _Sourced:
             and wavelength is not None:
         ds = ds.assign_coords(wavelength=[float(wavelength)])
     src = elastic_source(ds, use_sides, wavelength, asked.band)
-    for s in use_sides:
-        fns[s] = src.fn
+    # a file in an angle basis (every profile integrated by its basis sum) is piecewise constant: written as such
+    for s in use_sides:  # a file in an angle basis is written as piecewise constant, checked against its basis sum
+        fns[s] = PiecewiseConstant(src.fn, src.exact_tis, src.basis) if src.piecewise_constant else src.fn
         theta_sets.append(set(np.round(src.incidences_deg[s], 9)))
-    note = (f"values at {src.what}; reconstructed by the hemispherical engine "
-            "(bsdfkit.reduction.hemispherical: " + ", ".join(sorted(set(
-                m for ms in src.methods.values() for m in ms))) + ")")
+    if src.piecewise_constant:  # the file's own cells, not a reconstruction
+        note = (f"values at {src.what}; resampled from the file's own angle basis (exact cell lookup, each table "
+                "node the projected-solid-angle mean of the cells under it; no reconstruction)")
+    else:
+        note = (f"values at {src.what}; reconstructed by the hemispherical engine "
+                "(bsdfkit.reduction.hemispherical: " + ", ".join(sorted(set(
+                    m for ms in src.methods.values() for m in ms))) + ")")
     return _Sourced(fns, theta_sets, src.tis, src.incidences_deg, src.wavelength_nm, [note])
+
+
+def _back_face(source: Any, to: str, asked: _Asked, table_options: dict[str, Any], settings: ExportSettings,
+               sides: list[str]) -> tuple[Any, dict[str, dict[float, float]]] | None:
+    """The back face of a BSDF XML source that holds both faces, for a BSDF XML output that would otherwise lose
+    it: its BSDF callable (exact cell lookup) and its hemispherical values per side and incidence [-]; None when
+    the output is not BSDF XML, a face was chosen, the back is mirrored or the source holds one face."""
+    if to != "bsdfxml" or asked.kind != "bsdfxml" or table_options.get("face") is not None \
+            or settings.xml_back != "none" or settings.xml_back_fn is not None:
+        return None
+    try:
+        ds = vendor_dataset(source, wavelength_nm=asked.wavelength, face="back")
+    except InputError:  # no back face in the file
+        return None
+    if ds.attrs.get("faces_note", "").startswith("the file holds back-side blocks only"):
+        return None  # those are already the face written as the front
+    sourced = _source_fns(ds, _Asked(asked.label, asked.kind, "both", asked.wavelength, None, None))
+    if any(s not in sourced.fns for s in sides):
+        return None
+    values = {s: {round(t, 6): v for t, v in zip(sourced.src_t[s], sourced.engine_tis[s])} for s in sides}
+    return _dispatch({s: sourced.fns[s] for s in sides}), values
 
 
 def _written_sides_and_incidences(to: str, asked: _Asked, sourced: _Sourced,
@@ -343,9 +394,14 @@ def _worst_difference(tis_original: dict[str, list[float]], tis_written: dict[st
 def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: bool = False, *,
             side: str | None = None, wavelength_nm: float | None = None, band_nm: tuple[float, float] | None = None,
             interaction: str | None = None, theta_i_deg: Sequence[float] | None = None,
-            settings: ExportSettings | None = None, tolerance: float = 0.01,
+            settings: ExportSettings | None = None, tolerance: float = 0.01, keep_failed: bool = False,
             **table_options: Any) -> ConvertResult:
     """Write any readable source as a ``to`` (tracepro | zemax | asap) table and check its TIS.
+
+    The table is written to a hidden staging file in the output's folder, re-read and checked there, and moved to
+    ``path`` only when it passed (:class:`bsdfkit.io.atomic.StagedFile`). A table that fails its check never
+    stands at ``path`` and an earlier file there stays as it was, even with ``force``; the result says so
+    (``ok`` and ``committed`` False).
 
     Parameters
     ----------
@@ -368,7 +424,11 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         Further :class:`bsdfkit.tables.export.ExportSettings` (axes, grid, Zemax symmetry, TracePro options).
         Without settings the auto grid's TIS tolerance is half of ``tolerance`` (docs/exports.md, Grid resolution).
     tolerance
-        Largest accepted |TIS written / TIS original − 1| [-] (reported in the result; default 0.01).
+        Largest accepted |TIS written / TIS original − 1| [-] (default 0.01): a table beyond it is not committed.
+    keep_failed
+        Keep a table that failed its check as ``<stem>.failed-check<suffix>`` beside ``path``
+        (:func:`bsdfkit.io.atomic.failed_check_path`; checked like ``path`` before computing) instead of removing
+        it.
     **table_options
         Reader options for a text table or raw export, passed to :func:`ingest` (``None`` values dropped);
         refused for a vendor file.
@@ -376,38 +436,63 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     Returns
     -------
     ConvertResult
-        What was written and the TIS of the written table against the source's.
+        What was written (``committed``, ``failed_path``) and the TIS of the written table against the source's.
     """
     if to not in FORMATS:
         raise ValidationError("unknown target format", field="--to", expected=" | ".join(FORMATS), got=to)
     if side is not None and side not in ("reflection", "transmission", "both"):
         raise ValidationError("unknown side", field="--side", expected="reflection | transmission | both", got=side)
-    atomic.check_writable(path, force, inputs=[source] if isinstance(source, (str, Path)) else ())
-    if settings is None and 0.0 < tolerance < 2.0:  # the auto grid's TIS error: half of the check it must pass
-        settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)))
-    settings = settings or ExportSettings()
-    label = "dataset" if isinstance(source, xr.Dataset) else str(source)
-    kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
-    asked = _Asked(label, kind, side, wavelength_nm, band_nm, interaction)
-    sourced = _source_fns(_source_dataset(source, asked, table_options), asked)
-    fns, engine_tis, src_t, chosen_lambda = sourced.fns, sourced.engine_tis, sourced.src_t, sourced.chosen_lambda
-    sides, thetas = _written_sides_and_incidences(to, asked, sourced, theta_i_deg)
-    settings, settings_notes = _table_settings(settings, to, chosen_lambda, thetas, label)
-    notes = sourced.notes + settings_notes
-    result = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0], path,
-                    force, settings=settings)
-    dropped = [t for t in thetas if not any(abs(t - u) <= _MATCH_DEG for u in result.incidences_deg)]
-    if dropped:  # a format on its own incidences (BSDF XML: the Klems band centres) holds only some of them
-        notes.append(f"incidences not held by the {to} grid (not compared): " + ", ".join(f"{t:g}" for t in dropped))
-        thetas = [t for t in thetas if t not in dropped]
-    if engine_tis is not None:  # a dataset: what bsdfkit tis reports for it, at the written wavelength
-        tis_original = {s: [engine_tis[s][[round(u, 6) for u in src_t[s]].index(round(t, 6))] for t in thetas]
-                        for s in sides}
-    else:  # a phosphor interaction: the direct integral of its reconstruction
-        tis_original = {s: list(result.tis_source[s]) for s in sides}
-    read_thetas = list(result.incidences_deg)  # export re-read the written file as bsdfkit read does
-    tis_written = {s: [float(v) for v in result.tis_table[s]] for s in sides}
-    worst = _worst_difference(tis_original, tis_written, thetas, read_thetas)
-    return ConvertResult(source=label, source_kind=kind, export=result, incidences_deg=tuple(thetas),
-                         tis_original=tis_original, tis_written=tis_written, worst_relative_difference=worst,
-                         tolerance=float(tolerance), wavelength_nm=chosen_lambda, notes=tuple(notes))
+    inputs = [source] if isinstance(source, (str, Path)) else ()
+    failed = atomic.failed_check_path(path) if keep_failed else None
+    if failed is not None:  # a second possible output: refused before computing, as the first
+        atomic.check_writable(failed, force, inputs=inputs)
+    # the table is written, re-read and checked under a hidden name beside path, and takes the name only if it
+    # passed: a failed table never stands at path, and an earlier output there is replaced only by a checked one
+    with atomic.StagedFile(path, force, inputs=inputs) as staged:  # path checked here, before computing
+        if settings is None and 0.0 < tolerance < 2.0:  # the auto grid's TIS error: half of the check it must pass
+            settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)))
+        settings = settings or ExportSettings()
+        label = "dataset" if isinstance(source, xr.Dataset) else str(source)
+        kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
+        asked = _Asked(label, kind, side, wavelength_nm, band_nm, interaction)
+        sourced = _source_fns(_source_dataset(source, asked, table_options), asked)
+        fns, engine_tis, src_t, chosen_lambda = sourced.fns, sourced.engine_tis, sourced.src_t, sourced.chosen_lambda
+        sides, thetas = _written_sides_and_incidences(to, asked, sourced, theta_i_deg)
+        settings, settings_notes = _table_settings(settings, to, chosen_lambda, thetas, label)
+        notes = sourced.notes + settings_notes
+        back = _back_face(source, to, asked, table_options, settings, sides)
+        if back is not None:  # a BSDF XML file's back face, kept in a BSDF XML output
+            settings = replace(settings, xml_back_fn=back[0])
+            notes.append("the source's back face written as the Back blocks (its own values, not the front's)")
+        # force: the staging file is this process's own (path itself was checked above)
+        exported = export(_dispatch({s: fns[s] for s in sides}), to, "", "both" if len(sides) > 1 else sides[0],
+                          staged.path, True, settings=settings)
+        exported = replace(exported, path=str(path))  # named by the output it was written for, not its staging file
+        dropped = [t for t in thetas if not any(abs(t - u) <= _MATCH_DEG for u in exported.incidences_deg)]
+        if dropped:  # a format on its own incidences (BSDF XML: the Klems band centres) holds only some of them
+            notes.append(f"incidences not held by the {to} grid (not compared): "
+                         + ", ".join(f"{t:g}" for t in dropped))
+            thetas = [t for t in thetas if t not in dropped]
+        if engine_tis is not None:  # a dataset: what bsdfkit tis reports for it, at the written wavelength
+            tis_original = {s: [engine_tis[s][[round(u, 6) for u in src_t[s]].index(round(t, 6))] for t in thetas]
+                            for s in sides}
+        else:  # a phosphor interaction: the direct integral of its reconstruction
+            tis_original = {s: list(exported.tis_source[s]) for s in sides}
+        read_thetas = list(exported.incidences_deg)  # export re-read the written file as bsdfkit read does
+        tis_written = {s: [float(v) for v in exported.tis_table[s]] for s in sides}
+        if back is not None:  # the Back blocks are checked as the front ones, against the source's back face
+            reread = read_any(staged.path)
+            for s in sides:
+                tis_original[f"{s}@back"] = [back[1][s][round(t, 6)] for t in thetas]
+                tis_written[f"{s}@back"] = [reread.tis_computed[f"{s}@back"][int(np.argmin(np.abs(
+                    np.asarray(reread.incidences_deg) - t)))] for t in read_thetas]
+        worst = _worst_difference(tis_original, tis_written, thetas, read_thetas)
+        result = ConvertResult(source=label, source_kind=kind, export=exported, incidences_deg=tuple(thetas),
+                               tis_original=tis_original, tis_written=tis_written, worst_relative_difference=worst,
+                               tolerance=float(tolerance), wavelength_nm=chosen_lambda, notes=tuple(notes))
+        if result.ok:
+            staged.commit()
+            return result
+        kept = staged.keep_as(failed) if failed is not None else None
+        # not kept: the staged table is removed on leaving the block
+    return replace(result, committed=False, failed_path=None if kept is None else str(kept))

@@ -9,6 +9,9 @@ table node above the horizon into one record of the calibrated-dataset schema
 from __future__ import annotations
 
 import json
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +20,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bsdfkit.core import frames
-from bsdfkit.core.errors import FormatError, InputError
+from bsdfkit.core.errors import FormatError, InputError, StatedTisWarning
 from bsdfkit.measurement.table import (
     DEFAULT_RELATIVE_STD,
     ZERO_POLICIES,
@@ -30,9 +33,23 @@ from bsdfkit.measurement.table import (
 from bsdfkit.reduction import basis
 from bsdfkit.reduction.hemispherical import hemispherical, unique_rows
 from bsdfkit.tables import grids, registry
+from bsdfkit.tables.format_spec import FileSummary
 from bsdfkit.tables.registry import VendorGrid, VendorTable, sniff_format
 
-__all__ = ["sniff_format", "vendor_dataset"]
+__all__ = ["STATED_TIS_ATOL", "STATED_TIS_RTOL", "check_stated_tis", "sniff_format", "vendor_dataset"]
+
+#: Tolerance of :func:`check_stated_tis`: a file's stated TIS S and the integral I of its data disagree when
+#: |I - S| > STATED_TIS_RTOL * |S| AND |I - S| > STATED_TIS_ATOL (TIS is a fraction of the incident power, [-]).
+#: 10 % because the hemispherical engine and a vendor's own quadrature differ on coarse grids: the well-behaved
+#: Radiant Imaging Sphere Zemax file (tests/data/ansys-radiant-zemax-bsdf; 10 deg azimuth steps, radial nodes to
+#: 80 deg in 5-10 deg steps) integrates 0.9 % (15 deg) to 7.4 % (75 deg) above its stated TIS. 0.005 absolute so
+#: that a faint scatterer (stated TIS ~0.01, a few printed digits) is not flagged for quadrature noise.
+STATED_TIS_RTOL = 0.10
+STATED_TIS_ATOL = 0.005
+
+#: what bsdfkit does with a file whose stated TIS disagrees (part of the warning and of ``tis_stated_json``): the
+#: table is the BSDF; whether OpticStudio rescales a Zemax table to its TIS line is open (docs/exports.md §5)
+_STATED_TIS_ACTION = "bsdfkit uses the data as they are (not rescaled to the stated TIS)"
 
 
 #: kept under their old names for readers of this module
@@ -43,6 +60,108 @@ _Vendor = VendorTable
 def _read_vendor(path: str | Path, fmt: str | None = None) -> VendorTable:
     """The file's nodes in its native coordinates, by its format's registry hook (sniffed by content)."""
     return registry.get(fmt or sniff_format(path)).vendor_table(str(path))
+
+
+def _read_summary_and_vendor(path: str, table: VendorTable | None) -> tuple[FileSummary, VendorTable]:
+    """The file's summary (its stated TIS) and its nodes (``table`` when given), by one parse where the format
+    offers ``summary_and_table``."""
+    fmt = registry.get(sniff_format(path))
+    summary = None
+    if table is None and fmt.summary_and_table is not None:
+        summary, table = fmt.summary_and_table(path)
+    if table is None:
+        table = fmt.vendor_table(path)
+    return (summary if summary is not None else fmt.summarise(path)), table
+
+
+def check_stated_tis(summary: FileSummary, integrated: Mapping[str, Sequence[float]] | None = None, *,
+                     integral: str | None = None, skip: Sequence[str] = ()) -> dict[str, Any]:
+    """Compare a file's stated TIS with the integral of its data; warn when they disagree.
+
+    The one rule of every format that states a TIS (``FileSummary.tis_stated``: Zemax and ASAP-style per side
+    and incidence, LightTools per block, TracePro the total 1 - Abso - Refl - Tran): at each key and incidence
+    with both values finite, stated S and integrated I disagree when ``|I - S| > STATED_TIS_RTOL * |S|`` and
+    ``|I - S| > STATED_TIS_ATOL``. One :class:`bsdfkit.core.errors.StatedTisWarning` names the file, every
+    disagreeing key and incidence with both values, and what bsdfkit does: it keeps the data as they are. (A
+    format whose rule makes the table a shape scaled to the stated TIS, Speos, is scaled on reading,
+    ``VendorTable.normalise``; its keys are passed in ``skip``.)
+
+    Parameters
+    ----------
+    summary : FileSummary
+        The file's summary: path, format, incidences [deg] and ``tis_stated`` [-].
+    integrated : mapping of str to sequence of float, optional
+        Key -> integral of the data [-] per entry of ``summary.incidences_deg`` (default ``summary.tis_computed``,
+        the engine's values of :func:`bsdfkit.tables.export.read_any`). Keys missing here are not compared.
+    integral : str, optional
+        How ``integrated`` was computed (recorded; default ``summary.details['tis_rule']``).
+    skip : sequence of str
+        Keys not compared (the format scales their data to the stated TIS; all keys when ``summary.details`` has
+        a ``normalisation`` rule).
+
+    Returns
+    -------
+    dict
+        JSON-ready record: ``rule``, ``rtol`` and ``atol`` [-], ``integral``, ``action``, ``disagrees`` (bool) and
+        ``tis`` = key -> {``theta_i_deg`` [deg], ``stated`` [-], ``integrated`` [-], ``disagrees`` [bool]} (lists
+        over the incidences where both values are finite).
+    """
+    integrated = summary.tis_computed if integrated is None else integrated
+    if "normalisation" in summary.details:  # Speos: the table is a shape scaled to the stated TIS on reading
+        skip = tuple(summary.tis_stated)
+    rows: dict[str, dict[str, list]] = {}
+    bad: list[str] = []
+    for key, stated in summary.tis_stated.items():
+        got = integrated.get(key)
+        if got is None or key in skip:
+            continue
+        row: dict[str, list] = {"theta_i_deg": [], "stated": [], "integrated": [], "disagrees": []}
+        for theta, s, i in zip(summary.incidences_deg, stated, got):
+            s, i = float(s), float(i)
+            if not (np.isfinite(s) and np.isfinite(i)):  # a format may state the TIS at some incidences only
+                continue
+            diff = abs(i - s)
+            off = bool(diff > STATED_TIS_RTOL * abs(s) and diff > STATED_TIS_ATOL)
+            for name, value in (("theta_i_deg", float(theta)), ("stated", s), ("integrated", i), ("disagrees", off)):
+                row[name].append(value)
+            if off:
+                rel = f" ({100.0 * (i / s - 1.0):+.1f} %)" if s else ""
+                bad.append(f"{key} at theta_i {float(theta):g} deg: stated {s:.6g}, integrated {i:.4g}{rel}")
+        if row["theta_i_deg"]:
+            rows[key] = row
+    record = {"rule": "disagree when |integrated - stated| > rtol * |stated| and > atol",
+              "rtol": STATED_TIS_RTOL, "atol": STATED_TIS_ATOL,
+              "integral": integral or summary.details.get("tis_rule", "the format's own quadrature"),
+              "action": _STATED_TIS_ACTION, "disagrees": bool(bad), "tis": rows}
+    if bad:
+        warnings.warn(StatedTisWarning(
+            f"{summary.path}: the {summary.format} file's stated TIS disagrees with the integral of its data "
+            f"(by more than {100 * STATED_TIS_RTOL:g} % and {STATED_TIS_ATOL:g}): " + "; ".join(bad)
+            + f"; {_STATED_TIS_ACTION}", file=summary.path, details=record), stacklevel=2)
+    return record
+
+
+def _stated_tis_record(ds: xr.Dataset, vendor: VendorTable, summary: FileSummary, sides: list[str]) -> dict:
+    """:func:`check_stated_tis` of the ingested dataset ``ds`` (the ``sides`` chosen from ``vendor``): the
+    hemispherical engine on its records, as ``bsdfkit read`` and ``bsdfkit tis`` integrate them."""
+    scaled = set(vendor.normalise) | set(vendor.normalise_each)  # the format's rule: scaled to the stated TIS
+    back = "@back" if ds.attrs.get("face") == "back" else ""  # summary keys of a back face (FileSummary)
+    parts: dict[str, list[str]] = {}
+    for key in summary.tis_stated:
+        if key == "total":  # TracePro's energy balance: both sides, compared only when both were ingested
+            if not {g.side for g in vendor.grids} - set(sides):
+                parts[key] = list(sides)
+        elif key.removesuffix(back) in sides and (not back or key.endswith(back)) and key not in scaled:
+            parts[key] = [key.removesuffix(back)]
+    if not parts:  # other faces, sample rotations, one side of a TracePro total: nothing in ds to compare with
+        return check_stated_tis(summary, {}, skip=tuple(scaled))
+    need = sorted({s for p in parts.values() for s in p})
+    found = {(r.side, round(float(r.theta_i), 6)): float(r.band_average()["value"])
+             for r in hemispherical(ds, sides=tuple(need), errors=False)}
+    integrated = {key: [float(sum(found.get((s, round(float(t), 6)), 0.0) for s in p))
+                        for t in summary.incidences_deg] for key, p in parts.items()}
+    return check_stated_tis(summary, integrated, skip=tuple(scaled),
+                            integral="bsdfkit.reduction.hemispherical on the ingested records (as bsdfkit read/tis)")
 
 
 def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
@@ -75,8 +194,45 @@ def _grid_nodes(grid: _Grid, k: int) -> tuple[NDArray, NDArray, NDArray, NDArray
     return d / np.linalg.norm(d, axis=-1, keepdims=True), vals[inside], np.degrees(a2[inside]), perp
 
 
-def _chosen_grids(vendor: VendorTable, path: str, quantity: str | None, side: str | None) -> list:
-    """The file's grids of the side asked for (all without one), after checking ``quantity`` and ``side``."""
+FACES = ("front", "back")
+
+
+def chosen_face(vendor: VendorTable, path: str, face: str | None) -> tuple[str, str]:
+    """The face of the sample to read (``face``, else the front, else the only one) and a note for the dataset:
+    what else the file holds, never dropped in silence.
+
+    Parameters
+    ----------
+    vendor : VendorTable
+        The file's grids.
+    path : str
+        The file (named in errors).
+    face : str or None
+        ``front``, ``back`` or None (the default rule).
+
+    Returns
+    -------
+    tuple of str
+        The face and the note ('' when the file holds one face).
+    """
+    faces = [f for f in FACES if any(g.face == f for g in vendor.grids)]
+    if face is not None and face not in faces:
+        raise InputError("the file holds no data for this face", file=path, field="--face",
+                         expected=" or ".join(faces), got=face)
+    chosen = face or faces[0]
+    if faces == ["back"]:
+        return chosen, ("the file holds back-side blocks only (Radiance's own writers): they are read as the "
+                        "sample's face")
+    others = [f for f in faces if f != chosen]
+    return chosen, (f"the file also holds the {others[0]} face: ingest it with --face {others[0]}" if others else "")
+
+
+def _chosen_grids(vendor: VendorTable, path: str, quantity: str | None, side: str | None,
+                  face: str | None = None) -> list:
+    """The file's grids of the face and side asked for (all sides without one), after checking ``quantity``,
+    ``side`` and ``face``."""
+    face, _ = chosen_face(vendor, path, face)
+    vendor = replace(vendor, grids=tuple(g for g in vendor.grids if g.face == face))
     sides_in = [g.side for g in vendor.grids]
     if quantity is not None:
         q = normalise_quantity(quantity, field="--quantity")
@@ -107,7 +263,7 @@ def _checked_wavelength(stated: float | None, wavelength: float | None, path: st
 def _node_columns(chosen: list) -> dict[str, list]:
     """Per unique node above the horizon of the chosen grids: incidence, direction [deg], side, value, arc and
     basis solid angle (columns of lists)."""
-    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc", "psa")}
+    cols: dict[str, list] = {k: [] for k in ("theta_i", "theta_s", "phi_s", "side", "value", "arc", "psa", "cell")}
     for grid in chosen:
         for k, theta in enumerate(grid.theta_i):
             d, v, _, perp = _grid_nodes(grid, k)
@@ -119,6 +275,7 @@ def _node_columns(chosen: list) -> dict[str, list]:
             cols["psa"] += _merged_solid_angle(grid, k, first, np.asarray(inverse).ravel())
             order = np.argsort(first)
             first = first[order]
+            cols["cell"] += (np.asarray(grid.cell[k])[first].tolist() if grid.cell is not None else [-1] * first.size)
             arcs = _arc_of(theta, th_deg[first], ph_deg[first], perp[first])
             cols["theta_i"] += [float(theta)] * first.size
             cols["theta_s"] += th_deg[first].tolist()
@@ -131,7 +288,8 @@ def _node_columns(chosen: list) -> dict[str, list]:
 
 def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | None = None,
                    relative_std: float | None = None, *, wavelength_nm: float | None = None, zeros: str = "keep",
-                   sample: str | None = None, table: VendorTable | None = None) -> xr.Dataset:
+                   sample: str | None = None, table: VendorTable | None = None, face: str | None = None
+                   ) -> xr.Dataset:
     """A Zemax, TracePro (Scatter 5) or ASAP-style table as a calibrated BSDF dataset.
 
     Parameters
@@ -152,6 +310,9 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
         Sample name stored in ``attrs['sample_name']`` (default: the file name without its suffix).
     table
         The file's nodes when already read by its format's registry hook (not read again).
+    face
+        ``front`` or ``back``: the face of a file that holds both (BSDF XML); default the front (a file with back
+        blocks only: those). The dataset's ``face`` attribute names it, ``faces_note`` what else the file holds.
 
     Returns
     -------
@@ -163,7 +324,8 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if zeros not in ZERO_POLICIES:
         raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
     vendor = table if table is not None else _read_vendor(path)
-    chosen = _chosen_grids(vendor, path, quantity, side)
+    chosen = _chosen_grids(vendor, path, quantity, side, face)
+    face, faces_note = chosen_face(vendor, path, face)
     lam = _checked_wavelength(vendor.wavelength_nm, wavelength_nm, path)
     rel = DEFAULT_RELATIVE_STD if relative_std is None else float(relative_std)
     if not (np.isfinite(rel) and rel > 0):
@@ -191,15 +353,48 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if all(g.solid_angle is not None for g in chosen):
         ds = ds.assign_coords({basis.COORD: ("record", np.asarray(pick("psa"), dtype=np.float64))})
         ds[basis.COORD].attrs.update(units="sr", long_name="projected solid angle of the basis cell of the record")
+    specs = {g.basis for g in chosen}
+    if all(g.cell is not None for g in chosen) and len(specs) == 1 and None not in specs:
+        ds = ds.assign_coords({basis.CELL_COORD: ("record", np.asarray(pick("cell"), dtype=np.int64))})
+        ds[basis.CELL_COORD].attrs.update(long_name="index of the basis cell the record lies in",
+                                          basis=specs.pop())
     ds.attrs.update(source_format=vendor.format, source_layout=vendor.grids[0].kind,
                     source_quantity=" ".join("brdf" if g.side == "reflection" else "btdf" for g in chosen),
-                    sample_name=sample or Path(path).stem, zeros_policy=zeros, relative_std=rel,
+                    sample_name=sample or Path(path).stem, zeros_policy=zeros, relative_std=rel, face=face,
+                    faces_note=faces_note,
                     gap_records_dropped=int((~keep).sum()),
-                    manifest_json=_json({"format": vendor.format, "details": vendor.details,
+                    manifest_json=_json({"format": vendor.format, "details": dict(vendor.details, face=face,
+                                                                                  note=faces_note),
                                          "reader": "bsdfkit.tables.to_dataset"}))
     if lam is None:
         ds.attrs["wavelength_note"] = "not stated by the file; pass --wavelength NM (NaN = unknown)"
     return _normalised(ds, vendor, path)
+
+
+def checked_vendor_dataset(path: str | Path, **options: Any) -> xr.Dataset:
+    """:func:`vendor_dataset`, with the TIS the file states compared with the hemispherical integral of the
+    ingested records (:func:`check_stated_tis`: a :class:`bsdfkit.core.errors.StatedTisWarning` when they disagree;
+    the data are kept as they are) and both recorded in ``attrs['tis_stated_json']``: what ``ingest`` does. The
+    TIS checks of ``read``, ``convert`` and ``export`` integrate the dataset themselves.
+
+    Parameters
+    ----------
+    path
+        The vendor file.
+    **options
+        The keyword options of :func:`vendor_dataset` (``table`` excepted: the file is read here, once where its
+        format can give its summary and nodes in one parse).
+
+    Returns
+    -------
+    xarray.Dataset
+        The dataset of :func:`vendor_dataset`, with ``attrs['tis_stated_json']``.
+    """
+    summary, vendor = _read_summary_and_vendor(str(path), None)
+    ds = vendor_dataset(path, table=vendor, **options)
+    chosen = _chosen_grids(vendor, str(path), options.get("quantity"), options.get("side"), options.get("face"))
+    ds.attrs["tis_stated_json"] = _json(_stated_tis_record(ds, vendor, summary, [g.side for g in chosen]))
+    return ds
 
 
 def _merged_solid_angle(grid: _Grid, k: int, first: NDArray[np.int64], inverse: NDArray[np.int64]) -> list[float]:

@@ -845,7 +845,7 @@ def classify(case: Case, code: int | None, err: str) -> str:
         return "partial" if missing else "ok"
     if code == 1 and len(lines) == 1 and lines[0].startswith("bsdfkit convert: TIS check failed"):
         # convert's designed result for a table whose TIS the target grid cannot hold (docs/exports.md): the
-        # file is written and the check reported, for the original file as for its re-encodings
+        # check reported and the table not moved to the output path, for the original file as for its re-encodings
         return "ok" if case.expect in ("ok", "either") else "error"
     if code == 2 and len(lines) == 1 and ": error: " in lines[0]:
         if any(p.exists() for p in case.outputs) and case.expect == "error":

@@ -142,4 +142,5 @@ def test_signal_exit_releases_semaphores_so_stderr_is_one_line(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 143, err
-    assert err.strip().splitlines() == ["bsdfkit: terminated; unfinished outputs removed"], err
+    # nothing was being written: the message says so (issue #44.9: an interrupt after a commit said "removed")
+    assert err.strip().splitlines() == ["bsdfkit: terminated; no unfinished output (what was written is complete)"], err

@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.text import is_float, read_text
-from bsdfkit.reduction.basis import basis_sum
+from bsdfkit.reduction.basis import basis_sum, klems_spec, shirley_chiu_spec
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
 from bsdfkit.tables.formats import bsdfxml_tree as bt
@@ -228,7 +228,7 @@ def _direction(beta: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[str, ...], *,
                basis: KlemsBasis = KLEMS_FULL, wavelength_nm: float | None = None, back: str = "none",
-               comments: tuple[str, ...] = ()) -> KlemsBsdf:
+               comments: tuple[str, ...] = (), back_fn: grids.BsdfFn | None = None) -> KlemsBsdf:
     """Klems matrices of a BSDF callable (see the module docstring for the rules), each patch averaged over its
     :data:`SUB_SAMPLES` × :data:`SUB_SAMPLES` sub-samples.
 
@@ -246,6 +246,8 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
         The single wavelength of the ``Visible`` block [nm] (None: unknown, written as ``nan``).
     back
         ``none`` or ``mirror`` (Back blocks = Front blocks).
+    back_fn : callable, optional
+        The back face's BSDF [1/sr], written as the Back blocks (with ``back`` = ``none``).
     comments
         Comment lines written into the file.
 
@@ -261,23 +263,33 @@ def klems_bsdf(fn: grids.BsdfFn, theta_deg: NDArray[np.float64], sides: tuple[st
         raise ValidationError("unknown back-side rule", field="xml_back", expected="none or mirror", got=back)
     centres = basis.centres_deg
     chosen = np.array([theta[int(np.argmin(np.abs(theta - c)))] for c in centres])
-    beta, weights = _patch_nodes(basis, SUB_SAMPLES)
-    band, phi_c = basis.patches()
     blocks: dict[str, NDArray[np.float64]] = {}
     for side in sides:
-        m = np.zeros((basis.size, basis.size))
-        for j in range(basis.size):
-            a = np.radians(phi_c[j])
-            c, s = np.cos(a), np.sin(a)
-            # rotate the outgoing sub-samples by -phi_j: the source's plane of incidence
-            rot = np.stack([c * beta[..., 0] + s * beta[..., 1], -s * beta[..., 0] + c * beta[..., 1]], axis=-1)
-            values = grids.evaluate_bsdf(fn, float(chosen[band[j]]), side, _direction(rot))
-            m[:, j] = np.sum(values * weights, axis=-1)
-        blocks[f"{side.capitalize()} Front"] = m
+        blocks[f"{side.capitalize()} Front"] = _klems_matrix(fn, chosen, side, basis)
     if back == "mirror":
         for side in sides:
             blocks[f"{side.capitalize()} Back"] = blocks[f"{side.capitalize()} Front"].copy()
+    if back_fn is not None:  # the back face's own BSDF (a source file's Back blocks)
+        for side in sides:
+            blocks[f"{side.capitalize()} Back"] = _klems_matrix(back_fn, chosen, side, basis)
     return KlemsBsdf(basis, blocks, wavelength_nm, "bsdfkit", tuple(comments), tuple(float(t) for t in chosen))
+
+
+def _klems_matrix(fn: grids.BsdfFn, chosen: NDArray[np.float64], side: str, basis: KlemsBasis
+                  ) -> NDArray[np.float64]:
+    """One (outgoing, incident) matrix [1/sr]: each patch the mean of ``fn`` at its sub-samples, incident band b at
+    the source incidence ``chosen[b]`` [deg]."""
+    beta, weights = _patch_nodes(basis, SUB_SAMPLES)
+    band, phi_c = basis.patches()
+    m = np.zeros((basis.size, basis.size))
+    for j in range(basis.size):
+        a = np.radians(phi_c[j])
+        c, s = np.cos(a), np.sin(a)
+        # rotate the outgoing sub-samples by -phi_j: the source's plane of incidence
+        rot = np.stack([c * beta[..., 0] + s * beta[..., 1], -s * beta[..., 0] + c * beta[..., 1]], axis=-1)
+        values = grids.evaluate_bsdf(fn, float(chosen[band[j]]), side, _direction(rot))
+        m[:, j] = np.sum(values * weights, axis=-1)
+    return m
 
 
 def xml_text(bsdf: KlemsBsdf, generated_at: datetime | None = None) -> str:
@@ -363,14 +375,23 @@ def _line_of(text: str, needle: str) -> int:
     return 0 if k < 0 else text.count("\n", 0, k) + 1
 
 
+def _xml_start(text: str) -> int:
+    """Where the XML document begins: after the lines genBSDF writes before it ("Recover using: genBSDF -recover
+    …"), which Radiance's loader skips too; 0 for a file that starts with its XML."""
+    k = text.find("<")
+    return k if k > 0 and "<" not in text[:k] else 0
+
+
 def _open_layer(path: str) -> tuple[str, ET.Element]:
     """The file's text and its ``Optical/Layer`` element (one-line :class:`FormatError` otherwise)."""
     text = read_text(path, expected="a BSDF XML file")
+    start = _xml_start(text)
     try:
-        root = ET.fromstring(text)
+        root = ET.fromstring(text[start:])
     except ET.ParseError as exc:
         raise FormatError(f"not well-formed XML ({exc.msg if hasattr(exc, 'msg') else exc})", file=path,
-                          line=exc.position[0], field="XML", expected="a BSDF XML document") from None
+                          line=exc.position[0] + text.count("\n", 0, start), field="XML",
+                          expected="a BSDF XML document") from None
     if _local(root.tag) != "WindowElement":
         raise FormatError("not a BSDF XML file", file=path, line=1, field="root element",
                           expected="WindowElement", got=_local(root.tag))
@@ -450,6 +471,9 @@ def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element 
     size = basis.size
     blocks: dict[str, NDArray[np.float64]] = {}
     labels: list[str] = []
+    present = [_text(_child(wld, "Wavelength")) for wld in _children(layer, "WavelengthData")]
+    # one spectral block, never a mix: Visible (what Radiance reads) when the file has it, else the first
+    chosen = next((lb for lb in present if lb.lower() == "visible"), present[0] if present else "")
     for wld in _children(layer, "WavelengthData"):
         label = _text(_child(wld, "Wavelength"))
         for block in _children(wld, "WavelengthDataBlock"):
@@ -457,7 +481,7 @@ def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element 
             if direction not in _DIRECTIONS:
                 raise FormatError("unknown data direction", file=path, line=_line_of(text, "WavelengthDataDirection"),
                                   field="WavelengthDataDirection", expected=" | ".join(_DIRECTIONS), got=direction)
-            if label.lower() != "visible" and any(lb.lower() == "visible" for lb in labels + [label]):
+            if label != chosen:
                 continue
             raw = _text(_child(block, "ScatteringData"))
             tokens = [t for t in re.split(r"[,\s]+", raw) if t]
@@ -481,7 +505,8 @@ def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element 
     if not blocks:
         raise FormatError("no scattering data", file=path, field="WavelengthData", expected="a WavelengthDataBlock")
     lam, mat_name = _wavelength_and_name(path, text, layer)
-    return KlemsBsdf(basis, blocks, lam, mat_name, details={"wavelength_label": labels[0] if labels else "",
+    return KlemsBsdf(basis, blocks, lam, mat_name, details={"wavelength_label": chosen,
+                                                             "wavelength_labels_in_file": sorted(set(present)),
                                                              "incident_data_structure": structure})
 
 
@@ -502,6 +527,10 @@ def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
     data_starts = [m.end() for m in re.finditer(r"<ScatteringData\b[^>]*>", text)]
     trees: dict[str, tensortree.TensorTree] = {}
     labels: list[str] = []
+    present = [_text(_child(wld, "Wavelength")) for wld in _children(layer, "WavelengthData")]
+    bsdf_labels = [lb for lb in present if lb.lower() not in _CHROMA]
+    # one spectral block, never a mix: Visible (what Radiance reads) when the file has it, else the first BSDF one
+    chosen = next((lb for lb in bsdf_labels if lb.lower() == "visible"), bsdf_labels[0] if bsdf_labels else "")
     k = -1
     for wld in _children(layer, "WavelengthData"):
         label = _text(_child(wld, "Wavelength"))
@@ -511,8 +540,7 @@ def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
             if direction not in _DIRECTIONS:
                 raise FormatError("unknown data direction", file=path, line=_line_of(text, "WavelengthDataDirection"),
                                   field="WavelengthDataDirection", expected=" | ".join(_DIRECTIONS), got=direction)
-            if label.lower() in _CHROMA or (label.lower() != "visible"
-                                            and any(lb.lower() == "visible" for lb in labels + [label])):
+            if label != chosen:
                 continue
             basis_name = _text(_child(block, "AngleBasis"))
             if basis_name.lower() != "lbnl/shirley-chiu":
@@ -533,7 +561,8 @@ def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
         raise FormatError("no scattering data", file=path, field="WavelengthData",
                           expected="a WavelengthDataBlock with a Visible tensor tree")
     lam, name = _wavelength_and_name(path, text, layer)
-    return TreeBsdf(ndim, trees, lam, name, details={"wavelength_label": labels[0],
+    return TreeBsdf(ndim, trees, lam, name, details={"wavelength_label": chosen,
+                                                     "wavelength_labels_in_file": sorted(set(present)),
                                                      "incident_data_structure": f"TensorTree{ndim}"})
 
 
@@ -544,6 +573,10 @@ def _basis_rule(job: WriteJob) -> str:
     basis = job.settings.xml_basis
     if basis != "auto":
         return f"{basis}: --xml-basis {basis}"
+    source_basis = getattr(job.fn, "basis", None)  # a file's own basis is kept: its cells are not lobes
+    if isinstance(job.fn, grids.PiecewiseConstant) and source_basis:
+        kind = "tree" if source_basis.startswith("shirley-chiu") else "klems"
+        return f"{kind}: the source is a {'tensor tree' if kind == 'tree' else 'Klems'} file (its own basis kept)"
     width = bt.narrowest_lobe_deg(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides))
     if width is None:
         return "klems: no specular lobe"
@@ -558,7 +591,8 @@ def _write_job(job: WriteJob) -> WriteOutcome:
     if rule.startswith("tree"):
         return bt.write_tree_job(job, rule)
     bsdf = klems_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
-                      wavelength_nm=settings.wavelength_nm, back=settings.xml_back, comments=job.comments)
+                      wavelength_nm=settings.wavelength_nm, back=settings.xml_back, comments=job.comments,
+                      back_fn=settings.xml_back_fn)
     write_bsdfxml(job.path, bsdf, force=job.force, generated_at=job.generated_at)
     return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)", "basis_rule": rule,
                                "klems_incidence_map_deg": dict(zip([float(c) for c in KLEMS_FULL.centres_deg],
@@ -576,15 +610,53 @@ def _summarise(path: str) -> FileSummary:
         return _summarise_tree(path, bsdf)
     theta = [float(t) for t in bsdf.basis.centres_deg]
     computed = {_key(d): [float(v) for v in bsdf.band_tis(d)] for d in _DIRECTIONS if d in bsdf.blocks}
+    spread = klems_anisotropy(bsdf)
+    notes = [] if spread <= ANISOTROPY_RTOL else [
+        f"anisotropic: the hemispherical values of the incident patches of one band differ by up to "
+        f"{100 * spread:.3g} %; the values are those of the incident patch at Klems azimuth 0, bsdfkit's plane of "
+        "incidence (Radiance: direct_hemi(sd, 180 - theta, 180) on the front, (theta, 180) on the back)"]
     return FileSummary(
         format="bsdfxml", path=path, incidences_deg=theta, tis_computed=computed, tis_stated={},
         details={"basis": bsdf.basis.name, "patches": bsdf.basis.size, "blocks": list(bsdf.blocks),
-                 "wavelength_nm": bsdf.wavelength_nm, **bsdf.details,
+                 "wavelength_nm": bsdf.wavelength_nm, **bsdf.details, "anisotropy": spread,
+                 "azimuth_convention": "incidence theta = the Klems incident patch (theta, azimuth 0) = Radiance's "
+                                       "front direction (180 - theta, 180)", "notes": notes,
                  "tis_rule": "the file's own direct-hemispherical value sum_out f * Lambda at the azimuth-0 patch of "
                              "each incident band (as Radiance computes it): a Klems matrix holds patch averages, "
                              "whose integral is exactly this sum (the basis sum `bsdfkit tis` also uses on the "
                              "ingested file)"},
     )
+
+
+#: Relative spread of the hemispherical values over the incident azimuths of a band above which a Klems file is
+#: reported as anisotropic (the Monte Carlo noise of bsdf2klems' isotropic files is about 1e-4)
+ANISOTROPY_RTOL = 1e-3
+
+
+def klems_anisotropy(bsdf: KlemsBsdf) -> float:
+    """The largest relative spread (max − min)/max of the hemispherical value Σ_out f Λ over the incident patches
+    of one theta band, over the bands and blocks [-]: 0 for a file isotropic about its normal.
+
+    Parameters
+    ----------
+    bsdf : KlemsBsdf
+        The file's matrices [1/sr].
+
+    Returns
+    -------
+    float
+        The spread [-].
+    """
+    band, _ = bsdf.basis.patches()
+    lam = bsdf.basis.lambdas()
+    worst = 0.0
+    for m in bsdf.blocks.values():
+        tis = basis_sum(m, lam)  # per incident patch
+        for b in np.unique(band):
+            v = tis[band == b]
+            if v.size > 1 and v.max() > 0:
+                worst = max(worst, float((v.max() - v.min()) / v.max()))
+    return worst
 
 
 def _summarise_tree(path: str, bsdf: TreeBsdf) -> FileSummary:
@@ -608,15 +680,8 @@ def _summarise_tree(path: str, bsdf: TreeBsdf) -> FileSummary:
 INGEST_NODES = 2
 
 
-def _ingest_directions(present: list[str]) -> tuple[list[str], str]:
-    """The blocks ingest reads: the front ones, or the back ones when the file holds nothing else (Radiance's own
-    tools write the back blocks, Radiance's +Z side, only)."""
-    front = [d for d in ("Reflection Front", "Transmission Front") if d in present]
-    if front:
-        return front, ""
-    back = [d for d in ("Reflection Back", "Transmission Back") if d in present]
-    return back, ("the file holds back-side blocks only (Radiance's own writers): they are read as the sample's "
-                  "face" if back else "")
+def _face_of(direction: str) -> str:
+    return "back" if direction.endswith("Back") else "front"
 
 
 def _klems_grids(bsdf: KlemsBsdf, directions: list[str]) -> list[VendorGrid]:
@@ -627,13 +692,16 @@ def _klems_grids(bsdf: KlemsBsdf, directions: list[str]) -> list[VendorGrid]:
     phi_s = np.mod(np.degrees(np.arctan2(beta[..., 1], beta[..., 0])).ravel(), 360.0)
     first = np.concatenate([[0], np.cumsum(bsdf.basis.n_phi)[:-1]])
     psa = np.repeat(bsdf.basis.lambdas() / (n * n), n * n)
+    cells = np.repeat(np.arange(bsdf.basis.size), n * n)
+    spec = klems_spec(bsdf.basis.edges_deg, bsdf.basis.n_phi)
     out = []
     for direction in directions:
         m = bsdf.blocks[direction]
         # the source at azimuth 180 in bsdfkit's frame: incident patch (theta_b, 0), outgoing patches as they are
         out.append(VendorGrid("directions", _side_of(direction), bsdf.basis.centres_deg.copy(), theta_s, phi_s,
                               np.stack([np.repeat(m[:, j], n * n) for j in first]),
-                              solid_angle=np.tile(psa, (first.size, 1))))
+                              solid_angle=np.tile(psa, (first.size, 1)), cell=np.tile(cells, (first.size, 1)),
+                              basis=spec, face=_face_of(direction)))
     return out
 
 
@@ -648,27 +716,28 @@ def _tree_grids(bsdf: TreeBsdf, directions: list[str]) -> list[VendorGrid]:
         phi_s = np.mod(np.degrees(np.arctan2(by, bx)), 360.0)
         values = np.stack([tree.out_grid(t, m).ravel() for t in theta])
         out.append(VendorGrid("directions", _side_of(direction), theta.copy(), theta_s, phi_s, values,
-                              solid_angle=np.full(values.shape, np.pi / (m * m))))
+                              solid_angle=np.full(values.shape, np.pi / (m * m)),
+                              cell=np.tile(np.arange(m * m), (theta.size, 1)), basis=shirley_chiu_spec(m),
+                              face=_face_of(direction)))
     return out
 
 
 def _vendor_table(path: str) -> VendorTable:
     bsdf = read_bsdfxml(path)
     tree = isinstance(bsdf, TreeBsdf)
-    directions, note = _ingest_directions(list(bsdf.trees if tree else bsdf.blocks))
+    present = list(bsdf.trees if tree else bsdf.blocks)
+    directions = [d for d in _DIRECTIONS if d in present]  # both faces: ingest chooses one (vendor_dataset)
     if not directions:
         raise FormatError("the file holds no reflection or transmission block", file=path,
                           field="WavelengthDataDirection", expected="Reflection or Transmission, Front or Back")
     grids_ = _tree_grids(bsdf, directions) if tree else _klems_grids(bsdf, directions)
     details = {"basis": f"LBNL/Shirley-Chiu tensor tree (TensorTree{bsdf.ndim})" if tree else bsdf.basis.name,
                "blocks_read": directions}
-    if note:
-        details["note"] = note
     return VendorTable("bsdfxml", tuple(grids_), bsdf.wavelength_nm, details)
 
 
 def _guess_can_open(head: str, path: Path) -> bool:
-    body = re.sub(r"<\?xml[^>]*\?>|<!--.*?-->", "", head, flags=re.S).lstrip()
+    body = re.sub(r"<\?xml[^>]*\?>|<!--.*?-->", "", head[_xml_start(head):], flags=re.S).lstrip()
     return body.startswith("<WindowElement") or (body.startswith("<") and "<WindowElement" in head[:2048])
 
 

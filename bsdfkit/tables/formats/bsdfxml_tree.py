@@ -200,6 +200,10 @@ def write_tree_job(job: WriteJob, rule: str) -> WriteOutcome:
     mapping = _incidence_map(list(blocks.values()), held, n)
     if job.settings.xml_back == "mirror":
         blocks.update({d.replace("Front", "Back"): t for d, t in list(blocks.items())})
+    if job.settings.xml_back_fn is not None:  # the back face's own BSDF (a source file's Back blocks)
+        for side in job.sides:
+            blocks[f"{side.capitalize()} Back"] = tensortree.tree_text(tree_grids(job.settings.xml_back_fn, theta,
+                                                                                  side)[0])
     note = ", ".join(f"{c:g}<-{t:g}" for c, t in mapping.items())
     comments = (f"bsdfkit incidence read <- source incidence [deg]: {note}", *job.comments)
     atomic.write_text(job.path, tree_xml_text(blocks, "bsdfkit", job.settings.wavelength_nm, comments,

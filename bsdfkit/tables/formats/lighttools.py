@@ -92,10 +92,9 @@ def lighttools_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: t
     rad, az = axes if axes is not None else normal_axes.fixed_normal_axes()
     rad = np.asarray(rad, dtype=np.float64)
     az = np.sort(np.mod(np.round(np.asarray(az, dtype=np.float64) - 90.0, 9), 360.0))  # the LightTools frame
-    d = normal_axes.normal_directions(rad, az + 90.0)  # (azimuth, radial, 3), bsdfkit's azimuth
     blocks = {}
     for side in sides:
-        values = np.stack([grids.evaluate_bsdf(fn, float(t), side, d) for t in theta_i])
+        values = np.stack([normal_axes.node_values(fn, float(t), side, rad, az + 90.0) for t in theta_i])
         tis = np.array([grids.tis_reference(fn, float(t), side) for t in theta_i])
         blocks[("Front", side)] = (theta_i, values, tis)
     return LightToolsBsdf(az, rad, blocks, wavelength_nm)

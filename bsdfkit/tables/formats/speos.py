@@ -133,10 +133,10 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
         Tables [1/sr] and the spectrum (incidence [deg], TIS in per cent).
     """
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
-    theta, phi, d = speos_nodes(axes)
+    theta, phi, _ = speos_nodes(axes)
     tables, spectrum = {}, {}
     for side in sides:
-        tables[side] = np.stack([grids.evaluate_bsdf(fn, float(t), side, d) for t in theta_i])
+        tables[side] = np.stack([normal_axes.node_values(fn, float(t), side, theta, phi).T for t in theta_i])
         spectrum[side] = (float(theta_i[0]), 100.0 * grids.tis_reference(fn, float(theta_i[0]), side))
     return SpeosBsdf({s: theta_i for s in sides}, {s: theta for s in sides}, {s: phi for s in sides}, tables,
                      spectrum, comment=f"bsdfkit {__version__}" + (f" wavelength_nm={wavelength_nm:g}"

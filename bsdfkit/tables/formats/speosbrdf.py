@@ -102,10 +102,10 @@ def speos_brdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
         Tables [1/sr] and percentages (100 × TIS).
     """
     theta_i = np.asarray(theta_i_deg, dtype=np.float64)
-    theta, phi, d = speos_nodes(axes)
+    theta, phi, _ = speos_nodes(axes)
     tables, percent = {}, {}
     for side in sides:
-        tables[side] = np.stack([grids.evaluate_bsdf(fn, float(t), side, d) for t in theta_i])[:, None]
+        tables[side] = np.stack([normal_axes.node_values(fn, float(t), side, theta, phi).T for t in theta_i])[:, None]
         percent[side] = np.array([[100.0 * grids.tis_reference(fn, float(t), side)] for t in theta_i])
     lam = np.array([550.0 if wavelength_nm is None else float(wavelength_nm)])
     return SpeosBrdf(theta_i, lam, theta, phi, tables, percent, comment=f"bsdfkit {__version__}")

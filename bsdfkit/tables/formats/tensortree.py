@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.reduction.basis import basis_sum
+from bsdfkit.reduction.basis import basis_sum, disk_to_square, square_to_disk
 
 __all__ = ["TensorTree", "TreeSyntaxError", "disk_to_square", "grid_directions", "incidences_deg", "parse_tree",
            "square_to_disk"]
@@ -199,52 +199,6 @@ def grid_directions(m: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     c = (np.arange(m) + 0.5) / m
     a, b = np.meshgrid(c, c, indexing="ij")
     return square_to_disk(a.ravel(), b.ravel())
-
-
-def square_to_disk(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Shirley–Chiu concentric map of the unit square onto the unit disk (area preserving up to the factor π).
-
-    Parameters
-    ----------
-    a, b : ndarray
-        Points of the unit square [-].
-
-    Returns
-    -------
-    x, y : ndarray
-        Points of the unit disk [-].
-    """
-    u, v = 2.0 * np.asarray(a, dtype=np.float64) - 1.0, 2.0 * np.asarray(b, dtype=np.float64) - 1.0
-    first = np.abs(u) > np.abs(v)  # the wedges about the x axis
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.where(first, u, v)
-        phi = np.where(first, np.pi / 4 * v / u, np.pi / 2 - np.pi / 4 * u / v)
-    phi = np.where(r == 0.0, 0.0, phi)
-    return r * np.cos(phi), r * np.sin(phi)
-
-
-def disk_to_square(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Inverse of :func:`square_to_disk`: unit-disk points to the unit square.
-
-    Parameters
-    ----------
-    x, y : ndarray
-        Points of the unit disk [-].
-
-    Returns
-    -------
-    a, b : ndarray
-        Points of the unit square [-].
-    """
-    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    r = np.hypot(x, y)
-    phi = np.arctan2(y, x)
-    phi = np.where(phi < -np.pi / 4, phi + 2 * np.pi, phi)  # in [-pi/4, 7pi/4)
-    q = np.floor((phi + np.pi / 4) / (np.pi / 2)).astype(int) % 4  # wedge: +x, +y, -x, -y
-    t = (phi - q * np.pi / 2) / (np.pi / 4)  # in [-1, 1) within the wedge
-    a = np.select([q == 0, q == 1, q == 2], [r, -t * r, -r], t * r)
-    b = np.select([q == 0, q == 1, q == 2], [t * r, r, -t * r], -r)
-    return 0.5 * (a + 1.0), 0.5 * (b + 1.0)
 
 
 class TreeSyntaxError(ValueError):

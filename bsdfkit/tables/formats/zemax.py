@@ -27,7 +27,7 @@ channels are not supported (FormatError).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -446,6 +446,16 @@ def _write_job(job: WriteJob) -> WriteOutcome:
     """One ScatterType per file; PlaneSymmetrical writes the mirror average of the source (refused when the
     source deviates from plane symmetry by more than ``settings.symmetry_tolerance``)."""
     settings = job.settings
+    if settings.zemax_symmetry == "auto":  # the source's own symmetry: PlaneSymmetrical when it has it
+        try:
+            return _write_job(replace(job, settings=replace(settings, zemax_symmetry="PlaneSymmetrical")))
+        except ValidationError as exc:
+            if exc.field != "zemax_symmetry":
+                raise
+        outcome = _write_job(replace(job, settings=replace(settings, zemax_symmetry="Asymmetrical")))
+        outcome.grid["symmetry"] = (f"Asymmetrical (the source deviates from plane symmetry by more than "
+                                    f"{settings.symmetry_tolerance:g} of the block maximum)")
+        return outcome
     axes, info = axes_choice.specular_axes(job.fn, job.theta, job.sides, settings)
     deviation = None
     if settings.zemax_symmetry == "PlaneSymmetrical":
@@ -459,7 +469,10 @@ def _write_job(job: WriteJob) -> WriteOutcome:
 
 
 def _summarise(path: str) -> FileSummary:
-    bsdf = read_zemax(path)
+    return _summary(read_zemax(path), path)
+
+
+def _summary(bsdf: ZemaxBsdf, path: str) -> FileSummary:
     computed, stated = bsdf.tis_computed(), bsdf.tis_stated
     rotations = _as_floats(bsdf.table["sample_rotation"].values)
     keys = [bsdf.side] if len(rotations) == 1 else [f"{bsdf.side}@rotation={r:g}" for r in rotations]
@@ -473,7 +486,18 @@ def _summarise(path: str) -> FileSummary:
 
 
 def _vendor_table(path: str) -> VendorTable:
+    return _nodes(read_zemax(path), path)
+
+
+def _summary_and_table(path: str) -> tuple[FileSummary, VendorTable | None]:
+    """Summary (with the stated TIS) and nodes from one parse: ``bsdfkit read`` and the stated-TIS check of
+    ``ingest`` (:func:`bsdfkit.tables.vendor.check_stated_tis`) need both, and a large file takes a while to parse.
+    No nodes (None) for several sample rotations, which :func:`_vendor_table` refuses."""
     z = read_zemax(path)
+    return _summary(z, path), (_nodes(z, path) if z.table.sizes["sample_rotation"] == 1 else None)
+
+
+def _nodes(z: ZemaxBsdf, path: str) -> VendorTable:
     if z.table.sizes["sample_rotation"] != 1:
         raise FormatError("several sample rotations are not supported", file=path, field="SampleRotation",
                           expected="1 sample rotation", got=int(z.table.sizes["sample_rotation"]))
@@ -498,4 +522,4 @@ def _guess_can_open(head: str, path: Path) -> bool:
 
 FORMAT = TableFormat(name="zemax", title="Zemax BSDF", extensions=(".bsdf",), guess_can_open=_guess_can_open,
                      summarise=_summarise, vendor_table=_vendor_table, write=_write_job, sides_per_file=1,
-                     grid_kind="specular")
+                     grid_kind="specular", summary_and_table=_summary_and_table)

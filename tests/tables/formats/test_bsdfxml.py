@@ -3,14 +3,13 @@ Radiance's own library (pyradiance, optional) and by bsdfkit's reader; bad files
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import cli
 from hemisphere_truth import Truth
+from radiance_check import radiance_direct_hemi
 
 import bsdfkit
 from bsdfkit.core.errors import FormatError
@@ -60,27 +59,6 @@ def test_round_trip_reads_front_and_back(written):
         for key in (side, f"{side}@back"):
             np.testing.assert_allclose(summary.tis_computed[key], result.tis_source[side], rtol=5e-3)
     assert read_bsdfxml(path).wavelength_nm == 550.0
-
-
-_RADIANCE = """
-import json, sys
-import pyradiance.bsdf as rb
-sd = rb.load_file(sys.argv[1])
-flags = {"reflection": rb.SAMPLE_ALL & ~rb.SAMPLE_T, "transmission": rb.SAMPLE_ALL & ~rb.SAMPLE_R}
-out = {side: {"front": [rb.direct_hemi(sd, 180.0 - float(t), 0.0, f) for t in sys.argv[2:]],
-              "back": [rb.direct_hemi(sd, float(t), 0.0, f) for t in sys.argv[2:]]} for side, f in flags.items()}
-out["mirror_over_opposite"] = rb.query(sd, 150.0, 0.0, 150.0, 180.0)[1] / rb.query(sd, 150.0, 0.0, 150.0, 0.0)[1]
-print(json.dumps(out))
-"""
-
-
-def radiance_direct_hemi(path, thetas):
-    """Radiance's direct-hemispherical values (pyradiance) per side, front and back, at incidences [deg]; in a
-    fresh interpreter: pyradiance's C library keeps a global BSDF cache that must not outlive a test."""
-    pytest.importorskip("pyradiance.bsdf")
-    done = subprocess.run([sys.executable, "-c", _RADIANCE, str(path), *map(str, thetas)], capture_output=True,
-                          text=True, timeout=120, check=True)
-    return json.loads(done.stdout)
 
 
 def test_pyradiance_loads_it_and_agrees_with_bsdfkit(written):
