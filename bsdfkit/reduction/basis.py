@@ -18,14 +18,22 @@ nearest-record lookup lets a direct-transmission patch of 200/sr do). Cells are 
   ±180°/n_b of j·360°/n_b (WINDOW's layout; the cells in file order, band by band);
 * the Shirley–Chiu square (``shirley-chiu``) of a tensor tree read on an m × m uniform grid: cell (a, b), row-major,
   covers [a, a + 1)/m × [b, b + 1)/m of the square the concentric map :func:`disk_to_square` sends β to.
+
+A full θs × φs table about the normal (Speos, LightTools: :data:`NORMAL_GRID`) is the other complete representation
+a file can hold: its BSDF is the table interpolated linearly in ρ = sin θs and in φs (what ``bsdfkit read``'s engine
+and the writers' yardstick both assume), whose integral is Σ_k w_k f_k with w_k the integral of node k's hat
+function over the projected disk (:func:`normal_grid_weights`; Σ w_k = π). Ingested records carry w_k as their
+``basis_psa``, so the same sum gives the table's own value, and the engine evaluates the table by the same
+interpolation instead of reconstructing it.
 """
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CELL_COORD", "COORD", "COVERAGE_RTOL", "basis_sum", "cell_index", "covers_hemisphere", "disk_to_square",
-           "klems_spec", "shirley_chiu_spec", "square_to_disk"]
+__all__ = ["CELL_COORD", "COORD", "COVERAGE_RTOL", "NORMAL_GRID", "basis_sum", "cell_index", "covers_hemisphere",
+           "disk_to_square", "klems_cell_directions", "klems_spec", "klems_on_normal_grid", "normal_grid_weights",
+           "shirley_chiu_spec", "square_to_disk"]
 
 #: name of the per-record coordinate [sr]: the projected solid angle of the basis cell (or of the part of it)
 #: the record stands for
@@ -35,6 +43,8 @@ COVERAGE_RTOL = 1e-6
 #: name of the per-record coordinate: the index of the basis cell the record lies in (attribute ``basis``: the
 #: basis, :func:`klems_spec` / :func:`shirley_chiu_spec`)
 CELL_COORD = "basis_cell"
+#: the ``basis`` of the records of a full θs × φs table about the normal (:func:`normal_grid_weights`)
+NORMAL_GRID = "normal-grid"
 
 
 def basis_sum(values: NDArray[np.float64], psa: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -207,3 +217,130 @@ def disk_to_square(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDAr
     a = np.select([q == 0, q == 1, q == 2], [r, -t * r, -r], t * r)
     b = np.select([q == 0, q == 1, q == 2], [t * r, r, -t * r], -r)
     return 0.5 * (a + 1.0), 0.5 * (b + 1.0)
+
+
+def normal_grid_weights(theta_deg: NDArray[np.float64], phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Projected solid angle [sr] of each node's hat function on a full θs × φs table about the normal: linear in
+    ρ = sin θs between the θs rows, periodic and linear in φs between the columns, so that Σ w f is the integral of
+    the table's piecewise-linear interpolant over the projected disk (Σ w = π when the rows run from 0 to 90°).
+
+    Parameters
+    ----------
+    theta_deg : ndarray
+        The θs rows, increasing from 0 [deg].
+    phi_deg : ndarray
+        The φs columns over [0, 360), increasing [deg].
+
+    Returns
+    -------
+    ndarray
+        (theta, phi) weights [sr]; the nodes of the row θs = 0 (one direction) share that row's weight equally.
+    """
+    rho = np.sin(np.radians(np.asarray(theta_deg, dtype=np.float64)))
+    a, b = rho[:-1], rho[1:]
+    w_rho = np.zeros(rho.size)
+    w_rho[:-1] += (b - a) * (b + 2.0 * a) / 6.0  # ∫ ρ hat over the segment above the node (hat falling)
+    w_rho[1:] += (b - a) * (2.0 * b + a) / 6.0  # and below it (hat rising)
+    phi = np.radians(np.asarray(phi_deg, dtype=np.float64))
+    nxt = np.roll(phi, -1) + np.where(np.arange(phi.size) == phi.size - 1, 2.0 * np.pi, 0.0)
+    prv = np.roll(phi, 1) - np.where(np.arange(phi.size) == 0, 2.0 * np.pi, 0.0)
+    w_phi = 0.5 * (nxt - prv)
+    return w_rho[:, None] * w_phi[None, :]
+
+
+def _klems_layout(spec: str) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    kind, p = _parse_spec(spec)
+    if kind != "klems":
+        raise ValueError(f"not a Klems basis: {spec!r}")
+    return np.asarray(p["edges"], dtype=np.float64), np.asarray(p["n_phi"], dtype=np.int64)
+
+
+def klems_cell_directions(spec: str) -> NDArray[np.float64]:
+    """A direction inside each cell of a Klems-type basis (its centre in sin²θ and azimuth), file order.
+
+    Parameters
+    ----------
+    spec : str
+        The basis (:func:`klems_spec`).
+
+    Returns
+    -------
+    ndarray
+        (cells, 3) unit vectors [-].
+    """
+    edges, n_phi = _klems_layout(spec)
+    s2 = np.sin(np.radians(edges)) ** 2
+    r = np.repeat(np.sqrt(0.5 * (s2[:-1] + s2[1:])), n_phi)
+    phi = np.radians(np.concatenate([np.arange(n) * 360.0 / n for n in n_phi]))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=-1)
+
+
+def _hat_overlaps(knots: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], moment: bool
+                  ) -> NDArray[np.float64]:
+    """(nodes, intervals): ∫ hat_k(x) x^m dx over [lo, hi] ∩ the support of node k's hat on ``knots`` (m = 1 with
+    ``moment``, else 0), exact (2-point Gauss–Legendre on each linear piece: the integrand is at most quadratic)."""
+    z = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    out = np.zeros((knots.size, lo.size))
+    for k in range(knots.size):
+        for a, b, up in ((knots[k - 1] if k > 0 else None, knots[k], True),
+                         (knots[k], knots[k + 1] if k + 1 < knots.size else None, False)):
+            if a is None or b is None or b <= a:
+                continue
+            left, right = np.maximum(lo, a), np.minimum(hi, b)
+            ok = right > left
+            mid, half = 0.5 * (left + right), 0.5 * (right - left)
+            x = mid[:, None] + half[:, None] * z[None, :]
+            hat = (x - a) / (b - a) if up else (b - x) / (b - a)
+            out[k] += np.where(ok, half * np.sum(hat * (x if moment else 1.0), axis=1), 0.0)
+    return out
+
+
+def klems_on_normal_grid(spec: str, values: NDArray[np.float64], theta_deg: NDArray[np.float64],
+                         phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Exact node means of a Klems-type BSDF on a table about the normal: each node (θs, φs) the mean of the cell
+    values over its hat function (linear in ρ = sin θs and in φs, periodic), weighted by the projected solid
+    angle ρ dρ dφ. Klems cells are rectangles in (ρ, φs), so each mean is a sum of products of one-dimensional
+    overlaps (:func:`_hat_overlaps`): no quadrature across the steps of the cells. With the weights of
+    :func:`normal_grid_weights` the table integrates to the basis sum to rounding.
+
+    Parameters
+    ----------
+    spec : str
+        The Klems basis (:func:`klems_spec`).
+    values : ndarray
+        (cells,) BSDF of each cell [1/sr], file order.
+    theta_deg : ndarray
+        The table's θs rows, increasing from 0 [deg].
+    phi_deg : ndarray
+        The table's φs columns, increasing over one turn [deg] (a last column at 360° repeating 0° allowed).
+
+    Returns
+    -------
+    ndarray
+        (phi, theta) node means [1/sr].
+    """
+    edges, n_phi = _klems_layout(spec)
+    phi = np.asarray(phi_deg, dtype=np.float64)
+    closing = phi.size > 1 and abs(phi[-1] - phi[0] - 360.0) < 1e-9
+    ring = phi[:-1] if closing else phi
+    rho_edges = np.sin(np.radians(edges))
+    knots = np.sin(np.radians(np.asarray(theta_deg, dtype=np.float64)))
+    a_rho = _hat_overlaps(knots, rho_edges[:-1], rho_edges[1:], True)  # (rows, bands)
+    # periodic azimuth hats: knots extended by one column each side
+    ext = np.concatenate([[ring[-1] - 360.0], ring, [ring[0] + 360.0]])
+    out = np.zeros((ring.size, knots.size))
+    start = 0
+    for b, n in enumerate(n_phi):
+        centre = np.arange(n) * 360.0 / n
+        lo, hi = centre - 180.0 / n, centre + 180.0 / n
+        # the patches and their copies one turn either side, so that every hat meets its patches
+        lo3, hi3 = np.concatenate([lo - 360.0, lo, lo + 360.0]), np.concatenate([hi - 360.0, hi, hi + 360.0])
+        b_phi = _hat_overlaps(ext, lo3, hi3, False)[1:-1]  # (columns, 3 n)
+        v = np.tile(np.asarray(values, dtype=np.float64)[start:start + n], 3)
+        out += (b_phi @ v)[:, None] * a_rho[None, :, b]
+        start += n
+    w_rho = _hat_overlaps(knots, np.array([0.0]), np.array([1.0]), True)[:, 0]
+    w_phi = 0.5 * (ext[2:] - ext[:-2])
+    mean = np.divide(out, w_phi[:, None] * w_rho[None, :], out=np.zeros_like(out),
+                     where=(w_phi[:, None] * w_rho[None, :]) > 0)
+    return np.concatenate([mean, mean[:1]], axis=0) if closing else mean

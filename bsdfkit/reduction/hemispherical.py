@@ -826,6 +826,8 @@ def _reconstruct_basis(geom: Geometry, finite: NDArray[np.bool_]) -> Reconstruct
     found exactly when the records carry their cells (:func:`bsdfkit.reduction.basis.cell_index`), else the value
     of the nearest record in the projected disk (the cell containing the direction, up to the cells' shapes)."""
     psa = np.where(finite, geom.basis_psa, 0.0)
+    if geom.basis_spec == basis.NORMAL_GRID:  # a full table about the normal: its own interpolant, not cells
+        return _reconstruct_normal_grid(geom, finite, psa)
     evaluate = _cell_lookup(geom, finite)
     if evaluate is None:
         evaluate = _nearest_record(geom, finite)
@@ -837,6 +839,52 @@ def _reconstruct_basis(geom: Geometry, finite: NDArray[np.bool_]) -> Reconstruct
                                        "value the sum of value x projected solid angle over the cells (exact for "
                                        "the file; Radiance's value)"],
                           method="basis: sum of f x projected solid angle over the cells of the file's angle basis",
+                          evaluate=evaluate)
+
+
+def _reconstruct_normal_grid(geom: Geometry, finite: NDArray[np.bool_], weights: NDArray[np.float64]
+                             ) -> Reconstruction:
+    """A full θs × φs table about the normal (Speos, LightTools): the table's own interpolant, linear in ρ = sin θs
+    between its rows and in φs between its columns (periodic), integrated exactly by the records' hat weights
+    (:func:`bsdfkit.reduction.basis.normal_grid_weights`) and evaluated by the same interpolation."""
+    x, y = geom.frame()
+    rho = np.hypot(x, y)
+    pole = finite & (rho < 1e-9)
+    ring = finite & ~pole
+    phi = np.round(np.mod(np.degrees(np.arctan2(y, x)), 360.0), 9)
+    rows, cols = np.unique(np.round(rho[ring], 12)), np.unique(phi[ring])
+    r_idx = np.searchsorted(rows, np.round(rho[ring], 12))
+    c_idx = np.searchsorted(cols, phi[ring])
+    records = np.flatnonzero(ring)
+    pole_records = np.flatnonzero(pole)
+
+    def evaluate(values: NDArray[np.float64], directions: NDArray[np.float64]) -> NDArray[np.float64]:
+        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        table = np.zeros((rows.size + 1, cols.size))
+        table[0] = v[pole_records].mean() if pole_records.size else 0.0
+        table[1 + r_idx, c_idx] = v[records]
+        dx, dy = direction_frame(geom, directions)
+        q_rho = np.clip(np.hypot(dx, dy), 0.0, 1.0)
+        q_phi = np.mod(np.degrees(np.arctan2(dy, dx)), 360.0)
+        knots = np.concatenate([[0.0], rows])
+        i = np.clip(np.searchsorted(knots, q_rho, side="right") - 1, 0, knots.size - 2)
+        t = np.clip((q_rho - knots[i]) / (knots[i + 1] - knots[i]), 0.0, 1.0)
+        ext = np.concatenate([cols, [cols[0] + 360.0]])
+        j = np.clip(np.searchsorted(ext, np.where(q_phi < cols[0], q_phi + 360.0, q_phi), side="right") - 1, 0,
+                    cols.size - 1)
+        u = np.clip((np.where(q_phi < cols[0], q_phi + 360.0, q_phi) - ext[j]) / (ext[j + 1] - ext[j]), 0.0, 1.0)
+        j1 = (j + 1) % cols.size
+        lo = table[i, j] * (1.0 - u) + table[i, j1] * u
+        hi = table[i + 1, j] * (1.0 - u) + table[i + 1, j1] * u
+        return (lo * (1.0 - t) + hi * t).reshape(np.shape(dx))
+
+    return Reconstruction(central=weights, alternatives={}, comparisons={}, lobe=np.zeros(geom.n),
+                          region=Region(records=np.zeros(0, dtype=np.int64), in_plane_deg=None),
+                          extrapolated_beyond_deg=None,
+                          assumptions=["the records are a full table about the normal (every θs row × φs column): "
+                                       "its BSDF is the table interpolated linearly in sin θs and φs, integrated "
+                                       "exactly (the file's own representation, not reconstructed)"],
+                          method="grid: the table's own interpolant (linear in sin θs and φs), integrated exactly",
                           evaluate=evaluate)
 
 

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from bsdfkit.reduction import basis
 from bsdfkit.tables import grids
 from bsdfkit.tables.axes_choice import FALLBACK
 
@@ -57,8 +58,9 @@ def node_values(bsdf_fn: grids.BsdfFn, theta_i_deg: float, side: str, theta_deg:
                 phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
     """The BSDF [1/sr] a table about the normal holds at its nodes (φ, θ): point values, or for a piecewise-constant
     source (:class:`bsdfkit.tables.grids.PiecewiseConstant`) each node's mean over its hat function in sin θs and
-    φs (:func:`bsdfkit.tables.grids.node_means`: the engine behind ``bsdfkit read`` interpolates such tables
-    linearly in sin θs, so the table integrates to the source's value).
+    φs — exact for Klems cells (:func:`bsdfkit.reduction.basis.klems_on_normal_grid`), by quadrature for others
+    (:func:`bsdfkit.tables.grids.node_means`) — so that the table, read as its own piecewise-linear interpolant
+    (:func:`bsdfkit.reduction.basis.normal_grid_weights`), integrates to the source's value.
 
     Parameters
     ----------
@@ -80,6 +82,9 @@ def node_values(bsdf_fn: grids.BsdfFn, theta_i_deg: float, side: str, theta_deg:
     phi = np.asarray(phi_deg, dtype=np.float64)
     if not isinstance(bsdf_fn, grids.PiecewiseConstant):
         return grids.evaluate_bsdf(bsdf_fn, float(theta_i_deg), side, normal_directions(theta, phi))
+    if (bsdf_fn.basis or "").startswith("klems"):  # cells that are rectangles in (sin θs, φs): exact means
+        cells = grids.evaluate_bsdf(bsdf_fn, float(theta_i_deg), side, basis.klems_cell_directions(bsdf_fn.basis))
+        return basis.klems_on_normal_grid(bsdf_fn.basis, cells, theta, phi)
 
     def directions(t_deg: NDArray, a_deg: NDArray) -> NDArray:
         t, a = np.radians(t_deg), np.radians(a_deg)

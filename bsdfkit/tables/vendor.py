@@ -331,6 +331,8 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if not (np.isfinite(rel) and rel > 0):
         raise InputError("relative standard uncertainty must be a positive fraction", field="--relative-std",
                          expected="> 0", got=relative_std)
+    if registry.get(vendor.format).grid_kind == "normal":  # a full table about the normal: its own interpolant
+        chosen = [_normal_grid(g) for g in chosen]
     cols = _node_columns(chosen)
     f = np.asarray(cols["value"], dtype=np.float64)
     if zeros == "missing" or zeros == "auto":
@@ -395,6 +397,30 @@ def checked_vendor_dataset(path: str | Path, **options: Any) -> xr.Dataset:
     chosen = _chosen_grids(vendor, str(path), options.get("quantity"), options.get("side"), options.get("face"))
     ds.attrs["tis_stated_json"] = _json(_stated_tis_record(ds, vendor, summary, [g.side for g in chosen]))
     return ds
+
+
+def _normal_grid(grid: VendorGrid) -> VendorGrid:
+    """A table about the normal (nodes θs × φs, ``directions``) with each node's hat weight [sr] as its solid angle
+    and the basis :data:`bsdfkit.reduction.basis.NORMAL_GRID` when the nodes are the full product of its rows and
+    columns (the engine then integrates and evaluates the table's own piecewise-linear interpolant); else as it
+    is (reconstructed as scattered records)."""
+    theta = np.asarray(grid.first, dtype=np.float64)
+    phi = np.mod(np.asarray(grid.azimuth, dtype=np.float64), 360.0)
+    pole = theta < 1e-9
+    rows, cols = np.unique(theta[~pole]), np.unique(np.round(phi[~pole], 9))
+    if not pole.any() or rows.size < 2 or cols.size < 3 or (~pole).sum() != rows.size * cols.size:
+        return grid
+    r = np.searchsorted(rows, theta[~pole])
+    c = np.searchsorted(cols, np.round(phi[~pole], 9))
+    if np.unique(r * cols.size + c).size != rows.size * cols.size:
+        return grid
+    w = basis.normal_grid_weights(np.concatenate([[0.0], rows]), cols)
+    node_w = np.empty(theta.size)
+    node_w[~pole] = w[1 + r, c]
+    node_w[pole] = w[0].sum() / pole.sum()  # the pole row is one direction: its nodes share its weight
+    cell = np.arange(theta.size)
+    n = len(grid.theta_i)
+    return replace(grid, solid_angle=np.tile(node_w, (n, 1)), cell=np.tile(cell, (n, 1)), basis=basis.NORMAL_GRID)
 
 
 def _merged_solid_angle(grid: _Grid, k: int, first: NDArray[np.int64], inverse: NDArray[np.int64]) -> list[float]:

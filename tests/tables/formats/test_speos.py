@@ -26,12 +26,13 @@ def test_ansys_files_give_their_stated_tis_and_agree_with_the_zemax_original():
     # the same data as BSDF (row 8 = 1) and as BSDF cos(theta) (row 8 = 0, theta 90..180): the grazing row of the
     # latter is 0 (cos 90 deg) and takes the 85 deg row's values, the largest difference 1.8 % (at 60 deg)
     np.testing.assert_allclose(btdf.tis_computed["transmission"], brdf.tis_computed["reflection"], rtol=0.02)
-    # the Zemax file the Speos file was converted from states its TIS per incidence: up to 60 deg within 2.5 %;
-    # beyond, the Speos grid (5 deg theta rows about the normal, 10 deg azimuths) under-samples the grazing lobe
+    # the Zemax file the Speos file was converted from states its TIS per incidence: within 2.5 % at every
+    # incidence. The table is read as its own interpolant, linear in sin θs and φs (issue #43: a full table is not
+    # reconstructed); the engine's lobe reconstruction of the grazing lobe on its 5° x 10° grid read 65-75° 1-8 %
+    # low before
     stated = np.array(read_any(ZEMAX).tis_stated["reflection"])
     ratio = np.array(brdf.tis_computed["reflection"]) / stated
-    assert np.all(np.abs(ratio[:10] - 1) < 0.025)
-    assert np.all((ratio[10:] > 0.92) & (ratio[10:] < 1.0))
+    assert np.all(np.abs(ratio - 1) < 0.025), ratio
 
 
 @pytest.mark.slow
