@@ -32,8 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = ["CELL_COORD", "COORD", "COVERAGE_RTOL", "NORMAL_GRID", "basis_sum", "cell_index", "covers_hemisphere",
-           "disk_to_square", "klems_cell_directions", "klems_spec", "klems_on_normal_grid", "normal_grid_weights",
-           "shirley_chiu_spec", "square_to_disk"]
+           "cell_directions", "cells_on_normal_grid", "disk_to_square", "klems_cell_directions", "klems_spec",
+           "klems_on_normal_grid", "normal_grid_weights", "shirley_chiu_spec", "square_to_disk"]
 
 #: name of the per-record coordinate [sr]: the projected solid angle of the basis cell (or of the part of it)
 #: the record stands for
@@ -344,3 +344,91 @@ def klems_on_normal_grid(spec: str, values: NDArray[np.float64], theta_deg: NDAr
     mean = np.divide(out, w_phi[:, None] * w_rho[None, :], out=np.zeros_like(out),
                      where=(w_phi[:, None] * w_rho[None, :]) > 0)
     return np.concatenate([mean, mean[:1]], axis=0) if closing else mean
+
+
+#: sub-points per cell side with which :func:`cells_on_normal_grid` shares a cell among the hats it meets
+CELL_SHARE_POINTS = 4
+
+
+def _square_cells(spec: str) -> int:
+    kind, p = _parse_spec(spec)
+    if kind != "shirley-chiu":
+        raise ValueError(f"not a Shirley-Chiu grid: {spec!r}")
+    return int(p["m"][0])
+
+
+def cell_directions(spec: str) -> NDArray[np.float64]:
+    """A direction inside each cell of a basis (Klems: the patch centre; Shirley–Chiu: the cell centre), in the
+    order of :func:`cell_index`.
+
+    Parameters
+    ----------
+    spec : str
+        The basis (:func:`klems_spec`, :func:`shirley_chiu_spec`).
+
+    Returns
+    -------
+    ndarray
+        (cells, 3) unit vectors [-].
+    """
+    if spec.startswith("klems"):
+        return klems_cell_directions(spec)
+    m = _square_cells(spec)
+    c = (np.arange(m) + 0.5) / m
+    a, b = np.meshgrid(c, c, indexing="ij")
+    x, y = square_to_disk(a.ravel(), b.ravel())
+    return np.stack([x, y, np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))], axis=-1)
+
+
+def cells_on_normal_grid(spec: str, values: NDArray[np.float64], theta_deg: NDArray[np.float64],
+                         phi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Node means of a BSDF constant over the cells of a Shirley–Chiu grid (a tensor tree) on a table about the
+    normal: each cell's power (value × π/m²) is shared among the hats of the table's nodes (linear in sin θs and φs)
+    in proportion to the hats' values at :data:`CELL_SHARE_POINTS`² points spread evenly over the cell's area (the
+    concentric map preserves area), and each node's share is divided by its hat's projected solid angle
+    (:func:`normal_grid_weights`). The hats sum to one everywhere, so the table read as its own interpolant
+    integrates to the basis sum exactly, whatever the cells' sizes; a cell's power stays in the nodes around it.
+
+    Parameters
+    ----------
+    spec : str
+        The basis (:func:`shirley_chiu_spec`).
+    values : ndarray
+        (cells,) BSDF of each cell [1/sr], in the order of :func:`cell_index`.
+    theta_deg : ndarray
+        The table's θs rows, from 0 to 90, increasing [deg].
+    phi_deg : ndarray
+        The table's φs columns, increasing over one turn [deg] (a last column at 360° repeating 0° allowed).
+
+    Returns
+    -------
+    ndarray
+        (phi, theta) node means [1/sr].
+    """
+    m, q = _square_cells(spec), CELL_SHARE_POINTS
+    phi = np.asarray(phi_deg, dtype=np.float64)
+    closing = phi.size > 1 and abs(phi[-1] - phi[0] - 360.0) < 1e-9
+    ring = phi[:-1] if closing else phi
+    knots = np.sin(np.radians(np.asarray(theta_deg, dtype=np.float64)))
+    sub = (np.arange(m * q) + 0.5) / (m * q)
+    a, b = np.meshgrid(sub, sub, indexing="ij")
+    cell = (np.floor(a * m).astype(np.int64) * m + np.floor(b * m).astype(np.int64)).ravel()
+    x, y = square_to_disk(a.ravel(), b.ravel())
+    power = np.asarray(values, dtype=np.float64)[cell] * (np.pi / (m * q) ** 2)
+    rho = np.clip(np.hypot(x, y), 0.0, knots[-1])
+    i = np.clip(np.searchsorted(knots, rho, side="right") - 1, 0, knots.size - 2)
+    t = (rho - knots[i]) / (knots[i + 1] - knots[i])
+    az = np.mod(np.degrees(np.arctan2(y, x)) - ring[0], 360.0) + ring[0]
+    ext = np.concatenate([ring, [ring[0] + 360.0]])
+    j = np.clip(np.searchsorted(ext, az, side="right") - 1, 0, ring.size - 1)
+    u = (az - ext[j]) / (ext[j + 1] - ext[j])
+    share = np.zeros((knots.size, ring.size))
+    for di, wi in ((0, 1.0 - t), (1, t)):
+        for dj, wj in ((0, 1.0 - u), (1, u)):
+            np.add.at(share, (i + di, (j + dj) % ring.size), power * wi * wj)
+    w = normal_grid_weights(np.asarray(theta_deg, dtype=np.float64), ring)
+    mean = np.divide(share, w, out=np.zeros_like(share), where=w > 0)
+    if knots[0] == 0.0:  # the row at the normal is one direction: one value
+        mean[0] = share[0].sum() / w[0].sum()
+    out = mean.T
+    return np.concatenate([out, out[:1]], axis=0) if closing else out

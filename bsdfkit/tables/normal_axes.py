@@ -82,9 +82,12 @@ def node_values(bsdf_fn: grids.BsdfFn, theta_i_deg: float, side: str, theta_deg:
     phi = np.asarray(phi_deg, dtype=np.float64)
     if not isinstance(bsdf_fn, grids.PiecewiseConstant):
         return grids.evaluate_bsdf(bsdf_fn, float(theta_i_deg), side, normal_directions(theta, phi))
-    if (bsdf_fn.basis or "").startswith("klems"):  # cells that are rectangles in (sin θs, φs): exact means
-        cells = grids.evaluate_bsdf(bsdf_fn, float(theta_i_deg), side, basis.klems_cell_directions(bsdf_fn.basis))
-        return basis.klems_on_normal_grid(bsdf_fn.basis, cells, theta, phi)
+    spec = bsdf_fn.basis or ""
+    if (spec.startswith("klems") or spec.startswith("shirley-chiu")) and theta[0] == 0.0 and theta[-1] == 90.0:
+        cells = grids.evaluate_bsdf(bsdf_fn, float(theta_i_deg), side, basis.cell_directions(spec))
+        if spec.startswith("klems"):  # cells that are rectangles in (sin θs, φs): exact means
+            return basis.klems_on_normal_grid(spec, cells, theta, phi)
+        return basis.cells_on_normal_grid(spec, cells, theta, phi)  # each cell's power shared among the hats
 
     def directions(t_deg: NDArray, a_deg: NDArray) -> NDArray:
         t, a = np.radians(t_deg), np.radians(a_deg)
