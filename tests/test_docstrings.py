@@ -54,7 +54,7 @@ COVERED = [
     "tables/formats/bsdfxml_tree.py",
     "tables/formats/lighttools.py", "tables/formats/speos.py", "tables/formats/speosbrdf.py",
     "tables/formats/tensortree.py", "tables/formats/tracepro.py", "tables/formats/xml_document.py",
-    "tables/formats/zemax.py", "tables/normal_axes.py", "tables/registry.py",
+    "tables/formats/zemax.py", "tables/normal_axes.py", "tables/plausible.py", "tables/registry.py",
     "tables/export.py", "tables/to_dataset.py", "tables/vendor.py", "tables/grids.py",
 ]
 

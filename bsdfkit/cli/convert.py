@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from bsdfkit.cli._common import add_grid_arguments, add_table_arguments, check_options, emit_json
+from bsdfkit.cli.export import add_nonphysical_argument
 from bsdfkit.cli.ingest import OPTION_RANGES
 from bsdfkit.core.conventions import QUANTITIES, ZERO_POLICIES
 from bsdfkit.core.errors import ValidationError
@@ -81,6 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="largest accepted |TIS written / TIS source - 1| (default 0.01)")
     add_grid_arguments(p, "auto grid: largest estimated relative TIS error of the table (default: half of "
                             "--tis-tolerance, 0.005)")
+    add_nonphysical_argument(p)
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     # the failed table's name is an output too: --force never replaces an input with it (bsdfkit.cli.main); a
     # converted table keeps the source's own symmetry (Zemax): plane-symmetric only when the source is
@@ -90,6 +92,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _failed_output(args: argparse.Namespace) -> list[str]:
     """The name a failed table is kept under, when ``--keep-failed`` asks for it."""
     return [str(failed_check_path(args.output))] if args.keep_failed else []
+
+
+def _convert(args: argparse.Namespace, settings):
+    """:func:`bsdfkit.tables.to_dataset.convert` of the parsed command line with ``settings``."""
+    from bsdfkit.tables.to_dataset import convert
+
+    return convert(
+        args.source, args.to, args.output, args.force, side=args.side, wavelength_nm=args.wavelength,
+        band_nm=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
+        theta_i_deg=_floats(args.incidences, "--incidences") if args.incidences else None, settings=settings,
+        tolerance=args.tis_tolerance, quantity=args.quantity, relative_std=args.relative_std, zeros=args.zeros,
+        face=args.face, keep_failed=args.keep_failed,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -107,23 +122,16 @@ def run(args: argparse.Namespace) -> int:
         check failed (nothing written to OUT).
     """
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
-    from bsdfkit.cli.export import describe_grid, grid_tolerance
+    from bsdfkit.cli.export import describe_grid, grid_tolerance, nonphysical_warnings
     from bsdfkit.tables.export import ExportSettings
-    from bsdfkit.tables.to_dataset import convert
 
     check_options(args, OPTION_RANGES)
     settings = ExportSettings(zemax_symmetry=args.symmetry, symmetry_tolerance=args.symmetry_tolerance,
                               xml_back=args.xml_back, xml_basis=args.xml_basis,
                               grid=args.grid, grid_tolerance=grid_tolerance(args, _grid_tis_default(args)),
-                              node_values=args.node_values)
-    result = convert(
-        args.source, args.to, args.output, args.force, side=args.side, wavelength_nm=args.wavelength,
-        band_nm=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
-        theta_i_deg=_floats(args.incidences, "--incidences") if args.incidences else None, settings=settings,
-        tolerance=args.tis_tolerance, quantity=args.quantity, relative_std=args.relative_std, zeros=args.zeros,
-        face=args.face,
-        keep_failed=args.keep_failed,
-    )
+                              node_values=args.node_values, allow_nonphysical=args.allow_nonphysical)
+    with nonphysical_warnings("convert"):
+        result = _convert(args, settings)
     if args.json:
         emit_json(result.to_dict())
     else:

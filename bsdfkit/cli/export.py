@@ -11,6 +11,10 @@ PATH (``--force``) stays until the finished table replaces it.
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 
 from bsdfkit import api
@@ -91,6 +95,46 @@ def describe_grid(result) -> str:
     return text
 
 
+def add_nonphysical_argument(p: argparse.ArgumentParser) -> None:
+    """The ``--allow-nonphysical`` option of ``export`` and ``convert`` (:mod:`bsdfkit.tables.plausible`).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The verb's parser.
+    """
+    p.add_argument("--allow-nonphysical", action="store_true",
+                   help="write a source whose hemispherical value (or reflection + transmission) exceeds 1 by more "
+                        "than 0.01 at some incidence, with a warning (default: refused, nothing written)")
+
+
+@contextmanager
+def nonphysical_warnings(verb: str) -> Iterator[None]:
+    """Say each :class:`bsdfkit.tables.plausible.NonphysicalWarning` of the block as one line on stderr (the CLI
+    silences library warnings; a table written past the plausibility gate must be said).
+
+    Parameters
+    ----------
+    verb : str
+        The verb named in the line (``export``, ``convert``).
+
+    Yields
+    ------
+    None
+        While the export runs.
+    """
+    from bsdfkit.tables.plausible import NonphysicalWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", NonphysicalWarning)
+        try:
+            yield
+        finally:  # said also when the write then fails: the user asked for it
+            for w in caught:
+                if issubclass(w.category, NonphysicalWarning):
+                    print(f"bsdfkit {verb}: warning: {w.message}", file=sys.stderr)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``export`` verb and its options to the ``bsdfkit`` parser.
 
@@ -123,6 +167,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the wavelength to export from a per-wavelength model (bsdfkit fit reflectance)")
     p.add_argument("--temperature-k", type=float, default=None, help="TracePro temperature column (K)")
     add_grid_arguments(p, "auto grid: largest estimated relative TIS error of the table (default 0.001)")
+    add_nonphysical_argument(p)
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run)
 
@@ -158,10 +203,11 @@ def run(args: argparse.Namespace) -> int:
         grid=args.grid,
         grid_tolerance=grid_tolerance(args),
         node_values=args.node_values,
+        allow_nonphysical=args.allow_nonphysical,
     )
     # PATH checked here, before computing; the table is written and re-read at the staging file (force: it is this
     # process's own) and moved to PATH once complete
-    with StagedFile(args.output, args.force, inputs=[args.source]) as staged:
+    with StagedFile(args.output, args.force, inputs=[args.source]) as staged, nonphysical_warnings("export"):
         result = api.export(args.source, args.to, args.interaction, args.side, staged.path, True, settings=settings,
                             wavelength_nm=args.wavelength_nm)
         staged.commit()

@@ -22,6 +22,7 @@ Every write is atomic and refuses to overwrite an existing file unless ``force``
 """
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
@@ -40,7 +41,7 @@ from bsdfkit.io import atomic
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
 from bsdfkit.reduction.hemispherical import elastic_source, hemispherical, reduction_kind
 from bsdfkit.reduction.tis import CENTER, hemisphere_bsdf_fn
-from bsdfkit.tables import grids, registry
+from bsdfkit.tables import grids, plausible, registry
 from bsdfkit.tables.axes_choice import (
     FALLBACK,  # noqa: F401  (re-exported: the grid modes ExportResult.grid reports)
     FALLBACK_RECHECK,
@@ -157,6 +158,9 @@ class ExportSettings:
     #: samples or ``cell`` averages (:func:`grids.harvey_shack_cell_grid`; auto axes then refined by the lobe's peak
     #: only)
     node_values: str = "edge"
+    #: write a source the plausibility gate refuses (a hemispherical value, or R + T, above 1 beyond measurement
+    #: noise; :mod:`bsdfkit.tables.plausible`), with a :class:`~bsdfkit.tables.plausible.NonphysicalWarning`
+    allow_nonphysical: bool = False
 
     def __post_init__(self) -> None:
         if self.grid not in GRID_MODES:
@@ -459,6 +463,45 @@ def _elastic(ds: xr.Dataset, label: str, interaction: str, sides: tuple[str, ...
                    f"measured dataset {label} at {src.what} (hemispherical engine)", engine_tis=engine)
 
 
+def _gate(src: _Source, fn: BsdfFn, theta: NDArray[np.float64], sides: tuple[str, ...],
+          allow_nonphysical: bool) -> _Source:
+    """The source after :func:`bsdfkit.tables.plausible.check` on the sides and incidences written: refused (one
+    line) when not physical, else returned; with ``allow_nonphysical`` a warning and, for the writers that check
+    energy themselves (TracePro's absorptance), the excess allowed.
+
+    Parameters
+    ----------
+    src : _Source
+        The resolved source.
+    fn : callable
+        Its BSDF ``fn(theta_i_deg, side, directions)`` [1/sr].
+    theta : ndarray
+        Incidences written [deg].
+    sides : tuple of str
+        Sides written.
+    allow_nonphysical : bool
+        Write anyway, with a :class:`~bsdfkit.tables.plausible.NonphysicalWarning`.
+
+    Returns
+    -------
+    _Source
+        ``src``, with ``tis_excess_allowed`` raised to the source's own excess when it was let through.
+    """
+    if src.engine_tis is not None:  # a measured dataset: the engine's value, what bsdfkit tis reports
+        values = {s: [src.engine_tis[s][round(float(t), 6)] for t in theta] for s in sides}
+    elif isinstance(fn, grids.PiecewiseConstant) and fn.exact_tis is not None:  # a file's cells: their basis sum
+        values = {s: [fn.exact_tis(float(t), s) for t in theta] for s in sides}
+    else:
+        values = {s: [grids.tis_reference(fn, float(t), s) for t in theta] for s in sides}
+    # a fit keeps its own gate's k·u(TIS) (which already refused its sides in _resolve_source); here it is the margin
+    # of the sum and of each side as integrated for the table
+    message = plausible.check(values, theta, allowed=src.tis_excess_allowed, allow_nonphysical=allow_nonphysical)
+    if message is None:
+        return src
+    warnings.warn(plausible.NonphysicalWarning(message), stacklevel=3)
+    return replace(src, tis_excess_allowed=plausible.excess_to_allow(values, src.tis_excess_allowed))
+
+
 def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
     def bsdf_fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
@@ -706,6 +749,40 @@ def _table_tis(reread: FileSummary, theta: NDArray[np.float64], sides: Sequence[
     return tis_table
 
 
+def _write_and_read(job: _Job, settings: ExportSettings, force: bool, let_through: bool
+                    ) -> tuple[dict[str, Any], FileSummary, VendorTable | None, dict[str, list[float]] | None,
+                               float | None]:
+    """Write the table (re-checked and written again by the auto grid) and read it back as ``bsdfkit read`` does.
+
+    ``let_through``: a non-physical source the user let through (``allow_nonphysical``); a format whose own reader
+    then refuses the table (a percentage above 100 %) cannot hold it: the file is removed and that is the error.
+
+    Returns
+    -------
+    tuple
+        Grid description, the re-read summary, its nodes (None: the format's own rule), the direct integral per
+        side and incidence [-] (None when not computed) and the last plane-symmetry deviation.
+    """
+    try:
+        written = _write(job, settings, force)
+        deviation, grid_info = written.deviation, written.grid
+        reference: dict[str, list[float]] | None = None
+        summary = None  # the written file as read_any read it, while it is the file on disk (its re-read, 3-4 s)
+        nodes = None  # and its nodes as the engine integrated them (the peak check reads the same file)
+        if grid_info.get("mode") == "auto":
+            grid_info, summary, nodes, reference, deviation = _recheck(job, settings, written)
+        # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
+        reread, nodes = (summary, nodes) if summary is not None else _read_any(job.path)
+    except FormatError as exc:
+        if not let_through:
+            raise
+        Path(job.path).unlink(missing_ok=True)  # never leave a file its own format's reader refuses
+        raise ValidationError(f"the {job.fmt.title} format cannot hold this non-physical source: its reader refuses "
+                              f"the table written ({exc}); nothing written", field="allow_nonphysical",
+                              expected="a source within the format's range") from None
+    return grid_info, reread, nodes, reference, deviation
+
+
 def export(
     source: Any,
     to: ExportFormat,
@@ -761,18 +838,13 @@ def export(
     if isinstance(fn, grids.PiecewiseConstant) and settings.node_values == "edge":
         # a file's cells: Harvey–Shack nodes hold cell means (steps point-sampled integrate 1-4 % off)
         settings = replace(settings, node_values="cell")
+    # the plausibility gate, before anything is written: one rule and one message for every format
+    checked = _gate(src, fn, theta, tuple(sides), settings.allow_nonphysical)
+    let_through, src = checked is not src, checked  # another object: a non-physical source let through
     job = _Job(fmt=fmt, fn=fn, theta=theta, side=side, sides=tuple(sides), src=src,
                comments=(f"source: {src.description}",) + tuple(settings.comments), path=path,
                generated_at=generated_at)
-    written = _write(job, settings, force)
-    deviation, grid_info = written.deviation, written.grid
-    reference: dict[str, list[float]] | None = None
-    summary = None  # the written file as read_any read it, while it is the file on disk (its re-read, 3-4 s)
-    nodes = None  # and its nodes as the engine integrated them (the peak check reads the same file)
-    if grid_info.get("mode") == "auto":
-        grid_info, summary, nodes, reference, deviation = _recheck(job, settings, written)
-    # the written table, integrated as bsdfkit read integrates it (one number for one file, whatever the path)
-    reread, nodes = (summary, nodes) if summary is not None else _read_any(path)
+    grid_info, reread, nodes, reference, deviation = _write_and_read(job, settings, force, let_through)
     held = grid_info.get("klems_incidence_map_deg")
     tis_table = _table_tis(reread, theta, sides, held)
     written_mask = np.ones(theta.size, dtype=bool)

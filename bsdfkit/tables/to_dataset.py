@@ -423,6 +423,8 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     settings
         Further :class:`bsdfkit.tables.export.ExportSettings` (axes, grid, Zemax symmetry, TracePro options).
         Without settings the auto grid's TIS tolerance is half of ``tolerance`` (docs/exports.md, Grid resolution).
+        ``settings.allow_nonphysical`` writes a source the plausibility gate refuses (:mod:`bsdfkit.tables.plausible`:
+        a hemispherical value, or R + T, above 1 beyond measurement noise; refused before anything is written).
     tolerance
         Largest accepted |TIS written / TIS original − 1| [-] (default 0.01): a table beyond it is not committed.
     keep_failed

@@ -211,7 +211,7 @@ def test_api_ingest_dispatches(tmp_path):
         bsdfkit.ingest(RADIANT, quantity="btdf")
 
 
-def _lobe_dir(theta_i, d, rho=0.4, amp=3.0, sigma=0.2):
+def _lobe_dir(theta_i, d, rho=0.4, amp=2.0, sigma=0.2):  # hemispherical value about 0.9: a physical source
     b = d[..., :2] - np.array([np.sin(np.radians(theta_i)), 0.0])
     return rho / np.pi + amp * np.exp(-(b**2).sum(-1) / (2 * sigma**2))
 

@@ -64,6 +64,7 @@ from numpy.typing import NDArray
 from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.text import is_float, read_text
+from bsdfkit.measurement.table import MAX_ABS_BSDF
 from bsdfkit.reduction.basis import basis_sum, klems_spec, shirley_chiu_spec
 from bsdfkit.tables import grids
 from bsdfkit.tables.format_spec import FileSummary, TableFormat, VendorGrid, VendorTable, WriteJob, WriteOutcome
@@ -433,6 +434,23 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf | TreeBsdf:
     return _read_klems(path, text, layer, definition)
 
 
+def _refuse_huge(path: str, text: str, raw: str, where: str, largest: float) -> None:
+    """Refuse a ScatteringData body ``raw`` holding a value above :data:`bsdfkit.measurement.table.MAX_ABS_BSDF`
+    [1/sr], as text tables are: no measurement holds it, and its square overflows every uncertainty (1e300 read as
+    a TIS of 2.4e298). The line is the value's own line in the file; ``largest`` [1/sr], the parsed maximum, spares
+    the search of a body within the limit."""
+    if not largest > MAX_ABS_BSDF:
+        return
+    numbers = list(re.finditer(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?", raw))
+    big = next((m for m in numbers if abs(float(m.group())) > MAX_ABS_BSDF), None)
+    if big is None:
+        return
+    at = text.find(raw) if raw else -1
+    line = text.count("\n", 0, at + big.start()) + 1 if at >= 0 else None
+    raise FormatError("value implausibly large for a BSDF", file=path, line=line, field=where,
+                      expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=big.group()[:40])
+
+
 def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element | None) -> KlemsBsdf:
     """The Klems part of :func:`read_bsdfxml`."""
     basis_el = None if definition is None else _child(definition, "AngleBasis")
@@ -499,6 +517,7 @@ def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element 
                 bad_v = values[~(np.isfinite(values) & (values >= 0))][0]
                 raise FormatError("BSDF value not a finite number >= 0", file=path, line=_line_of(text, direction),
                                   field=where, expected="finite >= 0 (1/sr)", got=float(bad_v))
+            _refuse_huge(path, text, raw, where, float(values.max(initial=0.0)))
             m = values.reshape(size, size)  # Columns: one line per outgoing patch, one column per incident
             blocks[direction] = m.T.copy() if structure.lower() == "rows" else m
             labels.append(label)
@@ -556,6 +575,8 @@ def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
                 raise FormatError(str(exc), file=path, line=text.count("\n", 0, at) + 1 if at else None,
                                   field=f"ScatteringData of {direction} (TensorTree{ndim})", expected=exc.expected,
                                   got=exc.got) from None
+            _refuse_huge(path, text, raw, f"ScatteringData of {direction} (TensorTree{ndim})",
+                         float(np.max(trees[direction].value, initial=0.0)))
             labels.append(label)
     if not trees:
         raise FormatError("no scattering data", file=path, field="WavelengthData",

@@ -26,7 +26,9 @@ spectrum measurement equals the spectrum's reflectance (transmittance): only the
 percentages are data. The reader applies that rule with bsdfkit's hemispherical engine
 (:class:`bsdfkit.tables.format_spec.VendorTable` ``normalise``): BSDF = v · R / TIS_engine(v) at that incidence,
 every incidence of the side alike. The writer writes the BSDF itself (row 8 = 1) and the TIS of the source at
-its first incidence as the spectrum, so a bsdfkit file reads back at its own scale.
+its first incidence as the spectrum, so a bsdfkit file reads back at its own scale (a source above 1 there, written
+past the plausibility gate of :mod:`bsdfkit.tables.plausible`, states the first incidence at most 1; above 1 at
+every incidence it is refused: the percentage cannot exceed 100 %).
 
 **Spectral rule.** The file holds one table per incidence for all wavelengths; the spectrum scales it. bsdfkit
 writes the BSDF at one wavelength (the exported one, in the comment) and a flat spectrum (350 and 850 nm at the
@@ -43,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bsdfkit.core.conventions import SIDES
-from bsdfkit.core.errors import FormatError
+from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
@@ -110,7 +112,8 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
                axes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> SpeosBsdf:
     """Tables of a BSDF callable on ``axes`` (θs, φs [deg] in [0, 360); default: the fixed grid; the φ = 360° column
     repeating 0° is added); the spectrum is the source's TIS at its first incidence
-    (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral).
+    (:func:`bsdfkit.tables.grids.tis_reference`, the direct integral), or at the first incidence where it is at
+    most 1 (the percentage the format can state).
 
     Parameters
     ----------
@@ -137,11 +140,32 @@ def speos_bsdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
     tables, spectrum = {}, {}
     for side in sides:
         tables[side] = np.stack([normal_axes.node_values(fn, float(t), side, theta, phi).T for t in theta_i])
-        spectrum[side] = (float(theta_i[0]), 100.0 * grids.tis_reference(fn, float(theta_i[0]), side))
+        spectrum[side] = _spectrum(fn, theta_i, side)
     return SpeosBsdf({s: theta_i for s in sides}, {s: theta for s in sides}, {s: phi for s in sides}, tables,
                      spectrum, comment=f"bsdfkit {__version__}" + (f" wavelength_nm={wavelength_nm:g}"
                                                                     if wavelength_nm is not None else ""),
                      description=description, wavelength_nm=wavelength_nm)
+
+
+def _spectrum(fn: grids.BsdfFn, theta_i: NDArray[np.float64], side: str) -> tuple[float, float]:
+    """The spectrum of ``side``: (incidence [deg], TIS [%]) at the first incidence whose TIS the format can state.
+
+    The percentage is 0..100 % (Speos's rule; the reader refuses more), and the whole side is scaled to it: a
+    source above 1 there (written only past the plausibility gate, ``allow_nonphysical``) takes the spectrum at the
+    first incidence at most 1, so that every table still reads back at its own scale. A side above 1 at every
+    incidence cannot be written: refused before anything is written.
+    """
+    values = []
+    for t in theta_i:
+        pct = 100.0 * grids.tis_reference(fn, float(t), side)
+        if float(format(pct, _VALUE_FMT)) <= 100.0:
+            return float(t), pct
+        values.append(pct)
+    raise ValidationError("the Speos anisotropic BSDF format cannot hold this source: it states each side's "
+                          "hemispherical value as a percentage of 0..100 % at one incidence, and the source is "
+                          "above 1 at every incidence", field=f"{side}: spectrum",
+                          expected="a hemispherical value <= 1 at one incidence at least",
+                          got=round(min(values) / 100.0, 6))
 
 
 def speos_text(bsdf: SpeosBsdf) -> str:

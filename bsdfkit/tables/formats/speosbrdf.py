@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bsdfkit.core.conventions import PHOTOPIC_NM, SIDES
-from bsdfkit.core.errors import FormatError
+from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
 from bsdfkit.io.text import read_text
@@ -107,6 +107,12 @@ def speos_brdf(fn: grids.BsdfFn, theta_i_deg: NDArray[np.float64], sides: tuple[
     for side in sides:
         tables[side] = np.stack([normal_axes.node_values(fn, float(t), side, theta, phi).T for t in theta_i])[:, None]
         percent[side] = np.array([[100.0 * grids.tis_reference(fn, float(t), side)] for t in theta_i])
+        over = np.flatnonzero(percent[side][:, 0] > 100.0)
+        if over.size:  # the format states 0..100 % per table (its reader refuses more): refused before writing
+            k = int(over[0])
+            raise ValidationError("a Speos .brdf file cannot hold this non-physical source (each table states its "
+                                  "percentage, at most 100 %)", field=f"{side} at theta_i={theta_i[k]:g} deg",
+                                  expected="<= 100 %", got=f"{percent[side][k, 0]:.4g} %")
     lam = np.array([550.0 if wavelength_nm is None else float(wavelength_nm)])
     return SpeosBrdf(theta_i, lam, theta, phi, tables, percent, comment=f"bsdfkit {__version__}")
 
