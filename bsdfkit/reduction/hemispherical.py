@@ -1365,6 +1365,15 @@ FLANK_FLOOR = 0.05
 BULGE_CAP = 3.0
 #: The ``between_planes`` alternative: a lobe this many times narrower across the planes than along them, in σ².
 GAP_NARROWER = 1.5
+#: Factors on a lobe's width across the planes for the ``across_width`` error of a planes layout whose lobe lies on
+#: a measured plane (:func:`_reconstruct_disk`): a Gaussian lobe's integral scales with its width across.
+ACROSS_WIDTH_FACTORS = (0.5, 2.0)
+#: A plane passing the specular direction within this distance [direction cosines] samples a specular lobe there
+#: (:func:`_specular_unsampled`; a narrow glossy lobe is a few hundredths wide).
+SPECULAR_SAMPLED = 0.02
+#: A neighbouring plane passing the lobe's centre within this share of its region radius (about one σ) samples
+#: its width across (:func:`_across_width_factors`).
+ACROSS_SAMPLED = 1.0 / 3.0
 #: Half-planes closer than this in azimuth [deg] (median gap) are a grid, interpolated across; from C-planes 15°
 #: apart on, a lobe can lie between planes unmeasured (:func:`_gap_planes`).
 GAP_MIN_DEG = 12.5
@@ -1814,6 +1823,37 @@ def _gap_evaluate(planes: _GapPlanes, geom: Geometry, directions: NDArray[np.flo
 BETWEEN_PEAK = 1.05
 
 
+def _specular_unsampled(planes: _GapPlanes, theta_i_deg: float) -> str | None:
+    """The statement that no measured half-plane passes near the specular direction β0 = (sin θi, 0), where a
+    lobe no plane sees could lie (neither in the value nor in its error bar); None when one passes within
+    :data:`SPECULAR_SAMPLED` of it."""
+    b0 = float(np.sin(np.radians(theta_i_deg)))
+    # distance from β0 to each half-plane (a ray from the normal at azimuth φ): |b0 sin φ| ahead of the normal
+    d = np.where(np.cos(planes.phi) > 0, np.abs(b0 * np.sin(planes.phi)), b0)
+    nearest = float(d.min()) if d.size else b0
+    if nearest <= SPECULAR_SAMPLED:
+        return None
+    return (f"no measured plane passes within {nearest:.3g} (direction cosines) of the specular direction: a "
+            f"specular lobe narrower than about {nearest / 3:.2g} there would not be seen, and is neither in the "
+            "value nor in its error bar")
+
+
+def _across_width_factors(planes: _GapPlanes, opts: _DiskOptions) -> tuple[float, ...]:
+    """Factors on the width across the planes of a lobe seen on one plane (:data:`ACROSS_WIDTH_FACTORS`, the wider
+    one capped where the neighbouring planes, at distance d = |β_c| sin(gap) from its centre, would have seen it:
+    d / radius, none beyond when they pass within the radius); none when they pass through its core, d below
+    :data:`ACROSS_SAMPLED` × radius (the data sample its width: every C-plane passes the normal-incidence lobe)."""
+    if opts.lobe_c is None or opts.radius <= 0:
+        return ()
+    phi = np.sort(planes.phi)
+    gap = float(np.median(np.diff(np.concatenate([phi, [phi[0] + 2.0 * np.pi]]))))
+    reach = abs(opts.lobe_c) * np.sin(min(gap, np.pi / 2)) / opts.radius
+    if reach <= ACROSS_SAMPLED:
+        return ()
+    lo, hi = ACROSS_WIDTH_FACTORS
+    return (lo,) if reach <= 1.0 else (lo, min(hi, reach))
+
+
 def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray[np.float64],
                       n_psi: int = 256, n_r: int = 400, errors: bool = True) -> Reconstruction:
     """Body + lobe over the projected disk for records off the two arcs (:func:`sampling_method`).
@@ -1873,6 +1913,21 @@ def _reconstruct_disk(geom: Geometry, ref: NDArray[np.float64], ref_std: NDArray
             v = np.nan_to_num(np.asarray(values, dtype=np.float64))
             scale = float(m @ v) / level if level > 0 else 0.0
             return evaluate(values, directions, kappa) + scale * _gap_evaluate(planes, geom, directions)
+
+    if planes is not None:
+        unseen = _specular_unsampled(planes, geom.theta_i)
+        if unseen is not None:
+            stated.append(unseen)
+    if w_gap is None and planes is not None and np.any(lobe):
+        factors = _across_width_factors(planes, fit.options)
+        if factors:
+            # planes 15° or more apart that pass the lobe farther than its radius see it on one plane only: its
+            # extent across the planes is the in-plane one by assumption (round in direction cosines), which the
+            # data do not pin down; the error bar takes it narrower and as much wider as the neighbouring planes,
+            # which show no lobe, allow (the lobe's integral scales with its width across)
+            alt["across_width"] = {f"x{f:.3g}": fit.body + f * lobe for f in factors}
+            stated.append("planes layout: the lobe is taken as wide across the planes as along them (round); the "
+                          "error bar includes it " + " and ".join(f"{f:.3g}x" for f in factors) + " as wide across")
 
     return Reconstruction(central=central, alternatives=alt, comparisons=comparisons,
                           lobe=lobe, region=reg,

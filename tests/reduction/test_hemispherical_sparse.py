@@ -35,6 +35,12 @@ CASES = {
                                      {t: 0.03 for t in INCIDENCES}),
     "cplanes15_rotated_off_axis": (Truth(A=2.0, sx=0.05, sy=0.08, phi_c=5.0, rot=30.0), "cplanes",
                                    {"c_step": 15.0}, {0.0: 0.03, 30.0: 0.03, 50.0: 0.10, 70.0: 0.10}),
+    # a specular lobe on the plane of incidence, narrower or wider across the planes than along them: the planes
+    # 30 deg apart miss its width across (value 7-14 % off), which the error bar now covers (across_width)
+    "cplanes30_specular_narrow_across": (Truth(A=3.0, sx=0.08, sy=0.03), "cplanes", {"c_step": 30.0},
+                                         {0.0: 0.03, 30.0: 0.15, 50.0: 0.15, 70.0: 0.15}),
+    "cplanes30_specular_wide_across": (Truth(A=3.0, sx=0.05, sy=0.15), "cplanes", {"c_step": 30.0},
+                                       {0.0: 0.03, 30.0: 0.10, 50.0: 0.15, 70.0: 0.15}),
     # a full grid (θs every 5 deg, φs every 10 deg, a fine patch about the specular point) and the two arcs
     "grid_anisotropic": (Truth(a=0.3, sx=0.05, sy=0.09), "grid", {}, {t: 0.01 for t in INCIDENCES}),
     "two_arcs_isotropic": (Truth(), "two_arcs", {}, {t: 0.01 for t in INCIDENCES}),
@@ -69,3 +75,11 @@ if __name__ == "__main__":
         for theta_i, value, true, std in rows(case):
             print(f"{case:32s} {theta_i:4.0f} {value:7.4f} {true:7.4f} {std:7.4f} {(value - true) / std:+6.2f} "
                   f"{100 * (value / true - 1):+6.2f}")
+
+
+def test_a_specular_direction_no_plane_passes_is_stated():
+    # planes at 15, 45, ... deg: none passes near the specular direction at 50 deg, where a lobe would not be seen
+    r = hemispherical(table(Truth(A=3.0, sx=0.06, sy=0.06), "cplanes", (50.0,), c_step=30.0, c_offset=15.0))[0]
+    assert any("no measured plane passes within" in a for a in r.assumptions)
+    r = hemispherical(table(Truth(A=3.0, sx=0.06, sy=0.06), "cplanes", (50.0,), c_step=30.0))[0]
+    assert not any("no measured plane passes within" in a for a in r.assumptions)
