@@ -19,9 +19,9 @@ EXCEPTIONS = {
     "bsdfkit.measurement.table:read_table": "public signature: the path and the eight defaults a table may lack "
                                             "(quantity, side, relative_std, wavelength, incidence, phi_i, zeros, "
                                             "sample), which the ingest command passes by name",
-    "bsdfkit.tables.vendor:vendor_dataset": "public signature: the path, the seven reader options the ingest "
+    "bsdfkit.tables.vendor:vendor_dataset": "public signature: the path, the eight reader options the ingest "
                                             "command passes by name (quantity, side, relative_std, wavelength, "
-                                            "zeros, sample, face) and the file's nodes when already read",
+                                            "zeros, sample, face, block) and the file's nodes when already read",
     "bsdfkit.tables.to_dataset:convert": "public signature: source, to, path, force and the convert command's "
                                          "options (side, wavelength, band, interaction, incidences, settings, "
                                          "tolerance, table options), which the command line and tests pass by "

@@ -77,6 +77,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeros", choices=ZERO_POLICIES, default=None, help="for text tables (see bsdfkit ingest)")
     p.add_argument("--face", choices=("front", "back"), default=None,
                    help="BSDF XML source: the face to convert (default: the front; to BSDF XML both faces are kept)")
+    p.add_argument("--block", default=None, metavar="LABEL",
+                   help="BSDF XML source: the spectral block to convert (default: Visible, else the first)")
     add_table_arguments(p)
     p.add_argument("--tis-tolerance", type=float, default=0.01, metavar="FRACTION",
                    help="largest accepted |TIS written / TIS source - 1| (default 0.01)")
@@ -103,7 +105,7 @@ def _convert(args: argparse.Namespace, settings):
         band_nm=_floats(args.band, "--band", 2) if args.band else None, interaction=args.interaction,
         theta_i_deg=_floats(args.incidences, "--incidences") if args.incidences else None, settings=settings,
         tolerance=args.tis_tolerance, quantity=args.quantity, relative_std=args.relative_std, zeros=args.zeros,
-        face=args.face, keep_failed=args.keep_failed,
+        face=args.face, block=args.block, keep_failed=args.keep_failed,
     )
 
 

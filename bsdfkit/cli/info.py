@@ -28,11 +28,11 @@ def _run(args: argparse.Namespace) -> int:
     # a mistyped path is answered before the engine is imported
     existing_source(args.scan, "a raw export folder or a netCDF dataset written by bsdfkit")
     # the engine here, not at the top: `bsdfkit --help` registers every verb and must stay light
-    from bsdfkit.io import netcdf
     from bsdfkit.measurement.raw_scan import read_scan
+    from bsdfkit.tables.export import open_bsdf_dataset
 
     path = Path(args.scan)
-    ds = read_scan(path) if path.is_dir() else netcdf.load(path, quantity=("bsdf", "raw_counts"))
+    ds = read_scan(path) if path.is_dir() else open_bsdf_dataset(path, raw_counts=True)  # checked: docs/errors.md
     info = api.describe(ds)
     info["file"] = str(path)
     if args.json:

@@ -68,6 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--face", choices=("front", "back"), default=None,
                    help="BSDF XML: the face of the sample to read (default: the front; a file with back blocks "
                         "only: those)")
+    p.add_argument("--block", default=None, metavar="LABEL",
+                   help="BSDF XML: the spectral block to read by its label (default: Visible, else the first)")
     p.add_argument("--json", action="store_true", help="print the dataset summary as JSON")
     p.set_defaults(func=_run)
 
@@ -81,7 +83,7 @@ def _run(args: argparse.Namespace) -> int:
         warnings.simplefilter("always", StatedTisWarning)
         ds = api.ingest(args.path, quantity=args.quantity, side=args.side, relative_std=args.relative_std,
                         wavelength_nm=args.wavelength, incidence_deg=args.incidence, phi_i_deg=args.phi_i,
-                        zeros=args.zeros, sample=args.sample, face=args.face)
+                        zeros=args.zeros, sample=args.sample, face=args.face, block=args.block)
     api.save(ds, args.output, args.force)
     warn_dark(ds, "ingest")
     for w in caught:
@@ -90,7 +92,7 @@ def _run(args: argparse.Namespace) -> int:
     info = api.describe(ds)
     extra = {k: ds.attrs[k] for k in ("source_format", "source_layout", "source_quantity", "bsdf_std_origin",
                                       "gap_records_dropped", "zero_records_as_gaps", "wavelength_note",
-                                      "azimuth_note", "face", "faces_note")
+                                      "azimuth_note", "face", "faces_note", "block", "blocks_note")
              if k in ds.attrs and ds.attrs[k] != ""}
     if "tis_stated_json" in ds.attrs:  # stated vs integrated TIS of a vendor file (check_stated_tis)
         extra["tis_stated"] = json.loads(ds.attrs["tis_stated_json"])
@@ -111,6 +113,8 @@ def _run(args: argparse.Namespace) -> int:
             print(f"  wavelength: {extra['wavelength_note']}")
         if "faces_note" in extra:  # what else the file holds, never dropped in silence
             print(f"  face: {extra.get('face', '')}; {extra['faces_note']}")
+        if "blocks_note" in extra:
+            print(f"  spectral block: {extra.get('block', '')}; {extra['blocks_note']}")
         if "azimuth_note" in extra:
             print(f"  azimuth: {extra['azimuth_note']}")
     return 0

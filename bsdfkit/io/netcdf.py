@@ -122,7 +122,9 @@ def load(path: str | Path, quantity: str | tuple[str, ...] | None = None) -> xr.
     path : str or Path
         netCDF file written by bsdfkit.
     quantity : str or tuple of str, optional
-        Accepted values of ``attrs['quantity']``; None accepts any.
+        Accepted values of ``attrs['quantity']``; None accepts any, and a file without the attribute (a BSDF
+        dataset's readers leave it to :func:`bsdfkit.measurement.schema.validate_bsdf_dataset`, which reads such a
+        file as ``bsdf``).
 
     Returns
     -------
@@ -144,6 +146,9 @@ def load(path: str | Path, quantity: str | tuple[str, ...] | None = None) -> xr.
     if quantity is not None:
         wanted = (quantity,) if isinstance(quantity, str) else quantity
         got = ds.attrs.get("quantity")
+        if got is None:
+            raise FormatError("dataset states no quantity (no attribute 'quantity')", file=path, field="quantity",
+                              expected=" or ".join(wanted), got=None)
         if got not in wanted:
             raise FormatError("dataset holds another quantity", file=path, field="quantity",
                               expected=" or ".join(wanted), got=got)

@@ -13,15 +13,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import xarray as xr
 
 from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import ValidationError
 
-__all__ = ["DIMS", "VARIABLES", "ATTRIBUTES", "Variable", "new_bsdf_dataset", "validate_bsdf_dataset"]
+__all__ = ["DIMS", "VARIABLES", "ATTRIBUTES", "Variable", "ANGLE_RANGES_DEG", "READ_REQUIRED", "new_bsdf_dataset",
+           "validate_bsdf_dataset"]
 
 #: The dimensions of a BSDF dataset.
 DIMS: tuple[str, ...] = ("record", "wavelength", "configuration", "band_edge")
@@ -151,12 +154,13 @@ def new_bsdf_dataset(data: Mapping[str, Any], coords: Mapping[str, Any], attrs: 
     return validate_bsdf_dataset(ds)
 
 
-def _refuse(ds: xr.Dataset, message: str, field: str, expected: str, got: object) -> ValidationError:
-    return ValidationError(f"not a BSDF dataset: {message}", file=ds.attrs.get("source") or None, field=field,
+def _refuse(ds: xr.Dataset, message: str, field: str, expected: str, got: object,
+            file: str | Path | None = None) -> ValidationError:
+    return ValidationError(f"not a BSDF dataset: {message}", file=file or ds.attrs.get("source") or None, field=field,
                            expected=expected, got=got)
 
 
-def validate_bsdf_dataset(ds: xr.Dataset) -> xr.Dataset:
+def validate_bsdf_dataset(ds: xr.Dataset, file: str | Path | None = None) -> xr.Dataset:
     """``ds`` when it follows the schema of :data:`VARIABLES` and :data:`ATTRIBUTES`, else a one-line
     :class:`~bsdfkit.core.errors.ValidationError` naming the variable, what was expected and what was found.
 
@@ -164,48 +168,146 @@ def validate_bsdf_dataset(ds: xr.Dataset) -> xr.Dataset:
     a coordinate or not, and its ``units``; the required attributes and their fixed values; the side names.
     Further variables and attributes are allowed.
 
+    A dataset read from a file (``file`` given) is checked as the file's reader must (docs/errors.md, "netCDF
+    datasets"): a ``quantity`` attribute other than ``bsdf`` is refused naming both, a missing one is ``bsdf``; a
+    missing variable is named with the variables the file holds (a file without bsdfkit's attributes, written by
+    plain xarray or another tool, needs only :data:`READ_REQUIRED`); a variable without ``units`` takes the schema's
+    unit unless another unit attribute of it (``unit``, ``Units`` …, or the dataset's ``units`` for the 1/sr
+    variables) contradicts it, a stated unit must be the schema's; a file that lacks bsdfkit's attributes (written
+    by plain xarray or another tool) gets their neutral values; and the values must be plausible: angles within
+    their ranges (θ in [0, 90] deg, φ in [−360, 360] deg), wavelengths positive (NaN: not stated), ``bsdf_std``
+    ≥ 0, and some finite BSDF value.
+
     Parameters
     ----------
     ds : xarray.Dataset
         Dataset to check (raw or calibrated scan, or a table read as one).
+    file : str or Path, optional
+        The file ``ds`` was read from (named in every refusal); None for a dataset a reader has just built.
 
     Returns
     -------
     xarray.Dataset
-        ``ds`` itself, unchanged.
+        ``ds`` itself, unchanged; read from a file: ``ds`` with the schema's units and the neutral attributes it
+        lacked (a copy when any was added).
 
     Raises
     ------
     ValidationError
         The first departure from the schema found.
     """
-    missing = [d for d in DIMS if d not in ds.dims]
+    required, dims = {v.name for v in VARIABLES if v.required}, DIMS
+    if file is not None:
+        if not all(name in ds.attrs for name in ATTRIBUTES):  # another tool's file: what the reductions read
+            required, dims = set(READ_REQUIRED), ("record", "wavelength")
+        ds = _completed(ds, file)
+    missing = [d for d in dims if d not in ds.dims]
     if missing:
-        raise _refuse(ds, "dimension missing", missing[0], f"dims {', '.join(DIMS)}", tuple(ds.dims))
+        raise _refuse(ds, "dimension missing", missing[0], f"dims {', '.join(dims)}", tuple(ds.dims), file)
     for var in VARIABLES:
         if var.name not in ds.variables:
-            if var.required:
-                raise _refuse(ds, "variable missing", var.name, f"{var.type} on ({', '.join(var.dims)})", "nothing")
+            if var.name in required:
+                held = ", ".join(map(str, ds.data_vars)) or "none"
+                raise _refuse(ds, f"variable missing (data variables held: {held})", var.name,
+                              f"{var.type} on ({', '.join(var.dims)})", "nothing", file)
             continue
-        x = ds[var.name]
-        if x.dims != var.dims:
-            raise _refuse(ds, "variable on other dims", var.name, f"({', '.join(var.dims)})", x.dims)
-        if x.dtype.kind not in _KINDS[var.type]:
-            raise _refuse(ds, "variable of another type", var.name, var.type, str(x.dtype))
-        if var.coord != (var.name in ds.coords):
-            raise _refuse(ds, "coordinate and data variable mixed up", var.name,
-                          "a coordinate" if var.coord else "a data variable",
-                          "a data variable" if var.coord else "a coordinate")
-        if var.units is not None and x.attrs.get("units") != var.units:
-            raise _refuse(ds, "variable in other units", var.name, f"units '{var.units}'", x.attrs.get("units"))
+        _check_variable(ds, var, file)
     for name in ATTRIBUTES:
         if name not in ds.attrs:
-            raise _refuse(ds, "attribute missing", name, "the attributes of docs/architecture.md", "nothing")
+            raise _refuse(ds, "attribute missing", name, "the attributes of docs/architecture.md", "nothing", file)
     for name, value in FIXED_ATTRIBUTES.items():
         if ds.attrs[name] != value:
-            raise _refuse(ds, "attribute of another value", name, repr(value), ds.attrs[name])
+            raise _refuse(ds, "attribute of another value", name, repr(value), ds.attrs[name], file)
     sides = [str(s) for s in pd.unique(ds["side"].values)]  # hashing: no sort of a million strings
     odd = [s for s in sides + str(ds.attrs["side"]).split() if s not in SIDES]
     if odd:
-        raise _refuse(ds, "unknown side", "side", " or ".join(SIDES), odd[0])
+        raise _refuse(ds, "unknown side", "side", " or ".join(SIDES), odd[0], file)
+    if file is not None:
+        _check_ranges(ds, file)
     return ds
+
+
+def _check_variable(ds: xr.Dataset, var: Variable, file: str | Path | None) -> None:
+    """Refuse ``ds[var.name]`` on other dims, of another type, misplaced (coordinate / data) or in other units."""
+    x = ds[var.name]
+    if x.dims != var.dims:
+        raise _refuse(ds, "variable on other dims", var.name, f"({', '.join(var.dims)})", x.dims, file)
+    if x.dtype.kind not in _KINDS[var.type]:
+        raise _refuse(ds, "variable of another type", var.name, var.type, str(x.dtype), file)
+    if var.coord != (var.name in ds.coords):
+        raise _refuse(ds, "coordinate and data variable mixed up", var.name,
+                      "a coordinate" if var.coord else "a data variable",
+                      "a data variable" if var.coord else "a coordinate", file)
+    if var.units is not None and x.attrs.get("units") != var.units:
+        said = "variable in other units" if "units" in x.attrs else "variable states no units attribute"
+        raise _refuse(ds, said, var.name, f"units '{var.units}'", x.attrs.get("units"), file)
+
+
+#: The variables a dataset file written by another tool (plain xarray, without bsdfkit's attributes) must hold:
+#: those the reductions read; the other variables of :data:`VARIABLES` are checked when it holds them.
+READ_REQUIRED: tuple[str, ...] = ("bsdf", "bsdf_std", "config", "theta_i", "phi_i", "theta_s", "phi_s", "side",
+                                  "arc", "wavelength")
+#: Attribute names that state a variable's unit besides ``units`` (a file of another tool).
+_UNIT_ATTRIBUTES = ("unit", "Units", "UNITS", "Unit", "UNIT")
+#: Inclusive ranges [deg] of the angle coordinates of a dataset read from a file.
+ANGLE_RANGES_DEG: dict[str, tuple[float, float]] = {
+    "theta_i": (0.0, 90.0), "theta_s": (0.0, 90.0), "phi_i": (-360.0, 360.0), "phi_s": (-360.0, 360.0)}
+
+
+def _completed(ds: xr.Dataset, file: str | Path) -> xr.Dataset:
+    """``ds`` read from ``file`` with its quantity checked, the schema's units where it states none (and nothing
+    contradicts them) and, when it lacks bsdfkit's attributes, their neutral values."""
+    quantity = ds.attrs.get("quantity")
+    if quantity is not None and quantity != FIXED_ATTRIBUTES["quantity"]:
+        raise ValidationError("dataset holds another quantity", file=file, field="quantity",
+                              expected=repr(FIXED_ATTRIBUTES["quantity"]), got=quantity)
+    ds = ds.copy()
+    ours = all(name in ds.attrs for name in ATTRIBUTES)  # written by bsdfkit: it states every unit
+    for var in VARIABLES:
+        if var.name not in ds.variables:
+            continue
+        if var.coord and var.name not in ds.coords:
+            ds = ds.set_coords(var.name)  # another tool stored it as a data variable
+        attrs = ds[var.name].attrs
+        if ours or var.units is None or "units" in attrs:
+            continue
+        stated = [(k, attrs[k]) for k in _UNIT_ATTRIBUTES if k in attrs]
+        if var.units == FIXED_ATTRIBUTES["units"] and "units" in ds.attrs:
+            stated.append(("units", ds.attrs["units"]))  # the dataset's: the unit of its BSDF
+        for key, unit in stated:
+            if str(unit).strip() != var.units:
+                owner = "dataset" if key == "units" else "variable"
+                raise _refuse(ds, f"variable in other units (attribute {key!r} of the {owner})", var.name,
+                              f"units '{var.units}'", unit, file)
+        attrs["units"] = var.units
+    if not ours:  # the neutral values of bsdfkit's attributes
+        sides = " ".join(s for s in SIDES if "side" in ds.variables and s in set(map(str, ds["side"].values)))
+        neutral = {**FIXED_ATTRIBUTES, "angle_convention": ANGLE_CONVENTION, "side": sides,
+                   "sample_name": Path(file).stem, "synthetic": 0, "source": str(file), "manifest_json": "{}"}
+        ds.attrs = {**{name: neutral.get(name, float("nan")) for name in ATTRIBUTES}, **ds.attrs}
+        if "bsdf_bispectral" in ds.variables and not np.isfinite(ds["bsdf_bispectral"].values).any():
+            ds.attrs.setdefault("elastic", 1)
+    return ds
+
+
+def _check_ranges(ds: xr.Dataset, file: str | Path) -> None:
+    """Refuse angles outside :data:`ANGLE_RANGES_DEG`, wavelengths <= 0, negative ``bsdf_std`` and a dataset
+    without any finite BSDF value (read from ``file``)."""
+    for name, (lo, hi) in ANGLE_RANGES_DEG.items():
+        v = np.asarray(ds[name].values, dtype=np.float64)
+        bad = ~((v >= lo) & (v <= hi))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise _refuse(ds, f"angle out of range at record {k}", name, f"{lo:g} <= {name} <= {hi:g} deg",
+                          float(v[k]), file)
+    lam = np.asarray(ds["wavelength"].values, dtype=np.float64)
+    if (lam <= 0).any() or np.isinf(lam).any():
+        k = int(np.argmax((lam <= 0) | np.isinf(lam)))
+        raise _refuse(ds, "wavelength not positive", "wavelength", "> 0 nm (NaN: not stated)", float(lam[k]), file)
+    std = np.asarray(ds["bsdf_std"].values, dtype=np.float64)
+    if (std < 0).any():
+        k = np.unravel_index(int(np.argmax(std < 0)), std.shape)
+        raise _refuse(ds, f"negative uncertainty at record {k[0]}", "bsdf_std", ">= 0 1/sr", float(std[k]), file)
+    if not any(np.isfinite(ds[name].values).any() for name in ("bsdf", "bsdf_bispectral") if name in ds):
+        raise _refuse(ds, "no finite BSDF value", "bsdf", "finite values where the sample was measured",
+                      f"NaN in all {ds['bsdf'].size} values", file)

@@ -37,7 +37,9 @@ from bsdfkit.core import frames
 from bsdfkit.core.conventions import WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.fit import plausibility
-from bsdfkit.io import atomic
+from bsdfkit.io import atomic, netcdf
+from bsdfkit.measurement.schema import validate_bsdf_dataset
+from bsdfkit.measurement.table import MAX_ABS_BSDF, _check_values, _Rows
 from bsdfkit.models.registry import BSDF_MODELS, bsdf_model
 from bsdfkit.reduction.hemispherical import elastic_source, hemispherical, reduction_kind
 from bsdfkit.reduction.tis import CENTER, hemisphere_bsdf_fn
@@ -150,6 +152,9 @@ class ExportSettings:
     #: BSDF XML: the BSDF of the back face, ``fn(theta_i_deg, side, directions)`` [1/sr] (a source file's own Back
     #: blocks, which ``convert`` passes on), written as the Back blocks; None: ``xml_back`` decides
     xml_back_fn: Any = None
+    #: BSDF XML: the label of the written spectral block (``Visible``, what Radiance reads; ``convert`` keeps a
+    #: source block's own label, e.g. ``Solar``, rather than call it Visible)
+    xml_label: str = "Visible"
     #: BSDF XML basis: ``auto`` (default: a TensorTree3 when the source's specular lobe is narrower than a Klems
     #: patch, else Klems; docs/exports.md §2.4), ``klems`` (always: WINDOW reads only Klems) or ``tree``
     xml_basis: str = "auto"
@@ -169,6 +174,9 @@ class ExportSettings:
         if self.xml_back not in ("none", "mirror"):
             raise ValidationError("unknown BSDF XML back-side rule", field="xml_back", expected="none or mirror",
                                   got=self.xml_back)
+        if not self.xml_label or any(c in self.xml_label for c in "<>&"):
+            raise ValidationError("unusable spectral block label", field="xml_label", expected="a plain label",
+                                  got=self.xml_label)
         if self.xml_back_fn is not None and (self.xml_back != "none" or not callable(self.xml_back_fn)):
             raise ValidationError("the back face is either the source's own or the front mirrored",
                                   field="xml_back_fn", expected="a BSDF callable with xml_back = none",
@@ -254,16 +262,94 @@ class ExportResult:
 BsdfFn = grids.BsdfFn
 
 
-def _open_dataset(path: str | Path) -> xr.Dataset:
-    path = Path(path)
-    if not path.exists():
-        raise InputError("source file does not exist", file=path)
+def open_bsdf_dataset(path: str | Path, fit_results: bool = False, raw_counts: bool = False) -> xr.Dataset:
+    """A netCDF BSDF dataset read and checked before anything is computed from it: the one reader of every verb
+    that takes a dataset file (``ingest``/``tis``/``budget``/``fit bsdf``/``convert`` through
+    :func:`bsdfkit.tables.to_dataset.ingest`, ``info``, ``export``).
+
+    The schema (:func:`bsdfkit.measurement.schema.validate_bsdf_dataset`: variables, dims, units, quantity,
+    ranges) and the values as a measured table's (:func:`check_bsdf_values`); docs/errors.md, "netCDF datasets".
+
+    Parameters
+    ----------
+    path : str or Path
+        The netCDF file (written by bsdfkit, plain xarray or another tool).
+    fit_results : bool, optional
+        Also accept a fit result (attribute ``model``; its own layout, returned as read).
+    raw_counts : bool, optional
+        Also accept a raw scan (``quantity = "raw_counts"``; its own layout, returned as read).
+
+    Returns
+    -------
+    xarray.Dataset
+        The dataset in memory (a file without bsdfkit's attributes gets their neutral values).
+
+    Raises
+    ------
+    InputError
+        One line naming the file, the variable or attribute, what was expected and what was found.
+    """
+    ds = netcdf.load(path)
+    if (fit_results and "model" in ds.attrs) or (raw_counts and ds.attrs.get("quantity") == "raw_counts"):
+        return ds
+    return check_bsdf_values(validate_bsdf_dataset(ds, file=path), path)
+
+
+def check_bsdf_values(ds: xr.Dataset, path: str | Path) -> xr.Dataset:
+    """``ds`` when its ``bsdf`` values pass a measured table's value checks
+    (:func:`bsdfkit.measurement.table._check_values`, one rule for both): each value and uncertainty within
+    :data:`~bsdfkit.measurement.table.MAX_ABS_BSDF` [1/sr], and at each wavelength a mean not below zero beyond
+    the noise (``NEGATIVE_SIGMA`` standard errors of the mean and the median ``bsdf_std``). An all-zero dataset
+    (a black sample) is read, unlike an all-zero table: its uncertainties are checked alone.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A BSDF dataset (schema-checked).
+    path : str or Path
+        The file it was read from (named in a refusal).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``ds``.
+
+    Raises
+    ------
+    ValidationError
+        The first value refused, naming the record (and the line of its own source, when stated).
+    """
+    v = np.ascontiguousarray(ds["bsdf"].values, dtype=np.float64)
+    n_rec, n_lam = v.shape
+    n = v.size
+    zeros = np.broadcast_to(np.float64(0.0), (n,))
+    rows = _Rows(theta_i=zeros, phi_i=zeros, theta_s=zeros, phi_s=zeros,
+                 wavelength=np.tile(np.asarray(ds["wavelength"].values, dtype=np.float64), n_rec),
+                 value=v.reshape(-1), std=np.asarray(ds["bsdf_std"].values, dtype=np.float64).reshape(-1),
+                 std_relative=np.broadcast_to(np.False_, (n,)), side=np.broadcast_to(np.int8(0), (n,)),
+                 spec=np.broadcast_to(np.int16(0), (n,)), line=np.repeat(np.arange(n_rec), n_lam),
+                 quantities=["bsdf"], headers=["bsdf"])
+    # an all-zero dataset is read (a black sample; the fit says so itself): its uncertainties are checked alone
+    scatters = bool(np.any(v[np.isfinite(v)] != 0.0))
     try:
-        with xr.open_dataset(path) as ds:
-            return ds.load()
-    except (OSError, ValueError) as exc:
-        raise FormatError("cannot read the source as netCDF", file=path, expected="a netCDF dataset",
-                          got=type(exc).__name__) from None
+        if scatters:
+            _check_values(str(path), rows, None)
+        elif np.nanmax(rows.std, initial=0.0) > MAX_ABS_BSDF:
+            k = int(np.nanargmax(rows.std))
+            raise ValidationError("uncertainty implausibly large", file=path, line=k // n_lam, field="bsdf_std",
+                                  expected=f"<= {MAX_ABS_BSDF:g}", got=f"{rows.std[k]:g}")
+    except ValidationError as exc:  # said of the record, not of a line of the netCDF file
+        record = int(exc.line or 0)
+        prefix = f"{path}:{exc.line}: field '{exc.field}': "
+        line = int(ds["source_line"].values[record]) if "source_line" in ds.coords else 0
+        name = "bsdf" if exc.field == "bsdf" else "bsdf_std"  # the table reader says "uncertainty of 'bsdf'"
+        where = f"{name} of record {record}" + (f" (source line {line})" if line > 0 else "")
+        raise ValidationError(str(exc).removeprefix(prefix), file=path, field=where) from None
+    return ds
+
+
+def _open_dataset(path: str | Path) -> xr.Dataset:
+    return open_bsdf_dataset(path, fit_results=True)
 
 
 def _select(ds: xr.Dataset, dim: str, value: str, what: str) -> xr.Dataset:

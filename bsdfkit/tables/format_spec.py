@@ -64,6 +64,8 @@ class VendorGrid:
     basis: str | None = None
     #: the face of the sample the light is incident on: ``front`` or ``back`` (a BSDF XML file holds both)
     face: str = "front"
+    #: the spectral block's label (BSDF XML: ``Visible``, ``Solar``, …; '' for one-block formats)
+    block: str = ""
 
 
 @dataclass(frozen=True)

@@ -23,18 +23,15 @@ from numpy.typing import NDArray
 
 from bsdfkit.core.conventions import SIDES
 from bsdfkit.core.errors import FormatError, InputError, ValidationError
-from bsdfkit.io import atomic, netcdf
+from bsdfkit.io import atomic
 from bsdfkit.io.text import existing_source
 from bsdfkit.measurement.calibrate import calibrate
 from bsdfkit.measurement.raw_scan import read_scan
-from bsdfkit.measurement.table import (
-    MAX_ABS_BSDF,
-    read_table,
-)
+from bsdfkit.measurement.table import read_table
 from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import registry
-from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export, read_any
+from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export, open_bsdf_dataset, read_any
 from bsdfkit.tables.grids import GridTolerance, PiecewiseConstant, Pointwise, tis_reference
 from bsdfkit.tables.registry import sniff_format
 from bsdfkit.tables.vendor import checked_vendor_dataset, vendor_dataset
@@ -46,7 +43,7 @@ __all__ = ["VENDOR_FORMATS", "ConvertResult", "source_kind", "vendor_dataset", "
 VENDOR_FORMATS: tuple[str, ...] = registry.names()
 #: Options :func:`ingest` passes to the text-table and vendor readers.
 TABLE_OPTIONS = ("quantity", "side", "relative_std", "wavelength_nm", "incidence_deg", "phi_i_deg", "zeros",
-                 "sample", "face")
+                 "sample", "face", "block")
 _NETCDF_MAGIC = (b"\x89HDF", b"CDF\x01", b"CDF\x02")
 _MATCH_DEG = 1e-6
 
@@ -117,7 +114,7 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     if kind == "raw-scan":
         return calibrate(read_scan(path))
     if kind == "netcdf":
-        return _check_magnitudes(netcdf.load(path, quantity="bsdf"), path)
+        return open_bsdf_dataset(path)  # schema, units, quantity and values checked (docs/errors.md)
     if kind in VENDOR_FORMATS:
         bad = [k for k in given if k in ("incidence_deg", "phi_i_deg")]
         if bad:
@@ -125,32 +122,16 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
                              expected="no --incidence/--phi-i")
         # a file whose own TIS lines disagree with its data warns (StatedTisWarning) and records both
         return checked_vendor_dataset(path, **given)
-    if "face" in given:
-        raise InputError("a measured table holds one face", file=path, field="--face",
-                         expected="no --face (it chooses the face of a BSDF XML file)", got=given["face"])
+    for key in ("face", "block"):
+        if key in given:
+            raise InputError(f"a measured table holds one {key}", file=path, field=f"--{key}",
+                             expected=f"no --{key} (it chooses the {key} of a BSDF XML file)", got=given[key])
     return read_table(path, **given)
 
 
 def _flag(option: str) -> str:
     """The command-line flag of an ingest option: ``incidence_deg`` → ``--incidence`` (the flag states no unit)."""
     return "--" + option.removesuffix("_deg").removesuffix("_nm").replace("_", "-")
-
-
-def _check_magnitudes(ds: xr.Dataset, path: str | Path) -> xr.Dataset:
-    """``ds`` when its BSDF values and uncertainties are within :data:`MAX_ABS_BSDF` [1/sr]; else refused naming
-    the record (and its source line), before a reduction squares them into inf (a dataset written elsewhere)."""
-    for name in ("bsdf", "bsdf_std"):
-        if name not in ds:
-            continue
-        v = np.asarray(ds[name].values, dtype=np.float64)
-        bad = np.isfinite(v) & (np.abs(v) > MAX_ABS_BSDF)
-        if bad.any():
-            k = np.unravel_index(int(np.argmax(bad)), v.shape)
-            line = int(ds["source_line"].values[k[0]]) if "source_line" in ds.coords else 0
-            where = f"{name} of record {k[0]}" + (f" (source line {line})" if line > 0 else "")
-            raise ValidationError("value implausibly large for a BSDF", file=path, field=where,
-                                  expected=f"|{name}| <= {MAX_ABS_BSDF:g} 1/sr", got=f"{v[k]:g}")
-    return ds
 
 
 # ------------------------------------------------------------------------------------------- convert
@@ -256,14 +237,15 @@ def _source_dataset(source: str | Path | xr.Dataset, asked: _Asked, table_option
     """The source as a calibrated dataset (a vendor file or text table ingested)."""
     if asked.kind in VENDOR_FORMATS:
         extra = {k: v for k, v in table_options.items() if v is not None}
-        face = extra.pop("face", None)  # the face of a BSDF XML file
+        face = extra.pop("face", None)  # the face and spectral block of a BSDF XML file
+        block = extra.pop("block", None)
         if extra or asked.band is not None or asked.interaction is not None:
             raise InputError("options apply to datasets and text tables, not to a vendor file", file=asked.label,
                              field=", ".join([*extra, *(["band"] if asked.band else []),
                                               *(["interaction"] if asked.interaction else [])]))
         # a vendor file is integrated and written through the same reconstruction as its ingested dataset:
         # what bsdfkit read and bsdfkit tis report for it is what the written table is checked against
-        return vendor_dataset(source, wavelength_nm=asked.wavelength, face=face)
+        return vendor_dataset(source, wavelength_nm=asked.wavelength, face=face, block=block)
     if isinstance(source, xr.Dataset):
         return source
     opts = {k: v for k, v in table_options.items() if v is not None}
@@ -321,7 +303,7 @@ def _back_face(source: Any, to: str, asked: _Asked, table_options: dict[str, Any
             or settings.xml_back != "none" or settings.xml_back_fn is not None:
         return None
     try:
-        ds = vendor_dataset(source, wavelength_nm=asked.wavelength, face="back")
+        ds = vendor_dataset(source, wavelength_nm=asked.wavelength, face="back", block=table_options.get("block"))
     except InputError:  # no back face in the file
         return None
     if ds.attrs.get("faces_note", "").startswith("the file holds back-side blocks only"):
@@ -457,11 +439,17 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         label = "dataset" if isinstance(source, xr.Dataset) else str(source)
         kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
         asked = _Asked(label, kind, side, wavelength_nm, band_nm, interaction)
-        sourced = _source_fns(_source_dataset(source, asked, table_options), asked)
+        source_ds = _source_dataset(source, asked, table_options)
+        sourced_ds_attrs = dict(source_ds.attrs)
+        sourced = _source_fns(source_ds, asked)
         fns, engine_tis, src_t, chosen_lambda = sourced.fns, sourced.engine_tis, sourced.src_t, sourced.chosen_lambda
         sides, thetas = _written_sides_and_incidences(to, asked, sourced, theta_i_deg)
         settings, settings_notes = _table_settings(settings, to, chosen_lambda, thetas, label)
         notes = sourced.notes + settings_notes
+        label = str(sourced_ds_attrs.get("block", "")) if asked.kind == "bsdfxml" else ""
+        if to == "bsdfxml" and label and label.lower() != "visible":  # never called Visible when it is not
+            settings = replace(settings, xml_label=label)
+            notes.append(f"the source's {label} block written under its own label (Radiance reads the Visible one)")
         back = _back_face(source, to, asked, table_options, settings, sides)
         if back is not None:  # a BSDF XML file's back face, kept in a BSDF XML output
             settings = replace(settings, xml_back_fn=back[0])

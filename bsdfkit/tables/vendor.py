@@ -227,10 +227,41 @@ def chosen_face(vendor: VendorTable, path: str, face: str | None) -> tuple[str, 
     return chosen, (f"the file also holds the {others[0]} face: ingest it with --face {others[0]}" if others else "")
 
 
+def chosen_block(vendor: VendorTable, path: str, block: str | None) -> tuple[str, str]:
+    """The spectral block to read (``block``, else the file's default: BSDF XML's ``Visible``, else its first) and a
+    note naming the others, never dropped in silence; ('', '') for a format of one block.
+
+    Parameters
+    ----------
+    vendor : VendorTable
+        The file's grids.
+    path : str
+        The file (named in errors).
+    block : str or None
+        A block's label, or None.
+
+    Returns
+    -------
+    tuple of str
+        The block and the note.
+    """
+    blocks = list(dict.fromkeys(g.block for g in vendor.grids))
+    if block is not None and block not in blocks:
+        raise InputError("the file holds no spectral block of this label", file=path, field="--block",
+                         expected=" or ".join(b for b in blocks if b) or "no --block (one block)", got=block)
+    chosen = block if block is not None else str(vendor.details.get("wavelength_label", blocks[0]))
+    chosen = chosen if chosen in blocks else blocks[0]
+    others = [b for b in blocks if b != chosen]
+    return chosen, (f"the file also holds the {', '.join(others)} block(s): ingest with --block LABEL" if others
+                    else "")
+
+
 def _chosen_grids(vendor: VendorTable, path: str, quantity: str | None, side: str | None,
-                  face: str | None = None) -> list:
-    """The file's grids of the face and side asked for (all sides without one), after checking ``quantity``,
-    ``side`` and ``face``."""
+                  face: str | None = None, block: str | None = None) -> list:
+    """The file's grids of the face, spectral block and side asked for (all sides without one), after checking
+    ``quantity``, ``side``, ``face`` and ``block``."""
+    block, _ = chosen_block(vendor, path, block)
+    vendor = replace(vendor, grids=tuple(g for g in vendor.grids if g.block == block))
     face, _ = chosen_face(vendor, path, face)
     vendor = replace(vendor, grids=tuple(g for g in vendor.grids if g.face == face))
     sides_in = [g.side for g in vendor.grids]
@@ -288,8 +319,8 @@ def _node_columns(chosen: list) -> dict[str, list]:
 
 def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | None = None,
                    relative_std: float | None = None, *, wavelength_nm: float | None = None, zeros: str = "keep",
-                   sample: str | None = None, table: VendorTable | None = None, face: str | None = None
-                   ) -> xr.Dataset:
+                   sample: str | None = None, table: VendorTable | None = None, face: str | None = None,
+                   block: str | None = None) -> xr.Dataset:
     """A Zemax, TracePro (Scatter 5) or ASAP-style table as a calibrated BSDF dataset.
 
     Parameters
@@ -313,6 +344,9 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     face
         ``front`` or ``back``: the face of a file that holds both (BSDF XML); default the front (a file with back
         blocks only: those). The dataset's ``face`` attribute names it, ``faces_note`` what else the file holds.
+    block
+        The spectral block of a file that holds several, by its label (BSDF XML: ``Visible``, ``Solar``, …; default
+        ``Visible``, else the first); ``attrs['block']`` names it, ``blocks_note`` the others.
 
     Returns
     -------
@@ -324,8 +358,10 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     if zeros not in ZERO_POLICIES:
         raise InputError("unknown zero policy", field="zeros", expected=" | ".join(ZERO_POLICIES), got=zeros)
     vendor = table if table is not None else _read_vendor(path)
-    chosen = _chosen_grids(vendor, path, quantity, side, face)
-    face, faces_note = chosen_face(vendor, path, face)
+    chosen = _chosen_grids(vendor, path, quantity, side, face, block)
+    block, blocks_note = chosen_block(vendor, path, block)
+    face, faces_note = chosen_face(replace(vendor, grids=tuple(g for g in vendor.grids if g.block == block)), path,
+                                   face)
     lam = _checked_wavelength(vendor.wavelength_nm, wavelength_nm, path)
     rel = DEFAULT_RELATIVE_STD if relative_std is None else float(relative_std)
     if not (np.isfinite(rel) and rel > 0):
@@ -363,7 +399,7 @@ def vendor_dataset(path: str | Path, quantity: str | None = None, side: str | No
     ds.attrs.update(source_format=vendor.format, source_layout=vendor.grids[0].kind,
                     source_quantity=" ".join("brdf" if g.side == "reflection" else "btdf" for g in chosen),
                     sample_name=sample or Path(path).stem, zeros_policy=zeros, relative_std=rel, face=face,
-                    faces_note=faces_note,
+                    faces_note=faces_note, block=block, blocks_note=blocks_note,
                     gap_records_dropped=int((~keep).sum()),
                     manifest_json=_json({"format": vendor.format, "details": dict(vendor.details, face=face,
                                                                                   note=faces_note),
@@ -394,7 +430,8 @@ def checked_vendor_dataset(path: str | Path, **options: Any) -> xr.Dataset:
     """
     summary, vendor = _read_summary_and_vendor(str(path), None)
     ds = vendor_dataset(path, table=vendor, **options)
-    chosen = _chosen_grids(vendor, str(path), options.get("quantity"), options.get("side"), options.get("face"))
+    chosen = _chosen_grids(vendor, str(path), options.get("quantity"), options.get("side"), options.get("face"),
+                           options.get("block"))
     ds.attrs["tis_stated_json"] = _json(_stated_tis_record(ds, vendor, summary, [g.side for g in chosen]))
     return ds
 

@@ -12,6 +12,7 @@ import pytest
 from radiance_check import radiance_direct_hemi
 
 import bsdfkit
+from bsdfkit.core.errors import InputError
 from bsdfkit.reduction import basis
 from bsdfkit.tables import registry
 from bsdfkit.tables.export import read_any
@@ -148,3 +149,23 @@ def test_the_grates_direct_patch_to_zemax_keeps_its_power(tmp_path):
     # 22.8 % off before, 0.35 % now (limit of the convert check: 1 %)
     res = convert(PYRADIANCE / "metalGrate.xml", "zemax", tmp_path / "t.bsdf", side="transmission")
     assert res.ok and res.worst_relative_difference <= 0.01
+
+
+def test_every_spectral_block_can_be_chosen_and_keeps_its_label(tmp_path):
+    # DiffuseGlass holds Solar and Visible blocks: each is ingested by its own label, never mixed, and converted
+    # under its own name (a Solar block called Visible was the defect)
+    path = PYRADIANCE / "DiffuseGlass.xml"
+    solar = read_bsdfxml(path, block="Solar")
+    assert solar.details["wavelength_label"] == "Solar"
+    ds = bsdfkit.ingest(path, block="Solar")
+    assert ds.attrs["block"] == "Solar" and "Visible" in ds.attrs["blocks_note"]
+    tis = bsdfkit.tis(ds)
+    for side, direction in (("reflection", "Reflection Front"), ("transmission", "Transmission Front")):
+        got = [float(tis["tis_band"].sel(side=side).sel(theta_i=t, method="nearest").squeeze())
+               for t in KLEMS_FULL.centres_deg]
+        np.testing.assert_allclose(got, solar.band_tis(direction), rtol=1e-9)
+    out = tmp_path / "solar.xml"
+    res = convert(path, "bsdfxml", out, block="Solar")
+    assert res.ok and read_bsdfxml(out).details["wavelength_labels_in_file"] == ["Solar"]
+    with pytest.raises(InputError, match="expected Visible or Solar, got .NIR"):
+        bsdfkit.ingest(path, block="NIR")

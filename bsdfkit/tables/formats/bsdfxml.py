@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.core.errors import FormatError, ValidationError
+from bsdfkit.core.errors import FormatError, InputError, ValidationError
 from bsdfkit.io import atomic
 from bsdfkit.io.text import is_float, read_text
 from bsdfkit.measurement.table import MAX_ABS_BSDF
@@ -405,7 +405,7 @@ def _open_layer(path: str) -> tuple[str, ET.Element]:
     return text, layer
 
 
-def read_bsdfxml(path: str | Path) -> KlemsBsdf | TreeBsdf:
+def read_bsdfxml(path: str | Path, block: str | None = None) -> KlemsBsdf | TreeBsdf:
     """Read a BSDF XML: a Klems-type angle basis (any basis of theta bands; the WINDOW schema) as a
     :class:`KlemsBsdf`, a Radiance tensor tree (``TensorTree3`` / ``TensorTree4``) as a :class:`TreeBsdf`.
 
@@ -416,6 +416,9 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf | TreeBsdf:
     ----------
     path : str or Path
         The BSDF XML file.
+    block : str, optional
+        The spectral block to read by its label (``Visible``, ``Solar``, …; default: ``Visible`` when the file has
+        it, else the first).
 
     Returns
     -------
@@ -430,8 +433,8 @@ def read_bsdfxml(path: str | Path) -> KlemsBsdf | TreeBsdf:
         if structure.lower() not in ("tensortree3", "tensortree4"):
             raise FormatError("unknown tensor tree rank", file=path, line=_line_of(text, structure),
                               field="IncidentDataStructure", expected="TensorTree3 or TensorTree4", got=structure)
-        return _read_tree(path, text, layer, 3 if structure.lower() == "tensortree3" else 4)
-    return _read_klems(path, text, layer, definition)
+        return _read_tree(path, text, layer, 3 if structure.lower() == "tensortree3" else 4, block)
+    return _read_klems(path, text, layer, definition, block)
 
 
 def _refuse_huge(path: str, text: str, raw: str, where: str, largest: float) -> None:
@@ -451,7 +454,19 @@ def _refuse_huge(path: str, text: str, raw: str, where: str, largest: float) -> 
                       expected=f"|value| <= {MAX_ABS_BSDF:g} (1/sr)", got=big.group()[:40])
 
 
-def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element | None) -> KlemsBsdf:
+def _chosen_block(path: str, labels: list[str], block: str | None) -> str:
+    """The spectral block to read: ``block`` (which the file must hold), else ``Visible`` (what Radiance reads)
+    when the file has it, else the first; one block, never a mix."""
+    if block is not None:
+        if block not in labels:
+            raise InputError("the file holds no spectral block of this label", file=path, field="--block",
+                             expected=" or ".join(dict.fromkeys(labels)) or "a labelled block", got=block)
+        return block
+    return next((lb for lb in labels if lb.lower() == "visible"), labels[0] if labels else "")
+
+
+def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element | None, wanted: str | None = None
+                ) -> KlemsBsdf:
     """The Klems part of :func:`read_bsdfxml`."""
     basis_el = None if definition is None else _child(definition, "AngleBasis")
     if basis_el is None:
@@ -490,8 +505,7 @@ def _read_klems(path: str, text: str, layer: ET.Element, definition: ET.Element 
     blocks: dict[str, NDArray[np.float64]] = {}
     labels: list[str] = []
     present = [_text(_child(wld, "Wavelength")) for wld in _children(layer, "WavelengthData")]
-    # one spectral block, never a mix: Visible (what Radiance reads) when the file has it, else the first
-    chosen = next((lb for lb in present if lb.lower() == "visible"), present[0] if present else "")
+    chosen = _chosen_block(path, present, wanted)
     for wld in _children(layer, "WavelengthData"):
         label = _text(_child(wld, "Wavelength"))
         for block in _children(wld, "WavelengthDataBlock"):
@@ -541,15 +555,13 @@ def _wavelength_and_name(path: str, text: str, layer: ET.Element) -> tuple[float
 _CHROMA = ("cie-u", "cie-v")
 
 
-def _read_tree(path: str, text: str, layer: ET.Element, ndim: int) -> TreeBsdf:
+def _read_tree(path: str, text: str, layer: ET.Element, ndim: int, wanted: str | None = None) -> TreeBsdf:
     """The tensor-tree part of :func:`read_bsdfxml`: the ``Visible`` (else the first) BSDF tree of every block."""
     data_starts = [m.end() for m in re.finditer(r"<ScatteringData\b[^>]*>", text)]
     trees: dict[str, tensortree.TensorTree] = {}
     labels: list[str] = []
     present = [_text(_child(wld, "Wavelength")) for wld in _children(layer, "WavelengthData")]
-    bsdf_labels = [lb for lb in present if lb.lower() not in _CHROMA]
-    # one spectral block, never a mix: Visible (what Radiance reads) when the file has it, else the first BSDF one
-    chosen = next((lb for lb in bsdf_labels if lb.lower() == "visible"), bsdf_labels[0] if bsdf_labels else "")
+    chosen = _chosen_block(path, [lb for lb in present if lb.lower() not in _CHROMA], wanted)
     k = -1
     for wld in _children(layer, "WavelengthData"):
         label = _text(_child(wld, "Wavelength"))
@@ -614,6 +626,7 @@ def _write_job(job: WriteJob) -> WriteOutcome:
     bsdf = klems_bsdf(job.fn, np.asarray(job.theta, dtype=np.float64), tuple(job.sides),
                       wavelength_nm=settings.wavelength_nm, back=settings.xml_back, comments=job.comments,
                       back_fn=settings.xml_back_fn)
+    bsdf = replace(bsdf, wavelength_label=settings.xml_label)
     write_bsdfxml(job.path, bsdf, force=job.force, generated_at=job.generated_at)
     return WriteOutcome(None, {"mode": f"{KLEMS_FULL.name} ({KLEMS_FULL.size} patches)", "basis_rule": rule,
                                "klems_incidence_map_deg": dict(zip([float(c) for c in KLEMS_FULL.centres_deg],
@@ -744,17 +757,24 @@ def _tree_grids(bsdf: TreeBsdf, directions: list[str]) -> list[VendorGrid]:
 
 
 def _vendor_table(path: str) -> VendorTable:
-    bsdf = read_bsdfxml(path)
-    tree = isinstance(bsdf, TreeBsdf)
-    present = list(bsdf.trees if tree else bsdf.blocks)
-    directions = [d for d in _DIRECTIONS if d in present]  # both faces: ingest chooses one (vendor_dataset)
-    if not directions:
-        raise FormatError("the file holds no reflection or transmission block", file=path,
-                          field="WavelengthDataDirection", expected="Reflection or Transmission, Front or Back")
-    grids_ = _tree_grids(bsdf, directions) if tree else _klems_grids(bsdf, directions)
-    details = {"basis": f"LBNL/Shirley-Chiu tensor tree (TensorTree{bsdf.ndim})" if tree else bsdf.basis.name,
-               "blocks_read": directions}
-    return VendorTable("bsdfxml", tuple(grids_), bsdf.wavelength_nm, details)
+    """Every face and spectral block of the file as grids (``face``, ``block`` name each): ingest chooses one."""
+    first = read_bsdfxml(path)
+    tree = isinstance(first, TreeBsdf)
+    labels = [lb for lb in first.details["wavelength_labels_in_file"] if not tree or lb.lower() not in _CHROMA]
+    grids_: list[VendorGrid] = []
+    for label in [first.details["wavelength_label"]] + [lb for lb in labels if lb != first.details["wavelength_label"]]:
+        bsdf = first if label == first.details["wavelength_label"] else read_bsdfxml(path, block=label)
+        present = list(bsdf.trees if tree else bsdf.blocks)
+        directions = [d for d in _DIRECTIONS if d in present]  # both faces: ingest chooses one (vendor_dataset)
+        if not directions:
+            raise FormatError("the file holds no reflection or transmission block", file=path,
+                              field="WavelengthDataDirection", expected="Reflection or Transmission, Front or Back")
+        found = _tree_grids(bsdf, directions) if tree else _klems_grids(bsdf, directions)
+        grids_ += [replace(g, block=label) for g in found]
+    details = {"basis": f"LBNL/Shirley-Chiu tensor tree (TensorTree{first.ndim})" if tree else first.basis.name,
+               "blocks_read": [d for d in _DIRECTIONS if d in (first.trees if tree else first.blocks)],
+               "wavelength_label": first.details["wavelength_label"], "wavelength_labels_in_file": labels}
+    return VendorTable("bsdfxml", tuple(grids_), first.wavelength_nm, details)
 
 
 def _guess_can_open(head: str, path: Path) -> bool:

@@ -145,7 +145,7 @@ def _incidence_map(texts: list[str], held: NDArray[np.float64], n: int) -> dict[
 
 
 def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None, comments: tuple[str, ...],
-                  generated_at: datetime | None = None) -> str:
+                  generated_at: datetime | None = None, label: str = "Visible") -> str:
     """The XML document of tensor-tree ``blocks`` (direction -> ScatteringData text).
 
     Parameters
@@ -160,6 +160,8 @@ def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None
         Comment lines.
     generated_at : datetime, optional
         Time stamp of the first comment (default: now).
+    label : str
+        The spectral block's label (``Visible``: what Radiance reads).
 
     Returns
     -------
@@ -170,7 +172,7 @@ def tree_xml_text(blocks: dict[str, str], name: str, wavelength_nm: float | None
                             generated_at)
     out.append("</DataDefinition>")
     for direction, tree in blocks.items():
-        out += xml_document.wavelength_data(direction, "Visible", ("<AngleBasis>LBNL/Shirley-Chiu</AngleBasis>",),
+        out += xml_document.wavelength_data(direction, label, ("<AngleBasis>LBNL/Shirley-Chiu</AngleBasis>",),
                                             (tree,))
     return "\n".join(out + list(xml_document.TAIL))
 
@@ -207,6 +209,6 @@ def write_tree_job(job: WriteJob, rule: str) -> WriteOutcome:
     note = ", ".join(f"{c:g}<-{t:g}" for c, t in mapping.items())
     comments = (f"bsdfkit incidence read <- source incidence [deg]: {note}", *job.comments)
     atomic.write_text(job.path, tree_xml_text(blocks, "bsdfkit", job.settings.wavelength_nm, comments,
-                                              job.generated_at), force=job.force)
+                                              job.generated_at, label=job.settings.xml_label), force=job.force)
     return WriteOutcome(None, {"mode": f"LBNL/Shirley-Chiu TensorTree3 ({n} cells per dimension)",
                                "basis_rule": rule, "klems_incidence_map_deg": mapping})
