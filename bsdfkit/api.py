@@ -11,19 +11,22 @@ Every CLI verb is a thin wrapper over one of these functions, and ``import bsdfk
 """
 from __future__ import annotations
 
+import math
+import numbers
+import os
+import reprlib
 from importlib import import_module
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bsdfkit.core.errors import InputError
+from bsdfkit.core.errors import ArgumentTypeError, InputError, ValidationError
 
 if TYPE_CHECKING:  # the names of the signatures only; each function imports its engine when called
     import xarray as xr
 
     from bsdfkit.fit.least_squares import BsdfFitOptions
     from bsdfkit.fit.spectrum import fit_spectrum
-    from bsdfkit.measurement.describe import describe
-    from bsdfkit.pipeline.recipe import run
+    from bsdfkit.pipeline.recipe import Recipe
     from bsdfkit.raytrace import TraceResult
     from bsdfkit.raytrace.scene import Scene
     from bsdfkit.reduction.budget import InteractionTable
@@ -31,8 +34,7 @@ if TYPE_CHECKING:  # the names of the signatures only; each function imports its
 
 #: public names that are another module's function, imported on first use (PEP 562) so that ``bsdfkit.ingest``
 #: loads neither JAX nor matplotlib: ``run`` pulls in the pipeline and its report
-_REEXPORTS = {"describe": "bsdfkit.measurement.describe", "fit_spectrum": "bsdfkit.fit.spectrum",
-              "run": "bsdfkit.pipeline.recipe"}
+_REEXPORTS = {"fit_spectrum": "bsdfkit.fit.spectrum"}
 
 
 def __getattr__(name: str) -> Any:
@@ -45,6 +47,105 @@ def __getattr__(name: str) -> Any:
 
 __all__ = ["ingest", "tis", "budget", "profile", "describe", "save", "fit_bsdf", "fit_spectrum", "export", "read",
            "load_scene", "trace", "run"]
+
+#: what the arguments of the public functions are checked against, before anything is computed (issue #44.6)
+PATH = (str, os.PathLike)
+REAL = (numbers.Real,)
+#: the variables a calibrated scan of :func:`ingest` has and a reduction of it reads (a monochrome scan may have no
+#: ``wavelength``)
+SCAN_VARIABLES = ("bsdf", "bsdf_std", "config", "side", "theta_i")
+#: what a fit reads of a scan or of a profile (:func:`profile`)
+PROFILE_VARIABLES = ("bsdf", "bsdf_std", "side", "theta_i")
+#: the polar angle of incidence [deg] an ``incidence_deg`` argument may take
+INCIDENCE_RANGE_DEG = (0.0, 90.0)
+
+
+class _Shown:
+    """A value as an error message shows it: its type and a short representation."""
+
+    def __init__(self, value: Any, text: str | None = None) -> None:
+        self.text = text if text is not None else f"{type(value).__name__} {reprlib.repr(value)}"
+
+    def __repr__(self) -> str:
+        return self.text
+
+
+def check_argument(call: str, name: str, value: Any, kinds: tuple, expected: str, *, optional: bool = False,
+                   needs: tuple[str, ...] = (), bounds: tuple[float, float] | None = None) -> Any:
+    """``value`` of the argument ``name`` of ``bsdfkit.<call>`` when it is what the function takes; else one line.
+
+    The one check of the public functions' arguments (issue #44.6), made before anything is computed: a list or a
+    path where a dataset is expected is a :class:`TypeError` (:class:`~bsdfkit.core.errors.ArgumentTypeError`),
+    never an ``AttributeError`` from inside; the right type with the wrong content (a dataset without ``bsdf``, an
+    angle out of its range) is a :class:`~bsdfkit.core.errors.ValidationError`. Both name the function, the
+    argument, what was expected and what was given.
+
+    Parameters
+    ----------
+    call : str
+        The public function, e.g. ``"tis"``.
+    name : str
+        The argument.
+    value : object
+        What was given.
+    kinds : tuple of type
+        The types accepted (a ``bool`` is no number unless ``bool`` is one of them).
+    expected : str
+        What the function takes, in words.
+    optional : bool, optional
+        None is accepted too.
+    needs : tuple of str, optional
+        Variables (or coordinates) a dataset must have.
+    bounds : tuple of float, optional
+        Closed range ``(low, high)`` of a number, in the unit of the argument's name.
+
+    Returns
+    -------
+    object
+        ``value``.
+
+    Raises
+    ------
+    ArgumentTypeError
+        The value is of another type (a ``TypeError``).
+    ValidationError
+        The value lacks a variable of ``needs`` or lies outside ``bounds``.
+    """
+    if value is None and optional:
+        return value
+    where = f"bsdfkit.{call}(): argument '{name}'"
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        hint = " (read the file first: bsdfkit.ingest(path))" if "Dataset" in expected and isinstance(value, PATH) \
+            else ""
+        raise ArgumentTypeError(f"{where} of the wrong type", expected=expected + hint, got=_Shown(value))
+    missing = [n for n in needs if n not in value.variables]
+    if missing:
+        raise ValidationError(f"{where} is missing {', '.join(missing)}",
+                              expected=f"{expected} with {', '.join(needs)}",
+                              got=_Shown(value, "variables " + ", ".join(map(str, value.variables)) or "none"))
+    if bounds is not None and not (math.isfinite(value) and bounds[0] <= value <= bounds[1]):
+        raise ValidationError(f"{where} out of range", expected=f"{expected} in [{bounds[0]:g}, {bounds[1]:g}]",
+                              got=value)
+    return value
+
+
+def _dataset(call: str, ds: Any, needs: tuple[str, ...] = SCAN_VARIABLES, name: str = "ds") -> xr.Dataset:
+    """:func:`check_argument` of a dataset argument."""
+    import xarray as xr
+
+    return check_argument(call, name, ds, (xr.Dataset,), "an xarray.Dataset", needs=needs)
+
+
+def _incidence(call: str, incidence_deg: Any, optional: bool = True) -> Any:
+    """:func:`check_argument` of an ``incidence_deg`` argument [deg]."""
+    return check_argument(call, "incidence_deg", incidence_deg, REAL, "an angle of incidence [deg]",
+                          optional=optional, bounds=INCIDENCE_RANGE_DEG)
+
+
+def _names(call: str, optional: tuple[str, ...] = (), **names: Any) -> None:
+    """:func:`check_argument` of arguments that are names (interaction, side, model, format)."""
+    for name, value in names.items():
+        check_argument(call, name, value, (str,), "a name (str)", optional=name in optional)
 
 
 def ingest(path: str | Path, **options: Any) -> xr.Dataset:
@@ -69,6 +170,7 @@ def ingest(path: str | Path, **options: Any) -> xr.Dataset:
     """
     from bsdfkit.tables.to_dataset import ingest as _ingest_any
 
+    check_argument("ingest", "path", path, PATH, "a path (str or pathlib.Path) of a measurement")
     return _ingest_any(path, **options)
 
 
@@ -111,6 +213,8 @@ def tis(ds: xr.Dataset, incidence_deg: float | None = None,
     """
     from bsdfkit.reduction.any_sample import tis as _tis_any
 
+    _dataset("tis", ds)
+    _incidence("tis", incidence_deg)
     return _tis_any(ds, incidence_deg, band_nm)
 
 
@@ -138,6 +242,8 @@ def budget(ds: xr.Dataset, incidence_deg: float) -> InteractionTable:
     """
     from bsdfkit.reduction.any_sample import budget as _budget_any
 
+    _dataset("budget", ds)
+    _incidence("budget", incidence_deg, optional=False)
     return _budget_any(ds, incidence_deg)
 
 
@@ -160,6 +266,8 @@ def profile(ds: xr.Dataset, interaction: str, side: str | None = None) -> xr.Dat
     """
     from bsdfkit.reduction.spectral import interaction_profile
 
+    _dataset("profile", ds)
+    _names("profile", ("side",), interaction=interaction, side=side)
     return interaction_profile(ds, interaction, side)
 
 
@@ -182,6 +290,9 @@ def save(ds: xr.Dataset, path: str | Path, force: bool = False) -> Path:
     """
     from bsdfkit.io import netcdf
 
+    _dataset("save", ds, needs=())
+    check_argument("save", "path", path, PATH, "a path (str or pathlib.Path)")
+    check_argument("save", "force", force, (bool,), "True or False")
     return netcdf.save(ds, path, force)
 
 
@@ -235,6 +346,11 @@ def fit_bsdf(ds: xr.Dataset, interaction: str, side: str, model: str = "lambert+
     from bsdfkit.fit.least_squares import fit_bsdf as _fit_bsdf_profile
     from bsdfkit.reduction.spectral import interaction_profile
 
+    _dataset("fit_bsdf", ds, needs=PROFILE_VARIABLES)
+    _names("fit_bsdf", interaction=interaction, side=side, model=model)
+    check_argument("fit_bsdf", "options", options, (_Options,), "a BsdfFitOptions", optional=True)
+    _incidence("fit_bsdf", incidence_deg)
+    check_argument("fit_bsdf", "fallback", fallback, (bool,), "True, False or None", optional=True)
     prof = ds if "wavelength" not in ds.dims else interaction_profile(ds, interaction, side)
     finite = np.flatnonzero(np.isfinite(prof["bsdf"].values))
     if prof.sizes.get("record", 0) and finite.size == 0:  # NaN are gaps of a spectral grid; all NaN is no data
@@ -290,6 +406,14 @@ def export(source: Any, to: str, interaction: str, side: str, path: str | Path, 
     from bsdfkit.tables.export import ExportSettings, check_wavelength_nm
     from bsdfkit.tables.export import export as _export
 
+    if not callable(source):  # a BSDF callable is a source of the engine too
+        check_argument("export", "source", source, (xr.Dataset, *PATH), "an xarray.Dataset (a scan or a fit) or the "
+                       "path of its netCDF file")
+    _names("export", to=to, interaction=interaction, side=side)
+    check_argument("export", "path", path, PATH, "a path (str or pathlib.Path)")
+    check_argument("export", "force", force, (bool,), "True or False")
+    check_argument("export", "settings", settings, (ExportSettings,), "an ExportSettings", optional=True)
+    check_argument("export", "wavelength_nm", wavelength_nm, REAL, "a wavelength [nm]", optional=True)
     if wavelength_nm is not None:
         check_wavelength_nm(wavelength_nm)
         model = source if isinstance(source, xr.Dataset) else netcdf.load(source)
@@ -319,6 +443,7 @@ def read(path: str | Path) -> FileSummary:
     """
     from bsdfkit.tables.export import read_any
 
+    check_argument("read", "path", path, PATH, "a path (str or pathlib.Path) of a table")
     return read_any(path)
 
 
@@ -344,6 +469,9 @@ def trace(scene: Scene | str | Path, rays: int, seed: int = 0, **options: Any) -
     from bsdfkit.raytrace import trace as _trace
     from bsdfkit.raytrace.scene import Scene
 
+    check_argument("trace", "scene", scene, (Scene, *PATH), "a Scene or the path of a scene TOML file")
+    check_argument("trace", "rays", rays, (numbers.Integral,), "a number of rays (int)")
+    check_argument("trace", "seed", seed, (numbers.Integral,), "a seed (int)")
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     return _trace(scene, rays, seed, **options)
@@ -365,7 +493,57 @@ def load_scene(path: str | Path) -> Scene:
     """
     from bsdfkit.raytrace import load_scene as _load_scene
 
+    check_argument("load_scene", "path", path, PATH, "a path (str or pathlib.Path) of a scene TOML file")
     return _load_scene(path, plate_resolver=_recipe_plate)
+
+
+def describe(ds: xr.Dataset) -> dict:
+    """Incidences, sides, positions per arc, wavelength range and configurations of a raw or calibrated scan
+    (:func:`bsdfkit.measurement.describe.describe`).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Raw scan or calibrated one (:func:`ingest`).
+
+    Returns
+    -------
+    dict
+        JSON-ready summary: incidences [deg], sides, positions, wavelength range [nm], configurations.
+    """
+    from bsdfkit.measurement.describe import describe as _describe
+
+    _dataset("describe", ds, needs=("side", "theta_i", "wavelength"))
+    return _describe(ds)
+
+
+def run(recipe: Recipe | str | Path, out_dir: str | Path, force: bool = False, **options: Any) -> dict:
+    """Run every stage of a fitting recipe and write its outputs into ``out_dir``; the same function as ``bsdfkit
+    run`` (:func:`bsdfkit.pipeline.recipe.run`, whose docstring has the options).
+
+    Parameters
+    ----------
+    recipe : Recipe or str or Path
+        A recipe (:func:`bsdfkit.pipeline.recipe.load_recipe`), or its TOML file.
+    out_dir : str or Path
+        Output folder.
+    force : bool, optional
+        Replace an existing, non-empty output folder as a whole.
+    **options
+        ``log``, ``progress`` and ``helper_processes`` of :func:`bsdfkit.pipeline.recipe.run`.
+
+    Returns
+    -------
+    dict
+        The run summary (as written to summary.json).
+    """
+    from bsdfkit.pipeline.recipe import Recipe
+    from bsdfkit.pipeline.recipe import run as _run
+
+    check_argument("run", "recipe", recipe, (Recipe, *PATH), "a Recipe or the path of a recipe TOML file")
+    check_argument("run", "out_dir", out_dir, PATH, "a path (str or pathlib.Path) of the output folder")
+    check_argument("run", "force", force, (bool,), "True or False")
+    return _run(recipe, out_dir, force, **options)
 
 
 def _recipe_plate(recipe: Path) -> Any:

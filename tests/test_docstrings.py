@@ -26,7 +26,7 @@ COVERED = [
     "cli/read.py", "cli/run.py", "cli/simulate.py", "cli/sweep.py", "cli/tis.py", "cli/trace.py",
     "cli/convert.py", "cli/export.py",
     "core/conventions.py", "core/frames.py", "core/jaxconfig.py", "core/quadrature.py", "core/records.py",
-    "core/hemisphere.py", "core/spectra.py", "core/collector.py",
+    "core/hemisphere.py", "core/spectra.py", "core/collector.py", "core/children.py",
     "fit/lambertian.py", "fit/least_squares.py", "fit/lm.py", "fit/plausibility.py",
     "fit/spectrum/models.py", "fit/spectrum/reconstruction.py",
     "fit/spectrum/reporting.py", "fit/spectrum/solver.py", "fit/spectrum/starts.py",

@@ -95,3 +95,8 @@ class StatedTisWarning(BsdfkitWarning):
     """A table file's own stated TIS disagrees with the integral of its data beyond the tolerance of
     :func:`bsdfkit.tables.vendor.check_stated_tis`; ``details`` holds the comparison (stated and integrated TIS
     per key and incidence). bsdfkit keeps the data as they are."""
+
+
+class ArgumentTypeError(InputError, TypeError):
+    """An argument of a public function of the wrong type (a list or a path where a dataset is expected): a
+    ``TypeError`` too, raised before anything is computed (:func:`bsdfkit.api.check_argument`)."""

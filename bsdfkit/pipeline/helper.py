@@ -5,6 +5,12 @@ The helper computes the spectral comparison from the start of the run and then d
 before this process imports the pipeline itself, the two imports run on the two cores at once instead of one after
 the other (the second core idled through this process's imports). This module imports no more than the standard
 library and :mod:`bsdfkit.core.collector`.
+
+The helper never outlives the process that started it (issue #44): it is stopped when the block that started it
+ends (success, error), terminated with the command's other children on Ctrl-C or SIGTERM
+(:func:`bsdfkit.cli.main.exit_now`), and it ends by itself when its parent is gone without a word (SIGKILL, a crash):
+:func:`end_with_parent`, run as it starts, asks Linux for a SIGKILL when the parent dies (``PR_SET_PDEATHSIG``) and
+watches ``os.getppid()`` in a daemon thread everywhere.
 """
 from __future__ import annotations
 
@@ -15,7 +21,12 @@ from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
-from bsdfkit.core.collector import use_fewer_collections
+from bsdfkit.core.children import (  # noqa: F401  (the helper's parent watch, named here too)
+    PARENT_POLL_S,
+    USE_DEATH_SIGNAL,
+    child_initializer,
+    end_with_parent,
+)
 
 #: what the main job's helper imports as soon as it starts (what the pipeline's tasks need)
 PIPELINE = ("bsdfkit.pipeline.recipe",)
@@ -50,7 +61,9 @@ def helper_process(enabled: bool, preload: Sequence[str] = PIPELINE) -> Iterator
     if not enabled:
         yield None
         return
-    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=use_fewer_collections)
+    initializer, initargs = child_initializer()
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=initializer,
+                               initargs=initargs)
     try:
         with contextlib.suppress(BrokenProcessPool, RuntimeError):  # a dead helper: its work is done here
             pool.submit(_import, tuple(preload))

@@ -13,6 +13,7 @@ interruption needs no ``--force``.
 from __future__ import annotations
 
 import contextlib
+import gzip
 import math
 import time
 from collections.abc import Callable
@@ -44,6 +45,7 @@ from bsdfkit.io.recipe_head import recipe_head
 from bsdfkit.io.text import read_toml
 from bsdfkit.measurement.calibrate import BELOW_DARK_SIGMA, calibrate, truth_tis
 from bsdfkit.measurement.describe import describe
+from bsdfkit.measurement.manifest import read_manifest
 from bsdfkit.measurement.raw_scan import read_scan
 from bsdfkit.models.registry import BSDF_MODELS
 from bsdfkit.pipeline.helper import helper_process
@@ -286,6 +288,7 @@ def load_recipe(path: str | Path) -> Recipe:
     if not measurement.is_dir():
         raise InputError("measurement folder not found", file=path, field="recipe.measurement",
                          expected="an existing raw measurement folder", got=str(measurement))
+    _check_against_data(recipe)
     if trace.scene is not None:
         _scene_with_plate(trace.scene, None)  # the scene's own errors now, not after minutes of computing
     return recipe
@@ -364,6 +367,87 @@ def _check_ranges(r: Recipe) -> None:
     if sum(f.fallback_flux_W) <= 0:
         raise ValidationError("no light", file=p, field="fits.fallback_flux_W", expected="a positive total flux",
                               got=list(f.fallback_flux_W))
+
+
+class MeasuredAxes(NamedTuple):
+    """What a raw export measured: its wavelength range [nm], configurations and incidences [deg]."""
+
+    wavelength_nm: tuple[float, float]
+    configurations: tuple[str, ...]
+    incidences_deg: tuple[float, ...]
+
+
+def _scan_incidences(path: Path) -> set[float]:
+    """The distinct values of a raw scan table's ``theta_i_deg`` column [deg], read without its spectra."""
+    opener = gzip.open if path.suffix == ".gz" else open
+    found: set[float] = set()
+    column = None
+    with opener(path, "rt", encoding="utf-8-sig") as lines:
+        for line in lines:
+            if not line.strip() or line.lstrip().startswith("#"):
+                continue
+            if column is None:
+                column = [c.strip() for c in line.split(",")].index("theta_i_deg")  # ValueError: no such column
+                continue
+            found.add(float(line.split(",", column + 1)[column]))
+    return found
+
+
+def measured_axes(folder: Path) -> MeasuredAxes | None:
+    """The wavelength range, configurations and incidences of the raw export ``folder``, from its manifest and the
+    incidence column of its scans (tens of milliseconds: the spectra are not parsed).
+
+    Parameters
+    ----------
+    folder : Path
+        The raw export (a folder with ``manifest.toml``).
+
+    Returns
+    -------
+    MeasuredAxes or None
+        None when the export cannot be read so: its reader names the fault when the run reads it.
+    """
+    try:
+        manifest = read_manifest(folder)
+        incidences: set[float] = set()
+        for scan in sorted({cfg.scan_file for cfg in manifest.configurations}):
+            incidences |= _scan_incidences(Path(scan))
+    except (InputError, OSError, ValueError, EOFError, UnicodeDecodeError, IndexError):
+        return None
+    return MeasuredAxes((manifest.wavelength_min_nm, manifest.wavelength_max_nm),
+                        tuple(cfg.name for cfg in manifest.configurations), tuple(sorted(incidences)))
+
+
+def _measured_incidence(value: float, axes: MeasuredAxes, path: Path, dotted: str, folder: Path) -> None:
+    if not any(abs(value - th) < 1e-6 for th in axes.incidences_deg):
+        raise ValidationError("incidence not measured", file=path, field=dotted,
+                              expected=f"one of {', '.join(f'{th:g}' for th in axes.incidences_deg)} deg (the "
+                              f"incidences of {folder.name})", got=value)
+
+
+def _check_against_data(r: Recipe) -> None:
+    """Every key that selects from the measurement (a wavelength, a configuration, an incidence) inside what it
+    measured: a recipe asking for 2000 nm of a 380-780 nm scan is refused before the run, naming the key, the
+    measured range and the value (issue #44.7)."""
+    axes = measured_axes(r.measurement)
+    if axes is not None:
+        lo, hi = axes.wavelength_nm
+        wavelength = r.report.figure_wavelength_nm
+        if not lo <= wavelength <= hi:
+            raise ValidationError("wavelength outside the measured range", file=r.path,
+                                  field="report.figure_wavelength_nm", expected=f"a wavelength in [{lo:g}, {hi:g}] nm "
+                                  f"(the range of {r.measurement.name})", got=wavelength)
+        if r.report.figure_config not in axes.configurations:
+            raise ValidationError("configuration not measured", file=r.path, field="report.figure_config",
+                                  expected=f"one of {', '.join(axes.configurations)}", got=r.report.figure_config)
+        _measured_incidence(r.reductions.budget_incidence_deg, axes, r.path, "reductions.budget_incidence_deg",
+                            r.measurement)
+        _measured_incidence(r.fits.emission_incidence_deg, axes, r.path, "fits.emission_incidence_deg", r.measurement)
+    spectral = r.spectral
+    axes = None if spectral is None else measured_axes(spectral.measurement)
+    if axes is not None:
+        for k, value in enumerate(spectral.incidence_deg):
+            _measured_incidence(value, axes, r.path, f"spectral.incidence_deg[{k}]", spectral.measurement)
 
 
 def expected_outputs(recipe: Recipe) -> list[str]:

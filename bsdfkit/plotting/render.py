@@ -22,7 +22,7 @@ from pathlib import Path
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from bsdfkit.core.collector import use_fewer_collections
+from bsdfkit.core.children import child_initializer
 from bsdfkit.io.atomic import write_bytes
 
 #: resolution of the PNG files a run writes [dots per inch]
@@ -166,8 +166,12 @@ class PngRenderer:
 
     def __enter__(self) -> PngRenderer:
         if self._helper:
-            self._pool = self._given or ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                                initializer=use_fewer_collections)
+            if self._given is None:  # its own helper ends with this process, however this process ends
+                initializer, initargs = child_initializer()
+                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                                 initializer=initializer, initargs=initargs)
+            else:
+                self._pool = self._given
             with contextlib.suppress(BrokenProcessPool, RuntimeError):  # a dead helper: figures drawn here
                 self._pool.submit(_ready)
         return self
