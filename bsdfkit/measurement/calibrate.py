@@ -40,6 +40,7 @@ import xarray as xr
 
 from bsdfkit.core.errors import InputError, NumericalError
 from bsdfkit.measurement.instrument import Instrument, aperture_solid_angle, aperture_solid_angle_small
+from bsdfkit.measurement.raw_scan import MAX_ABS_COUNTS
 from bsdfkit.measurement.schema import new_bsdf_dataset
 
 __all__ = ["calibrate", "aperture_solid_angle", "aperture_solid_angle_small", "dark_statistics"]
@@ -110,11 +111,14 @@ def _incident_of(raw: xr.Dataset, name: str, darks: dict, gain: float, source: s
         raise InputError("no reference-beam frames for a configuration", file=source, field="reference_file",
                          expected=f"frames for configuration '{name}'")
     t_ref = raw["reference_exposure"].values[sel]
-    net, var, _ = _net(raw["reference_counts"].values[sel], t_ref, darks, gain, source)
+    counts = raw["reference_counts"].values[sel]
+    _refuse_overflow(raw, name, counts, source)
+    net, var, _ = _net(counts, t_ref, darks, gain, source)
     rate = (net / t_ref[:, None]).mean(axis=0)
     var_rate = (var / t_ref[:, None] ** 2).sum(axis=0) / sel.sum() ** 2
     att = float(raw["reference_attenuation"].sel(configuration=name))
     power, var_power = rate / att, var_rate / att**2
+    _refuse_overflow(raw, name, counts, source, (power, var_power))
     peak = power.max()
     valid = (power > INCIDENT_THRESHOLD * peak) & (power > 10.0 * np.sqrt(var_power))
     if not valid.any():
@@ -123,6 +127,40 @@ def _incident_of(raw: xr.Dataset, name: str, darks: dict, gain: float, source: s
                              expected="a reference spectrum above 10 standard uncertainties somewhere",
                              got=f"peak {peak:.3g} counts/s")
     return power, var_power, valid
+
+
+def _reference_file(raw: xr.Dataset, name: str, source: str) -> str:
+    """The reference file of configuration ``name`` as its manifest names it (``[[configuration]]``), else the scan's
+    folder ``source``."""
+    try:
+        entries = json.loads(raw.attrs.get("manifest_json", "{}")).get("configuration", [])
+        file = next(c["reference_file"] for c in entries if c.get("name") == name)
+    except (ValueError, TypeError, AttributeError, KeyError, StopIteration):
+        return source
+    return f"{source.rstrip('/')}/{file}" if source else str(file)
+
+
+def _refuse_overflow(raw: xr.Dataset, name: str, counts: np.ndarray, source: str,
+                     power: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    """Refuse a reference beam whose counts are implausibly large (:data:`MAX_ABS_COUNTS`), or whose incident
+    power (``power``: P_i and its variance per pixel, once computed) overflows: said as such, never as "zero
+    incident power" (an infinite peak leaves no pixel above its 1e-3 and none above an infinite uncertainty)."""
+    huge = ~np.isfinite(counts) | (np.abs(counts) > MAX_ABS_COUNTS)
+    over = np.zeros(counts.shape[1], dtype=bool)
+    if power is not None:
+        over = ~(np.isfinite(power[0]) & np.isfinite(power[1]))
+    if not (huge.any() or over.any()):
+        return
+    lam = raw["wavelength"].values
+    k = int(np.argmax(huge.any(axis=0))) if huge.any() else int(np.argmax(over))
+    biggest = float(np.nanmax(np.abs(np.where(np.isfinite(counts[:, k]), counts[:, k], np.inf))))
+    what = ("reference counts implausibly large" if huge.any() else
+            "reference power overflows (counts divided by a tiny exposure_s or reference_attenuation)")
+    raise NumericalError(f"{what}: the incident power is not finite (an overflow, not zero light)",
+                         file=_reference_file(raw, name, source),
+                         field=f"configuration '{name}': reference counts at {lam[k]:g} nm",
+                         expected=f"|count| <= {MAX_ABS_COUNTS:g} and a finite incident power",
+                         got=f"{biggest:g} counts")
 
 
 def _incident(raw: xr.Dataset, darks: dict, gain: float, source: str) -> _Incident:

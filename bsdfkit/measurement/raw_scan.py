@@ -27,6 +27,10 @@ SCAN_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_s_deg", "phi_s_deg", "side", 
 SCAN_OPTIONAL = ("arc",)
 FRAME_COLUMNS = ("frame", "exposure_s")
 ARCS = ("in_plane", "perpendicular", "other")
+#: Largest plausible |count| of one spectrometer pixel: 1e15, far above any frame however co-added (a 16-bit
+#: detector summing a million frames reaches 7e10). A larger number is an overflow or a corrupt cell, and the
+#: calibration would turn it into an infinite power (1e308 / exposure) that reads as no light at all.
+MAX_ABS_COUNTS = 1e15
 
 
 @dataclass(frozen=True)
@@ -135,6 +139,13 @@ def _counts(data: list[tuple[int, list[str]]], header: list[str], n_named: int, 
         line, row = data[r]
         raise ValidationError("count is not finite", file=path, line=line, field=header[n_named + k],
                               expected="a finite number", got=row[n_named + k])
+    huge = np.abs(counts) > MAX_ABS_COUNTS
+    if huge.any():
+        r, k = np.argwhere(huge)[0]
+        line, row = data[r]
+        raise ValidationError("count implausibly large (an overflow or a corrupt cell)", file=path, line=line,
+                              field=header[n_named + k], expected=f"|count| <= {MAX_ABS_COUNTS:g}",
+                              got=row[n_named + k].strip())
     if n_ok < len(data):
         line, row = data[n_ok]
         raise FormatError("wrong number of fields", file=path, line=line, expected=f"{width} fields", got=len(row))

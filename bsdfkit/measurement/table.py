@@ -824,8 +824,9 @@ def _check_header_layout(columns: list[_Column], roles: dict[str, list[_Column]]
                          line=header_line, field="--wavelength", got=wavelength)
     wl_list = [c.wavelength for c in wide_wl]
     if len(set(np.round(wl_list, 9))) != len(wl_list):
-        dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][-1]
-        raise FormatError("wavelength given twice in the header", file=path, line=header_line, field=dup.header,
+        first, dup = [c for c in wide_wl if wl_list.count(c.wavelength) > 1][:2]
+        raise FormatError(f"wavelength given twice in the header: {_column_name(first)} and {_column_name(dup)} "
+                          "would be read as two measurements", file=path, line=header_line, field=dup.header,
                           expected="distinct wavelengths", got=dup.wavelength)
     if len(wl_list) > 1 and np.any(np.diff(wl_list) <= 0):
         bad = next(wide_wl[i + 1] for i in range(len(wl_list) - 1) if wl_list[i + 1] <= wl_list[i])
@@ -834,6 +835,42 @@ def _check_header_layout(columns: list[_Column], roles: dict[str, list[_Column]]
     if incidence is not None and ("theta_i" in roles or wide_inc):
         raise InputError("the table states its incidences; --incidence is for tables without them", file=path,
                          line=header_line, field="--incidence", got=incidence)
+
+
+def _refuse_side_not_held(side: str | None, held: list[str], how: str, path: str, line: int | None) -> None:
+    """Refuse ``side`` (``--side``) when the table holds none of it: the side asked and the sides it holds (``held``,
+    as ``how`` says they are known) in one line, at ``line`` (the first data row, which holds another side)."""
+    if side is None or side in held or not held:
+        return
+    raise InputError(f"the table holds no {side} data, only {' and '.join(held)} ({how})", file=path, line=line,
+                     field="--side", expected=f"--side {' or '.join(held)} (or no --side)", got=side)
+
+
+def _column_name(col: _Column) -> str:
+    """``column N 'header'`` (N from 1), as the messages name a column."""
+    return f"column {col.index + 1} '{col.header}'"
+
+
+def _refuse_repeated_values(columns: list[_Column], path: str, header_line: int) -> None:
+    """Refuse two value columns that hold the same thing: the same quantity at the same wavelength and incidence
+    (``BRDF`` twice, ``brdf`` and ``BRDF [1/sr]``, ``AOI 10`` twice). Each would be read as a measurement of its
+    own, a repetition of every direction, and count twice in every sum (TIS). Called once the quantities are
+    resolved (:func:`_resolve_quantity`)."""
+    seen: dict[tuple[Any, ...], _Column] = {}
+    for c in columns:
+        if c.role != "value":
+            continue
+        key = (c.quantity, None if c.wavelength is None else round(c.wavelength, 9),
+               None if c.incidence is None else round(c.incidence, 9))
+        if key in seen:
+            first = seen[key]
+            same = "the same header" if first.header.lower() == c.header.lower() else "the same quantity"
+            raise FormatError(f"value column given twice: {_column_name(first)} and {_column_name(c)} name "
+                              f"{same}, and would be read as two measurements of every direction", file=path,
+                              line=header_line, field=c.header,
+                              expected="one value column per quantity, wavelength and incidence (rename or "
+                                       "remove the copy)", got=[first.header, c.header])
+        seen[key] = c
 
 
 def _default_side(meta: dict[str, tuple[str, int]], side: str | None, path: str) -> str | None:
@@ -952,6 +989,7 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     roles = _roles_of(columns, path, header_line)
     _check_header_layout(columns, roles, path, header_line, wavelength_nm, incidence_deg)
     _resolve_quantity(columns, meta, quantity, path, header_line)
+    _refuse_repeated_values(columns, path, header_line)
     _pair_std(columns, path, header_line)
     defaults = _row_defaults(meta, path, wavelength_nm, incidence_deg, phi_i_deg)
     meta_rel = _meta_number(meta, "relative_std", path, {"": 1.0, "%": 0.01}, "")
@@ -961,6 +999,12 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
         raise FormatError("no incidence column", file=path, line=header_line, field="header",
                           expected="a theta_i / AOI / incidence column, '# incidence: 10 deg', or --incidence",
                           got=[c.header for c in columns][:8])
+    fixed = [c for c in roles["value"] if side_of_quantity(c.quantity) is not None]
+    if len(fixed) == len(roles["value"]):  # every value column's quantity fixes its side
+        more = f" and {len(fixed) - 1} more" if len(fixed) > 1 else ""
+        _refuse_side_not_held(side, [x for x in SIDES if any(side_of_quantity(c.quantity) == x for c in fixed)],
+                              f"its values are {'/'.join(sorted({str(c.quantity) for c in fixed}))}: "
+                              f"{_column_name(fixed[0])}{more}", path, data[0][0])  # the first row of them
     defaults = replace(defaults, side=_default_side(meta, side, path))
     rel = relative_std if relative_std is not None else meta_rel
     decimal_comma = delim in ("\t", ";", None) and _uses_decimal_comma(data, delim)
@@ -968,6 +1012,11 @@ def read_table(path: str | Path, quantity: str | None = None, side: str | None =
     rows = _parse_rows(_events(source, header_line, units_line, comments), layout, defaults,
                        _rows_estimate(path, data))
     _refuse_cut_last_block(path, rows)
+    if "side" in roles:  # the side column decides the side of its rows, whatever --side says
+        codes = set(np.unique(rows.side).tolist()) if rows.side.strides != (0,) else {int(rows.side[0])}
+        _refuse_side_not_held(side, [x for k, x in enumerate(SIDES) if k in codes],
+                              f"the rows of its side column, {_column_name(roles['side'][0])}", path,
+                              int(rows.line[0]))
     _check_units(path, rows, roles)
     _check_values(path, rows, rel)
     stated = sorted({rows.quantities[k] for k in np.unique(rows.spec).tolist()})
@@ -1799,7 +1848,17 @@ def _check_values(path: str, rows: _Rows, rel: float | None) -> None:
         raise ValidationError("the table is all zero: every value is 0", file=path, line=int(lines[k]),
                               field=rows.column(k), expected="values > 0 where the sample scatters",
                               got=f"0 in all {int(count.sum())} cells")
-    # the mean of the stated values at each wavelength (NaN wavelength: one group)
+    _refuse_negative(path, rows, lam_code, (count, total), rel)
+
+
+def _refuse_negative(path: str, rows: _Rows, lam_code: NDArray, sums: tuple[NDArray, NDArray], rel: float | None
+                     ) -> None:
+    """Refuse a table whose mean value at a wavelength (NaN wavelength: one group) lies below zero beyond the noise
+    (:data:`NEGATIVE_SIGMA`), naming the negative value that comes first in the file among the wavelengths refused:
+    the wavelengths are tried in sorted order, which is not the file's (a table listing 650 nm before 550 nm)."""
+    v, s, lines = rows.value, rows.std, rows.line
+    count, total = sums
+    first = None  # (line, entry, count, negatives, mean, standard error) of the earliest negative refused
     for w in np.flatnonzero((count > 0) & (total < 0)).tolist():
         sel = np.isfinite(v) & (lam_code == w)
         n_w = int(sel.sum())
@@ -1811,14 +1870,20 @@ def _check_values(path: str, rows: _Rows, rel: float | None) -> None:
             continue
         sem = max(float(np.std(x)) / math.sqrt(n_w), float(np.sqrt(np.sum(u**2))) / n_w)
         if -mean > NEGATIVE_SIGMA * sem and -mean > float(np.median(u)):
-            k = int(np.flatnonzero(sel & (v < 0))[0])
-            lam_k = float(rows.wavelength[k])
-            at = "" if math.isnan(lam_k) else f" at {lam_k:g} nm"
-            raise ValidationError(f"BSDF negative beyond noise{at}: {int((x < 0).sum())} of {n_w} values < 0",
-                                  file=path, line=int(lines[k]), field=rows.column(k),
-                                  expected=f">= 0 within the noise (mean > -{NEGATIVE_SIGMA:g} standard errors "
-                                           f"= {-NEGATIVE_SIGMA * sem:.3g})",
-                                  got=f"mean {mean:.4g} (first negative {v[k]:g})")
+            negative = np.flatnonzero(sel & (v < 0))
+            k = int(negative[np.argmin(lines[negative])])  # the entries are in file order; the line decides
+            if first is None or (int(lines[k]), k) < first[:2]:
+                first = (int(lines[k]), k, n_w, int((x < 0).sum()), mean, sem)
+    if first is None:
+        return
+    line, k, n_w, n_neg, mean, sem = first
+    lam_k = float(rows.wavelength[k])
+    at = "" if math.isnan(lam_k) else f" at {lam_k:g} nm"
+    raise ValidationError(f"BSDF negative beyond noise{at}: {n_neg} of {n_w} values < 0", file=path, line=line,
+                          field=rows.column(k),
+                          expected=f">= 0 within the noise (mean > -{NEGATIVE_SIGMA:g} standard errors "
+                                   f"= {-NEGATIVE_SIGMA * sem:.3g})",
+                          got=f"mean {mean:.4g} (first negative {v[k]:g})")
 
 
 def _check_angles(path: str, line: int, th_i: float, ph_i: float, th_s: float, ph_s: float, signed: bool,

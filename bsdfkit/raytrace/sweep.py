@@ -138,6 +138,51 @@ class Cluster:
         if self.workers is not None and (not isinstance(self.workers, int) or self.workers < 1):
             raise ValidationError("worker count must be positive", field="--workers", expected="an integer >= 1",
                                   got=self.workers)
+        if self.scheduler is not None:
+            check_scheduler_address(self.scheduler)
+
+
+#: Seconds a sweep waits for an existing scheduler (``--scheduler``) to answer before it gives up.
+SCHEDULER_TIMEOUT_S = 30.0
+
+
+def check_scheduler_address(address: str) -> None:
+    """Refuse a scheduler address dask cannot connect to: a TCP/TLS address needs ``host:port``.
+
+    Parameters
+    ----------
+    address : str
+        ``tcp://host:port`` (or ``host:port``, ``tls://host:port``, another dask scheme).
+
+    Raises
+    ------
+    InputError
+        The address has no port, or a port that is not a number.
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(str(address))
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(location)
+    except ValueError as exc:
+        what = "has no port" if "missing port" in str(exc) else "has a port that is not a number"
+        raise InputError(f"the dask scheduler address {what}: it needs host:port", field="--scheduler",
+                         expected="an address such as tcp://127.0.0.1:8786", got=address) from None
+
+
+def _connect(address: str) -> distributed.Client:
+    """A client of the scheduler at ``address``; one line naming it when it cannot be reached within
+    :data:`SCHEDULER_TIMEOUT_S` (connection refused, no answer, or something that does not speak dask's protocol
+    there: its answer can read as a frame of any size, a MemoryError)."""
+    try:
+        return distributed.Client(address, timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
+    except (OSError, TimeoutError, MemoryError) as exc:
+        reason = ("what answers there is no dask scheduler" if isinstance(exc, MemoryError)
+                  else (str(exc).splitlines() or [type(exc).__name__])[0])
+        raise InputError(f"the dask scheduler at {address} could not be reached ({reason})", field="--scheduler",
+                         expected="a running dask.distributed scheduler at this address (dask scheduler --port "
+                                  "PORT), or --workers N for a local cluster", got=address) from None
 
 
 class SweepPointsFailed(BsdfkitError):
@@ -217,7 +262,7 @@ def _run_on_cluster(scene: Scene, spec: SweepSpec, points: list, cluster: Cluste
                     progress: Callable[[int, int], None] | None) -> tuple[dict, list[str]]:
     local = None
     if cluster.scheduler:
-        client = distributed.Client(cluster.scheduler, timeout="30s")
+        client = _connect(cluster.scheduler)
     else:
         # single-threaded worker processes on the loopback interface, no dashboard; workers inherit the
         # environment (JAX's compilation cache settings of the command line). silence_logs is the level of the

@@ -449,6 +449,10 @@ def interaction_profile(ds: xr.Dataset, interaction: str, side: str | None = Non
     if side is not None:
         if side not in SIDES:
             raise InputError("unknown side", field="side", expected=" or ".join(SIDES), got=side)
+        held = sorted(set(map(str, out["side"].values)))
+        if side not in held:  # name what the data hold, not an empty selection
+            raise InputError("the data hold no records for this side", file=ds.attrs.get("source"), field="--side",
+                             expected=" or ".join(held) or "records on some side", got=side)
         out = out.isel(record=np.flatnonzero(out["side"].values == side))
     return out
 

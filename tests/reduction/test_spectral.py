@@ -98,3 +98,15 @@ def test_photon_ratio_is_ratio_of_mean_wavelengths():
     r = spectral.photon_ratio(a, (440, 480), b, (470, 740))
     assert r == pytest.approx(spectral.mean_wavelength(b, (470, 740)) / spectral.mean_wavelength(a, (440, 480)),
                               rel=1e-12)
+
+
+def test_a_side_the_data_do_not_hold_is_named_with_the_sides_they_hold():
+    # issue #44.5: `fit bsdf --side transmission` on a reflection-only file said "got []"
+    from pathlib import Path
+
+    from bsdfkit.tables.vendor import vendor_dataset
+
+    ds = vendor_dataset(Path(__file__).resolve().parents[1] / "data" / "ansys-radiant-zemax-bsdf"
+                        / "radiant_imaging_sphere_planesymmetric_BRDF.bsdf")
+    with pytest.raises(InputError, match="expected reflection, got 'transmission'"):
+        spectral.interaction_profile(ds, "elastic", "transmission")

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import SIDES
+from bsdfkit.core.conventions import SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
@@ -263,15 +263,20 @@ class Lines:
         ndarray
             The values.
         """
-        line = self.next(what)
-        try:
-            values = np.array([float(t) for t in line.split()], dtype=np.float64)
-        except ValueError:
-            raise FormatError("not a number", file=self.path, line=self.k, field=what, expected="numbers",
-                              got=line.strip()[:40]) from None
-        if (count is not None and values.size != count) or not np.all(np.isfinite(values)):
+        tokens = self.next(what).split()
+        values = np.full(len(tokens), np.nan)
+        for j, token in enumerate(tokens):
+            try:
+                values[j] = float(token)
+            except ValueError:
+                raise FormatError(f"not a number in column {j + 1}", file=self.path, line=self.k, field=what,
+                                  expected="numbers", got=token[:40]) from None
+            if not np.isfinite(values[j]):
+                raise FormatError(f"value not finite in column {j + 1}", file=self.path, line=self.k, field=what,
+                                  expected="finite numbers", got=token[:40])
+        if count is not None and values.size != count:
             raise FormatError("wrong number of values", file=self.path, line=self.k, field=what,
-                              expected=f"{count} finite numbers" if count else "finite numbers", got=values.size)
+                              expected=f"{count} numbers", got=values.size)
         return values
 
     def integer(self, what: str, lo: int, hi: int) -> int:
@@ -383,9 +388,26 @@ def read_speos(path: str | Path) -> SpeosBsdf:
             theta[s], phi[s] = th, ph
             blocks.append(values)
         tables[s] = np.stack(blocks)
-    tag = _WAVELENGTH_TAG.search(comment)
     return SpeosBsdf(incidences, theta, phi, tables, spectrum, intensity, comment, description,
-                     float(tag.group(1)) if tag else None)
+                     _comment_wavelength(comment, path))
+
+
+def _comment_wavelength(comment: str, path: str) -> float | None:
+    """The ``wavelength_nm=`` of the comment line (line 3) [nm], None without one; FormatError naming the file, line
+    and field for a value that is no wavelength in nm (a number in metres: the file's field, not an option)."""
+    tag = _WAVELENGTH_TAG.search(comment)
+    if tag is None:
+        return None
+    lo, hi = WAVELENGTH_RANGE_NM
+    try:
+        value = float(tag.group(1))
+    except ValueError:
+        value = float("nan")
+    if not lo <= value <= hi:
+        raise FormatError("wavelength of the comment out of range: it is stated in nm", file=path, line=3,
+                          field="comment: wavelength_nm", expected=f"a wavelength in nm, {lo:g}..{hi:g}",
+                          got=tag.group(1))
+    return value
 
 
 # ------------------------------------------------------------------------------------------- registry hooks

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.core.conventions import PHOTOPIC_NM, SIDES
+from bsdfkit.core.conventions import PHOTOPIC_NM, SIDES, WAVELENGTH_RANGE_NM
 from bsdfkit.core.errors import FormatError, ValidationError
 from bsdfkit.core.version import __version__
 from bsdfkit.io import atomic
@@ -169,6 +169,29 @@ def write_speos_brdf(path: str | Path, b: SpeosBrdf, *, force: bool = False) -> 
     return atomic.write_text(path, speos_brdf_text(b), force=force)
 
 
+def _wavelengths_nm(r: Lines, n_wl: int) -> NDArray[np.float64]:
+    """The wavelength line [nm]: FormatError naming the file, line and column of a value outside
+    :data:`bsdfkit.core.conventions.WAVELENGTH_RANGE_NM` (a grid in metres or micrometres: the file's own field, not
+    an option of the command)."""
+    lam = r.numbers("wavelengths", n_wl)
+    lo, hi = WAVELENGTH_RANGE_NM
+    out = np.flatnonzero((lam < lo) | (lam > hi))
+    if out.size:
+        v = float(lam[out[0]])
+        if v <= 0:
+            looks = "it is not positive"
+        elif v < 1e-4:
+            looks = "it looks like metres (5.5e-07 = 550 nm)"
+        elif v < 30.0:
+            looks = "it looks like micrometres (0.55 = 550 nm)"
+        else:
+            looks = "it is not in nanometres"
+        raise FormatError(f"wavelength in column {out[0] + 1} out of range: the format states nm, {looks}",
+                          file=r.path, line=r.k, field="wavelengths", expected=f"a wavelength in nm, {lo:g}..{hi:g}",
+                          got=v)
+    return lam
+
+
 def read_speos_brdf(path: str | Path) -> SpeosBrdf:
     """Read a text ``*.brdf``. FormatError names the file, line and field.
 
@@ -205,10 +228,7 @@ def read_speos_brdf(path: str | Path) -> SpeosBrdf:
     if np.any((inc < 0) | (inc >= 90)) or np.any(np.diff(inc) <= 0):
         raise FormatError("incidences must increase within [0, 90) deg", file=path, line=r.k, field="incidences",
                           expected="increasing angles in [0, 90)", got=" ".join(f"{v:g}" for v in inc)[:60])
-    lam = r.numbers("wavelengths", n_wl)
-    if np.any(lam <= 0):
-        raise FormatError("wavelength must be positive", file=path, line=r.k, field="wavelengths", expected="> 0 nm",
-                          got=float(lam.min()))
+    lam = _wavelengths_nm(r, n_wl)
     theta = phi = None
     tables, percent = {}, {}
     for s in sides:
