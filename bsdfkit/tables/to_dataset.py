@@ -446,10 +446,10 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
         sides, thetas = _written_sides_and_incidences(to, asked, sourced, theta_i_deg)
         settings, settings_notes = _table_settings(settings, to, chosen_lambda, thetas, label)
         notes = sourced.notes + settings_notes
-        label = str(sourced_ds_attrs.get("block", "")) if asked.kind == "bsdfxml" else ""
-        if to == "bsdfxml" and label and label.lower() != "visible":  # never called Visible when it is not
-            settings = replace(settings, xml_label=label)
-            notes.append(f"the source's {label} block written under its own label (Radiance reads the Visible one)")
+        block = str(sourced_ds_attrs.get("block", "")) if asked.kind == "bsdfxml" else ""
+        if to == "bsdfxml" and block and block.lower() != "visible":  # never called Visible when it is not
+            settings = replace(settings, xml_label=block)
+            notes.append(f"the source's {block} block written under its own label (Radiance reads the Visible one)")
         back = _back_face(source, to, asked, table_options, settings, sides)
         if back is not None:  # a BSDF XML file's back face, kept in a BSDF XML output
             settings = replace(settings, xml_back_fn=back[0])

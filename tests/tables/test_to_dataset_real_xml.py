@@ -43,7 +43,7 @@ def test_cell_lookup_finds_every_klems_patch_and_tree_cell_exactly():
 def test_klems_to_klems_is_the_identity(path, tmp_path):
     out = tmp_path / "out.xml"
     res = convert(path, "bsdfxml", out)
-    assert res.ok and res.export.grid["mode"].startswith("LBNL/Klems Full")
+    assert res.ok and res.export.grid["mode"].startswith("LBNL/Klems Full") and res.source == str(path)
     assert any("own angle basis" in n for n in res.notes)  # says it resampled, not reconstructed
     source, written = read_any(path), read_any(out)
     assert set(written.tis_computed) == set(source.tis_computed)  # both faces kept (Back blocks from the source's)
