@@ -931,13 +931,11 @@ def _specular_node_means(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, axes: S
     theta = np.radians(theta_i_deg)
 
     def directions(r_deg: NDArray, a_deg: NDArray) -> NDArray:
-        d = frames.direction_from_specular(np.radians(r_deg), np.radians(a_deg), theta)
-        d[..., 2] = np.maximum(d[..., 2], 0.0)
-        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+        # unit vectors as they are: those below the horizon (z < 0) get no weight (density), their value is unused
+        return frames.direction_from_specular(np.radians(r_deg), np.radians(a_deg), theta)
 
     def density(r_deg: NDArray, a_deg: NDArray, d: NDArray) -> NDArray:
-        below = frames.direction_from_specular(np.radians(r_deg), np.radians(a_deg), theta)[..., 2] <= 0.0
-        return np.where(below, 0.0, np.sin(np.radians(r_deg)) * d[..., 2])
+        return np.where(d[..., 2] <= 0.0, 0.0, np.sin(np.radians(r_deg)) * d[..., 2])
 
     means = node_means(bsdf_fn, theta_i_deg, side, np.asarray(axes.radial_deg, dtype=np.float64), ring, directions,
                        "angle", density)

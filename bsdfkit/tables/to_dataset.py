@@ -434,8 +434,10 @@ def convert(source: str | Path | xr.Dataset, to: str, path: str | Path, force: b
     # passed: a failed table never stands at path, and an earlier output there is replaced only by a checked one
     with atomic.StagedFile(path, force, inputs=inputs) as staged:  # path checked here, before computing
         if settings is None and 0.0 < tolerance < 2.0:  # the auto grid's TIS error: half of the check it must pass
-            settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)))
-        settings = settings or ExportSettings()
+            settings = ExportSettings(grid_tolerance=GridTolerance(tis_rtol=0.5 * float(tolerance)),
+                                      zemax_symmetry="auto")
+        # a converted table keeps the source's own symmetry (Zemax), as the command line's default does
+        settings = settings or ExportSettings(zemax_symmetry="auto")
         label = "dataset" if isinstance(source, xr.Dataset) else str(source)
         kind = "dataset" if isinstance(source, xr.Dataset) else source_kind(source)
         asked = _Asked(label, kind, side, wavelength_nm, band_nm, interaction)
