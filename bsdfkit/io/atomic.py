@@ -487,6 +487,9 @@ def check_output_folder(folder: PathLike, force: bool, inputs: Iterable[PathLike
         ``folder``.
     """
     folder = Path(folder)
+    if folder.is_symlink():  # --force would replace the folder it points to, not the link (issue #44)
+        raise OutputError("output folder is a symbolic link, not a folder (refused even with --force)", file=folder,
+                          expected="a real folder or a new name", got=f"a link to {os.readlink(folder)}")
     anchor = _folder_anchor(folder)
     others = _other_entries(folder)
     if others and not force:

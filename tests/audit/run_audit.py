@@ -779,6 +779,184 @@ def plausibility_cases(work: Path, f: dict[str, Path]) -> list[Case]:
     ]
 
 
+# ---------------------------------------------------------------------------------- issue 44: outputs and inputs
+#: the formats every writer knows (convert/export --to)
+FORMATS = ("tracepro", "zemax", "asap", "bsdfxml", "speos", "speosbrdf", "lighttools")
+
+
+def issue44_cases(work: Path, f: dict[str, Path]) -> list[Case]:
+    """Issue #44: ``--force`` replaces only regular files (FIFO, folder, symlink outputs), a refused output is never
+    left (non-physical sources, a failed TIS check), netCDF datasets checked on reading, messages that name the real
+    cause, recipes out of range, the real BSDF XML files of the repository. Every input and output is inside the
+    audit's folder (the FIFO is made with ``os.mkfifo`` there; no device node is touched)."""
+    import math
+    import stat
+
+    import xarray as xr
+
+    d = work / "i44"
+    d.mkdir()
+    cases: list[Case] = []
+
+    def add(case: Case, *needles: str, check=None) -> None:
+        cases.append(case)
+        CAUSES[case.name] = (needles, check)
+
+    # 1. --force replaces only regular files: a FIFO, a folder, a symlink (to a file here) as the output
+    kept = d / "kept.txt"
+    kept.write_text("the symlink's target, never to be replaced\n")
+    writers = {
+        "convert": lambda out: ["convert", str(f["zemax"]), "--to", "tracepro", "-o", out],
+        "export": lambda out: ["export", str(f["nc"]), "--to", "zemax", "--interaction", "bibs", "-o", out],
+        "ingest": lambda out: ["ingest", str(f["csv_table"]), "-o", out],
+        "fit bsdf": lambda out: ["fit", "bsdf", str(f["nc"]), "--interaction", "bibs", "--side", "reflection",
+                                 "-o", out],
+    }
+    for verb, build in writers.items():
+        tag = verb.replace(" ", "_")
+        fifo = d / f"{tag}.fifo"
+        os.mkfifo(fifo)
+        add(Case(f"i44 {verb} --force onto a FIFO", build(str(fifo)) + ["--force"], timeout=60),
+            check=lambda p=fifo: None if stat.S_ISFIFO(os.lstat(p).st_mode) else f"{p} is no longer a FIFO")
+        folder = d / f"{tag}_dir"
+        folder.mkdir()
+        (folder / "inside.txt").write_text("x")
+        add(Case(f"i44 {verb} --force onto a folder", build(str(folder)) + ["--force"], timeout=120,
+                 inputs=[folder / "inside.txt"]),
+            check=lambda p=folder: None if p.is_dir() and not p.is_symlink() else f"{p} is no longer a folder")
+        link = d / f"{tag}.link"
+        link.symlink_to(kept)
+        add(Case(f"i44 {verb} --force onto a symlink", build(str(link)) + ["--force"], timeout=120,
+                 inputs=[kept]),
+            check=lambda p=link: None if p.is_symlink() else f"{p} is no longer a symlink")
+    # the main job: an output folder that is a symlink (to a folder here) or a regular file
+    runs = d / "runs"  # apart: a run's staging folder is judged beside its output
+    runs.mkdir()
+    real = runs / "run_real"
+    real.mkdir()
+    (real / "notes.txt").write_text("someone else's")
+    run_link = runs / "run_link"
+    run_link.symlink_to(real, target_is_directory=True)
+    add(Case("i44 run --force into a symlinked folder", ["run", str(f["recipe"]), "-o", str(run_link), "--force"],
+             timeout=300, inputs=[real / "notes.txt"]),
+        check=lambda: None if run_link.is_symlink() and real.is_dir() else "the symlink or its folder was replaced")
+    run_file = runs / "run_file"
+    run_file.write_text("a regular file\n")
+    add(Case("i44 run --force into a regular file", ["run", str(f["recipe"]), "-o", str(run_file), "--force"],
+             timeout=300, inputs=[run_file]))
+
+    # 2. a refused output is never left: a non-physical source (Lambertian, reflectance 1.5) to every format
+    hot = _long_table(d / "hot.csv", lambda la, th, ph: 1.5 / math.pi, wavelengths=(550.0,))
+    for fmt in FORMATS:
+        fresh = d / f"hot_{fmt}.out"
+        add(Case(f"i44 convert non-physical to {fmt}", ["convert", str(hot), "--to", fmt, "-o", str(fresh)],
+                 outputs=[fresh]), "exceeds 1")
+        earlier = d / f"hot_{fmt}_earlier.out"
+        earlier.write_bytes(f"an earlier good {fmt} file\n".encode())
+        add(Case(f"i44 convert non-physical to {fmt} --force over an earlier file",
+                 ["convert", str(hot), "--to", fmt, "-o", str(earlier), "--force"], inputs=[earlier]), "exceeds 1",
+            check=lambda p=earlier: leftovers([p]) or None)
+    strict = d / "strict.bsdf"
+    add(Case("i44 convert --tis-tolerance 1e-9", ["convert", str(f["radiant"]), "--to", "zemax", "--side",
+                                                  "reflection", "--tis-tolerance", "1e-9", "-o", str(strict)],
+             outputs=[strict]),
+        "TIS check failed", check=lambda: f"{strict} exists" if strict.exists() else None)
+
+    # 3. netCDF datasets written by other hands
+    with xr.open_dataset(f["nc"]) as src:
+        good = src.load()
+    variants = {"negative": lambda ds: ds.assign(bsdf=-abs(ds["bsdf"]) - 1.0),
+                "no bsdf": lambda ds: ds.drop_vars("bsdf"),
+                "units 1/deg": lambda ds: ds.assign(bsdf=ds["bsdf"].assign_attrs(units="1/deg")),
+                "1e300": lambda ds: ds.assign(bsdf=ds["bsdf"] * 0 + 1e300),
+                "plain xarray": lambda ds: xr.Dataset({k: xr.DataArray(v.values, dims=v.dims)
+                                                      for k, v in ds.data_vars.items()},
+                                                     coords={k: xr.DataArray(v.values, dims=v.dims)
+                                                             for k, v in ds.coords.items()})}
+    words = {"negative": ("field 'bsdf", "negative"), "no bsdf": ("'bsdf'",), "units 1/deg": ("'bsdf'", "1/deg"),
+             "1e300": ("field 'bsdf", "1e+300"), "plain xarray": ()}
+    for label, change in variants.items():
+        p = d / f"nc_{label.replace(' ', '_').replace('/', '_')}.nc"
+        change(good.copy(deep=True)).to_netcdf(p)
+        expect = "ok" if label == "plain xarray" else "error"
+        conv = d / f"nc_{label.replace(' ', '_').replace('/', '_')}.bsdf"
+        for verb, argv in (("tis", ["tis", str(p), "--incidence", "45"]), ("info", ["info", str(p)]),
+                           ("fit bsdf", ["fit", "bsdf", str(p), "--interaction", "bibs", "--side", "reflection"]),
+                           ("convert", ["convert", str(p), "--to", "zemax", "--interaction", "bibs", "--side",
+                                        "reflection", "-o", str(conv)])):
+            add(Case(f"i44 {verb} netCDF {label}", argv, expect, inputs=[p], timeout=300,
+                     outputs=[conv] if verb == "convert" else []), *words[label])
+
+    # 4. messages naming the real cause
+    speos = ROOT / "tests" / "data" / "ansys-speos-anisotropicbsdf"
+    nan = d / "nan.anisotropicbsdf"
+    text = (speos / "test_13_planesymmetric_brdf_speos_reference.anisotropicbsdf").read_text()
+    lines = text.splitlines(keepends=True)
+    row = next(i for i, ln in enumerate(lines) if ln.startswith("5.0\t"))
+    cells = lines[row].split("\t")
+    cells[3] = "nan"
+    lines[row] = "\t".join(cells)
+    nan.write_text("".join(lines))
+    add(Case("i44 read Speos file with a NaN", ["read", str(nan)]), f"nan.anisotropicbsdf:{row + 1}:", "not finite",
+        "column 4")
+    neg = d / "negative.csv"
+    rows = ["theta_i,theta_s,phi_s,wavelength,brdf", "# measured 2026-01-01"]
+    rows += [f"10,{th},{ph},550,{-0.2 if (th, ph) == (30, 60) else 0.1}" for th in range(0, 90, 5)
+             for ph in range(0, 360, 30)]
+    rows = rows[:2] + [ln.replace(",0.1", ",-0.1") for ln in rows[2:]]
+    neg.write_text("\n".join(rows) + "\n")
+    add(Case("i44 ingest negative table", ["ingest", str(neg), "-o", str(d / "neg.nc")], outputs=[d / "neg.nc"]),
+        "negative.csv:3:", "'brdf'", "negative")
+    metres = d / "metres.brdf"
+    lines = (speos / "test_13_brdf_one_wavelength_speos.brdf").read_text().splitlines(keepends=True)
+    assert lines[9].strip() == "550"
+    lines[9] = "5.5e-07\n"
+    metres.write_text("".join(lines))
+    add(Case("i44 read Speos .brdf wavelength in metres", ["read", str(metres)]), "metres.brdf:10:", "metres")
+    add(Case("i44 ingest Speos .brdf wavelength in metres", ["ingest", str(metres), "-o", str(d / "m.nc")],
+             outputs=[d / "m.nc"]), "metres.brdf:10:", "metres")
+    reflection = _long_table(d / "reflection.csv", lambda la, th, ph: 0.5 / math.pi, wavelengths=(550.0,))
+    add(Case("i44 ingest --side transmission on reflection", ["ingest", str(reflection), "--side", "transmission",
+                                                              "-o", str(d / "tr.nc")], outputs=[d / "tr.nc"]),
+        "transmission", "only reflection")
+    add(Case("i44 fit bsdf --side transmission on reflection",
+             ["fit", "bsdf", str(reflection), "--interaction", "elastic", "--side", "transmission"], timeout=300),
+        "--side", "transmission", "reflection")
+    twice = _long_table(d / "twice.csv", lambda la, th, ph: 0.5 / math.pi, wavelengths=(550.0,),
+                        header="theta_i,theta_s,phi_s,wavelength,brdf,brdf")
+    twice.write_text("".join(ln + ",0.16\n" if i else ln + "\n"
+                             for i, ln in enumerate(twice.read_text().splitlines())))
+    add(Case("i44 ingest a value column twice", ["ingest", str(twice), "-o", str(d / "tw.nc")],
+             outputs=[d / "tw.nc"]), "'brdf'", "column 5", "column 6")
+    add(Case("i44 sweep --scheduler without a port",
+             ["sweep", str(f["scene"]), "--param", "wall.reflectance=0.8", "--rays", "1000", "--scheduler",
+              "127.0.0.1", "--no-plots", "-o", str(d / "sched.nc")], outputs=[d / "sched.nc"]),
+        "--scheduler", "127.0.0.1")
+    # (an unreachable scheduler at tcp://127.0.0.1:1 is not run: its 30 s timeout is a constant, no variable)
+
+    # 5. a recipe out of range: refused in under 10 s
+    shutil.copytree(ROOT / "fitting" / "scenes", d / "fitting" / "scenes")  # the recipe's scene, beside it
+    recipe = (ROOT / "fitting" / "cl830.toml").read_text()
+    recipe = recipe.replace('"../measurements/', f'"{ROOT / "measurements"}/')
+    recipe = re.sub(r"figure_wavelength_nm = [0-9.]+", "figure_wavelength_nm = 2000", recipe)
+    far = d / "fitting" / "cl830.toml"
+    far.write_text(recipe)
+    add(Case("i44 run recipe figure_wavelength_nm = 2000", ["run", str(far), "-o", str(d / "far")],
+             outputs=[d / "far"], timeout=10), "figure_wavelength_nm", "2000", "[380, 780]")
+
+    # 6. the real BSDF XML files of the repository
+    xmls = sorted((ROOT / "tests" / "data" / "pyradiance-sample-bsdf").glob("*.xml"))
+    xmls += sorted((ROOT / "tests" / "data" / "frads-bsdf").glob("*.xml"))
+    for x in xmls:
+        ing, conv = d / f"xml_{x.stem}.nc", d / f"xml_{x.stem}.xml"
+        cases += [Case(f"i44 read XML {x.name}", ["read", str(x)], "ok", timeout=300),
+                  Case(f"i44 ingest XML {x.name}", ["ingest", str(x), "-o", str(ing)], "ok", outputs=[ing],
+                       timeout=300),
+                  Case(f"i44 convert XML {x.name} to bsdfxml", ["convert", str(x), "--to", "bsdfxml", "-o", str(conv)],
+                       "ok", outputs=[conv], timeout=300)]
+    return cases
+
+
 def _alive(entry: Path) -> bool:
     """A temporary named after a process that still runs (another case running at the same time): the process id
     is the first all-digit part of ``.NAME.PID.HEX.staging`` or ``.bsdfkit-PID.HEX.part``."""
@@ -1000,6 +1178,7 @@ def main() -> int:
                                 ("concurrency", concurrency_cases(work, f)),
                                 ("issue 26 commands", command_cases(work, f, mounts)),
                                 ("plausibility", plausibility_cases(work, f)),
+                                ("issue 44", issue44_cases(work, f)),
                                 ("kills", [] if args.no_kills else kill_cases(work, f))):
                 for case in made:
                     case.group = f"input {case.name.rsplit(' ', 1)[-1]}" if group == "inputs" else group
