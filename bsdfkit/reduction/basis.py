@@ -32,8 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = ["CELL_COORD", "COORD", "COVERAGE_RTOL", "NORMAL_GRID", "basis_sum", "cell_index", "covers_hemisphere",
-           "cell_directions", "cells_on_normal_grid", "disk_to_square", "klems_cell_directions", "klems_spec",
-           "klems_on_normal_grid", "normal_grid_weights", "shirley_chiu_spec", "square_to_disk"]
+           "cell_directions", "cells_on_normal_grid", "disk_to_square", "grid_directions", "klems_cell_directions",
+           "klems_spec", "klems_on_normal_grid", "normal_grid_weights", "shirley_chiu_spec", "square_to_disk"]
 
 #: name of the per-record coordinate [sr]: the projected solid angle of the basis cell (or of the part of it)
 #: the record stands for
@@ -191,6 +191,25 @@ def square_to_disk(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDAr
         phi = np.where(first, np.pi / 4 * v / u, np.pi / 2 - np.pi / 4 * u / v)
     phi = np.where(r == 0.0, 0.0, phi)
     return r * np.cos(phi), r * np.sin(phi)
+
+
+def grid_directions(m: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(βx, βy) of the centres of the m × m uniform grid of the Shirley–Chiu square (row-major, the order of
+    :func:`cell_index` and of a tensor tree's ``out_grid``); each cell covers the projected solid angle π / m² [sr].
+
+    Parameters
+    ----------
+    m : int
+        Cells per side.
+
+    Returns
+    -------
+    bx, by : ndarray
+        (m·m,) direction cosines [-].
+    """
+    c = (np.arange(m) + 0.5) / m
+    a, b = np.meshgrid(c, c, indexing="ij")
+    return square_to_disk(a.ravel(), b.ravel())
 
 
 def disk_to_square(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -373,10 +392,7 @@ def cell_directions(spec: str) -> NDArray[np.float64]:
     """
     if spec.startswith("klems"):
         return klems_cell_directions(spec)
-    m = _square_cells(spec)
-    c = (np.arange(m) + 0.5) / m
-    a, b = np.meshgrid(c, c, indexing="ij")
-    x, y = square_to_disk(a.ravel(), b.ravel())
+    x, y = grid_directions(_square_cells(spec))
     return np.stack([x, y, np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))], axis=-1)
 
 

@@ -592,14 +592,9 @@ def _dispatch(fns: Mapping[str, BsdfFn]) -> BsdfFn:
     def bsdf_fn(theta_i_deg: float, side: str, directions: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(fns[side](theta_i_deg, side, directions), dtype=np.float64)
 
-    if all(isinstance(f, grids.PiecewiseConstant) for f in fns.values()):
-        def exact(theta_i_deg: float, side: str) -> float:
-            f = fns[side]
-            return (f.exact_tis(theta_i_deg, side) if f.exact_tis is not None
-                    else grids.tis_reference(grids.Pointwise(f), theta_i_deg, side))
-
-        bases = {f.basis for f in fns.values()}
-        return grids.PiecewiseConstant(bsdf_fn, exact, bases.pop() if len(bases) == 1 else None)
+    piecewise = grids.piecewise_per_side(fns, bsdf_fn)
+    if piecewise is not None:
+        return piecewise
     return grids.Pointwise(bsdf_fn) if all(isinstance(f, grids.Pointwise) for f in fns.values()) else bsdf_fn
 
 

@@ -43,7 +43,7 @@ radius; docs/exports.md §3) and is the reference for the tables; the closed for
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -65,6 +65,7 @@ __all__ = [
     "HarveyShackAxes",
     "PiecewiseConstant",
     "Pointwise",
+    "piecewise_per_side",
     "SpecularAxes",
     "evaluate_bsdf",
     "auto_harvey_shack_axes",
@@ -366,6 +367,34 @@ class PiecewiseConstant(Pointwise):
 
     exact_tis: Callable[[float, str], float] | None = None
     basis: str | None = None
+
+
+def piecewise_per_side(fns: Mapping[str, BsdfFn], bsdf_fn: BsdfFn) -> PiecewiseConstant | None:
+    """``bsdf_fn`` (which dispatches to ``fns[side]``) as a :class:`PiecewiseConstant` when every side's source is
+    one: its exact TIS is the side's own (else :func:`tis_reference` of it), its basis the sides' common one; None
+    when some side is not piecewise constant.
+
+    Parameters
+    ----------
+    fns : mapping of str to callable
+        Side → BSDF callable [1/sr].
+    bsdf_fn : callable
+        The callable that dispatches to them by side.
+
+    Returns
+    -------
+    PiecewiseConstant or None
+    """
+    if not fns or not all(isinstance(f, PiecewiseConstant) for f in fns.values()):
+        return None
+
+    def exact(theta_i_deg: float, side: str) -> float:
+        f = fns[side]
+        return f.exact_tis(theta_i_deg, side) if f.exact_tis is not None else tis_reference(Pointwise(f),
+                                                                                             theta_i_deg, side)
+
+    bases = {f.basis for f in fns.values()}
+    return PiecewiseConstant(bsdf_fn, exact, bases.pop() if len(bases) == 1 else None)
 
 
 def node_means(bsdf_fn: BsdfFn, theta_i_deg: float, side: str, first_deg: NDArray[np.float64],

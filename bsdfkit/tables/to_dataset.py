@@ -32,7 +32,7 @@ from bsdfkit.reduction.hemispherical import elastic_source, reduction_kind
 from bsdfkit.reduction.tis import hemisphere_bsdf_fn
 from bsdfkit.tables import registry
 from bsdfkit.tables.export import FORMATS, ExportResult, ExportSettings, export, open_bsdf_dataset, read_any
-from bsdfkit.tables.grids import GridTolerance, PiecewiseConstant, Pointwise, tis_reference
+from bsdfkit.tables.grids import GridTolerance, PiecewiseConstant, Pointwise, piecewise_per_side
 from bsdfkit.tables.registry import sniff_format
 from bsdfkit.tables.vendor import checked_vendor_dataset, vendor_dataset
 
@@ -199,14 +199,7 @@ def _dispatch(fns: dict[str, BsdfFn]) -> BsdfFn:
 
     # the sources here are NumPy reconstructions (the hemispherical engine, a phosphor scan's hemisphere): each
     # direction's value is its own, so the grids evaluate them without padding; a basis file's cells stay cells
-    if all(isinstance(f, PiecewiseConstant) for f in fns.values()):
-        def exact(theta_i_deg: float, side: str) -> float:
-            tis = fns[side].exact_tis
-            return tis(theta_i_deg, side) if tis is not None else tis_reference(Pointwise(fns[side]), theta_i_deg, side)
-
-        bases = {f.basis for f in fns.values()}
-        return PiecewiseConstant(fn, exact, bases.pop() if len(bases) == 1 else None)
-    return Pointwise(fn)
+    return piecewise_per_side(fns, fn) or Pointwise(fn)
 
 
 class _Asked(NamedTuple):

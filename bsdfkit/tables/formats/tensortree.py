@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from bsdfkit.reduction.basis import basis_sum, disk_to_square, square_to_disk
+from bsdfkit.reduction.basis import basis_sum, disk_to_square, grid_directions, square_to_disk
 
 __all__ = ["TensorTree", "TreeSyntaxError", "disk_to_square", "grid_directions", "incidences_deg", "parse_tree",
            "square_to_disk"]
@@ -180,25 +180,6 @@ def incidences_deg(edges: NDArray[np.float64], ndim: int) -> list[float]:
     c = 0.5 * (e[:-1] + e[1:])
     r = 1.0 - 2.0 * c if ndim == 3 else 2.0 * c - 1.0  # TT3: x0 = (1 - sin) / 2; TT4: x0 = (1 + sin) / 2
     return sorted({0.0, *(round(float(np.degrees(np.arcsin(np.clip(v, 0.0, 1.0)))), 9) for v in r)})
-
-
-def grid_directions(m: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(βx, βy) of the centres of the m × m uniform grid of the square (row-major, as :meth:`TensorTree.out_grid`);
-    each cell covers the projected solid angle π / m² [sr].
-
-    Parameters
-    ----------
-    m : int
-        Cells per side.
-
-    Returns
-    -------
-    bx, by : ndarray
-        (m·m,) direction cosines [-].
-    """
-    c = (np.arange(m) + 0.5) / m
-    a, b = np.meshgrid(c, c, indexing="ij")
-    return square_to_disk(a.ravel(), b.ravel())
 
 
 class TreeSyntaxError(ValueError):
