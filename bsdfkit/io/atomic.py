@@ -202,11 +202,14 @@ def describe_os_error(exc: BaseException) -> str:
     return f"{reason} [{name}]"
 
 
-def _fault(exc: OSError, path: PathLike) -> OutputError:
+def _fault(exc: OSError, path: PathLike, writable: bool = False) -> OutputError:
     code = getattr(exc, "errno", None)
     if code in (errno.ENOSPC, errno.EDQUOT):
         return _no_space(path, code)
-    if code is None and _device_full(Path(path).parent):
+    # HDF5 reports a full device as EACCES (or with no errno) when it fails to write into a file this process has
+    # just created: a folder that took the temporary file is writable, so a full device is the cause
+    if (code is None or (writable and code in (errno.EACCES, errno.EPERM, errno.EIO))) \
+            and _device_full(Path(path).parent):
         return _no_space(path)
     return OutputError(f"cannot write output: {describe_os_error(exc)}", file=path)
 
@@ -592,7 +595,7 @@ def atomic_path(path: PathLike, force: bool = False, inputs: Iterable[PathLike |
         _place(tmp, path, force)
         _fsync_dir(path.parent)
     except OSError as exc:
-        raise _fault(exc, path) from None
+        raise _fault(exc, path, writable=tmp is not None and tmp.exists()) from None
     except RuntimeError as exc:
         # netCDF4/HDF5 report a write that failed for want of space as "NetCDF: HDF error", without an errno
         if tmp is not None and _device_full(tmp.parent):

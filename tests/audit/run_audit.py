@@ -1135,8 +1135,11 @@ def fault_mounts(work: Path):
         if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(full)],
                           capture_output=True).returncode == 0:
             mounts["a full disk"] = full
-            with contextlib.suppress(OSError), open(full / "filler", "wb") as fh:
-                fh.write(b"\0" * 250_000)
+            # filled to the last block: a 5 KB table fits in what 250 KB of filler leaves, and was then
+            # (rightly) written, which the audit took for a silent failure
+            with contextlib.suppress(OSError), open(full / "filler", "wb", buffering=0) as fh:
+                while fh.write(b"\0" * 4096):
+                    pass
         if subprocess.run(["mount", "--bind", "-o", "ro", str(ro), str(ro)], capture_output=True).returncode == 0:
             mounts["a read-only folder"] = ro
         yield mounts

@@ -72,6 +72,25 @@ def test_full_disk_mid_write_leaves_old_file_and_no_temp(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
+@pytest.mark.parametrize("full,expected", [(True, "no space left on device while writing map.nc [ENOSPC]"),
+                                           (False, "cannot write output: permission denied [EACCES]")])
+def test_a_library_saying_eacces_on_a_full_device_is_told_no_space(tmp_path, monkeypatch, full, expected):
+    """HDF5 reports a full device as EACCES when writing into the temporary file this process has just created
+    (a 256 KiB tmpfs with 8 KiB free): the folder took that file, so a full device is the cause; on a device with
+    room, EACCES stays "permission denied"."""
+    from bsdfkit.io import atomic
+
+    monkeypatch.setattr(atomic, "_device_full", lambda folder: full)
+
+    def writer(tmp):
+        raise PermissionError(errno.EACCES, "Permission denied", str(tmp))
+
+    with pytest.raises(OutputError) as info:
+        write_with(tmp_path / "map.nc", writer, force=False)
+    assert expected in str(info.value)
+    assert _leftovers(tmp_path) == [] and not (tmp_path / "map.nc").exists()
+
+
 @pytest.mark.parametrize("code,text", [(errno.EROFS, "read-only file system"), (errno.EACCES, "permission denied")])
 def test_unwritable_folder_is_found_before_computing(tmp_path, monkeypatch, code, text):
     real_open = os.open
